@@ -1,0 +1,68 @@
+"""Test harness shared by the whole suite.
+
+- ROS isolation: this host is shared, so the session gets its own ROS_DOMAIN_ID, discovery
+  stays on localhost, and rcl logs go to a temporary folder. Set at import time, before any
+  test module imports rclpy, and inherited by every process a test starts.
+- `free_port`: a TCP port nobody listens on.
+- `processes`: starts a child (the daemon, an rclpy peer) and guarantees it is stopped.
+- every test fails if it leaves a child process of the test runner behind.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import tempfile
+import time
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+
+from support import Processes, children_of, pick_free_port
+
+# 0 and 101 are left alone; other ROS users on this host tend to sit on the default 0.
+_DOMAIN_ID = random.Random(os.getpid() ^ int(time.time())).randint(1, 100)
+os.environ["ROS_DOMAIN_ID"] = str(_DOMAIN_ID)
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.pop("ROS_STATIC_PEERS", None)
+os.environ["ROS_LOG_DIR"] = tempfile.mkdtemp(prefix="slicer-ros2-bridge-roslog-")
+os.environ["RCUTILS_LOGGING_BUFFERED_STREAM"] = "0"
+os.environ["PYTHONUNBUFFERED"] = "1"
+
+
+def pytest_report_header(config: pytest.Config) -> str:
+    return (f"ROS_DOMAIN_ID={_DOMAIN_ID} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST "
+            f"ROS_LOG_DIR={os.environ['ROS_LOG_DIR']}")
+
+
+@pytest.fixture
+def free_port() -> int:
+    return pick_free_port()
+
+
+@pytest.fixture
+def processes(tmp_path: Path) -> Iterator[Processes]:
+    manager = Processes(tmp_path)
+    try:
+        yield manager
+    finally:
+        manager.stop_all()
+
+
+@pytest.fixture(autouse=True)
+def no_leftover_children() -> Iterator[None]:
+    yield
+    # A child that is exiting may take a moment to go.
+    deadline = time.monotonic() + 3.0
+    left = children_of(os.getpid())
+    while left and time.monotonic() < deadline:
+        time.sleep(0.05)
+        left = children_of(os.getpid())
+    for pid, _, _ in left:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    assert not left, f"the test left child processes behind: {left}"

@@ -1,0 +1,163 @@
+"""Helpers for tests: ports, child processes, waiting on events, optional test data."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Callable, Optional, Sequence
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+PEERS = Path(__file__).resolve().parent / "peers"
+SHARED = REPO.parent / "shared"
+
+
+def pick_free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+class Child:
+    """A started process whose combined output goes to a log file we can wait on."""
+
+    def __init__(self, name: str, popen: subprocess.Popen[bytes], log: Path) -> None:
+        self.name = name
+        self.popen = popen
+        self.log = log
+        self._read_upto = 0
+
+    @property
+    def pid(self) -> int:
+        return self.popen.pid
+
+    def output(self) -> str:
+        return self.log.read_text(errors="replace")
+
+    def wait_for_output(self, needle: str, timeout: float = 20.0) -> str:
+        """Wait until `needle` appears in the output after what earlier waits consumed;
+        return the line holding it."""
+        deadline = time.monotonic() + timeout
+        while True:
+            text = self.output()
+            found = text.find(needle, self._read_upto)
+            if found >= 0:
+                line_end = text.find("\n", found)
+                line_end = len(text) if line_end < 0 else line_end
+                line_start = text.rfind("\n", 0, found) + 1
+                self._read_upto = line_end
+                return text[line_start:line_end]
+            if self.popen.poll() is not None:
+                raise AssertionError(f"{self.name} exited with {self.popen.returncode} before "
+                                     f"printing {needle!r}; output:\n{text[-3000:]}")
+            if time.monotonic() > deadline:
+                raise AssertionError(f"{self.name} did not print {needle!r} within {timeout} s;"
+                                     f" output:\n{text[-3000:]}")
+            time.sleep(0.02)
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> Optional[int]:
+        """Signal the child, wait for it, kill its whole process group if it lingers."""
+        if self.popen.poll() is None:
+            try:
+                self.popen.send_signal(sig)
+                self.popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                pass
+        try:
+            os.killpg(self.popen.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+        try:
+            self.popen.wait(5)
+        except subprocess.TimeoutExpired:
+            pass
+        return self.popen.returncode
+
+
+class Processes:
+    """Starts children for one test and stops every one of them at teardown."""
+
+    def __init__(self, tmp: Path) -> None:
+        self.tmp = tmp
+        self.children: list[Child] = []
+
+    def start(self, name: str, argv: Sequence[str], *, env: Optional[dict[str, str]] = None,
+              cwd: Optional[Path] = None) -> Child:
+        log = self.tmp / f"{name}-{len(self.children)}.log"
+        full_env = dict(os.environ)
+        full_env.update(env or {})
+        with log.open("wb") as out:
+            popen = subprocess.Popen(list(argv), stdout=out, stderr=subprocess.STDOUT,
+                                     stdin=subprocess.DEVNULL, env=full_env,
+                                     cwd=str(cwd or REPO), start_new_session=True)
+        child = Child(name, popen, log)
+        self.children.append(child)
+        return child
+
+    def python(self, name: str, script: str, *args: str,
+               env: Optional[dict[str, str]] = None) -> Child:
+        """Run a peer script from tests/peers (or any path) with this venv's Python."""
+        path = Path(script)
+        if not path.is_absolute():
+            path = PEERS / script
+        return self.start(name, [sys.executable, "-u", str(path), *args], env=env)
+
+    def bridge(self, *args: str, env: Optional[dict[str, str]] = None) -> Child:
+        """Run the `slicer-ros2-bridge` CLI (as `python -m bridge.cli`) with these arguments."""
+        return self.start("bridge", [sys.executable, "-u", "-m", "bridge.cli", *args], env=env)
+
+    def stop_all(self) -> None:
+        for child in reversed(self.children):
+            child.stop()
+
+
+def children_of(pid: int) -> list[tuple[int, str, str]]:
+    """(pid, state, command) of every live descendant of `pid`, read from /proc."""
+    parents: dict[int, list[int]] = {}
+    info: dict[int, tuple[str, str]] = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+            cmdline = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ")
+        except OSError:
+            continue
+        # The command name may hold spaces or parentheses: split after the last ')'.
+        fields = stat[stat.rfind(")") + 2:].split()
+        state, ppid = fields[0], int(fields[1])
+        parents.setdefault(ppid, []).append(int(entry))
+        info[int(entry)] = (state, cmdline.decode(errors="replace").strip())
+    found: list[tuple[int, str, str]] = []
+    stack = list(parents.get(pid, []))
+    while stack:
+        child = stack.pop()
+        state, cmd = info.get(child, ("?", ""))
+        if state != "Z":
+            found.append((child, state, cmd))
+        stack.extend(parents.get(child, []))
+    return found
+
+
+def wait_until(predicate: Callable[[], bool], timeout: float = 10.0,
+               what: str = "condition") -> None:
+    """Poll a cheap predicate until it holds; fail naming `what` after `timeout`."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.01)
+
+
+def require_shared(relative: str) -> Path:
+    """A path under ../shared, or a skip naming what is missing."""
+    path = SHARED / relative
+    if not path.exists():
+        pytest.skip(f"needs {path} (the project's shared test data), which is absent here")
+    return path
