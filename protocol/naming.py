@@ -1,0 +1,399 @@
+"""OpenIGTLink device names for ROS entities, and the metadata that carries the full names.
+
+A device name is at most 20 bytes and 3D Slicer uses it as the MRML node name (and finds
+the node again by it after a reconnect), so a name must be short, readable, stable across
+runs and machines, and never shared by two different ROS entities.
+
+Scheme (every role has its own shape, so roles never collide):
+
+====================  =========================  ============================
+role                  ROS identity               readable device name
+====================  =========================  ============================
+subscriber            topic ``/tool``            ``tool``
+publisher             topic ``/cmd``             ``pub:cmd``
+tf_lookup             parent, child              ``tf:world>tool``
+tf_broadcaster        parent, child              ``tfb:world>tool``
+robot_link            robot, link                ``PSM1:base_link``
+robot_visual          robot, link, index         ``PSM1:base_link:0``
+robot_description     robot                      ``urdf:PSM1``
+parameter_client      node ``/rsp``              ``param:rsp``
+parameter_server      node (the daemon's)        ``params:bridge``
+service_client        service ``/spawn``         ``srvc:spawn``
+service_server        service ``/spawn``         ``srv:spawn``
+====================  =========================  ============================
+
+* A leading ``/`` is dropped (topics, node names, services and frames are taken as
+  absolute: ``/tool`` and ``tool`` are the same); inner ``/`` of namespaces is kept.
+* The readable form is used only when it fits in 20 bytes and every part is made of
+  ``A-Z a-z 0-9 _ . / -`` (and a robot name is not one of the role prefixes). Those
+  characters exclude the separators ``: > ~``, so two different entities can never share a
+  readable name.
+* Otherwise the name is ``<prefix><tail>~<hash>``: the end of the sanitised readable form
+  (the most specific part of a ROS name) and the first characters of a base32 SHA-256 of
+  the role and the exact ROS names. Only hashed names contain ``~``.
+* `DeviceNameRegistry` remembers what it handed out; if two entities' hashes ever collide,
+  the later one gets a longer hash, and it maps device names back to the ROS entity.
+
+Every message also carries metadata ``ros2.*`` with the full names (see `metadata_for`);
+3D Slicer copies it onto the node as attributes ``OpenIGTLink.<key>``.
+"""
+
+from __future__ import annotations
+
+import base64
+import enum
+import hashlib
+import re
+from dataclasses import dataclass
+from typing import Dict, Iterator, Optional, Tuple
+
+from protocol.errors import ProtocolError
+
+__all__ = [
+    "MAX_DEVICE_NAME_BYTES",
+    "DEFAULT_HASH_LENGTH",
+    "NamingError",
+    "Role",
+    "NameKey",
+    "device_name_for",
+    "is_hashed_name",
+    "DeviceNameRegistry",
+    "KEY_TOPIC",
+    "KEY_TYPE",
+    "KEY_FRAME",
+    "KEY_PARENT",
+    "KEY_CHILD",
+    "KEY_ROBOT",
+    "KEY_LINK",
+    "KEY_VISUAL",
+    "KEY_NODE",
+    "KEY_SERVICE",
+    "KEY_ROLE",
+    "KEY_UNITS",
+    "METADATA_KEYS",
+    "UNITS_MM",
+    "metadata_for",
+    "key_from_metadata",
+]
+
+MAX_DEVICE_NAME_BYTES = 20
+# 6 base32 characters = 30 bits: a collision among 1000 names has odds of about 1 in 2000,
+# and the registry resolves even that one.
+DEFAULT_HASH_LENGTH = 6
+_MAX_HASH_LENGTH = 16
+_HASH_SEPARATOR = "~"
+
+_SAFE_PART = re.compile(r"[A-Za-z0-9_./-]+\Z")
+_UNSAFE_TAIL_CHAR = re.compile(r"[^A-Za-z0-9_./:>-]")
+
+
+class NamingError(ProtocolError):
+    """A ROS name cannot be turned into a device name (empty, wrong count of parts...)."""
+
+
+class Role(str, enum.Enum):
+    """What a device name stands for; also the value of metadata ``ros2.role``."""
+
+    SUBSCRIBER = "subscriber"
+    PUBLISHER = "publisher"
+    TF_LOOKUP = "tf_lookup"
+    TF_BROADCASTER = "tf_broadcaster"
+    ROBOT_LINK = "robot_link"
+    ROBOT_VISUAL = "robot_visual"
+    ROBOT_DESCRIPTION = "robot_description"
+    PARAMETER_CLIENT = "parameter_client"
+    PARAMETER_SERVER = "parameter_server"
+    SERVICE_CLIENT = "service_client"
+    SERVICE_SERVER = "service_server"
+
+
+# Prefix of the readable form, and the names of the parts (also their metadata keys).
+_PREFIX: Dict[Role, str] = {
+    Role.SUBSCRIBER: "",
+    Role.PUBLISHER: "pub:",
+    Role.TF_LOOKUP: "tf:",
+    Role.TF_BROADCASTER: "tfb:",
+    Role.ROBOT_LINK: "",
+    Role.ROBOT_VISUAL: "",
+    Role.ROBOT_DESCRIPTION: "urdf:",
+    Role.PARAMETER_CLIENT: "param:",
+    Role.PARAMETER_SERVER: "params:",
+    Role.SERVICE_CLIENT: "srvc:",
+    Role.SERVICE_SERVER: "srv:",
+}
+_RESERVED_ROBOT_NAMES = frozenset(p.rstrip(":") for p in _PREFIX.values() if p)
+
+KEY_TOPIC = "ros2.topic"
+KEY_TYPE = "ros2.type"
+KEY_FRAME = "ros2.frame"
+KEY_PARENT = "ros2.parent"
+KEY_CHILD = "ros2.child"
+KEY_ROBOT = "ros2.robot"
+KEY_LINK = "ros2.link"
+KEY_VISUAL = "ros2.visual"
+KEY_NODE = "ros2.node"
+KEY_SERVICE = "ros2.service"
+KEY_ROLE = "ros2.role"
+KEY_UNITS = "ros2.units"
+METADATA_KEYS: Tuple[str, ...] = (
+    KEY_TOPIC, KEY_TYPE, KEY_FRAME, KEY_PARENT, KEY_CHILD, KEY_ROBOT, KEY_LINK,
+    KEY_VISUAL, KEY_NODE, KEY_SERVICE, KEY_ROLE, KEY_UNITS,
+)
+UNITS_MM = "mm"
+
+_PART_KEYS: Dict[Role, Tuple[str, ...]] = {
+    Role.SUBSCRIBER: (KEY_TOPIC,),
+    Role.PUBLISHER: (KEY_TOPIC,),
+    Role.TF_LOOKUP: (KEY_PARENT, KEY_CHILD),
+    Role.TF_BROADCASTER: (KEY_PARENT, KEY_CHILD),
+    Role.ROBOT_LINK: (KEY_ROBOT, KEY_LINK),
+    Role.ROBOT_VISUAL: (KEY_ROBOT, KEY_LINK, KEY_VISUAL),
+    Role.ROBOT_DESCRIPTION: (KEY_ROBOT,),
+    Role.PARAMETER_CLIENT: (KEY_NODE,),
+    Role.PARAMETER_SERVER: (KEY_NODE,),
+    Role.SERVICE_CLIENT: (KEY_SERVICE,),
+    Role.SERVICE_SERVER: (KEY_SERVICE,),
+}
+# Parts that are absolute ROS graph names: metadata gives them with their leading '/'.
+_GRAPH_NAME_KEYS = frozenset({KEY_TOPIC, KEY_NODE, KEY_SERVICE})
+
+
+def _strip(name: str) -> str:
+    return name.lstrip("/")
+
+
+@dataclass(frozen=True)
+class NameKey:
+    """The ROS identity behind one device name: a role and its normalised name parts.
+
+    Build it with the class methods (``NameKey.subscriber('/tool')``...), which drop
+    leading slashes so ``/tool`` and ``tool`` give the same key.
+    """
+
+    role: Role
+    parts: Tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.role, Role):
+            raise NamingError(field="role", expected="a Role", got=repr(self.role))
+        want = len(_PART_KEYS[self.role])
+        if len(self.parts) != want:
+            raise NamingError(field="parts", expected=f"{want} name parts for {self.role.value}",
+                              got=f"{len(self.parts)}")
+        for key, part in zip(_PART_KEYS[self.role], self.parts):
+            if not isinstance(part, str) or not part:
+                raise NamingError(field=key, expected="a non-empty string", got=repr(part))
+            if "\x00" in part:
+                raise NamingError(field=key, expected="a name without NUL", got=repr(part))
+
+    # -- constructors, one per role
+    @classmethod
+    def subscriber(cls, topic: str) -> NameKey:
+        return cls(Role.SUBSCRIBER, (_clean(topic, KEY_TOPIC),))
+
+    @classmethod
+    def publisher(cls, topic: str) -> NameKey:
+        return cls(Role.PUBLISHER, (_clean(topic, KEY_TOPIC),))
+
+    @classmethod
+    def tf_lookup(cls, parent: str, child: str) -> NameKey:
+        return cls(Role.TF_LOOKUP, (_clean(parent, KEY_PARENT), _clean(child, KEY_CHILD)))
+
+    @classmethod
+    def tf_broadcaster(cls, parent: str, child: str) -> NameKey:
+        return cls(Role.TF_BROADCASTER, (_clean(parent, KEY_PARENT), _clean(child, KEY_CHILD)))
+
+    @classmethod
+    def robot_link(cls, robot: str, link: str) -> NameKey:
+        return cls(Role.ROBOT_LINK, (_clean(robot, KEY_ROBOT), _clean(link, KEY_LINK)))
+
+    @classmethod
+    def robot_visual(cls, robot: str, link: str, index: int) -> NameKey:
+        if isinstance(index, bool) or not isinstance(index, int) or index < 0:
+            raise NamingError(field=KEY_VISUAL, expected="an integer >= 0", got=repr(index))
+        return cls(Role.ROBOT_VISUAL,
+                   (_clean(robot, KEY_ROBOT), _clean(link, KEY_LINK), str(index)))
+
+    @classmethod
+    def robot_description(cls, robot: str) -> NameKey:
+        return cls(Role.ROBOT_DESCRIPTION, (_clean(robot, KEY_ROBOT),))
+
+    @classmethod
+    def parameter_client(cls, node: str) -> NameKey:
+        return cls(Role.PARAMETER_CLIENT, (_clean(node, KEY_NODE),))
+
+    @classmethod
+    def parameter_server(cls, node: str) -> NameKey:
+        return cls(Role.PARAMETER_SERVER, (_clean(node, KEY_NODE),))
+
+    @classmethod
+    def service_client(cls, service: str) -> NameKey:
+        return cls(Role.SERVICE_CLIENT, (_clean(service, KEY_SERVICE),))
+
+    @classmethod
+    def service_server(cls, service: str) -> NameKey:
+        return cls(Role.SERVICE_SERVER, (_clean(service, KEY_SERVICE),))
+
+    def named_parts(self) -> Dict[str, str]:
+        """The parts keyed by metadata key; graph names get back their leading ``/``."""
+        out: Dict[str, str] = {}
+        for key, part in zip(_PART_KEYS[self.role], self.parts):
+            out[key] = "/" + part if key in _GRAPH_NAME_KEYS else part
+        return out
+
+
+def _clean(name: str, field: str) -> str:
+    if not isinstance(name, str):
+        raise NamingError(field=field, expected="a string", got=type(name).__name__)
+    stripped = _strip(name)
+    if not stripped:
+        raise NamingError(field=field, expected="a non-empty name", got=repr(name))
+    return stripped
+
+
+def _readable_body(key: NameKey) -> str:
+    if key.role in (Role.TF_LOOKUP, Role.TF_BROADCASTER):
+        return f"{key.parts[0]}>{key.parts[1]}"
+    return ":".join(key.parts)
+
+
+def _is_lossless(key: NameKey) -> bool:
+    if not all(_SAFE_PART.match(p) for p in key.parts):
+        return False
+    if key.role in (Role.ROBOT_LINK, Role.ROBOT_VISUAL) and key.parts[0] in _RESERVED_ROBOT_NAMES:
+        return False
+    if key.role == Role.ROBOT_VISUAL and not key.parts[2].isdigit():
+        return False
+    return True
+
+
+def _digest(key: NameKey) -> str:
+    material = "\x00".join((key.role.value,) + key.parts).encode("utf-8")
+    raw = hashlib.sha256(material).digest()
+    return base64.b32encode(raw).decode("ascii").lower().rstrip("=")
+
+
+def device_name_for(key: NameKey, hash_length: int = DEFAULT_HASH_LENGTH) -> str:
+    """The deterministic device name of ``key`` (ASCII, at most 20 bytes).
+
+    ``hash_length`` only matters for names that must be hashed; the registry raises it on a
+    collision.
+    """
+    prefix = _PREFIX[key.role]
+    body = _readable_body(key)
+    readable = prefix + body
+    if _is_lossless(key) and len(readable) <= MAX_DEVICE_NAME_BYTES:
+        return readable
+    if not 4 <= hash_length <= _MAX_HASH_LENGTH:
+        raise NamingError(field="hash_length", expected=f"4..{_MAX_HASH_LENGTH}",
+                          got=str(hash_length))
+    room = MAX_DEVICE_NAME_BYTES - len(prefix) - len(_HASH_SEPARATOR) - hash_length
+    tail = _UNSAFE_TAIL_CHAR.sub("_", body)  # separators stay, '~' and non-ASCII go
+    tail = tail[-room:].lstrip("/:>") if room > 0 else ""  # no name starting with a separator
+    return f"{prefix}{tail}{_HASH_SEPARATOR}{_digest(key)[:hash_length]}"
+
+
+def is_hashed_name(device_name: str) -> bool:
+    """True for device names of the shortened ``<tail>~<hash>`` form."""
+    return _HASH_SEPARATOR in device_name
+
+
+class DeviceNameRegistry:
+    """Hands out device names within one daemon; no two keys ever share one.
+
+    Registering is idempotent: the same key always gets the name it got first. On a hash
+    collision the newcomer's hash is lengthened until the name is free.
+    """
+
+    def __init__(self) -> None:
+        self._by_key: Dict[NameKey, str] = {}
+        self._by_name: Dict[str, NameKey] = {}
+
+    def register(self, key: NameKey) -> str:
+        """Return the device name for ``key``, reserving it if new."""
+        known = self._by_key.get(key)
+        if known is not None:
+            return known
+        for length in range(DEFAULT_HASH_LENGTH, _MAX_HASH_LENGTH + 1):
+            name = self._candidate(key, length)
+            if name not in self._by_name:
+                self._by_key[key] = name
+                self._by_name[name] = key
+                return name
+        # 16 base32 characters of SHA-256 colliding as well: not a realistic input.
+        raise NamingError(field="device_name", expected="a free device name",
+                          got=f"every candidate for {key!r} taken")
+
+    def _candidate(self, key: NameKey, hash_length: int) -> str:
+        # Overridable seam: tests force collisions through it.
+        return device_name_for(key, hash_length)
+
+    def release(self, key: NameKey) -> Optional[str]:
+        """Forget ``key``; returns the device name it had, or None if unknown."""
+        name = self._by_key.pop(key, None)
+        if name is not None:
+            del self._by_name[name]
+        return name
+
+    def lookup(self, device_name: str) -> Optional[NameKey]:
+        """The ROS identity behind a device name handed out here, or None."""
+        return self._by_name.get(device_name)
+
+    def name_of(self, key: NameKey) -> Optional[str]:
+        """The device name already given to ``key``, or None (does not register)."""
+        return self._by_key.get(key)
+
+    def __contains__(self, device_name: object) -> bool:
+        return device_name in self._by_name
+
+    def __len__(self) -> int:
+        return len(self._by_key)
+
+    def __iter__(self) -> Iterator[Tuple[str, NameKey]]:
+        return iter(list(self._by_name.items()))
+
+
+def metadata_for(
+    key: NameKey,
+    *,
+    ros_type: Optional[str] = None,
+    frame: Optional[str] = None,
+    units: Optional[str] = None,
+) -> Dict[str, str]:
+    """Metadata for every message of ``key``: role, full ROS names, and the optional type
+    (``pkg/msg/Type``), header frame id and units (``"mm"`` for anything geometric).
+
+    Keys are ASCII; values are str and may be any UTF-8 (frame names are free text).
+    """
+    meta: Dict[str, str] = {KEY_ROLE: key.role.value}
+    meta.update(key.named_parts())
+    if ros_type:
+        meta[KEY_TYPE] = ros_type
+    if frame:
+        meta[KEY_FRAME] = frame
+    if units:
+        meta[KEY_UNITS] = units
+    return meta
+
+
+def key_from_metadata(metadata: Dict[str, str]) -> NameKey:
+    """Rebuild the `NameKey` from a message's ``ros2.*`` metadata (inverse of
+    `metadata_for`); raises `NamingError` naming the missing or bad key."""
+    role_text = metadata.get(KEY_ROLE)
+    try:
+        role = Role(role_text)
+    except ValueError:
+        raise NamingError(field=KEY_ROLE, expected="one of " + ", ".join(r.value for r in Role),
+                          got=repr(role_text)) from None
+    parts = []
+    for part_key in _PART_KEYS[role]:
+        value = metadata.get(part_key)
+        if not value:
+            raise NamingError(field=part_key, expected=f"a name for role {role.value}",
+                              got=repr(value))
+        parts.append(value)
+    if role == Role.ROBOT_VISUAL:
+        if not parts[2].isdigit():
+            raise NamingError(field=KEY_VISUAL, expected="an integer >= 0", got=repr(parts[2]))
+        return NameKey.robot_visual(parts[0], parts[1], int(parts[2]))
+    return NameKey(role, tuple(_clean(p, k) for p, k in zip(parts, _PART_KEYS[role])))
