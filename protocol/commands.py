@@ -16,20 +16,14 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from enum import IntEnum
 from typing import (
     Any,
     ClassVar,
-    Dict,
-    List,
     Literal,
-    Mapping,
     NewType,
-    Optional,
-    Set,
-    Tuple,
-    Type,
     TypeVar,
     Union,
     cast,
@@ -39,80 +33,80 @@ from protocol.conversions import ConversionError, validate_matrix
 from protocol.errors import ProtocolError
 
 __all__ = [
-    "SCHEMA_VERSION",
     "COMMAND_DEVICE_NAME",
-    "MAX_OP_NAME_BYTES",
     "MAX_COMMAND_TEXT_BYTES",
-    "SLICER_MAX_COMMAND_TEXT_BYTES",
     "MAX_JSON_DEPTH",
-    "METADATA_STATUS",
+    "MAX_OP_NAME_BYTES",
     "METADATA_ERROR_MESSAGE",
-    "STATUS_SUCCESS",
-    "STATUS_FAIL",
-    "status_is_success",
-    "CommandId",
-    "ErrorCode",
-    "CommandError",
-    "BadJsonError",
-    "TooLargeError",
-    "UnknownOpError",
-    "UnsupportedSchemaError",
-    "MissingFieldError",
-    "UnknownFieldError",
-    "WrongTypeError",
-    "OutOfRangeError",
-    "CommandFailedError",
-    "QoS",
-    "Stamp",
-    "ParameterValue",
+    "METADATA_STATUS",
     "PARAMETER_TYPES",
-    "RobotSource",
-    "resolve_message_type",
-    "resolve_service_type",
     "REFERENCE_TYPE_NAMES",
+    "REQUEST_TYPES",
+    "SCHEMA_VERSION",
+    "SLICER_MAX_COMMAND_TEXT_BYTES",
+    "STATUS_FAIL",
+    "STATUS_SUCCESS",
+    "AdvertiseService",
+    "BadJsonError",
+    "BroadcastTransform",
+    "CallService",
+    "CommandError",
+    "CommandFailedError",
+    "CommandId",
+    "CreateParameterClient",
+    "CreatePublisher",
+    "CreateRobot",
+    "CreateSubscriber",
+    "CreateTfBroadcaster",
+    "CreateTfLookup",
+    "ErrorCode",
+    "ErrorInfo",
+    "GetLastMessage",
+    "GetParameters",
     "Hello",
     "ListBridges",
-    "ListTopics",
-    "ListServices",
-    "CreateSubscriber",
-    "RemoveSubscriber",
-    "CreatePublisher",
-    "RemovePublisher",
-    "Publish",
-    "GetLastMessage",
-    "CreateParameterClient",
-    "RemoveParameterClient",
     "ListParameters",
-    "GetParameters",
-    "SetParameters",
-    "ObserveParameters",
-    "ServerDeclareParameter",
-    "ServerSetParameter",
-    "ServerGetParameters",
-    "ServerUndeclareParameter",
-    "CreateTfLookup",
-    "RemoveTfLookup",
-    "LookupTransform",
-    "CreateTfBroadcaster",
-    "RemoveTfBroadcaster",
-    "BroadcastTransform",
-    "CreateRobot",
-    "RemoveRobot",
     "ListRobots",
-    "CallService",
-    "AdvertiseService",
-    "UnadvertiseService",
-    "ServiceRequest",
-    "Request",
-    "REQUEST_TYPES",
-    "parse_request",
-    "encode_request",
-    "ErrorInfo",
+    "ListServices",
+    "ListTopics",
+    "LookupTransform",
+    "MissingFieldError",
+    "ObserveParameters",
+    "OutOfRangeError",
+    "ParameterValue",
+    "Publish",
+    "QoS",
+    "RemoveParameterClient",
+    "RemovePublisher",
+    "RemoveRobot",
+    "RemoveSubscriber",
+    "RemoveTfBroadcaster",
+    "RemoveTfLookup",
     "Reply",
-    "error_reply",
-    "reply_for_exception",
+    "Request",
+    "RobotSource",
+    "ServerDeclareParameter",
+    "ServerGetParameters",
+    "ServerSetParameter",
+    "ServerUndeclareParameter",
+    "ServiceRequest",
+    "SetParameters",
+    "Stamp",
+    "TooLargeError",
+    "UnadvertiseService",
+    "UnknownFieldError",
+    "UnknownOpError",
+    "UnsupportedSchemaError",
+    "WrongTypeError",
     "dumps",
+    "encode_request",
+    "error_reply",
     "loads",
+    "parse_request",
+    "reply_for_exception",
+    "resolve_message_type",
+    "resolve_service_type",
+    "status_is_success",
 ]
 
 SCHEMA_VERSION = 1
@@ -138,7 +132,7 @@ _U32 = (1 << 32) - 1
 _I64_MIN, _I64_MAX = -(1 << 63), (1 << 63) - 1
 
 
-def status_is_success(value: Optional[str]) -> bool:
+def status_is_success(value: str | None) -> bool:
     """True if an RTS_COMMAND ``Status`` metadata value means success.
 
     OpenIGTLinkIO writes ``SUCCESS``; its converter also reads ``TRUE``; accept both.
@@ -251,8 +245,8 @@ def _reject_constant(name: str) -> Any:
     raise BadJsonError("text", "standard JSON numbers", name)
 
 
-def _no_duplicates(pairs: List[Tuple[str, Any]]) -> Dict[str, Any]:
-    out: Dict[str, Any] = {}
+def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
     for key, value in pairs:
         if key in out:
             raise BadJsonError(key, "each key once", "a duplicate key")
@@ -261,7 +255,7 @@ def _no_duplicates(pairs: List[Tuple[str, Any]]) -> Dict[str, Any]:
 
 
 def _depth_ok(value: Any, limit: int) -> bool:
-    stack: List[Tuple[Any, int]] = [(value, 1)]
+    stack: list[tuple[Any, int]] = [(value, 1)]
     while stack:
         item, depth = stack.pop()
         if isinstance(item, (dict, list)):
@@ -272,7 +266,7 @@ def _depth_ok(value: Any, limit: int) -> bool:
     return True
 
 
-def loads(text: Union[str, bytes], *, max_bytes: int = MAX_COMMAND_TEXT_BYTES) -> Dict[str, Any]:
+def loads(text: str | bytes, *, max_bytes: int = MAX_COMMAND_TEXT_BYTES) -> dict[str, Any]:
     """Parse a command or reply text into a JSON object, refusing anything odd.
 
     Bytes are decoded as UTF-8 whatever the COMMAND's ENCODING says (Slicer labels every
@@ -347,7 +341,7 @@ class _Args:
     def __init__(self, data: Mapping[str, Any], prefix: str = "") -> None:
         self._data = data
         self._prefix = prefix
-        self._used: Set[str] = set()
+        self._used: set[str] = set()
 
     def path(self, name: str) -> str:
         return f"{self._prefix}{name}"
@@ -368,13 +362,13 @@ class _Args:
 
     # strings
     def req_str(self, name: str, *, max_len: int = _MAX_NAME, allow_empty: bool = False,
-                pattern: Optional[re.Pattern[str]] = None, desc: str = "") -> str:
+                pattern: re.Pattern[str] | None = None, desc: str = "") -> str:
         value = self._raw(name, True)
         return _check_str(value, self.path(name), max_len, allow_empty, pattern, desc)
 
-    def opt_str(self, name: str, default: Optional[str] = None, *, max_len: int = _MAX_NAME,
-                allow_empty: bool = False, pattern: Optional[re.Pattern[str]] = None,
-                desc: str = "") -> Optional[str]:
+    def opt_str(self, name: str, default: str | None = None, *, max_len: int = _MAX_NAME,
+                allow_empty: bool = False, pattern: re.Pattern[str] | None = None,
+                desc: str = "") -> str | None:
         value = self._raw(name, False)
         if value is _MISSING:
             return default
@@ -390,7 +384,7 @@ class _Args:
                                   repr(text))
         return text
 
-    def choice(self, name: str, choices: Tuple[str, ...], default: Optional[str] = None) -> str:
+    def choice(self, name: str, choices: tuple[str, ...], default: str | None = None) -> str:
         value = self._raw(name, default is None)
         if value is _MISSING:
             return cast(str, default)
@@ -401,7 +395,7 @@ class _Args:
         return value
 
     # numbers
-    def opt_int(self, name: str, default: Optional[int], *, low: int, high: int) -> Optional[int]:
+    def opt_int(self, name: str, default: int | None, *, low: int, high: int) -> int | None:
         value = self._raw(name, False)
         if value is _MISSING:
             return default
@@ -410,8 +404,8 @@ class _Args:
     def req_int(self, name: str, *, low: int, high: int) -> int:
         return _check_int(self._raw(name, True), self.path(name), low, high)
 
-    def opt_float(self, name: str, default: Optional[float], *, low: float, high: float,
-                  low_open: bool = False) -> Optional[float]:
+    def opt_float(self, name: str, default: float | None, *, low: float, high: float,
+                  low_open: bool = False) -> float | None:
         value = self._raw(name, False)
         if value is _MISSING:
             return default
@@ -426,7 +420,7 @@ class _Args:
         return value
 
     # containers
-    def opt_obj(self, name: str) -> Optional[_Args]:
+    def opt_obj(self, name: str) -> _Args | None:
         value = self._raw(name, False)
         if value is _MISSING:
             return None
@@ -434,14 +428,14 @@ class _Args:
             raise WrongTypeError(self.path(name), "an object", _json_type(value))
         return _Args(value, self.path(name) + ".")
 
-    def req_obj_raw(self, name: str) -> Dict[str, Any]:
+    def req_obj_raw(self, name: str) -> dict[str, Any]:
         value = self._raw(name, True)
         if not isinstance(value, dict):
             raise WrongTypeError(self.path(name), "an object", _json_type(value))
         return value
 
-    def str_list(self, name: str, *, pattern: Optional[re.Pattern[str]] = None,
-                 desc: str = "", required: bool = True) -> Tuple[str, ...]:
+    def str_list(self, name: str, *, pattern: re.Pattern[str] | None = None,
+                 desc: str = "", required: bool = True) -> tuple[str, ...]:
         value = self._raw(name, required)
         if value is _MISSING:
             return ()
@@ -457,7 +451,7 @@ class _Args:
 
 
 def _check_str(value: Any, path: str, max_len: int, allow_empty: bool,
-               pattern: Optional[re.Pattern[str]], desc: str) -> str:
+               pattern: re.Pattern[str] | None, desc: str) -> str:
     if not isinstance(value, str):
         raise WrongTypeError(path, "a string", _json_type(value))
     if not value and not allow_empty:
@@ -507,7 +501,7 @@ class QoS:
     reliability: str = "reliable"  # reliable | best_effort
     durability: str = "volatile"  # volatile | transient_local
 
-    def to_dict(self) -> Dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         return {"depth": self.depth, "reliability": self.reliability,
                 "durability": self.durability}
 
@@ -529,7 +523,7 @@ class Stamp:
     sec: int
     nanosec: int = 0
 
-    def to_dict(self) -> Dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         return {"sec": self.sec, "nanosec": self.nanosec}
 
     @classmethod
@@ -540,7 +534,7 @@ class Stamp:
         return stamp
 
 
-PARAMETER_TYPES: Tuple[str, ...] = (
+PARAMETER_TYPES: tuple[str, ...] = (
     "not_set", "bool", "integer", "double", "string", "byte_array",
     "bool_array", "integer_array", "double_array", "string_array",
 )
@@ -611,7 +605,7 @@ class ParameterValue:
     def __post_init__(self) -> None:
         object.__setattr__(self, "value", _check_parameter(self.type, self.value, "value"))
 
-    def to_dict(self) -> Dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         value = list(self.value) if isinstance(self.value, tuple) else self.value
         return {"type": self.type, "value": value}
 
@@ -668,7 +662,7 @@ class RobotSource:
     topic: str = "/robot_description"
     path: str = ""
 
-    def to_dict(self) -> Dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         if self.kind == "parameter":
             return {"kind": "parameter", "node": self.node, "parameter": self.parameter}
         if self.kind == "topic":
@@ -692,7 +686,7 @@ class RobotSource:
         return src
 
 
-Matrix4 = Tuple[Tuple[float, float, float, float], ...]
+Matrix4 = tuple[tuple[float, float, float, float], ...]
 
 
 def _matrix_from(value: Any, path: str) -> Matrix4:
@@ -714,7 +708,7 @@ def _matrix_from(value: Any, path: str) -> Matrix4:
 # ---------------------------------------------------------------------------- message types
 
 # The reference SlicerROS2's short names (and its class-name stems) -> ROS message type.
-REFERENCE_TYPE_NAMES: Dict[str, str] = {
+REFERENCE_TYPE_NAMES: dict[str, str] = {
     "Empty": "std_msgs/msg/Empty",
     "String": "std_msgs/msg/String",
     "Bool": "std_msgs/msg/Bool",
@@ -791,8 +785,8 @@ class _RequestBase:
 
     op: ClassVar[str] = ""
 
-    def to_args(self) -> Dict[str, Any]:
-        out: Dict[str, Any] = {"schema": SCHEMA_VERSION}
+    def to_args(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"schema": SCHEMA_VERSION}
         for f in fields(self):
             value = getattr(self, f.name)
             if value is not None or f.default is not None:  # omit unset optionals only
@@ -808,7 +802,7 @@ class _RequestBase:
         raise NotImplementedError  # pragma: no cover
 
     @classmethod
-    def from_json(cls: Type[R], text: Union[str, bytes]) -> R:
+    def from_json(cls: type[R], text: str | bytes) -> R:  # noqa: PYI019  (3.9: no Self)
         """Parse and validate this op's COMMAND text."""
         return cast(R, parse_request(cls.op, text))
 
@@ -818,12 +812,12 @@ def _qos(a: _Args) -> QoS:
     return QoS.from_args(sub) if sub is not None else QoS()
 
 
-def _stamp(a: _Args, name: str) -> Optional[Stamp]:
+def _stamp(a: _Args, name: str) -> Stamp | None:
     sub = a.opt_obj(name)
     return Stamp.from_args(sub) if sub is not None else None
 
 
-def _rate(a: _Args) -> Optional[float]:
+def _rate(a: _Args) -> float | None:
     return a.opt_float("rate_hz", None, low=0.0, high=10_000.0, low_open=True)
 
 
@@ -839,7 +833,7 @@ def _srv_type(a: _Args) -> str:
     return text
 
 
-def _json_object(a: _Args, name: str) -> Dict[str, Any]:
+def _json_object(a: _Args, name: str) -> dict[str, Any]:
     return a.req_obj_raw(name)
 
 
@@ -848,7 +842,7 @@ class Hello(_RequestBase):
     """Handshake: the reply says the daemon's schema, version, node name and ops."""
 
     op: ClassVar[Literal["hello"]] = "hello"
-    client: Optional[str] = None
+    client: str | None = None
 
     @classmethod
     def from_args(cls, a: _Args) -> Hello:
@@ -899,7 +893,7 @@ class CreateSubscriber(_RequestBase):
     topic: str
     type: str
     qos: QoS = QoS()
-    rate_hz: Optional[float] = None
+    rate_hz: float | None = None
 
     @property
     def ros_type(self) -> str:
@@ -1015,16 +1009,16 @@ class GetParameters(_RequestBase):
 
     op: ClassVar[Literal["get_parameters"]] = "get_parameters"
     node: str
-    names: Tuple[str, ...]
+    names: tuple[str, ...]
 
     @classmethod
     def from_args(cls, a: _Args) -> GetParameters:
         return cls(node=a.ros_name("node"), names=a.str_list("names", pattern=_PARAM_NAME))
 
 
-def _param_values(a: _Args, name: str) -> Dict[str, ParameterValue]:
+def _param_values(a: _Args, name: str) -> dict[str, ParameterValue]:
     raw = a.req_obj_raw(name)
-    out: Dict[str, ParameterValue] = {}
+    out: dict[str, ParameterValue] = {}
     for key, value in raw.items():
         path = f"{a.path(name)}.{key}"
         _check_str(key, path, _MAX_NAME, False, _PARAM_NAME, "a parameter name")
@@ -1040,7 +1034,7 @@ class SetParameters(_RequestBase):
 
     op: ClassVar[Literal["set_parameters"]] = "set_parameters"
     node: str
-    values: Dict[str, ParameterValue]
+    values: dict[str, ParameterValue]
 
     @classmethod
     def from_args(cls, a: _Args) -> SetParameters:
@@ -1054,7 +1048,7 @@ class ObserveParameters(_RequestBase):
 
     op: ClassVar[Literal["observe_parameters"]] = "observe_parameters"
     node: str
-    names: Tuple[str, ...]
+    names: tuple[str, ...]
 
     @classmethod
     def from_args(cls, a: _Args) -> ObserveParameters:
@@ -1097,7 +1091,7 @@ class ServerGetParameters(_RequestBase):
     """Values of the daemon's own parameters; ``names`` omitted or empty = all."""
 
     op: ClassVar[Literal["server_get_parameters"]] = "server_get_parameters"
-    names: Tuple[str, ...] = ()
+    names: tuple[str, ...] = ()
 
     @classmethod
     def from_args(cls, a: _Args) -> ServerGetParameters:
@@ -1121,7 +1115,7 @@ class CreateTfLookup(_RequestBase):
     op: ClassVar[Literal["create_tf_lookup"]] = "create_tf_lookup"
     parent: str
     child: str
-    rate_hz: Optional[float] = None
+    rate_hz: float | None = None
 
     @classmethod
     def from_args(cls, a: _Args) -> CreateTfLookup:
@@ -1146,7 +1140,7 @@ class LookupTransform(_RequestBase):
     op: ClassVar[Literal["lookup_transform"]] = "lookup_transform"
     parent: str
     child: str
-    time: Optional[Stamp] = None
+    time: Stamp | None = None
     timeout: float = 0.0
 
     @classmethod
@@ -1190,7 +1184,7 @@ class BroadcastTransform(_RequestBase):
     parent: str
     child: str
     matrix: Matrix4
-    stamp: Optional[Stamp] = None
+    stamp: Stamp | None = None
 
     @classmethod
     def from_args(cls, a: _Args) -> BroadcastTransform:
@@ -1207,7 +1201,7 @@ class CreateRobot(_RequestBase):
     op: ClassVar[Literal["create_robot"]] = "create_robot"
     name: str
     source: RobotSource = RobotSource()
-    fixed_frame: Optional[str] = None
+    fixed_frame: str | None = None
     tf_prefix: str = ""
     namespace: str = ""
 
@@ -1254,7 +1248,7 @@ class CallService(_RequestBase):
     op: ClassVar[Literal["call_service"]] = "call_service"
     service: str
     type: str
-    request: Dict[str, Any] = field(default_factory=dict)
+    request: dict[str, Any] = field(default_factory=dict)
     timeout: float = 4.0
 
     @property
@@ -1310,7 +1304,7 @@ class ServiceRequest(_RequestBase):
     op: ClassVar[Literal["service_request"]] = "service_request"
     service: str
     type: str
-    request: Dict[str, Any] = field(default_factory=dict)
+    request: dict[str, Any] = field(default_factory=dict)
     timeout: float = 4.0
 
     @classmethod
@@ -1334,7 +1328,7 @@ Request = Union[
     CallService, AdvertiseService, UnadvertiseService, ServiceRequest,
 ]
 
-_ALL_REQUESTS: Tuple[Type[_RequestBase], ...] = (
+_ALL_REQUESTS: tuple[type[_RequestBase], ...] = (
     Hello, ListBridges, ListTopics, ListServices,
     CreateSubscriber, RemoveSubscriber, CreatePublisher, RemovePublisher, Publish,
     GetLastMessage,
@@ -1346,7 +1340,7 @@ _ALL_REQUESTS: Tuple[Type[_RequestBase], ...] = (
     CreateRobot, RemoveRobot, ListRobots,
     CallService, AdvertiseService, UnadvertiseService, ServiceRequest,
 )
-REQUEST_TYPES: Dict[str, Type[_RequestBase]] = {cls.op: cls for cls in _ALL_REQUESTS}
+REQUEST_TYPES: dict[str, type[_RequestBase]] = {cls.op: cls for cls in _ALL_REQUESTS}
 
 
 def _check_schema(data: Mapping[str, Any]) -> None:
@@ -1359,7 +1353,7 @@ def _check_schema(data: Mapping[str, Any]) -> None:
         raise UnsupportedSchemaError("schema", f"1..{SCHEMA_VERSION}", str(value))
 
 
-def parse_request(op: str, text: Union[str, bytes]) -> Request:
+def parse_request(op: str, text: str | bytes) -> Request:
     """COMMAND NAME + text -> a validated request object, or a `CommandError`."""
     if len(op.encode("utf-8")) > MAX_OP_NAME_BYTES:
         raise TooLargeError("op", f"at most {MAX_OP_NAME_BYTES} bytes", f"{len(op)} characters")
@@ -1375,7 +1369,7 @@ def parse_request(op: str, text: Union[str, bytes]) -> Request:
     return cast(Request, request)
 
 
-def encode_request(request: Request) -> Tuple[str, str]:
+def encode_request(request: Request) -> tuple[str, str]:
     """A request -> (COMMAND NAME, COMMAND text)."""
     return request.op, request.to_json()
 
@@ -1391,7 +1385,7 @@ class ErrorInfo:
     message: str
     field: str = ""
 
-    def to_dict(self) -> Dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         return {"code": int(self.code), "name": self.code.name, "message": self.message,
                 "field": self.field}
 
@@ -1418,8 +1412,8 @@ class Reply:
 
     ok: bool
     op: str = ""
-    result: Dict[str, Any] = field(default_factory=dict)
-    error: Optional[ErrorInfo] = None
+    result: dict[str, Any] = field(default_factory=dict)
+    error: ErrorInfo | None = None
     schema: int = SCHEMA_VERSION
 
     def __post_init__(self) -> None:
@@ -1429,7 +1423,7 @@ class Reply:
             raise MissingFieldError("error", "an error on a failed reply", "nothing")
 
     @classmethod
-    def success(cls, op: str, result: Optional[Mapping[str, Any]] = None) -> Reply:
+    def success(cls, op: str, result: Mapping[str, Any] | None = None) -> Reply:
         return cls(ok=True, op=op, result=dict(result or {}))
 
     @classmethod
@@ -1441,7 +1435,7 @@ class Reply:
         """The ``Status`` metadata value of the RTS_COMMAND."""
         return STATUS_SUCCESS if self.ok else STATUS_FAIL
 
-    def metadata(self) -> Dict[str, str]:
+    def metadata(self) -> dict[str, str]:
         """Metadata for the RTS_COMMAND header v2: Status, and ErrorMessage on failure
         (what OpenIGTLinkIO's ``igtlioCommand::GetErrorMessage`` returns)."""
         meta = {METADATA_STATUS: self.status}
@@ -1449,8 +1443,8 @@ class Reply:
             meta[METADATA_ERROR_MESSAGE] = self.error.message
         return meta
 
-    def to_dict(self) -> Dict[str, Any]:
-        out: Dict[str, Any] = {"schema": self.schema, "op": self.op, "ok": self.ok}
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"schema": self.schema, "op": self.op, "ok": self.ok}
         if self.ok:
             out["result"] = self.result
         else:
@@ -1461,7 +1455,7 @@ class Reply:
         return dumps(self.to_dict())
 
     @classmethod
-    def from_json(cls, text: Union[str, bytes], *, max_bytes: int = 1 << 30) -> Reply:
+    def from_json(cls, text: str | bytes, *, max_bytes: int = 1 << 30) -> Reply:
         """Parse a reply (replies can be large: a last message, a parameter list)."""
         data = loads(text, max_bytes=max_bytes)
         a = _Args(data)
@@ -1472,7 +1466,7 @@ class Reply:
             raise WrongTypeError("ok", "true or false", _json_type(ok))
         if ok:
             raw = a._raw("result", False)
-            result: Dict[str, Any] = {} if raw is _MISSING else raw
+            result: dict[str, Any] = {} if raw is _MISSING else raw
             if not isinstance(result, dict):
                 raise WrongTypeError("result", "an object", _json_type(result))
             a.finish()

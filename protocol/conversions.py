@@ -19,7 +19,7 @@ Pure Python 3.9+ and numpy; no I/O, no ROS import.
 from __future__ import annotations
 
 import time
-from typing import Tuple, Union
+from typing import Union
 
 import numpy as np
 import numpy.typing as npt
@@ -29,21 +29,21 @@ from protocol.errors import ProtocolError
 __all__ = [
     "MM_PER_M",
     "ConversionError",
-    "metres_to_mm",
-    "mm_to_metres",
-    "quaternion_to_rotation",
-    "rotation_to_quaternion",
-    "pose_to_matrix",
-    "matrix_to_pose",
-    "matrix_to_igtl12",
     "igtl12_to_matrix",
-    "validate_matrix",
-    "validate_rotation",
     "igtl_timestamp_from_ros",
-    "ros_time_from_igtl",
+    "igtl_timestamp_from_seconds",
     "igtl_timestamp_now",
     "igtl_timestamp_to_seconds",
-    "igtl_timestamp_from_seconds",
+    "matrix_to_igtl12",
+    "matrix_to_pose",
+    "metres_to_mm",
+    "mm_to_metres",
+    "pose_to_matrix",
+    "quaternion_to_rotation",
+    "ros_time_from_igtl",
+    "rotation_to_quaternion",
+    "validate_matrix",
+    "validate_rotation",
 ]
 
 MM_PER_M = 1000.0
@@ -157,9 +157,9 @@ def rotation_to_quaternion(rotation: ArrayLike) -> FloatArray:
         if not np.any(sel):
             continue
         s = np.sqrt(np.maximum(cand[sel, k], 1e-300))  # = 2 * |component k|
-        a00, a01, a02 = m00[sel], m01[sel], m02[sel]
-        a10, a11, a12 = m10[sel], m11[sel], m12[sel]
-        a20, a21, a22 = m20[sel], m21[sel], m22[sel]
+        _a00, a01, a02 = m00[sel], m01[sel], m02[sel]
+        a10, _a11, a12 = m10[sel], m11[sel], m12[sel]
+        a20, a21, _a22 = m20[sel], m21[sel], m22[sel]
         if k == 0:
             cols = (s / 2, (a01 + a10) / (2 * s), (a02 + a20) / (2 * s), (a21 - a12) / (2 * s))
         elif k == 1:
@@ -193,7 +193,7 @@ def pose_to_matrix(translation_m: ArrayLike, quaternion_xyzw: ArrayLike) -> Floa
     return matrix
 
 
-def matrix_to_pose(matrix_mm: ArrayLike) -> Tuple[FloatArray, FloatArray]:
+def matrix_to_pose(matrix_mm: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """4x4 matrix in mm -> (translation in metres (3,), quaternion x, y, z, w (4,)).
 
     The matrix is validated first (`validate_matrix`), so a sheared or scaled matrix is
@@ -304,7 +304,7 @@ def igtl_timestamp_from_ros(sec: int, nanosec: int) -> int:
     return (s << 32) | frac
 
 
-def ros_time_from_igtl(ts: int) -> Tuple[int, int]:
+def ros_time_from_igtl(ts: int) -> tuple[int, int]:
     """OpenIGTLink u64 time stamp -> ROS time (sec, nanosec), rounded to the nearest ns."""
     t = _check_int(ts, "timestamp", 0, _U64_MAX)
     sec, frac = t >> 32, t & _U32_MAX
@@ -334,7 +334,7 @@ def igtl_timestamp_from_seconds(seconds: float) -> int:
     if not (np.isfinite(value) and 0.0 <= value < float(1 << 32)):
         raise _fail("seconds", "a finite number in [0, 2**32)", repr(value))
     whole = int(value)
-    frac = int(round((value - whole) * _FRAC_PER_S))
+    frac = round((value - whole) * _FRAC_PER_S)
     if frac >= _FRAC_PER_S:
         whole, frac = whole + 1, 0
     return (whole << 32) | frac

@@ -44,36 +44,36 @@ import base64
 import enum
 import hashlib
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Dict, Iterator, Optional, Tuple
 
 from protocol.errors import ProtocolError
 
 __all__ = [
-    "MAX_DEVICE_NAME_BYTES",
     "DEFAULT_HASH_LENGTH",
-    "NamingError",
-    "Role",
-    "NameKey",
-    "device_name_for",
-    "is_hashed_name",
-    "DeviceNameRegistry",
+    "KEY_CHILD",
+    "KEY_FRAME",
+    "KEY_LINK",
+    "KEY_NODE",
+    "KEY_PARENT",
+    "KEY_ROBOT",
+    "KEY_ROLE",
+    "KEY_SERVICE",
     "KEY_TOPIC",
     "KEY_TYPE",
-    "KEY_FRAME",
-    "KEY_PARENT",
-    "KEY_CHILD",
-    "KEY_ROBOT",
-    "KEY_LINK",
-    "KEY_VISUAL",
-    "KEY_NODE",
-    "KEY_SERVICE",
-    "KEY_ROLE",
     "KEY_UNITS",
+    "KEY_VISUAL",
+    "MAX_DEVICE_NAME_BYTES",
     "METADATA_KEYS",
     "UNITS_MM",
-    "metadata_for",
+    "DeviceNameRegistry",
+    "NameKey",
+    "NamingError",
+    "Role",
+    "device_name_for",
+    "is_hashed_name",
     "key_from_metadata",
+    "metadata_for",
 ]
 
 MAX_DEVICE_NAME_BYTES = 20
@@ -108,7 +108,7 @@ class Role(str, enum.Enum):
 
 
 # Prefix of the readable form, and the names of the parts (also their metadata keys).
-_PREFIX: Dict[Role, str] = {
+_PREFIX: dict[Role, str] = {
     Role.SUBSCRIBER: "",
     Role.PUBLISHER: "pub:",
     Role.TF_LOOKUP: "tf:",
@@ -135,13 +135,13 @@ KEY_NODE = "ros2.node"
 KEY_SERVICE = "ros2.service"
 KEY_ROLE = "ros2.role"
 KEY_UNITS = "ros2.units"
-METADATA_KEYS: Tuple[str, ...] = (
+METADATA_KEYS: tuple[str, ...] = (
     KEY_TOPIC, KEY_TYPE, KEY_FRAME, KEY_PARENT, KEY_CHILD, KEY_ROBOT, KEY_LINK,
     KEY_VISUAL, KEY_NODE, KEY_SERVICE, KEY_ROLE, KEY_UNITS,
 )
 UNITS_MM = "mm"
 
-_PART_KEYS: Dict[Role, Tuple[str, ...]] = {
+_PART_KEYS: dict[Role, tuple[str, ...]] = {
     Role.SUBSCRIBER: (KEY_TOPIC,),
     Role.PUBLISHER: (KEY_TOPIC,),
     Role.TF_LOOKUP: (KEY_PARENT, KEY_CHILD),
@@ -171,7 +171,7 @@ class NameKey:
     """
 
     role: Role
-    parts: Tuple[str, ...]
+    parts: tuple[str, ...]
 
     def __post_init__(self) -> None:
         if not isinstance(self.role, Role):
@@ -234,9 +234,9 @@ class NameKey:
     def service_server(cls, service: str) -> NameKey:
         return cls(Role.SERVICE_SERVER, (_clean(service, KEY_SERVICE),))
 
-    def named_parts(self) -> Dict[str, str]:
+    def named_parts(self) -> dict[str, str]:
         """The parts keyed by metadata key; graph names get back their leading ``/``."""
-        out: Dict[str, str] = {}
+        out: dict[str, str] = {}
         for key, part in zip(_PART_KEYS[self.role], self.parts):
             out[key] = "/" + part if key in _GRAPH_NAME_KEYS else part
         return out
@@ -262,9 +262,7 @@ def _is_lossless(key: NameKey) -> bool:
         return False
     if key.role in (Role.ROBOT_LINK, Role.ROBOT_VISUAL) and key.parts[0] in _RESERVED_ROBOT_NAMES:
         return False
-    if key.role == Role.ROBOT_VISUAL and not key.parts[2].isdigit():
-        return False
-    return True
+    return not (key.role == Role.ROBOT_VISUAL and not key.parts[2].isdigit())
 
 
 def _digest(key: NameKey) -> str:
@@ -306,8 +304,8 @@ class DeviceNameRegistry:
     """
 
     def __init__(self) -> None:
-        self._by_key: Dict[NameKey, str] = {}
-        self._by_name: Dict[str, NameKey] = {}
+        self._by_key: dict[NameKey, str] = {}
+        self._by_name: dict[str, NameKey] = {}
 
     def register(self, key: NameKey) -> str:
         """Return the device name for ``key``, reserving it if new."""
@@ -328,18 +326,18 @@ class DeviceNameRegistry:
         # Overridable seam: tests force collisions through it.
         return device_name_for(key, hash_length)
 
-    def release(self, key: NameKey) -> Optional[str]:
+    def release(self, key: NameKey) -> str | None:
         """Forget ``key``; returns the device name it had, or None if unknown."""
         name = self._by_key.pop(key, None)
         if name is not None:
             del self._by_name[name]
         return name
 
-    def lookup(self, device_name: str) -> Optional[NameKey]:
+    def lookup(self, device_name: str) -> NameKey | None:
         """The ROS identity behind a device name handed out here, or None."""
         return self._by_name.get(device_name)
 
-    def name_of(self, key: NameKey) -> Optional[str]:
+    def name_of(self, key: NameKey) -> str | None:
         """The device name already given to ``key``, or None (does not register)."""
         return self._by_key.get(key)
 
@@ -349,23 +347,23 @@ class DeviceNameRegistry:
     def __len__(self) -> int:
         return len(self._by_key)
 
-    def __iter__(self) -> Iterator[Tuple[str, NameKey]]:
+    def __iter__(self) -> Iterator[tuple[str, NameKey]]:
         return iter(list(self._by_name.items()))
 
 
 def metadata_for(
     key: NameKey,
     *,
-    ros_type: Optional[str] = None,
-    frame: Optional[str] = None,
-    units: Optional[str] = None,
-) -> Dict[str, str]:
+    ros_type: str | None = None,
+    frame: str | None = None,
+    units: str | None = None,
+) -> dict[str, str]:
     """Metadata for every message of ``key``: role, full ROS names, and the optional type
     (``pkg/msg/Type``), header frame id and units (``"mm"`` for anything geometric).
 
     Keys are ASCII; values are str and may be any UTF-8 (frame names are free text).
     """
-    meta: Dict[str, str] = {KEY_ROLE: key.role.value}
+    meta: dict[str, str] = {KEY_ROLE: key.role.value}
     meta.update(key.named_parts())
     if ros_type:
         meta[KEY_TYPE] = ros_type
@@ -376,7 +374,7 @@ def metadata_for(
     return meta
 
 
-def key_from_metadata(metadata: Dict[str, str]) -> NameKey:
+def key_from_metadata(metadata: dict[str, str]) -> NameKey:
     """Rebuild the `NameKey` from a message's ``ros2.*`` metadata (inverse of
     `metadata_for`); raises `NamingError` naming the missing or bad key."""
     role_text = metadata.get(KEY_ROLE)
