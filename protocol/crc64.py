@@ -16,12 +16,12 @@ pure Python + numpy implementation (3D Slicer's Python has numpy but no crcmod):
 from __future__ import annotations
 
 import importlib
-from typing import Callable, Dict, List, Optional, Tuple, Union
+from typing import Callable, Union
 
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["POLY", "CHECK_VALUE", "crc64", "crc64_python", "crc64_crcmod", "BACKEND"]
+__all__ = ["BACKEND", "CHECK_VALUE", "POLY", "crc64", "crc64_crcmod", "crc64_python"]
 
 POLY = 0x42F0E1EBA9EA3693
 CHECK_VALUE = 0x6C40DF5F0B497347  # crc64(b"123456789"), the catalogue's check value
@@ -40,21 +40,23 @@ def _byte_table() -> U64Array:
         carry = (reg & top) != 0
         reg = reg << np.uint64(1)
         reg[carry] ^= poly
-    return reg
+    out: U64Array = reg
+    return out
 
 
 _T8 = _byte_table()
-_T8_LIST: List[int] = [int(v) for v in _T8]
+_T8_LIST: list[int] = [int(v) for v in _T8]
 
 
 def _word_table() -> U64Array:
     # T16[w] = register after feeding the 16-bit big-endian word w into a zero register.
     w = np.arange(65536, dtype=np.uint64)
     first = _T8[w >> np.uint64(8)]
-    return (first << np.uint64(8)) ^ _T8[(first >> np.uint64(56)) ^ (w & np.uint64(0xFF))]
+    out: U64Array = (first << np.uint64(8)) ^ _T8[(first >> np.uint64(56)) ^ (w & np.uint64(0xFF))]
+    return out
 
 
-_T16: Optional[U64Array] = None  # built lazily: 512 KiB that short messages never need
+_T16: U64Array | None = None  # built lazily: 512 KiB that short messages never need
 
 
 def crc64_python(data: Buffer) -> int:
@@ -65,7 +67,7 @@ def crc64_python(data: Buffer) -> int:
     return _crc_blocks(view)
 
 
-def _crc_loop(crc: int, data: Union[memoryview, bytes]) -> int:
+def _crc_loop(crc: int, data: memoryview | bytes) -> int:
     table = _T8_LIST
     for byte in data:
         crc = ((crc << 8) & _MASK) ^ table[(crc >> 56) ^ byte]
@@ -84,7 +86,7 @@ def _block_size(n: int) -> int:
 
 def _apply_shift(tables: U64Array, values: U64Array) -> U64Array:
     # Linear map given as 8 tables (one per input byte): XOR of the byte-wise images.
-    out = tables[0][values & np.uint64(0xFF)]
+    out: U64Array = tables[0][values & np.uint64(0xFF)]
     for k in range(1, 8):
         out ^= tables[k][(values >> np.uint64(8 * k)) & np.uint64(0xFF)]
     return out
@@ -101,7 +103,7 @@ def _tables_from_basis(images: U64Array) -> U64Array:
     return tables
 
 
-_SHIFT_CACHE: Dict[int, U64Array] = {}
+_SHIFT_CACHE: dict[int, U64Array] = {}
 
 
 def _shift_tables(log2_bytes: int) -> U64Array:
@@ -154,7 +156,7 @@ def _crc_blocks(view: memoryview) -> int:
     return int(crc[0])
 
 
-def _load_crcmod() -> Tuple[Optional[Callable[[Buffer], int]], str]:
+def _load_crcmod() -> tuple[Callable[[Buffer], int] | None, str]:
     try:
         # The package re-exports a name "crcmod" that hides the submodule: use sys.modules.
         impl = importlib.import_module("crcmod.crcmod")

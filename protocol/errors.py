@@ -22,14 +22,14 @@ reading; on `FramingError` close the connection, since message boundaries are lo
 from __future__ import annotations
 
 __all__ = [
-    "ProtocolError",
+    "BodyError",
+    "BodyTooLargeError",
+    "CrcMismatchError",
+    "EncodeError",
     "FramingError",
     "HeaderError",
-    "BodyTooLargeError",
     "MessageError",
-    "CrcMismatchError",
-    "BodyError",
-    "EncodeError",
+    "ProtocolError",
 ]
 
 

@@ -17,27 +17,27 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
-from typing import Dict, Tuple, Union
+from typing import Union
 
 from protocol.errors import BodyError, EncodeError, HeaderError
 
 __all__ = [
-    "HEADER_SIZE",
-    "EXT_HEADER_SIZE",
-    "TYPE_NAME_SIZE",
     "DEVICE_NAME_SIZE",
     "ENCODING_US_ASCII",
     "ENCODING_UTF8",
+    "EXT_HEADER_SIZE",
+    "HEADER_SIZE",
     "SUPPORTED_HEADER_VERSIONS",
-    "Header",
+    "TYPE_NAME_SIZE",
     "ExtendedHeader",
-    "unpack_raw",
-    "encode_name",
+    "Header",
     "decode_name",
-    "encode_text",
     "decode_text",
+    "encode_name",
+    "encode_text",
     "pack_metadata",
     "unpack_metadata",
+    "unpack_raw",
 ]
 
 HEADER_SIZE = 58
@@ -145,11 +145,11 @@ class Header:
         return cls(version, type_name, device_name, timestamp, body_size, crc)
 
 
-def unpack_raw(data: Buffer) -> Tuple[int, bytes, bytes, int, int, int]:
+def unpack_raw(data: Buffer) -> tuple[int, bytes, bytes, int, int, int]:
     """Header fields with the names still raw; checks the length and header version only."""
     if len(data) != HEADER_SIZE:
         raise HeaderError("header", f"{HEADER_SIZE} bytes", f"{len(data)} bytes")
-    fields: Tuple[int, bytes, bytes, int, int, int] = _HEADER.unpack(data)
+    fields: tuple[int, bytes, bytes, int, int, int] = _HEADER.unpack(data)
     if fields[0] not in SUPPORTED_HEADER_VERSIONS:
         raise HeaderError("header version", "1 or 2", fields[0])
     return fields
@@ -194,7 +194,7 @@ class ExtendedHeader:
         return cls(ext, meta_header, meta, msg_id)
 
 
-def pack_metadata(metadata: Dict[str, str]) -> Tuple[bytes, bytes]:
+def pack_metadata(metadata: dict[str, str]) -> tuple[bytes, bytes]:
     """(metadata header incl. INDEX_COUNT, keys and values). Values go out as US-ASCII when
     they are ASCII (what 3D Slicer writes), else UTF-8."""
     if len(metadata) > 0xFFFF:
@@ -217,9 +217,9 @@ def pack_metadata(metadata: Dict[str, str]) -> Tuple[bytes, bytes]:
     return b"".join(entries), b"".join(payload)
 
 
-def unpack_metadata(meta_header: Buffer, meta: Buffer, type_name: str = "") -> Dict[str, str]:
+def unpack_metadata(meta_header: Buffer, meta: Buffer, type_name: str = "") -> dict[str, str]:
     """Parse metadata header + key/value bytes; `BodyError` names the inconsistent field."""
-    result: Dict[str, str] = {}
+    result: dict[str, str] = {}
     if len(meta_header) == 0:
         return result  # some writers omit even INDEX_COUNT when there is no metadata
     if len(meta_header) < 2:

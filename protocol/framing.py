@@ -1,0 +1,185 @@
+"""Sans-I/O OpenIGTLink framing: `encode` a `Message` to bytes, `Decoder` turns a byte
+stream back into messages. No sockets here: a transport feeds received bytes in and writes
+encoded bytes out (the asyncio daemon, a blocking client and a Qt timer in Slicer share it).
+
+Decoder error contract (see protocol.errors):
+
+* `MessageError` (`CrcMismatchError`, `BodyError`): raised by `next_message` after the bad
+  message was consumed; call again to go on with the next one.
+* `FramingError` (`HeaderError`, `BodyTooLargeError`): message boundaries are lost; the
+  decoder stays broken and raises the same error on every later call. Close the connection.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+from protocol.crc64 import crc64
+from protocol.errors import (
+    BodyError,
+    BodyTooLargeError,
+    CrcMismatchError,
+    EncodeError,
+    FramingError,
+    ProtocolError,
+)
+from protocol.header import (
+    EXT_HEADER_SIZE,
+    HEADER_SIZE,
+    ExtendedHeader,
+    Header,
+    decode_name,
+    pack_metadata,
+    unpack_metadata,
+    unpack_raw,
+)
+from protocol.messages import Message, unpack_body
+
+__all__ = ["DEFAULT_MAX_BODY_SIZE", "Decoder", "encode"]
+
+DEFAULT_MAX_BODY_SIZE = 64 * 1024 * 1024  # 64 MiB: a 512^3 uint8 volume with room to spare
+
+_U32_MAX = 0xFFFFFFFF
+
+
+def encode(message: Message, *, header_version: int = 1) -> bytes:
+    """The complete wire bytes of ``message`` (header + body) with its CRC.
+
+    ``header_version`` 1 drops ``metadata`` and ``message_id`` (OpenIGTLink 1.x/2.x peers
+    cannot read more); 2 writes the extended header and metadata. The timestamp is written
+    as given: setting it (0 means "unset") is the caller's business.
+    """
+    type_name = message.type_name
+    content = message.body.pack()
+    if header_version == 1:
+        body = content
+    elif header_version == 2:
+        if isinstance(message.message_id, bool) or not isinstance(message.message_id, int) \
+                or not 0 <= message.message_id <= _U32_MAX:
+            raise EncodeError("message_id", "an integer in [0, 2**32)", message.message_id)
+        meta_header, meta = pack_metadata(message.metadata)
+        if len(meta_header) > 0xFFFF or len(meta) > _U32_MAX:
+            raise EncodeError("metadata", "a header under 64 KiB and values under 4 GiB",
+                              f"{len(meta_header)} + {len(meta)} bytes")
+        ext = ExtendedHeader(EXT_HEADER_SIZE, len(meta_header), len(meta), message.message_id)
+        body = b"".join((ext.pack(), content, meta_header, meta))
+    else:
+        raise EncodeError("header_version", "1 or 2", header_version)
+    header = Header(header_version, type_name, message.device_name, message.timestamp,
+                    len(body), crc64(body))
+    return header.pack() + body
+
+
+class Decoder:
+    """Incremental decoder: `feed` bytes of any chunk size, then take messages with
+    `next_message` (or iterate `messages`).
+
+    Bytes are appended to one buffer and consumed by advancing an offset; the consumed prefix
+    is dropped once it is at least half of the buffer, so each byte is moved O(1) times
+    whatever the chunking. A BODY_SIZE above ``max_body_size`` is refused from the header
+    alone, before any body byte is awaited or stored.
+    """
+
+    def __init__(self, *, max_body_size: int = DEFAULT_MAX_BODY_SIZE,
+                 verify_crc: bool = True) -> None:
+        self.max_body_size = max_body_size
+        self.verify_crc = verify_crc
+        self._buffer = bytearray()
+        self._offset = 0
+        self._header: tuple[int, bytes, bytes, int, int, int] | None = None
+        self._broken: FramingError | None = None
+
+    @property
+    def buffered(self) -> int:
+        """Bytes received and not yet returned as part of a message."""
+        return len(self._buffer) - self._offset
+
+    @property
+    def broken(self) -> FramingError | None:
+        """The framing error that stopped this decoder, if any."""
+        return self._broken
+
+    def feed(self, data: bytes | bytearray | memoryview) -> None:
+        """Append received bytes (any size, including 1 byte or none)."""
+        if self._broken is not None:
+            raise self._broken
+        if self._offset and self._offset * 2 >= len(self._buffer):
+            del self._buffer[: self._offset]
+            self._offset = 0
+        self._buffer += data
+
+    def _take(self, size: int) -> bytes:
+        start = self._offset
+        self._offset = start + size
+        with memoryview(self._buffer) as view:  # one copy, and the view is released at once
+            return bytes(view[start:self._offset])
+
+    def next_message(self) -> Message | None:
+        """The next complete message, or None if more bytes are needed.
+
+        Raises `MessageError` for a bad message (already consumed: call again) and
+        `FramingError` when the stream cannot continue (then raised again on every call).
+        """
+        if self._broken is not None:
+            raise self._broken
+        if self._header is None:
+            if self.buffered < HEADER_SIZE:
+                return None
+            start = self._offset
+            try:
+                fields = unpack_raw(self._buffer[start:start + HEADER_SIZE])
+            except FramingError as exc:
+                self._broken = exc
+                raise
+            body_size = fields[4]
+            if body_size > self.max_body_size:
+                self._broken = BodyTooLargeError(
+                    "BODY_SIZE", f"<= {self.max_body_size} bytes (max_body_size)", body_size)
+                raise self._broken
+            self._header = fields
+        version, type_raw, name_raw, timestamp, body_size, crc = self._header
+        if self.buffered < HEADER_SIZE + body_size:
+            return None
+        self._header = None
+        self._offset += HEADER_SIZE
+        body = self._take(body_size)
+        return _decode(version, type_raw, name_raw, timestamp, body, crc, self.verify_crc)
+
+    def messages(self) -> Iterator[Message]:
+        """Yield messages until more bytes are needed (errors as in `next_message`)."""
+        while True:
+            message = self.next_message()
+            if message is None:
+                return
+            yield message
+
+
+def _decode(version: int, type_raw: bytes, name_raw: bytes, timestamp: int, body: bytes,
+            crc: int, verify_crc: bool) -> Message:
+    if verify_crc:
+        actual = crc64(body)
+        if actual != crc:
+            raise CrcMismatchError("CRC", f"0x{actual:016x} (computed over the body)",
+                                   f"0x{crc:016x}")
+    try:
+        type_name = decode_name(type_raw, "type_name")
+        device_name = decode_name(name_raw, "device_name", type_name)
+        metadata: dict[str, str] = {}
+        message_id = 0
+        content = body
+        if version == 2:
+            ext = ExtendedHeader.unpack(body, type_name)
+            content_end = len(body) - ext.meta_header_size - ext.meta_size
+            content = body[ext.ext_header_size:content_end]
+            metadata = unpack_metadata(
+                body[content_end:content_end + ext.meta_header_size],
+                body[content_end + ext.meta_header_size:], type_name)
+            message_id = ext.message_id
+        parsed = unpack_body(type_name, content)
+    except ProtocolError:
+        raise
+    except (ValueError, IndexError, TypeError, UnicodeDecodeError) as exc:
+        # Safety net: nothing untyped may escape the decoder.
+        raise BodyError("body", "a well-formed message", f"{type(exc).__name__}: {exc}",
+                        type_name=type_raw.split(b"\0", 1)[0].decode("latin-1")) from exc
+    return Message(device_name, parsed, timestamp, metadata, message_id, version)
