@@ -1,0 +1,302 @@
+"""Units, rotations, the OpenIGTLink TRANSFORM order and time stamps (protocol/conversions.py)."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from protocol.conversions import (
+    MM_PER_M,
+    ConversionError,
+    igtl12_to_matrix,
+    igtl_timestamp_from_ros,
+    igtl_timestamp_from_seconds,
+    igtl_timestamp_now,
+    igtl_timestamp_to_seconds,
+    matrix_to_igtl12,
+    matrix_to_pose,
+    metres_to_mm,
+    mm_to_metres,
+    pose_to_matrix,
+    quaternion_to_rotation,
+    ros_time_from_igtl,
+    rotation_to_quaternion,
+    validate_matrix,
+)
+from protocol.errors import ProtocolError
+
+H = math.sqrt(0.5)
+RZ90 = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+# ---------------------------------------------------------------- lengths
+
+def test_lengths_real_values() -> None:
+    assert MM_PER_M == 1000.0
+    assert float(metres_to_mm(0.0031415)) == pytest.approx(3.1415, abs=1e-12)
+    assert float(mm_to_metres(3.1415)) == pytest.approx(0.0031415, abs=1e-15)
+    pts = np.array([[0.001, 0.002, 0.003], [1.0, -2.0, 0.5]])
+    np.testing.assert_allclose(metres_to_mm(pts), [[1, 2, 3], [1000, -2000, 500]])
+    assert metres_to_mm(pts).shape == (2, 3)
+    np.testing.assert_allclose(mm_to_metres(metres_to_mm(pts)), pts)
+
+
+# ---------------------------------------------------------------- rotations
+
+def test_quarter_turn_about_z() -> None:
+    q = rotation_to_quaternion(RZ90)
+    np.testing.assert_allclose(q, [0.0, 0.0, H, H], atol=1e-12)
+    np.testing.assert_allclose(quaternion_to_rotation([0.0, 0.0, H, H]), RZ90, atol=1e-12)
+
+
+def test_identity_and_denormalised_quaternion() -> None:
+    np.testing.assert_allclose(quaternion_to_rotation([0, 0, 0, 1]), np.eye(3))
+    # ROS messages often carry slightly off quaternions; they are normalised first.
+    np.testing.assert_allclose(quaternion_to_rotation([0, 0, 2 * H, 2 * H]), RZ90, atol=1e-12)
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_half_turns_take_the_stable_branches(axis: int) -> None:
+    # trace = -1: the w branch would divide by ~0; Shepperd's choice avoids it.
+    q = np.zeros(4)
+    q[axis] = 1.0
+    r = quaternion_to_rotation(q)
+    back = rotation_to_quaternion(r)
+    np.testing.assert_allclose(np.abs(back), np.abs(q), atol=1e-12)
+    assert back[3] >= 0.0
+
+
+def test_canonical_sign_w_non_negative() -> None:
+    q = rotation_to_quaternion(quaternion_to_rotation([0.1, 0.2, 0.3, -0.9]))
+    assert q[3] > 0
+    np.testing.assert_allclose(np.linalg.norm(q), 1.0)
+
+
+def test_batched_shapes() -> None:
+    qs = np.array([[0, 0, 0, 1], [0, 0, H, H], [1, 0, 0, 0]], dtype=float)
+    rs = quaternion_to_rotation(qs)
+    assert rs.shape == (3, 3, 3)
+    np.testing.assert_allclose(rs[1], RZ90, atol=1e-12)
+    back = rotation_to_quaternion(rs)
+    assert back.shape == (3, 4)
+    np.testing.assert_allclose(back, qs, atol=1e-12)
+
+
+def test_rotation_to_quaternion_accepts_homogeneous() -> None:
+    m = np.eye(4)
+    m[:3, :3] = RZ90
+    np.testing.assert_allclose(rotation_to_quaternion(m), [0, 0, H, H], atol=1e-12)
+
+
+unit_quaternions = st.lists(
+    st.floats(-1.0, 1.0, allow_nan=False), min_size=4, max_size=4
+).filter(lambda v: np.linalg.norm(v) > 1e-3)
+
+
+@given(unit_quaternions)
+def test_quaternion_matrix_round_trip(q: list[float]) -> None:
+    q_arr = np.asarray(q) / np.linalg.norm(q)
+    r = quaternion_to_rotation(q_arr)
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(r) == pytest.approx(1.0)
+    back = rotation_to_quaternion(r)
+    # q and -q are the same rotation; canonical form has w >= 0.
+    assert min(np.abs(back - q_arr).max(), np.abs(back + q_arr).max()) < 1e-9
+    np.testing.assert_allclose(quaternion_to_rotation(back), r, atol=1e-12)
+
+
+@given(unit_quaternions, st.lists(st.floats(-100.0, 100.0), min_size=3, max_size=3))
+def test_pose_matrix_round_trip(q: list[float], t: list[float]) -> None:
+    m = pose_to_matrix(t, q)
+    np.testing.assert_allclose(m[:3, 3], np.asarray(t) * 1000.0)
+    t_back, q_back = matrix_to_pose(m)
+    np.testing.assert_allclose(t_back, t, atol=1e-9)
+    np.testing.assert_allclose(quaternion_to_rotation(q_back), m[:3, :3], atol=1e-9)
+
+
+def test_pose_to_matrix_real_values() -> None:
+    m = pose_to_matrix([0.0031415, -0.5, 2.0], [0.0, 0.0, H, H])
+    assert m.dtype == np.float64
+    np.testing.assert_allclose(m[:3, 3], [3.1415, -500.0, 2000.0])
+    np.testing.assert_allclose(m[:3, :3], RZ90, atol=1e-12)
+    np.testing.assert_array_equal(m[3], [0, 0, 0, 1])
+    t, q = matrix_to_pose(m)
+    np.testing.assert_allclose(t, [0.0031415, -0.5, 2.0])
+    np.testing.assert_allclose(q, [0, 0, H, H], atol=1e-12)
+
+
+# ---------------------------------------------------------------- OpenIGTLink TRANSFORM
+
+def test_igtl12_order_element_by_element() -> None:
+    m = np.eye(4)
+    for i in range(3):
+        for j in range(4):
+            m[i, j] = 10 * (i + 1) + (j + 1)  # R_ij = "ij"; TX = 14, TY = 24, TZ = 34
+    out = matrix_to_igtl12(m)
+    assert out.dtype == np.float32
+    assert out.shape == (12,)
+    expected = [11, 21, 31, 12, 22, 32, 13, 23, 33, 14, 24, 34]  # R11 R21 R31 R12 ... TZ
+    for k, value in enumerate(expected):
+        assert out[k] == value, k
+    np.testing.assert_array_equal(igtl12_to_matrix(out), m)
+
+
+def test_igtl12_of_a_real_pose() -> None:
+    m = pose_to_matrix([0.0031415, 0.0, 0.0], [0.0, 0.0, H, H])
+    out = matrix_to_igtl12(m)
+    np.testing.assert_allclose(out[:3], [0, 1, 0], atol=1e-7)  # first column of Rz(90)
+    np.testing.assert_allclose(out[3:6], [-1, 0, 0], atol=1e-7)
+    np.testing.assert_allclose(out[9:], [3.1415, 0, 0], rtol=1e-7)
+
+
+@pytest.mark.parametrize(
+    ("values", "fld"),
+    [(np.zeros(11), "transform"), ([float("nan")] * 12, "transform")],
+)
+def test_igtl12_to_matrix_refuses(values: object, fld: str) -> None:
+    with pytest.raises(ConversionError) as info:
+        igtl12_to_matrix(values)  # type: ignore[arg-type]
+    assert info.value.field == fld
+
+
+# ---------------------------------------------------------------- validation
+
+def test_validate_matrix_accepts_rigid_and_float32_noise() -> None:
+    m = pose_to_matrix([0.1, 0.2, 0.3], [0.1, 0.2, 0.3, 0.9])
+    noisy = igtl12_to_matrix(matrix_to_igtl12(m))  # through float32
+    np.testing.assert_allclose(validate_matrix(noisy), noisy)
+
+
+@pytest.mark.parametrize(
+    ("matrix", "fld", "word"),
+    [
+        (np.eye(3), "matrix", "shape"),
+        (np.full((4, 4), np.nan), "matrix", "finite"),
+        (np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [1, 0, 0, 1]]), "matrix[3]", "0 0 0 1"),
+        (np.diag([2.0, 1.0, 1.0, 1.0]), "matrix rotation", "orthonormal"),
+        (np.diag([-1.0, 1.0, 1.0, 1.0]), "matrix rotation", "determinant"),
+        ([["a"] * 4] * 4, "matrix", "4x4"),
+    ],
+)
+def test_validate_matrix_errors_name_field(matrix: object, fld: str, word: str) -> None:
+    with pytest.raises(ConversionError) as info:
+        validate_matrix(matrix)  # type: ignore[arg-type]
+    err = info.value
+    assert isinstance(err, ProtocolError)
+    assert err.field == fld
+    assert word in err.expected
+    assert str(err).startswith(fld)
+
+
+def test_validate_matrix_custom_field_name() -> None:
+    with pytest.raises(ConversionError) as info:
+        validate_matrix(np.zeros((4, 4)), field="request.matrix")
+    assert info.value.field.startswith("request.matrix")
+
+
+@pytest.mark.parametrize(
+    ("q", "got"), [([0, 0, 0, 0], "norm 0"), ([0, 0, 1], "shape (3,)"), ([np.inf, 0, 0, 1], "NaN")]
+)
+def test_bad_quaternions(q: list[float], got: str) -> None:
+    with pytest.raises(ConversionError) as info:
+        quaternion_to_rotation(q)
+    assert info.value.field == "quaternion"
+    assert got in str(info.value.got)
+
+
+def test_bad_pose_inputs() -> None:
+    with pytest.raises(ConversionError) as info:
+        pose_to_matrix([0, 0], [0, 0, 0, 1])
+    assert info.value.field == "translation"
+    with pytest.raises(ConversionError) as info:
+        rotation_to_quaternion(np.zeros((2, 2)))
+    assert info.value.field == "rotation"
+
+
+# ---------------------------------------------------------------- time stamps
+
+def test_timestamp_zero() -> None:
+    assert igtl_timestamp_from_ros(0, 0) == 0
+    assert ros_time_from_igtl(0) == (0, 0)
+
+
+def test_timestamp_layout() -> None:
+    ts = igtl_timestamp_from_ros(1_700_000_000, 500_000_000)
+    assert ts >> 32 == 1_700_000_000
+    assert ts & 0xFFFFFFFF == 1 << 31  # half a second
+    assert igtl_timestamp_to_seconds(ts) == 1_700_000_000.5
+
+
+@pytest.mark.parametrize(
+    ("sec", "ns"),
+    [
+        (0, 0),
+        (0, 1),
+        (0, 999_999_999),
+        (1_700_000_000, 999_999_999),
+        (2**31 - 1, 999_999_999),  # last second before 2038-01-19
+        (2**31 + 12_345, 678_901_234),  # after 2038: u32 seconds still fit
+        (2**32 - 1, 999_999_999),  # 2106, the last representable second
+    ],
+)
+def test_timestamp_round_trip_exact(sec: int, ns: int) -> None:
+    assert ros_time_from_igtl(igtl_timestamp_from_ros(sec, ns)) == (sec, ns)
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(0, 999_999_999))
+def test_timestamp_round_trip_property(sec: int, ns: int) -> None:
+    ts = igtl_timestamp_from_ros(sec, ns)
+    assert 0 <= ts < 2**64
+    assert ros_time_from_igtl(ts) == (sec, ns)
+
+
+@given(st.integers(0, 2**64 - 1))
+def test_any_igtl_stamp_converts_within_half_ns(ts: int) -> None:
+    sec, ns = ros_time_from_igtl(ts)
+    assert 0 <= ns <= 999_999_999
+    exact = (ts >> 32) * 10**9 + (ts & 0xFFFFFFFF) * 10**9 / 2**32
+    assert abs(sec * 10**9 + ns - exact) <= 0.5
+
+
+def test_fraction_just_below_a_second_carries() -> None:
+    assert ros_time_from_igtl((5 << 32) | 0xFFFFFFFF) == (6, 0)
+
+
+def test_now_and_seconds() -> None:
+    before = time.time()
+    ts = igtl_timestamp_now()
+    after = time.time()
+    assert before - 1e-3 <= igtl_timestamp_to_seconds(ts) <= after + 1e-3
+    assert igtl_timestamp_from_seconds(1.5) == (1 << 32) | (1 << 31)
+
+
+@pytest.mark.parametrize(
+    ("sec", "ns", "fld"),
+    [(-1, 0, "sec"), (2**32, 0, "sec"), (0, 10**9, "nanosec"), (0, -1, "nanosec"),
+     (1.5, 0, "sec"), (True, 0, "sec")],
+)
+def test_timestamp_errors_name_field(sec: object, ns: object, fld: str) -> None:
+    with pytest.raises(ConversionError) as info:
+        igtl_timestamp_from_ros(sec, ns)  # type: ignore[arg-type]
+    assert info.value.field == fld
+
+
+def test_bad_igtl_stamp() -> None:
+    with pytest.raises(ConversionError) as info:
+        ros_time_from_igtl(2**64)
+    assert info.value.field == "timestamp"
+    with pytest.raises(ConversionError) as info:
+        igtl_timestamp_from_seconds(float("nan"))
+    assert info.value.field == "seconds"
+
+
+@settings(max_examples=50)
+@given(st.floats(0.0, 2.0**32 - 1, allow_nan=False))
+def test_seconds_round_trip(seconds: float) -> None:
+    assert igtl_timestamp_to_seconds(igtl_timestamp_from_seconds(seconds)) == pytest.approx(
+        seconds, abs=1e-6)
