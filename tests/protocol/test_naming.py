@@ -1,0 +1,224 @@
+"""Device names and ros2.* metadata (protocol/naming.py)."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from protocol.naming import (
+    KEY_CHILD,
+    KEY_FRAME,
+    KEY_LINK,
+    KEY_PARENT,
+    KEY_ROBOT,
+    KEY_ROLE,
+    KEY_TOPIC,
+    KEY_TYPE,
+    KEY_UNITS,
+    KEY_VISUAL,
+    MAX_DEVICE_NAME_BYTES,
+    METADATA_KEYS,
+    DeviceNameRegistry,
+    NameKey,
+    NamingError,
+    Role,
+    device_name_for,
+    is_hashed_name,
+    key_from_metadata,
+    metadata_for,
+)
+
+
+@pytest.mark.parametrize(
+    ("key", "name"),
+    [
+        (NameKey.subscriber("/tool"), "tool"),
+        (NameKey.subscriber("tool"), "tool"),
+        (NameKey.subscriber("/PSM1/measured_cp"), "PSM1/measured_cp"),
+        (NameKey.publisher("/tool"), "pub:tool"),
+        (NameKey.tf_lookup("world", "tool"), "tf:world>tool"),
+        (NameKey.tf_broadcaster("world", "tool"), "tfb:world>tool"),
+        (NameKey.robot_link("PSM1", "base_link"), "PSM1:base_link"),
+        (NameKey.robot_visual("PSM1", "base_link", 2), "PSM1:base_link:2"),
+        (NameKey.robot_description("PSM1"), "urdf:PSM1"),
+        (NameKey.parameter_client("/turtlesim"), "param:turtlesim"),
+        (NameKey.parameter_server("/slicer"), "params:slicer"),
+        (NameKey.service_client("/spawn"), "srvc:spawn"),
+        (NameKey.service_server("/spawn"), "srv:spawn"),
+    ],
+)
+def test_short_names_stay_readable(key: NameKey, name: str) -> None:
+    assert device_name_for(key) == name
+    assert not is_hashed_name(name)
+
+
+def test_lookup_and_subscriber_of_same_name_do_not_collide() -> None:
+    names = {
+        device_name_for(NameKey.subscriber("/tool")),
+        device_name_for(NameKey.publisher("/tool")),
+        device_name_for(NameKey.tf_lookup("world", "tool")),
+        device_name_for(NameKey.tf_broadcaster("world", "tool")),
+        device_name_for(NameKey.robot_link("world", "tool")),
+        device_name_for(NameKey.parameter_client("/tool")),
+    }
+    assert len(names) == 6
+
+
+def test_long_names_get_tail_and_hash() -> None:
+    key = NameKey.subscriber("/my_robot/arm/end_effector/measured_pose")
+    name = device_name_for(key)
+    assert len(name.encode("ascii")) <= MAX_DEVICE_NAME_BYTES
+    assert is_hashed_name(name)
+    tail, digest = name.split("~")
+    assert "/my_robot/arm/end_effector/measured_pose".endswith(tail)
+    assert len(digest) == 6
+    # sha256-based: the same on every run and machine (hash() would be salted).
+    assert name == device_name_for(NameKey.subscriber("my_robot/arm/end_effector/measured_pose"))
+    assert name == "measured_pose~" + digest
+    assert device_name_for(NameKey.publisher("/my_robot/arm/end_effector/measured_pose")) != name
+
+
+def test_hash_is_stable_across_versions() -> None:
+    # Pinned: changing it would orphan users' saved Slicer scenes.
+    assert device_name_for(NameKey.robot_link("PSM1", "tool_tip_link_very_long")) == (
+        "ink_very_long~gafcmj")
+
+
+def test_separator_characters_force_hashing() -> None:
+    a = NameKey.tf_lookup("a>b", "c")
+    b = NameKey.tf_lookup("a", "b>c")
+    assert device_name_for(a) != device_name_for(b)
+    assert is_hashed_name(device_name_for(a)) and is_hashed_name(device_name_for(b))
+
+
+def test_reserved_robot_name_cannot_pose_as_publisher() -> None:
+    assert device_name_for(NameKey.robot_link("pub", "x")) != device_name_for(
+        NameKey.publisher("/x"))
+    assert is_hashed_name(device_name_for(NameKey.robot_link("pub", "x")))
+
+
+def test_non_ascii_frames_become_ascii() -> None:
+    name = device_name_for(NameKey.tf_lookup("wörld", "werkzeug"))
+    name.encode("ascii")
+    assert is_hashed_name(name)
+    assert name != device_name_for(NameKey.tf_lookup("w_rld", "werkzeug"))
+
+
+ros_text = st.text(min_size=1, max_size=80).filter(lambda s: "\x00" not in s and s.strip("/"))
+
+
+@given(st.lists(st.tuples(ros_text, ros_text), min_size=1, max_size=30))
+def test_registry_names_always_fit_and_are_unique(pairs: list[tuple[str, str]]) -> None:
+    registry = DeviceNameRegistry()
+    keys = {NameKey.tf_lookup(p, c) for p, c in pairs} | {NameKey.subscriber(p) for p, _ in pairs}
+    names = {}
+    for key in keys:
+        name = registry.register(key)
+        name.encode("ascii")
+        assert 0 < len(name) <= MAX_DEVICE_NAME_BYTES
+        names[name] = key
+        assert registry.lookup(name) == key
+    assert len(names) == len(keys)
+
+
+class _CollidingRegistry(DeviceNameRegistry):
+    """Every 6-character hash is the same: forces the collision path."""
+
+    def _candidate(self, key: NameKey, hash_length: int) -> str:
+        name = super()._candidate(key, hash_length)
+        if hash_length == 6 and is_hashed_name(name):
+            return name.split("~")[0][-5:] + "~aaaaaa"
+        return name
+
+
+def test_forced_collision_lengthens_hash() -> None:
+    registry = _CollidingRegistry()
+    first = NameKey.subscriber("/a/very/long/namespace/one/topic")
+    second = NameKey.subscriber("/another/long/namespace/two/topic")
+    n1 = registry.register(first)
+    n2 = registry.register(second)
+    assert n1.endswith("~aaaaaa") and n1.startswith("topic")
+    assert n2 != n1
+    assert len(n2.split("~")[1]) == 7
+    assert len(n2) <= MAX_DEVICE_NAME_BYTES
+    assert registry.lookup(n1) == first
+    assert registry.lookup(n2) == second
+    # Idempotent, and releasing frees the name for its key only.
+    assert registry.register(second) == n2
+    assert registry.release(first) == n1
+    assert n1 not in registry
+    assert registry.lookup(n1) is None
+    assert registry.release(first) is None
+    assert len(registry) == 1
+
+
+def test_registry_basic_mapping() -> None:
+    registry = DeviceNameRegistry()
+    key = NameKey.tf_lookup("world", "tool")
+    assert registry.name_of(key) is None
+    name = registry.register(key)
+    assert name == "tf:world>tool"
+    assert name in registry
+    assert registry.name_of(key) == name
+    assert dict(iter(registry)) == {name: key}
+    assert key.named_parts() == {KEY_PARENT: "world", KEY_CHILD: "tool"}
+
+
+def test_metadata_for_subscriber() -> None:
+    meta = metadata_for(NameKey.subscriber("tool"), ros_type="geometry_msgs/msg/PoseStamped",
+                        frame="world", units="mm")
+    assert meta == {
+        KEY_ROLE: "subscriber",
+        KEY_TOPIC: "/tool",
+        KEY_TYPE: "geometry_msgs/msg/PoseStamped",
+        KEY_FRAME: "world",
+        KEY_UNITS: "mm",
+    }
+    assert set(meta) <= set(METADATA_KEYS)
+    for k in meta:
+        k.encode("ascii")
+
+
+def test_metadata_for_robot_visual() -> None:
+    meta = metadata_for(NameKey.robot_visual("PSM1", "tool", 0), units="mm")
+    assert meta[KEY_ROBOT] == "PSM1" and meta[KEY_LINK] == "tool" and meta[KEY_VISUAL] == "0"
+    assert meta[KEY_ROLE] == "robot_visual"
+
+
+ALL_KEYS = [
+    NameKey.subscriber("/a/b"), NameKey.publisher("x"), NameKey.tf_lookup("w", "t"),
+    NameKey.tf_broadcaster("wörld", "t"), NameKey.robot_link("R", "l"),
+    NameKey.robot_visual("R", "l", 3), NameKey.robot_description("R"),
+    NameKey.parameter_client("/n"), NameKey.parameter_server("/s"),
+    NameKey.service_client("/c"), NameKey.service_server("/c"),
+]
+
+
+def test_every_role_has_an_example() -> None:
+    assert {k.role for k in ALL_KEYS} == set(Role)
+
+
+@pytest.mark.parametrize("key", ALL_KEYS, ids=lambda k: k.role.value)
+def test_metadata_round_trip(key: NameKey) -> None:
+    assert key_from_metadata(metadata_for(key)) == key
+
+
+@pytest.mark.parametrize(
+    ("build", "fld"),
+    [
+        (lambda: NameKey.subscriber("/"), KEY_TOPIC),
+        (lambda: NameKey.subscriber(""), KEY_TOPIC),
+        (lambda: NameKey.tf_lookup("world", ""), KEY_CHILD),
+        (lambda: NameKey.robot_visual("R", "l", -1), KEY_VISUAL),
+        (lambda: NameKey.robot_link("R", 3), KEY_LINK),
+        (lambda: NameKey(Role.TF_LOOKUP, ("only",)), "parts"),
+        (lambda: key_from_metadata({KEY_ROLE: "nope"}), KEY_ROLE),
+        (lambda: key_from_metadata({KEY_ROLE: "tf_lookup", KEY_PARENT: "w"}), KEY_CHILD),
+        (lambda: device_name_for(NameKey.subscriber("x" * 40), hash_length=2), "hash_length"),
+    ],
+)
+def test_errors_name_their_field(build: object, fld: str) -> None:
+    with pytest.raises(NamingError) as info:
+        build()  # type: ignore[operator]
+    assert info.value.field == fld
