@@ -1,0 +1,162 @@
+"""ROS type names: resolve what a user typed to ``pkg/msg/Type`` and load the message class.
+
+Accepted spellings (the reference SlicerROS2 accepts the first three):
+
+* a short name of the reference: ``"String"``, ``"Int"``, ``"DoubleTable"``, ``"PoseStamped"``;
+* a reference node class name: ``"vtkMRMLROS2PublisherStringNode"``,
+  ``"vtkMRMLROS2SubscriberPoseStampedNode"``;
+* ``"std_msgs/msg/String"`` (canonical), ``"std_msgs/String"``, ``"std_msgs.msg.String"``;
+* any other bare message name (``"NavSatFix"``) found in exactly one installed package.
+
+rclpy only: no ament index is needed (the PyPI wheels install none), installed interface
+packages are found on ``sys.path`` by their ``msg/__init__.py``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import re
+import sys
+from functools import lru_cache
+from typing import Any, Dict, List, Tuple
+
+from bridge.codecs.errors import CodecError
+
+__all__ = ["resolve_type", "message_class", "ros_type_of", "REFERENCE_SHORT_NAMES"]
+
+# The reference's short names (its vtkMRMLROS2{Publisher,Subscriber}<Name>Node classes) and
+# the ROS type each one stands for. Several short names share a ROS type (a vtkTable and a
+# vtkDoubleArray both travel as Float64MultiArray): the codec handles 1-D and 2-D alike.
+REFERENCE_SHORT_NAMES: Dict[str, str] = {
+    "Empty": "std_msgs/msg/Empty",
+    "String": "std_msgs/msg/String",
+    "Bool": "std_msgs/msg/Bool",
+    "Int": "std_msgs/msg/Int64",
+    "Int64": "std_msgs/msg/Int64",
+    "Double": "std_msgs/msg/Float64",
+    "Float": "std_msgs/msg/Float64",
+    "Float64": "std_msgs/msg/Float64",
+    "IntArray": "std_msgs/msg/Int64MultiArray",
+    "IntTable": "std_msgs/msg/Int64MultiArray",
+    "IntNArray": "std_msgs/msg/Int64MultiArray",
+    "Int64MultiArray": "std_msgs/msg/Int64MultiArray",
+    "DoubleArray": "std_msgs/msg/Float64MultiArray",
+    "FloatArray": "std_msgs/msg/Float64MultiArray",
+    "DoubleTable": "std_msgs/msg/Float64MultiArray",
+    "Float64MultiArray": "std_msgs/msg/Float64MultiArray",
+    "Pose": "geometry_msgs/msg/Pose",
+    "PoseStamped": "geometry_msgs/msg/PoseStamped",
+    "TransformStamped": "geometry_msgs/msg/TransformStamped",
+    "Wrench": "geometry_msgs/msg/Wrench",
+    "WrenchStamped": "geometry_msgs/msg/WrenchStamped",
+    "PoseArray": "geometry_msgs/msg/PoseArray",
+    "JointState": "sensor_msgs/msg/JointState",
+    "Joy": "sensor_msgs/msg/Joy",
+    "JoyV2": "sensor_msgs/msg/Joy",
+    "Image": "sensor_msgs/msg/Image",
+    "UInt8Image": "sensor_msgs/msg/Image",
+    "PointCloud": "sensor_msgs/msg/PointCloud",
+    "PointCloud2": "sensor_msgs/msg/PointCloud2",
+}
+
+_NODE_CLASS = re.compile(r"^vtkMRMLROS2(?:Publisher|Subscriber)(\w+)Node$")
+_IDENT = r"[A-Za-z][A-Za-z0-9_]*"
+_CANONICAL = re.compile(rf"^({_IDENT})/msg/({_IDENT})$")
+_TWO_PART = re.compile(rf"^({_IDENT})/({_IDENT})$")
+_DOTTED = re.compile(rf"^({_IDENT})\.msg\.({_IDENT})$")
+_BARE = re.compile(rf"^{_IDENT}$")
+_IMPORT_LINE = re.compile(rf"^from\s+({_IDENT})\.msg\.\w+\s+import\s+({_IDENT})", re.M)
+
+
+def _unknown(name: str, why: str) -> CodecError:
+    return CodecError(field="type", expected=why, got=repr(name))
+
+
+@lru_cache(maxsize=None)
+def message_class(ros_type: str) -> Any:
+    """The rclpy message class of a canonical ``pkg/msg/Type``; `CodecError` if not installed."""
+    m = _CANONICAL.match(ros_type)
+    if m is None:
+        raise _unknown(ros_type, "a message type 'pkg/msg/Type'")
+    pkg, name = m.groups()
+    try:
+        module = importlib.import_module(f"{pkg}.msg")
+    except ImportError:
+        raise _unknown(ros_type, f"an installed interface package ({pkg!r} is not)") from None
+    cls = getattr(module, name, None)
+    if cls is None or not hasattr(cls, "get_fields_and_field_types"):
+        raise _unknown(ros_type, f"a message of package {pkg!r} ({name!r} is not one)")
+    return cls
+
+
+def ros_type_of(msg_or_class: Any) -> str:
+    """``pkg/msg/Type`` of an rclpy message instance or class."""
+    cls = msg_or_class if isinstance(msg_or_class, type) else type(msg_or_class)
+    module = cls.__module__  # "sensor_msgs.msg._image"
+    pkg = module.split(".", 1)[0]
+    return f"{pkg}/msg/{cls.__name__}"
+
+
+@lru_cache(maxsize=1)
+def _installed_messages() -> Dict[str, Tuple[str, ...]]:
+    """Bare message name -> packages defining it, read from every ``<pkg>/msg/__init__.py``
+    on sys.path (the generated file lists one import per message, so no import is needed)."""
+    found: Dict[str, List[str]] = {}
+    for entry in sys.path:
+        if not entry or not os.path.isdir(entry):
+            continue
+        try:
+            children = os.listdir(entry)
+        except OSError:
+            continue
+        for pkg in children:
+            init = os.path.join(entry, pkg, "msg", "__init__.py")
+            if not os.path.isfile(init):
+                continue
+            try:
+                with open(init, encoding="utf-8") as f:
+                    text = f.read()
+            except OSError:
+                continue
+            for imp_pkg, name in _IMPORT_LINE.findall(text):
+                if imp_pkg == pkg and pkg not in found.setdefault(name, []):
+                    found[name].append(pkg)
+    return {name: tuple(sorted(pkgs)) for name, pkgs in found.items()}
+
+
+@lru_cache(maxsize=1024)
+def resolve_type(name: str) -> str:
+    """Any accepted spelling of a message type -> canonical ``pkg/msg/Type``.
+
+    The type is checked to be installed. An unknown or ambiguous name raises `CodecError`
+    with ``field="type"`` naming it.
+    """
+    if not isinstance(name, str):
+        raise CodecError(field="type", expected="a message type name (str)",
+                         got=type(name).__name__)
+    text = name.strip()
+    node = _NODE_CLASS.match(text)
+    if node is not None:
+        text = node.group(1)  # then resolved like a short or bare name
+    for pattern in (_CANONICAL, _TWO_PART, _DOTTED):
+        m = pattern.match(text)
+        if m is not None:
+            ros_type = f"{m.group(1)}/msg/{m.group(2)}"
+            message_class(ros_type)
+            return ros_type
+    if text in REFERENCE_SHORT_NAMES:
+        ros_type = REFERENCE_SHORT_NAMES[text]
+        message_class(ros_type)
+        return ros_type
+    if _BARE.match(text):
+        pkgs = _installed_messages().get(text, ())
+        if len(pkgs) == 1:
+            ros_type = f"{pkgs[0]}/msg/{text}"
+            message_class(ros_type)
+            return ros_type
+        if len(pkgs) > 1:
+            raise _unknown(name, "an unambiguous name; spell one of "
+                           + ", ".join(f"{p}/msg/{text}" for p in pkgs))
+    raise _unknown(name, "a known message type ('pkg/msg/Type', 'pkg/Type', a reference short "
+                   "name such as 'PoseStamped', or 'vtkMRMLROS2Subscriber<Name>Node')")
