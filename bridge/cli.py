@@ -1,19 +1,92 @@
-"""The `slicer-ros2-bridge` command line."""
+"""The `slicer-ros2-bridge` command line: `run`, `demo`, `state-publisher`."""
 
 from __future__ import annotations
 
 import argparse
+import asyncio
+import logging
 import sys
+from pathlib import Path
+
+from bridge.config import DEFAULT_HOST, DEFAULT_PORT, ConfigError, DaemonConfig
+from bridge.config import load_startup_commands
+
+LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
+
+
+def _package_path(text: str) -> tuple[str, str]:
+    name, sep, folder = text.partition("=")
+    if not sep or not name or not folder:
+        raise argparse.ArgumentTypeError(f"expected NAME=DIR, got {text!r}")
+    return name, folder
+
+
+def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--host", default=DEFAULT_HOST,
+                        help=f"address to listen on (default {DEFAULT_HOST}: this machine only)")
+    parser.add_argument("--port", type=int, default=DEFAULT_PORT,
+                        help=f"OpenIGTLink TCP port (default {DEFAULT_PORT}, Slicer's default)")
+    parser.add_argument("--config", type=Path, metavar="FILE",
+                        help="YAML file of bridges to create at start-up (see README)")
+    parser.add_argument("--node-name", default="slicer_bridge",
+                        help="name of the daemon's ROS node (default slicer_bridge)")
+    parser.add_argument("--namespace", default="", help="ROS namespace of the daemon's node")
+    parser.add_argument("--log-level", default="INFO", type=str.upper, choices=LOG_LEVELS)
+    parser.add_argument("--package-path", type=_package_path, action="append", default=[],
+                        metavar="NAME=DIR",
+                        help="where package://NAME/... URIs of robot meshes point (repeatable)")
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="slicer-ros2-bridge",
         description="Bridge ROS 2 (topics, parameters, tf2, services, robots) and 3D Slicer "
-                    "over OpenIGTLink.",
+                    "over OpenIGTLink. Connect 3D Slicer's OpenIGTLinkIF (client mode) to "
+                    "the daemon's host and port.",
     )
-    parser.add_subparsers(dest="command", metavar="COMMAND")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+    run = commands.add_parser("run", help="run the bridge daemon",
+                              description="Run the bridge daemon: one ROS node, an "
+                                          "OpenIGTLink server for any number of clients.")
+    _add_daemon_options(run)
+    demo = commands.add_parser("demo", help="run the daemon with the built-in demo robot",
+                               description="Run the daemon with the built-in demo robot "
+                                           "moving (state publisher and joint motion included).")
+    _add_daemon_options(demo)
     return parser
+
+
+def _config_from(args: argparse.Namespace) -> DaemonConfig:
+    startup = load_startup_commands(args.config) if args.config else ()
+    return DaemonConfig(host=args.host, port=args.port, node_name=args.node_name,
+                        namespace=args.namespace, log_level=args.log_level, startup=startup,
+                        package_paths=tuple(args.package_path))
+
+
+def _configure_logging(level: str) -> None:
+    logging.basicConfig(level=getattr(logging, level), stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+
+def _run_daemon(args: argparse.Namespace) -> int:
+    from bridge.daemon import StartupError, run_daemon
+    from bridge.server import PortInUseError
+
+    try:
+        config = _config_from(args)
+    except ConfigError as error:
+        print(f"slicer-ros2-bridge: {error}", file=sys.stderr)
+        return 2
+    _configure_logging(config.log_level)
+    try:
+        asyncio.run(run_daemon(config))
+    except PortInUseError as error:
+        print(f"slicer-ros2-bridge: {error.strerror}", file=sys.stderr)
+        return 2
+    except StartupError as error:
+        print(f"slicer-ros2-bridge: {error}", file=sys.stderr)
+        return 2
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -22,7 +95,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
-    return 0
+    if args.command in ("run", "demo"):
+        return _run_daemon(args)
+    parser.error(f"unknown command {args.command}")
+    return 2
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@
   test module imports rclpy, and inherited by every process a test starts.
 - `free_port`: a TCP port nobody listens on.
 - `processes`: starts a child (the daemon, an rclpy peer) and guarantees it is stopped.
+- `module_processes`: the same, shared by the tests of one module.
 - every test fails if it leaves a child process of the test runner behind.
 """
 
@@ -51,15 +52,27 @@ def processes(tmp_path: Path) -> Iterator[Processes]:
         manager.stop_all()
 
 
+@pytest.fixture(scope="module")
+def module_processes(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Processes]:
+    """Children shared by the tests of one module (a daemon, long-running peers)."""
+    manager = Processes(tmp_path_factory.mktemp("module-processes"))
+    try:
+        yield manager
+    finally:
+        manager.stop_all()
+
+
 @pytest.fixture(autouse=True)
 def no_leftover_children() -> Iterator[None]:
+    """Fail a test that leaves behind a child it started (module-scoped ones excepted)."""
+    before = {pid for pid, _, _ in children_of(os.getpid())}
     yield
     # A child that is exiting may take a moment to go.
     deadline = time.monotonic() + 3.0
-    left = children_of(os.getpid())
+    left = [c for c in children_of(os.getpid()) if c[0] not in before]
     while left and time.monotonic() < deadline:
         time.sleep(0.05)
-        left = children_of(os.getpid())
+        left = [c for c in children_of(os.getpid()) if c[0] not in before]
     for pid, _, _ in left:
         try:
             os.kill(pid, signal.SIGKILL)

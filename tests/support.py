@@ -3,15 +3,19 @@
 from __future__ import annotations
 
 import os
+import re
 import signal
 import socket
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
 import pytest
+
+from slicer_client.connection import Connection
 
 REPO = Path(__file__).resolve().parent.parent
 PEERS = Path(__file__).resolve().parent / "peers"
@@ -161,3 +165,28 @@ def require_shared(relative: str) -> Path:
     if not path.exists():
         pytest.skip(f"needs {path} (the project's shared test data), which is absent here")
     return path
+
+
+@dataclass
+class RunningDaemon:
+    child: Child
+    port: int
+
+    def connect(self) -> Connection:
+        return Connection("127.0.0.1", self.port)
+
+
+def start_daemon(processes: Processes, *args: str) -> RunningDaemon:
+    port = pick_free_port()
+    child = processes.bridge("run", "--port", str(port), *args)
+    child.wait_for_output("listening on", timeout=30)
+    return RunningDaemon(child, port)
+
+
+def assert_clean_exit(daemon: RunningDaemon) -> None:
+    """SIGINT stops the daemon with exit code 0, no traceback and nothing at ERROR level."""
+    code = daemon.child.stop()
+    output = daemon.child.output()
+    assert code == 0, output[-3000:]
+    assert "Traceback" not in output, output[-3000:]
+    assert not re.search(r" (ERROR|CRITICAL) ", output), output[-3000:]

@@ -1,0 +1,76 @@
+"""Wires the daemon together and runs it until SIGINT or SIGTERM.
+
+    ROS executor thread                     asyncio loop (main thread)
+    ───────────────────                     ──────────────────────────
+    subscription callbacks ──convert──►  Hub ──► ClientSession ×N ──► TCP clients
+                                          ▲
+    publishers ◄── PublisherBridge ◄──────┴── Dispatcher ◄── COMMAND / data messages
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import signal
+from typing import Awaitable, Callable, Optional
+
+from bridge.config import DaemonConfig
+from bridge.dispatch import Dispatcher
+from bridge.hub import Hub
+from bridge.ros_node import RosNode, RosOptions
+from bridge.server import BridgeServer
+from protocol.errors import ProtocolError
+
+log = logging.getLogger("bridge")
+
+
+class StartupError(Exception):
+    """The daemon cannot start as configured (a bad start-up bridge, for example)."""
+
+
+class Daemon:
+    def __init__(self, config: DaemonConfig, loop: asyncio.AbstractEventLoop) -> None:
+        self.config = config
+        self.hub = Hub(loop)
+        self.ros = RosNode(RosOptions(node_name=config.node_name, namespace=config.namespace))
+        self.dispatcher = Dispatcher(self.ros, self.hub, package_paths=dict(config.package_paths))
+        self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
+                                   port=config.port, limits=config.limits)
+
+    async def start(self) -> None:
+        try:
+            await self.server.start()
+            self.ros.start()
+            for command in self.config.startup:
+                try:
+                    await self.dispatcher.execute(command.op, command.arguments)
+                except ProtocolError as error:
+                    raise StartupError(f"{command.where}: {error}") from None
+        except BaseException:
+            await self.stop()
+            raise
+        log.info("listening on %s:%d (OpenIGTLink); ROS node %s", self.config.host,
+                 self.server.port, self.ros.fully_qualified_name)
+
+    async def stop(self) -> None:
+        await self.server.close()
+        self.dispatcher.close()
+        self.ros.stop()
+
+
+async def run_daemon(config: DaemonConfig,
+                     started: Optional[Callable[[Daemon], Awaitable[None]]] = None) -> None:
+    """Run until SIGINT/SIGTERM; `started` runs once the daemon serves (used by `demo`)."""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    daemon = Daemon(config, loop)
+    await daemon.start()
+    try:
+        if started is not None:
+            await started(daemon)
+        await stop.wait()
+        log.info("shutting down")
+    finally:
+        await daemon.stop()

@@ -1,0 +1,141 @@
+"""Command dispatch: a client's COMMAND -> one handler per op -> an RTS_COMMAND reply.
+
+Every request gets a reply carrying its command id: a result, or an error naming the field,
+what was expected and what came. Nothing a request does can take the daemon down: an
+unexpected exception is logged as a bug and answered as INTERNAL.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import inspect
+import logging
+from typing import Any, Awaitable, Callable, Mapping, Union
+
+from bridge.hub import Hub, Replier
+from bridge.ros_node import RosNode
+from bridge.topics import TopicBridges
+from protocol import commands as c
+from protocol.commands import CommandError, CommandFailedError, ErrorCode, Reply
+from protocol.messages import Command, Message, RtsCommand
+from protocol.naming import DeviceNameRegistry
+
+log = logging.getLogger(__name__)
+
+Result = Mapping[str, Any]
+Handler = Callable[[Any, Union[Replier, None]], Union[Result, Awaitable[Result]]]
+
+DAEMON_VERSION = "0.1.0"
+
+
+class Dispatcher:
+    def __init__(self, ros: RosNode, hub: Hub, *, package_paths: Mapping[str, str]) -> None:
+        self._ros = ros
+        self._hub = hub
+        self.names = DeviceNameRegistry()
+        self.topics = TopicBridges(ros, hub, self.names)
+        self.package_paths = dict(package_paths)
+        self._tasks: set[asyncio.Task[None]] = set()
+        # The one list of what this daemon serves. Ops of the schema missing here are
+        # answered NOT_SUPPORTED, naming the op.
+        self._handlers: dict[str, Handler] = {
+            c.Hello.op: self._hello,
+            c.ListBridges.op: self._list_bridges,
+            c.ListTopics.op: self._list_topics,
+            c.ListServices.op: self._list_services,
+            c.CreateSubscriber.op: lambda r, _: self.topics.create_subscriber(r),
+            c.RemoveSubscriber.op: lambda r, _: self.topics.remove_subscriber(r),
+            c.CreatePublisher.op: lambda r, _: self.topics.create_publisher(r),
+            c.RemovePublisher.op: lambda r, _: self.topics.remove_publisher(r),
+            c.Publish.op: lambda r, _: self.topics.publish(r),
+            c.GetLastMessage.op: lambda r, _: self.topics.get_last_message(r),
+        }
+
+    def register(self, op: str, handler: Handler) -> None:
+        """Add the handler of an op (capabilities wire themselves in at start-up)."""
+        if op not in c.REQUEST_TYPES:
+            raise ValueError(f"{op!r} is not an op of the command schema")
+        self._handlers[op] = handler
+
+    # --- entry points -------------------------------------------------------------------
+    def handle(self, message: Message, client: Replier) -> None:
+        """A COMMAND from a client (loop thread): reply now, or when an async op is done."""
+        body = message.body
+        assert isinstance(body, Command)
+        try:
+            request = c.parse_request(body.name, body.text)
+            outcome = self._run(request, client)
+        except Exception as error:  # noqa: BLE001 - every failure becomes a reply
+            self._reply(client, message, self._failure(body.name, error))
+            return
+        if inspect.isawaitable(outcome):
+            task = asyncio.ensure_future(self._finish(outcome, client, message))
+            self._tasks.add(task)
+            task.add_done_callback(self._tasks.discard)
+        else:
+            self._reply(client, message, Reply.success(body.name, outcome))
+
+    async def execute(self, op: str, arguments: Mapping[str, Any]) -> Result:
+        """Run one command without a client (start-up config); raises `CommandError`."""
+        request = c.parse_request(op, c.dumps(dict(arguments)))
+        outcome = self._run(request, None)
+        if inspect.isawaitable(outcome):
+            return await outcome
+        return outcome
+
+    def close(self) -> None:
+        for task in tuple(self._tasks):
+            task.cancel()
+        self.topics.close()
+
+    # --- plumbing -----------------------------------------------------------------------
+    def _run(self, request: c.Request, client: Replier | None) -> Result | Awaitable[Result]:
+        handler = self._handlers.get(request.op)
+        if handler is None:
+            raise CommandFailedError("op", "an op this daemon serves: " +
+                                     ", ".join(sorted(self._handlers)), request.op,
+                                     code=ErrorCode.NOT_SUPPORTED)
+        return handler(request, client)
+
+    async def _finish(self, outcome: Awaitable[Result], client: Replier,
+                      message: Message) -> None:
+        body = message.body
+        assert isinstance(body, Command)
+        try:
+            reply = Reply.success(body.name, await outcome)
+        except Exception as error:  # noqa: BLE001
+            reply = self._failure(body.name, error)
+        self._reply(client, message, reply)
+
+    @staticmethod
+    def _failure(op: str, error: BaseException) -> Reply:
+        if not isinstance(error, CommandError):
+            log.exception("command %s failed unexpectedly", op, exc_info=error)
+        else:
+            log.info("command %s refused: %s", op, error)
+        return c.reply_for_exception(op, error)
+
+    @staticmethod
+    def _reply(client: Replier, request: Message, reply: Reply) -> None:
+        body = request.body
+        assert isinstance(body, Command)
+        client.send_message(Message(
+            device_name=request.device_name,
+            body=RtsCommand(command_id=body.command_id, name=body.name, text=reply.to_json()),
+            metadata=reply.metadata(), message_id=request.message_id))
+
+    # --- small handlers -----------------------------------------------------------------
+    def _hello(self, request: c.Hello, client: Replier | None) -> Result:
+        return {"schema": c.SCHEMA_VERSION, "version": DAEMON_VERSION,
+                "node": self._ros.fully_qualified_name, "ops": sorted(self._handlers)}
+
+    def _list_bridges(self, request: c.ListBridges, client: Replier | None) -> Result:
+        return {"bridges": self.topics.describe(), "devices": self._hub.devices()}
+
+    def _list_topics(self, request: c.ListTopics, client: Replier | None) -> Result:
+        return {"topics": [{"topic": name, "types": list(types)}
+                           for name, types in self._ros.node.get_topic_names_and_types()]}
+
+    def _list_services(self, request: c.ListServices, client: Replier | None) -> Result:
+        return {"services": [{"service": name, "types": list(types)}
+                             for name, types in self._ros.node.get_service_names_and_types()]}

@@ -1,0 +1,95 @@
+"""Per-client send buffer: the newest value of each streamed device, plus one-shot frames.
+
+A client that reads slowly must never delay ROS callbacks or other clients, and its memory
+must stay bounded. So while a client's socket is backed up, a newer value of a streamed
+device replaces its unsent older value (a viewer wants the latest pose, not the backlog),
+and the buffer holds at most one frame per device. One-shot frames (meshes, command
+replies) are never coalesced away; they are bounded in bytes instead, and a client that
+lets them pile up past the bound is too slow to serve (`OutboxOverflow`).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict, deque
+from typing import Optional
+
+from protocol.framing import encode
+from protocol.messages import Message
+
+__all__ = ["Frame", "Outbox", "OutboxOverflow"]
+
+
+class Frame:
+    """A message to send, encoded at most once per header version.
+
+    Clients differ in the header version they can read (OpenIGTLink 1.11 peers need v1,
+    3D Slicer takes v2 with metadata), so the bytes are made lazily and cached per version:
+    one encode serves every client of that version.
+    """
+
+    __slots__ = ("message", "_encoded")
+
+    def __init__(self, message: Message) -> None:
+        self.message = message
+        self._encoded: dict[int, bytes] = {}
+
+    def encoded(self, header_version: int) -> bytes:
+        data = self._encoded.get(header_version)
+        if data is None:
+            data = encode(self.message, header_version=header_version)
+            self._encoded[header_version] = data
+        return data
+
+
+class OutboxOverflow(Exception):
+    """One-shot frames waiting for a client exceed the configured bound."""
+
+    def __init__(self, limit: int, pending: int) -> None:
+        super().__init__(f"send buffer over its bound: expected at most {limit} bytes of "
+                         f"unsent one-shot messages, got {pending}")
+        self.limit = limit
+        self.pending = pending
+
+
+class Outbox:
+    """Unsent encoded frames of one client. Not thread-safe: the event loop owns it."""
+
+    def __init__(self, *, max_oneshot_bytes: int) -> None:
+        self._max_oneshot_bytes = max_oneshot_bytes
+        self._latest: OrderedDict[str, bytes] = OrderedDict()
+        self._oneshots: deque[bytes] = deque()
+        self._oneshot_bytes = 0
+        self.coalesced = 0  # older values replaced before they were sent
+
+    def __len__(self) -> int:
+        return len(self._latest) + len(self._oneshots)
+
+    @property
+    def pending_bytes(self) -> int:
+        return self._oneshot_bytes + sum(len(data) for data in self._latest.values())
+
+    def put_latest(self, device: str, data: bytes) -> None:
+        # A replaced value keeps its place in the queue, so a device updated at 1 kHz
+        # cannot starve a slower one queued before it.
+        if device in self._latest:
+            self.coalesced += 1
+        self._latest[device] = data
+
+    def put_once(self, data: bytes) -> None:
+        if self._oneshot_bytes + len(data) > self._max_oneshot_bytes:
+            raise OutboxOverflow(self._max_oneshot_bytes, self._oneshot_bytes + len(data))
+        self._oneshots.append(data)
+        self._oneshot_bytes += len(data)
+
+    def discard(self, device: str) -> None:
+        self._latest.pop(device, None)
+
+    def pop(self) -> Optional[bytes]:
+        """The next frame to write: one-shots first (replies are awaited), then streams."""
+        if self._oneshots:
+            data = self._oneshots.popleft()
+            self._oneshot_bytes -= len(data)
+            return data
+        if self._latest:
+            return self._latest.popitem(last=False)[1]
+        return None

@@ -1,0 +1,213 @@
+"""One connected OpenIGTLink client: reads and decodes its bytes, writes its frames.
+
+Reading: bytes go through the sans-I/O `Decoder`. A bad message (wrong CRC, malformed
+body) gets a STATUS reply naming the problem and the stream goes on; a broken stream
+(malformed header, oversized body) gets a STATUS and the connection is closed. Nothing a
+client sends can raise out of here into the server.
+
+Writing: frames go straight to the transport while it keeps up; once its buffer passes the
+high-water mark, they wait in the client's `Outbox`, where a newer value of a device
+replaces an unsent older one.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import socket
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+from bridge.hub import Hub
+from bridge.outbox import Frame, Outbox, OutboxOverflow
+from protocol.errors import CrcMismatchError, FramingError, MessageError
+from protocol.framing import Decoder
+from protocol.messages import Message, Status, StatusCode
+from protocol.negotiation import HeaderVersionNegotiator
+
+log = logging.getLogger(__name__)
+
+CommandHandler = Callable[[Message, "ClientSession"], None]
+
+
+@dataclass(frozen=True)
+class SessionLimits:
+    max_message_bytes: int = 64 * 1024 * 1024
+    max_oneshot_bytes: int = 256 * 1024 * 1024
+    # Above this many bytes in the kernel-side transport buffer, frames wait in the outbox.
+    write_high_water: int = 256 * 1024
+
+
+class ClientSession(asyncio.Protocol):
+    def __init__(self, hub: Hub, commands: CommandHandler, limits: SessionLimits,
+                 on_close: Callable[[ClientSession], None]) -> None:
+        self._hub = hub
+        self._commands = commands
+        self._limits = limits
+        self._on_close = on_close
+        self._decoder = Decoder(max_body_size=limits.max_message_bytes)
+        self._negotiator = HeaderVersionNegotiator()
+        self._outbox = Outbox(max_oneshot_bytes=limits.max_oneshot_bytes)
+        self._transport: Optional[asyncio.Transport] = None
+        self._paused = False
+        self._closing = False
+        self._unrouted_warned: set[str] = set()
+        self.peer = "?"
+        self.received = 0
+        self.sent = 0
+
+    # --- asyncio.Protocol ------------------------------------------------------------------
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self._transport = transport
+        peer = transport.get_extra_info("peername")
+        self.peer = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
+        sock = transport.get_extra_info("socket")
+        if sock is not None and sock.family in (socket.AF_INET, socket.AF_INET6):
+            # Latency matters more than packet count: no Nagle delay.
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        transport.set_write_buffer_limits(high=self._limits.write_high_water)
+        log.info("client %s connected", self.peer)
+        self._hub.attach(self)
+
+    def connection_lost(self, exc: Optional[Exception]) -> None:
+        self._closing = True
+        self._hub.detach(self)
+        self._on_close(self)
+        log.info("client %s disconnected%s", self.peer, f" ({exc})" if exc else "")
+
+    def pause_writing(self) -> None:
+        self._paused = True
+
+    def resume_writing(self) -> None:
+        self._paused = False
+        self._flush()
+
+    def data_received(self, data: bytes) -> None:
+        try:
+            self._decoder.feed(data)
+            while not self._closing:
+                try:
+                    message = self._decoder.next_message()
+                except MessageError as error:
+                    log.warning("client %s sent a bad message: %s", self.peer, error)
+                    self.send_status(getattr(error, "device_name", "") or "", _status_of(error),
+                                     str(error))
+                    continue
+                if message is None:
+                    break
+                self.received += 1
+                self._handle(message)
+        except FramingError as error:
+            log.warning("client %s broke the OpenIGTLink framing, closing: %s", self.peer, error)
+            self.send_status("", StatusCode.UNKNOWN_ERROR, f"closing the connection: {error}")
+            self.close()
+
+    # --- incoming messages -----------------------------------------------------------------
+    def _handle(self, message: Message) -> None:
+        self._negotiator.observe(message)
+        type_name = message.type_name
+        if type_name == "COMMAND":
+            self._commands(message, self)
+        elif type_name == "STATUS":
+            pass  # 3D Slicer announces header v2 with a STATUS; the negotiator saw it
+        elif type_name.startswith("GET_"):
+            self._answer_query(message)
+        elif type_name.startswith(("STT_", "STP_", "RTS_")):
+            pass  # streaming control and replies to queries we never make
+        else:
+            handler = self._hub.inbound_handler(message.device_name)
+            if handler is None:
+                if message.device_name not in self._unrouted_warned:
+                    self._unrouted_warned.add(message.device_name)
+                    log.warning("client %s sent %s to device %r, which no publisher or "
+                                "broadcaster receives; ignored (said once per device)",
+                                self.peer, type_name, message.device_name)
+                    self.send_status(message.device_name, StatusCode.NOT_FOUND,
+                                     f"no publisher or broadcaster receives device "
+                                     f"{message.device_name!r}")
+                return
+            try:
+                handler(message, self)
+            except Exception as error:  # a bridge's bug must not take the connection down
+                log.exception("handling %s for device %r failed", type_name, message.device_name)
+                self.send_status(message.device_name, StatusCode.UNKNOWN_ERROR, str(error))
+
+    def _answer_query(self, message: Message) -> None:
+        """GET_<TYPE> asks for the current value of a device (empty name: all of that type)."""
+        wanted = message.type_name[len("GET_"):]
+        devices = [message.device_name] if message.device_name else self._hub.devices()
+        found = 0
+        for device in devices:
+            latest = self._hub.latest(device)
+            if latest is not None and latest.type_name == wanted:
+                self.send_once(Frame(latest))
+                found += 1
+        if not found:
+            self.send_status(message.device_name, StatusCode.NOT_FOUND,
+                             f"no {wanted} device named {message.device_name!r}")
+
+    # --- outgoing --------------------------------------------------------------------------
+    @property
+    def header_version(self) -> int:
+        return self._negotiator.outgoing_version
+
+    def send_stream(self, device: str, frame: Frame) -> None:
+        if self._closing:
+            return
+        data = frame.encoded(self.header_version)
+        if self._paused or len(self._outbox):
+            self._outbox.put_latest(device, data)
+        else:
+            self._write(data)
+
+    def send_once(self, frame: Frame) -> None:
+        if self._closing:
+            return
+        data = frame.encoded(self.header_version)
+        if self._paused or len(self._outbox):
+            try:
+                self._outbox.put_once(data)
+            except OutboxOverflow as error:
+                log.warning("client %s is too slow, closing it: %s", self.peer, error)
+                self.close()
+        else:
+            self._write(data)
+
+    def send_message(self, message: Message) -> None:
+        self.send_once(Frame(message))
+
+    def send_status(self, device: str, code: int, text: str) -> None:
+        self.send_message(Message(device_name=device[:20],
+                                  body=Status(code=code, error_name="slicer-ros2-bridge"[:20],
+                                              text=text)))
+
+    def forget_device(self, device: str) -> None:
+        self._outbox.discard(device)
+
+    def close(self) -> None:
+        self._closing = True
+        if self._transport is not None:
+            self._transport.close()
+
+    def _write(self, data: bytes) -> None:
+        assert self._transport is not None
+        self._transport.write(data)
+        self.sent += 1
+
+    def _flush(self) -> None:
+        while not self._paused and not self._closing:
+            data = self._outbox.pop()
+            if data is None:
+                return
+            self._write(data)
+
+    @property
+    def coalesced(self) -> int:
+        return self._outbox.coalesced
+
+
+def _status_of(error: MessageError) -> int:
+    if isinstance(error, CrcMismatchError):
+        return StatusCode.CHECKSUM_ERROR
+    return StatusCode.UNKNOWN_ERROR

@@ -1,0 +1,304 @@
+"""Topic bridges: a ROS subscription streamed to clients, and clients' data published to ROS.
+
+`SubscriberBridge` (ROS -> Slicer): its callback runs in the ROS executor thread and only
+converts the message and hands it to the hub; it also keeps the last message for
+`get_last_message` (the reference's GetLastMessage / GetLastMessageYAML).
+
+`PublisherBridge` (Slicer -> ROS): messages clients send to its device, or `publish`
+commands with a JSON value, become ROS messages. Publishing returns the number of ROS
+subscribers, as the reference's Publish does.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+from rclpy.qos import QoSProfile
+
+from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
+from bridge.hub import Hub, Replier
+from bridge.qos import QosSpec
+from bridge.ros_node import RosNode
+from protocol.commands import (CommandFailedError, CreatePublisher, CreateSubscriber, ErrorCode,
+                               GetLastMessage, OutOfRangeError, Publish, QoS, RemovePublisher,
+                               RemoveSubscriber, WrongTypeError)
+from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
+from protocol.messages import Message, StatusCode
+from protocol.naming import UNITS_MM, DeviceNameRegistry, NameKey, metadata_for
+
+log = logging.getLogger(__name__)
+
+# A stream of bad ROS messages must not flood the log: one warning per bridge per interval.
+_WARN_INTERVAL_S = 5.0
+
+
+@dataclass
+class TopicInfo:
+    """What `list` reports of a bridge."""
+
+    kind: str  # "subscriber" | "publisher"
+    topic: str
+    ros_type: str
+    device: str
+    igtl_type: str
+    qos: dict[str, Any]
+    max_rate_hz: Optional[float] = None
+    messages: int = 0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class SubscriberBridge:
+    def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QosSpec,
+                 device: str, metadata: dict[str, str],
+                 max_rate_hz: Optional[float] = None) -> None:
+        self.topic = topic
+        self.codec = codec
+        self.qos = qos
+        self.device = device
+        self.max_rate_hz = max_rate_hz
+        self._hub = hub
+        self._ros = ros
+        self._metadata = metadata
+        self.count = 0
+        self.last_message: Any = None
+        self._last_warning = 0.0
+        hub.set_rate_cap(device, max_rate_hz)
+        self._subscription = ros.node.create_subscription(
+            codec.message_class, topic, self._on_message, qos.profile())
+
+    def _on_message(self, msg: Any) -> None:  # ROS executor thread: convert, hand off
+        self.count += 1
+        self.last_message = msg
+        try:
+            encoded = self.codec.encode(msg)
+        except CodecError as error:
+            now = time.monotonic()
+            if now - self._last_warning > _WARN_INTERVAL_S:
+                self._last_warning = now
+                log.warning("cannot convert a %s from %s, not sent: %s", self.codec.ros_type,
+                            self.topic, error)
+            return
+        stamp = (igtl_timestamp_from_ros(*encoded.stamp) if encoded.stamp and encoded.stamp[0] > 0
+                 else igtl_timestamp_now())
+        metadata = dict(self._metadata)
+        metadata.update(encoded.metadata)
+        self._hub.post(Message(device_name=self.device, body=encoded.body, timestamp=stamp,
+                               metadata=metadata))
+
+    def info(self) -> TopicInfo:
+        return TopicInfo("subscriber", self.topic, self.codec.ros_type, self.device,
+                         self.codec.igtl_type, self.qos.to_dict(), self.max_rate_hz, self.count)
+
+    def close(self) -> None:
+        self._ros.node.destroy_subscription(self._subscription)
+        self._hub.forget(self.device)
+
+
+class PublisherBridge:
+    def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QosSpec,
+                 device: str, frame_id: str = "") -> None:
+        self.topic = topic
+        self.codec = codec
+        self.qos = qos
+        self.device = device
+        self.frame_id = frame_id
+        self.count = 0
+        self._ros = ros
+        self._hub = hub
+        profile: QoSProfile = qos.profile()
+        self._publisher = ros.node.create_publisher(codec.message_class, topic, profile)
+        hub.route(device, self.on_igtl)
+
+    def _stamp_now(self) -> tuple[int, int]:
+        now = self._ros.node.get_clock().now().seconds_nanoseconds()
+        return int(now[0]), int(now[1])
+
+    def publish_value(self, value: Any) -> int:
+        """Publish a client's JSON value; returns the number of ROS subscribers.
+        Raises `CodecError` naming the bad part of the value."""
+        msg = self.codec.from_value(value, stamp=self._stamp_now(), frame_id=self.frame_id)
+        return self._publish(msg)
+
+    def on_igtl(self, message: Message, client: Replier) -> None:
+        """A client sent data to this publisher's device (loop thread)."""
+        try:
+            msg = self.codec.from_igtl(message.body, stamp=self._stamp_now(),
+                                       frame_id=message.metadata.get("ros2.frame", "")
+                                       or self.frame_id,
+                                       metadata=message.metadata)
+        except CodecError as error:
+            log.warning("refused %s for %s from a client: %s", message.type_name, self.topic,
+                        error)
+            client.send_status(message.device_name, StatusCode.CONFIG_ERROR,
+                               f"not published to {self.topic}: {error}")
+            return
+        self._publish(msg)
+
+    def _publish(self, msg: Any) -> int:
+        self._publisher.publish(msg)
+        self.count += 1
+        return int(self._publisher.get_subscription_count())
+
+    def info(self) -> TopicInfo:
+        return TopicInfo("publisher", self.topic, self.codec.ros_type, self.device,
+                         self.codec.igtl_type, self.qos.to_dict(), None, self.count,
+                         {"subscribers": int(self._publisher.get_subscription_count())})
+
+    def close(self) -> None:
+        self._hub.unroute(self.device)
+        self._ros.node.destroy_publisher(self._publisher)
+
+
+class TopicBridges:
+    """The daemon's subscriber and publisher bridges, one of each kind per topic."""
+
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry) -> None:
+        self._ros = ros
+        self._hub = hub
+        self._names = names
+        self.subscribers: dict[str, SubscriberBridge] = {}
+        self.publishers: dict[str, PublisherBridge] = {}
+
+    def _resolve(self, topic: str) -> str:
+        try:
+            return self._ros.resolve_topic(topic)
+        except Exception as error:  # rclpy raises several name-validation exceptions
+            raise OutOfRangeError("topic", "a valid ROS topic name", f"{topic!r} ({error})") \
+                from None
+
+    def _codec(self, type_name: str, ros_type: str) -> TypeCodec:
+        try:
+            return codec_for(ros_type)
+        except CodecError as error:
+            raise CommandFailedError("type", "a message type installed in the daemon's "
+                                     "environment", f"{type_name!r} ({error})",
+                                     code=ErrorCode.UNKNOWN_ROS_TYPE) from None
+
+    def _check_graph(self, topic: str, ros_type: str) -> None:
+        known = self._ros.topic_types(topic)
+        if known and ros_type not in known:
+            raise CommandFailedError("type", f"the type {topic} already has in the ROS graph "
+                                     f"({', '.join(known)})", ros_type,
+                                     code=ErrorCode.ALREADY_EXISTS)
+
+    @staticmethod
+    def _check_existing(existing: SubscriberBridge | PublisherBridge | None, topic: str,
+                        ros_type: str) -> bool:
+        """True if an identical bridge exists (creating is idempotent, so a client that
+        reconnects can re-create what it had); a type clash is refused."""
+        if existing is None:
+            return False
+        if existing.codec.ros_type != ros_type:
+            raise CommandFailedError("type", f"{existing.codec.ros_type} (the bridge on "
+                                     f"{topic} has it)", ros_type,
+                                     code=ErrorCode.ALREADY_EXISTS)
+        return True
+
+    def create_subscriber(self, request: CreateSubscriber) -> dict[str, Any]:
+        topic = self._resolve(request.topic)
+        ros_type = request.ros_type
+        codec = self._codec(request.type, ros_type)
+        if self._check_existing(self.subscribers.get(topic), topic, ros_type):
+            return _describe(self.subscribers[topic].info(), existed=True)
+        self._check_graph(topic, ros_type)
+        key = NameKey.subscriber(topic)
+        device = self._names.register(key)
+        bridge = SubscriberBridge(
+            self._ros, self._hub, topic=topic, codec=codec, qos=_qos_spec(request.qos),
+            device=device, metadata=metadata_for(key, ros_type=ros_type, units=UNITS_MM),
+            max_rate_hz=request.rate_hz)
+        self.subscribers[topic] = bridge
+        log.info("subscribed to %s (%s) as device %r", topic, ros_type, device)
+        return _describe(bridge.info(), existed=False)
+
+    def remove_subscriber(self, request: RemoveSubscriber) -> dict[str, Any]:
+        topic = self._resolve(request.topic)
+        bridge = self.subscribers.pop(topic, None)
+        if bridge is None:
+            raise CommandFailedError("topic", "a topic with a subscriber bridge", topic,
+                                     code=ErrorCode.NOT_FOUND)
+        bridge.close()
+        self._names.release(NameKey.subscriber(topic))
+        return {"topic": topic, "device": bridge.device}
+
+    def create_publisher(self, request: CreatePublisher) -> dict[str, Any]:
+        topic = self._resolve(request.topic)
+        ros_type = request.ros_type
+        codec = self._codec(request.type, ros_type)
+        if self._check_existing(self.publishers.get(topic), topic, ros_type):
+            return _describe(self.publishers[topic].info(), existed=True)
+        self._check_graph(topic, ros_type)
+        device = self._names.register(NameKey.publisher(topic))
+        bridge = PublisherBridge(self._ros, self._hub, topic=topic, codec=codec,
+                                 qos=_qos_spec(request.qos), device=device)
+        self.publishers[topic] = bridge
+        log.info("publishing %s (%s); clients send to device %r", topic, ros_type, device)
+        return _describe(bridge.info(), existed=False)
+
+    def remove_publisher(self, request: RemovePublisher) -> dict[str, Any]:
+        topic = self._resolve(request.topic)
+        bridge = self.publishers.pop(topic, None)
+        if bridge is None:
+            raise CommandFailedError("topic", "a topic with a publisher bridge", topic,
+                                     code=ErrorCode.NOT_FOUND)
+        bridge.close()
+        self._names.release(NameKey.publisher(topic))
+        return {"topic": topic, "device": bridge.device}
+
+    def publish(self, request: Publish) -> dict[str, Any]:
+        topic = self._resolve(request.topic)
+        bridge = self.publishers.get(topic)
+        if bridge is None:
+            raise CommandFailedError("topic", "a topic with a publisher bridge (create_publisher "
+                                     "first)", topic, code=ErrorCode.NOT_FOUND)
+        try:
+            subscribers = bridge.publish_value(request.value)
+        except CodecError as error:
+            raise WrongTypeError(f"value.{error.field}" if error.field else "value",
+                                 error.expected, error.got) from None
+        return {"topic": topic, "subscribers": subscribers}
+
+    def get_last_message(self, request: GetLastMessage) -> dict[str, Any]:
+        topic = self._resolve(request.topic)
+        bridge = self.subscribers.get(topic)
+        if bridge is None:
+            raise CommandFailedError("topic", "a topic with a subscriber bridge", topic,
+                                     code=ErrorCode.NOT_FOUND)
+        message = bridge.last_message
+        result: dict[str, Any] = {"topic": topic, "type": bridge.codec.ros_type,
+                                  "count": bridge.count, "received": message is not None}
+        if message is not None:
+            result["text"] = (bridge.codec.to_yaml(message) if request.format == "yaml"
+                              else message_to_json(message))
+            result["value"] = bridge.codec.to_value(message)
+        return result
+
+    def describe(self) -> list[dict[str, Any]]:
+        bridges: list[SubscriberBridge | PublisherBridge] = [*self.subscribers.values(),
+                                                            *self.publishers.values()]
+        return [_describe(bridge.info()) for bridge in bridges]
+
+    def close(self) -> None:
+        for bridge in [*self.subscribers.values(), *self.publishers.values()]:
+            bridge.close()
+        self.subscribers.clear()
+        self.publishers.clear()
+
+
+def _qos_spec(qos: QoS) -> QosSpec:
+    return QosSpec(depth=qos.depth, reliability=qos.reliability, durability=qos.durability)
+
+
+def _describe(info: TopicInfo, existed: bool | None = None) -> dict[str, Any]:
+    out: dict[str, Any] = {"kind": info.kind, "topic": info.topic, "type": info.ros_type,
+                           "device": info.device, "igtl_type": info.igtl_type, "qos": info.qos,
+                           "messages": info.messages}
+    if info.max_rate_hz:
+        out["rate_hz"] = info.max_rate_hz
+    out.update(info.extra)
+    if existed is not None:
+        out["existed"] = existed
+    return out

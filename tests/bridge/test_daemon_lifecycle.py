@@ -1,0 +1,68 @@
+"""The daemon as a user runs it: starts, serves TCP, stops cleanly, fails clearly."""
+
+from __future__ import annotations
+
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+from support import REPO, Processes, assert_clean_exit, pick_free_port, start_daemon
+
+
+def test_run_listens_and_stops_on_sigint(processes: Processes) -> None:
+    daemon = start_daemon(processes)
+    with socket.create_connection(("127.0.0.1", daemon.port), timeout=5):
+        pass
+    assert_clean_exit(daemon)
+
+
+def test_sigterm_stops_with_exit_code_0(processes: Processes) -> None:
+    daemon = start_daemon(processes)
+    assert daemon.child.stop(signal.SIGTERM) == 0
+    assert "Traceback" not in daemon.child.output()
+
+
+def test_port_in_use_is_one_line_and_exit_code_2(processes: Processes) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = subprocess.run([sys.executable, "-m", "bridge.cli", "run", "--port", str(port)],
+                                cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and f"127.0.0.1:{port} is already in use" in lines[0], result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_bad_config_file_is_refused_with_its_location(tmp_path: Path) -> None:
+    config = tmp_path / "bridges.yaml"
+    config.write_text("subscribers:\n  - {topic: /ok, type: String}\n"
+                      "  - {topic: /bad, type: NoSuchType}\n")
+    result = subprocess.run([sys.executable, "-m", "bridge.cli", "run", "--port",
+                             str(pick_free_port()), "--config", str(config)],
+                            cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stderr
+    assert "bridges.yaml: subscribers[1]" in result.stderr
+    assert "NoSuchType" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_unknown_config_section_names_the_sections(tmp_path: Path) -> None:
+    config = tmp_path / "bridges.yaml"
+    config.write_text("subscriberz: []\n")
+    result = subprocess.run([sys.executable, "-m", "bridge.cli", "run", "--config", str(config)],
+                            cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert "unknown section 'subscriberz'" in result.stderr and "subscribers" in result.stderr
+
+
+def test_help_documents_the_options() -> None:
+    result = subprocess.run([sys.executable, "-m", "bridge.cli", "run", "--help"], cwd=REPO,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0
+    for option in ("--host", "--port", "--config", "--node-name", "--namespace",
+                   "--log-level"):
+        assert option in result.stdout
