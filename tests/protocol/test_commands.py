@@ -1,0 +1,472 @@
+"""The JSON command schema (protocol/commands.py)."""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Callable
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from protocol import commands as c
+from protocol.commands import (
+    REQUEST_TYPES,
+    SCHEMA_VERSION,
+    BadJsonError,
+    CommandError,
+    CommandFailedError,
+    ErrorCode,
+    MissingFieldError,
+    OutOfRangeError,
+    ParameterValue,
+    Reply,
+    TooLargeError,
+    UnknownFieldError,
+    UnknownOpError,
+    UnsupportedSchemaError,
+    WrongTypeError,
+    parse_request,
+)
+from protocol.errors import ProtocolError
+
+# ---------------------------------------------------------------- strategies
+
+_ident = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,12}", fullmatch=True)
+ros_names = st.builds(
+    lambda lead, parts: lead + "/".join(parts), st.sampled_from(["", "/"]),
+    st.lists(_ident, min_size=1, max_size=4))
+frames = st.text(min_size=1, max_size=30).filter(
+    lambda s: "\x00" not in s and s.strip() == s and s != "")
+param_names = st.from_regex(r"[A-Za-z_][A-Za-z0-9_.]{0,20}", fullmatch=True)
+msg_types = st.sampled_from(
+    ["String", "PoseStamped", "Int", "IntTable", "geometry_msgs/msg/Pose", "std_msgs/Bool",
+     "vtkMRMLROS2SubscriberStringNode", "vtkMRMLROS2PublisherPoseStampedNode",
+     "sensor_msgs/msg/PointCloud2"])
+srv_types = st.sampled_from(["std_srvs/srv/SetBool", "turtlesim/Spawn", "std_srvs/srv/Trigger"])
+finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+json_scalars = st.none() | st.booleans() | st.integers(-(2**53), 2**53) | finite | st.text(
+    max_size=20)
+json_values = st.recursive(
+    json_scalars,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner,
+                                                                max_size=4),
+    max_leaves=12)
+json_objects = st.dictionaries(st.text(max_size=8), json_values, max_size=4)
+qos = st.builds(c.QoS, depth=st.integers(1, 10_000),
+                reliability=st.sampled_from(["reliable", "best_effort"]),
+                durability=st.sampled_from(["volatile", "transient_local"]))
+rates = st.none() | st.floats(0.001, 10_000.0)
+stamps = st.builds(c.Stamp, sec=st.integers(0, 2**32 - 1), nanosec=st.integers(0, 999_999_999))
+
+_i64 = st.integers(-(2**63), 2**63 - 1)
+param_values = st.one_of(
+    st.just(ParameterValue("not_set")),
+    st.builds(ParameterValue, st.just("bool"), st.booleans()),
+    st.builds(ParameterValue, st.just("integer"), _i64),
+    st.builds(ParameterValue, st.just("double"), finite),
+    st.builds(ParameterValue, st.just("string"), st.text(max_size=20)),
+    st.builds(ParameterValue, st.just("byte_array"), st.lists(st.integers(0, 255), max_size=5)),
+    st.builds(ParameterValue, st.just("bool_array"), st.lists(st.booleans(), max_size=5)),
+    st.builds(ParameterValue, st.just("integer_array"), st.lists(_i64, max_size=5)),
+    st.builds(ParameterValue, st.just("double_array"), st.lists(finite, max_size=5)),
+    st.builds(ParameterValue, st.just("string_array"), st.lists(st.text(max_size=5), max_size=5)),
+)
+
+
+def _rigid(angle: float, tx: float) -> tuple[tuple[float, ...], ...]:
+    import math
+
+    cs, sn = math.cos(angle), math.sin(angle)
+    return ((cs, -sn, 0.0, tx), (sn, cs, 0.0, -tx), (0.0, 0.0, 1.0, 2.0 * tx),
+            (0.0, 0.0, 0.0, 1.0))
+
+
+matrices = st.builds(_rigid, st.floats(-3.14, 3.14), st.floats(-1e4, 1e4))
+robot_sources = st.one_of(
+    st.builds(c.RobotSource, st.just("parameter"), node=ros_names, parameter=param_names),
+    st.builds(c.RobotSource, st.just("topic"), topic=ros_names),
+    st.builds(c.RobotSource, st.just("file"), path=st.text(min_size=1, max_size=40)),
+)
+robot_names = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,15}", fullmatch=True)
+names_tuples = st.lists(param_names, max_size=5).map(tuple)
+
+STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
+    c.Hello: st.builds(c.Hello, client=st.none() | st.text(min_size=1, max_size=30)),
+    c.ListBridges: st.just(c.ListBridges()),
+    c.ListTopics: st.just(c.ListTopics()),
+    c.ListServices: st.just(c.ListServices()),
+    c.CreateSubscriber: st.builds(c.CreateSubscriber, topic=ros_names, type=msg_types, qos=qos,
+                                  rate_hz=rates),
+    c.RemoveSubscriber: st.builds(c.RemoveSubscriber, topic=ros_names),
+    c.CreatePublisher: st.builds(c.CreatePublisher, topic=ros_names, type=msg_types, qos=qos),
+    c.RemovePublisher: st.builds(c.RemovePublisher, topic=ros_names),
+    c.Publish: st.builds(c.Publish, topic=ros_names, value=json_values),
+    c.GetLastMessage: st.builds(c.GetLastMessage, topic=ros_names,
+                                format=st.sampled_from(["yaml", "json"])),
+    c.CreateParameterClient: st.builds(c.CreateParameterClient, node=ros_names),
+    c.RemoveParameterClient: st.builds(c.RemoveParameterClient, node=ros_names),
+    c.ListParameters: st.builds(c.ListParameters, node=ros_names),
+    c.GetParameters: st.builds(c.GetParameters, node=ros_names, names=names_tuples),
+    c.SetParameters: st.builds(c.SetParameters, node=ros_names,
+                               values=st.dictionaries(param_names, param_values, min_size=1,
+                                                      max_size=4)),
+    c.ObserveParameters: st.builds(c.ObserveParameters, node=ros_names, names=names_tuples),
+    c.ServerDeclareParameter: st.builds(c.ServerDeclareParameter, name=param_names,
+                                        value=param_values, read_only=st.booleans(),
+                                        description=st.text(max_size=30)),
+    c.ServerSetParameter: st.builds(c.ServerSetParameter, name=param_names, value=param_values),
+    c.ServerGetParameters: st.builds(c.ServerGetParameters, names=names_tuples),
+    c.ServerUndeclareParameter: st.builds(c.ServerUndeclareParameter, name=param_names),
+    c.CreateTfLookup: st.builds(c.CreateTfLookup, parent=frames, child=frames, rate_hz=rates),
+    c.RemoveTfLookup: st.builds(c.RemoveTfLookup, parent=frames, child=frames),
+    c.LookupTransform: st.builds(c.LookupTransform, parent=frames, child=frames,
+                                 time=st.none() | stamps, timeout=st.floats(0.0, 60.0)),
+    c.CreateTfBroadcaster: st.builds(c.CreateTfBroadcaster, parent=frames, child=frames,
+                                     static=st.booleans()),
+    c.RemoveTfBroadcaster: st.builds(c.RemoveTfBroadcaster, parent=frames, child=frames),
+    c.BroadcastTransform: st.builds(c.BroadcastTransform, parent=frames, child=frames,
+                                    matrix=matrices, stamp=st.none() | stamps),
+    c.CreateRobot: st.builds(c.CreateRobot, name=robot_names, source=robot_sources,
+                             fixed_frame=st.none() | frames,
+                             tf_prefix=st.sampled_from(["", "PSM1/"]),
+                             namespace=st.sampled_from(["", "/PSM1", "arm"])),
+    c.RemoveRobot: st.builds(c.RemoveRobot, name=robot_names),
+    c.ListRobots: st.just(c.ListRobots()),
+    c.CallService: st.builds(c.CallService, service=ros_names, type=srv_types,
+                             request=json_objects, timeout=st.floats(0.01, 300.0)),
+    c.AdvertiseService: st.builds(c.AdvertiseService, service=ros_names, type=srv_types),
+    c.UnadvertiseService: st.builds(c.UnadvertiseService, service=ros_names),
+    c.ServiceRequest: st.builds(c.ServiceRequest, service=ros_names, type=srv_types,
+                                request=json_objects, timeout=st.floats(0.01, 300.0)),
+}
+
+
+def test_every_op_has_a_strategy_and_a_unique_literal_op() -> None:
+    assert set(STRATEGIES) == set(REQUEST_TYPES.values())
+    assert len(REQUEST_TYPES) == len(STRATEGIES)
+    for op, cls in REQUEST_TYPES.items():
+        assert cls.op == op
+        assert len(op.encode()) <= c.MAX_OP_NAME_BYTES
+
+
+@pytest.mark.parametrize("cls", list(STRATEGIES), ids=lambda k: k.op)
+@settings(max_examples=40, deadline=None)
+@given(data=st.data())
+def test_to_json_parse_round_trip(cls: type, data: st.DataObject) -> None:
+    request = data.draw(STRATEGIES[cls])
+    op, text = c.encode_request(request)
+    assert op == cls.op
+    text.encode("ascii")  # ASCII-only JSON: Slicer labels commands US-ASCII
+    assert json.loads(text)["schema"] == SCHEMA_VERSION
+    parsed = parse_request(op, text)
+    assert type(parsed) is cls
+    assert parsed == request
+    assert cls.from_json(text.encode()) == request
+    assert parsed.to_json() == text
+
+
+# ---------------------------------------------------------------- specific requests
+
+def test_create_subscriber_defaults_and_type_resolution() -> None:
+    req = c.CreateSubscriber.from_json('{"topic": "/tool", "type": "PoseStamped"}')
+    assert req == c.CreateSubscriber("/tool", "PoseStamped", c.QoS(10, "reliable", "volatile"))
+    assert req.ros_type == "geometry_msgs/msg/PoseStamped"
+    assert req.rate_hz is None
+
+
+@pytest.mark.parametrize(
+    ("given_type", "resolved"),
+    [
+        ("String", "std_msgs/msg/String"),
+        ("Int", "std_msgs/msg/Int64"),
+        ("DoubleTable", "std_msgs/msg/Float64MultiArray"),
+        ("vtkMRMLROS2SubscriberStringNode", "std_msgs/msg/String"),
+        ("vtkMRMLROS2PublisherPoseStampedNode", "geometry_msgs/msg/PoseStamped"),
+        ("sensor_msgs/Image", "sensor_msgs/msg/Image"),
+        ("my_pkg/msg/Custom2", "my_pkg/msg/Custom2"),
+    ],
+)
+def test_message_type_names(given_type: str, resolved: str) -> None:
+    assert c.resolve_message_type(given_type) == resolved
+
+
+def test_service_types() -> None:
+    assert c.resolve_service_type("turtlesim/Spawn") == "turtlesim/srv/Spawn"
+    with pytest.raises(OutOfRangeError) as info:
+        c.resolve_service_type("std_msgs/msg/String")
+    assert info.value.field == "type"
+
+
+def test_empty_text_means_no_arguments() -> None:
+    assert parse_request("list_bridges", "") == c.ListBridges()
+    assert parse_request("hello", b"  ") == c.Hello()
+
+
+def test_broadcast_transform_matrix_kept_exactly() -> None:
+    text = json.dumps({"parent": "world", "child": "tool",
+                       "matrix": [[0, -1, 0, 3.1415], [1, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]],
+                       "stamp": {"sec": 2**31 + 5, "nanosec": 999_999_999}})
+    req = c.BroadcastTransform.from_json(text)
+    assert req.matrix[0] == (0.0, -1.0, 0.0, 3.1415)
+    assert req.stamp == c.Stamp(2**31 + 5, 999_999_999)
+
+
+def test_create_robot_sources() -> None:
+    default = c.CreateRobot.from_json('{"name": "PSM1"}')
+    assert default.source == c.RobotSource("parameter", node="/robot_state_publisher",
+                                           parameter="robot_description")
+    topic = c.CreateRobot.from_json('{"name": "r", "source": {"kind": "topic"}}')
+    assert topic.source.kind == "topic" and topic.source.topic == "/robot_description"
+    with pytest.raises(MissingFieldError) as info:
+        c.CreateRobot.from_json('{"name": "r", "source": {"kind": "file"}}')
+    assert info.value.field == "source.path"
+
+
+# ---------------------------------------------------------------- validation errors
+
+BAD: list[tuple[str, str, type, str]] = [
+    ("nope", "{}", UnknownOpError, "op"),
+    ("create_subscriber", '{"type": "String"}', MissingFieldError, "topic"),
+    ("create_subscriber", '{"topic": 3, "type": "String"}', WrongTypeError, "topic"),
+    ("create_subscriber", '{"topic": "/a b", "type": "String"}', OutOfRangeError, "topic"),
+    ("create_subscriber", '{"topic": "/x", "type": "Nope"}', OutOfRangeError, "type"),
+    ("create_subscriber", '{"topic": "/x", "type": "String", "qos": {"depth": 0}}',
+     OutOfRangeError, "qos.depth"),
+    ("create_subscriber", '{"topic": "/x", "type": "String", "qos": {"depth": 1.5}}',
+     WrongTypeError, "qos.depth"),
+    ("create_subscriber", '{"topic": "/x", "type": "String", "qos": {"reliability": "maybe"}}',
+     OutOfRangeError, "qos.reliability"),
+    ("create_subscriber", '{"topic": "/x", "type": "String", "qos": {"durable": 1}}',
+     UnknownFieldError, "qos.durable"),
+    ("create_subscriber", '{"topic": "/x", "type": "String", "qos": []}',
+     WrongTypeError, "qos"),
+    ("create_subscriber", '{"topic": "/x", "type": "String", "rate_hz": 0}',
+     OutOfRangeError, "rate_hz"),
+    ("create_subscriber", '{"topic": "/x", "type": "String", "rate_hz": true}',
+     WrongTypeError, "rate_hz"),
+    ("create_subscriber", '{"topic": "/x", "type": "String", "tpoic": "/y"}',
+     UnknownFieldError, "tpoic"),
+    ("publish", '{"topic": "/x"}', MissingFieldError, "value"),
+    ("get_last_message", '{"topic": "/x", "format": "xml"}', OutOfRangeError, "format"),
+    ("get_parameters", '{"node": "/n", "names": "a"}', WrongTypeError, "names"),
+    ("get_parameters", '{"node": "/n", "names": ["ok", 3]}', WrongTypeError, "names[1]"),
+    ("set_parameters", '{"node": "/n", "values": {}}', OutOfRangeError, "values"),
+    ("set_parameters", '{"node": "/n", "values": {"p": {"type": "integer", "value": 3.0}}}',
+     WrongTypeError, "values.p.value"),
+    ("set_parameters", '{"node": "/n", "values": {"p": {"type": "float", "value": 3.0}}}',
+     OutOfRangeError, "values.p.type"),
+    ("set_parameters", '{"node": "/n", "values": {"p": {"type": "byte_array", "value": [256]}}}',
+     OutOfRangeError, "values.p.value[0]"),
+    ("set_parameters", '{"node": "/n", "values": {"p": {"type": "bool", "value": 1}}}',
+     WrongTypeError, "values.p.value"),
+    ("set_parameters", '{"node": "/n", "values": {"p": {"type": "string"}}}',
+     MissingFieldError, "values.p.value"),
+    ("set_parameters", '{"node": "/n", "values": {"p": 3}}', WrongTypeError, "values.p"),
+    ("server_declare_parameter", '{"name": "1bad", "value": {"type": "bool", "value": true}}',
+     OutOfRangeError, "name"),
+    ("lookup_transform", '{"parent": "a", "child": "b", "time": {"sec": -1}}',
+     OutOfRangeError, "time.sec"),
+    ("lookup_transform", '{"parent": "a", "child": "b", "time": {"nanosec": 1}}',
+     MissingFieldError, "time.sec"),
+    ("lookup_transform", '{"parent": "", "child": "b"}', OutOfRangeError, "parent"),
+    ("lookup_transform", '{"parent": " a", "child": "b"}', OutOfRangeError, "parent"),
+    ("lookup_transform", '{"parent": "a", "child": "b", "timeout": 1000}',
+     OutOfRangeError, "timeout"),
+    ("broadcast_transform", '{"parent": "a", "child": "b", "matrix": [[1, 0, 0, 0]]}',
+     WrongTypeError, "matrix"),
+    ("broadcast_transform",
+     '{"parent": "a", "child": "b", "matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,"x",1]]}',
+     WrongTypeError, "matrix[3][2]"),
+    ("broadcast_transform",
+     '{"parent": "a", "child": "b", "matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,1,1]]}',
+     OutOfRangeError, "matrix[3]"),
+    ("broadcast_transform",
+     '{"parent": "a", "child": "b", "matrix": [[2,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}',
+     OutOfRangeError, "matrix rotation"),
+    ("create_robot", '{"name": "bad name"}', OutOfRangeError, "name"),
+    ("create_robot", '{"name": "r", "source": {"kind": "usb"}}', OutOfRangeError, "source.kind"),
+    ("call_service", '{"service": "/s", "type": "std_srvs/srv/SetBool", "request": []}',
+     WrongTypeError, "request"),
+    ("call_service", '{"service": "/s", "type": "std_srvs/srv/SetBool", "timeout": 0}',
+     OutOfRangeError, "timeout"),
+    ("call_service", '{"service": "/s", "type": "std_msgs/msg/String"}', OutOfRangeError, "type"),
+    ("hello", '{"schema": 2}', UnsupportedSchemaError, "schema"),
+    ("hello", '{"schema": "1"}', WrongTypeError, "schema"),
+    ("hello", "[1, 2]", BadJsonError, "text"),
+    ("hello", "{", BadJsonError, "text"),
+    ("hello", '{"a": NaN}', BadJsonError, "text"),
+    ("hello", '{"client": "a", "client": "b"}', BadJsonError, "client"),
+    ("hello", '{"client": ' + "[" * 40 + "]" * 40 + "}", BadJsonError, "text"),
+    ("hello", '{"a": ' + "[" * 600_000 + "]" * 600_000 + "}", TooLargeError, "text"),
+]
+
+
+@pytest.mark.parametrize(("op", "text", "error", "fld"), BAD,
+                         ids=[f"{op}:{fld}" for op, _, _, fld in BAD])
+def test_validation_errors_name_their_field(op: str, text: str, error: type, fld: str) -> None:
+    with pytest.raises(error) as info:
+        parse_request(op, text)
+    err = info.value
+    assert isinstance(err, CommandError) and isinstance(err, ProtocolError)
+    assert err.field == fld
+    assert err.expected
+    assert str(err).startswith(f"{fld}: expected ")
+    reply = c.error_reply(op, err)
+    assert not reply.ok and reply.error is not None
+    assert reply.error.field == fld
+    assert reply.error.code == err.error_code
+    assert reply.metadata()["Status"] == "FAIL"
+
+
+def test_deep_nesting_within_size_limit_is_refused_cleanly() -> None:
+    text = '{"a": ' + "[" * 100_000 + "]" * 100_000 + "}"
+    with pytest.raises(BadJsonError) as info:
+        c.loads(text, max_bytes=1 << 20)
+    assert info.value.field == "text"
+
+
+def test_non_utf8_bytes() -> None:
+    with pytest.raises(BadJsonError) as info:
+        parse_request("hello", b'{"client": "\xff"}')
+    assert "UTF-8" in info.value.expected
+
+
+def test_utf8_bytes_accepted_and_written_back_as_ascii() -> None:
+    req = parse_request("create_tf_lookup", '{"parent": "wörld", "child": "t"}'.encode())
+    assert req == c.CreateTfLookup("wörld", "t")
+    assert "\\u00f6" in req.to_json()
+
+
+def test_op_name_too_long() -> None:
+    with pytest.raises(TooLargeError) as info:
+        parse_request("x" * 200, "{}")
+    assert info.value.field == "op"
+
+
+# ---------------------------------------------------------------- parameter values
+
+def test_integer_and_double_stay_distinct() -> None:
+    i, d = ParameterValue("integer", 3), ParameterValue("double", 3)
+    assert d.value == 3.0 and isinstance(d.value, float)
+    assert i != d
+    req = c.SetParameters("/n", {"i": i, "d": d})
+    text = req.to_json()
+    assert '"i":{"type":"integer","value":3}' in text
+    assert '"d":{"type":"double","value":3.0}' in text
+    back = parse_request("set_parameters", text)
+    assert isinstance(back, c.SetParameters)
+    assert type(back.values["i"].value) is int
+    assert type(back.values["d"].value) is float
+
+
+@pytest.mark.parametrize(
+    ("value", "kind"),
+    [(True, "bool"), (3, "integer"), (3.0, "double"), ("s", "string"), (b"\x00\xff", "byte_array"),
+     ([True], "bool_array"), ([1, 2], "integer_array"), ([1.5, 2], "double_array"),
+     (["a"], "string_array"), (None, "not_set")],
+)
+def test_parameter_infer(value: Any, kind: str) -> None:
+    assert ParameterValue.infer(value).type == kind
+
+
+def test_parameter_value_errors() -> None:
+    with pytest.raises(WrongTypeError) as info:
+        ParameterValue("integer", True)
+    assert info.value.field == "value.value"
+    with pytest.raises(OutOfRangeError):
+        ParameterValue("integer", 2**63)
+    with pytest.raises(OutOfRangeError):
+        ParameterValue("double", float("inf"))
+    with pytest.raises(WrongTypeError):
+        ParameterValue.infer(object())
+    assert ParameterValue("byte_array", b"\x01\x02").value == (1, 2)
+
+
+# ---------------------------------------------------------------- replies
+
+def test_success_reply_round_trip_and_metadata() -> None:
+    reply = Reply.success("create_subscriber", {"device": "tool", "topic": "/tool"})
+    text = reply.to_json()
+    assert json.loads(text) == {"schema": SCHEMA_VERSION, "op": "create_subscriber", "ok": True,
+                                "result": {"device": "tool", "topic": "/tool"}}
+    assert Reply.from_json(text) == reply
+    assert reply.metadata() == {"Status": "SUCCESS"}
+    assert c.status_is_success(reply.metadata()["Status"])
+
+
+def test_failure_reply_round_trip_and_metadata() -> None:
+    reply = Reply.failure("remove_subscriber", ErrorCode.NOT_FOUND, "no subscriber on /x", "topic")
+    data = json.loads(reply.to_json())
+    assert data["error"] == {"code": 20, "name": "NOT_FOUND", "message": "no subscriber on /x",
+                             "field": "topic"}
+    assert Reply.from_json(reply.to_json()) == reply
+    assert reply.metadata() == {"Status": "FAIL", "ErrorMessage": "no subscriber on /x"}
+    assert not c.status_is_success("FAIL")
+
+
+@pytest.mark.parametrize(("value", "ok"), [("SUCCESS", True), ("true", True), ("TRUE", True),
+                                           ("FAIL", False), ("false", False), (None, False)])
+def test_status_values(value: str | None, ok: bool) -> None:
+    assert c.status_is_success(value) is ok
+
+
+def test_reply_invariants() -> None:
+    with pytest.raises(MissingFieldError):
+        Reply(ok=False)
+    with pytest.raises(OutOfRangeError):
+        Reply(ok=True, error=c.ErrorInfo(ErrorCode.INTERNAL, "x"))
+    with pytest.raises(WrongTypeError) as info:
+        Reply.from_json('{"ok": "yes"}')
+    assert info.value.field == "ok"
+    with pytest.raises(MissingFieldError) as info2:
+        Reply.from_json('{"ok": false}')
+    assert info2.value.field == "error"
+
+
+def test_unknown_future_error_code_still_parses() -> None:
+    reply = Reply.from_json('{"ok": false, "error": {"code": 777, "message": "m"}}')
+    assert reply.error is not None and reply.error.code == ErrorCode.INTERNAL
+
+
+def test_command_failed_error_carries_its_code() -> None:
+    err = CommandFailedError("topic", "an existing subscriber", "/x", code=ErrorCode.NOT_FOUND)
+    reply = c.error_reply("remove_subscriber", err)
+    assert reply.error == c.ErrorInfo(ErrorCode.NOT_FOUND,
+                                      "topic: expected an existing subscriber, got /x", "topic")
+
+
+@pytest.mark.parametrize(
+    ("exc", "code"),
+    [(WrongTypeError("a", "b", "c"), ErrorCode.WRONG_TYPE),
+     (ProtocolError("m", "4x4", "3x3"), ErrorCode.OUT_OF_RANGE),
+     (RuntimeError("boom"), ErrorCode.INTERNAL)],
+)
+def test_reply_for_exception(exc: BaseException, code: ErrorCode) -> None:
+    reply = c.reply_for_exception("publish", exc)
+    assert reply.error is not None and reply.error.code == code
+    assert reply.op == "publish"
+
+
+@given(st.dictionaries(st.text(max_size=8), json_values, max_size=5))
+def test_reply_result_round_trip(result: dict[str, Any]) -> None:
+    reply = Reply.success("hello", result)
+    assert Reply.from_json(reply.to_json()) == reply
+
+
+def test_error_codes_are_stable() -> None:
+    # Clients may switch on the numbers: never renumber.
+    expected: dict[str, int] = {
+        "BAD_JSON": 1, "TOO_LARGE": 2, "UNKNOWN_OP": 3, "UNSUPPORTED_SCHEMA": 4,
+        "MISSING_FIELD": 5, "UNKNOWN_FIELD": 6, "WRONG_TYPE": 7, "OUT_OF_RANGE": 8,
+        "NOT_FOUND": 20, "ALREADY_EXISTS": 21, "UNKNOWN_ROS_TYPE": 22, "ROS_ERROR": 23,
+        "TIMEOUT": 24, "UNAVAILABLE": 25, "TRANSFORM_UNAVAILABLE": 26, "NOT_SUPPORTED": 27,
+        "INTERNAL": 99,
+    }
+    assert {e.name: int(e) for e in ErrorCode} == expected
+
+
+def test_dumps_refuses_nan() -> None:
+    builder: Callable[[], object] = lambda: c.Publish("/x", float("nan")).to_json()
+    with pytest.raises(OutOfRangeError):
+        builder()
