@@ -1,0 +1,469 @@
+"""Triangle meshes for robot visuals: files (STL, OBJ, DAE, ... via trimesh), URDF
+primitives, a cache, decimation and normals.
+
+Everything here is in METRES and in the mesh's own frame: the visual origin and the
+conversion to millimetres happen in `bridge.robots.model`. A `MeshData` is immutable (its
+arrays are read-only) so one cached copy can be shared by every robot that uses the file.
+
+Vertices are merged when their position (and colour, if the file gives per-vertex colours)
+are bit-for-bit equal, never within a tolerance: the counts are then those of the file
+(an STL of F triangles gives exactly its distinct corner positions), and two robots
+loading the same file get identical arrays.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+import numpy as np
+import numpy.typing as npt
+import trimesh
+
+from bridge.robots.errors import MeshError
+
+__all__ = [
+    "MeshData",
+    "MeshCache",
+    "DEFAULT_MESH_CACHE",
+    "MESH_SUFFIXES",
+    "load_mesh_file",
+    "box_mesh",
+    "cylinder_mesh",
+    "sphere_mesh",
+    "decimate",
+    "vertex_normals",
+]
+
+_log = logging.getLogger("bridge.robots.meshes")
+
+F64 = npt.NDArray[np.float64]
+U32 = npt.NDArray[np.uint32]
+U8 = npt.NDArray[np.uint8]
+
+# What trimesh reads with the project's dependencies (pycollada gives DAE).
+MESH_SUFFIXES = (".stl", ".obj", ".dae", ".ply", ".off", ".glb", ".gltf", ".3mf")
+
+# Primitive tessellation: enough facets to look round in Slicer, few enough to stay small.
+CYLINDER_SECTIONS = 48
+SPHERE_SUBDIVISIONS = 3  # icosphere: 642 vertices, 1280 triangles
+
+
+@dataclass(frozen=True)
+class MeshData:
+    """A triangle mesh in metres, in its own frame, with the colours its file gave.
+
+    ``rgba`` is the file's single colour (0..1) if it has exactly one, ``vertex_rgba`` the
+    per-vertex colours (uint8) if they vary; both None when the file says nothing (STL).
+    """
+
+    vertices: F64  # (N, 3) float64, metres, scale applied
+    triangles: U32  # (M, 3) uint32
+    rgba: Optional[tuple[float, float, float, float]]
+    vertex_rgba: Optional[U8]  # (N, 4) uint8 or None
+    description: str  # "stl, 2848 triangles" ...
+    original_triangles: int  # before decimation
+
+    @property
+    def triangle_count(self) -> int:
+        return int(self.triangles.shape[0])
+
+
+def _frozen(array: np.ndarray) -> Any:
+    array.setflags(write=False)
+    return array
+
+
+# ---------------------------------------------------------------------------- merging
+
+
+def _merge_exact(vertices: F64, triangles: U32, colours: Optional[U8]
+                 ) -> tuple[F64, U32, Optional[U8]]:
+    """Merge vertices whose position (and colour) bytes are equal; drop unused ones."""
+    if len(vertices) == 0:
+        return vertices, triangles, colours
+    pos = np.ascontiguousarray(vertices, dtype=np.float64)
+    if colours is not None:
+        key_arr = np.concatenate([pos.view(np.uint8).reshape(len(pos), 24),
+                                  np.ascontiguousarray(colours, dtype=np.uint8)], axis=1)
+    else:
+        key_arr = pos.view(np.uint8).reshape(len(pos), 24)
+    key_arr = np.ascontiguousarray(key_arr)
+    # One opaque value per row, so np.unique sorts rows as a whole (fast, vectorised).
+    keys = key_arr.view(np.dtype((np.void, key_arr.shape[1]))).ravel()
+    used = np.zeros(len(pos), dtype=bool)
+    used[triangles.ravel()] = True
+    keys_used_idx = np.flatnonzero(used)
+    _, first, inverse = np.unique(keys[keys_used_idx], return_index=True, return_inverse=True)
+    remap = np.zeros(len(pos), dtype=np.int64)
+    remap[keys_used_idx] = inverse.ravel()
+    keep = keys_used_idx[first]
+    new_colours = colours[keep] if colours is not None else None
+    return pos[keep], remap[triangles].astype(np.uint32), new_colours
+
+
+# ---------------------------------------------------------------------------- colours
+
+
+def _visual_colours(geom: trimesh.Trimesh) -> Optional[U8]:
+    """(N, 4) uint8 colours of a trimesh geometry, or None when its file gives none."""
+    visual = geom.visual
+    kind = getattr(visual, "kind", None)
+    if kind is None:
+        return None
+    try:
+        if kind == "texture":
+            material = getattr(visual, "material", None)
+            image = getattr(material, "image", None) or getattr(material, "baseColorTexture",
+                                                                 None)
+            uv = getattr(visual, "uv", None)
+            if image is not None and uv is not None and len(uv) == len(geom.vertices):
+                colours = visual.to_color().vertex_colors  # samples the texture per vertex
+            else:
+                main = np.asarray(material.main_color, dtype=np.uint8).reshape(4)
+                colours = np.broadcast_to(main, (len(geom.vertices), 4))
+        elif kind == "face":
+            faces = np.asarray(visual.face_colors, dtype=np.uint8)
+            if len(faces) and np.all(faces == faces[0]):
+                colours = np.broadcast_to(faces[0], (len(geom.vertices), 4))
+            else:
+                colours = visual.vertex_colors  # trimesh averages face colours per vertex
+        else:
+            colours = visual.vertex_colors
+    except Exception as exc:  # a broken material must not lose the geometry
+        _log.debug("ignoring the colours of a geometry: %s", exc)
+        return None
+    colours = np.asarray(colours, dtype=np.uint8)
+    if colours.shape != (len(geom.vertices), 4):
+        return None
+    return np.ascontiguousarray(colours)
+
+
+def _split_colours(colours: Optional[U8]
+                   ) -> tuple[Optional[tuple[float, float, float, float]], Optional[U8]]:
+    """One colour if all are equal (rgba 0..1), else the per-vertex array."""
+    if colours is None or len(colours) == 0:
+        return None, None
+    if np.all(colours == colours[0]):
+        c = colours[0].astype(np.float64) / 255.0
+        return (float(c[0]), float(c[1]), float(c[2]), float(c[3])), None
+    return None, colours
+
+
+# ---------------------------------------------------------------------------- units
+
+_UNITS = re.compile(r"^\s*([0-9.eE+-]+)\s*\*\s*meters\s*$")
+
+
+def _unit_scale(metadata: dict[str, Any]) -> float:
+    """Metres per file unit from trimesh's metadata (COLLADA ``<unit meter>``), else 1.
+
+    COLLADA files often say centimetres or inches; RViz (assimp) honours that, so do we.
+    """
+    units = metadata.get("units")
+    if not isinstance(units, str):
+        return 1.0
+    match = _UNITS.match(units)
+    if match:
+        try:
+            value = float(match.group(1))
+        except ValueError:
+            return 1.0
+        return value if np.isfinite(value) and value > 0 else 1.0
+    return 1.0
+
+
+# ---------------------------------------------------------------------------- files
+
+
+def _read_geometries(path: Path) -> tuple[list[trimesh.Trimesh], float]:
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise MeshError(str(path), "a mesh file (" + ", ".join(MESH_SUFFIXES) + ")",
+                        f"suffix {suffix or '(none)'}")
+    try:
+        # process=False: keep the file's vertices; merging is ours (exact, see module doc).
+        loaded = trimesh.load(str(path), process=False, force="scene")
+    except MeshError:
+        raise
+    except Exception as exc:  # trimesh raises many types for a corrupt file
+        raise MeshError(str(path), f"a readable {suffix[1:].upper()} mesh",
+                        f"{type(exc).__name__}: {exc}") from None
+    scale = _unit_scale(dict(getattr(loaded, "metadata", {}) or {}))
+    if isinstance(loaded, trimesh.Scene):
+        try:
+            geoms = loaded.dump(concatenate=False)
+        except Exception as exc:
+            raise MeshError(str(path), "a mesh scene", f"{type(exc).__name__}: {exc}") from None
+    else:
+        geoms = [loaded]
+    meshes = [g for g in geoms if isinstance(g, trimesh.Trimesh) and len(g.faces) > 0]
+    return meshes, scale
+
+
+def load_mesh_file(path: Path, scale: Sequence[float] = (1.0, 1.0, 1.0), *,
+                   max_triangles: Optional[int] = None) -> MeshData:
+    """Read a mesh file into a `MeshData` (metres, ``scale`` applied per axis).
+
+    Raises `MeshError` when the file is not a mesh trimesh can read, or holds no triangles.
+    Several geometries (a DAE scene) are placed by their node transforms and joined.
+    """
+    geoms, unit = _read_geometries(path)
+    if not geoms:
+        raise MeshError(str(path), "at least one triangle", "no triangles in the file")
+    verts: list[F64] = []
+    tris: list[U32] = []
+    colour_parts: list[Optional[U8]] = []
+    offset = 0
+    for g in geoms:
+        v = np.asarray(g.vertices, dtype=np.float64)
+        f = np.asarray(g.faces, dtype=np.int64)
+        if f.ndim != 2 or f.shape[1] != 3 or (len(f) and (f.min() < 0 or f.max() >= len(v))):
+            raise MeshError(str(path), "triangles indexing the vertices",
+                            f"faces of shape {f.shape}")
+        verts.append(v)
+        tris.append((f + offset).astype(np.uint32))
+        colour_parts.append(_visual_colours(g))
+        offset += len(v)
+    vertices = np.concatenate(verts)
+    triangles = np.concatenate(tris)
+    colours: Optional[U8] = None
+    if any(c is not None for c in colour_parts):
+        grey = np.array(DEFAULT_GREY_U8, dtype=np.uint8)
+        colours = np.concatenate([
+            c if c is not None else np.broadcast_to(grey, (len(v), 4))
+            for c, v in zip(colour_parts, verts)])
+    if not np.all(np.isfinite(vertices)):
+        raise MeshError(str(path), "finite vertex coordinates", "NaN or infinity")
+    vertices, triangles, colours = _merge_exact(vertices, triangles, colours)
+    factor = np.asarray(scale, dtype=np.float64) * unit
+    vertices = vertices * factor
+    if np.linalg.det(np.diag(factor)) < 0:
+        triangles = triangles[:, ::-1].copy()  # a mirroring scale flips the winding
+    original = len(triangles)
+    if max_triangles is not None and original > max_triangles:
+        vertices, triangles, colours = decimate(vertices, triangles, max_triangles, colours)
+    rgba, vertex_rgba = _split_colours(colours)
+    desc = f"{path.suffix[1:].lower()} {path.name}, {original} triangles"
+    if len(triangles) != original:
+        desc += f" decimated to {len(triangles)}"
+    return MeshData(_frozen(np.ascontiguousarray(vertices)),
+                    _frozen(np.ascontiguousarray(triangles, dtype=np.uint32)), rgba,
+                    None if vertex_rgba is None else _frozen(vertex_rgba), desc, original)
+
+
+DEFAULT_GREY_U8 = (179, 179, 179, 255)
+
+
+# ---------------------------------------------------------------------------- primitives
+
+
+def _from_trimesh(mesh: trimesh.Trimesh, description: str) -> MeshData:
+    v = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+    t = np.ascontiguousarray(mesh.faces, dtype=np.uint32)
+    return MeshData(_frozen(v), _frozen(t), None, None, description, len(t))
+
+
+def _positive(value: float, what: str) -> float:
+    if not np.isfinite(value) or value <= 0:
+        raise MeshError(what, "a positive finite number (metres)", value)
+    return float(value)
+
+
+def box_mesh(size: Sequence[float]) -> MeshData:
+    """A box of extents ``size`` (x, y, z metres) centred on the origin (URDF <box>)."""
+    sx, sy, sz = (_positive(float(s), "box size") for s in size)
+    return _from_trimesh(trimesh.creation.box(extents=(sx, sy, sz)),
+                         f"box {sx:g} x {sy:g} x {sz:g} m")
+
+
+def cylinder_mesh(radius: float, length: float) -> MeshData:
+    """A cylinder along z, centred on the origin (URDF <cylinder>)."""
+    r = _positive(radius, "cylinder radius")
+    h = _positive(length, "cylinder length")
+    return _from_trimesh(trimesh.creation.cylinder(radius=r, height=h,
+                                                   sections=CYLINDER_SECTIONS),
+                         f"cylinder r {r:g} m, length {h:g} m")
+
+
+def sphere_mesh(radius: float) -> MeshData:
+    """A sphere centred on the origin (URDF <sphere>)."""
+    r = _positive(radius, "sphere radius")
+    return _from_trimesh(trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS,
+                                                    radius=r), f"sphere r {r:g} m")
+
+
+# ---------------------------------------------------------------------------- decimation
+
+
+def _cluster(vertices: F64, triangles: U32, cells: int
+             ) -> tuple[npt.NDArray[np.int64], U32]:
+    """Vertex clustering on a grid of ``cells`` along the longest side.
+
+    Returns the cluster of every vertex (0..K-1) and the surviving triangles in cluster ids.
+    """
+    low = vertices.min(axis=0)
+    extent = float(np.max(vertices.max(axis=0) - low)) or 1.0
+    size = extent / cells
+    grid = np.floor((vertices - low) / size).astype(np.int64)
+    grid = np.minimum(grid, cells)  # the far face lands in the last cell
+    key = (grid[:, 0] * (cells + 1) + grid[:, 1]) * (cells + 1) + grid[:, 2]
+    _, cluster = np.unique(key, return_inverse=True)
+    cluster = cluster.ravel()
+    t = cluster[triangles]
+    ok = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])
+    t = t[ok]
+    # The same cluster triple can come from several triangles: keep one of each winding.
+    canonical = _rotate_min_first(t)
+    _, first = np.unique(canonical, axis=0, return_index=True)
+    return cluster, t[np.sort(first)].astype(np.uint32)
+
+
+def _rotate_min_first(t: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+    """Rotate each triangle so its smallest index comes first (winding kept)."""
+    shift = np.argmin(t, axis=1)
+    idx = (shift[:, None] + np.arange(3)[None, :]) % 3
+    return np.take_along_axis(t, idx, axis=1)
+
+
+def decimate(vertices: F64, triangles: U32, max_triangles: int,
+             colours: Optional[U8] = None) -> tuple[F64, U32, Optional[U8]]:
+    """Reduce a mesh to at most ``max_triangles`` by vertex clustering (numpy only).
+
+    trimesh's quadric decimation needs the optional ``fast_simplification`` package, which
+    the project does not depend on; clustering is cruder (it can close small holes and
+    thin walls) but is vectorised, deterministic and good enough to show a huge CAD mesh.
+    The finest grid that meets the budget is found by bisection (~12 passes).
+    """
+    if max_triangles < 4:
+        raise MeshError("max_triangles", "at least 4", max_triangles)
+    if len(triangles) <= max_triangles:
+        return vertices, triangles, colours
+    lo, hi = 1, 2
+    best: Optional[tuple[npt.NDArray[np.int64], U32]] = None
+    # Grow the grid until it is too fine, then bisect between the last fitting and it.
+    while True:
+        cluster, tris = _cluster(vertices, triangles, hi)
+        if len(tris) > max_triangles or hi >= 1 << 16:
+            break
+        lo, best = hi, (cluster, tris)
+        hi *= 2
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        cluster, tris = _cluster(vertices, triangles, mid)
+        if len(tris) <= max_triangles:
+            lo, best = mid, (cluster, tris)
+        else:
+            hi = mid
+    if best is None:
+        best = _cluster(vertices, triangles, 1)
+    cluster, tris = best
+    count = int(cluster.max()) + 1
+    weights = np.bincount(cluster, minlength=count).astype(np.float64)
+    new_vertices = np.stack([np.bincount(cluster, vertices[:, k], minlength=count)
+                             for k in range(3)], axis=1) / weights[:, None]
+    new_colours = None
+    if colours is not None:
+        new_colours = np.stack([np.bincount(cluster, colours[:, k].astype(np.float64),
+                                            minlength=count) for k in range(4)], axis=1)
+        new_colours = np.clip(np.rint(new_colours / weights[:, None]), 0, 255).astype(np.uint8)
+    # Drop clusters no surviving triangle uses.
+    used = np.zeros(count, dtype=bool)
+    used[tris.ravel()] = True
+    remap = np.cumsum(used) - 1
+    new_vertices = new_vertices[used]
+    if new_colours is not None:
+        new_colours = new_colours[used]
+    return new_vertices, remap[tris].astype(np.uint32), new_colours
+
+
+# ---------------------------------------------------------------------------- normals
+
+
+def vertex_normals(vertices: npt.ArrayLike, triangles: npt.ArrayLike
+                   ) -> npt.NDArray[np.float32]:
+    """Area-weighted unit vertex normals (float32), vectorised; (0, 0, 0) for a vertex of
+    degenerate triangles only."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    face = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])  # length = 2 * area
+    idx = t.ravel()
+    rep = np.repeat(face, 3, axis=0)
+    acc = np.stack([np.bincount(idx, rep[:, k], minlength=len(v)) for k in range(3)], axis=1)
+    norm = np.linalg.norm(acc, axis=1, keepdims=True)
+    out = np.divide(acc, norm, out=np.zeros_like(acc), where=norm > 0)
+    return out.astype(np.float32)
+
+
+# ---------------------------------------------------------------------------- cache
+
+
+class MeshCache:
+    """Loaded meshes keyed by (resolved file, its mtime and size, scale, triangle budget).
+
+    Several robots, or a robot loaded again, share the arrays instead of re-reading the
+    file; an edited file (new mtime or size) is read again. Thread-safe; keeps at most
+    ``max_entries`` meshes, least recently used first out.
+    """
+
+    def __init__(self, max_entries: int = 512) -> None:
+        self.max_entries = max_entries
+        self._entries: OrderedDict[tuple[object, ...], MeshData] = OrderedDict()
+        self._lock = threading.Lock()
+        self.hits = 0
+        self.misses = 0
+
+    def clear(self) -> None:
+        with self._lock:
+            self._entries.clear()
+            self.hits = self.misses = 0
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def mesh_file(self, path: Path, scale: Sequence[float] = (1.0, 1.0, 1.0), *,
+                  max_triangles: Optional[int] = None) -> MeshData:
+        resolved = path.resolve()
+        try:
+            stat = resolved.stat()
+        except OSError as exc:
+            raise MeshError(str(path), "a readable file", str(exc)) from None
+        key = ("file", str(resolved), stat.st_mtime_ns, stat.st_size,
+               tuple(float(s) for s in scale), max_triangles)
+        return self._get(key, lambda: load_mesh_file(resolved, scale,
+                                                     max_triangles=max_triangles))
+
+    def primitive(self, kind: str, *params: float) -> MeshData:
+        key = (kind, *(float(p) for p in params))
+        if kind == "box":
+            return self._get(key, lambda: box_mesh(params))
+        if kind == "cylinder":
+            return self._get(key, lambda: cylinder_mesh(params[0], params[1]))
+        if kind == "sphere":
+            return self._get(key, lambda: sphere_mesh(params[0]))
+        raise MeshError("primitive", "box, cylinder or sphere", kind)
+
+    def _get(self, key: tuple[object, ...], make: Any) -> MeshData:
+        with self._lock:
+            found = self._entries.get(key)
+            if found is not None:
+                self._entries.move_to_end(key)
+                self.hits += 1
+                return found
+            self.misses += 1
+        mesh: MeshData = make()  # outside the lock: reading a file may take a while
+        with self._lock:
+            self._entries[key] = mesh
+            self._entries.move_to_end(key)
+            while len(self._entries) > self.max_entries:
+                self._entries.popitem(last=False)
+        return mesh
+
+
+# The process-wide cache `load_robot` uses unless given another one.
+DEFAULT_MESH_CACHE = MeshCache()

@@ -1,0 +1,271 @@
+"""A robot ready for Slicer: every link visual as a triangle mesh in MILLIMETRES, plus FK.
+
+`load_robot` (URDF text) and `load_robot_file` (a path) parse the URDF (`parse_urdf`),
+resolve each mesh URI (`PackageResolver`), read it through a shared `MeshCache`, apply
+the per-visual ``scale`` and ``<origin>``, convert metres to millimetres with
+`protocol.conversions.metres_to_mm`, and pick a colour:
+
+1. the URDF material of the visual (inline ``<color>``, or a named material defined at
+   robot level or inline in an earlier visual);
+2. else the mesh file's own colours (DAE/OBJ materials, face or vertex colours);
+3. else `DEFAULT_RGBA` (grey).
+
+A mesh that is missing, unreadable or not a mesh becomes a warning naming the file and the
+link (``RobotModel.warnings``, also logged) and the rest of the robot loads. Only a
+malformed URDF raises (`UrdfError`).
+
+`to_polydata` turns one `VisualMesh` into the POLYDATA message the daemon sends once per
+connection; link poses come from `RobotModel.link_poses` (metres, the root link's frame).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping, Optional
+
+import numpy as np
+import numpy.typing as npt
+
+from bridge.robots.description import RobotDescription, VisualSpec, parse_urdf
+from bridge.robots.errors import MeshError, ResourceError, UrdfError
+from bridge.robots.kinematics import Kinematics
+from bridge.robots.meshes import DEFAULT_MESH_CACHE, MeshCache, MeshData, vertex_normals
+from bridge.robots.resources import PackageResolver
+from protocol.conversions import metres_to_mm
+from protocol.messages import AttributeKind, PolyData, PolyDataAttribute, cells_from_array
+
+__all__ = [
+    "DEFAULT_RGBA",
+    "RGBA_ATTRIBUTE",
+    "NORMALS_ATTRIBUTE",
+    "LoadOptions",
+    "VisualMesh",
+    "RobotModel",
+    "load_robot",
+    "load_robot_file",
+    "to_polydata",
+]
+
+_log = logging.getLogger("bridge.robots")
+
+F32 = npt.NDArray[np.float32]
+F64 = npt.NDArray[np.float64]
+U32 = npt.NDArray[np.uint32]
+Rgba = tuple[float, float, float, float]
+
+DEFAULT_RGBA: Rgba = (0.7, 0.7, 0.7, 1.0)
+RGBA_ATTRIBUTE = "RGBA"  # POLYDATA point attribute holding each point's colour, 0..1
+NORMALS_ATTRIBUTE = "Normals"
+
+
+@dataclass(frozen=True)
+class LoadOptions:
+    """How meshes are prepared.
+
+    ``max_triangles``: decimate any mesh file above this many triangles (None: never).
+    ``normals``: compute per-point normals (smooth shading; without them Slicer shades
+    each triangle flat, which suits CAD meshes with sharp edges).
+    ``progress_after_s``: log each mesh once loading has taken longer than this.
+    """
+
+    max_triangles: Optional[int] = None
+    normals: bool = False
+    progress_after_s: float = 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class VisualMesh:
+    """One ``<visual>`` of one link, ready to draw: vertices in mm, in the LINK frame
+    (the visual origin and scale already applied)."""
+
+    link: str
+    index: int  # among the link's visuals, in URDF order
+    name: str  # the URDF visual name, else "<link>_visual<index>"
+    vertices: F32  # (N, 3) float32, mm, link frame
+    triangles: U32  # (M, 3) uint32
+    rgba: Rgba  # the visual's colour, 0..1
+    normals: Optional[F32] = None  # (N, 3) unit, link frame, if LoadOptions.normals
+    vertex_rgba: Optional[F32] = None  # (N, 4) 0..1 when the mesh file's colours vary
+    source: str = ""  # "package://... -> /path (stl ..., 2848 triangles)", "box ..."
+    colour_source: str = "default"  # "urdf", "mesh" or "default"
+
+
+@dataclass(frozen=True, eq=False)
+class RobotModel:
+    """A loaded robot: its description, its visuals and forward kinematics."""
+
+    description: RobotDescription
+    visuals: tuple[VisualMesh, ...]
+    warnings: tuple[str, ...]
+    kinematics: Kinematics
+
+    @property
+    def name(self) -> str:
+        return self.description.name
+
+    @property
+    def root_link(self) -> str:
+        return self.description.root_link
+
+    @property
+    def links(self) -> tuple[str, ...]:
+        return tuple(self.description.links)
+
+    @property
+    def joints(self) -> Mapping[str, object]:
+        return self.description.joints
+
+    @property
+    def urdf(self) -> str:
+        return self.description.xml
+
+    def visuals_of(self, link: str) -> tuple[VisualMesh, ...]:
+        return tuple(v for v in self.visuals if v.link == link)
+
+    def link_poses(self, joint_positions: Mapping[str, float]) -> dict[str, F64]:
+        """4x4 pose (metres) of every link in the root link's frame."""
+        return self.kinematics.link_poses(joint_positions)
+
+
+# ---------------------------------------------------------------------------- loading
+
+
+def _mesh_for(spec: VisualSpec, resolver: PackageResolver, cache: MeshCache,
+              options: LoadOptions) -> tuple[MeshData, str]:
+    g = spec.geometry
+    if g.kind == "mesh":
+        assert g.filename is not None
+        path = resolver.resolve(g.filename)
+        mesh = cache.mesh_file(path, g.scale, max_triangles=options.max_triangles)
+        return mesh, f"{g.filename} -> {path} ({mesh.description})"
+    if g.kind == "box":
+        mesh = cache.primitive("box", *g.size)
+    elif g.kind == "cylinder":
+        mesh = cache.primitive("cylinder", g.radius, g.length)
+    else:
+        mesh = cache.primitive("sphere", g.radius)
+    return mesh, mesh.description
+
+
+def _visual_mesh(spec: VisualSpec, mesh: MeshData, source: str,
+                 options: LoadOptions) -> VisualMesh:
+    rotation = spec.origin[:3, :3]
+    # Visual frame -> link frame in metres, then the project's one unit conversion.
+    link_m = mesh.vertices @ rotation.T + spec.origin[:3, 3]
+    vertices = np.ascontiguousarray(metres_to_mm(link_m), dtype=np.float32)
+    normals: Optional[F32] = None
+    if options.normals:
+        normals = np.ascontiguousarray(
+            vertex_normals(mesh.vertices, mesh.triangles) @ rotation.T.astype(np.float32),
+            dtype=np.float32)
+    vertex_rgba: Optional[F32] = None
+    if spec.rgba is not None:
+        rgba, colour_source = spec.rgba, "urdf"
+    elif mesh.rgba is not None:
+        rgba, colour_source = mesh.rgba, "mesh"
+    elif mesh.vertex_rgba is not None:
+        vertex_rgba = mesh.vertex_rgba.astype(np.float32) / np.float32(255.0)
+        mean = vertex_rgba.mean(axis=0)
+        rgba, colour_source = (float(mean[0]), float(mean[1]), float(mean[2]),
+                               float(mean[3])), "mesh"
+    else:
+        rgba, colour_source = DEFAULT_RGBA, "default"
+    for array in (vertices, normals, vertex_rgba):
+        if array is not None:
+            array.setflags(write=False)
+    name = spec.name or f"{spec.link}_visual{spec.index}"
+    return VisualMesh(spec.link, spec.index, name, vertices, mesh.triangles, rgba, normals,
+                      vertex_rgba, source, colour_source)
+
+
+def _load(description: RobotDescription, resolver: PackageResolver, cache: MeshCache,
+          options: LoadOptions, logger: logging.Logger) -> RobotModel:
+    warnings = list(description.warnings)
+    for w in description.warnings:
+        logger.warning("robot %r: %s", description.name, w)
+    specs = [v for link in description.links.values() for v in link.visuals]
+    visuals: list[VisualMesh] = []
+    start = time.monotonic()
+    reported = False
+    for number, spec in enumerate(specs, 1):
+        what = f"link {spec.link!r} visual {spec.index}"
+        try:
+            mesh, source = _mesh_for(spec, resolver, cache, options)
+        except ResourceError as exc:
+            message = (f"{what}: mesh {spec.geometry.filename!r} not found: expected "
+                       f"{exc.expected}, got {exc.got}; the visual is left out")
+        except MeshError as exc:
+            uri = spec.geometry.filename or spec.geometry.kind
+            message = (f"{what}: mesh {uri!r} ({exc.field}) cannot be used: expected "
+                       f"{exc.expected}, got {exc.got}; the visual is left out")
+        else:
+            visuals.append(_visual_mesh(spec, mesh, source, options))
+            message = ""
+        if message:
+            warnings.append(message)
+            logger.warning("robot %r: %s", description.name, message)
+            continue
+        elapsed = time.monotonic() - start
+        if elapsed > options.progress_after_s:
+            reported = True
+            logger.info("robot %r: visual %d/%d loaded (%s, %.1f s)", description.name,
+                        number, len(specs), source, elapsed)
+    if reported:
+        logger.info("robot %r: %d visuals of %d links loaded in %.1f s", description.name,
+                    len(visuals), len(description.links), time.monotonic() - start)
+    return RobotModel(description, tuple(visuals), tuple(warnings), Kinematics(description))
+
+
+def load_robot(urdf: str | bytes, *, package_paths: Optional[Mapping[str, Path]] = None,
+               base_dir: Optional[Path] = None, options: LoadOptions = LoadOptions(),
+               cache: Optional[MeshCache] = None,
+               logger: Optional[logging.Logger] = None) -> RobotModel:
+    """Load a robot from URDF TEXT (for example a ``robot_description`` parameter).
+
+    ``package_paths`` maps package names to folders for ``package://`` URIs (searched
+    before ROS_PACKAGE_PATH and the ament index, see `bridge.robots.resources`);
+    relative mesh paths are taken relative to ``base_dir`` (default: current directory).
+    Raises `UrdfError` for a malformed URDF; mesh problems become ``warnings``.
+    """
+    description = parse_urdf(urdf)
+    resolver = PackageResolver(dict(package_paths or {}), base_dir=base_dir)
+    return _load(description, resolver, cache if cache is not None else DEFAULT_MESH_CACHE,
+                 options, logger or _log)
+
+
+def load_robot_file(path: str | Path, *, package_paths: Optional[Mapping[str, Path]] = None,
+                    options: LoadOptions = LoadOptions(), cache: Optional[MeshCache] = None,
+                    logger: Optional[logging.Logger] = None) -> RobotModel:
+    """Load a robot from a URDF FILE; relative mesh paths are relative to its folder."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise UrdfError(str(p), "a readable URDF file", f"{type(exc).__name__}: {exc}") from None
+    return load_robot(data, package_paths=package_paths, base_dir=p.resolve().parent,
+                      options=options, cache=cache, logger=logger)
+
+
+# ---------------------------------------------------------------------------- POLYDATA
+
+
+def to_polydata(visual: VisualMesh, *, colours: bool = True,
+                normals: bool = True) -> PolyData:
+    """One visual as a POLYDATA body: points (mm, link frame), triangles as polygons, an
+    RGBA point attribute (``"RGBA"``, 0..1) and, if the visual has them, ``"Normals"``."""
+    attributes: list[PolyDataAttribute] = []
+    n = len(visual.vertices)
+    if colours:
+        if visual.vertex_rgba is not None:
+            rgba = visual.vertex_rgba
+        else:
+            rgba = np.broadcast_to(np.asarray(visual.rgba, dtype=np.float32), (n, 4))
+        attributes.append(PolyDataAttribute(RGBA_ATTRIBUTE, AttributeKind.RGBA, rgba))
+    if normals and visual.normals is not None:
+        attributes.append(PolyDataAttribute(NORMALS_ATTRIBUTE, AttributeKind.NORMAL,
+                                            visual.normals))
+    return PolyData(points=visual.vertices, polygons=cells_from_array(visual.triangles),
+                    attributes=attributes)
