@@ -10,6 +10,8 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import socket
+import struct
 import time
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -17,6 +19,9 @@ from typing import Any, Callable
 import numpy as np
 import pytest
 
+from protocol.crc64 import crc64
+from protocol.framing import Decoder, encode
+from protocol.header import HEADER_SIZE, Header
 from protocol.messages import Image, Message, PolyData, String, Transform
 from slicer_client.connection import CommandRefusedError, Connection
 from support import Child, Processes, RunningDaemon
@@ -331,15 +336,22 @@ def test_bad_igtl_data_for_a_publisher_gets_a_status_and_nothing_is_published(
     assert listed[topic]["messages"] == 0
 
 
-def test_nan_transform_from_a_client_is_refused(daemon: RunningDaemon, client: Connection,
-                                                processes: Processes) -> None:
+def test_nan_transform_from_a_client_is_refused(daemon: RunningDaemon, client: Connection) -> None:
+    """A foreign peer's TRANSFORM with NaN (our own encoder refuses to write one)."""
     topic = fresh_topic("nan_pose")
     device = client.command("create_publisher", {"topic": topic, "type": "PoseStamped"})["device"]
-    matrix = np.eye(4)
-    matrix[1, 3] = math.nan
-    client.send(Message(device, Transform(matrix=matrix)))
-    status = client.wait_for(device, timeout=10)
-    assert status.type_name == "STATUS" and "not published" in status.body.text
-    assert "nan" in status.body.text.lower()
+    body = bytearray(encode(Message(device, Transform(matrix=np.eye(4))))[HEADER_SIZE:])
+    body[40:44] = struct.pack(">f", math.nan)  # TY
+    header = Header(1, "TRANSFORM", device, 0, len(body), crc64(bytes(body)))
+    decoder = Decoder()
+    with socket.create_connection(("127.0.0.1", daemon.port), timeout=10) as raw:
+        raw.sendall(header.pack() + bytes(body))
+        status = None
+        while status is None:
+            decoder.feed(raw.recv(65536))
+            for message in decoder.messages():
+                if message.type_name == "STATUS" and message.device_name == device:
+                    status = message
+    assert "not published" in status.body.text and "finite" in status.body.text
     listed = {b["topic"]: b for b in client.command("list_bridges")["bridges"]}
     assert listed[topic]["messages"] == 0
