@@ -291,14 +291,21 @@ def numeric_array(value: Any, field: str, base: str, *, ndim: Optional[int] = 1)
             idx = tuple(int(i) for i in bad[0])
             raise CodecError(field=field + _index_text(idx), expected=f"a number ({base})",
                              got=_describe(obj[idx]))
-        if arr.dtype.kind not in "iuf":  # only ints beyond 64 bits get here (dtype=object)
+        exact_ints = base in _INT_RANGES and not any(
+            isinstance(x, (float, np.floating)) for x in obj.flat)
+        if arr.dtype.kind not in "iuf" or (exact_ints and arr.dtype.kind == "f"):
+            # Python ints that numpy could not hold exactly (beyond 64 bits, or promoted to
+            # float next to a huge one): check them as Python ints, no rounding.
             low, high = _INT_RANGES.get(base, (-(2**63), 2**64 - 1))
             out = np.argwhere(np.frompyfunc(lambda x: not low <= int(x) <= high, 1, 1)(obj)
                               .astype(bool))
-            idx = tuple(int(i) for i in out[0]) if out.size else ()
-            raise CodecError(field=field + _index_text(idx),
-                             expected=f"an integer in [{low}, {high}] ({base})",
-                             got=str(obj[idx]) if idx else "a huge integer")
+            if out.size or base not in _INT_RANGES:
+                idx = tuple(int(i) for i in out[0]) if out.size else ()
+                raise CodecError(field=field + _index_text(idx),
+                                 expected=f"an integer in [{low}, {high}] ({base})"
+                                 if base in _INT_RANGES else f"a number ({base})",
+                                 got=str(obj[idx]) if idx else "a huge integer")
+            return obj.astype(_DTYPES[base])
     if base in _INT_RANGES:
         low, high = _INT_RANGES[base]
         if arr.dtype.kind == "f":
@@ -309,6 +316,8 @@ def numeric_array(value: Any, field: str, base: str, *, ndim: Optional[int] = 1)
                                  got=repr(float(arr[idx])))
         if arr.dtype.kind == "u":
             out = np.argwhere(arr > high)
+        elif arr.dtype.kind == "f":  # float(high) may round up to high + 1: compare >= that
+            out = np.argwhere((arr < low) | (arr >= float(high) + 1.0))
         else:
             out = np.argwhere((arr < low) | (arr > high))
         if out.size:
