@@ -12,8 +12,9 @@ raises `QosError` naming the key, what was accepted and what came.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Dict, Mapping, Optional
+from typing import Any
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -48,7 +49,7 @@ class QosSpec:
                           reliability=_RELIABILITY[self.reliability],
                           durability=_DURABILITY[self.durability])
 
-    def to_dict(self) -> Dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         return {"depth": self.depth, "reliability": self.reliability,
                 "durability": self.durability}
 
@@ -67,7 +68,7 @@ def _choice(spec: Mapping[str, Any], key: str, allowed: Mapping[str, Any], defau
     return norm
 
 
-def parse_spec(spec: Optional[Mapping[str, Any]]) -> QosSpec:
+def parse_spec(spec: Mapping[str, Any] | None) -> QosSpec:
     """Validate a spec dict (``None`` or ``{}`` = defaults) into a `QosSpec`."""
     if spec is None:
         return QosSpec()
@@ -88,12 +89,12 @@ def parse_spec(spec: Optional[Mapping[str, Any]]) -> QosSpec:
                    durability=_choice(spec, "durability", _DURABILITY, "volatile"))
 
 
-def parse_qos(spec: Optional[Mapping[str, Any]]) -> QoSProfile:
+def parse_qos(spec: Mapping[str, Any] | None) -> QoSProfile:
     """A spec dict (``None`` = defaults) -> rclpy `QoSProfile`; `QosError` if invalid."""
     return parse_spec(spec).profile()
 
 
-def qos_to_dict(profile: QoSProfile) -> Dict[str, Any]:
+def qos_to_dict(profile: QoSProfile) -> dict[str, Any]:
     """The spec form of a profile (for replies and logs); unknown policies named as-is."""
     rel = {v: k for k, v in _RELIABILITY.items()}.get(profile.reliability,
                                                        str(profile.reliability.name).lower())

@@ -18,38 +18,38 @@ naming the field.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Dict, Mapping, Optional, Tuple, Union
-
-from protocol.errors import ProtocolError
-from protocol.messages import String
-from protocol.naming import KEY_FRAME, KEY_TYPE
+from typing import Any, Union
 
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import message_to_yaml
 from bridge.codecs.registry import message_class
+from protocol.errors import ProtocolError
+from protocol.messages import String
+from protocol.naming import KEY_FRAME, KEY_TYPE
 
 __all__ = [
+    "KEY_ENCODING",
+    "KEY_FORMAT",
+    "KEY_LABELS",
+    "KEY_SHAPE",
+    "MAX_STRING_BYTES",
     "Body",
     "Encoded",
     "Stamp",
     "TypeCodec",
-    "KEY_SHAPE",
-    "KEY_ENCODING",
-    "KEY_FORMAT",
-    "KEY_LABELS",
+    "json_body",
     "make_header",
+    "parse_json_text",
     "stamp_of",
     "string_text",
-    "json_body",
     "text_body",
-    "MAX_STRING_BYTES",
-    "parse_json_text",
 ]
 
 Body = Any  # one of protocol.messages' body classes (Transform, String, Image, PolyData, Point)
 # A ROS time: builtin_interfaces/Time, or (sec, nanosec).
-Stamp = Union[Any, Tuple[int, int], None]
+Stamp = Union[Any, tuple[int, int], None]
 
 # Metadata keys the codecs suggest, next to protocol.naming's ros2.* keys.
 KEY_SHAPE = "ros2.shape"  # "2x3": shape of a multi-array / table
@@ -65,11 +65,11 @@ class Encoded:
     header: the daemon uses its receive time)."""
 
     body: Body
-    metadata: Dict[str, str] = field(default_factory=dict)
-    stamp: Optional[Tuple[int, int]] = None
+    metadata: dict[str, str] = field(default_factory=dict)
+    stamp: tuple[int, int] | None = None
 
 
-def stamp_of(msg: Any) -> Optional[Tuple[int, int]]:
+def stamp_of(msg: Any) -> tuple[int, int] | None:
     """``(sec, nanosec)`` of ``msg.header.stamp``, or None for a message without header."""
     header = getattr(msg, "header", None)
     stamp = getattr(header, "stamp", None)
@@ -177,7 +177,7 @@ class TypeCodec:
         return self.encode(msg).body
 
     def from_igtl(self, body: Body, *, stamp: Stamp = None, frame_id: str = "",
-                  metadata: Optional[Mapping[str, str]] = None) -> Any:
+                  metadata: Mapping[str, str] | None = None) -> Any:
         """OpenIGTLink body -> ROS message; ``stamp``/``frame_id`` fill its header (if it has
         one). ``metadata`` of the message may refine the conversion (image encoding, table
         shape). Raises `CodecError` (wrong body type, shape, NaN, size mismatch)."""
@@ -210,10 +210,10 @@ class TypeCodec:
 
     # ---------------------------------------------------------------- hooks
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         raise NotImplementedError
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         raise NotImplementedError
 
     def _to_value(self, msg: Any) -> Any:

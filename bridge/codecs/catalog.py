@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache
-from typing import Dict, Tuple
+from functools import cache
 
 from bridge.codecs.base import TypeCodec
 from bridge.codecs.geometry import PoseArrayCodec, PoseCodec, WrenchCodec
@@ -25,7 +24,7 @@ __all__ = ["SPECIFIC_CODECS", "codec_for", "specific_types"]
 
 _S, _T, _I, _P = "STRING", "TRANSFORM", "IMAGE", "POLYDATA"
 
-SPECIFIC_CODECS: Dict[str, TypeCodec] = {c.ros_type: c for c in (
+SPECIFIC_CODECS: dict[str, TypeCodec] = {c.ros_type: c for c in (
     EmptyCodec("std_msgs/msg/Empty", _S),
     StringCodec("std_msgs/msg/String", _S),
     BoolCodec("std_msgs/msg/Bool", _S),
@@ -47,7 +46,7 @@ SPECIFIC_CODECS: Dict[str, TypeCodec] = {c.ros_type: c for c in (
 )}
 
 
-@lru_cache(maxsize=None)
+@cache
 def codec_for(ros_type: str) -> TypeCodec:
     """The codec of a message type (any spelling `resolve_type` accepts): a specific one for
     the reference's types, else the generic JSON codec. `CodecError` if not installed."""
@@ -55,10 +54,10 @@ def codec_for(ros_type: str) -> TypeCodec:
     codec = SPECIFIC_CODECS.get(canonical)
     if codec is None:
         codec = GenericJsonCodec(canonical, _S)
-    codec.message_class  # fail now, not in a callback, if the class cannot load
+    _ = codec.message_class  # fail now, not in a callback, if the class cannot load
     return codec
 
 
-def specific_types() -> Tuple[str, ...]:
+def specific_types() -> tuple[str, ...]:
     """The ROS types with a dedicated codec, sorted."""
     return tuple(sorted(SPECIFIC_CODECS))

@@ -29,9 +29,10 @@ import base64
 import binascii
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import lru_cache
-from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
+from functools import cache
+from typing import Any
 
 import numpy as np
 import yaml
@@ -41,22 +42,22 @@ from bridge.codecs.errors import CodecError
 from bridge.codecs.registry import message_class, resolve_type, ros_type_of
 
 __all__ = [
-    "message_to_dict",
-    "dict_to_message",
-    "message_to_json",
-    "json_to_message",
-    "message_to_yaml",
-    "is_message",
-    "check_int",
     "check_float",
-    "numeric_array",
+    "check_int",
+    "dict_to_message",
+    "is_message",
+    "json_to_message",
     "list_of",
+    "message_to_dict",
+    "message_to_json",
+    "message_to_yaml",
+    "numeric_array",
 ]
 
 JsonValue = Any  # str | bool | int | float | None | list | dict (recursive)
 
 # Integer ranges and numpy dtypes of the ROS basic types.
-_INT_RANGES: Dict[str, Tuple[int, int]] = {
+_INT_RANGES: dict[str, tuple[int, int]] = {
     "int8": (-(2**7), 2**7 - 1),
     "uint8": (0, 2**8 - 1),
     "int16": (-(2**15), 2**15 - 1),
@@ -67,12 +68,12 @@ _INT_RANGES: Dict[str, Tuple[int, int]] = {
     "uint64": (0, 2**64 - 1),
     "octet": (0, 255),
 }
-_DTYPES: Dict[str, str] = {
+_DTYPES: dict[str, str] = {
     "float": "<f4", "double": "<f8", "long double": "<f8",
     "int8": "i1", "uint8": "u1", "int16": "<i2", "uint16": "<u2",
     "int32": "<i4", "uint32": "<u4", "int64": "<i8", "uint64": "<u8",
 }
-_TYPECODES: Dict[str, str] = {
+_TYPECODES: dict[str, str] = {
     "float": "f", "double": "d", "int8": "b", "uint8": "B", "int16": "h", "uint16": "H",
     "int32": "i", "uint32": "I", "int64": "q", "uint64": "Q",
 }
@@ -90,12 +91,12 @@ class _Field:
     name: str
     kind: str  # "bool" | "int" | "float" | "str" | "octet" | "char" | "msg"
     base: str  # basic type name ("int32", "double", "octet"...) or "pkg/msg/Type"
-    container: Optional[str]  # None | "array" (fixed size) | "sequence"
-    size: Optional[int]  # array length, or bounded-sequence maximum
-    max_string: Optional[int]  # bounded string maximum length
+    container: str | None  # None | "array" (fixed size) | "sequence"
+    size: int | None  # array length, or bounded-sequence maximum
+    max_string: int | None  # bounded string maximum length
 
 
-def _basic_kind(t: Any) -> Tuple[str, str, Optional[int]]:
+def _basic_kind(t: Any) -> tuple[str, str, int | None]:
     if isinstance(t, rdef.BasicType):
         name = t.typename
         if name == "boolean":
@@ -114,12 +115,12 @@ def _basic_kind(t: Any) -> Tuple[str, str, Optional[int]]:
     raise TypeError(f"unsupported ROS field type {t!r}")
 
 
-@lru_cache(maxsize=None)
-def _plan(cls: Any) -> Tuple[_Field, ...]:
+@cache
+def _plan(cls: Any) -> tuple[_Field, ...]:
     fields = []
     for name, slot in zip(cls.get_fields_and_field_types().keys(), cls.SLOT_TYPES):
-        container: Optional[str] = None
-        size: Optional[int] = None
+        container: str | None = None
+        size: int | None = None
         t = slot
         if isinstance(slot, rdef.Array):
             container, size, t = "array", slot.size, slot.value_type
@@ -170,7 +171,7 @@ def _value_out(f: _Field, v: Any, bytes_as: str) -> JsonValue:
     return list(v)
 
 
-def message_to_dict(msg: Any, *, bytes_as: str = "base64") -> Dict[str, JsonValue]:
+def message_to_dict(msg: Any, *, bytes_as: str = "base64") -> dict[str, JsonValue]:
     """A message as a plain dict (JSON-able), fields in declaration order.
 
     ``bytes_as``: ``"base64"`` (default, for JSON) or ``"list"`` (for YAML/readability) for
@@ -210,9 +211,9 @@ def check_int(value: Any, field: str, base: str = "int64") -> int:
     low, high = _INT_RANGES[base]
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise CodecError(field=field, expected=f"an integer ({base})", got=_describe(value))
-    if isinstance(value, (float, np.floating)):
-        if not (math.isfinite(value) and float(value).is_integer()):
-            raise CodecError(field=field, expected=f"an integer ({base})", got=_describe(value))
+    if isinstance(value, (float, np.floating)) and not (
+            math.isfinite(value) and float(value).is_integer()):
+        raise CodecError(field=field, expected=f"an integer ({base})", got=_describe(value))
     iv = int(value)
     if not low <= iv <= high:
         raise CodecError(field=field, expected=f"an integer in [{low}, {high}] ({base})",
@@ -232,7 +233,7 @@ def check_float(value: Any, field: str, base: str = "double", *, finite: bool = 
     return fv
 
 
-def _check_str(value: Any, field: str, max_len: Optional[int]) -> str:
+def _check_str(value: Any, field: str, max_len: int | None) -> str:
     if not isinstance(value, str):
         raise CodecError(field=field, expected="a string", got=_describe(value))
     if max_len is not None and len(value) > max_len:
@@ -257,11 +258,11 @@ def _bytes_in(value: Any, field: str) -> bytes:
                      got=_describe(value))
 
 
-def _index_text(index: Tuple[int, ...]) -> str:
+def _index_text(index: tuple[int, ...]) -> str:
     return "".join(f"[{i}]" for i in index)
 
 
-def numeric_array(value: Any, field: str, base: str, *, ndim: Optional[int] = 1) -> np.ndarray:
+def numeric_array(value: Any, field: str, base: str, *, ndim: int | None = 1) -> np.ndarray:
     """A (nested) list of numbers -> a checked numpy array of ROS type ``base``.
 
     ``ndim``: required number of dimensions (None: any rectangular nesting). Bools, strings,
@@ -339,7 +340,7 @@ def numeric_array(value: Any, field: str, base: str, *, ndim: Optional[int] = 1)
 def _time_from_seconds(cls: Any, value: Any, field: str) -> Any:
     seconds = check_float(value, field, finite=True)
     sec = math.floor(seconds)
-    nanosec = int(round((seconds - sec) * 1e9))
+    nanosec = round((seconds - sec) * 1e9)
     if nanosec >= 1_000_000_000:
         sec, nanosec = sec + 1, 0
     check_int(sec, f"{field}.sec", "int32")
@@ -407,7 +408,7 @@ def _check_length(f: _Field, n: int, field: str) -> None:
         raise CodecError(field=field, expected=f"at most {f.size} elements", got=f"{n} elements")
 
 
-def dict_to_message(ros_type_or_class: Union[str, Any], d: Mapping[str, Any], *,
+def dict_to_message(ros_type_or_class: str | Any, d: Mapping[str, Any], *,
                     _path: str = "") -> Any:
     """Build a message from a dict as written by `message_to_dict` (missing fields keep
     their defaults). Raises `CodecError` naming the first bad field path."""
@@ -439,7 +440,7 @@ def dict_to_message(ros_type_or_class: Union[str, Any], d: Mapping[str, Any], *,
     return msg
 
 
-def json_to_message(ros_type_or_class: Union[str, Any], text: Union[str, bytes]) -> Any:
+def json_to_message(ros_type_or_class: str | Any, text: str | bytes) -> Any:
     """Parse JSON text into a message; bad JSON or bad fields raise `CodecError`."""
     try:
         value = json.loads(text)
@@ -448,7 +449,7 @@ def json_to_message(ros_type_or_class: Union[str, Any], text: Union[str, bytes])
     return dict_to_message(ros_type_or_class, value)
 
 
-def list_of(value: Any, field: str, expected: str = "a list") -> List[Any]:
+def list_of(value: Any, field: str, expected: str = "a list") -> list[Any]:
     """``value`` if it is a list/tuple, else `CodecError`."""
     if not isinstance(value, (list, tuple)):
         raise CodecError(field=field, expected=expected, got=_describe(value))

@@ -9,9 +9,21 @@ other than 0 0 0 1, a non-orthonormal rotation or a reflection raise `CodecError
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Dict, List, Tuple
+from typing import Any
 
 import numpy as np
+
+from bridge.codecs.base import (
+    KEY_FORMAT,
+    KEY_SHAPE,
+    Body,
+    TypeCodec,
+    json_body,
+    parse_json_text,
+    string_text,
+)
+from bridge.codecs.errors import CodecError
+from bridge.codecs.generic import numeric_array
 from protocol.conversions import (
     ConversionError,
     matrix_to_pose,
@@ -25,29 +37,17 @@ from protocol.conversions import (
 from protocol.messages import Transform
 from protocol.naming import KEY_CHILD, KEY_PARENT, KEY_UNITS, UNITS_MM
 
-from bridge.codecs.base import (
-    KEY_FORMAT,
-    KEY_SHAPE,
-    Body,
-    TypeCodec,
-    json_body,
-    parse_json_text,
-    string_text,
-)
-from bridge.codecs.errors import CodecError
-from bridge.codecs.generic import numeric_array
-
 __all__ = [
+    "PoseArrayCodec",
     "PoseCodec",
     "WrenchCodec",
-    "PoseArrayCodec",
-    "pose_msg_to_matrix",
-    "matrix_to_pose_msg",
     "checked_matrix",
+    "matrix_to_pose_msg",
+    "pose_msg_to_matrix",
 ]
 
 
-def _finite(values: Tuple[float, ...], field: str) -> None:
+def _finite(values: tuple[float, ...], field: str) -> None:
     arr = np.asarray(values, dtype=np.float64)
     if not np.all(np.isfinite(arr)):
         raise CodecError(field=field, expected="finite numbers", got=repr(list(values)))
@@ -77,19 +77,19 @@ def checked_matrix(value: Any, field: str) -> np.ndarray:
         raise CodecError(field=exc.field, expected=exc.expected, got=exc.got) from None
 
 
-def matrix_to_pose_msg(matrix_mm: np.ndarray) -> Tuple[List[float], List[float]]:
+def matrix_to_pose_msg(matrix_mm: np.ndarray) -> tuple[list[float], list[float]]:
     """A validated 4x4 mm matrix -> (translation m, quaternion xyzw) as Python floats."""
     t, q = matrix_to_pose(matrix_mm)
     return [float(x) for x in t], [float(x) for x in q]
 
 
-def _set_pose(pose: Any, t: List[float], q: List[float]) -> None:
+def _set_pose(pose: Any, t: list[float], q: list[float]) -> None:
     pose.position.x, pose.position.y, pose.position.z = t
     o = pose.orientation
     o.x, o.y, o.z, o.w = q
 
 
-def _set_transform(tf: Any, t: List[float], q: List[float]) -> None:
+def _set_transform(tf: Any, t: list[float], q: list[float]) -> None:
     tf.translation.x, tf.translation.y, tf.translation.z = t
     r = tf.rotation
     r.x, r.y, r.z, r.w = q
@@ -113,7 +113,7 @@ class PoseCodec(TypeCodec):
         return pose_msg_to_matrix(pose.position, pose.orientation,
                                   "pose" if hasattr(msg, "pose") else "value")
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         meta = {KEY_UNITS: UNITS_MM}
         if self.ros_type.endswith("/TransformStamped"):
             if msg.header.frame_id:
@@ -134,7 +134,7 @@ class PoseCodec(TypeCodec):
             _set_pose(msg, t, q)
         return msg
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         if not isinstance(body, Transform):
             raise CodecError(field="body", expected=f"an OpenIGTLink TRANSFORM (for "
                              f"{self.ros_type})", got=type(body).__name__)
@@ -164,15 +164,15 @@ class WrenchCodec(TypeCodec):
     """Wrench / WrenchStamped <-> STRING JSON ``[fx, fy, fz, tx, ty, tz]`` (N, N·m; the
     reference's vtkDoubleArray[6]). Not lengths: no unit change."""
 
-    def _six(self, msg: Any) -> List[float]:
+    def _six(self, msg: Any) -> list[float]:
         w = msg.wrench if hasattr(msg, "wrench") else msg
         return [float(w.force.x), float(w.force.y), float(w.force.z),
                 float(w.torque.x), float(w.torque.y), float(w.torque.z)]
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         return json_body(self._six(msg)), {KEY_FORMAT: "json", KEY_SHAPE: "6"}
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         return self._build(parse_json_text(string_text(body, self.ros_type)), "text")
 
     def _to_value(self, msg: Any) -> Any:
@@ -227,12 +227,12 @@ class PoseArrayCodec(TypeCodec):
         out[:, 3, 3] = 1.0
         return out
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         mats = self._matrices(msg)
         return json_body(mats.tolist()), {KEY_FORMAT: "json", KEY_UNITS: UNITS_MM,
                                           KEY_SHAPE: f"{len(mats)}x4x4"}
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         return self._build(parse_json_text(string_text(body, self.ros_type)), "text")
 
     def _to_value(self, msg: Any) -> Any:

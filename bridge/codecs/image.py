@@ -24,17 +24,17 @@ from __future__ import annotations
 import base64
 import binascii
 from dataclasses import dataclass
-from typing import Any, Dict, Optional, Tuple
+from typing import Any
 
 import numpy as np
-from protocol.messages import Image
-from protocol.naming import KEY_UNITS, UNITS_MM
 
 from bridge.codecs.base import KEY_ENCODING, Body, TypeCodec
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import numeric_array
+from protocol.messages import Image
+from protocol.naming import KEY_UNITS, UNITS_MM
 
-__all__ = ["ImageCodec", "ENCODINGS", "image_pixels", "SLICER_DIRECTIONS"]
+__all__ = ["ENCODINGS", "SLICER_DIRECTIONS", "ImageCodec", "image_pixels"]
 
 
 @dataclass(frozen=True)
@@ -44,7 +44,7 @@ class _Encoding:
     swap_rb: bool = False  # blue first: reorder to red first for Slicer
 
 
-ENCODINGS: Dict[str, _Encoding] = {
+ENCODINGS: dict[str, _Encoding] = {
     "mono8": _Encoding("u1", 1), "8UC1": _Encoding("u1", 1),
     "rgb8": _Encoding("u1", 3), "rgba8": _Encoding("u1", 4),
     "bgr8": _Encoding("u1", 3, True), "bgra8": _Encoding("u1", 4, True),
@@ -55,7 +55,7 @@ ENCODINGS: Dict[str, _Encoding] = {
     "bgr16": _Encoding("u2", 3, True), "bgra16": _Encoding("u2", 4, True),
 }
 # The encoding a Slicer image gets when no metadata says otherwise: (dtype, channels).
-_DEFAULT_FOR: Dict[Tuple[str, int], str] = {
+_DEFAULT_FOR: dict[tuple[str, int], str] = {
     ("u1", 1): "mono8", ("u1", 3): "rgb8", ("u1", 4): "rgba8",
     ("u2", 1): "mono16", ("i2", 1): "16SC1", ("i4", 1): "32SC1",
     ("f4", 1): "32FC1", ("f8", 1): "64FC1", ("u2", 3): "rgb16", ("u2", 4): "rgba16",
@@ -80,7 +80,7 @@ def _encoding(name: str, field: str) -> _Encoding:
     return enc
 
 
-def image_pixels(msg: Any) -> Tuple[np.ndarray, str]:
+def image_pixels(msg: Any) -> tuple[np.ndarray, str]:
     """(height, width, channels) native-endian pixels of a sensor_msgs/Image, red first,
     and the encoding they now have. A view on ``msg.data`` when no copy is needed."""
     enc = _encoding(msg.encoding, "encoding")
@@ -121,7 +121,7 @@ def _message(pixels: np.ndarray, encoding: str) -> Any:
     return msg
 
 
-def _choose_encoding(dtype: np.dtype, channels: int, wanted: Optional[str], field: str) -> str:
+def _choose_encoding(dtype: np.dtype, channels: int, wanted: str | None, field: str) -> str:
     base = dtype.str[1:]
     if wanted:
         enc = _encoding(wanted, field)
@@ -135,8 +135,8 @@ def _choose_encoding(dtype: np.dtype, channels: int, wanted: Optional[str], fiel
     return name
 
 
-def _from_pixels(pixels: np.ndarray, wanted: Optional[str], field: str) -> Any:
-    h, w, c = pixels.shape
+def _from_pixels(pixels: np.ndarray, wanted: str | None, field: str) -> Any:
+    _h, _w, c = pixels.shape
     encoding = _choose_encoding(pixels.dtype, c, wanted, field)
     if ENCODINGS[encoding].swap_rb:
         pixels = _swap_rb(pixels)  # Slicer holds red first
@@ -147,13 +147,13 @@ def _from_pixels(pixels: np.ndarray, wanted: Optional[str], field: str) -> Any:
 class ImageCodec(TypeCodec):
     """sensor_msgs/Image <-> IMAGE (one slice, 1 mm pixels, upright in Slicer's Red view)."""
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         pixels, _ = image_pixels(msg)
         body = Image(pixels=pixels[np.newaxis], spacing=np.ones(3),
                      directions=SLICER_DIRECTIONS.copy(), origin=np.zeros(3), coordinate="RAS")
         return body, {KEY_ENCODING: msg.encoding, KEY_UNITS: UNITS_MM}
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         if not isinstance(body, Image):
             raise CodecError(field="body", expected="an OpenIGTLink IMAGE (for "
                              f"{self.ros_type})", got=type(body).__name__)
@@ -214,7 +214,7 @@ class ImageCodec(TypeCodec):
             return _from_pixels(arr.astype(np.uint8), None, "value.encoding")
         return _from_pixels(arr.astype(np.float32), None, "value.encoding")
 
-    def _from_data(self, value: Dict[str, Any], encoding: Optional[str]) -> Any:
+    def _from_data(self, value: dict[str, Any], encoding: str | None) -> Any:
         from bridge.codecs.generic import check_int
 
         if encoding is None:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Dict, Tuple
+from typing import Any
 
 from bridge.codecs.base import KEY_FORMAT, Body, TypeCodec, json_body, parse_json_text, string_text
 from bridge.codecs.generic import dict_to_message, message_to_dict
@@ -22,10 +22,10 @@ class GenericJsonCodec(TypeCodec):
     def _to_value(self, msg: Any) -> Any:
         return message_to_dict(msg)
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         return json_body(message_to_dict(msg)), {KEY_FORMAT: "json"}
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         return dict_to_message(self.message_class,
                                parse_json_text(string_text(body, self.ros_type)))
 

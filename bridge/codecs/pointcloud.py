@@ -20,25 +20,32 @@ Packed colour: the 4 bytes of the float32 field read as uint32 0xAARRGGBB (PCL's
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any
 
 import numpy as np
-from protocol.conversions import metres_to_mm, mm_to_metres
-from protocol.messages import AttributeKind, Point, PolyData, PolyDataAttribute, cells_from_array
-from protocol.naming import KEY_UNITS, UNITS_MM
 
 from bridge.codecs.base import KEY_SHAPE, Body, TypeCodec
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import numeric_array
+from protocol.conversions import metres_to_mm, mm_to_metres
+from protocol.messages import AttributeKind, Point, PolyData, PolyDataAttribute, cells_from_array
+from protocol.naming import KEY_UNITS, UNITS_MM
 
-__all__ = ["PointCloud2Codec", "PointCloudCodec", "CloudArrays", "cloud2_arrays",
-           "arrays_to_cloud2", "KEY_DROPPED", "RGBA_ATTRIBUTE"]
+__all__ = [
+    "KEY_DROPPED",
+    "RGBA_ATTRIBUTE",
+    "CloudArrays",
+    "PointCloud2Codec",
+    "PointCloudCodec",
+    "arrays_to_cloud2",
+    "cloud2_arrays",
+]
 
 KEY_DROPPED = "ros2.dropped"  # points left out for a NaN/inf coordinate
 RGBA_ATTRIBUTE = "RGBA"
 
 # sensor_msgs/PointField datatypes -> numpy base types.
-_POINTFIELD_DTYPES: Dict[int, str] = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4",
+_POINTFIELD_DTYPES: dict[int, str] = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4",
                                       7: "f4", 8: "f8"}
 _FLOAT32, _UINT32 = 7, 6
 _COLOUR_NAMES = ("rgb", "rgba")
@@ -50,21 +57,21 @@ class CloudArrays:
     scalar fields name -> (N,) arrays."""
 
     xyz_m: np.ndarray
-    rgba: Optional[np.ndarray]
-    scalars: Dict[str, np.ndarray]
+    rgba: np.ndarray | None
+    scalars: dict[str, np.ndarray]
     dropped: int = 0
 
 
 # --------------------------------------------------------------------------- PointCloud2 in
 
-def _struct_dtype(msg: Any) -> Tuple[np.dtype, Optional[str], List[str]]:
+def _struct_dtype(msg: Any) -> tuple[np.dtype, str | None, list[str]]:
     order = ">" if msg.is_bigendian else "<"
     step = int(msg.point_step)
-    names: List[str] = []
-    formats: List[str] = []
-    offsets: List[int] = []
-    colour: Optional[str] = None
-    scalars: List[str] = []
+    names: list[str] = []
+    formats: list[str] = []
+    offsets: list[int] = []
+    colour: str | None = None
+    scalars: list[str] = []
     for i, f in enumerate(msg.fields):
         base = _POINTFIELD_DTYPES.get(int(f.datatype))
         if base is None:
@@ -158,7 +165,7 @@ def cloud1_arrays(msg: Any) -> CloudArrays:
     keep = np.isfinite(xyz).all(axis=1)
     dropped = int(n - np.count_nonzero(keep))
     rgba = None
-    scalars: Dict[str, np.ndarray] = {}
+    scalars: dict[str, np.ndarray] = {}
     for i, ch in enumerate(msg.channels):
         values = np.frombuffer(ch.values, dtype=np.float32) if len(ch.values) else \
             np.zeros(0, np.float32)
@@ -176,7 +183,7 @@ def cloud1_arrays(msg: Any) -> CloudArrays:
 
 def arrays_to_polydata(cloud: CloudArrays) -> PolyData:
     n = cloud.xyz_m.shape[0]
-    attributes: List[PolyDataAttribute] = []
+    attributes: list[PolyDataAttribute] = []
     if cloud.rgba is not None:
         attributes.append(PolyDataAttribute(RGBA_ATTRIBUTE, AttributeKind.RGBA,
                                             cloud.rgba.astype(np.float32) / np.float32(255.0)))
@@ -198,7 +205,7 @@ def polydata_arrays(body: PolyData) -> CloudArrays:
     _check_finite(points, "points")
     n = points.shape[0]
     rgba = None
-    scalars: Dict[str, np.ndarray] = {}
+    scalars: dict[str, np.ndarray] = {}
     for attr in body.attributes:
         data = np.asarray(attr.data, dtype=np.float32)
         if attr.on_cells or data.shape[0] != n:
@@ -264,8 +271,9 @@ def arrays_to_cloud2(cloud: CloudArrays) -> Any:
         table[s] = cloud.scalars[s]
     msg = PointCloud2(height=1, width=n, is_bigendian=False, point_step=dtype.itemsize,
                       row_step=dtype.itemsize * n, is_dense=True)
-    msg.fields = [PointField(name=name, offset=int(dtype.fields[name][1]),
-                             datatype=PointField.FLOAT32, count=1) for name in names]
+    offsets = {name: int(spec[1]) for name, spec in (dtype.fields or {}).items()}
+    msg.fields = [PointField(name=name, offset=offsets[name], datatype=PointField.FLOAT32,
+                             count=1) for name in names]
     msg.data.frombytes(table.tobytes())  # one memcpy into the array.array
     return msg
 
@@ -294,8 +302,8 @@ def arrays_to_cloud1(cloud: CloudArrays) -> Any:
 
 # --------------------------------------------------------------------------- values
 
-def _cloud_value(cloud: CloudArrays) -> Dict[str, Any]:
-    value: Dict[str, Any] = {"points": metres_to_mm(cloud.xyz_m).tolist()}
+def _cloud_value(cloud: CloudArrays) -> dict[str, Any]:
+    value: dict[str, Any] = {"points": metres_to_mm(cloud.xyz_m).tolist()}
     if cloud.rgba is not None:
         value["rgba"] = cloud.rgba.tolist()
     return value
@@ -334,7 +342,7 @@ def _body_cloud(body: Body, ros_type: str) -> CloudArrays:
                      f"{ros_type})", got=type(body).__name__)
 
 
-def _meta(cloud: CloudArrays) -> Dict[str, str]:
+def _meta(cloud: CloudArrays) -> dict[str, str]:
     meta = {KEY_UNITS: UNITS_MM, KEY_SHAPE: str(cloud.xyz_m.shape[0])}
     if cloud.dropped:
         meta[KEY_DROPPED] = str(cloud.dropped)
@@ -347,11 +355,11 @@ class PointCloud2Codec(TypeCodec):
     POINT is accepted on the way back. Value: ``{"points": [[x, y, z] mm...],
     "rgba": [[r, g, b, a] 0..255...]}`` (rgba only if coloured)."""
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         cloud = cloud2_arrays(msg)
         return arrays_to_polydata(cloud), _meta(cloud)
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         return arrays_to_cloud2(_body_cloud(body, self.ros_type))
 
     def _to_value(self, msg: Any) -> Any:
@@ -366,11 +374,11 @@ class PointCloudCodec(TypeCodec):
     """sensor_msgs/PointCloud (v1) <-> POLYDATA, as PointCloud2; colour in a packed ``rgb``
     channel, other channels as SCALAR attributes."""
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         cloud = cloud1_arrays(msg)
         return arrays_to_polydata(cloud), _meta(cloud)
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         return arrays_to_cloud1(_body_cloud(body, self.ros_type))
 
     def _to_value(self, msg: Any) -> Any:

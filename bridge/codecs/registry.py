@@ -18,17 +18,17 @@ import importlib
 import os
 import re
 import sys
-from functools import lru_cache
-from typing import Any, Dict, List, Tuple
+from functools import cache, lru_cache
+from typing import Any
 
 from bridge.codecs.errors import CodecError
 
-__all__ = ["resolve_type", "message_class", "ros_type_of", "REFERENCE_SHORT_NAMES"]
+__all__ = ["REFERENCE_SHORT_NAMES", "message_class", "resolve_type", "ros_type_of"]
 
 # The reference's short names (its vtkMRMLROS2{Publisher,Subscriber}<Name>Node classes) and
 # the ROS type each one stands for. Several short names share a ROS type (a vtkTable and a
 # vtkDoubleArray both travel as Float64MultiArray): the codec handles 1-D and 2-D alike.
-REFERENCE_SHORT_NAMES: Dict[str, str] = {
+REFERENCE_SHORT_NAMES: dict[str, str] = {
     "Empty": "std_msgs/msg/Empty",
     "String": "std_msgs/msg/String",
     "Bool": "std_msgs/msg/Bool",
@@ -66,14 +66,14 @@ _CANONICAL = re.compile(rf"^({_IDENT})/msg/({_IDENT})$")
 _TWO_PART = re.compile(rf"^({_IDENT})/({_IDENT})$")
 _DOTTED = re.compile(rf"^({_IDENT})\.msg\.({_IDENT})$")
 _BARE = re.compile(rf"^{_IDENT}$")
-_IMPORT_LINE = re.compile(rf"^from\s+({_IDENT})\.msg\.\w+\s+import\s+({_IDENT})", re.M)
+_IMPORT_LINE = re.compile(rf"^from\s+({_IDENT})\.msg\.\w+\s+import\s+({_IDENT})", re.MULTILINE)
 
 
 def _unknown(name: str, why: str) -> CodecError:
     return CodecError(field="type", expected=why, got=repr(name))
 
 
-@lru_cache(maxsize=None)
+@cache
 def message_class(ros_type: str) -> Any:
     """The rclpy message class of a canonical ``pkg/msg/Type``; `CodecError` if not installed."""
     m = _CANONICAL.match(ros_type)
@@ -99,10 +99,10 @@ def ros_type_of(msg_or_class: Any) -> str:
 
 
 @lru_cache(maxsize=1)
-def _installed_messages() -> Dict[str, Tuple[str, ...]]:
+def _installed_messages() -> dict[str, tuple[str, ...]]:
     """Bare message name -> packages defining it, read from every ``<pkg>/msg/__init__.py``
     on sys.path (the generated file lists one import per message, so no import is needed)."""
-    found: Dict[str, List[str]] = {}
+    found: dict[str, list[str]] = {}
     for entry in sys.path:
         if not entry or not os.path.isdir(entry):
             continue

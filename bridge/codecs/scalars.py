@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any
 
 import numpy as np
 
@@ -24,12 +24,12 @@ from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import check_float, check_int, numeric_array
 
 __all__ = [
-    "EmptyCodec",
-    "StringCodec",
     "BoolCodec",
-    "Int64Codec",
+    "EmptyCodec",
     "Float64Codec",
+    "Int64Codec",
     "MultiArrayCodec",
+    "StringCodec",
     "multiarray_to_ndarray",
 ]
 
@@ -37,7 +37,7 @@ _TRUE = ("true", "1", "yes", "on")
 _FALSE = ("false", "0", "no", "off")
 
 
-def _text_meta() -> Dict[str, str]:
+def _text_meta() -> dict[str, str]:
     return {KEY_FORMAT: "text"}
 
 
@@ -45,10 +45,10 @@ def _text_meta() -> Dict[str, str]:
 class EmptyCodec(TypeCodec):
     """std_msgs/Empty <-> STRING "" ; value ``None``."""
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         return text_body(""), _text_meta()
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         string_text(body, self.ros_type)  # any text: the message carries nothing
         return self.message_class()
 
@@ -66,10 +66,10 @@ class EmptyCodec(TypeCodec):
 class StringCodec(TypeCodec):
     """std_msgs/String <-> STRING text (UTF-8); value ``str``."""
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         return text_body(msg.data), _text_meta()
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         return self.message_class(data=string_text(body, self.ros_type))
 
     def _to_value(self, msg: Any) -> Any:
@@ -95,10 +95,10 @@ def parse_bool(text: str, field: str = "text") -> bool:
 class BoolCodec(TypeCodec):
     """std_msgs/Bool <-> STRING "true"/"false"; value ``bool``."""
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         return text_body("true" if msg.data else "false"), _text_meta()
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         return self.message_class(data=parse_bool(string_text(body, self.ros_type)))
 
     def _to_value(self, msg: Any) -> Any:
@@ -114,10 +114,10 @@ class BoolCodec(TypeCodec):
 class Int64Codec(TypeCodec):
     """std_msgs/Int64 <-> STRING decimal text; value ``int`` (int64 range checked)."""
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         return text_body(str(int(msg.data))), _text_meta()
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         text = string_text(body, self.ros_type).strip()
         try:
             value = int(text, 10)
@@ -138,10 +138,10 @@ class Float64Codec(TypeCodec):
     """std_msgs/Float64 <-> STRING text (``repr``: shortest exact form, ``nan``/``inf``);
     value ``float``."""
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         return text_body(repr(float(msg.data))), _text_meta()
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         text = string_text(body, self.ros_type).strip()
         try:
             value = float(text)
@@ -191,7 +191,7 @@ def multiarray_to_ndarray(msg: Any) -> np.ndarray:
     return np.array(view)
 
 
-def _shape_text(shape: Tuple[int, ...]) -> str:
+def _shape_text(shape: tuple[int, ...]) -> str:
     return "x".join(str(n) for n in shape)
 
 
@@ -207,7 +207,7 @@ class MultiArrayCodec(TypeCodec):
 
     base: str = "double"  # "int64" or "double"
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         arr = multiarray_to_ndarray(msg)
         meta = {KEY_FORMAT: "json", KEY_SHAPE: _shape_text(arr.shape)}
         labels = [d.label for d in msg.layout.dim]
@@ -215,7 +215,7 @@ class MultiArrayCodec(TypeCodec):
             meta[KEY_LABELS] = json.dumps(labels)
         return json_body(arr.tolist()), meta
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         value = parse_json_text(string_text(body, self.ros_type))
         if not isinstance(value, dict):
             shape_text = metadata.get(KEY_SHAPE)
@@ -237,7 +237,7 @@ class MultiArrayCodec(TypeCodec):
     def _from_value(self, value: Any) -> Any:
         return self._build(value if isinstance(value, dict) else {"data": value}, "value")
 
-    def _build(self, spec: Dict[str, Any], where: str) -> Any:
+    def _build(self, spec: dict[str, Any], where: str) -> Any:
         unknown = sorted(set(spec) - {"data", "shape", "labels"})
         if unknown:
             raise CodecError(field=f"{where}.{unknown[0]}", expected="data, shape or labels",
@@ -256,7 +256,7 @@ class MultiArrayCodec(TypeCodec):
                                  f"{arr.size} (the number of data elements)",
                                  got=_shape_text(shape))
             arr = arr.reshape(shape)
-        labels: List[str] = []
+        labels: list[str] = []
         if spec.get("labels") is not None:
             raw = spec["labels"]
             if not (isinstance(raw, list) and all(isinstance(x, str) for x in raw)
@@ -267,7 +267,7 @@ class MultiArrayCodec(TypeCodec):
             labels = raw
         return self._message(arr, labels)
 
-    def _message(self, arr: np.ndarray, labels: List[str]) -> Any:
+    def _message(self, arr: np.ndarray, labels: list[str]) -> Any:
         from std_msgs.msg import MultiArrayDimension
 
         msg = self.message_class()

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Dict, Tuple
+from typing import Any
 
 from bridge.codecs.base import KEY_FORMAT, Body, TypeCodec, json_body, parse_json_text, string_text
 from bridge.codecs.errors import CodecError
@@ -14,7 +14,7 @@ __all__ = ["JointStateCodec", "JoyCodec"]
 _JOINT_ARRAYS = ("position", "velocity", "effort")
 
 
-def _object(value: Any, where: str, keys: Tuple[str, ...]) -> Dict[str, Any]:
+def _object(value: Any, where: str, keys: tuple[str, ...]) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise CodecError(field=where, expected="an object with " + ", ".join(keys),
                          got=type(value).__name__)
@@ -35,10 +35,10 @@ class JointStateCodec(TypeCodec):
         return {"name": list(msg.name), "position": msg.position.tolist(),
                 "velocity": msg.velocity.tolist(), "effort": msg.effort.tolist()}
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         return json_body(self._to_value(msg)), {KEY_FORMAT: "json"}
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         return self._build(parse_json_text(string_text(body, self.ros_type)), "text")
 
     def _from_value(self, value: Any) -> Any:
@@ -68,10 +68,10 @@ class JoyCodec(TypeCodec):
     def _to_value(self, msg: Any) -> Any:
         return {"axes": msg.axes.tolist(), "buttons": msg.buttons.tolist()}
 
-    def _to_igtl(self, msg: Any) -> Tuple[Body, Dict[str, str]]:
+    def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         return json_body(self._to_value(msg)), {KEY_FORMAT: "json"}
 
-    def _from_igtl(self, body: Body, metadata: Dict[str, str]) -> Any:
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         return self._build(parse_json_text(string_text(body, self.ros_type)), "text")
 
     def _from_value(self, value: Any) -> Any:

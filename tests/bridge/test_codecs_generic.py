@@ -5,7 +5,7 @@ from __future__ import annotations
 import base64
 import json
 import math
-from typing import Any, Dict
+from typing import Any
 
 import numpy as np
 import pytest
@@ -175,7 +175,7 @@ def test_yaml_is_ros2_topic_echo_style() -> None:
     ("visualization_msgs/msg/Marker", {"texture": {"data": "not base64!"}}, "texture.data"),
     ("visualization_msgs/msg/Marker", {"texture": {"data": [1, 256]}}, "texture.data[1]"),
 ])
-def test_bad_values_name_the_field(ros_type: str, value: Dict[str, Any], field: str) -> None:
+def test_bad_values_name_the_field(ros_type: str, value: dict[str, Any], field: str) -> None:
     with pytest.raises(CodecError) as err:
         dict_to_message(ros_type, value)
     assert err.value.field == field

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from typing import Any, List
+from typing import Any
 
 import numpy as np
 import pytest
@@ -23,7 +23,7 @@ def _wire(body: Any) -> Any:
     return unpack_body(body.TYPE, body.pack())
 
 
-def _same_rotation(q1: List[float], q2: List[float], tol: float = 1e-6) -> bool:
+def _same_rotation(q1: list[float], q2: list[float], tol: float = 1e-6) -> bool:
     # q and -q are the same rotation
     return abs(abs(float(np.dot(q1, q2))) - 1.0) < tol
 

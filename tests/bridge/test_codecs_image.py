@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, Tuple
+from typing import Any
 
 import numpy as np
 import pytest
@@ -143,7 +143,7 @@ def test_bad_bodies_from_slicer() -> None:
     assert err.value.field == "body"
 
 
-def _value_round_trip(encoding: str, pixels: np.ndarray) -> Tuple[Any, RosImage]:
+def _value_round_trip(encoding: str, pixels: np.ndarray) -> tuple[Any, RosImage]:
     codec = codec_for("Image")
     msg = _ros_image(encoding, pixels)
     value = codec.to_value(msg)

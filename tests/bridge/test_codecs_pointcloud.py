@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, List, Optional, Tuple
+from typing import Any
 
 import numpy as np
 import pytest
@@ -27,15 +27,15 @@ def _wire(body: Any) -> Any:
     return unpack_body(body.TYPE, body.pack())
 
 
-def _cloud(xyz: np.ndarray, *, rgb: Optional[np.ndarray] = None, xyz_type: str = "f4",
-           point_step: int = 32, offsets: Tuple[int, int, int, int] = (0, 4, 8, 16),
+def _cloud(xyz: np.ndarray, *, rgb: np.ndarray | None = None, xyz_type: str = "f4",
+           point_step: int = 32, offsets: tuple[int, int, int, int] = (0, 4, 8, 16),
            height: int = 1, row_pad: int = 0, big_endian: bool = False,
-           intensity: Optional[np.ndarray] = None, colour_name: str = "rgb") -> PointCloud2:
+           intensity: np.ndarray | None = None, colour_name: str = "rgb") -> PointCloud2:
     """A PointCloud2 laid out like real drivers do: fields at given offsets, padding."""
     n = xyz.shape[0]
     width = n // height
     order = ">" if big_endian else "<"
-    names: List[str] = ["x", "y", "z"]
+    names: list[str] = ["x", "y", "z"]
     formats = [order + xyz_type] * 3
     offs = list(offsets[:3])
     datatype = PointField.FLOAT32 if xyz_type == "f4" else PointField.FLOAT64
@@ -72,7 +72,7 @@ def _cloud(xyz: np.ndarray, *, rgb: Optional[np.ndarray] = None, xyz_type: str =
     return msg
 
 
-def _packed(r: np.ndarray, g: np.ndarray, b: np.ndarray, a: Optional[np.ndarray] = None
+def _packed(r: np.ndarray, g: np.ndarray, b: np.ndarray, a: np.ndarray | None = None
             ) -> np.ndarray:
     a = np.full_like(r, 255) if a is None else a
     return ((a.astype(np.uint32) << 24) | (r.astype(np.uint32) << 16)
