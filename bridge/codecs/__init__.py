@@ -33,7 +33,13 @@ from bridge.codecs.generic import (
     message_to_json,
     message_to_yaml,
 )
-from bridge.codecs.registry import REFERENCE_SHORT_NAMES, message_class, resolve_type, ros_type_of
+from bridge.codecs.registry import (
+    REFERENCE_SHORT_NAMES,
+    installed_types,
+    message_class,
+    resolve_type,
+    ros_type_of,
+)
 
 __all__ = [
     "KEY_ENCODING",
@@ -47,6 +53,7 @@ __all__ = [
     "TypeCodec",
     "codec_for",
     "dict_to_message",
+    "installed_types",
     "json_to_message",
     "message_class",
     "message_to_dict",

@@ -23,7 +23,7 @@ from typing import Any
 
 from bridge.codecs.errors import CodecError
 
-__all__ = ["REFERENCE_SHORT_NAMES", "message_class", "resolve_type", "ros_type_of"]
+__all__ = ["REFERENCE_SHORT_NAMES", "installed_types", "message_class", "resolve_type", "ros_type_of"]
 
 # The reference's short names (its vtkMRMLROS2{Publisher,Subscriber}<Name>Node classes) and
 # the ROS type each one stands for. Several short names share a ROS type (a vtkTable and a
@@ -123,6 +123,12 @@ def _installed_messages() -> dict[str, tuple[str, ...]]:
                 if imp_pkg == pkg and pkg not in found.setdefault(name, []):
                     found[name].append(pkg)
     return {name: tuple(sorted(pkgs)) for name, pkgs in found.items()}
+
+
+def installed_types() -> tuple[str, ...]:
+    """Every installed message type as ``pkg/msg/Type``, sorted (found without importing)."""
+    return tuple(sorted(f"{pkg}/msg/{name}" for name, pkgs in _installed_messages().items()
+                        for pkg in pkgs))
 
 
 @lru_cache(maxsize=1024)

@@ -210,3 +210,37 @@ def test_string_body_limit_is_a_codec_error() -> None:
         codec_for("String").to_igtl(RosString(data="é" * 40000))  # 80000 bytes of UTF-8
     assert err.value.field == "text"
     assert "65535" in err.value.expected
+
+
+def test_bool_sequences_bounded_sequences_and_bounded_strings() -> None:
+    from rcl_interfaces.msg import ParameterValue
+    from shape_msgs.msg import SolidPrimitive
+
+    pv = ParameterValue(type=6, bool_array_value=[True, False, True],
+                        string_array_value=["a", "ü"])
+    assert json_to_message("rcl_interfaces/msg/ParameterValue", message_to_json(pv)) == pv
+    with pytest.raises(CodecError) as err:
+        dict_to_message(ParameterValue, {"bool_array_value": [True, 1]})
+    assert err.value.field == "bool_array_value[1]"
+
+    box = SolidPrimitive(type=SolidPrimitive.BOX, dimensions=[0.1, 0.2, 0.3])
+    assert json_to_message("shape_msgs/msg/SolidPrimitive", message_to_json(box)) == box
+    with pytest.raises(CodecError) as err:
+        dict_to_message(SolidPrimitive, {"dimensions": [1.0, 2.0, 3.0, 4.0]})
+    assert err.value.field == "dimensions" and "at most 3" in err.value.expected
+
+    from rmw_dds_common.msg import NodeEntitiesInfo
+
+    with pytest.raises(CodecError) as err:
+        dict_to_message(NodeEntitiesInfo, {"node_name": "n" * 300})
+    assert err.value.field == "node_name"
+
+
+def test_every_installed_message_type_round_trips_its_defaults() -> None:
+    from bridge.codecs import installed_types
+
+    types = installed_types()
+    assert "tf2_msgs/msg/TFMessage" in types and len(types) > 100
+    for ros_type in types:
+        cls = codec_for(ros_type).message_class
+        assert json_to_message(ros_type, message_to_json(cls())) == cls(), ros_type
