@@ -14,7 +14,6 @@ loading the same file get identical arrays.
 from __future__ import annotations
 
 import logging
-import re
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -24,6 +23,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 import numpy.typing as npt
 import trimesh
+import trimesh.units
 
 from bridge.robots.errors import MeshError
 
@@ -157,25 +157,20 @@ def _split_colours(colours: Optional[U8]
 
 # ---------------------------------------------------------------------------- units
 
-_UNITS = re.compile(r"^\s*([0-9.eE+-]+)\s*\*\s*meters\s*$")
-
-
-def _unit_scale(metadata: dict[str, Any]) -> float:
-    """Metres per file unit from trimesh's metadata (COLLADA ``<unit meter>``), else 1.
+def _unit_scale(units: Optional[str]) -> float:
+    """Metres per file unit from trimesh's units string (COLLADA ``<unit meter="0.01">``
+    gives ``"0.01 * meters"``), else 1: STL and OBJ carry no unit and are taken as metres.
 
     COLLADA files often say centimetres or inches; RViz (assimp) honours that, so do we.
     """
-    units = metadata.get("units")
-    if not isinstance(units, str):
+    if not isinstance(units, str) or not units.strip():
         return 1.0
-    match = _UNITS.match(units)
-    if match:
-        try:
-            value = float(match.group(1))
-        except ValueError:
-            return 1.0
-        return value if np.isfinite(value) and value > 0 else 1.0
-    return 1.0
+    try:
+        value = float(trimesh.units.unit_conversion(units, "meters"))
+    except Exception:  # an unknown unit name: keep the numbers as they are
+        _log.debug("unknown mesh units %r, taken as metres", units)
+        return 1.0
+    return value if np.isfinite(value) and value > 0 else 1.0
 
 
 # ---------------------------------------------------------------------------- files
@@ -194,7 +189,7 @@ def _read_geometries(path: Path) -> tuple[list[trimesh.Trimesh], float]:
     except Exception as exc:  # trimesh raises many types for a corrupt file
         raise MeshError(str(path), f"a readable {suffix[1:].upper()} mesh",
                         f"{type(exc).__name__}: {exc}") from None
-    scale = _unit_scale(dict(getattr(loaded, "metadata", {}) or {}))
+    scale = _unit_scale(getattr(loaded, "units", None))
     if isinstance(loaded, trimesh.Scene):
         try:
             geoms = loaded.dump(concatenate=False)
