@@ -166,17 +166,22 @@ def _value(slot: _Slot) -> Tf7:
     return interpolate(cache.values[i], cache.values[i + 1], ratio)
 
 
+def _up(slots: Sequence[_Slot]) -> Tf7:
+    """top<-bottom for the links of one side, listed bottom-up."""
+    if not slots:
+        return IDENTITY
+    acc = _value(slots[0])  # starting from the first link saves one product with identity
+    for k in range(1, len(slots)):
+        acc = compose(_value(slots[k]), acc)
+    return acc
+
+
 def _combine(source_slots: Sequence[_Slot], target_slots: Sequence[_Slot]) -> Tf7:
     """target<-source from the links source->common and target->common."""
-    a = IDENTITY
-    for slot in source_slots:  # common<-source, built bottom-up
-        a = compose(_value(slot), a)
+    a = _up(source_slots)  # common<-source
     if not target_slots:
         return a
-    b = IDENTITY
-    for slot in target_slots:  # common<-target
-        b = compose(_value(slot), b)
-    return compose(invert(b), a)
+    return compose(invert(_up(target_slots)), a)  # target<-common after common<-source
 
 
 def _strip(frame: str) -> str:

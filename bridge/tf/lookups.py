@@ -24,8 +24,8 @@ and, from a timer, ``registry.due(now_ns)`` (``next_due_ns()`` says when to wake
 * A newly added lookup is evaluated at the next `updates` or `due` call.
 
 Thread-safety: one lock guards the registry, so `updates` (ROS thread) and `due` / `add` /
-`remove` (asyncio thread) may be called concurrently. The buffer has its own lock; the
-registry never holds the buffer's lock while taking its own, so there is no lock-order issue.
+`remove` (asyncio thread) may be called concurrently. The buffer has its own lock, taken
+only inside the registry's and never the other way round, so the two cannot deadlock.
 """
 
 from __future__ import annotations

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import pickle
 import threading
 from typing import Sequence
 
@@ -371,6 +372,23 @@ def test_frames_and_yaml(robot: TfBuffer) -> None:
     assert doc["camera"]["buffer_length"] == pytest.approx(1.0)
     assert doc["camera"]["transform_delay"] == pytest.approx(1.0)
     assert doc["lens"]["static"] is True and doc["lens"]["parent"] == "camera"
+
+
+def test_matrix_round_trip_and_errors_pickle(robot: TfBuffer) -> None:
+    r = robot.lookup("lens", "tool")
+    back = StampedTransform.from_matrix_mm("lens", "tool", r.stamp_ns, r.matrix_mm())
+    np.testing.assert_allclose(back.matrix_mm(), r.matrix_mm(), atol=1e-9)
+    errors = []
+    for args in (("nowhere", "tool", 0), ("world", "tool", 9 * S), ("", "tool", 0)):
+        with pytest.raises(Exception) as info:
+            robot.lookup(*args)
+        errors.append(info.value)
+    robot.set_transforms([tf("m", "o", 0, (0, 0, 0))], static=True)
+    with pytest.raises(ConnectivityError) as conn:
+        robot.lookup("o", "tool")
+    for err in [*errors, conn.value]:
+        copy = pickle.loads(pickle.dumps(err))
+        assert type(copy) is type(err) and str(copy) == str(err) and copy.code == err.code
 
 
 # ---------------------------------------------------------------------- properties
