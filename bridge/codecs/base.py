@@ -165,6 +165,8 @@ class TypeCodec:
             body, meta = self._to_igtl(msg)
         except ProtocolError as exc:
             raise _rename(exc, "") from None
+        except Exception as exc:  # a safety net: a ROS callback must only see CodecError
+            raise self._unexpected("message", exc) from exc
         metadata = {KEY_TYPE: self.ros_type}
         frame = getattr(getattr(msg, "header", None), "frame_id", None)
         if frame:
@@ -185,6 +187,8 @@ class TypeCodec:
             msg = self._from_igtl(body, dict(metadata or {}))
         except ProtocolError as exc:
             raise _rename(exc, "body") from None
+        except Exception as exc:  # a safety net: a ROS callback must only see CodecError
+            raise self._unexpected("body", exc) from exc
         return self._stamp(msg, stamp, frame_id)
 
     def to_value(self, msg: Any) -> Any:
@@ -194,6 +198,8 @@ class TypeCodec:
             return self._to_value(msg)
         except ProtocolError as exc:
             raise _rename(exc, "") from None
+        except Exception as exc:  # a safety net: a ROS callback must only see CodecError
+            raise self._unexpected("message", exc) from exc
 
     def from_value(self, value: Any, *, stamp: Stamp = None, frame_id: str = "") -> Any:
         """JSON value from a client -> ROS message. Raises `CodecError` naming the bad part."""
@@ -201,6 +207,8 @@ class TypeCodec:
             msg = self._from_value(value)
         except ProtocolError as exc:
             raise _rename(exc, "value") from None
+        except Exception as exc:  # a safety net: a ROS callback must only see CodecError
+            raise self._unexpected("value", exc) from exc
         return self._stamp(msg, stamp, frame_id)
 
     def to_yaml(self, msg: Any) -> str:
@@ -223,6 +231,10 @@ class TypeCodec:
         raise NotImplementedError
 
     # ---------------------------------------------------------------- helpers
+
+    def _unexpected(self, field_name: str, exc: Exception) -> CodecError:
+        return CodecError(field=field_name, expected=f"data convertible as {self.ros_type}",
+                          got=f"{type(exc).__name__}: {exc}")
 
     def _check_message(self, msg: Any) -> None:
         if not isinstance(msg, self.message_class):

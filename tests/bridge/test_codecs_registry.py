@@ -91,3 +91,15 @@ def test_wrong_message_instance_is_refused() -> None:
         codec_for("String").to_igtl(Bool(data=True))
     assert err.value.field == "message"
     assert err.value.expected == "std_msgs/msg/String"
+
+
+def test_unexpected_failures_become_codec_errors() -> None:
+    # A body of the right class holding nonsense must not raise anything but CodecError.
+    from protocol.messages import Image, PolyData
+
+    with pytest.raises(CodecError) as err:
+        codec_for("Image").from_igtl(Image(pixels=object()))  # type: ignore[arg-type]
+    assert err.value.field in ("body", "pixels")
+    with pytest.raises(CodecError) as err:
+        codec_for("PointCloud2").from_igtl(PolyData(points="abc"))  # type: ignore[arg-type]
+    assert err.value.field in ("body", "points")
