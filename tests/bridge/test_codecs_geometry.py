@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped, TransformStamped, WrenchStamped
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from bridge.codecs import CodecError, codec_for
 from protocol.conversions import quaternion_to_rotation
@@ -187,3 +189,26 @@ def test_pose_array_as_matrices_in_mm() -> None:
     with pytest.raises(CodecError) as err:
         codec.from_value([[1, 2, 3]])
     assert err.value.field == "value"
+
+
+_coord = st.floats(min_value=-10.0, max_value=10.0, allow_nan=False)
+_unit = st.floats(min_value=-1.0, max_value=1.0, allow_nan=False)
+
+
+@settings(max_examples=60, deadline=None)
+@given(t=st.tuples(_coord, _coord, _coord), q=st.tuples(_unit, _unit, _unit, _unit))
+def test_any_pose_round_trips_through_the_wire(t: tuple, q: tuple) -> None:
+    norm = float(np.linalg.norm(q))
+    if norm < 1e-3:
+        return
+    p = PoseStamped()
+    p.pose.position.x, p.pose.position.y, p.pose.position.z = t
+    o = p.pose.orientation
+    o.x, o.y, o.z, o.w = (v / norm for v in q)
+    codec = codec_for("PoseStamped")
+    back = codec.from_igtl(_wire(codec.to_igtl(p)))
+    got = back.pose.position
+    # float32 mm on the wire: ~1e-7 relative of up to 10 m
+    assert np.allclose([got.x, got.y, got.z], t, atol=2e-6)
+    b = back.pose.orientation
+    assert _same_rotation([b.x, b.y, b.z, b.w], [v / norm for v in q], 1e-6)

@@ -8,6 +8,9 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 from std_msgs.msg import (
     Bool,
     Empty,
@@ -182,3 +185,15 @@ def test_bad_json_text_from_slicer() -> None:
     with pytest.raises(CodecError) as err:
         codec_for("DoubleTable").from_igtl(String(text="[[1, 2], [3"))
     assert err.value.field == "text"
+
+
+
+@settings(max_examples=40, deadline=None)
+@given(table=arrays(np.int64, st.tuples(st.integers(1, 6), st.integers(1, 6))))
+def test_any_int_table_round_trips(table: np.ndarray) -> None:
+    codec = codec_for("IntTable")
+    msg = codec.from_value(table.tolist())
+    enc = codec.encode(msg)
+    assert enc.metadata["ros2.shape"] == f"{table.shape[0]}x{table.shape[1]}"
+    back = codec.from_igtl(_wire(enc.body), metadata=enc.metadata)
+    assert codec.to_value(back) == table.tolist()
