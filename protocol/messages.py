@@ -114,6 +114,7 @@ def _check_shape(arr: AnyArray, shape: tuple[int, ...], field_name: str) -> None
 # in protocol.conversions (applied to 0..11), so decoding is a single gather that also keeps
 # NaN (refusing NaN is the bridge's job, not the decoder's).
 _IGTL12_INDEX = igtl12_to_matrix(np.arange(12, dtype=np.float64))[:3, :].astype(np.intp)
+_IGTL12_WIRE_ORDER = np.argsort(_IGTL12_INDEX.reshape(12))  # wire slot -> entry of matrix[:3]
 
 
 @dataclass(eq=False)
@@ -126,11 +127,18 @@ class Transform:
     SIZE: ClassVar[int] = 48
 
     def pack(self) -> bytes:
+        m = self.matrix
+        if isinstance(m, np.ndarray) and m.shape == (4, 4) and m.dtype.kind == "f":
+            # Fast path (a few us): the same gather as conversions.matrix_to_igtl12, via the
+            # index table derived from it; anything unusual goes through the checked path.
+            values = m[:3].reshape(12)[_IGTL12_WIRE_ORDER]
+            if np.isfinite(values).all():
+                return values.astype(">f4").tobytes()
         try:
-            values = matrix_to_igtl12(self.matrix)
+            checked = matrix_to_igtl12(m)
         except ConversionError as exc:
             raise EncodeError(f"TRANSFORM {exc.field}", exc.expected, exc.got) from None
-        return values.astype(">f4").tobytes()
+        return checked.astype(">f4").tobytes()
 
     @classmethod
     def unpack(cls, content: bytes) -> Transform:

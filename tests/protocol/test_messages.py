@@ -416,3 +416,15 @@ def test_protocol_sources_parse_as_python39() -> None:
     # protocol/ must run inside 3D Slicer's Python 3.9.
     for path in sorted(PROTOCOL.glob("*.py")):
         ast.parse(path.read_text(), str(path), feature_version=(3, 9))
+
+
+@settings(max_examples=60, deadline=None)
+@given(strat.transforms())
+def test_transform_fast_path_matches_conversions(body: Transform) -> None:
+    from protocol.conversions import matrix_to_igtl12
+
+    expected = matrix_to_igtl12(body.matrix).astype(">f4").tobytes()
+    assert body.pack() == expected
+    assert Transform(np.asfortranarray(body.matrix)).pack() == expected
+    assert Transform(body.matrix.astype(np.float32)).pack() == expected
+    assert Transform(body.matrix.tolist()).pack() == expected  # type: ignore[arg-type]
