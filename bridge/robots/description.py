@@ -235,13 +235,12 @@ def _geometry(raw: Any, what: str) -> Geometry:
     raise UrdfError(what, "one of <mesh>, <box>, <cylinder>, <sphere>", "none")
 
 
-def _visuals(link_el: Any, raw_link: Any, named: Mapping[str, Rgba],
+def _visuals(raw_link: Any, named: Mapping[str, Rgba],
              inline_named: dict[str, Rgba], warnings: list[str]) -> tuple[VisualSpec, ...]:
     out = []
     link = raw_link.name
-    for index, (el, raw) in enumerate(zip(link_el.findall("visual"), raw_link.visuals)):
+    for index, raw in enumerate(raw_link.visuals):
         what = f"link {link!r} visual {index}"
-        _check_origin_text(el, what)
         geometry = _geometry(raw.geometry, what)
         rgba: Optional[Rgba] = None
         material_name: Optional[str] = None
@@ -266,14 +265,13 @@ def _visuals(link_el: Any, raw_link: Any, named: Mapping[str, Rgba],
     return tuple(out)
 
 
-def _joint(el: Any, raw: Any, warnings: list[str]) -> JointSpec:
+def _joint(raw: Any, warnings: list[str]) -> JointSpec:
     what = f"joint {raw.name!r}"
     if raw.type not in JOINT_TYPES:
         raise UrdfError(f"{what} type", "one of " + ", ".join(JOINT_TYPES), raw.type)
     if not raw.parent or not raw.child:
         raise UrdfError(what, "<parent link=...> and <child link=...>",
                         f"parent {raw.parent!r}, child {raw.child!r}")
-    _check_origin_text(el, what)
     axis = np.asarray(_floats(raw.axis, 3, f"{what} <axis> xyz"), dtype=np.float64)
     norm = float(np.linalg.norm(axis))
     if raw.type in MOVING_JOINT_TYPES and norm < 1e-12:
@@ -346,12 +344,14 @@ def parse_urdf(xml: str | bytes) -> RobotDescription:
         name = _element_name(el, "link")
         if name in links:
             raise UrdfError(f"link {name!r}{_where(el)}", "a unique link name", "a duplicate")
+        for index, visual_el in enumerate(el.findall("visual")):
+            _check_origin_text(visual_el, f"link {name!r} visual {index}")
         try:
             raw = _YourdfpyURDF._parse_link(el)
         except Exception as exc:
             raise UrdfError(f"link {name!r}{_where(el)}", "a valid <link>",
                             _explain(exc)) from None
-        links[name] = LinkSpec(name, _visuals(el, raw, named, inline_named, warnings))
+        links[name] = LinkSpec(name, _visuals(raw, named, inline_named, warnings))
     if not links:
         raise UrdfError(f"robot {robot_name!r}", "at least one <link>", "none")
 
@@ -362,12 +362,13 @@ def parse_urdf(xml: str | bytes) -> RobotDescription:
         name = _element_name(el, "joint")
         if name in joints:
             raise UrdfError(f"joint {name!r}{_where(el)}", "a unique joint name", "a duplicate")
+        _check_origin_text(el, f"joint {name!r}")
         try:
             raw = _YourdfpyURDF._parse_joint(el)
         except Exception as exc:
             raise UrdfError(f"joint {name!r}{_where(el)}", "a valid <joint>",
                             _explain(exc)) from None
-        joint = _joint(el, raw, warnings)
+        joint = _joint(raw, warnings)
         for role, link in (("parent", joint.parent), ("child", joint.child)):
             if link not in links:
                 raise UrdfError(f"joint {name!r} <{role}>", "the name of a <link>", link)
