@@ -130,7 +130,8 @@ class Dispatcher:
                 "node": self._ros.fully_qualified_name, "ops": sorted(self._handlers)}
 
     def _list_bridges(self, request: c.ListBridges, client: Replier | None) -> Result:
-        return {"bridges": self.topics.describe(), "devices": self._hub.devices()}
+        return {"bridges": self.topics.describe(), "devices": self._hub.devices(),
+                "clients": [client.describe() for client in self._hub.clients]}
 
     def _list_topics(self, request: c.ListTopics, client: Replier | None) -> Result:
         return {"topics": [{"topic": name, "types": list(types)}

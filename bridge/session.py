@@ -36,6 +36,9 @@ class SessionLimits:
     max_oneshot_bytes: int = 256 * 1024 * 1024
     # Above this many bytes in the kernel-side transport buffer, frames wait in the outbox.
     write_high_water: int = 256 * 1024
+    # How long a new client may take to show it reads header v2 (3D Slicer sends a STATUS
+    # at once) before it gets the current state as v1; OpenIGTLink 1.11 peers never send.
+    negotiation_grace_s: float = 0.25
 
 
 class ClientSession(asyncio.Protocol):
@@ -51,6 +54,8 @@ class ClientSession(asyncio.Protocol):
         self._transport: Optional[asyncio.Transport] = None
         self._paused = False
         self._closing = False
+        self._attached = False
+        self._attach_timer: Optional[asyncio.TimerHandle] = None
         self._unrouted_warned: set[str] = set()
         self.peer = "?"
         self.received = 0
@@ -68,11 +73,25 @@ class ClientSession(asyncio.Protocol):
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         transport.set_write_buffer_limits(high=self._limits.write_high_water)
         log.info("client %s connected", self.peer)
+        # Streams start once the header version is known: the current state sent as v1
+        # would reach 3D Slicer without metadata, and meshes are sent only once.
+        self._attach_timer = asyncio.get_running_loop().call_later(
+            self._limits.negotiation_grace_s, self._attach)
+
+    def _attach(self) -> None:
+        if self._attached or self._closing:
+            return
+        self._attached = True
+        if self._attach_timer is not None:
+            self._attach_timer.cancel()
         self._hub.attach(self)
 
     def connection_lost(self, exc: Optional[Exception]) -> None:
         self._closing = True
-        self._hub.detach(self)
+        if self._attach_timer is not None:
+            self._attach_timer.cancel()
+        if self._attached:
+            self._hub.detach(self)
         self._on_close(self)
         log.info("client %s disconnected%s", self.peer, f" ({exc})" if exc else "")
 
@@ -106,6 +125,8 @@ class ClientSession(asyncio.Protocol):
     # --- incoming messages -----------------------------------------------------------------
     def _handle(self, message: Message) -> None:
         self._negotiator.observe(message)
+        if not self._attached and self._negotiator.peer_speaks_v2:
+            self._attach()
         type_name = message.type_name
         if type_name == "COMMAND":
             self._commands(message, self)
@@ -202,9 +223,11 @@ class ClientSession(asyncio.Protocol):
                 return
             self._write(data)
 
-    @property
-    def coalesced(self) -> int:
-        return self._outbox.coalesced
+    def describe(self) -> dict[str, object]:
+        return {"peer": self.peer, "header_version": self.header_version,
+                "received": self.received, "sent": self.sent,
+                "coalesced": self._outbox.coalesced, "waiting": len(self._outbox),
+                "waiting_bytes": self._outbox.pending_bytes}
 
 
 def _status_of(error: MessageError) -> int:
