@@ -19,6 +19,8 @@ from bridge.dispatch import Dispatcher
 from bridge.hub import Hub
 from bridge.ros_node import RosNode, RosOptions
 from bridge.server import BridgeServer
+from bridge.topics import TopicBridges
+from protocol.naming import DeviceNameRegistry
 from protocol.errors import ProtocolError
 
 log = logging.getLogger("bridge")
@@ -33,7 +35,9 @@ class Daemon:
         self.config = config
         self.hub = Hub(loop)
         self.ros = RosNode(RosOptions(node_name=config.node_name, namespace=config.namespace))
-        self.dispatcher = Dispatcher(self.ros, self.hub, package_paths=dict(config.package_paths))
+        names = DeviceNameRegistry()
+        self.topics = TopicBridges(self.ros, self.hub, names)
+        self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics])
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
                                    port=config.port, limits=config.limits)
 

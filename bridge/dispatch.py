@@ -10,52 +10,58 @@ from __future__ import annotations
 import asyncio
 import inspect
 import logging
-from typing import Any, Awaitable, Callable, Mapping, Union
+from typing import Any, Awaitable, Callable, Mapping, Protocol, Sequence, Union
 
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
-from bridge.topics import TopicBridges
 from protocol import commands as c
 from protocol.commands import CommandError, CommandFailedError, ErrorCode, Reply
 from protocol.messages import Command, Message, RtsCommand
-from protocol.naming import DeviceNameRegistry
 
 log = logging.getLogger(__name__)
 
 Result = Mapping[str, Any]
+# A handler gets the parsed request and the client that sent it (None for start-up config).
 Handler = Callable[[Any, Union[Replier, None]], Union[Result, Awaitable[Result]]]
 
 DAEMON_VERSION = "0.1.0"
 
 
+class Capability(Protocol):
+    """One area of the daemon (topics, tf, parameters, services, robots)."""
+
+    def handlers(self) -> Mapping[str, Handler]:
+        """The ops it serves: op name -> handler."""
+        ...
+
+    def describe(self) -> list[dict[str, Any]]:
+        """Its live bridges, for `list_bridges`."""
+        ...
+
+    def close(self) -> None: ...
+
+
 class Dispatcher:
-    def __init__(self, ros: RosNode, hub: Hub, *, package_paths: Mapping[str, str]) -> None:
+    def __init__(self, ros: RosNode, hub: Hub, capabilities: Sequence[Capability]) -> None:
         self._ros = ros
         self._hub = hub
-        self.names = DeviceNameRegistry()
-        self.topics = TopicBridges(ros, hub, self.names)
-        self.package_paths = dict(package_paths)
+        self._capabilities = tuple(capabilities)
         self._tasks: set[asyncio.Task[None]] = set()
-        # The one list of what this daemon serves. Ops of the schema missing here are
-        # answered NOT_SUPPORTED, naming the op.
+        # The one table of what this daemon serves, built from each capability's own list.
+        # Ops of the schema missing here are answered NOT_SUPPORTED, naming the op.
         self._handlers: dict[str, Handler] = {
             c.Hello.op: self._hello,
             c.ListBridges.op: self._list_bridges,
             c.ListTopics.op: self._list_topics,
             c.ListServices.op: self._list_services,
-            c.CreateSubscriber.op: lambda r, _: self.topics.create_subscriber(r),
-            c.RemoveSubscriber.op: lambda r, _: self.topics.remove_subscriber(r),
-            c.CreatePublisher.op: lambda r, _: self.topics.create_publisher(r),
-            c.RemovePublisher.op: lambda r, _: self.topics.remove_publisher(r),
-            c.Publish.op: lambda r, _: self.topics.publish(r),
-            c.GetLastMessage.op: lambda r, _: self.topics.get_last_message(r),
         }
-
-    def register(self, op: str, handler: Handler) -> None:
-        """Add the handler of an op (capabilities wire themselves in at start-up)."""
-        if op not in c.REQUEST_TYPES:
-            raise ValueError(f"{op!r} is not an op of the command schema")
-        self._handlers[op] = handler
+        for capability in self._capabilities:
+            for op, handler in capability.handlers().items():
+                if op not in c.REQUEST_TYPES:
+                    raise ValueError(f"{op!r} is not an op of the command schema")
+                if op in self._handlers:
+                    raise ValueError(f"two handlers for {op!r}")
+                self._handlers[op] = handler
 
     # --- entry points -------------------------------------------------------------------
     def handle(self, message: Message, client: Replier) -> None:
@@ -86,7 +92,8 @@ class Dispatcher:
     def close(self) -> None:
         for task in tuple(self._tasks):
             task.cancel()
-        self.topics.close()
+        for capability in reversed(self._capabilities):
+            capability.close()
 
     # --- plumbing -----------------------------------------------------------------------
     def _run(self, request: c.Request, client: Replier | None) -> Result | Awaitable[Result]:
@@ -130,7 +137,9 @@ class Dispatcher:
                 "node": self._ros.fully_qualified_name, "ops": sorted(self._handlers)}
 
     def _list_bridges(self, request: c.ListBridges, client: Replier | None) -> Result:
-        return {"bridges": self.topics.describe(), "devices": self._hub.devices(),
+        bridges = [bridge for capability in self._capabilities
+                   for bridge in capability.describe()]
+        return {"bridges": bridges, "devices": self._hub.devices(),
                 "clients": [client.describe() for client in self._hub.clients]}
 
     def _list_topics(self, request: c.ListTopics, client: Replier | None) -> Result:

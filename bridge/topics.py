@@ -19,6 +19,7 @@ from typing import Any, Optional
 from rclpy.qos import QoSProfile
 
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
+from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
 from bridge.qos import QosSpec
 from bridge.ros_node import RosNode
@@ -275,6 +276,16 @@ class TopicBridges:
                               else message_to_json(message))
             result["value"] = bridge.codec.to_value(message)
         return result
+
+    def handlers(self) -> dict[str, Handler]:
+        return {
+            CreateSubscriber.op: lambda request, _: self.create_subscriber(request),
+            RemoveSubscriber.op: lambda request, _: self.remove_subscriber(request),
+            CreatePublisher.op: lambda request, _: self.create_publisher(request),
+            RemovePublisher.op: lambda request, _: self.remove_publisher(request),
+            Publish.op: lambda request, _: self.publish(request),
+            GetLastMessage.op: lambda request, _: self.get_last_message(request),
+        }
 
     def describe(self) -> list[dict[str, Any]]:
         bridges: list[SubscriberBridge | PublisherBridge] = [*self.subscribers.values(),
