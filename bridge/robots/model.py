@@ -23,13 +23,14 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Mapping, Optional
 
 import numpy as np
 import numpy.typing as npt
 
-from bridge.robots.description import RobotDescription, VisualSpec, parse_urdf
+from bridge.robots.description import JointSpec, RobotDescription, VisualSpec, parse_urdf
 from bridge.robots.errors import MeshError, ResourceError, UrdfError
 from bridge.robots.kinematics import Kinematics
 from bridge.robots.meshes import DEFAULT_MESH_CACHE, MeshCache, MeshData, vertex_normals
@@ -115,15 +116,23 @@ class RobotModel:
         return tuple(self.description.links)
 
     @property
-    def joints(self) -> Mapping[str, object]:
+    def joints(self) -> Mapping[str, JointSpec]:
         return self.description.joints
 
     @property
     def urdf(self) -> str:
         return self.description.xml
 
+    @cached_property
+    def _visuals_by_link(self) -> dict[str, tuple[VisualMesh, ...]]:
+        grouped: dict[str, list[VisualMesh]] = {}
+        for v in self.visuals:
+            grouped.setdefault(v.link, []).append(v)
+        return {link: tuple(vs) for link, vs in grouped.items()}
+
     def visuals_of(self, link: str) -> tuple[VisualMesh, ...]:
-        return tuple(v for v in self.visuals if v.link == link)
+        """The visuals of ``link`` in URDF order (those that loaded); O(1)."""
+        return self._visuals_by_link.get(link, ())
 
     def link_poses(self, joint_positions: Mapping[str, float]) -> dict[str, F64]:
         """4x4 pose (metres) of every link in the root link's frame."""
