@@ -52,6 +52,8 @@ MESH_SUFFIXES = (".stl", ".obj", ".dae", ".ply", ".off", ".glb", ".gltf", ".3mf"
 # Primitive tessellation: enough facets to look round in Slicer, few enough to stay small.
 CYLINDER_SECTIONS = 48
 SPHERE_SUBDIVISIONS = 3  # icosphere: 642 vertices, 1280 triangles
+# Parts of a multi-geometry file that have no colour when others do (= model.DEFAULT_RGBA).
+DEFAULT_GREY_U8 = (179, 179, 179, 255)
 
 
 @dataclass(frozen=True)
@@ -250,9 +252,6 @@ def load_mesh_file(path: Path, scale: Sequence[float] = (1.0, 1.0, 1.0), *,
     return MeshData(_frozen(np.ascontiguousarray(vertices)),
                     _frozen(np.ascontiguousarray(triangles, dtype=np.uint32)), rgba,
                     None if vertex_rgba is None else _frozen(vertex_rgba), desc, original)
-
-
-DEFAULT_GREY_U8 = (179, 179, 179, 255)
 
 
 # ---------------------------------------------------------------------------- primitives

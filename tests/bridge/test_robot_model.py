@@ -448,3 +448,23 @@ def test_polydata_has_points_triangles_colours_and_normals() -> None:
     # Sphere normals point away from the centre.
     radial = v.vertices / np.linalg.norm(v.vertices, axis=1, keepdims=True)
     assert float(np.min(np.einsum("ij,ij->i", radial, kinds[AttributeKind.NORMAL].data))) > 0.95
+
+
+def test_obj_with_two_materials_gives_per_vertex_colours(tmp_path: Path) -> None:
+    (tmp_path / "two.mtl").write_text("newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 1\n")
+    (tmp_path / "two.obj").write_text(
+        "mtllib two.mtl\nv 0 0 0\nv 1 0 0\nv 0 2 0\nv 0 0 3\n"
+        "usemtl red\nf 1 3 2\nf 1 2 4\nusemtl blue\nf 1 4 3\nf 2 3 4\n")
+    model = load_robot(robot(link("a", visual('<mesh filename="two.obj"/>'))),
+                       base_dir=tmp_path, cache=MeshCache())
+    v = model.visuals[0]
+    assert v.colour_source == "mesh" and v.vertex_rgba is not None
+    assert v.triangles.shape == (4, 3)
+    # Each triangle has its material's colour at all three corners (any triangle order).
+    red_corners = [{(0, 0, 0), (0, 2000, 0), (1000, 0, 0)}, {(0, 0, 0), (1000, 0, 0), (0, 0, 3000)}]
+    for tri in v.triangles.astype(np.int64):
+        corners = {tuple(int(round(c)) for c in v.vertices[i]) for i in tri}
+        expected = [1, 0, 0, 1] if corners in red_corners else [0, 0, 1, 1]
+        np.testing.assert_array_equal(v.vertex_rgba[tri], np.tile(expected, (3, 1)))
+    (rgba,) = PolyData.unpack(to_polydata(v).pack()).attributes
+    np.testing.assert_array_equal(rgba.data, v.vertex_rgba)
