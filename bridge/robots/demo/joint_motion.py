@@ -21,11 +21,11 @@ import argparse
 import math
 import sys
 from dataclasses import dataclass
-from typing import Optional
+from typing import Any, Optional
 
 from bridge.robots.description import RobotDescription, parse_urdf
 
-__all__ = ["JointMotion", "main"]
+__all__ = ["JointMotion", "create_joint_motion_node", "main"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +73,32 @@ class JointMotion:
                 * math.cos(2 * math.pi * t / w.period + w.phase) for w in self._waves}
 
 
+def create_joint_motion_node(motion: JointMotion, *, rate_hz: float = 50.0,
+                             node_name: str = "demo_joint_motion", namespace: str = "",
+                             context: Any = None) -> Any:
+    """An rclpy node publishing ``motion`` on ``joint_states`` at ``rate_hz`` (for any
+    executor, e.g. inside the daemon); rclpy must be initialised."""
+    import rclpy
+    from sensor_msgs.msg import JointState
+
+    node = rclpy.create_node(node_name, namespace=namespace, context=context)
+    publisher = node.create_publisher(JointState, "joint_states", 10)
+    start = node.get_clock().now()
+
+    def tick() -> None:
+        now = node.get_clock().now()
+        t = (now - start).nanoseconds * 1e-9
+        msg = JointState()
+        msg.header.stamp = now.to_msg()
+        msg.name = list(motion.joint_names)
+        msg.position = list(motion.positions_at(t).values())
+        msg.velocity = list(motion.velocities_at(t).values())
+        publisher.publish(msg)
+
+    node.create_timer(1.0 / rate_hz, tick)
+    return node
+
+
 def main(argv: Optional[list[str]] = None) -> int:
     """Publish joint_states until SIGINT/SIGTERM; exit 0 on a clean stop."""
     parser = argparse.ArgumentParser(prog="joint_motion", description=__doc__.split("\n\n")[0])
@@ -88,8 +114,6 @@ def main(argv: Optional[list[str]] = None) -> int:
         parser.error("--rate must be positive")
 
     # ROS imports here: JointMotion itself is usable (and testable) without ROS.
-    from sensor_msgs.msg import JointState
-
     from bridge.robots._spin import ros_session, spin_until_signal
     from bridge.robots.errors import RobotError
     from bridge.robots.state_publisher import read_urdf
@@ -107,23 +131,8 @@ def main(argv: Optional[list[str]] = None) -> int:
         return 2
 
     with ros_session() as session:
-        import rclpy
-
-        node = rclpy.create_node(args.node_name, namespace=args.namespace)
-        publisher = node.create_publisher(JointState, "joint_states", 10)
-        start = node.get_clock().now()
-
-        def tick() -> None:
-            now = node.get_clock().now()
-            t = (now - start).nanoseconds * 1e-9
-            msg = JointState()
-            msg.header.stamp = now.to_msg()
-            msg.name = list(motion.joint_names)
-            msg.position = list(motion.positions_at(t).values())
-            msg.velocity = list(motion.velocities_at(t).values())
-            publisher.publish(msg)
-
-        node.create_timer(1.0 / args.rate, tick)
+        node = create_joint_motion_node(motion, rate_hz=args.rate, node_name=args.node_name,
+                                        namespace=args.namespace)
         spin_until_signal(session, [node], on_ready=lambda: print(
             f"joint motion ready: {len(motion.joint_names)} joints at {args.rate:g} Hz",
             flush=True))
