@@ -16,12 +16,10 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
-from rclpy.qos import QoSProfile
-
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
 from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
-from bridge.qos import QosSpec
+from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
 from protocol.commands import (CommandFailedError, CreatePublisher, CreateSubscriber, ErrorCode,
                                GetLastMessage, OutOfRangeError, Publish, QoS, RemovePublisher,
@@ -52,7 +50,7 @@ class TopicInfo:
 
 
 class SubscriberBridge:
-    def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QosSpec,
+    def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QoS,
                  device: str, metadata: dict[str, str],
                  max_rate_hz: Optional[float] = None) -> None:
         self.topic = topic
@@ -68,7 +66,7 @@ class SubscriberBridge:
         self._last_warning = 0.0
         hub.set_rate_cap(device, max_rate_hz)
         self._subscription = ros.node.create_subscription(
-            codec.message_class, topic, self._on_message, qos.profile())
+            codec.message_class, topic, self._on_message, qos_profile(qos))
 
     def _on_message(self, msg: Any) -> None:  # ROS executor thread: convert, hand off
         self.count += 1
@@ -99,7 +97,7 @@ class SubscriberBridge:
 
 
 class PublisherBridge:
-    def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QosSpec,
+    def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QoS,
                  device: str, frame_id: str = "") -> None:
         self.topic = topic
         self.codec = codec
@@ -109,8 +107,7 @@ class PublisherBridge:
         self.count = 0
         self._ros = ros
         self._hub = hub
-        profile: QoSProfile = qos.profile()
-        self._publisher = ros.node.create_publisher(codec.message_class, topic, profile)
+        self._publisher = ros.node.create_publisher(codec.message_class, topic, qos_profile(qos))
         hub.route(device, self.on_igtl)
 
     def _stamp_now(self) -> tuple[int, int]:
@@ -208,7 +205,7 @@ class TopicBridges:
         key = NameKey.subscriber(topic)
         device = self._names.register(key)
         bridge = SubscriberBridge(
-            self._ros, self._hub, topic=topic, codec=codec, qos=_qos_spec(request.qos),
+            self._ros, self._hub, topic=topic, codec=codec, qos=request.qos,
             device=device, metadata=metadata_for(key, ros_type=ros_type, units=UNITS_MM),
             max_rate_hz=request.rate_hz)
         self.subscribers[topic] = bridge
@@ -234,7 +231,7 @@ class TopicBridges:
         self._check_graph(topic, ros_type)
         device = self._names.register(NameKey.publisher(topic))
         bridge = PublisherBridge(self._ros, self._hub, topic=topic, codec=codec,
-                                 qos=_qos_spec(request.qos), device=device)
+                                 qos=request.qos, device=device)
         self.publishers[topic] = bridge
         log.info("publishing %s (%s); clients send to device %r", topic, ros_type, device)
         return _describe(bridge.info(), existed=False)
@@ -297,10 +294,6 @@ class TopicBridges:
             bridge.close()
         self.subscribers.clear()
         self.publishers.clear()
-
-
-def _qos_spec(qos: QoS) -> QosSpec:
-    return QosSpec(depth=qos.depth, reliability=qos.reliability, durability=qos.durability)
 
 
 def _describe(info: TopicInfo, existed: bool | None = None) -> dict[str, Any]:

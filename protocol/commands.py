@@ -708,6 +708,7 @@ def _matrix_from(value: Any, path: str) -> Matrix4:
 # ---------------------------------------------------------------------------- message types
 
 # The reference SlicerROS2's short names (and its class-name stems) -> ROS message type.
+# Several share a type (a vtkTable and a vtkDoubleArray both travel as Float64MultiArray).
 REFERENCE_TYPE_NAMES: dict[str, str] = {
     "Empty": "std_msgs/msg/Empty",
     "String": "std_msgs/msg/String",
@@ -715,11 +716,14 @@ REFERENCE_TYPE_NAMES: dict[str, str] = {
     "Int": "std_msgs/msg/Int64",
     "Int64": "std_msgs/msg/Int64",
     "Double": "std_msgs/msg/Float64",
+    "Float": "std_msgs/msg/Float64",
     "Float64": "std_msgs/msg/Float64",
     "IntArray": "std_msgs/msg/Int64MultiArray",
     "IntTable": "std_msgs/msg/Int64MultiArray",
+    "IntNArray": "std_msgs/msg/Int64MultiArray",
     "Int64MultiArray": "std_msgs/msg/Int64MultiArray",
     "DoubleArray": "std_msgs/msg/Float64MultiArray",
+    "FloatArray": "std_msgs/msg/Float64MultiArray",
     "DoubleTable": "std_msgs/msg/Float64MultiArray",
     "Float64MultiArray": "std_msgs/msg/Float64MultiArray",
     "Pose": "geometry_msgs/msg/Pose",
@@ -733,6 +737,7 @@ REFERENCE_TYPE_NAMES: dict[str, str] = {
     "PointStamped": "geometry_msgs/msg/PointStamped",
     "JointState": "sensor_msgs/msg/JointState",
     "Joy": "sensor_msgs/msg/Joy",
+    "JoyV2": "sensor_msgs/msg/Joy",
     "Image": "sensor_msgs/msg/Image",
     "UInt8Image": "sensor_msgs/msg/Image",
     "PointCloud": "sensor_msgs/msg/PointCloud",

@@ -22,43 +22,12 @@ from functools import cache, lru_cache
 from typing import Any
 
 from bridge.codecs.errors import CodecError
+from protocol.commands import REFERENCE_TYPE_NAMES
 
 __all__ = ["REFERENCE_SHORT_NAMES", "installed_types", "message_class", "resolve_type", "ros_type_of"]
 
-# The reference's short names (its vtkMRMLROS2{Publisher,Subscriber}<Name>Node classes) and
-# the ROS type each one stands for. Several short names share a ROS type (a vtkTable and a
-# vtkDoubleArray both travel as Float64MultiArray): the codec handles 1-D and 2-D alike.
-REFERENCE_SHORT_NAMES: dict[str, str] = {
-    "Empty": "std_msgs/msg/Empty",
-    "String": "std_msgs/msg/String",
-    "Bool": "std_msgs/msg/Bool",
-    "Int": "std_msgs/msg/Int64",
-    "Int64": "std_msgs/msg/Int64",
-    "Double": "std_msgs/msg/Float64",
-    "Float": "std_msgs/msg/Float64",
-    "Float64": "std_msgs/msg/Float64",
-    "IntArray": "std_msgs/msg/Int64MultiArray",
-    "IntTable": "std_msgs/msg/Int64MultiArray",
-    "IntNArray": "std_msgs/msg/Int64MultiArray",
-    "Int64MultiArray": "std_msgs/msg/Int64MultiArray",
-    "DoubleArray": "std_msgs/msg/Float64MultiArray",
-    "FloatArray": "std_msgs/msg/Float64MultiArray",
-    "DoubleTable": "std_msgs/msg/Float64MultiArray",
-    "Float64MultiArray": "std_msgs/msg/Float64MultiArray",
-    "Pose": "geometry_msgs/msg/Pose",
-    "PoseStamped": "geometry_msgs/msg/PoseStamped",
-    "TransformStamped": "geometry_msgs/msg/TransformStamped",
-    "Wrench": "geometry_msgs/msg/Wrench",
-    "WrenchStamped": "geometry_msgs/msg/WrenchStamped",
-    "PoseArray": "geometry_msgs/msg/PoseArray",
-    "JointState": "sensor_msgs/msg/JointState",
-    "Joy": "sensor_msgs/msg/Joy",
-    "JoyV2": "sensor_msgs/msg/Joy",
-    "Image": "sensor_msgs/msg/Image",
-    "UInt8Image": "sensor_msgs/msg/Image",
-    "PointCloud": "sensor_msgs/msg/PointCloud",
-    "PointCloud2": "sensor_msgs/msg/PointCloud2",
-}
+# The reference's short names: one table, in the protocol (clients resolve them too).
+REFERENCE_SHORT_NAMES = REFERENCE_TYPE_NAMES
 
 _NODE_CLASS = re.compile(r"^vtkMRMLROS2(?:Publisher|Subscriber)(\w+)Node$")
 _IDENT = r"[A-Za-z][A-Za-z0-9_]*"
