@@ -53,6 +53,10 @@ def build_parser() -> argparse.ArgumentParser:
                                description="Run the daemon with the built-in demo robot "
                                            "moving (state publisher and joint motion included).")
     _add_daemon_options(demo)
+    # Parsed by its own module (it runs on its own too); listed here for --help.
+    commands.add_parser("state-publisher", add_help=False,
+                        help="a robot state publisher for any URDF (robot_description, /tf "
+                             "from joint_states, /tf_static); see state-publisher --help")
     return parser
 
 
@@ -90,6 +94,11 @@ def _run_daemon(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["state-publisher"]:
+        from bridge.robots import state_publisher
+
+        return state_publisher.main(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
