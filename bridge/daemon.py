@@ -19,6 +19,7 @@ from bridge.dispatch import Dispatcher
 from bridge.hub import Hub
 from bridge.ros_node import RosNode, RosOptions
 from bridge.server import BridgeServer
+from bridge.tf.capability import TfBridges
 from bridge.topics import TopicBridges
 from protocol.naming import DeviceNameRegistry
 from protocol.errors import ProtocolError
@@ -37,7 +38,8 @@ class Daemon:
         self.ros = RosNode(RosOptions(node_name=config.node_name, namespace=config.namespace))
         names = DeviceNameRegistry()
         self.topics = TopicBridges(self.ros, self.hub, names)
-        self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics])
+        self.tf = TfBridges(self.ros, self.hub, names)
+        self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf])
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
                                    port=config.port, limits=config.limits)
 

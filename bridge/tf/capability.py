@@ -1,0 +1,631 @@
+"""The daemon's tf2 capability: the buffer fed from /tf and /tf_static, lookups streamed to
+clients when they change, one-shot lookups, and broadcasters publishing clients' transforms.
+
+    ROS executor thread                               asyncio loop thread
+    ───────────────────                               ───────────────────
+    /tf, /tf_static ─► convert the whole TFMessage
+                       buffer.set_transforms(batch)
+                       changed frames ─► pending set ─(one call_soon per burst)─► _drain:
+                                                         registry.updates(changed) ─► hub.stream
+                                                         wake one-shot lookups that wait
+                                                         arm the rate-cap timer (registry.due)
+
+Why this shape (and not the reference's): SlicerROS2 runs every lookup on a 50 Hz timer
+whether anything moved or not, so a client sees a change up to 20 ms late and idle lookups
+cost CPU forever. Here a lookup is evaluated only when a frame of its chain changed
+(`LookupRegistry`), and sent only when its result differs from the last one sent; a lookup
+with ``rate_hz`` gets at most that many messages a second, the newest value winning.
+
+Threads: the ROS callback does the least it can (convert, store, merge the changed frames
+into a set under a lock) and schedules the loop at most once until the loop has taken the
+set, so a burst of /tf messages costs one loop wake-up. Everything else runs on the loop.
+
+Frames: a client's frame ids are used as given unless ``frame_prefix`` is set (the
+``tf_prefix`` idea of ROS 1, for a daemon started with ``--namespace`` next to a namespaced
+robot): then a relative frame ``base`` means ``<prefix>base`` and ``/base`` means ``base``.
+The topics stay ``/tf`` and ``/tf_static`` whatever the node's namespace, as with tf2_ros;
+pass relative ``tf_topic`` / ``tf_static_topic`` names to use namespaced ones instead.
+
+Units: the buffer holds metres; clients get 4x4 matrices in mm, and the TRANSFORM messages a
+client sends to a broadcaster are in mm. Every conversion goes through `protocol.conversions`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Awaitable, Iterable, Optional, Union
+
+import numpy as np
+import numpy.typing as npt
+from geometry_msgs.msg import TransformStamped
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from tf2_msgs.msg import TFMessage
+
+from bridge.dispatch import Handler
+from bridge.hub import Hub, Replier
+from bridge.ros_node import RosNode
+from bridge.tf.buffer import StampedTransform, TfBuffer
+from bridge.tf.errors import (
+    ConnectivityError,
+    ExtrapolationError,
+    RejectedTransformsError,
+    TfError,
+    TfLookupError,
+)
+from bridge.tf.lookups import LookupKey, LookupRegistry, LookupResult
+from protocol.commands import (
+    BroadcastTransform,
+    CommandFailedError,
+    CreateTfBroadcaster,
+    CreateTfLookup,
+    ErrorCode,
+    LookupTransform,
+    OutOfRangeError,
+    RemoveTfBroadcaster,
+    RemoveTfLookup,
+    Stamp,
+)
+from protocol.conversions import (
+    ConversionError,
+    igtl_timestamp_from_ros,
+    igtl_timestamp_now,
+    validate_matrix,
+)
+from protocol.messages import Message, Status, StatusCode, Transform
+from protocol.naming import UNITS_MM, DeviceNameRegistry, NameKey, metadata_for
+
+__all__ = ["TfBridges", "tf_message_to_transforms", "status_for_error"]
+
+log = logging.getLogger(__name__)
+
+_NS_PER_S = 1_000_000_000
+# A publisher of bad transforms must not flood the log: one warning per interval.
+_WARN_INTERVAL_S = 5.0
+
+# tf2_ros's own profiles: TransformListener/Broadcaster use depth 100 (volatile, reliable);
+# the static ones are transient local so a late subscriber still gets the latched message.
+_TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                     reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+_TF_STATIC_SUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                                reliability=ReliabilityPolicy.RELIABLE,
+                                durability=DurabilityPolicy.TRANSIENT_LOCAL)
+_TF_STATIC_PUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                                reliability=ReliabilityPolicy.RELIABLE,
+                                durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+# ---------------------------------------------------------------------------- conversions
+
+
+def tf_message_to_transforms(msg: Any) -> list[StampedTransform]:
+    """A tf2_msgs/TFMessage -> `StampedTransform`s (metres, as ROS sends them).
+
+    No validation here: `TfBuffer.set_transforms` judges each transform and says why it
+    refused one, and it must see the whole batch at once.
+    """
+    out = []
+    for t in msg.transforms:
+        stamp = t.header.stamp
+        tr = t.transform.translation
+        q = t.transform.rotation
+        out.append(StampedTransform(t.header.frame_id, t.child_frame_id,
+                                    stamp.sec * _NS_PER_S + stamp.nanosec,
+                                    (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w)))
+    return out
+
+
+def _transform_stamped(st: StampedTransform) -> Any:
+    msg = TransformStamped()
+    sec, nanosec = divmod(st.stamp_ns, _NS_PER_S)
+    msg.header.stamp.sec = sec
+    msg.header.stamp.nanosec = nanosec
+    msg.header.frame_id = st.parent
+    msg.child_frame_id = st.child
+    tr = msg.transform.translation
+    tr.x, tr.y, tr.z = st.translation
+    q = msg.transform.rotation
+    q.x, q.y, q.z, q.w = st.rotation
+    return msg
+
+
+def _stamp_dict(stamp_ns: int) -> dict[str, int]:
+    sec, nanosec = divmod(stamp_ns, _NS_PER_S)
+    return {"sec": sec, "nanosec": nanosec}
+
+
+def _stamp_ns(stamp: Optional[Stamp]) -> int:
+    return 0 if stamp is None else stamp.sec * _NS_PER_S + stamp.nanosec
+
+
+def _igtl_timestamp(stamp_ns: int) -> int:
+    # A chain of static links has stamp 0 (valid at every time); OpenIGTLink's 0 means
+    # "unset", so such a result carries the time the daemon computed it instead.
+    if stamp_ns <= 0:
+        return igtl_timestamp_now()
+    sec, nanosec = divmod(stamp_ns, _NS_PER_S)
+    return igtl_timestamp_from_ros(sec, nanosec)
+
+
+# OpenIGTLink STATUS for a lookup that fails: the code says what a client can expect
+# (NOT_READY: data may still come; NOT_FOUND: the frames are not connected), SUB_CODE is the
+# tf2_msgs/TF2Error value, ERROR_NAME its name, the text tf2's own wording.
+_STATUS_OF_ERROR: dict[type[TfError], StatusCode] = {
+    ExtrapolationError: StatusCode.NOT_READY,
+    ConnectivityError: StatusCode.NOT_FOUND,
+    TfLookupError: StatusCode.CONFIG_ERROR,  # a loop in the tree (unknown frames are pending)
+}
+
+
+def status_for_error(error: TfError) -> Status:
+    """The STATUS body that tells clients why a streamed lookup has no value now."""
+    code = _STATUS_OF_ERROR.get(type(error), StatusCode.UNKNOWN_ERROR)
+    name = error.code.name
+    if len(name) > 19:  # ERROR_NAME holds 19 bytes (see protocol.messages.Status)
+        name = name.removesuffix("_ERROR")[:19]
+    return Status(code=code, subcode=int(error.code), error_name=name, text=error.message)
+
+
+def _field_of(error: TfError, time_ns: int) -> str:
+    """The request field a tf2 error is about, for error replies."""
+    if isinstance(error, TfLookupError) and error.frame is not None:
+        return "parent" if "target_frame" in error.message else "child"
+    if isinstance(error, ExtrapolationError) and time_ns != 0:
+        return "time"
+    return "child"
+
+
+# ---------------------------------------------------------------------------- bridges
+
+
+@dataclass
+class _Lookup:
+    key: LookupKey  # the registry's key: the resolved frames
+    device: str
+    metadata: dict[str, str]
+    requested: tuple[str, str]  # the frames as the client named them
+    rate_hz: Optional[float]
+    messages: int = 0
+
+
+@dataclass
+class _Broadcaster:
+    parent: str
+    child: str
+    static: bool
+    device: str
+    topic: str
+    messages: int = 0
+
+
+class TfBridges:
+    """The tf capability of the daemon: lookups, one-shot lookups, broadcasters.
+
+    Keyword options: ``frame_prefix`` (see the module docstring), ``cache_time_s`` (how much
+    history the buffer keeps per frame, tf2's default 10 s), ``tf_topic`` and
+    ``tf_static_topic``.
+    """
+
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
+                 frame_prefix: str = "", cache_time_s: float = 10.0,
+                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static") -> None:
+        self._ros = ros
+        self._hub = hub
+        self._names = names
+        self._prefix = frame_prefix.lstrip("/")
+        self.buffer = TfBuffer(cache_time_s)
+        self.registry = LookupRegistry(self.buffer)
+        self.lookups: dict[tuple[str, str], _Lookup] = {}
+        self.broadcasters: dict[tuple[str, str], _Broadcaster] = {}
+        self._by_key: dict[LookupKey, _Lookup] = {}
+        self._by_device: dict[str, _Broadcaster] = {}
+        self._tf_topic = ros.resolve_topic(tf_topic)
+        self._tf_static_topic = ros.resolve_topic(tf_static_topic)
+        # Hand-off from the ROS thread: changed frames merged until the loop takes them.
+        self._lock = threading.Lock()
+        self._pending_frames: set[str] = set()
+        self._drain_scheduled = False
+        self._last_warning = 0.0
+        self._suppressed = 0
+        # Loop-thread state.
+        self._timer: Optional[asyncio.TimerHandle] = None
+        self._timer_due_ns: Optional[int] = None
+        self._changed_event: Optional[asyncio.Event] = None
+        self._closed = False
+        self.received = {"tf": 0, "tf_static": 0}
+        self.drains = 0
+        # Publishers are made on first use, so a daemon that never broadcasts does not show
+        # up as a /tf publisher in the ROS graph.
+        self._tf_publisher: Any = None
+        self._static_publisher: Any = None
+        self._static_transforms: dict[str, Any] = {}  # child -> TransformStamped (latched)
+        node = ros.node
+        self._subscriptions = [
+            node.create_subscription(TFMessage, self._tf_topic, self._on_tf, _TF_QOS),
+            node.create_subscription(TFMessage, self._tf_static_topic, self._on_tf_static,
+                                     _TF_STATIC_SUB_QOS),
+        ]
+
+    # ------------------------------------------------------------------ ROS thread
+
+    def _on_tf(self, msg: Any) -> None:
+        self.received["tf"] += 1
+        self._store(tf_message_to_transforms(msg), static=False)
+
+    def _on_tf_static(self, msg: Any) -> None:
+        self.received["tf_static"] += 1
+        self._store(tf_message_to_transforms(msg), static=True)
+
+    def _store(self, transforms: list[StampedTransform], *, static: bool) -> None:
+        """Store one batch (any thread) and hand its changed frames to the loop."""
+        try:
+            changed = self.buffer.set_transforms(transforms, static=static)
+        except RejectedTransformsError as error:
+            self._warn_rejected(error, static)
+            changed = error.changed
+        if changed:
+            self._note_changed(changed)
+
+    def _warn_rejected(self, error: RejectedTransformsError, static: bool) -> None:
+        now = time.monotonic()
+        if now - self._last_warning < _WARN_INTERVAL_S:
+            self._suppressed += len(error.rejected)
+            return
+        more = f" ({self._suppressed} more refused since the last warning)" \
+            if self._suppressed else ""
+        self._last_warning = now
+        self._suppressed = 0
+        log.warning("refused %d transform(s) from %s: %s%s", len(error.rejected),
+                    self._tf_static_topic if static else self._tf_topic, error, more)
+
+    def _note_changed(self, frames: Iterable[str]) -> None:
+        with self._lock:
+            self._pending_frames.update(frames)
+            if self._drain_scheduled:
+                return
+            self._drain_scheduled = True
+        self._hub.call_soon(self._drain)
+
+    # ------------------------------------------------------------------ loop thread
+
+    def _drain(self) -> None:
+        with self._lock:
+            frames, self._pending_frames = self._pending_frames, set()
+            self._drain_scheduled = False
+        if self._closed:
+            return
+        self.drains += 1
+        self._deliver(self.registry.updates(frames, time.monotonic_ns()))
+        event, self._changed_event = self._changed_event, None
+        if event is not None:
+            event.set()  # one-shot lookups that wait for data try again
+        self._arm()
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        self._timer_due_ns = None
+        if self._closed:
+            return
+        self._deliver(self.registry.due(time.monotonic_ns()))
+        self._arm()
+
+    def _arm(self) -> None:
+        """Wake up when the registry has something due (a rate cap ran out, a new lookup)."""
+        due = self.registry.next_due_ns()
+        if due is None:
+            return
+        if self._timer is not None:
+            if self._timer_due_ns is not None and self._timer_due_ns <= due:
+                return  # an earlier wake-up is already set; it re-arms after running
+            self._timer.cancel()
+        delay = max(0, due - time.monotonic_ns()) / _NS_PER_S
+        loop = asyncio.get_running_loop()
+        self._timer = loop.call_later(delay, self._on_timer)
+        self._timer_due_ns = due
+
+    def _deliver(self, results: list[tuple[LookupKey, LookupResult]]) -> None:
+        for key, result in results:
+            lookup = self._by_key.get(key)
+            if lookup is None:
+                continue
+            lookup.messages += 1
+            if isinstance(result, StampedTransform):
+                body: Union[Transform, Status] = Transform(matrix=result.matrix_mm())
+                timestamp = _igtl_timestamp(result.stamp_ns)
+            else:
+                body = status_for_error(result)
+                timestamp = igtl_timestamp_now()
+            self._hub.stream(Message(device_name=lookup.device, body=body,
+                                     timestamp=timestamp, metadata=lookup.metadata))
+
+    # ------------------------------------------------------------------ frames
+
+    def resolve_frame(self, frame: str) -> str:
+        """A client's frame id -> the buffer's (``frame_prefix`` applied, see the module)."""
+        if frame.startswith("/"):
+            return frame.lstrip("/")
+        return self._prefix + frame
+
+    def _pair(self, parent: str, child: str) -> tuple[str, str]:
+        resolved = (self.resolve_frame(parent), self.resolve_frame(child))
+        for name, frame, given in (("parent", resolved[0], parent),
+                                   ("child", resolved[1], child)):
+            if not frame:
+                raise OutOfRangeError(name, "a non-empty frame id", repr(given))
+        return resolved
+
+    # ------------------------------------------------------------------ lookups
+
+    def create_lookup(self, request: CreateTfLookup) -> dict[str, Any]:
+        pair = self._pair(request.parent, request.child)
+        existing = self.lookups.get(pair)
+        if existing is not None:
+            # Idempotent (a reconnecting client re-creates what it had); the cap may change.
+            self.registry.add(pair[0], pair[1], rate_hz=request.rate_hz)
+            existing.rate_hz = request.rate_hz
+            self._arm()
+            return self._describe_lookup(existing, existed=True)
+        name_key = NameKey.tf_lookup(*pair)
+        device = self._names.register(name_key)
+        key = self.registry.add(pair[0], pair[1], rate_hz=request.rate_hz)
+        lookup = _Lookup(key, device, metadata_for(name_key, frame=pair[0], units=UNITS_MM),
+                         (request.parent, request.child), request.rate_hz)
+        self.lookups[pair] = lookup
+        self._by_key[key] = lookup
+        self._arm()  # the first result comes from registry.due, on the next loop turn
+        log.info("tf lookup %s -> %s streams as device %r", pair[0], pair[1], device)
+        return self._describe_lookup(lookup, existed=False)
+
+    def remove_lookup(self, request: RemoveTfLookup) -> dict[str, Any]:
+        pair = self._pair(request.parent, request.child)
+        lookup = self.lookups.pop(pair, None)
+        if lookup is None:
+            raise CommandFailedError("child", "a lookup created by create_tf_lookup",
+                                     f"{pair[0]} -> {pair[1]}", code=ErrorCode.NOT_FOUND)
+        del self._by_key[lookup.key]
+        self.registry.remove(lookup.key)
+        self._hub.forget(lookup.device)
+        self._names.release(NameKey.tf_lookup(*pair))
+        return {"parent": pair[0], "child": pair[1], "device": lookup.device}
+
+    def lookup_transform(self, request: LookupTransform,
+                         ) -> Union[dict[str, Any], Awaitable[dict[str, Any]]]:
+        """One lookup; with ``timeout`` it waits (without blocking the loop) for tf data."""
+        pair = self._pair(request.parent, request.child)
+        time_ns = _stamp_ns(request.time)
+        try:
+            return self._lookup_once(pair, time_ns)
+        except TfError as error:
+            if request.timeout <= 0:
+                raise _unavailable(pair, time_ns, error) from None
+        return self._lookup_waiting(pair, time_ns, request.timeout)
+
+    def _lookup_once(self, pair: tuple[str, str], time_ns: int) -> dict[str, Any]:
+        result = self.buffer.lookup(pair[0], pair[1], time_ns)
+        matrix: npt.NDArray[np.float64] = result.matrix_mm()
+        return {"parent": pair[0], "child": pair[1], "matrix": matrix.tolist(),
+                "translation": list(result.translation), "rotation": list(result.rotation),
+                "stamp": _stamp_dict(result.stamp_ns)}
+
+    async def _lookup_waiting(self, pair: tuple[str, str], time_ns: int,
+                              timeout: float) -> dict[str, Any]:
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout
+        while True:
+            # Take the event before trying: data landing after the try still wakes us.
+            if self._changed_event is None:
+                self._changed_event = asyncio.Event()
+            event = self._changed_event
+            try:
+                return self._lookup_once(pair, time_ns)
+            except TfError as error:
+                remaining = deadline - loop.time()
+                if remaining <= 0:
+                    raise _unavailable(pair, time_ns, error, waited=timeout) from None
+            try:
+                await asyncio.wait_for(event.wait(), remaining)
+            except asyncio.TimeoutError:
+                pass
+
+    # ------------------------------------------------------------------ broadcasters
+
+    def create_broadcaster(self, request: CreateTfBroadcaster) -> dict[str, Any]:
+        pair = self._pair(request.parent, request.child)
+        if pair[0] == pair[1]:
+            raise OutOfRangeError("child", "a frame other than the parent", repr(request.child))
+        existing = self.broadcasters.get(pair)
+        if existing is not None:
+            if existing.static != request.static:
+                raise CommandFailedError(
+                    "static", f"{str(existing.static).lower()} (the broadcaster {pair[0]} -> "
+                    f"{pair[1]} has it; remove it first)", str(request.static).lower(),
+                    code=ErrorCode.ALREADY_EXISTS)
+            return self._describe_broadcaster(existing, existed=True)
+        name_key = NameKey.tf_broadcaster(*pair)
+        device = self._names.register(name_key)
+        broadcaster = _Broadcaster(pair[0], pair[1], request.static, device,
+                                   self._tf_static_topic if request.static else self._tf_topic)
+        self._publisher(request.static)  # create it now: discovery starts before the 1st send
+        self.broadcasters[pair] = broadcaster
+        self._by_device[device] = broadcaster
+        self._hub.route(device, self._on_igtl)
+        log.info("tf broadcaster %s -> %s (%s); clients send TRANSFORM to device %r",
+                 pair[0], pair[1], broadcaster.topic, device)
+        return self._describe_broadcaster(broadcaster, existed=False)
+
+    def remove_broadcaster(self, request: RemoveTfBroadcaster) -> dict[str, Any]:
+        pair = self._pair(request.parent, request.child)
+        broadcaster = self.broadcasters.pop(pair, None)
+        if broadcaster is None:
+            raise CommandFailedError("child", "a broadcaster created by create_tf_broadcaster",
+                                     f"{pair[0]} -> {pair[1]}", code=ErrorCode.NOT_FOUND)
+        self._hub.unroute(broadcaster.device)
+        del self._by_device[broadcaster.device]
+        self._names.release(NameKey.tf_broadcaster(*pair))
+        if broadcaster.static and self._static_transforms.pop(pair[1], None) is not None:
+            # Later subscribers no longer get it; tf2 keeps static data forever, so current
+            # ones keep it (there is no "delete" in tf2).
+            self._static_publisher.publish(
+                TFMessage(transforms=list(self._static_transforms.values())))
+        return {"parent": pair[0], "child": pair[1], "device": broadcaster.device}
+
+    def broadcast(self, request: BroadcastTransform) -> dict[str, Any]:
+        pair = self._pair(request.parent, request.child)
+        broadcaster = self.broadcasters.get(pair)
+        if broadcaster is None:
+            raise CommandFailedError("child", "a broadcaster (create_tf_broadcaster first)",
+                                     f"{pair[0]} -> {pair[1]}", code=ErrorCode.NOT_FOUND)
+        # The schema already validated the matrix (field "matrix[i][j]" / "matrix rotation").
+        stamp_ns = _stamp_ns(request.stamp) or self._now_ns()
+        subscribers = self._send(broadcaster, np.asarray(request.matrix, dtype=np.float64),
+                                 stamp_ns)
+        return {"topic": broadcaster.topic, "stamp": _stamp_dict(stamp_ns),
+                "subscribers": subscribers}
+
+    def _on_igtl(self, message: Message, client: Replier) -> None:
+        """A client sent a message to a broadcaster's device (loop thread)."""
+        broadcaster = self._by_device.get(message.device_name)
+        if broadcaster is None:  # removed while the message was on its way
+            return
+        body = message.body
+        try:
+            if not isinstance(body, Transform):
+                raise ConversionError("message", "a TRANSFORM (4x4 matrix in mm)",
+                                      message.type_name)
+            matrix = validate_matrix(body.matrix, field="TRANSFORM matrix")
+        except ConversionError as error:
+            log.warning("refused %s for the tf broadcaster %s -> %s from a client: %s",
+                        message.type_name, broadcaster.parent, broadcaster.child, error)
+            client.send_status(message.device_name, StatusCode.CONFIG_ERROR,
+                               f"not broadcast on {broadcaster.topic}: {error}")
+            return
+        self._send(broadcaster, matrix, self._now_ns())
+
+    def _send(self, broadcaster: _Broadcaster, matrix_mm: npt.NDArray[np.float64],
+              stamp_ns: int) -> int:
+        static = broadcaster.static
+        # The stamp goes out even for a static transform (tf2 ignores it there, but a
+        # stamp of 0 tells a reader nothing); the buffer ignores it for static data too.
+        st = StampedTransform.from_matrix_mm(broadcaster.parent, broadcaster.child, stamp_ns,
+                                             matrix_mm)
+        msg = _transform_stamped(st)
+        if static:
+            # One latched message with every static transform of the daemon, as tf2_ros's
+            # StaticTransformBroadcaster keeps: a late subscriber gets all of them.
+            self._static_transforms[broadcaster.child] = msg
+            tf_message = TFMessage(transforms=list(self._static_transforms.values()))
+        else:
+            tf_message = TFMessage(transforms=[msg])
+        publisher = self._publisher(static)
+        publisher.publish(tf_message)
+        broadcaster.messages += 1
+        # Read-your-writes: the daemon also hears its own /tf, but a lookup right after a
+        # broadcast must already see it (the echo then changes nothing: same stamp, value).
+        self._store([st], static=static)
+        return int(publisher.get_subscription_count())
+
+    def _publisher(self, static: bool) -> Any:
+        node = self._ros.node
+        if static:
+            if self._static_publisher is None:
+                self._static_publisher = node.create_publisher(
+                    TFMessage, self._tf_static_topic, _TF_STATIC_PUB_QOS)
+            return self._static_publisher
+        if self._tf_publisher is None:
+            self._tf_publisher = node.create_publisher(TFMessage, self._tf_topic, _TF_QOS)
+        return self._tf_publisher
+
+    def _now_ns(self) -> int:
+        """The node clock's now (ROS time; sim time if the node uses it)."""
+        return int(self._ros.node.get_clock().now().nanoseconds)
+
+    # ------------------------------------------------------------------ capability
+
+    def handlers(self) -> dict[str, Handler]:
+        return {
+            CreateTfLookup.op: lambda request, _: self.create_lookup(request),
+            RemoveTfLookup.op: lambda request, _: self.remove_lookup(request),
+            LookupTransform.op: lambda request, _: self.lookup_transform(request),
+            CreateTfBroadcaster.op: lambda request, _: self.create_broadcaster(request),
+            RemoveTfBroadcaster.op: lambda request, _: self.remove_broadcaster(request),
+            BroadcastTransform.op: lambda request, _: self.broadcast(request),
+        }
+
+    def describe(self) -> list[dict[str, Any]]:
+        out: list[dict[str, Any]] = [self._describe_lookup(lookup)
+                                     for lookup in self.lookups.values()]
+        out.extend(self._describe_broadcaster(b) for b in self.broadcasters.values())
+        out.append({"kind": "tf_buffer", "topics": [self._tf_topic, self._tf_static_topic],
+                    "frame_prefix": self._prefix, "frames": self.buffer.frames(),
+                    "received": dict(self.received),
+                    "cache_time_s": self.buffer.cache_time_s})
+        return out
+
+    def _describe_lookup(self, lookup: _Lookup, existed: Optional[bool] = None,
+                         ) -> dict[str, Any]:
+        last = self.registry.last_sent(lookup.key)
+        if isinstance(last, StampedTransform):
+            state = "streaming"
+        elif isinstance(last, TfError):
+            state = "error"
+        else:
+            state = "pending"  # no result yet: a frame is unknown, or not evaluated yet
+        out: dict[str, Any] = {"kind": "tf_lookup", "parent": lookup.key.parent,
+                               "child": lookup.key.child, "device": lookup.device,
+                               "igtl_type": Transform.TYPE, "state": state,
+                               "messages": lookup.messages}
+        if isinstance(last, TfError):
+            out["error"] = last.message
+        if lookup.rate_hz:
+            out["rate_hz"] = lookup.rate_hz
+        if existed is not None:
+            out["existed"] = existed
+        return out
+
+    def _describe_broadcaster(self, broadcaster: _Broadcaster,
+                              existed: Optional[bool] = None) -> dict[str, Any]:
+        out: dict[str, Any] = {"kind": "tf_broadcaster", "parent": broadcaster.parent,
+                               "child": broadcaster.child, "device": broadcaster.device,
+                               "igtl_type": Transform.TYPE, "static": broadcaster.static,
+                               "topic": broadcaster.topic, "messages": broadcaster.messages}
+        if existed is not None:
+            out["existed"] = existed
+        return out
+
+    def close(self) -> None:
+        self._closed = True
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        for lookup in self.lookups.values():
+            self._hub.forget(lookup.device)
+        for broadcaster in self.broadcasters.values():
+            self._hub.unroute(broadcaster.device)
+        self.lookups.clear()
+        self.broadcasters.clear()
+        self._by_key.clear()
+        self._by_device.clear()
+        node = self._ros.node
+        for subscription in self._subscriptions:
+            node.destroy_subscription(subscription)
+        self._subscriptions = []
+        for publisher in (self._tf_publisher, self._static_publisher):
+            if publisher is not None:
+                node.destroy_publisher(publisher)
+        self._tf_publisher = self._static_publisher = None
+
+
+def _unavailable(pair: tuple[str, str], time_ns: int, error: TfError,
+                 waited: float = 0.0) -> CommandFailedError:
+    """The error reply of a failed one-shot lookup: tf2's words and its TF2Error code."""
+    when = "the latest common time" if time_ns == 0 else \
+        f"time {time_ns // _NS_PER_S}.{time_ns % _NS_PER_S:09d}"
+    after = f" (after waiting {waited:g} s)" if waited else ""
+    return CommandFailedError(
+        _field_of(error, time_ns), f"a transform {pair[0]} <- {pair[1]} at {when}",
+        f"TF2Error {int(error.code)} {error.code.name}: {error.message}{after}",
+        code=ErrorCode.TRANSFORM_UNAVAILABLE)
