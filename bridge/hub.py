@@ -40,6 +40,9 @@ class Replier(Protocol):
 
 
 InboundHandler = Callable[[Message, Replier], None]
+# A client's RTS_COMMAND (a reply to a COMMAND the daemon sent it), and a client leaving.
+ReplyListener = Callable[[Message, Replier], None]
+ClosedListener = Callable[[Replier], None]
 
 
 class Hub:
@@ -49,6 +52,8 @@ class Hub:
         self._latest: dict[str, Frame] = {}
         self._persistent: dict[str, Frame] = {}
         self._inbound: dict[str, InboundHandler] = {}
+        self._reply_listeners: list[ReplyListener] = []
+        self._closed_listeners: list[ClosedListener] = []
         # Rate caps: device -> minimum seconds between two sends, and what they hold back.
         self._min_interval: dict[str, float] = {}
         self._last_sent: dict[str, float] = {}
@@ -135,6 +140,30 @@ class Hub:
 
     def inbound_handler(self, device: str) -> InboundHandler | None:
         return self._inbound.get(device)
+
+    # --- replies to the daemon's own COMMANDs, clients leaving (loop thread) -------------
+    def add_reply_listener(self, listener: ReplyListener) -> None:
+        """`listener(message, client)` gets every RTS_COMMAND clients send (it matches the
+        command ids it is waiting for and ignores the rest)."""
+        self._reply_listeners.append(listener)
+
+    def add_closed_listener(self, listener: ClosedListener) -> None:
+        """`listener(client)` runs when a client's connection is gone."""
+        self._closed_listeners.append(listener)
+
+    def deliver_reply(self, message: Message, client: Replier) -> None:
+        for listener in tuple(self._reply_listeners):
+            try:
+                listener(message, client)
+            except Exception:  # one capability's bug must not starve the others
+                log.exception("a reply listener failed on %s", message.device_name)
+
+    def client_closed(self, client: Replier) -> None:
+        for listener in tuple(self._closed_listeners):
+            try:
+                listener(client)
+            except Exception:
+                log.exception("a closed-client listener failed")
 
     # --- hand-off from other threads -----------------------------------------------------
     def post(self, message: Message) -> None:

@@ -93,6 +93,7 @@ class ClientSession(asyncio.Protocol):
         if self._attached:
             self._hub.detach(self)
         self._on_close(self)
+        self._hub.client_closed(self)
         log.info("client %s disconnected%s", self.peer, f" ({exc})" if exc else "")
 
     def pause_writing(self) -> None:
@@ -134,6 +135,8 @@ class ClientSession(asyncio.Protocol):
             pass  # 3D Slicer announces header v2 with a STATUS; the negotiator saw it
         elif type_name.startswith("GET_"):
             self._answer_query(message)
+        elif type_name == "RTS_COMMAND":
+            self._hub.deliver_reply(message, self)  # answers a COMMAND the daemon sent
         elif type_name.startswith(("STT_", "STP_", "RTS_")):
             pass  # streaming control and replies to queries we never make
         else:

@@ -24,7 +24,8 @@ from typing import Any
 from bridge.codecs.errors import CodecError
 from protocol.commands import REFERENCE_TYPE_NAMES
 
-__all__ = ["REFERENCE_SHORT_NAMES", "installed_types", "message_class", "resolve_type", "ros_type_of"]
+__all__ = ["REFERENCE_SHORT_NAMES", "installed_types", "message_class", "resolve_type", "ros_type_of",
+           "service_class"]
 
 # The reference's short names: one table, in the protocol (clients resolve them too).
 REFERENCE_SHORT_NAMES = REFERENCE_TYPE_NAMES
@@ -56,6 +57,26 @@ def message_class(ros_type: str) -> Any:
     cls = getattr(module, name, None)
     if cls is None or not hasattr(cls, "get_fields_and_field_types"):
         raise _unknown(ros_type, f"a message of package {pkg!r} ({name!r} is not one)")
+    return cls
+
+
+_SERVICE = re.compile(rf"^({_IDENT})/srv/({_IDENT})$")
+
+
+@cache
+def service_class(ros_type: str) -> Any:
+    """The rclpy service class of a canonical ``pkg/srv/Type``; `CodecError` if not installed."""
+    m = _SERVICE.match(ros_type)
+    if m is None:
+        raise _unknown(ros_type, "a service type 'pkg/srv/Type'")
+    pkg, name = m.groups()
+    try:
+        module = importlib.import_module(f"{pkg}.srv")
+    except ImportError:
+        raise _unknown(ros_type, f"an installed interface package ({pkg!r} is not)") from None
+    cls = getattr(module, name, None)
+    if cls is None or not hasattr(cls, "Request") or not hasattr(cls, "Response"):
+        raise _unknown(ros_type, f"a service of package {pkg!r} ({name!r} is not one)")
     return cls
 
 
