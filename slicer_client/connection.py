@@ -53,14 +53,24 @@ class CommandRefusedError(BridgeClientError):
     """The daemon answered a command with an error; `error` says which field and why."""
 
     def __init__(self, op: str, error: c.ErrorInfo) -> None:
-        super().__init__(f"{op} refused ({error.code.name}): {error.message}")
+        where = f" (field {error.field!r})" if error.field else ""
+        super().__init__(f"the daemon refused {op}{where}: {error.code.name}: {error.message}")
         self.op = op
         self.error = error
+
+    @property
+    def code(self) -> c.ErrorCode:
+        return self.error.code
+
+    @property
+    def field(self) -> str:
+        return self.error.field
 
 
 class CommandTimeoutError(BridgeClientError, TimeoutError):
     def __init__(self, op: str, timeout: float) -> None:
-        super().__init__(f"no reply to {op} within {timeout} s")
+        super().__init__(f"no reply to {op} within {timeout} s (is the daemon busy or "
+                         f"stalled? its log says why)")
         self.op = op
         self.timeout = timeout
 

@@ -1,0 +1,120 @@
+"""What a client created, as data: the re-sync list after a reconnect and the format a saved
+3D Slicer scene keeps its bridges in.
+
+A `BridgeSpec` is one create command (op + JSON arguments) plus the follow-up commands
+that restore its state (a parameter client's observed names). A `BridgeState` is the
+ordered list of them; its JSON text is versioned and every spec is validated against the
+command schema when read, so a hand-edited or truncated scene fails with the field at fault.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Mapping, Tuple
+
+from protocol import commands as c
+
+__all__ = ["CREATE_OPS", "REMOVE_OPS", "BridgeSpec", "BridgeState", "StateFormatError"]
+
+STATE_VERSION = 1
+
+# Ops that create something the daemon keeps, and the op (and key fields) that removes it.
+REMOVE_OPS: Dict[str, Tuple[str, Tuple[str, ...]]] = {
+    "create_subscriber": ("remove_subscriber", ("topic",)),
+    "create_publisher": ("remove_publisher", ("topic",)),
+    "create_parameter_client": ("remove_parameter_client", ("node",)),
+    "create_tf_lookup": ("remove_tf_lookup", ("parent", "child")),
+    "create_tf_broadcaster": ("remove_tf_broadcaster", ("parent", "child")),
+    "create_robot": ("remove_robot", ("name",)),
+}
+CREATE_OPS = tuple(REMOVE_OPS)
+FOLLOW_UP_OPS = ("observe_parameters",)
+
+
+class StateFormatError(ValueError):
+    """Saved bridge state that cannot be read; names the entry and field."""
+
+
+def _validated(op: str, args: Mapping[str, Any], where: str) -> Dict[str, Any]:
+    try:
+        c.parse_request(op, c.dumps(dict(args)))
+    except c.CommandError as error:
+        raise StateFormatError(f"{where}: {op} arguments: {error}") from None
+    return dict(args)
+
+
+@dataclass(frozen=True)
+class BridgeSpec:
+    op: str
+    args: Dict[str, Any]
+    then: Tuple[Tuple[str, Dict[str, Any]], ...] = ()
+
+    @property
+    def key(self) -> Tuple[str, ...]:
+        """(op, identity fields...): one bridge per key, as the daemon keeps them."""
+        _, fields = REMOVE_OPS[self.op]
+        return (self.op, *(str(self.args[f]) for f in fields))
+
+    def remove_command(self) -> Tuple[str, Dict[str, Any]]:
+        op, fields = REMOVE_OPS[self.op]
+        return op, {f: self.args[f] for f in fields}
+
+    def to_dict(self) -> Dict[str, Any]:
+        out: Dict[str, Any] = {"op": self.op, "args": self.args}
+        if self.then:
+            out["then"] = [{"op": op, "args": args} for op, args in self.then]
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Any, where: str = "bridge") -> BridgeSpec:
+        if not isinstance(data, dict):
+            raise StateFormatError(f"{where}: expected an object, got {type(data).__name__}")
+        op, args = data.get("op"), data.get("args", {})
+        if op not in REMOVE_OPS:
+            raise StateFormatError(f"{where}.op: expected one of {', '.join(CREATE_OPS)}, "
+                                   f"got {op!r}")
+        if not isinstance(args, dict):
+            raise StateFormatError(f"{where}.args: expected an object, got "
+                                   f"{type(args).__name__}")
+        then: List[Tuple[str, Dict[str, Any]]] = []
+        for i, item in enumerate(data.get("then", [])):
+            sub = f"{where}.then[{i}]"
+            if not isinstance(item, dict) or item.get("op") not in FOLLOW_UP_OPS:
+                raise StateFormatError(f"{sub}: expected {{'op': one of {FOLLOW_UP_OPS}, "
+                                       f"'args': ...}}, got {item!r}")
+            then.append((item["op"], _validated(item["op"], item.get("args", {}), sub)))
+        return cls(op, _validated(op, args, where), tuple(then))
+
+
+@dataclass(frozen=True)
+class BridgeState:
+    specs: Tuple[BridgeSpec, ...] = ()
+    version: int = STATE_VERSION
+    extra: Dict[str, Any] = field(default_factory=dict)  # e.g. host/port of the GUI
+
+    def to_json(self) -> str:
+        return json.dumps({"version": self.version, "bridges": [s.to_dict() for s in self.specs],
+                           **({"extra": self.extra} if self.extra else {})},
+                          sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> BridgeState:
+        if not text or not text.strip():
+            return cls()
+        try:
+            data = json.loads(text)
+        except ValueError as error:
+            raise StateFormatError(f"saved bridge state: expected JSON, got {error}") from None
+        if not isinstance(data, dict):
+            raise StateFormatError("saved bridge state: expected a JSON object")
+        version = data.get("version")
+        if version != STATE_VERSION:
+            raise StateFormatError(f"saved bridge state: version {STATE_VERSION} expected, "
+                                   f"got {version!r} (saved by another slicer_client?)")
+        bridges = data.get("bridges", [])
+        if not isinstance(bridges, list):
+            raise StateFormatError("saved bridge state.bridges: expected a list")
+        extra = data.get("extra", {})
+        specs = tuple(BridgeSpec.from_dict(b, f"bridges[{i}]") for i, b in enumerate(bridges))
+        return cls(specs, version, extra if isinstance(extra, dict) else {})

@@ -1,0 +1,345 @@
+"""The Pythonic client: `connect()` -> `Client`, which hands out one object per resource.
+
+    import slicer_client
+    with slicer_client.connect("127.0.0.1", 18944) as ros:
+        sub = ros.subscribe("/tool", "PoseStamped", callback=print)
+        pub = ros.publisher("/cmd", "String"); pub.publish("hello")
+
+Threads: callbacks run in the transport's receive thread by default (keep them short; never
+block on a command there). For GUI code pass ``callbacks="queue"`` and call
+`Client.process_events()` from the GUI thread (for example from a Qt timer): the callbacks
+then run there.
+
+Reconnection: if the daemon goes away the transport retries in the background; when it is
+back, the client re-creates every resource in creation order (same objects, new device
+names if they changed) and restores observers before user commands go through again.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+
+import numpy as np
+
+from protocol.messages import Message
+from protocol.naming import KEY_ROBOT
+from slicer_client.bridge_state import BridgeSpec, BridgeState
+from slicer_client.connection import DEFAULT_HOST, DEFAULT_PORT
+from slicer_client.matrices import as_numpy
+from slicer_client.resources import (ParameterClient, Publisher, Resource, Robot, Service,
+                                     Subscriber, TfBroadcaster, TfLookup)
+from slicer_client.transport import CommandFn, Transport, open_transport
+
+__all__ = ["Client", "connect"]
+
+log = logging.getLogger(__name__)
+
+_QUEUE = "queue"
+_THREAD = "thread"
+
+
+class Client:
+    """A session with the daemon over any `Transport`; see the module docstring."""
+
+    def __init__(self, transport: Transport, *, callbacks: str = _THREAD) -> None:
+        if callbacks not in (_THREAD, _QUEUE):
+            raise ValueError(f"callbacks: expected 'thread' or 'queue', got {callbacks!r}")
+        self._transport = transport
+        self._mode = callbacks
+        self._events: "queue.Queue[Tuple[Callable[..., None], Tuple[Any, ...]]]" = queue.Queue()
+        self._lock = threading.RLock()
+        self._resources: Dict[Tuple[str, ...], Resource] = {}  # creation order
+        self._by_device: Dict[str, Resource] = {}
+        self._latest: Dict[str, Message] = {}
+        self._connection_callbacks: List[Callable[[bool, str], None]] = []
+        self.errors: List[str] = []  # STATUS errors and unreadable messages, newest last
+        self.daemon_info: Dict[str, Any] = {}
+        self._facade: Any = None
+        transport.set_listener(self)
+
+    # --- transport listener (receive / reconnect threads) -------------------------------
+    def on_message(self, message: Message) -> None:
+        with self._lock:
+            self._latest[message.device_name] = message
+            resource = self._by_device.get(message.device_name)
+            if resource is None and message.metadata.get(KEY_ROBOT):
+                resource = self._resources.get(("create_robot",
+                                                message.metadata[KEY_ROBOT]))
+        if message.type_name == "STATUS" and getattr(message.body, "code", 1) != 1:
+            self.errors.append(f"{message.device_name}: {getattr(message.body, 'text', '')}")
+        if resource is not None:
+            try:
+                resource._handle(message)
+            except Exception:  # noqa: BLE001 - one bad message must not stop the stream
+                log.exception("handling %s for %r failed", message.type_name, resource)
+
+    def on_connected(self, command: CommandFn, first: bool) -> None:
+        """Re-create everything (in order) on a new connection, then tell the user."""
+        self.daemon_info = command("hello", {"client": "slicer_client 0.1"})
+        with self._lock:
+            resources = list(self._resources.values())
+            self._by_device.clear()
+        for resource in resources:
+            self._apply(resource, command)
+        if not first:
+            for callback in list(self._connection_callbacks):
+                self._emit(callback, True, "")
+
+    def on_disconnected(self, reason: str) -> None:
+        for callback in list(self._connection_callbacks):
+            self._emit(callback, False, reason)
+
+    # --- event delivery ------------------------------------------------------------------
+    def _emit(self, callback: Callable[..., None], *args: Any) -> None:
+        if self._mode == _QUEUE:
+            self._events.put((callback, args))
+            return
+        try:
+            callback(*args)
+        except Exception:  # noqa: BLE001 - a user callback must not kill the receive thread
+            log.exception("callback %r raised", callback)
+
+    def process_events(self, timeout: float = 0.0, max_events: int = 1000) -> int:
+        """Run queued callbacks in the calling thread (``callbacks="queue"`` mode); waits
+        up to `timeout` s for the first one. Returns how many ran."""
+        ran = 0
+        block = timeout > 0
+        while ran < max_events:
+            try:
+                callback, args = self._events.get(block=block, timeout=timeout if block
+                                                  else None)
+            except queue.Empty:
+                break
+            block = False
+            try:
+                callback(*args)
+            finally:
+                ran += 1
+        return ran
+
+    def on_connection_change(self, callback: Callable[[bool, str], None]) -> None:
+        """`callback(connected, reason)` after a loss and after each re-sync."""
+        self._connection_callbacks.append(callback)
+
+    # --- resources -----------------------------------------------------------------------
+    def _apply(self, resource: Resource, command: CommandFn) -> None:
+        result = command(resource.spec.op, resource.spec.args)
+        resource._created(result)
+        restore = getattr(resource, "_restore", None)
+        if restore is not None:
+            restore(command)
+        with self._lock:
+            for device in resource.devices():
+                self._by_device[device] = resource
+            # Messages that arrived before the reply told us their device (a late joiner
+            # gets the current state at once): hand over the latest of each.
+            early = [self._latest[d] for d in resource.devices() if d in self._latest]
+        for message in early:
+            resource._handle(message)
+
+    def _add(self, resource: Resource) -> Any:
+        key = resource.spec.key
+        with self._lock:
+            existing = self._resources.get(key)
+        if existing is not None and existing.spec.args == resource.spec.args:
+            return existing  # creating is idempotent, as on the daemon
+        self._apply(resource, self.command)
+        with self._lock:
+            self._resources[key] = resource
+        return resource
+
+    def _remove(self, resource: Resource) -> None:
+        op, args = resource.spec.remove_command()
+        try:
+            self.command(op, args)
+        finally:
+            with self._lock:
+                self._resources.pop(resource.spec.key, None)
+                for device in resource.devices():
+                    self._by_device.pop(device, None)
+
+    def _spec_changed(self, resource: Resource) -> None:
+        """A resource's follow-up commands changed (kept for re-sync and saving)."""
+
+    def subscribe(self, topic: str, type: str, *, qos: Optional[Mapping[str, Any]] = None,
+                  rate_hz: Optional[float] = None,
+                  callback: Optional[Callable[[Any], None]] = None) -> Subscriber:
+        """Subscribe to a ROS topic. `type`: "String", "PoseStamped", "pkg/msg/Type"...
+        `callback(value)` on every message (see the module docstring for the thread)."""
+        sub: Subscriber = self._add(Subscriber(self, topic, type, qos=qos, rate_hz=rate_hz))
+        if callback is not None:
+            sub.add_callback(callback)
+        return sub
+
+    def publisher(self, topic: str, type: str, *,
+                  qos: Optional[Mapping[str, Any]] = None) -> Publisher:
+        return self._add(Publisher(self, topic, type, qos=qos))
+
+    def parameters(self, node: str) -> ParameterClient:
+        return self._add(ParameterClient(self, node))
+
+    def tf_lookup(self, parent: str, child: str, *, rate_hz: Optional[float] = None,
+                  callback: Optional[Callable[[np.ndarray], None]] = None) -> TfLookup:
+        lookup: TfLookup = self._add(TfLookup(self, parent, child, rate_hz=rate_hz))
+        if callback is not None:
+            lookup.add_callback(callback)
+        return lookup
+
+    def tf_broadcaster(self, parent: str, child: str, *, static: bool = False
+                       ) -> TfBroadcaster:
+        return self._add(TfBroadcaster(self, parent, child, static=static))
+
+    def service(self, service: str, type: str) -> Service:
+        return Service(self, service, type)
+
+    def robot(self, name: str, *, node: str = "/robot_state_publisher",
+              parameter: str = "robot_description", fixed_frame: Optional[str] = None,
+              tf_prefix: str = "", namespace: str = "",
+              source: Optional[Mapping[str, Any]] = None,
+              callback: Optional[Callable[[str, str, Any], None]] = None,
+              timeout: float = 30.0) -> Robot:
+        """Load a robot from its URDF (default: /robot_state_publisher's
+        robot_description). Its meshes and link transforms then arrive in `Robot.links`."""
+        robot = Robot(self, name, node=node, parameter=parameter, fixed_frame=fixed_frame,
+                      tf_prefix=tf_prefix, namespace=namespace, source=source)
+        if callback is not None:
+            robot.add_callback(callback)
+        key = robot.spec.key
+        with self._lock:
+            existing = self._resources.get(key)
+        if existing is not None and existing.spec.args == robot.spec.args:
+            return existing  # type: ignore[return-value]
+        # Meshes may follow the reply at once: index by robot name before the reply.
+        with self._lock:
+            self._resources[key] = robot
+        try:
+            self._apply(robot, lambda op, args: self.command(op, args, timeout=timeout))
+        except BaseException:
+            with self._lock:
+                self._resources.pop(key, None)
+            raise
+        return robot
+
+    def resources(self) -> List[Resource]:
+        with self._lock:
+            return list(self._resources.values())
+
+    def find(self, op: str, *identity: str) -> Optional[Resource]:
+        with self._lock:
+            return self._resources.get((op, *identity))
+
+    # --- state (re-sync list, scene saving) ---------------------------------------------
+    def state(self) -> BridgeState:
+        return BridgeState(tuple(r.spec for r in self.resources()))
+
+    def restore(self, state: BridgeState) -> List[Resource]:
+        """Create what a saved `BridgeState` lists, in order."""
+        made: List[Resource] = []
+        for spec in state.specs:
+            made.append(self._from_spec(spec))
+        return made
+
+    def _from_spec(self, spec: BridgeSpec) -> Resource:
+        a = spec.args
+        resource: Resource
+        if spec.op == "create_subscriber":
+            resource = self.subscribe(a["topic"], a["type"], qos=a.get("qos"),
+                                      rate_hz=a.get("rate_hz"))
+        elif spec.op == "create_publisher":
+            resource = self.publisher(a["topic"], a["type"], qos=a.get("qos"))
+        elif spec.op == "create_parameter_client":
+            params = self.parameters(a["node"])
+            for op, args in spec.then:
+                if op == "observe_parameters":
+                    params.observe(args.get("names", []))
+            resource = params
+        elif spec.op == "create_tf_lookup":
+            resource = self.tf_lookup(a["parent"], a["child"], rate_hz=a.get("rate_hz"))
+        elif spec.op == "create_tf_broadcaster":
+            resource = self.tf_broadcaster(a["parent"], a["child"],
+                                           static=bool(a.get("static", False)))
+        else:  # create_robot
+            resource = self.robot(a["name"], source=a.get("source"),
+                                  fixed_frame=a.get("fixed_frame"),
+                                  tf_prefix=a.get("tf_prefix", ""),
+                                  namespace=a.get("namespace", ""))
+        return resource
+
+    # --- direct commands -----------------------------------------------------------------
+    @property
+    def address(self) -> str:
+        return self._transport.address
+
+    @property
+    def connected(self) -> bool:
+        return self._transport.connected
+
+    @property
+    def transport(self) -> Transport:
+        return self._transport
+
+    def command(self, op: str, arguments: Optional[Mapping[str, Any]] = None, *,
+                timeout: float = 10.0) -> Dict[str, Any]:
+        """Any op of protocol/README.md; returns its result or raises a typed error."""
+        return self._transport.command(op, arguments, timeout=timeout)
+
+    def send(self, message: Message) -> None:
+        self._transport.send(message)
+
+    def list_bridges(self) -> Dict[str, Any]:
+        return self.command("list_bridges")
+
+    def list_topics(self) -> List[Dict[str, Any]]:
+        return list(self.command("list_topics").get("topics", []))
+
+    def lookup_transform(self, parent: str, child: str, *, timeout: float = 0.5,
+                         stamp: Optional[Tuple[int, int]] = None) -> np.ndarray:
+        """parent -> child now (or at `stamp`), 4x4 mm; waits up to `timeout` s for tf."""
+        args: Dict[str, Any] = {"parent": parent, "child": child, "timeout": timeout}
+        if stamp is not None:
+            args["time"] = {"sec": int(stamp[0]), "nanosec": int(stamp[1])}
+        result = self.command("lookup_transform", args, timeout=timeout + 5.0)
+        return as_numpy(result["matrix"], field="lookup_transform.matrix", rigid=False)
+
+    def latest(self, device: str) -> Optional[Message]:
+        with self._lock:
+            return self._latest.get(device)
+
+    # --- the reference-compatible facade -------------------------------------------------
+    def GetDefaultROS2Node(self) -> Any:  # noqa: N802 - the reference's name
+        """The CamelCase facade (reference_api.py): the same resources, reference names."""
+        if self._facade is None:
+            from slicer_client.reference_api import ROS2Node
+            self._facade = ROS2Node(self)
+        return self._facade
+
+    # --- lifetime ------------------------------------------------------------------------
+    def close(self) -> None:
+        self._transport.close()
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "connected" if self.connected else "disconnected"
+        return f"<slicer_client.Client {self.address} {state}, {len(self._resources)} bridges>"
+
+
+def connect(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *, reconnect: bool = True,
+            callbacks: str = _THREAD, retry_interval: float = 0.5, max_interval: float = 5.0,
+            connect_timeout: float = 3.0) -> Client:
+    """Connect to the daemon. Raises `DaemonUnreachableError` (naming host:port and how to
+    start the daemon) if nothing listens there."""
+    transport = open_transport(host, port, reconnect=reconnect, retry_interval=retry_interval,
+                               max_interval=max_interval, connect_timeout=connect_timeout)
+    try:
+        return Client(transport, callbacks=callbacks)
+    except BaseException:
+        transport.close()
+        raise

@@ -1,0 +1,519 @@
+"""The reference SlicerROS2's CamelCase API on top of a `Client`, so its documented
+examples run with only the logic line changed:
+
+    import slicer_client
+    rosLogic = slicer_client.connect("127.0.0.1", 18944)  # was slicer.util.getModuleLogic('ROS2')
+    rosNode = rosLogic.GetDefaultROS2Node()
+    pub = rosNode.CreateAndAddPublisherNode('String', '/my_string')
+    pub.Publish('hello')
+
+Every facade node wraps one resource of the Pythonic API (`.resource`), so both styles can
+be mixed. Matrices come back as 4x4 numpy arrays in mm; pass a vtkMatrix4x4 to a getter
+(or set ``rosNode.matrix_type = "vtk"``) to get VTK ones. Observers are called as VTK
+calls them, ``callback(caller, event)``, in the thread the client delivers events in
+(the receive thread unless the client was made with ``callbacks="queue"``).
+
+Deliberate differences from the reference: creating something that exists returns the
+existing node (the reference returns None); getters of unknown parameters raise
+`KeyError`/`TypeError` naming the parameter instead of returning garbage; there is one
+ROS node (the daemon's), so ``Create``/``Destroy`` of extra nodes are not offered.
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from protocol import commands as c
+from slicer_client.matrices import fill_vtk, is_vtk_matrix, to_vtk
+from slicer_client.resources import (ParameterClient, Publisher, Resource, Robot, Service,
+                                     Subscriber, TfBroadcaster, TfLookup, parameter_to_python)
+
+if TYPE_CHECKING:
+    from slicer_client.client import Client
+
+__all__ = ["ParameterNode", "PublisherNode", "ROS2Node", "RobotNode", "ServiceClientNode",
+           "SubscriberNode", "Tf2BroadcasterNode", "Tf2LookupNode", "short_type_name"]
+
+_VTK_EVENT_NAMES = {33: "ModifiedEvent"}  # vtkCommand::ModifiedEvent
+_tags = itertools.count(1)
+
+
+def short_type_name(class_or_short: str) -> str:
+    """'vtkMRMLROS2PublisherStringNode' or 'String' or 'std_msgs/msg/String' -> as the
+    daemon takes it (the schema accepts all three; validated here for an early error)."""
+    c.resolve_message_type(class_or_short, "className")
+    return class_or_short
+
+
+class _Observable:
+    """VTK-style observers: AddObserver(event, callback) -> tag, RemoveObserver(tag)."""
+
+    _events: Tuple[str, ...] = ("ModifiedEvent",)
+
+    def __init__(self) -> None:
+        self._observers: Dict[int, Tuple[str, Callable[..., None]]] = {}
+
+    def AddObserver(self, event: Any, callback: Callable[..., None],  # noqa: N802
+                    priority: float = 0.0) -> int:
+        name = _VTK_EVENT_NAMES.get(event, event) if isinstance(event, int) else str(event)
+        if name not in self._events:
+            raise ValueError(f"{type(self).__name__}.AddObserver: expected one of "
+                             f"{', '.join(self._events)}, got {event!r}")
+        tag = next(_tags)
+        self._observers[tag] = (name, callback)
+        return tag
+
+    def RemoveObserver(self, tag: int) -> None:  # noqa: N802
+        self._observers.pop(tag, None)
+
+    def RemoveAllObservers(self) -> None:  # noqa: N802
+        self._observers.clear()
+
+    def HasObserver(self, event: Any) -> bool:  # noqa: N802
+        name = _VTK_EVENT_NAMES.get(event, event) if isinstance(event, int) else str(event)
+        return any(n == name for n, _ in self._observers.values())
+
+    def InvokeEvent(self, event: str) -> None:  # noqa: N802
+        for name, callback in list(self._observers.values()):
+            if name == event:
+                callback(self, event)
+
+
+class _Node(_Observable):
+    def __init__(self, ros_node: ROS2Node, resource: Any) -> None:
+        super().__init__()
+        self._ros_node = ros_node
+        self.resource = resource
+
+    def _matrix_out(self, matrix: Optional[np.ndarray], target: Any) -> Any:
+        if matrix is None:
+            return None
+        if target is not None and is_vtk_matrix(target):
+            return fill_vtk(matrix, target)
+        if self._ros_node.matrix_type == "vtk":
+            return to_vtk(matrix)
+        return matrix.copy()
+
+
+class SubscriberNode(_Node):
+    resource: Subscriber
+
+    def __init__(self, ros_node: ROS2Node, resource: Subscriber) -> None:
+        super().__init__(ros_node, resource)
+        resource.add_callback(lambda value: self.InvokeEvent("ModifiedEvent"))
+
+    def GetName(self) -> str:  # noqa: N802
+        return f"ros2:sub:{self.resource.topic}"
+
+    def GetTopic(self) -> str:  # noqa: N802
+        return self.resource.topic
+
+    def GetROSType(self) -> str:  # noqa: N802
+        return self.resource.ros_type
+
+    def GetNumberOfMessages(self) -> int:  # noqa: N802
+        """Messages the daemon's subscription received (exact even when the stream to this
+        client is rate-capped or coalesced)."""
+        return self.resource.daemon_count()
+
+    def GetLastMessage(self, target: Any = None) -> Any:  # noqa: N802
+        """The last message as a Slicer value (str, bool, int, float, list, 4x4 matrix in
+        mm...); None before the first one."""
+        value = self.resource.last_value
+        if isinstance(value, np.ndarray) and value.shape == (4, 4):
+            return self._matrix_out(value, target)
+        return value
+
+    def GetLastMessageYAML(self) -> str:  # noqa: N802
+        return self.resource.last_message_yaml()
+
+
+class PublisherNode(_Node):
+    resource: Publisher
+
+    def GetName(self) -> str:  # noqa: N802
+        return f"ros2:pub:{self.resource.topic}"
+
+    def GetTopic(self) -> str:  # noqa: N802
+        return self.resource.topic
+
+    def GetROSType(self) -> str:  # noqa: N802
+        return str(self.resource.info.get("type", c.resolve_message_type(self.resource.type)))
+
+    def GetNumberOfMessages(self) -> int:  # noqa: N802
+        return self.resource.sent
+
+    def Publish(self, value: Any) -> int:  # noqa: N802
+        """Publish; returns the number of ROS subscribers (as the reference)."""
+        if hasattr(value, "GetMatrixTransformToParent") and not is_vtk_matrix(value):
+            value = _transform_node_matrix(value)
+        return self.resource.publish(value)
+
+
+class ParameterNode(_Node):
+    """The reference's parameter node: tracks some parameters of one ROS node."""
+
+    resource: ParameterClient
+    _events = ("ParameterModifiedEvent", "ModifiedEvent")
+
+    def __init__(self, ros_node: ROS2Node, resource: ParameterClient) -> None:
+        super().__init__(ros_node, resource)
+        self._tracked: List[str] = list(resource.observed)
+        resource.add_callback(self._changed)
+
+    def _changed(self, name: str, value: Any) -> None:
+        self.InvokeEvent("ParameterModifiedEvent")
+        self.InvokeEvent("ModifiedEvent")
+
+    def GetName(self) -> str:  # noqa: N802
+        return f"ros2:param:{self.resource.node}"
+
+    def GetMonitoredNodeName(self) -> str:  # noqa: N802
+        return self.resource.node
+
+    def AddParameter(self, name: str) -> bool:  # noqa: N802
+        """Track (and observe) one parameter; its current value is fetched now."""
+        if name not in self._tracked:
+            self.resource.observe([*self._tracked, name])
+            self._tracked.append(name)
+        self.resource.get_typed([name])
+        return True
+
+    def RemoveParameter(self, name: str) -> bool:  # noqa: N802
+        if name not in self._tracked:
+            return False
+        self._tracked.remove(name)
+        self.resource.observe(self._tracked)
+        self.resource.values.pop(name, None)
+        return True
+
+    def GetParameterNames(self) -> List[str]:  # noqa: N802
+        return list(self._tracked)
+
+    GetTrackedParametersList = GetParameterNames
+
+    def ListTrackedParameters(self) -> str:  # noqa: N802
+        return "\n".join(self._tracked)
+
+    def _typed(self, name: str) -> c.ParameterValue:
+        if name not in self._tracked:
+            raise KeyError(f"parameter {name!r} of {self.resource.node} is not tracked: "
+                           f"call AddParameter({name!r}) first")
+        value = self.resource.values.get(name)
+        if value is None:
+            value = self.resource.get_typed([name])[name]
+        return value
+
+    def IsParameterSet(self, name: str) -> bool:  # noqa: N802
+        return name in self._tracked and self._typed(name).type != "not_set"
+
+    def GetParameterType(self, name: str) -> str:  # noqa: N802
+        """"bool", "integer", "double", "string", "bool_array", "integer_array",
+        "double_array", "string_array", "byte_array", "not_set"; "" if not tracked."""
+        return self._typed(name).type if name in self._tracked else ""
+
+    def _as(self, name: str, *types: str) -> Any:
+        value = self._typed(name)
+        if value.type not in types:
+            raise TypeError(f"parameter {name!r} of {self.resource.node} is "
+                            f"{value.type}, not {' or '.join(types)}")
+        return parameter_to_python(value)
+
+    def GetParameterAsBool(self, name: str) -> bool:  # noqa: N802
+        return bool(self._as(name, "bool"))
+
+    def GetParameterAsInteger(self, name: str) -> int:  # noqa: N802
+        return int(self._as(name, "integer"))
+
+    def GetParameterAsDouble(self, name: str) -> float:  # noqa: N802
+        return float(self._as(name, "double", "integer"))
+
+    def GetParameterAsString(self, name: str) -> str:  # noqa: N802
+        return str(self._as(name, "string"))
+
+    def GetParameterAsVectorOfBools(self, name: str) -> List[bool]:  # noqa: N802
+        return [bool(v) for v in self._as(name, "bool_array")]
+
+    def GetParameterAsVectorOfIntegers(self, name: str) -> List[int]:  # noqa: N802
+        return [int(v) for v in self._as(name, "integer_array", "byte_array")]
+
+    def GetParameterAsVectorOfDoubles(self, name: str) -> List[float]:  # noqa: N802
+        return [float(v) for v in self._as(name, "double_array", "integer_array")]
+
+    def GetParameterAsVectorOfStrings(self, name: str) -> List[str]:  # noqa: N802
+        return [str(v) for v in self._as(name, "string_array")]
+
+    def PrintParameter(self, name: str) -> str:  # noqa: N802
+        """The value as text, as the reference's PrintParameterValue."""
+        value = self._typed(name)
+        raw = parameter_to_python(value)
+        if value.type == "bool":
+            return "true" if raw else "false"
+        if value.type.endswith("_array"):
+            return "[" + ", ".join(str(v).lower() if isinstance(v, bool) else str(v)
+                                   for v in raw) + "]"
+        return "" if raw is None else str(raw)
+
+    PrintParameterValue = PrintParameter
+
+    def SetParameter(self, name: str, value: Any, type: Optional[str] = None) -> bool:  # noqa: N802
+        """Not in the reference (its parameter node is read-only); offered for symmetry."""
+        self.resource.set(name, value, type=type)
+        return True
+
+
+class Tf2BroadcasterNode(_Node):
+    resource: TfBroadcaster
+
+    def GetName(self) -> str:  # noqa: N802
+        return f"ros2:tf2broadcaster:{self.resource.parent}To{self.resource.child}"
+
+    def GetParentID(self) -> str:  # noqa: N802
+        return self.resource.parent
+
+    def GetChildID(self) -> str:  # noqa: N802
+        return self.resource.child
+
+    def GetNumberOfBroadcasts(self) -> int:  # noqa: N802
+        return self.resource.count
+
+    def Broadcast(self, matrix: Any) -> bool:  # noqa: N802
+        """A 4x4 in mm (numpy, lists, vtkMatrix4x4) or a Slicer transform node."""
+        if hasattr(matrix, "GetMatrixTransformToParent") and not is_vtk_matrix(matrix):
+            matrix = _transform_node_matrix(matrix)
+        self.resource.broadcast(matrix)
+        return True
+
+    def ObserveTransformNode(self, transform_node: Any) -> int:  # noqa: N802
+        """Broadcast whenever a Slicer transform node changes (inside 3D Slicer)."""
+        event = getattr(transform_node, "TransformModifiedEvent", 15000)
+        return int(transform_node.AddObserver(
+            event, lambda caller, _event: self.Broadcast(caller)))
+
+
+class Tf2LookupNode(_Node):
+    resource: TfLookup
+    _events = ("ModifiedEvent", "TransformModifiedEvent")
+
+    def __init__(self, ros_node: ROS2Node, resource: TfLookup) -> None:
+        super().__init__(ros_node, resource)
+        resource.add_callback(self._changed)
+
+    def _changed(self, matrix: np.ndarray) -> None:
+        self.InvokeEvent("TransformModifiedEvent")
+        self.InvokeEvent("ModifiedEvent")
+
+    def GetName(self) -> str:  # noqa: N802
+        return f"ros2:tf2lookup:{self.resource.parent}To{self.resource.child}"
+
+    def GetParentID(self) -> str:  # noqa: N802
+        return self.resource.parent
+
+    def GetChildID(self) -> str:  # noqa: N802
+        return self.resource.child
+
+    def IsParentAndChildSet(self) -> bool:  # noqa: N802
+        return bool(self.resource.parent and self.resource.child)
+
+    def GetMatrixTransformToParent(self, target: Any = None) -> Any:  # noqa: N802
+        """The latest parent -> child (4x4, mm); None before tf could connect them."""
+        return self._matrix_out(self.resource.matrix, target)
+
+
+class RobotNode(_Node):
+    resource: Robot
+
+    def __init__(self, ros_node: ROS2Node, resource: Robot) -> None:
+        super().__init__(ros_node, resource)
+        resource.add_callback(lambda *args: self.InvokeEvent("ModifiedEvent"))
+
+    def GetName(self) -> str:  # noqa: N802
+        return f"ros2:robot:{self.resource.name}"
+
+    def GetRobotName(self) -> str:  # noqa: N802
+        return self.resource.name
+
+    def GetNumberOfLinks(self) -> int:  # noqa: N802
+        return len(self.resource.links)
+
+    def GetLinkNames(self) -> List[str]:  # noqa: N802
+        return sorted(self.resource.links)
+
+    def GetLinkTransform(self, link: str, target: Any = None) -> Any:  # noqa: N802
+        entry = self.resource.links.get(link)
+        return None if entry is None else self._matrix_out(entry.matrix, target)
+
+
+class ServiceClientNode(_Node):
+    """A service client; the reference generates one class per service type, here any
+    installed service type works."""
+
+    resource: Service
+
+    def __init__(self, ros_node: ROS2Node, resource: Service) -> None:
+        super().__init__(ros_node, resource)
+        self._last: Optional[Dict[str, Any]] = None
+
+    def GetTopic(self) -> str:  # noqa: N802
+        return self.resource.service
+
+    def SendBlockingRequest(self, request: Optional[Dict[str, Any]] = None,  # noqa: N802
+                            timeout: float = 4.0) -> Dict[str, Any]:
+        self._last = self.resource.call(request, timeout)
+        self.InvokeEvent("ModifiedEvent")
+        return self._last
+
+    def SendAsyncRequest(self, request: Optional[Dict[str, Any]] = None,  # noqa: N802
+                         timeout: float = 4.0) -> None:
+        def done(response: Optional[Dict[str, Any]], error: Optional[Exception]) -> None:
+            if error is None:
+                self._last = response
+                self.InvokeEvent("ModifiedEvent")
+        self.resource.call_async(request, done, timeout)
+
+    def GetLastResponse(self) -> Optional[Dict[str, Any]]:  # noqa: N802
+        return self._last
+
+
+def _transform_node_matrix(node: Any) -> Any:
+    import vtk  # only Slicer transform nodes get here, so vtk is there
+    matrix = vtk.vtkMatrix4x4()
+    node.GetMatrixTransformToParent(matrix)
+    return matrix
+
+
+class ROS2Node:
+    """The reference's ``vtkMRMLROS2NodeNode``: the daemon's ROS node, seen from here."""
+
+    def __init__(self, client: Client) -> None:
+        self.client = client
+        self.matrix_type = "numpy"  # or "vtk"
+        self._nodes: Dict[Tuple[str, ...], _Node] = {}
+        self._services: Dict[str, ServiceClientNode] = {}
+
+    def _wrap(self, resource: Resource, cls: Any) -> Any:
+        node = self._nodes.get(resource.spec.key)
+        if node is None or node.resource is not resource:
+            node = cls(self, resource)
+            self._nodes[resource.spec.key] = node
+        return node
+
+    def _get(self, *key: str) -> Any:
+        resource = self.client.find(*key)
+        return None if resource is None else self._nodes.get(resource.spec.key)
+
+    def _drop(self, *key: str) -> bool:
+        resource = self.client.find(*key)
+        if resource is None:
+            return False
+        resource.remove()
+        node = self._nodes.pop(resource.spec.key, None)
+        if node is not None:
+            node.RemoveAllObservers()
+        return True
+
+    def GetROS2NodeName(self) -> str:  # noqa: N802
+        return str(self.client.daemon_info.get("node", "/slicer_bridge"))
+
+    GetName = GetROS2NodeName
+
+    def Spin(self) -> None:  # noqa: N802
+        """The daemon spins its node itself; kept so reference scripts run unchanged."""
+
+    def GetSpinning(self) -> bool:  # noqa: N802
+        return self.client.connected
+
+    def RegisteredROS2SubscriberNodes(self) -> str:  # noqa: N802
+        return " ".join(f"vtkMRMLROS2Subscriber{n}Node" for n in c.REFERENCE_TYPE_NAMES)
+
+    def RegisteredROS2PublisherNodes(self) -> str:  # noqa: N802
+        return " ".join(f"vtkMRMLROS2Publisher{n}Node" for n in c.REFERENCE_TYPE_NAMES)
+
+    # topics
+    def CreateAndAddSubscriberNode(self, className: str, topic: str) -> SubscriberNode:  # noqa: N802,N803
+        sub = self.client.subscribe(topic, short_type_name(className))
+        return self._wrap(sub, SubscriberNode)
+
+    def CreateAndAddPublisherNode(self, className: str, topic: str) -> PublisherNode:  # noqa: N802,N803
+        pub = self.client.publisher(topic, short_type_name(className))
+        return self._wrap(pub, PublisherNode)
+
+    def GetSubscriberNodeByTopic(self, topic: str) -> Optional[SubscriberNode]:  # noqa: N802
+        return self._get("create_subscriber", topic)
+
+    def GetPublisherNodeByTopic(self, topic: str) -> Optional[PublisherNode]:  # noqa: N802
+        return self._get("create_publisher", topic)
+
+    def RemoveAndDeleteSubscriberNode(self, topic: str) -> bool:  # noqa: N802
+        return self._drop("create_subscriber", topic)
+
+    def RemoveAndDeletePublisherNode(self, topic: str) -> bool:  # noqa: N802
+        return self._drop("create_publisher", topic)
+
+    # parameters
+    def CreateAndAddParameterNode(self, nodeName: str) -> ParameterNode:  # noqa: N802,N803
+        return self._wrap(self.client.parameters(nodeName), ParameterNode)
+
+    def GetParameterNodeByNode(self, nodeName: str) -> Optional[ParameterNode]:  # noqa: N802,N803
+        return self._get("create_parameter_client", nodeName)
+
+    def RemoveAndDeleteParameterNode(self, nodeName: str) -> bool:  # noqa: N802,N803
+        return self._drop("create_parameter_client", nodeName)
+
+    # tf2
+    def CreateAndAddTf2BroadcasterNode(self, parent_id: str, child_id: str  # noqa: N802
+                                       ) -> Tf2BroadcasterNode:
+        return self._wrap(self.client.tf_broadcaster(parent_id, child_id), Tf2BroadcasterNode)
+
+    def CreateAndAddTf2LookupNode(self, parent_id: str, child_id: str  # noqa: N802
+                                  ) -> Tf2LookupNode:
+        return self._wrap(self.client.tf_lookup(parent_id, child_id), Tf2LookupNode)
+
+    def GetTf2BroadcasterNodeByParentChild(self, parent_id: str, child_id: str  # noqa: N802
+                                           ) -> Optional[Tf2BroadcasterNode]:
+        return self._get("create_tf_broadcaster", parent_id, child_id)
+
+    def GetTf2LookupNodeByParentChild(self, parent_id: str, child_id: str  # noqa: N802
+                                      ) -> Optional[Tf2LookupNode]:
+        return self._get("create_tf_lookup", parent_id, child_id)
+
+    def RemoveAndDeleteTf2BroadcasterNode(self, parent_id: str, child_id: str) -> bool:  # noqa: N802
+        return self._drop("create_tf_broadcaster", parent_id, child_id)
+
+    def RemoveAndDeleteTf2LookupNode(self, parent_id: str, child_id: str) -> bool:  # noqa: N802
+        return self._drop("create_tf_lookup", parent_id, child_id)
+
+    # robots
+    def CreateAndAddRobotNode(self, robotName: str,  # noqa: N802,N803
+                              parameterNodeName: str = "/robot_state_publisher",  # noqa: N803
+                              parameterName: str = "robot_description",  # noqa: N803
+                              fixedFrame: str = "", tfPrefix: str = "") -> RobotNode:  # noqa: N803
+        robot = self.client.robot(robotName, node=parameterNodeName, parameter=parameterName,
+                                  fixed_frame=fixedFrame or None, tf_prefix=tfPrefix)
+        return self._wrap(robot, RobotNode)
+
+    def GetRobotNodeByName(self, robotName: str) -> Optional[RobotNode]:  # noqa: N802,N803
+        return self._get("create_robot", robotName)
+
+    def RemoveAndDeleteRobotNode(self, robotName: str) -> bool:  # noqa: N802,N803
+        return self._drop("create_robot", robotName)
+
+    # services
+    def CreateAndAddServiceClientNode(self, className: str, service: str  # noqa: N802,N803
+                                      ) -> ServiceClientNode:
+        node = self._services.get(service)
+        if node is None:
+            node = ServiceClientNode(self, self.client.service(service, className))
+            self._services[service] = node
+        return node
+
+    def GetServiceClientNodeByTopic(self, service: str) -> Optional[ServiceClientNode]:  # noqa: N802
+        return self._services.get(service)
+
+    def RemoveAndDeleteServiceClientNode(self, service: str) -> bool:  # noqa: N802
+        return self._services.pop(service, None) is not None
+
+

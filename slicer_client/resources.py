@@ -1,0 +1,464 @@
+"""One object per daemon-side resource: what a `Client` hands out.
+
+Each resource knows the command that creates it (its `BridgeSpec`, replayed after a
+reconnect), the device name the daemon answered with, and how to read the messages that
+arrive for it. Callbacks run where the client delivers events: in the receive thread by
+default, or in whatever thread calls `Client.process_events()` (see client.py).
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from dataclasses import dataclass
+from typing import (TYPE_CHECKING, Any, Callable, Dict, List, Mapping, Optional, Sequence,
+                    Tuple)
+
+import numpy as np
+
+from protocol import commands as c
+from protocol.messages import Message, PolyData, String, Transform
+from protocol.naming import KEY_LINK, KEY_ROLE, KEY_VISUAL
+from slicer_client.bridge_state import BridgeSpec
+from slicer_client.matrices import as_numpy, as_rows
+from slicer_client.values import value_from_message
+
+if TYPE_CHECKING:
+    from slicer_client.client import Client
+
+__all__ = ["ParameterClient", "Publisher", "Resource", "Robot", "RobotLink", "Service",
+           "Subscriber", "TfBroadcaster", "TfLookup", "parameter_to_python"]
+
+Callback = Callable[..., None]
+
+
+def _qos_dict(qos: Optional[Mapping[str, Any]]) -> Optional[Dict[str, Any]]:
+    if qos is None:
+        return None
+    known = c.QoS(**dict(qos))  # TypeError names an unknown field
+    return known.to_dict()
+
+
+def _drop_none(args: Dict[str, Any]) -> Dict[str, Any]:
+    return {k: v for k, v in args.items() if v is not None}
+
+
+class Resource:
+    """Base: creation spec, device name, callbacks, removal."""
+
+    def __init__(self, client: Client, spec: BridgeSpec) -> None:
+        self._client = client
+        self.spec = spec
+        self.device: str = ""
+        self.info: Dict[str, Any] = {}
+        self.removed = False
+        self._callbacks: List[Callback] = []
+        self._lock = threading.Lock()
+        self._changed = threading.Condition(self._lock)
+
+    # --- plumbing the client calls ------------------------------------------------------
+    def _created(self, result: Mapping[str, Any]) -> None:
+        self.info = dict(result)
+        self.device = str(result.get("device", ""))
+
+    def devices(self) -> Tuple[str, ...]:
+        return (self.device,) if self.device else ()
+
+    def _handle(self, message: Message) -> None:
+        """A message for one of `devices()` (receive thread)."""
+
+    def _notify(self, *args: Any) -> None:
+        for callback in list(self._callbacks):
+            self._client._emit(callback, *args)
+
+    def _wait(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
+        with self._changed:
+            if not self._changed.wait_for(predicate, timeout):
+                raise TimeoutError(f"{what}: nothing within {timeout} s (daemon at "
+                                   f"{self._client.address}, device {self.device!r})")
+
+    # --- user API -----------------------------------------------------------------------
+    def add_callback(self, callback: Callback) -> Callback:
+        self._callbacks.append(callback)
+        return callback
+
+    def remove_callback(self, callback: Callback) -> None:
+        if callback in self._callbacks:
+            self._callbacks.remove(callback)
+
+    def remove(self) -> None:
+        """Remove it daemon-side and forget it (it is no longer re-created)."""
+        if not self.removed:
+            self._client._remove(self)
+            self.removed = True
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.spec.key[1:]} device={self.device!r}>"
+
+
+class Subscriber(Resource):
+    """A ROS subscription streamed to this client (the reference's subscriber node)."""
+
+    def __init__(self, client: Client, topic: str, type: str, *,
+                 qos: Optional[Mapping[str, Any]] = None,
+                 rate_hz: Optional[float] = None) -> None:
+        super().__init__(client, BridgeSpec("create_subscriber", _drop_none(
+            {"topic": topic, "type": type, "qos": _qos_dict(qos), "rate_hz": rate_hz})))
+        self.topic = topic
+        self.type = type
+        self.count = 0  # messages this client received (the daemon may coalesce a burst)
+        self.last_message: Optional[Message] = None
+
+    @property
+    def ros_type(self) -> str:
+        return str(self.info.get("type", c.resolve_message_type(self.type)))
+
+    def _handle(self, message: Message) -> None:
+        with self._changed:
+            self.count += 1
+            self.last_message = message
+            self._changed.notify_all()
+        self._notify(self.last_value)
+
+    @property
+    def last_value(self) -> Any:
+        """The last message as a Python value: str/bool/int/float, a 4x4 numpy matrix in
+        mm, a list/dict for JSON types, numpy pixels, PolyData; None before the first."""
+        message = self.last_message
+        return None if message is None else value_from_message(message)
+
+    def wait_for_message(self, timeout: float = 10.0,
+                         predicate: Optional[Callable[[Any], bool]] = None) -> Any:
+        """Block until a message (satisfying `predicate` on its value) has arrived."""
+        def ready() -> bool:
+            return self.last_message is not None and (
+                predicate is None or bool(predicate(value_from_message(self.last_message))))
+        self._wait(ready, timeout, f"a message on {self.topic}")
+        return self.last_value
+
+    def last_message_yaml(self, timeout: float = 10.0) -> str:
+        """The daemon's last message as YAML (`ros2 topic echo` style); "" before any."""
+        return str(self._last("yaml", timeout).get("text", ""))
+
+    def daemon_count(self, timeout: float = 10.0) -> int:
+        """How many messages the daemon's subscription received (exact, not coalesced)."""
+        return int(self._last("yaml", timeout).get("count", 0))
+
+    def _last(self, fmt: str, timeout: float) -> Dict[str, Any]:
+        return self._client.command("get_last_message", {"topic": self.topic, "format": fmt},
+                                    timeout=timeout)
+
+
+class Publisher(Resource):
+    """A ROS publisher fed by this client."""
+
+    def __init__(self, client: Client, topic: str, type: str, *,
+                 qos: Optional[Mapping[str, Any]] = None) -> None:
+        super().__init__(client, BridgeSpec("create_publisher", _drop_none(
+            {"topic": topic, "type": type, "qos": _qos_dict(qos)})))
+        self.topic = topic
+        self.type = type
+        self.sent = 0
+
+    def publish(self, value: Any, timeout: float = 10.0) -> int:
+        """Publish one message; returns the number of ROS subscribers (as the reference).
+        `value`: the message as a dict of its fields, or a bare value for one-field types
+        (str, bool, int, float, lists/tables), or a 4x4 matrix (numpy, lists or
+        vtkMatrix4x4, mm) for Pose/PoseStamped/Transform types."""
+        result = self._client.command("publish", {"topic": self.topic,
+                                                  "value": _json_value(value)},
+                                      timeout=timeout)
+        self.sent += 1
+        return int(result.get("subscribers", 0))
+
+    def send(self, body: Any, metadata: Optional[Mapping[str, str]] = None) -> None:
+        """Stream an OpenIGTLink body (Transform, String, Image, PolyData...) to this
+        publisher's device: no reply, so bad data comes back as a STATUS in
+        `Client.errors`. A matrix or a str is wrapped for you."""
+        if isinstance(body, str):
+            body = String(body)
+        elif not hasattr(body, "pack"):
+            body = Transform(as_numpy(body))
+        self._client.send(Message(self.device, body, metadata=dict(metadata or {})))
+        self.sent += 1
+
+
+def _json_value(value: Any) -> Any:
+    """numpy and vtk values -> JSON-able ones (matrices stay in mm)."""
+    if hasattr(value, "GetElement"):
+        return as_rows(value)
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, dict):
+        return {k: _json_value(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_value(v) for v in value]
+    return value
+
+
+def parameter_to_python(value: c.ParameterValue) -> Any:
+    return list(value.value) if isinstance(value.value, tuple) else value.value
+
+
+class ParameterClient(Resource):
+    """Another ROS node's parameters: list, get, set, observe (typed values)."""
+
+    def __init__(self, client: Client, node: str) -> None:
+        super().__init__(client, BridgeSpec("create_parameter_client", {"node": node}))
+        self.node = node
+        self.observed: Tuple[str, ...] = ()
+        self.values: Dict[str, c.ParameterValue] = {}  # last known, kept by observe/get
+
+    def _restore(self, command: Callable[..., Dict[str, Any]]) -> None:
+        if self.observed:
+            command("observe_parameters", {"node": self.node, "names": list(self.observed)})
+
+    def _handle(self, message: Message) -> None:
+        if not isinstance(message.body, String):
+            return
+        try:
+            data = json.loads(message.body.text)
+            values = {name: c.ParameterValue.from_json_value(raw, f"values.{name}")
+                      for name, raw in dict(data.get("values", {})).items()}
+        except (ValueError, c.CommandError, AttributeError) as error:
+            self._client.errors.append(f"{self.device}: unreadable parameter update: {error}")
+            return
+        with self._changed:
+            self.values.update(values)
+            self._changed.notify_all()
+        for name, value in values.items():
+            self._notify(name, parameter_to_python(value))
+
+    def list(self, timeout: float = 10.0) -> List[str]:
+        return list(self._client.command("list_parameters", {"node": self.node},
+                                         timeout=timeout).get("names", []))
+
+    def get_typed(self, names: Sequence[str], timeout: float = 10.0
+                  ) -> Dict[str, c.ParameterValue]:
+        result = self._client.command("get_parameters", {"node": self.node,
+                                                         "names": list(names)},
+                                      timeout=timeout)
+        values = {name: c.ParameterValue.from_json_value(raw, f"values.{name}")
+                  for name, raw in dict(result.get("values", {})).items()}
+        with self._changed:
+            self.values.update(values)
+        return values
+
+    def get(self, name: str, timeout: float = 10.0) -> Any:
+        """One parameter's value as Python (None when not set)."""
+        return parameter_to_python(self.get_typed([name], timeout)[name])
+
+    def set(self, name: str, value: Any, *, type: Optional[str] = None,
+            timeout: float = 10.0) -> None:
+        """Set one parameter; `type` (e.g. "double") overrides the inferred one. Raises
+        `ParameterRejectedError` with the node's reason if the node refuses."""
+        typed = c.ParameterValue(type, value) if type else c.ParameterValue.infer(value)
+        result = self._client.command("set_parameters", {
+            "node": self.node, "values": {name: typed.to_dict()}}, timeout=timeout)
+        outcome = dict(result.get("results", {})).get(name, {"ok": True})
+        if not outcome.get("ok", False):
+            from slicer_client.errors import ParameterRejectedError
+            raise ParameterRejectedError(self.node, name, str(outcome.get("reason", "")))
+
+    def observe(self, names: Sequence[str], timeout: float = 10.0) -> None:
+        """Have changes of `names` pushed (replaces the observed set; [] stops).
+        Callbacks get (name, value)."""
+        self._client.command("observe_parameters", {"node": self.node, "names": list(names)},
+                             timeout=timeout)
+        self.observed = tuple(names)
+        self.spec = BridgeSpec(self.spec.op, self.spec.args, (
+            ("observe_parameters", {"node": self.node, "names": list(names)}),)
+            if names else ())
+        self._client._spec_changed(self)
+
+
+class TfLookup(Resource):
+    """parent -> child from tf2, streamed as a 4x4 matrix in mm whenever it changes."""
+
+    def __init__(self, client: Client, parent: str, child: str, *,
+                 rate_hz: Optional[float] = None) -> None:
+        super().__init__(client, BridgeSpec("create_tf_lookup", _drop_none(
+            {"parent": parent, "child": child, "rate_hz": rate_hz})))
+        self.parent = parent
+        self.child = child
+        self.matrix: Optional[np.ndarray] = None
+        self.count = 0
+
+    def _handle(self, message: Message) -> None:
+        if not isinstance(message.body, Transform):
+            return
+        with self._changed:
+            self.matrix = np.array(message.body.matrix, dtype=np.float64)
+            self.count += 1
+            self._changed.notify_all()
+        self._notify(self.matrix)
+
+    def wait_for_matrix(self, timeout: float = 10.0,
+                        predicate: Optional[Callable[[np.ndarray], bool]] = None
+                        ) -> np.ndarray:
+        self._wait(lambda: self.matrix is not None and (predicate is None
+                                                         or bool(predicate(self.matrix))),
+                   timeout, f"tf {self.parent} -> {self.child}")
+        assert self.matrix is not None
+        return self.matrix.copy()
+
+    def lookup(self, timeout: float = 0.5) -> np.ndarray:
+        """One lookup now (waits up to `timeout` s daemon-side for tf to connect)."""
+        return self._client.lookup_transform(self.parent, self.child, timeout=timeout)
+
+
+class TfBroadcaster(Resource):
+    def __init__(self, client: Client, parent: str, child: str, *, static: bool = False) -> None:
+        super().__init__(client, BridgeSpec("create_tf_broadcaster",
+                                            {"parent": parent, "child": child,
+                                             "static": static}))
+        self.parent = parent
+        self.child = child
+        self.count = 0
+
+    def broadcast(self, matrix_mm: Any, stamp: Optional[Tuple[int, int]] = None,
+                  timeout: float = 10.0) -> None:
+        """Broadcast parent -> child (a rigid 4x4 in mm: numpy, lists or vtkMatrix4x4);
+        the daemon stamps it now unless `stamp` (sec, nanosec) is given."""
+        args: Dict[str, Any] = {"parent": self.parent, "child": self.child,
+                                "matrix": as_rows(matrix_mm)}
+        if stamp is not None:
+            args["stamp"] = {"sec": int(stamp[0]), "nanosec": int(stamp[1])}
+        self._client.command("broadcast_transform", args, timeout=timeout)
+        self.count += 1
+
+    def send(self, matrix_mm: Any) -> None:
+        """Stream a TRANSFORM to the broadcaster's device (no reply; for high rates)."""
+        self._client.send(Message(self.device, Transform(as_numpy(matrix_mm))))
+        self.count += 1
+
+
+class Service:
+    """A ROS service client (nothing is created daemon-side: each call is one command)."""
+
+    def __init__(self, client: Client, service: str, type: str) -> None:
+        c.resolve_service_type(type)  # fail early on a bad type name
+        self._client = client
+        self.service = service
+        self.type = type
+
+    def call(self, request: Optional[Mapping[str, Any]] = None, timeout: float = 4.0
+             ) -> Dict[str, Any]:
+        """Call and wait; returns the response fields. The daemon gives up after `timeout`
+        (TIMEOUT refusal); this client waits a little longer for that answer."""
+        result = self._client.command("call_service", {
+            "service": self.service, "type": self.type,
+            "request": _json_value(dict(request or {})), "timeout": timeout},
+            timeout=timeout + 2.0)
+        return dict(result.get("response", {}))
+
+    def call_async(self, request: Optional[Mapping[str, Any]],
+                   callback: Callable[[Optional[Dict[str, Any]], Optional[Exception]], None],
+                   timeout: float = 4.0) -> threading.Thread:
+        """Call in a worker thread; `callback(response, error)` runs there (or is queued)."""
+        def run() -> None:
+            try:
+                response = self.call(request, timeout)
+            except Exception as error:  # noqa: BLE001 - handed to the callback
+                self._client._emit(callback, None, error)
+            else:
+                self._client._emit(callback, response, None)
+        worker = threading.Thread(target=run, name=f"service {self.service}", daemon=True)
+        worker.start()
+        return worker
+
+
+@dataclass
+class RobotLink:
+    """One link: its transform from the fixed frame (mm) and its visuals' meshes."""
+
+    name: str
+    device: str = ""
+    matrix: Optional[np.ndarray] = None
+    meshes: Dict[int, PolyData] = None  # type: ignore[assignment]
+    metadata: Dict[int, Dict[str, str]] = None  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        self.meshes = {} if self.meshes is None else self.meshes
+        self.metadata = {} if self.metadata is None else self.metadata
+
+
+class Robot(Resource):
+    """A robot: one mesh (PolyData, mm, in its link's frame) per link visual and one
+    transform per link, as they arrive; read from the messages' ros2.* metadata.
+    Callbacks get (kind, link_name, value) with kind "transform" or "mesh"."""
+
+    def __init__(self, client: Client, name: str, *, node: str = "/robot_state_publisher",
+                 parameter: str = "robot_description", fixed_frame: Optional[str] = None,
+                 tf_prefix: str = "", namespace: str = "",
+                 source: Optional[Mapping[str, Any]] = None) -> None:
+        src = dict(source) if source is not None else {"kind": "parameter", "node": node,
+                                                        "parameter": parameter}
+        super().__init__(client, BridgeSpec("create_robot", _drop_none({
+            "name": name, "source": src, "fixed_frame": fixed_frame or None,
+            "tf_prefix": tf_prefix or None, "namespace": namespace or None})))
+        self.name = name
+        self.links: Dict[str, RobotLink] = {}
+        self._devices: Dict[str, Tuple[str, Optional[int]]] = {}
+
+    def _created(self, result: Mapping[str, Any]) -> None:
+        super()._created(result)
+        with self._changed:
+            for item in result.get("links", []):
+                link = self.links.setdefault(item["link"], RobotLink(item["link"]))
+                link.device = item.get("device", "")
+                if link.device:
+                    self._devices[link.device] = (link.name, None)
+                for index, device in enumerate(item.get("visuals", [])):
+                    self._devices[device] = (link.name, index)
+
+    def devices(self) -> Tuple[str, ...]:
+        return tuple(self._devices)
+
+    def _handle(self, message: Message) -> None:
+        meta = message.metadata
+        known = self._devices.get(message.device_name)
+        link_name = meta.get(KEY_LINK) or (known[0] if known else "")
+        if not link_name:
+            return
+        with self._changed:
+            link = self.links.setdefault(link_name, RobotLink(link_name))
+            if isinstance(message.body, Transform) and meta.get(KEY_ROLE, "robot_link") \
+                    == "robot_link":
+                link.device = link.device or message.device_name
+                link.matrix = np.array(message.body.matrix, dtype=np.float64)
+                kind, value = "transform", link.matrix
+            elif isinstance(message.body, PolyData):
+                index = int(meta.get(KEY_VISUAL, known[1] if known and known[1] is not None
+                                     else 0))
+                link.meshes[index] = message.body
+                link.metadata[index] = dict(meta)
+                kind, value = "mesh", message.body
+            else:
+                return
+            self._changed.notify_all()
+        self._notify(kind, link_name, value)
+
+    @property
+    def transforms(self) -> Dict[str, np.ndarray]:
+        return {n: l.matrix.copy() for n, l in self.links.items() if l.matrix is not None}
+
+    def mesh_count(self) -> int:
+        return sum(len(l.meshes) for l in self.links.values())
+
+    def wait_until_loaded(self, timeout: float = 30.0) -> None:
+        """Wait until every link named in the create reply has a transform and every
+        visual its mesh."""
+        def loaded() -> bool:
+            for device, (link, index) in self._devices.items():
+                entry = self.links.get(link)
+                if entry is None:
+                    return False
+                if index is None and entry.matrix is None:
+                    return False
+                if index is not None and index not in entry.meshes:
+                    return False
+            return bool(self._devices)
+        self._wait(loaded, timeout, f"robot {self.name} links and meshes")

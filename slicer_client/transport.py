@@ -1,0 +1,201 @@
+"""The transport behind a `Client`: one factory, `open_transport`, and one protocol.
+
+A transport carries commands (blocking, matched by id) and messages, and tells its
+listener about messages, connections and losses. Two implementations exist:
+
+- `ReconnectingTransport` (here): a TCP `Connection` to the daemon that, when the daemon
+  goes away, retries in a background thread (every `retry_interval` s, growing to
+  `max_interval`) and, once back, lets the listener re-create its bridges *before* user
+  commands are let through again;
+- the 3D Slicer module's connector transport (slicer_module/ROS2Bridge), which sends the
+  same commands through Slicer's OpenIGTLinkIF connector node.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any, Callable, Dict, Mapping, Optional
+
+from protocol.messages import Message
+from slicer_client.connection import (DEFAULT_HOST, DEFAULT_PORT, ConnectionClosedError,
+                                      Connection, DaemonUnreachableError)
+
+try:  # Protocol is in typing from 3.8; keep the import local to typing users
+    from typing import Protocol
+except ImportError:  # pragma: no cover
+    Protocol = object  # type: ignore[assignment,misc]
+
+__all__ = ["CommandFn", "ReconnectingTransport", "Transport", "TransportListener",
+           "open_transport"]
+
+log = logging.getLogger(__name__)
+
+CommandFn = Callable[..., Dict[str, Any]]  # (op, args=None, *, timeout=...) -> result
+
+
+class TransportListener(Protocol):
+    def on_message(self, message: Message) -> None:
+        """Any message that is not a command reply (receive thread)."""
+
+    def on_connected(self, command: CommandFn, first: bool) -> None:
+        """A (re)connection is up. Re-create state with `command`; user commands wait
+        until this returns. `first` is True for the connection made by `connect()`."""
+
+    def on_disconnected(self, reason: str) -> None:
+        """The connection was lost; the transport is retrying."""
+
+
+class Transport(Protocol):
+    address: str
+
+    @property
+    def connected(self) -> bool: ...
+
+    def set_listener(self, listener: TransportListener) -> None: ...
+
+    def command(self, op: str, arguments: Optional[Mapping[str, Any]] = None, *,
+                timeout: float = 10.0) -> Dict[str, Any]: ...
+
+    def send(self, message: Message) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class ReconnectingTransport:
+    """A TCP connection to the daemon that comes back by itself."""
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
+                 reconnect: bool = True, retry_interval: float = 0.5,
+                 max_interval: float = 5.0, connect_timeout: float = 3.0) -> None:
+        self.host = host
+        self.port = port
+        self.address = f"{host}:{port}"
+        self._reconnect = reconnect
+        self._retry_interval = retry_interval
+        self._max_interval = max_interval
+        self._connect_timeout = connect_timeout
+        self._listener: Optional[TransportListener] = None
+        self._lock = threading.Lock()
+        self._ready = threading.Event()  # set while a connection is up and re-synced
+        self._stop = threading.Event()
+        self._generation = 0
+        self._retrier: Optional[threading.Thread] = None
+        self._retrying = False  # guarded by _lock: one retry thread at a time
+        self.reconnects = 0
+        self.last_loss: str = ""
+        self._conn = self._open()  # raises DaemonUnreachableError naming host:port
+
+    # --- connections --------------------------------------------------------------------
+    def _open(self) -> Connection:
+        with self._lock:
+            self._generation += 1
+            generation = self._generation
+        return Connection(self.host, self.port, connect_timeout=self._connect_timeout,
+                          on_message=self._on_message,
+                          on_close=lambda reason: self._lost(generation, reason))
+
+    def set_listener(self, listener: TransportListener) -> None:
+        """Attach the listener and run its first `on_connected` (re-sync of nothing)."""
+        self._listener = listener
+        listener.on_connected(self._conn.command, True)
+        self._ready.set()
+
+    def _on_message(self, message: Message) -> None:
+        if self._listener is not None:
+            self._listener.on_message(message)
+
+    def _lost(self, generation: int, reason: Optional[BaseException]) -> None:
+        # Reader thread of the lost connection. Old generations and close() are ignored.
+        with self._lock:
+            if self._stop.is_set() or generation != self._generation:
+                return
+            self._ready.clear()
+            start = self._reconnect and not self._retrying
+            self._retrying = self._retrying or start
+        self.last_loss = str(reason) if reason else "the daemon closed the connection"
+        log.warning("lost the daemon at %s (%s)%s", self.address, self.last_loss,
+                    "; reconnecting" if self._reconnect else "")
+        if self._listener is not None:
+            self._listener.on_disconnected(self.last_loss)
+        if start:
+            self._retrier = threading.Thread(target=self._retry_loop,
+                                             name="slicer-client-reconnect", daemon=True)
+            self._retrier.start()
+
+    def _retry_loop(self) -> None:
+        interval = self._retry_interval
+        while not self._stop.wait(interval):  # waits the retry interval, wakes on close()
+            try:
+                conn = self._open()
+            except DaemonUnreachableError:
+                interval = min(interval * 1.5, self._max_interval)
+                continue
+            self._conn = conn
+            try:
+                if self._listener is not None:
+                    self._listener.on_connected(conn.command, False)
+            except (ConnectionClosedError, DaemonUnreachableError) as error:
+                log.warning("re-sync with %s interrupted: %s", self.address, error)
+            except Exception:  # noqa: BLE001 - a refused re-create must not stop retrying
+                log.exception("re-sync with %s failed", self.address)
+            with self._lock:
+                # A loss seen by _lost while we were re-syncing left the work to us.
+                if conn.closed:
+                    interval = self._retry_interval
+                    continue
+                self.reconnects += 1
+                self._retrying = False
+                self._ready.set()
+            log.info("reconnected to the daemon at %s", self.address)
+            return
+
+    # --- use ----------------------------------------------------------------------------
+    @property
+    def connected(self) -> bool:
+        return self._ready.is_set() and not self._conn.closed
+
+    @property
+    def connection(self) -> Connection:
+        """The current TCP connection (changes after a reconnect)."""
+        return self._conn
+
+    def wait_connected(self, timeout: float) -> bool:
+        return self._ready.wait(timeout)
+
+    def _current(self, timeout: float, what: str) -> Connection:
+        if self._stop.is_set():
+            raise ConnectionClosedError(f"{what}: the client was closed")
+        if not self._ready.wait(timeout):
+            retrying = ("still reconnecting every "
+                        f"{self._retry_interval:g}-{self._max_interval:g} s"
+                        if self._reconnect else "reconnection is off")
+            raise ConnectionClosedError(
+                f"{what}: the daemon at {self.address} is gone ({self.last_loss}); "
+                f"{retrying}. Start it again (`slicer-ros2-bridge run --port {self.port}`).")
+        return self._conn
+
+    def command(self, op: str, arguments: Optional[Mapping[str, Any]] = None, *,
+                timeout: float = 10.0) -> Dict[str, Any]:
+        return self._current(timeout, op).command(op, arguments, timeout=timeout)
+
+    def send(self, message: Message) -> None:
+        self._current(0.0, f"sending {message.type_name} to {message.device_name!r}") \
+            .send(message)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._ready.clear()
+        self._conn.close()
+        retrier = self._retrier
+        if retrier is not None:
+            retrier.join(timeout=self._connect_timeout + 1.0)
+
+
+def open_transport(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
+                   reconnect: bool = True, retry_interval: float = 0.5,
+                   max_interval: float = 5.0, connect_timeout: float = 3.0) -> Transport:
+    """The one factory for socket transports (the Slicer module builds its own)."""
+    return ReconnectingTransport(host, port, reconnect=reconnect,
+                                 retry_interval=retry_interval, max_interval=max_interval,
+                                 connect_timeout=connect_timeout)
