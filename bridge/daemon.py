@@ -17,8 +17,10 @@ from typing import Awaitable, Callable, Optional
 from bridge.config import DaemonConfig
 from bridge.dispatch import Dispatcher
 from bridge.hub import Hub
+from bridge.parameters import ParameterBridges
 from bridge.ros_node import RosNode, RosOptions
 from bridge.server import BridgeServer
+from bridge.services import ServiceBridges
 from bridge.tf.capability import TfBridges
 from bridge.topics import TopicBridges
 from protocol.naming import DeviceNameRegistry
@@ -39,7 +41,10 @@ class Daemon:
         names = DeviceNameRegistry()
         self.topics = TopicBridges(self.ros, self.hub, names)
         self.tf = TfBridges(self.ros, self.hub, names)
-        self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf])
+        self.parameters = ParameterBridges(self.ros, self.hub, names)
+        self.services = ServiceBridges(self.ros, self.hub, names)
+        self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
+                                                          self.services])
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
                                    port=config.port, limits=config.limits)
 

@@ -1,0 +1,529 @@
+"""Parameter bridges: clients of other nodes' parameters, and a parameter server for clients.
+
+Parameter clients (the reference's parameter nodes, plus set): one per remote node, named
+with or without a namespace (relative names resolve under the daemon's namespace). They use
+the node's standard rcl_interfaces services with ``call_async``, awaited on the asyncio loop.
+Observed parameters are pushed, never polled: every ``/parameter_events`` message of a
+watched node goes to the loop, and the client's device gets one STRING with all its observed
+values (JSON with types) whenever one changes. A node that is not there yet is "not ready"
+(STATUS NOT_READY on its device); a cheap timer notices when its services appear, and then
+the observed values are fetched and streamed.
+
+Parameter server: clients declare typed parameters on the daemon's own node; other ROS nodes
+read and set them through the node's standard parameter services (rclpy creates them with
+the node; undeclared names are refused). Every change, from either side, is streamed as a
+STRING on the server device.
+
+`to_ros_value` / `from_ros_value` are the one place where rcl_interfaces ParameterValue and
+`protocol.commands.ParameterValue` meet.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+from rcl_interfaces.msg import Parameter as RosParameter
+from rcl_interfaces.msg import ParameterDescriptor, ParameterEvent, ParameterType
+from rcl_interfaces.msg import ParameterValue as RosParameterValue
+from rcl_interfaces.srv import (GetParameters as GetParametersSrv,
+                                GetParameterTypes as GetParameterTypesSrv,
+                                ListParameters as ListParametersSrv,
+                                SetParameters as SetParametersSrv)
+from rclpy.client import Client
+from rclpy.exceptions import ParameterException
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_parameter_events
+
+from bridge.dispatch import Handler
+from bridge.hub import Hub
+from bridge.ros_node import RosNode
+from bridge.services import call_ros_service, resolve_name, wait_until_ready
+from protocol.commands import (CommandError, CommandFailedError, CreateParameterClient,
+                               ErrorCode, GetParameters, ListParameters, ObserveParameters,
+                               OutOfRangeError, ParameterValue, RemoveParameterClient,
+                               ServerDeclareParameter, ServerGetParameters,
+                               ServerSetParameter, ServerUndeclareParameter, SetParameters,
+                               dumps)
+from protocol.messages import Message, Status, StatusCode, String
+from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
+
+log = logging.getLogger(__name__)
+
+_STATUS_NAME = "slicer-ros2-bridge"
+_MAX_STRING_BYTES = 0xFFFF  # an OpenIGTLink STRING's limit
+
+# ---------------------------------------------------------------------------- conversion
+
+_ROS_TYPE: dict[str, int] = {
+    "not_set": ParameterType.PARAMETER_NOT_SET,
+    "bool": ParameterType.PARAMETER_BOOL,
+    "integer": ParameterType.PARAMETER_INTEGER,
+    "double": ParameterType.PARAMETER_DOUBLE,
+    "string": ParameterType.PARAMETER_STRING,
+    "byte_array": ParameterType.PARAMETER_BYTE_ARRAY,
+    "bool_array": ParameterType.PARAMETER_BOOL_ARRAY,
+    "integer_array": ParameterType.PARAMETER_INTEGER_ARRAY,
+    "double_array": ParameterType.PARAMETER_DOUBLE_ARRAY,
+    "string_array": ParameterType.PARAMETER_STRING_ARRAY,
+}
+_KIND: dict[int, str] = {number: kind for kind, number in _ROS_TYPE.items()}
+
+
+def to_ros_value(value: ParameterValue) -> RosParameterValue:
+    """protocol ParameterValue -> rcl_interfaces/msg/ParameterValue."""
+    msg = RosParameterValue(type=_ROS_TYPE[value.type])
+    if value.type == "not_set":
+        return msg
+    raw = value.value
+    if value.type == "byte_array":
+        raw = [bytes([b]) for b in raw]  # rclpy's byte[] holds 1-byte bytes objects
+    elif isinstance(raw, tuple):
+        raw = list(raw)
+    setattr(msg, f"{value.type}_value", raw)
+    return msg
+
+
+def from_ros_value(msg: RosParameterValue, path: str) -> ParameterValue:
+    """rcl_interfaces/msg/ParameterValue -> protocol ParameterValue (the type is kept: an
+    integer 3 stays apart from a double 3.0). JSON has no NaN or infinity: such a double is
+    refused with an error naming `path`."""
+    kind = _KIND.get(int(msg.type))
+    if kind is None:
+        raise CommandFailedError(path, "a known parameter type (0..9)", str(msg.type),
+                                 code=ErrorCode.NOT_SUPPORTED)
+    if kind == "not_set":
+        return ParameterValue("not_set")
+    raw = getattr(msg, f"{kind}_value")
+    if kind == "byte_array":
+        raw = [b[0] if isinstance(b, (bytes, bytearray)) else int(b) for b in raw]
+    elif kind.endswith("_array"):
+        raw = list(raw)
+    if kind in ("double", "double_array"):
+        numbers = raw if isinstance(raw, list) else [raw]
+        if not all(math.isfinite(x) for x in numbers):
+            raise CommandFailedError(path, "finite doubles (JSON has no NaN or infinity)",
+                                     repr(raw), code=ErrorCode.NOT_SUPPORTED)
+    return ParameterValue(kind, raw)
+
+
+def _rclpy_parameter(name: str, value: ParameterValue) -> Parameter:
+    return Parameter.from_parameter_msg(RosParameter(name=name, value=to_ros_value(value)))
+
+
+# ---------------------------------------------------------------------------- clients
+
+
+@dataclass
+class ParameterClient:
+    """A client of one remote node's parameters, streamed on one device."""
+
+    node: str
+    key: NameKey
+    device: str
+    list_client: Client
+    get_client: Client
+    set_client: Client
+    types_client: Client
+    ready: Optional[bool] = None  # None until the first check
+    observed: tuple[str, ...] = ()
+    values: dict[str, ParameterValue] = field(default_factory=dict)
+    # name -> serial of the last event that changed it: a fetch that started earlier must
+    # not overwrite what an event reported meanwhile.
+    touched: dict[str, int] = field(default_factory=dict)
+
+    def clients(self) -> tuple[Client, ...]:
+        return (self.list_client, self.get_client, self.set_client, self.types_client)
+
+
+class ParameterBridges:
+    """Parameter clients of other nodes, and the daemon node's own parameter server."""
+
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
+                 request_timeout_s: float = 3.0, ready_wait_s: float = 1.0,
+                 check_interval_s: float = 0.5) -> None:
+        self._ros = ros
+        self._hub = hub
+        self._names = names
+        self._request_timeout_s = request_timeout_s
+        self._ready_wait_s = ready_wait_s
+        self._check_interval_s = check_interval_s
+        self.clients: dict[str, ParameterClient] = {}
+        self._check_timer: Optional[asyncio.TimerHandle] = None
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._event_serial = 0
+        # Read by the executor thread, replaced (never mutated) by the loop thread.
+        self._watched: frozenset[str] = frozenset()
+        self._events = ros.node.create_subscription(
+            ParameterEvent, "/parameter_events", self._on_event_ros, qos_profile_parameter_events)
+        # Parameter server.
+        self._server_node = ros.fully_qualified_name
+        self._server_key = NameKey.parameter_server(self._server_node)
+        self._server_device = names.register(self._server_key)
+        self.declared: dict[str, None] = {}  # names clients declared, in order
+        self._server_stream_pending = False
+        ros.node.add_post_set_parameters_callback(self._on_server_set_ros)
+
+    # --- parameter clients -----------------------------------------------------------------
+    async def create_parameter_client(self, request: CreateParameterClient) -> dict[str, Any]:
+        node = resolve_name(self._ros, request.node, "node")
+        existing = self.clients.get(node)
+        if existing is not None:
+            return self._describe_client(existing, existed=True)
+        key = NameKey.parameter_client(node)
+        ros_node = self._ros.node
+        client = ParameterClient(
+            node, key, self._names.register(key),
+            list_client=ros_node.create_client(ListParametersSrv, f"{node}/list_parameters"),
+            get_client=ros_node.create_client(GetParametersSrv, f"{node}/get_parameters"),
+            set_client=ros_node.create_client(SetParametersSrv, f"{node}/set_parameters"),
+            types_client=ros_node.create_client(GetParameterTypesSrv,
+                                                f"{node}/get_parameter_types"))
+        self.clients[node] = client
+        # Give discovery a moment, so an existing node is reported ready at once.
+        ready = await wait_until_ready(client.get_client, self._ready_wait_s)
+        if self.clients.get(node) is client and client.ready is None:
+            self._set_ready(client, ready)
+        self._schedule_check()
+        log.info("parameter client for %s (device %r, %s)", node, client.device,
+                 "ready" if client.ready else "not ready")
+        return self._describe_client(client, existed=False)
+
+    def remove_parameter_client(self, request: RemoveParameterClient) -> dict[str, Any]:
+        client = self._client(request.node)
+        del self.clients[client.node]
+        self._update_watched()
+        for ros_client in client.clients():
+            self._ros.node.destroy_client(ros_client)
+        self._hub.forget(client.device)
+        self._names.release(client.key)
+        return {"node": client.node, "device": client.device}
+
+    async def list_parameters(self, request: ListParameters) -> dict[str, Any]:
+        client = self._client(request.node)
+        listed = await self._call(client, client.list_client,
+                                  ListParametersSrv.Request(prefixes=[], depth=0))
+        names = sorted(listed.result.names)
+        types: dict[str, str] = {}
+        if names:
+            typed = await self._call(client, client.types_client,
+                                     GetParameterTypesSrv.Request(names=names))
+            types = {name: _KIND.get(int(number), "not_set")
+                     for name, number in zip(names, typed.types)}
+        return {"node": client.node, "names": names, "types": types}
+
+    async def get_parameters(self, request: GetParameters) -> dict[str, Any]:
+        client = self._client(request.node)
+        values = await self._get(client, request.names)
+        return {"node": client.node,
+                "values": {name: value.to_dict() for name, value in values.items()}}
+
+    async def set_parameters(self, request: SetParameters) -> dict[str, Any]:
+        client = self._client(request.node)
+        names = list(request.values)
+        reply = await self._call(client, client.set_client, SetParametersSrv.Request(
+            parameters=[RosParameter(name=name, value=to_ros_value(request.values[name]))
+                        for name in names]))
+        if len(reply.results) != len(names):
+            raise CommandFailedError("values", f"{len(names)} results from {client.node}",
+                                     str(len(reply.results)), code=ErrorCode.ROS_ERROR)
+        return {"node": client.node,
+                "results": {name: {"ok": bool(result.successful), "reason": result.reason}
+                            for name, result in zip(names, reply.results)}}
+
+    async def observe_parameters(self, request: ObserveParameters) -> dict[str, Any]:
+        client = self._client(request.node)
+        client.observed = tuple(dict.fromkeys(request.names))
+        client.values = {n: v for n, v in client.values.items() if n in client.observed}
+        self._update_watched()
+        if client.observed and client.ready:
+            await self._refresh(client)  # a failure is the reply; a later (re)appearance retries
+        else:
+            self._stream_values(client)
+        return {"node": client.node, "device": client.device, "observed": list(client.observed),
+                "ready": bool(client.ready),
+                "values": {n: v.to_dict() for n, v in client.values.items()}}
+
+    def _client(self, node_name: str) -> ParameterClient:
+        node = resolve_name(self._ros, node_name, "node")
+        client = self.clients.get(node)
+        if client is None:
+            raise CommandFailedError("node", "a node with a parameter client "
+                                     "(create_parameter_client first)", node,
+                                     code=ErrorCode.NOT_FOUND)
+        return client
+
+    async def _call(self, client: ParameterClient, ros_client: Client, request: Any) -> Any:
+        return await call_ros_service(self._hub, ros_client, request,
+                                      timeout=self._request_timeout_s,
+                                      ready_wait=self._ready_wait_s,
+                                      what=f"the parameter services of {client.node}",
+                                      field="node")
+
+    async def _get(self, client: ParameterClient,
+                   names: tuple[str, ...]) -> dict[str, ParameterValue]:
+        reply = await self._call(client, client.get_client,
+                                 GetParametersSrv.Request(names=list(names)))
+        if len(reply.values) != len(names):
+            # rclpy answers an empty list if any name is unknown: ask one by one then.
+            if len(names) > 1 and not reply.values:
+                out: dict[str, ParameterValue] = {}
+                for name in names:
+                    out.update(await self._get(client, (name,)))
+                return out
+            return {name: ParameterValue("not_set") for name in names}
+        return {name: from_ros_value(value, f"values.{name}")
+                for name, value in zip(names, reply.values)}
+
+    # --- readiness -------------------------------------------------------------------------
+    def _schedule_check(self) -> None:
+        if self._check_timer is None and self.clients:
+            self._check_timer = asyncio.get_running_loop().call_later(
+                self._check_interval_s, self._check_readiness)
+
+    def _check_readiness(self) -> None:
+        """Every `check_interval_s` while clients exist: one cheap rcl call per client."""
+        self._check_timer = None
+        for client in list(self.clients.values()):
+            if client.ready is None:
+                continue  # its creation is still waiting for discovery
+            ready = client.get_client.service_is_ready()
+            if ready != client.ready:
+                self._set_ready(client, ready)
+        self._schedule_check()
+
+    def _set_ready(self, client: ParameterClient, ready: bool) -> None:
+        client.ready = ready
+        if not ready:
+            log.info("parameter client for %s: node not available", client.node)
+            self._status(client, StatusCode.NOT_READY,
+                         f"not ready: {client.node} has no parameter services (yet)")
+            return
+        self._status(client, StatusCode.OK, f"ready: {client.node}")
+        if client.observed:
+            self._spawn(self._refresh_quietly(client))
+
+    def _status(self, client: ParameterClient, code: int, text: str) -> None:
+        self._hub.stream(Message(device_name=client.device,
+                                 body=Status(code=code, error_name=_STATUS_NAME, text=text),
+                                 metadata=metadata_for(client.key)))
+
+    def _spawn(self, coroutine: Any) -> None:
+        task = asyncio.ensure_future(coroutine)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    # --- observed values -------------------------------------------------------------------
+    async def _refresh(self, client: ParameterClient) -> None:
+        started = self._event_serial
+        names = client.observed
+        values = await self._get(client, names)
+        if self.clients.get(client.node) is not client:
+            return
+        for name, value in values.items():
+            if name in client.observed and client.touched.get(name, 0) <= started:
+                client.values[name] = value
+        self._stream_values(client)
+
+    async def _refresh_quietly(self, client: ParameterClient) -> None:
+        try:
+            await self._refresh(client)
+        except CommandError as error:
+            log.warning("could not fetch the observed parameters of %s: %s", client.node, error)
+
+    def _stream_values(self, client: ParameterClient) -> None:
+        values = {n: client.values[n].to_dict() for n in client.observed if n in client.values}
+        text = dumps({"node": client.node, "values": values})
+        self._stream_text(client.device, client.key, text)
+
+    def _stream_text(self, device: str, key: NameKey, text: str) -> None:
+        size = len(text.encode("utf-8"))
+        if size > _MAX_STRING_BYTES:
+            log.warning("%s: %d bytes of parameter values do not fit a STRING; use "
+                        "get_parameters", device, size)
+            self._hub.stream(Message(device_name=device, body=Status(
+                code=StatusCode.OVERFLOW, error_name=_STATUS_NAME,
+                text=f"values are {size} bytes, over a STRING's {_MAX_STRING_BYTES}; "
+                     f"use get_parameters"), metadata=metadata_for(key)))
+            return
+        self._hub.stream(Message(device_name=device, body=String(text=text),
+                                 metadata=metadata_for(key)))
+
+    def _update_watched(self) -> None:
+        self._watched = frozenset(node for node, client in self.clients.items()
+                                  if client.observed)
+
+    def _on_event_ros(self, event: ParameterEvent) -> None:
+        # Executor thread: only pick the watched nodes' events and hand them off.
+        if event.node in self._watched:
+            self._hub.call_soon(self._on_event, event)
+
+    def _on_event(self, event: ParameterEvent) -> None:
+        client = self.clients.get(event.node)
+        if client is None or not client.observed:
+            return
+        changed = False
+        updates = [(p.name, p.value) for p in (*event.new_parameters, *event.changed_parameters)]
+        updates += [(p.name, RosParameterValue()) for p in event.deleted_parameters]
+        for name, ros_value in updates:
+            if name not in client.observed:
+                continue
+            try:
+                value = from_ros_value(ros_value, name)
+            except CommandError as error:
+                log.warning("parameter %s of %s not streamed: %s", name, client.node, error)
+                continue
+            self._event_serial += 1
+            client.touched[name] = self._event_serial
+            if client.values.get(name) != value:
+                client.values[name] = value
+                changed = True
+        if changed:
+            self._stream_values(client)
+
+    # --- parameter server (the daemon's own node) -----------------------------------------
+    def server_declare_parameter(self, request: ServerDeclareParameter) -> dict[str, Any]:
+        name, value, node = request.name, request.value, self._ros.node
+        if value.type == "not_set":
+            raise OutOfRangeError("value.type", "a parameter type other than not_set",
+                                  "not_set")
+        if node.has_parameter(name):
+            current = self._server_value(name)
+            if name in self.declared and current.type == value.type:
+                return {"name": name, "value": current.to_dict(), "existed": True}
+            raise CommandFailedError("name", "a parameter not declared yet (or declared again "
+                                     "with the same type)", f"{name} ({current.type})",
+                                     code=ErrorCode.ALREADY_EXISTS)
+        parameter = _rclpy_parameter(name, value)
+        try:
+            # Declared by type, then set: rclpy infers an empty list's type as byte_array.
+            node.declare_parameter(name, parameter.type_, ParameterDescriptor(
+                name=name, description=request.description))
+            result = node.set_parameters([parameter])[0]
+            if not result.successful:
+                node.undeclare_parameter(name)
+                raise CommandFailedError("value", f"a value ROS accepts for {name}",
+                                         result.reason, code=ErrorCode.ROS_ERROR)
+            if request.read_only:  # only now: a read-only parameter cannot be set
+                node.set_descriptor(name, ParameterDescriptor(
+                    name=name, type=_ROS_TYPE[value.type], description=request.description,
+                    read_only=True))
+        except (ParameterException, ValueError, TypeError) as error:
+            raise CommandFailedError("name", "a parameter ROS accepts", f"{name} ({error})",
+                                     code=ErrorCode.ROS_ERROR) from None
+        self.declared[name] = None
+        self._request_server_stream()
+        return {"name": name, "value": self._server_value(name).to_dict(), "existed": False}
+
+    def server_set_parameter(self, request: ServerSetParameter) -> dict[str, Any]:
+        name, node = request.name, self._ros.node
+        if not node.has_parameter(name):
+            raise CommandFailedError("name", "a declared parameter (server_declare_parameter "
+                                     "first)", name, code=ErrorCode.NOT_FOUND)
+        try:
+            result = node.set_parameters([_rclpy_parameter(name, request.value)])[0]
+        except (ParameterException, ValueError, TypeError) as error:
+            raise CommandFailedError("value", f"a value ROS accepts for {name}", str(error),
+                                     code=ErrorCode.ROS_ERROR) from None
+        if not result.successful:
+            raise CommandFailedError("value", f"a value ROS accepts for {name}", result.reason,
+                                     code=ErrorCode.ROS_ERROR)
+        return {"name": name, "value": self._server_value(name).to_dict()}
+
+    def server_get_parameters(self, request: ServerGetParameters) -> dict[str, Any]:
+        node = self._ros.node
+        names = request.names or tuple(sorted(node.list_parameters([], 0).names))
+        return {"node": self._server_node,
+                "values": {name: (self._server_value(name) if node.has_parameter(name)
+                                  else ParameterValue("not_set")).to_dict() for name in names}}
+
+    def server_undeclare_parameter(self, request: ServerUndeclareParameter) -> dict[str, Any]:
+        name = request.name
+        if name not in self.declared:
+            raise CommandFailedError("name", "a parameter a client declared", name,
+                                     code=ErrorCode.NOT_FOUND)
+        try:
+            self._ros.node.undeclare_parameter(name)
+        except ParameterException as error:
+            raise CommandFailedError("name", "a parameter ROS lets go (read-only ones stay)",
+                                     f"{name} ({type(error).__name__})",
+                                     code=ErrorCode.ROS_ERROR) from None
+        del self.declared[name]
+        self._request_server_stream()
+        return {"name": name}
+
+    def _server_value(self, name: str) -> ParameterValue:
+        try:
+            ros_value = self._ros.node.get_parameter(name).get_parameter_value()
+        except ParameterException:  # declared, no value yet
+            return ParameterValue("not_set")
+        return from_ros_value(ros_value, "value")
+
+    def _on_server_set_ros(self, parameters: list[Parameter]) -> None:
+        # Executor thread (a ROS node set it) or loop thread (a client did): hand off.
+        names = [p.name for p in parameters]
+        self._hub.call_soon(self._server_changed, names)
+
+    def _server_changed(self, names: list[str]) -> None:
+        if any(name in self.declared for name in names):
+            self._request_server_stream()
+
+    def _request_server_stream(self) -> None:
+        if not self._server_stream_pending:
+            self._server_stream_pending = True
+            self._hub.call_soon(self._stream_server)
+
+    def _stream_server(self) -> None:
+        self._server_stream_pending = False
+        values: dict[str, Any] = {}
+        for name in self.declared:
+            try:
+                values[name] = self._server_value(name).to_dict()
+            except CommandError as error:
+                log.warning("server parameter %s not streamed: %s", name, error)
+        self._stream_text(self._server_device, self._server_key,
+                          dumps({"node": self._server_node, "values": values}))
+
+    # --- capability ------------------------------------------------------------------------
+    def handlers(self) -> dict[str, Handler]:
+        return {
+            CreateParameterClient.op: lambda r, _: self.create_parameter_client(r),
+            RemoveParameterClient.op: lambda r, _: self.remove_parameter_client(r),
+            ListParameters.op: lambda r, _: self.list_parameters(r),
+            GetParameters.op: lambda r, _: self.get_parameters(r),
+            SetParameters.op: lambda r, _: self.set_parameters(r),
+            ObserveParameters.op: lambda r, _: self.observe_parameters(r),
+            ServerDeclareParameter.op: lambda r, _: self.server_declare_parameter(r),
+            ServerSetParameter.op: lambda r, _: self.server_set_parameter(r),
+            ServerGetParameters.op: lambda r, _: self.server_get_parameters(r),
+            ServerUndeclareParameter.op: lambda r, _: self.server_undeclare_parameter(r),
+        }
+
+    def _describe_client(self, client: ParameterClient,
+                         existed: bool | None = None) -> dict[str, Any]:
+        out: dict[str, Any] = {"kind": "parameter_client", "node": client.node,
+                               "device": client.device, "ready": bool(client.ready),
+                               "observed": list(client.observed)}
+        if existed is not None:
+            out["existed"] = existed
+        return out
+
+    def describe(self) -> list[dict[str, Any]]:
+        out = [self._describe_client(client) for client in self.clients.values()]
+        if self.declared:
+            out.append({"kind": "parameter_server", "node": self._server_node,
+                        "device": self._server_device, "parameters": list(self.declared)})
+        return out
+
+    def close(self) -> None:
+        if self._check_timer is not None:
+            self._check_timer.cancel()
+            self._check_timer = None
+        for task in tuple(self._tasks):
+            task.cancel()
+        self._watched = frozenset()
+        # The node, its clients and subscription are destroyed with it right after.
+        self.clients.clear()

@@ -1,0 +1,402 @@
+"""Service bridges: clients call any installed ROS service, and offer services of their own.
+
+`call_service` (Slicer -> ROS): the request is built from JSON with the generic codec, sent
+with ``call_async`` and awaited on the asyncio loop; the rclpy future's done-callback (ROS
+executor thread) only hands the result to the loop. Nothing blocks the loop or the executor.
+
+`advertise_service` (ROS -> Slicer): an rclpy service whose callback is a coroutine. rclpy
+awaits it inside the executor without blocking other callbacks (it sits in a reentrant
+callback group); the coroutine hands the request to the loop, which sends the advertising
+client a `service_request` COMMAND and waits for its RTS_COMMAND. The client's answer (or a
+default response after the timeout) completes an rclpy future and wakes the executor.
+
+`call_ros_service` and `resolve_name` are shared with the parameter bridges.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import logging
+from dataclasses import dataclass
+from typing import Any, Optional
+
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.client import Client
+from rclpy.task import Future as RosFuture
+
+from bridge.codecs import CodecError, dict_to_message, message_to_dict
+from bridge.codecs.registry import service_class
+from bridge.dispatch import Handler
+from bridge.hub import Hub, Replier
+from bridge.ros_node import RosNode
+from protocol.commands import (AdvertiseService, CallService, CommandError, CommandFailedError,
+                               ErrorCode, OutOfRangeError, Reply, ServiceRequest,
+                               UnadvertiseService, WrongTypeError, loads)
+from protocol.messages import Command, Message, RtsCommand
+from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
+
+log = logging.getLogger(__name__)
+
+# How often an async wait re-checks that a service server has been discovered.
+_READY_POLL_S = 0.05
+
+
+# ---------------------------------------------------------------------------- shared helpers
+
+
+def resolve_name(ros: RosNode, name: str, field: str) -> str:
+    """A topic, service or node name -> fully qualified; relative names resolve under the
+    daemon's namespace (``PSM1/x`` with namespace ``/lab`` -> ``/lab/PSM1/x``)."""
+    try:
+        return ros.resolve_topic(name)
+    except Exception as error:  # rclpy raises several name-validation exceptions
+        raise OutOfRangeError(field, "a valid ROS name", f"{name!r} ({error})") from None
+
+
+async def wait_until_ready(client: Client, wait_s: float) -> bool:
+    """True once `client` sees a server, False after `wait_s` (polled on the loop: the
+    check is one cheap rcl call, and no thread blocks)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + wait_s
+    while not client.service_is_ready():
+        if loop.time() >= deadline:
+            return False
+        await asyncio.sleep(_READY_POLL_S)
+    return True
+
+
+async def call_ros_service(hub: Hub, client: Client, request: Any, *, timeout: float,
+                           ready_wait: float, what: str, field: str) -> Any:
+    """Call a ROS service from the asyncio loop and return its response.
+
+    Waits up to ``min(timeout, ready_wait)`` for the server (else UNAVAILABLE), then for the
+    response until ``timeout`` has passed in all (else TIMEOUT). The errors name ``field``.
+    """
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+    if not await wait_until_ready(client, min(timeout, ready_wait)):
+        raise CommandFailedError(field, f"{what} to be available",
+                                 f"no server after {min(timeout, ready_wait):g} s",
+                                 code=ErrorCode.UNAVAILABLE)
+    outcome: asyncio.Future[Any] = loop.create_future()
+    ros_future = client.call_async(request)
+    # Runs in the executor thread (or at once if already done): hand off only.
+    ros_future.add_done_callback(lambda done: hub.call_soon(_transfer, done, outcome))
+    try:
+        return await asyncio.wait_for(outcome, max(0.0, start + timeout - loop.time()))
+    except asyncio.TimeoutError:
+        client.remove_pending_request(ros_future)
+        raise CommandFailedError(field, f"a response from {what} within {timeout:g} s",
+                                 "no response", code=ErrorCode.TIMEOUT) from None
+
+
+def _transfer(ros_future: RosFuture, outcome: asyncio.Future[Any]) -> None:
+    if outcome.done():  # timed out meanwhile
+        return
+    if ros_future.cancelled():
+        outcome.set_exception(CommandFailedError("service", "a response", "a cancelled call",
+                                                 code=ErrorCode.ROS_ERROR))
+    elif ros_future.exception() is not None:
+        outcome.set_exception(CommandFailedError("service", "a response",
+                                                 str(ros_future.exception()),
+                                                 code=ErrorCode.ROS_ERROR))
+    else:
+        outcome.set_result(ros_future.result())
+
+
+def _service_class(type_name: str, ros_type: str) -> Any:
+    try:
+        return service_class(ros_type)
+    except CodecError as error:
+        raise CommandFailedError("type", "a service type installed in the daemon's environment",
+                                 f"{type_name!r} ({error})",
+                                 code=ErrorCode.UNKNOWN_ROS_TYPE) from None
+
+
+# ---------------------------------------------------------------------------- bridges
+
+
+@dataclass
+class CalledService:
+    """A cached client for `call_service` (one per service and type)."""
+
+    service: str
+    ros_type: str
+    client: Client
+    device: str
+    calls: int = 0
+
+
+@dataclass
+class _PendingAnswer:
+    served: ServedService
+    future: RosFuture
+    timer: asyncio.TimerHandle
+
+
+@dataclass
+class ServedService:
+    """A ROS service answered by one client (the one that advertised it)."""
+
+    service: str
+    ros_type: str
+    srv_class: Any
+    owner: Replier
+    key: NameKey
+    device: str
+    handle: Any = None  # rclpy Service
+    calls: int = 0
+    # Touched only in the executor thread: calls being served, and a destroy waiting on them.
+    inflight: int = 0
+    destroy_pending: bool = False
+    closed: bool = False
+
+
+class ServiceBridges:
+    """The daemon's service clients (`call_service`) and client-served services."""
+
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
+                 availability_wait_s: float = 2.0, answer_timeout_s: float = 4.0) -> None:
+        self._ros = ros
+        self._hub = hub
+        self._names = names
+        self._availability_wait_s = availability_wait_s
+        self._answer_timeout_s = answer_timeout_s
+        # Served coroutines wait for a client without holding a mutually exclusive group
+        # (the node's default group also runs every subscription).
+        self._group = ReentrantCallbackGroup()
+        self._ids = itertools.count(1)
+        self.called: dict[tuple[str, str], CalledService] = {}
+        self.served: dict[str, ServedService] = {}
+        self._pending: dict[tuple[Replier, int], _PendingAnswer] = {}
+        hub.add_reply_listener(self._on_reply)
+        hub.add_closed_listener(self._on_client_closed)
+
+    # --- call_service ----------------------------------------------------------------------
+    async def call_service(self, request: CallService) -> dict[str, Any]:
+        service = resolve_name(self._ros, request.service, "service")
+        ros_type = request.ros_type
+        srv = _service_class(request.type, ros_type)
+        try:
+            ros_request = dict_to_message(srv.Request, request.request)
+        except CodecError as error:
+            raise WrongTypeError(f"request.{error.field}" if error.field else "request",
+                                 error.expected, error.got) from None
+        entry = self._client_for(service, ros_type, srv)
+        response = await call_ros_service(self._hub, entry.client, ros_request,
+                                          timeout=request.timeout,
+                                          ready_wait=self._availability_wait_s,
+                                          what=f"service {service}", field="service")
+        entry.calls += 1
+        return {"service": service, "type": ros_type, "response": message_to_dict(response)}
+
+    def _client_for(self, service: str, ros_type: str, srv: Any) -> CalledService:
+        entry = self.called.get((service, ros_type))
+        if entry is None:
+            client = self._ros.node.create_client(srv, service, callback_group=self._group)
+            device = self._names.register(NameKey.service_client(service))
+            entry = CalledService(service, ros_type, client, device)
+            self.called[(service, ros_type)] = entry
+        return entry
+
+    # --- advertise_service -----------------------------------------------------------------
+    def advertise_service(self, request: AdvertiseService,
+                          client: Optional[Replier]) -> dict[str, Any]:
+        if client is None:
+            raise CommandFailedError("service", "a request from a connected client (it answers "
+                                     "the calls)", "a start-up command",
+                                     code=ErrorCode.NOT_SUPPORTED)
+        service = resolve_name(self._ros, request.service, "service")
+        ros_type = request.ros_type
+        srv = _service_class(request.type, ros_type)
+        existing = self.served.get(service)
+        if existing is not None:
+            if existing.owner is client and existing.ros_type == ros_type:
+                return _describe_served(existing, existed=True)
+            raise CommandFailedError("service", "a service no other client advertises (or the "
+                                     "same type again)", f"{service} ({existing.ros_type})",
+                                     code=ErrorCode.ALREADY_EXISTS)
+        for name, types in self._ros.node.get_service_names_and_types():
+            if name == service:
+                raise CommandFailedError("service", "a service no ROS node serves yet",
+                                         f"{service} ({', '.join(types)})",
+                                         code=ErrorCode.ALREADY_EXISTS)
+        key = NameKey.service_server(service)
+        served = ServedService(service, ros_type, srv, client, key, self._names.register(key))
+        served.handle = self._ros.node.create_service(srv, service, self._callback_for(served),
+                                                      callback_group=self._group)
+        self.served[service] = served
+        log.info("serving %s (%s) for client %s", service, ros_type,
+                 getattr(client, "peer", "?"))
+        return _describe_served(served, existed=False)
+
+    def unadvertise_service(self, request: UnadvertiseService,
+                            client: Optional[Replier]) -> dict[str, Any]:
+        service = resolve_name(self._ros, request.service, "service")
+        served = self.served.get(service)
+        if served is None or (client is not None and served.owner is not client):
+            raise CommandFailedError("service", "a service this client advertises", service,
+                                     code=ErrorCode.NOT_FOUND)
+        self._unadvertise(served)
+        return {"service": service, "device": served.device}
+
+    def _callback_for(self, served: ServedService) -> Any:
+        async def serve(request: Any, response: Any) -> Any:
+            # Executor thread. An exception here would stop the executor: never raise.
+            served.inflight += 1
+            try:
+                if served.closed:
+                    return response
+                answer = RosFuture(executor=self._ros.executor)
+                self._hub.call_soon(self._forward, served, request, answer)
+                outcome = await answer
+                return outcome if outcome is not None else response
+            except Exception:
+                log.exception("serving a call of %s failed; the caller gets a default response",
+                              served.service)
+                return response
+            finally:
+                served.inflight -= 1
+                if served.destroy_pending and not served.inflight:
+                    # After this step rclpy sends the response; destroy only then.
+                    self._ros.executor.create_task(self._destroy_if_idle, served)
+        return serve
+
+    def _forward(self, served: ServedService, request: Any, answer: RosFuture) -> None:
+        """A ROS call to a served service (loop thread): ask the client that serves it."""
+        if served.closed:
+            self._settle(answer, None)
+            return
+        served.calls += 1
+        command_id = next(self._ids)
+        try:
+            text = ServiceRequest(service=served.service, type=served.ros_type,
+                                  request=message_to_dict(request),
+                                  timeout=self._answer_timeout_s).to_json()
+        except (CodecError, CommandError) as error:
+            log.warning("cannot forward a call of %s to its client (%s); the caller gets a "
+                        "default response", served.service, error)
+            self._settle(answer, None)
+            return
+        timer = asyncio.get_running_loop().call_later(
+            self._answer_timeout_s, self._expire, served.owner, command_id)
+        self._pending[(served.owner, command_id)] = _PendingAnswer(served, answer, timer)
+        served.owner.send_message(Message(
+            device_name=served.device,
+            body=Command(command_id=command_id, name=ServiceRequest.op, text=text),
+            metadata=metadata_for(served.key, ros_type=served.ros_type)))
+
+    def _on_reply(self, message: Message, client: Replier) -> None:
+        body = message.body
+        if not isinstance(body, RtsCommand):
+            return
+        pending = self._pending.pop((client, body.command_id), None)
+        if pending is None:
+            return  # not ours, or it came after the timeout
+        pending.timer.cancel()
+        response = self._response_from(pending.served, body.text)
+        self._settle(pending.future, response)
+
+    def _response_from(self, served: ServedService, text: str) -> Any:
+        """The client's answer -> a Response, judged by its JSON (3D Slicer's Status
+        metadata is junk); None (a default response) with a warning if unusable."""
+        try:
+            data = loads(text)
+            if "ok" in data:  # a Reply envelope
+                reply = Reply.from_json(text)
+                if not reply.ok:
+                    assert reply.error is not None
+                    raise CommandFailedError("ok", "true", f"false ({reply.error.message})")
+                data = reply.result
+            raw = data.get("response")
+            if not isinstance(raw, dict):
+                raise WrongTypeError("response", "an object with the response fields",
+                                     type(raw).__name__ if raw is not None else "nothing")
+            return dict_to_message(served.srv_class.Response, raw)
+        except (CommandError, CodecError) as error:
+            log.warning("the answer to a call of %s is unusable (%s); the caller gets a default "
+                        "response", served.service, error)
+            return None
+
+    def _expire(self, owner: Replier, command_id: int) -> None:
+        pending = self._pending.pop((owner, command_id), None)
+        if pending is None:
+            return
+        log.warning("client %s did not answer a call of %s within %g s; the caller gets a "
+                    "default response", getattr(owner, "peer", "?"), pending.served.service,
+                    self._answer_timeout_s)
+        self._settle(pending.future, None)
+
+    def _settle(self, answer: RosFuture, response: Any) -> None:
+        if not answer.done():
+            answer.set_result(response)
+        # The executor resumes a waiting coroutine only when something wakes it.
+        self._ros.executor.wake()
+
+    def _unadvertise(self, served: ServedService) -> None:
+        served.closed = True
+        self.served.pop(served.service, None)
+        for key, pending in list(self._pending.items()):
+            if pending.served is served:
+                del self._pending[key]
+                pending.timer.cancel()
+                self._settle(pending.future, None)
+        self._names.release(served.key)
+        self._hub.forget(served.device)
+        # Destroyed in the executor thread once no call is being answered: rclpy sends the
+        # response after the coroutine returns, and a destroyed handle would stop the executor.
+        self._ros.executor.create_task(self._destroy_if_idle, served)
+        log.info("no longer serving %s", served.service)
+
+    def _destroy_if_idle(self, served: ServedService) -> None:
+        if served.inflight:
+            served.destroy_pending = True
+            return
+        served.destroy_pending = False
+        if served.handle is not None:
+            try:
+                self._ros.node.destroy_service(served.handle)
+            except Exception:  # never let cleanup stop the executor
+                log.exception("destroying the service %s failed", served.service)
+            served.handle = None
+
+    def _on_client_closed(self, client: Replier) -> None:
+        for served in [s for s in self.served.values() if s.owner is client]:
+            self._unadvertise(served)
+
+    # --- capability ------------------------------------------------------------------------
+    def handlers(self) -> dict[str, Handler]:
+        return {
+            CallService.op: lambda request, _: self.call_service(request),
+            AdvertiseService.op: self.advertise_service,
+            UnadvertiseService.op: self.unadvertise_service,
+        }
+
+    def describe(self) -> list[dict[str, Any]]:
+        out = [_describe_served(served) for served in self.served.values()]
+        out += [{"kind": "service_client", "service": entry.service, "type": entry.ros_type,
+                 "device": entry.device, "calls": entry.calls,
+                 "ready": entry.client.service_is_ready()} for entry in self.called.values()]
+        return out
+
+    def close(self) -> None:
+        # The node (and its services and clients) is destroyed right after; only make sure
+        # no ROS caller waits for a client that is gone.
+        for served in list(self.served.values()):
+            served.closed = True
+        for pending in self._pending.values():
+            pending.timer.cancel()
+            self._settle(pending.future, None)
+        self._pending.clear()
+        self.served.clear()
+        self.called.clear()
+
+
+def _describe_served(served: ServedService, existed: bool | None = None) -> dict[str, Any]:
+    out: dict[str, Any] = {"kind": "service_server", "service": served.service,
+                           "type": served.ros_type, "device": served.device,
+                           "calls": served.calls}
+    if existed is not None:
+        out["existed"] = existed
+    return out
