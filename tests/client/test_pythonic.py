@@ -1,0 +1,135 @@
+"""The Pythonic API against a real daemon: callbacks and their threads, the queue mode,
+errors that say what went wrong, and daemon restarts."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+import slicer_client
+from protocol.commands import ErrorCode
+from protocol.messages import Transform
+from support import Processes, RunningDaemon, pick_free_port, wait_until
+
+pytestmark = pytest.mark.ros
+
+
+def test_subscriber_callback_runs_in_the_receive_thread(ros: slicer_client.Client) -> None:
+    threads: list[str] = []
+    got = threading.Event()
+
+    def on_value(value) -> None:
+        threads.append(threading.current_thread().name)
+        got.set()
+
+    sub = ros.subscribe("/py_cb", "String", callback=on_value)
+    pub = ros.publisher("/py_cb", "String")
+    wait_until(lambda: pub.publish("x") >= 1 and got.wait(0.1), timeout=20,
+               what="the callback")
+    assert threads[0] == "igtl-receive"
+    assert sub.last_value == "x" and sub.count >= 1
+    assert sub.last_message_yaml() == "data: x\n"
+    assert ros.subscribe("/py_cb", "String") is sub  # idempotent, like the daemon
+
+
+def test_queue_mode_runs_callbacks_in_the_polling_thread(daemon: RunningDaemon) -> None:
+    with slicer_client.connect("127.0.0.1", daemon.port, callbacks="queue") as ros:
+        seen: list[tuple[object, str]] = []
+        ros.subscribe("/py_queue", "Int", callback=lambda v: seen.append(
+            (v, threading.current_thread().name)))
+        pub = ros.publisher("/py_queue", "Int")
+        wait_until(lambda: pub.publish(5) >= 1 and ros.process_events(timeout=0.1) > 0,
+                   timeout=20, what="a queued callback")
+        assert seen[0] == (5, threading.current_thread().name)
+
+
+def test_pose_publisher_streams_igtl_transforms_to_ros(ros: slicer_client.Client,
+                                                       processes: Processes) -> None:
+    echo = processes.python("echo", "echo_subscriber.py", "/py_stream",
+                            "geometry_msgs/msg/PoseStamped")
+    echo.wait_for_output("READY", timeout=30)
+    pub = ros.publisher("/py_stream", "PoseStamped")
+    matrix = np.eye(4)
+    matrix[2, 3] = 250.0
+    def received() -> bool:
+        pub.send(matrix)  # a TRANSFORM under the publisher's device, no reply
+        return "MSG " in echo.output()
+    wait_until(received, timeout=20, what="the streamed pose in ROS")
+    assert '"z": 0.25' in echo.output()
+
+
+def test_refusal_names_the_op_the_field_and_why(ros: slicer_client.Client) -> None:
+    with pytest.raises(slicer_client.CommandRefusedError) as caught:
+        ros.subscribe("/py_bad", "String", qos={"depth": 0})
+    error = caught.value
+    assert error.op == "create_subscriber"
+    assert error.field == "qos.depth"
+    assert error.code == ErrorCode.OUT_OF_RANGE
+    assert "qos.depth" in str(error) and "got 0" in str(error)
+    with pytest.raises(slicer_client.CommandRefusedError, match="NOT_FOUND"):
+        ros.command("remove_subscriber", {"topic": "/py_never_made"})
+    assert ros.find("create_subscriber", "/py_bad") is None
+
+
+def test_bad_matrix_is_refused_before_sending(ros: slicer_client.Client) -> None:
+    broadcaster = ros.tf_broadcaster("py_w", "py_c")
+    with pytest.raises(slicer_client.MatrixError, match="matrix"):
+        broadcaster.broadcast(np.full((4, 4), 2.0))
+    with pytest.raises(slicer_client.MatrixError, match=r"shape \(4, 4\)"):
+        broadcaster.broadcast([[1, 0], [0, 1]])
+
+
+def test_a_daemon_that_is_not_running_gives_a_clear_error() -> None:
+    port = pick_free_port()
+    with pytest.raises(slicer_client.DaemonUnreachableError) as caught:
+        slicer_client.connect("127.0.0.1", port)
+    text = str(caught.value)
+    assert f"127.0.0.1:{port}" in text
+    assert "slicer-ros2-bridge run" in text
+
+
+def test_state_lists_what_was_created_in_order(ros: slicer_client.Client) -> None:
+    ros.subscribe("/py_state_a", "String")
+    ros.publisher("/py_state_b", "PoseStamped", qos={"depth": 1})
+    ros.tf_lookup("py_w", "py_tool", rate_hz=30)
+    state = slicer_client.BridgeState.from_json(ros.state().to_json())
+    assert [s.key for s in state.specs] == [
+        ("create_subscriber", "/py_state_a"), ("create_publisher", "/py_state_b"),
+        ("create_tf_lookup", "py_w", "py_tool")]
+    # Restoring into another client re-creates the same bridges.
+    with slicer_client.connect(*ros.address.split(":")[:1], int(ros.address.split(":")[1])) \
+            as other:
+        made = other.restore(state)
+        assert [r.spec for r in made] == list(state.specs)
+
+
+def test_reconnects_after_a_daemon_restart_and_restores_subscriptions(
+        processes: Processes) -> None:
+    port = pick_free_port()
+    first = processes.bridge("run", "--port", str(port))
+    first.wait_for_output("listening on", timeout=30)
+    changes: list[tuple[bool, str]] = []
+    with slicer_client.connect("127.0.0.1", port, retry_interval=0.1) as ros:
+        ros.on_connection_change(lambda up, why: changes.append((up, why)))
+        sub = ros.subscribe("/py_restart", "PoseStamped")
+        processes.python("pose", "pose_publisher.py", "/py_restart", "0.001", "0", "0",
+                         "0", "0", "0", "1")
+        sub.wait_for_message(timeout=30)
+        before = sub.count
+        assert first.stop() == 0
+        wait_until(lambda: not ros.connected, timeout=10, what="the client to see the loss")
+        assert changes and changes[0][0] is False
+        with pytest.raises(slicer_client.ConnectionClosedError, match=f"127.0.0.1:{port}"):
+            ros.command("list_bridges", timeout=0.2)
+        second = processes.bridge("run", "--port", str(port))
+        second.wait_for_output("listening on", timeout=30)
+        wait_until(lambda: ros.connected, timeout=30, what="the client to reconnect")
+        assert changes[-1] == (True, "")
+        # The same object streams again: the new daemon got the subscription back.
+        wait_until(lambda: sub.count > before + 3, timeout=30, what="messages after restart")
+        np.testing.assert_allclose(sub.last_value[0, 3], 1.0, atol=1e-6)
+        listed = ros.list_bridges()["bridges"]
+        assert any(b.get("topic") == "/py_restart" for b in listed)
+        assert isinstance(ros.latest(sub.device).body, Transform)
