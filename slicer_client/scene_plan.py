@@ -1,0 +1,158 @@
+"""The scene planner: which MRML nodes the 3D Slicer module makes of what arrives, decided
+without Slicer (so it is unit-tested here; slicer_module/ROS2Bridge only applies plans).
+
+3D Slicer's OpenIGTLinkIF names each node after the device name and copies the message's
+metadata onto it as attributes ``OpenIGTLink.<key>``. From those attributes the planner
+says: what the node is (robot link transform, robot link model, tf lookup, subscriber...),
+which transform it goes under, which subject-hierarchy folder it belongs to, a readable
+name, and a colour. Node names are never changed: the connector finds its nodes again by
+name after a reconnect, so renaming would duplicate them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+
+from protocol.naming import (KEY_CHILD, KEY_LINK, KEY_NODE, KEY_PARENT, KEY_ROBOT, KEY_ROLE,
+                             KEY_TOPIC, KEY_TYPE, KEY_VISUAL, NameKey, NamingError, Role,
+                             device_name_for)
+
+__all__ = ["ATTRIBUTE_PREFIX", "DEFAULT_COLOUR", "NodePlan", "ROBOTS_FOLDER",
+           "describe_bridges", "metadata_from_attributes", "model_colour", "plan_node",
+           "robot_folder"]
+
+ATTRIBUTE_PREFIX = "OpenIGTLink."
+ROBOTS_FOLDER = "ROS2 robots"
+DEFAULT_COLOUR: Tuple[float, float, float] = (0.7, 0.7, 0.7)
+# Metadata keys a daemon may add for colours (r g b [a], each 0..1).
+_COLOUR_KEYS = ("ros2.color", "ros2.colour", "ros2.rgba")
+
+Rgb = Tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class NodePlan:
+    device: str
+    kind: str  # robot_link | robot_visual | robot_description | tf_lookup | subscriber | ...
+    display_name: str
+    parent_device: Optional[str] = None  # the transform node this node goes under
+    folder: Optional[str] = None  # subject-hierarchy folder (one per robot)
+    colour: Optional[Rgb] = None
+    opacity: float = 1.0
+
+
+def metadata_from_attributes(attributes: Mapping[str, str]) -> Dict[str, str]:
+    """Node attributes -> the message metadata they came from (``OpenIGTLink.`` stripped)."""
+    return {k[len(ATTRIBUTE_PREFIX):]: v for k, v in attributes.items()
+            if k.startswith(ATTRIBUTE_PREFIX)}
+
+
+def robot_folder(robot: str) -> str:
+    return f"robot {robot}"
+
+
+def _parse_colour(text: str) -> Optional[Tuple[Rgb, float]]:
+    parts = text.replace(",", " ").split()
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        return None
+    if len(values) not in (3, 4) or not all(0.0 <= v <= 1.0 for v in values):
+        return None
+    return (values[0], values[1], values[2]), (values[3] if len(values) == 4 else 1.0)
+
+
+def model_colour(metadata: Mapping[str, str],
+                 rgba_mean: Optional[Sequence[float]] = None) -> Tuple[Rgb, float]:
+    """Colour and opacity of a model: metadata first, then the mean of the POLYDATA's RGBA
+    point attribute (what the daemon sends for URDF materials), else light grey."""
+    for key in _COLOUR_KEYS:
+        if key in metadata:
+            parsed = _parse_colour(metadata[key])
+            if parsed is not None:
+                return parsed
+    if rgba_mean is not None and len(rgba_mean) >= 3:
+        rgb = tuple(min(1.0, max(0.0, float(v))) for v in rgba_mean[:3])
+        alpha = float(rgba_mean[3]) if len(rgba_mean) > 3 else 1.0
+        return (rgb[0], rgb[1], rgb[2]), min(1.0, max(0.0, alpha))
+    return DEFAULT_COLOUR, 1.0
+
+
+def _link_device(robot: str, link: str,
+                 link_devices: Optional[Mapping[Tuple[str, str], str]]) -> Optional[str]:
+    if link_devices and (robot, link) in link_devices:
+        return link_devices[(robot, link)]
+    try:  # the daemon's deterministic name (a collision would lengthen the hash)
+        return device_name_for(NameKey.robot_link(robot, link))
+    except NamingError:
+        return None
+
+
+def plan_node(device: str, metadata: Mapping[str, str], *,
+              rgba_mean: Optional[Sequence[float]] = None,
+              link_devices: Optional[Mapping[Tuple[str, str], str]] = None) -> NodePlan:
+    """What to do with the node of `device`, given its metadata (see the module doc).
+    `link_devices` ((robot, link) -> device, from create_robot replies) wins over names
+    computed here."""
+    role = metadata.get(KEY_ROLE, "")
+    robot = metadata.get(KEY_ROBOT, "")
+    link = metadata.get(KEY_LINK, "")
+    if role == Role.ROBOT_LINK.value and robot and link:
+        return NodePlan(device, "robot_link", f"{robot} {link}", folder=robot_folder(robot))
+    if role == Role.ROBOT_VISUAL.value and robot and link:
+        colour, opacity = model_colour(metadata, rgba_mean)
+        index = metadata.get(KEY_VISUAL, "0")
+        name = f"{robot} {link}" + (f" visual {index}" if index not in ("", "0") else "")
+        return NodePlan(device, "robot_visual", name,
+                        parent_device=_link_device(robot, link, link_devices),
+                        folder=robot_folder(robot), colour=colour, opacity=opacity)
+    if role == Role.ROBOT_DESCRIPTION.value and robot:
+        return NodePlan(device, "robot_description", f"{robot} URDF",
+                        folder=robot_folder(robot))
+    if role == Role.TF_LOOKUP.value:
+        return NodePlan(device, "tf_lookup",
+                        f"tf {metadata.get(KEY_PARENT, '?')} -> {metadata.get(KEY_CHILD, '?')}",
+                        folder="ROS2 tf")
+    if role == Role.SUBSCRIBER.value:
+        kind = metadata.get(KEY_TYPE, "")
+        return NodePlan(device, "subscriber",
+                        f"{metadata.get(KEY_TOPIC, device)}" + (f" ({kind})" if kind else ""),
+                        folder="ROS2 topics")
+    if role == Role.PARAMETER_CLIENT.value:
+        return NodePlan(device, "parameters", f"parameters of {metadata.get(KEY_NODE, '?')}",
+                        folder="ROS2 parameters")
+    return NodePlan(device, role or "other", device)
+
+
+def describe_bridges(result: Mapping[str, Any]) -> List[str]:
+    """list_bridges' result -> one readable line per bridge, for the module's list.
+    Accepts the daemon's ``{"bridges": [{"kind": ...}]}`` and the per-kind lists of
+    protocol/README.md."""
+    lines: List[str] = []
+    items: List[Mapping[str, Any]] = []
+    if isinstance(result.get("bridges"), list):
+        items = [b for b in result["bridges"] if isinstance(b, dict)]
+    else:
+        for kind in ("subscribers", "publishers", "tf_lookups", "tf_broadcasters", "robots",
+                     "parameter_clients", "services"):
+            for entry in result.get(kind, []) or []:
+                if isinstance(entry, dict):
+                    items.append({"kind": kind.rstrip("s"), **entry})
+    for b in items:
+        kind = str(b.get("kind", "?"))
+        if "topic" in b:
+            what = f"{b['topic']} [{b.get('type', '?')}]"
+        elif "parent" in b and "child" in b:
+            what = f"{b['parent']} -> {b['child']}"
+        elif "name" in b:
+            what = str(b["name"])
+        elif "node" in b:
+            what = str(b["node"])
+        elif "service" in b:
+            what = str(b["service"])
+        else:
+            continue  # daemon-internal entries (the shared tf buffer...)
+        device = f" as {b['device']}" if b.get("device") else ""
+        lines.append(f"{kind}: {what}{device}")
+    return lines

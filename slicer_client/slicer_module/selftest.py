@@ -1,0 +1,44 @@
+"""Self-test of the ROS2Bridge module, run INSIDE 3D Slicer:
+
+    Slicer --no-main-window --python-script slicer_client/slicer_module/selftest.py
+
+Optional: start the daemon first (`slicer-ros2-bridge run --port 18944`) and set
+ROS2BRIDGE_TEST_PORT=18944 to also test the round trip through Slicer's connector.
+Exit code 0 = every test passed, 1 = a failure (printed), 2 = not run inside Slicer.
+"""
+
+import os
+import sys
+import traceback
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def main() -> int:
+    try:
+        import slicer
+    except ImportError:
+        print("selftest.py runs inside 3D Slicer: Slicer --no-main-window --python-script "
+              f"{os.path.abspath(__file__)}", file=sys.stderr)
+        return 2
+    module_dir = os.path.join(HERE, "ROS2Bridge")
+    sys.path.insert(0, module_dir)
+    import ROS2Bridge  # noqa: E402  (puts the repository root on sys.path)
+
+    try:
+        ROS2Bridge.ROS2BridgeTest().runTest()
+    except Exception:  # noqa: BLE001 - reported and turned into the exit code
+        traceback.print_exc()
+        print("ROS2Bridge self-test FAILED")
+        return 1
+    print("ROS2Bridge self-test passed")
+    return 0
+
+
+if __name__ == "__main__":
+    code = main()
+    try:
+        import slicer
+        slicer.util.exit(code)
+    except ImportError:
+        sys.exit(code)
