@@ -143,7 +143,7 @@ class ParameterBridges:
     """Parameter clients of other nodes, and the daemon node's own parameter server."""
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
-                 request_timeout_s: float = 3.0, ready_wait_s: float = 1.0,
+                 request_timeout_s: float = 3.0, ready_wait_s: float = 2.0,
                  check_interval_s: float = 0.5) -> None:
         self._ros = ros
         self._hub = hub
@@ -184,7 +184,7 @@ class ParameterBridges:
                                                 f"{node}/get_parameter_types"))
         self.clients[node] = client
         # Give discovery a moment, so an existing node is reported ready at once.
-        ready = await wait_until_ready(client.get_client, self._ready_wait_s)
+        ready = await self._wait_all_ready(client)
         if self.clients.get(node) is client and client.ready is None:
             self._set_ready(client, ready)
         self._schedule_check()
@@ -256,10 +256,22 @@ class ParameterBridges:
                                      code=ErrorCode.NOT_FOUND)
         return client
 
+    async def _wait_all_ready(self, client: ParameterClient) -> bool:
+        # Each service is discovered on its own: all four, within one `ready_wait_s`.
+        deadline = asyncio.get_running_loop().time() + self._ready_wait_s
+        for ros_client in client.clients():
+            left = deadline - asyncio.get_running_loop().time()
+            if not await wait_until_ready(ros_client, max(0.0, left)):
+                return False
+        return True
+
     async def _call(self, client: ParameterClient, ros_client: Client, request: Any) -> Any:
+        # A node known to be there gets the whole timeout for this service's discovery; an
+        # absent one is reported UNAVAILABLE sooner.
         return await call_ros_service(self._hub, ros_client, request,
                                       timeout=self._request_timeout_s,
-                                      ready_wait=self._ready_wait_s,
+                                      ready_wait=(self._request_timeout_s if client.ready
+                                                  else self._ready_wait_s),
                                       what=f"the parameter services of {client.node}",
                                       field="node")
 
@@ -290,7 +302,7 @@ class ParameterBridges:
         for client in list(self.clients.values()):
             if client.ready is None:
                 continue  # its creation is still waiting for discovery
-            ready = client.get_client.service_is_ready()
+            ready = all(ros_client.service_is_ready() for ros_client in client.clients())
             if ready != client.ready:
                 self._set_ready(client, ready)
         self._schedule_check()
