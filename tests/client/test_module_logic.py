@@ -1,0 +1,185 @@
+"""The Slicer module's logic that needs no Slicer: scene planner, bridge-state format,
+connector command building and reply parsing, values and matrices."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+
+import numpy as np
+import pytest
+
+from protocol import commands as c
+from protocol.messages import Message, String, Transform
+from protocol.naming import NameKey, device_name_for, metadata_for
+from slicer_client import (BridgeSpec, BridgeState, CommandRefusedError, CommandTimeoutError,
+                           MatrixError, StateFormatError, as_numpy, to_vtk)
+from slicer_client.connector_codec import build_command, message_from_node, parse_reply
+from slicer_client.scene_plan import (DEFAULT_COLOUR, describe_bridges,
+                                      metadata_from_attributes, model_colour, plan_node)
+from slicer_client.values import value_from_message
+
+
+def attrs(meta: dict[str, str]) -> dict[str, str]:
+    return {f"OpenIGTLink.{k}": v for k, v in meta.items()}
+
+
+# --- scene planner ------------------------------------------------------------------------
+def test_robot_visual_goes_under_its_link_transform_in_the_robot_folder() -> None:
+    meta = metadata_from_attributes({**attrs(metadata_for(
+        NameKey.robot_visual("PSM1", "tool_link", 0))), "Other": "x"})
+    plan = plan_node("PSM1:tool_link:0", meta)
+    assert plan.kind == "robot_visual"
+    assert plan.parent_device == "PSM1:tool_link"
+    assert plan.folder == "robot PSM1"
+    assert plan.display_name == "PSM1 tool_link"
+    assert plan.colour == DEFAULT_COLOUR
+
+
+def test_long_link_names_use_the_daemons_hashed_device_or_the_create_reply() -> None:
+    link = "a_very_long_link_name_indeed"
+    meta = metadata_for(NameKey.robot_visual("PSM1", link, 2))
+    plan = plan_node("whatever", meta)
+    assert plan.parent_device == device_name_for(NameKey.robot_link("PSM1", link))
+    assert "~" in plan.parent_device and plan.display_name.endswith("visual 2")
+    given = plan_node("whatever", meta, link_devices={("PSM1", link): "from-reply"})
+    assert given.parent_device == "from-reply"
+
+
+def test_colours_from_metadata_then_rgba_attribute_then_default() -> None:
+    assert model_colour({"ros2.color": "1 0 0 0.5"}) == ((1.0, 0.0, 0.0), 0.5)
+    assert model_colour({"ros2.color": "bad"}, [0.2, 0.4, 0.6, 1.0]) == ((0.2, 0.4, 0.6), 1.0)
+    assert model_colour({}, None) == (DEFAULT_COLOUR, 1.0)
+    assert model_colour({}, [2.0, -1.0, 0.5]) == ((1.0, 0.0, 0.5), 1.0)
+
+
+@pytest.mark.parametrize("key, kind, folder", [
+    (NameKey.robot_link("R", "base"), "robot_link", "robot R"),
+    (NameKey.robot_description("R"), "robot_description", "robot R"),
+    (NameKey.tf_lookup("world", "tool"), "tf_lookup", "ROS2 tf"),
+    (NameKey.subscriber("/tool"), "subscriber", "ROS2 topics"),
+    (NameKey.parameter_client("/rsp"), "parameters", "ROS2 parameters"),
+])
+def test_every_role_has_a_plan(key: NameKey, kind: str, folder: str) -> None:
+    plan = plan_node(device_name_for(key), metadata_for(key, ros_type="std_msgs/msg/String"))
+    assert (plan.kind, plan.folder, plan.parent_device) == (kind, folder, None)
+
+
+def test_unknown_nodes_are_left_alone() -> None:
+    plan = plan_node("Needle", {})
+    assert (plan.kind, plan.folder, plan.colour) == ("other", None, None)
+
+
+def test_bridge_lines_from_both_list_shapes() -> None:
+    daemon_shape = {"bridges": [
+        {"kind": "subscriber", "topic": "/tool", "type": "geometry_msgs/msg/PoseStamped",
+         "device": "tool"},
+        {"kind": "tf_buffer", "topics": ["/tf"]},
+        {"kind": "tf_lookup", "parent": "world", "child": "tool", "device": "tf:world>tool"}]}
+    assert describe_bridges(daemon_shape) == [
+        "subscriber: /tool [geometry_msgs/msg/PoseStamped] as tool",
+        "tf_lookup: world -> tool as tf:world>tool"]
+    readme_shape = {"robots": [{"name": "PSM1", "links": 7}],
+                    "parameter_clients": [{"node": "/rsp", "device": "param:rsp"}]}
+    assert describe_bridges(readme_shape) == ["robot: PSM1", "parameter_client: /rsp as param:rsp"]
+
+
+# --- bridge state -------------------------------------------------------------------------
+def test_state_round_trips_and_keeps_order_and_follow_ups() -> None:
+    state = BridgeState((
+        BridgeSpec("create_subscriber", {"topic": "/a", "type": "String"}),
+        BridgeSpec("create_parameter_client", {"node": "/rsp"},
+                   (("observe_parameters", {"node": "/rsp", "names": ["x"]}),)),
+        BridgeSpec("create_robot", {"name": "PSM1", "tf_prefix": "PSM1/"})))
+    again = BridgeState.from_json(state.to_json())
+    assert again == state
+    assert again.specs[1].remove_command() == ("remove_parameter_client", {"node": "/rsp"})
+    assert [s.key for s in again.specs] == [("create_subscriber", "/a"),
+                                            ("create_parameter_client", "/rsp"),
+                                            ("create_robot", "PSM1")]
+    assert BridgeState.from_json("") == BridgeState()
+
+
+@pytest.mark.parametrize("text, message", [
+    ("{", "expected JSON"),
+    ('{"version": 9}', "version 1 expected, got 9"),
+    ('{"version": 1, "bridges": [{"op": "publish", "args": {}}]}', "bridges[0].op"),
+    ('{"version": 1, "bridges": [{"op": "create_subscriber", "args": {"topic": "/a", '
+     '"type": "String", "qos": {"depth": 0}}}]}', "qos.depth"),
+    ('{"version": 1, "bridges": [{"op": "create_subscriber", "args": {"topic": "/a"}}]}',
+     "type"),
+])
+def test_bad_saved_state_names_the_entry_and_field(text: str, message: str) -> None:
+    with pytest.raises(StateFormatError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        BridgeState.from_json(text)
+
+
+# --- connector command codec --------------------------------------------------------------
+def test_build_command_validates_and_encodes() -> None:
+    name, text = build_command("create_subscriber", {"topic": "/tool", "type": "PoseStamped"})
+    assert name == "create_subscriber"
+    assert json.loads(text)["topic"] == "/tool" and json.loads(text)["schema"] == 1
+    with pytest.raises(c.MissingFieldError, match="type"):
+        build_command("create_subscriber", {"topic": "/tool"})
+    with pytest.raises(c.TooLargeError, match="65535"):
+        build_command("publish", {"topic": "/t", "value": "x" * 70000})
+
+
+def test_parse_reply_success_refusal_expiry() -> None:
+    ok = c.Reply.success("list_bridges", {"bridges": []}).to_json()
+    assert parse_reply("list_bridges", ok) == {"bridges": []}
+    refused = c.Reply.failure("create_subscriber", c.ErrorCode.OUT_OF_RANGE,
+                              "qos.depth: expected >= 1, got 0", "qos.depth").to_json()
+    with pytest.raises(CommandRefusedError) as caught:
+        parse_reply("create_subscriber", refused)
+    assert caught.value.field == "qos.depth" and "got 0" in str(caught.value)
+    with pytest.raises(CommandTimeoutError, match="5"):
+        parse_reply("hello", "", expired=True, timeout=5.0)
+    with pytest.raises(CommandRefusedError, match="connector says no"):
+        parse_reply("hello", "", error_message="connector says no")
+
+
+def test_connector_nodes_become_messages() -> None:
+    meta = metadata_for(NameKey.subscriber("/tool"), ros_type="std_msgs/msg/Int64")
+    message = message_from_node("tool", attrs(meta), text="42")
+    assert isinstance(message.body, String) and value_from_message(message) == 42
+    moved = np.eye(4)
+    moved[0, 3] = 5.0
+    transform = message_from_node("tf:w>t", {}, matrix=moved.tolist())
+    assert isinstance(transform.body, Transform)
+    np.testing.assert_allclose(value_from_message(transform), moved)
+    assert message_from_node("x", {}) is None
+
+
+# --- values and matrices ------------------------------------------------------------------
+@pytest.mark.parametrize("ros_type, text, fmt, value", [
+    ("std_msgs/msg/String", "hi", "text", "hi"),
+    ("std_msgs/msg/Bool", "true", "text", True),
+    ("std_msgs/msg/Float64", "2.5", "text", 2.5),
+    ("std_msgs/msg/Empty", "", "text", None),
+    ("std_msgs/msg/Float64MultiArray", "[[1, 2], [3, 4]]", "json", [[1, 2], [3, 4]]),
+])
+def test_values_follow_the_metadata(ros_type: str, text: str, fmt: str, value) -> None:
+    message = Message("d", String(text), metadata={"ros2.type": ros_type, "ros2.format": fmt})
+    assert value_from_message(message) == value
+
+
+def test_matrices_accept_lists_and_refuse_non_rigid() -> None:
+    np.testing.assert_allclose(as_numpy([[1, 0, 0, 1], [0, 1, 0, 2], [0, 0, 1, 3],
+                                         [0, 0, 0, 1]])[:3, 3], [1, 2, 3])
+    with pytest.raises(MatrixError, match="shape"):
+        as_numpy(np.eye(3))
+    with pytest.raises(MatrixError):
+        as_numpy(np.diag([2.0, 1.0, 1.0, 1.0]))
+
+
+def test_vtk_matrices_when_vtk_is_importable() -> None:
+    if importlib.util.find_spec("vtk") is None:
+        with pytest.raises(ImportError, match="vtk"):
+            to_vtk(np.eye(4))
+        pytest.skip("vtk is not installed here: only the clear ImportError was checked")
+    matrix = np.eye(4)
+    matrix[1, 3] = 7.0
+    vtk_matrix = to_vtk(matrix)
+    assert vtk_matrix.GetElement(1, 3) == 7.0
+    np.testing.assert_allclose(as_numpy(vtk_matrix), matrix)
