@@ -421,9 +421,10 @@ def test_bad_broadcast_requests_get_error_replies_naming_the_field(
                                                "matrix": sheared.tolist()})
     assert shear.value.error.code.name == "OUT_OF_RANGE"
     assert shear.value.error.field == "matrix rotation"
+    not_a_number = [[1, 0, 0, None]] + np.eye(4)[1:].tolist()  # JSON has no NaN: null
     with pytest.raises(CommandRefusedError) as nan:
         client.command("broadcast_transform", {"parent": p + "a", "child": p + "b",
-                                               "matrix": [[1, 0, 0, None]] + np.eye(4)[1:].tolist()})
+                                               "matrix": not_a_number})
     assert nan.value.error.field == "matrix[0][3]"
     with pytest.raises(CommandRefusedError) as three:
         client.command("broadcast_transform", {"parent": p + "a", "child": p + "b",
