@@ -133,3 +133,20 @@ def test_reconnects_after_a_daemon_restart_and_restores_subscriptions(
         listed = ros.list_bridges()["bridges"]
         assert any(b.get("topic") == "/py_restart" for b in listed)
         assert isinstance(ros.latest(sub.device).body, Transform)
+
+
+def test_service_call_through_the_pythonic_api_and_the_facade(ros: slicer_client.Client,
+                                                               processes: Processes) -> None:
+    server = processes.python("services", "service_server.py", "--namespace", "/py_srv")
+    server.wait_for_output("READY", timeout=30)
+    service = ros.service("/py_srv/set_enabled", "std_srvs/srv/SetBool")
+    response = service.call({"data": True}, timeout=4.0)
+    assert response["success"] is True
+    server.wait_for_output('CALL set_enabled {"data": true}')
+    node = ros.GetDefaultROS2Node().CreateAndAddServiceClientNode("std_srvs/srv/Trigger",
+                                                                  "/py_srv/trigger")
+    assert node.SendBlockingRequest({})["success"] is True
+    assert node.GetLastResponse()["success"] is True
+    with pytest.raises(slicer_client.CommandRefusedError) as caught:
+        ros.service("/py_srv/nobody_here", "std_srvs/srv/Trigger").call({}, timeout=0.5)
+    assert caught.value.code in (ErrorCode.UNAVAILABLE, ErrorCode.TIMEOUT)
