@@ -90,7 +90,8 @@ def test_a_daemon_that_is_not_running_gives_a_clear_error() -> None:
     assert "slicer-ros2-bridge run" in text
 
 
-def test_state_lists_what_was_created_in_order(ros: slicer_client.Client) -> None:
+def test_state_lists_what_was_created_in_order(ros: slicer_client.Client,
+                                               daemon: RunningDaemon) -> None:
     ros.subscribe("/py_state_a", "String")
     ros.publisher("/py_state_b", "PoseStamped", qos={"depth": 1})
     ros.tf_lookup("py_w", "py_tool", rate_hz=30)
@@ -99,8 +100,7 @@ def test_state_lists_what_was_created_in_order(ros: slicer_client.Client) -> Non
         ("create_subscriber", "/py_state_a"), ("create_publisher", "/py_state_b"),
         ("create_tf_lookup", "py_w", "py_tool")]
     # Restoring into another client re-creates the same bridges.
-    with slicer_client.connect(*ros.address.split(":")[:1], int(ros.address.split(":")[1])) \
-            as other:
+    with slicer_client.connect("127.0.0.1", daemon.port) as other:
         made = other.restore(state)
         assert [r.spec for r in made] == list(state.specs)
 
