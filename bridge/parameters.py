@@ -143,7 +143,7 @@ class ParameterBridges:
     """Parameter clients of other nodes, and the daemon node's own parameter server."""
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
-                 request_timeout_s: float = 3.0, ready_wait_s: float = 2.0,
+                 request_timeout_s: float = 4.0, ready_wait_s: float = 2.0,
                  check_interval_s: float = 0.5) -> None:
         self._ros = ros
         self._hub = hub
@@ -266,12 +266,11 @@ class ParameterBridges:
         return True
 
     async def _call(self, client: ParameterClient, ros_client: Client, request: Any) -> Any:
-        # A node known to be there gets the whole timeout for this service's discovery; an
-        # absent one is reported UNAVAILABLE sooner.
+        # Discovery of a node that just appeared can take seconds: it may use the whole
+        # timeout before the call is UNAVAILABLE.
         return await call_ros_service(self._hub, ros_client, request,
                                       timeout=self._request_timeout_s,
-                                      ready_wait=(self._request_timeout_s if client.ready
-                                                  else self._ready_wait_s),
+                                      ready_wait=self._request_timeout_s,
                                       what=f"the parameter services of {client.node}",
                                       field="node")
 

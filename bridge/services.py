@@ -157,7 +157,9 @@ class ServiceBridges:
     """The daemon's service clients (`call_service`) and client-served services."""
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
-                 availability_wait_s: float = 2.0, answer_timeout_s: float = 4.0) -> None:
+                 availability_wait_s: float = 3.5, answer_timeout_s: float = 4.0) -> None:
+        # 3.5 s: a server missed by the first discovery announcements is found at the next
+        # round (Fast DDS: every 3 s); still below call_service's default timeout of 4 s.
         self._ros = ros
         self._hub = hub
         self._names = names

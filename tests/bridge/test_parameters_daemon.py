@@ -41,6 +41,13 @@ def start_param_node(processes: Processes, name: str, *args: str) -> Child:
     return child
 
 
+def wait_ready(client: Connection, device: str) -> None:
+    """The parameter client's device says OK once all the node's parameter services are
+    discovered (at creation, or later: discovery can take seconds)."""
+    client.wait_for(device, lambda m: not isinstance(m.body, Status)
+                    or m.body.code == StatusCode.OK, timeout=20)
+
+
 def refused(call: Callable[[], Any]) -> c.ErrorInfo:
     with pytest.raises(CommandRefusedError) as info:
         call()
@@ -76,8 +83,9 @@ def test_every_type_with_its_type(processes: Processes, client: Connection) -> N
     start_param_node(processes, name)
     created = client.command("create_parameter_client", {"node": f"/{name}"})
     assert created == {"kind": "parameter_client", "node": f"/{name}",
-                       "device": f"param:{name}", "ready": True, "observed": [],
+                       "device": f"param:{name}", "ready": created["ready"], "observed": [],
                        "existed": False}
+    wait_ready(client, created["device"])
     names = [*EVERY_TYPE, "label", "nope"]
     values = client.command("get_parameters", {"node": name, "names": names})["values"]
     assert values == {**EVERY_TYPE, "label": {"type": "string", "value": f"/{name}"},
@@ -99,7 +107,7 @@ def test_every_type_with_its_type(processes: Processes, client: Connection) -> N
 def test_set_from_the_client(processes: Processes, client: Connection) -> None:
     name = fresh_node("set")
     peer = start_param_node(processes, name)
-    client.command("create_parameter_client", {"node": name})
+    wait_ready(client, client.command("create_parameter_client", {"node": name})["device"])
     result = client.command("set_parameters", {"node": name, "values": {
         "ratio": {"type": "double", "value": 2.5},
         "counts": {"type": "integer_array", "value": []},
@@ -122,6 +130,7 @@ def test_observed_changes_are_pushed(processes: Processes, daemon: Any,
     peer = start_param_node(processes, name)
     created = client.command("create_parameter_client", {"node": name})
     device = created["device"]
+    wait_ready(client, device)
     observed = client.command("observe_parameters", {"node": name,
                                                      "names": ["count", "ratio", "nope"]})
     assert observed["observed"] == ["count", "ratio", "nope"]
@@ -189,6 +198,8 @@ def test_namespaced_nodes_side_by_side(processes: Processes, client: Connection)
     assert (one["node"], two["node"]) == ("/PSM1/robot_state_publisher",
                                           "/PSM2/robot_state_publisher")
     assert one["device"] != two["device"] and len(one["device"]) <= 20
+    for created in (one, two):
+        wait_ready(client, created["device"])
     for ns, created in (("PSM1", one), ("PSM2", two)):
         values = client.command("get_parameters", {"node": created["node"],
                                                    "names": ["robot_description"]})["values"]
@@ -203,9 +214,11 @@ def test_namespaced_nodes_side_by_side(processes: Processes, client: Connection)
     try:
         relative = connection.command("create_parameter_client",
                                       {"node": "robot_state_publisher"})
-        assert relative["node"] == "/PSM1/robot_state_publisher" and relative["ready"]
+        assert relative["node"] == "/PSM1/robot_state_publisher"
         absolute = connection.command("create_parameter_client",
                                       {"node": "/PSM2/robot_state_publisher"})
+        for created in (relative, absolute):
+            wait_ready(connection, created["device"])
         got = {created["node"]: connection.command("get_parameters", {
             "node": created["node"], "names": ["label"]})["values"]["label"]["value"]
             for created in (relative, absolute)}

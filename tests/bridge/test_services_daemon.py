@@ -22,7 +22,7 @@ from support import Child, Processes, RunningDaemon, start_daemon, wait_until
 @pytest.fixture(scope="module")
 def server(module_processes: Processes) -> Child:
     child = module_processes.python("service_server", "service_server.py",
-                                    "--slow-seconds", "3")
+                                    "--slow-seconds", "5")
     child.wait_for_output("READY")
     return child
 
@@ -85,9 +85,11 @@ def answerer_factory(daemon: RunningDaemon) -> Iterator[Callable[..., Answerer]]
 
 
 def test_set_bool_round_trip(client: Connection, server: Child) -> None:
+    # The first call of the module may wait for a discovery round: a generous timeout.
     result = client.command("call_service", {"service": "/set_enabled",
                                              "type": "std_srvs/srv/SetBool",
-                                             "request": {"data": True}})
+                                             "request": {"data": True}, "timeout": 10.0},
+                            timeout=15)
     assert result == {"service": "/set_enabled", "type": "std_srvs/srv/SetBool",
                       "response": {"success": True, "message": "/ enabled=True"}}
     assert server.wait_for_output("CALL set_enabled").endswith('{"data": true}')
@@ -109,10 +111,10 @@ def test_trigger_round_trip(client: Connection, server: Child) -> None:
 def test_timeout(client: Connection, server: Child) -> None:
     started = time.monotonic()
     error = refused(lambda: client.command("call_service", {
-        "service": "/slow", "type": "std_srvs/srv/Trigger", "timeout": 1.0}))
+        "service": "/slow", "type": "std_srvs/srv/Trigger", "timeout": 2.5}))
     elapsed = time.monotonic() - started
     assert error.code == ErrorCode.TIMEOUT and error.field == "service", error
-    assert 1.0 <= elapsed < 2.5, elapsed
+    assert 2.5 <= elapsed < 4.0, elapsed
     server.wait_for_output("CALL slow")
     # The daemon keeps serving while the peer still sleeps.
     result = client.command("call_service", {"service": "/set_enabled",
@@ -279,13 +281,15 @@ def test_namespaces(processes: Processes) -> None:
     answering: Connection | None = None
     answering_conn: list[Connection] = []
     try:
+        # A fresh daemon may need a discovery round (seconds) to see the servers.
         relative = connection.command("call_service", {
-            "service": "set_enabled", "type": "std_srvs/srv/SetBool", "request": {"data": True}})
+            "service": "set_enabled", "type": "std_srvs/srv/SetBool", "request": {"data": True},
+            "timeout": 10.0}, timeout=15)
         assert relative["service"] == "/PSM1/set_enabled"
         assert relative["response"]["message"] == "/PSM1 enabled=True"
         absolute = connection.command("call_service", {
             "service": "/PSM2/set_enabled", "type": "std_srvs/srv/SetBool",
-            "request": {"data": True}})
+            "request": {"data": True}, "timeout": 10.0}, timeout=15)
         assert absolute["response"]["message"] == "/PSM2 enabled=True"
         for child in servers:
             child.wait_for_output("CALL set_enabled")
