@@ -23,6 +23,7 @@ from typing import Any, Optional
 
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.client import Client
+from rclpy.exceptions import InvalidHandle
 from rclpy.task import Future as RosFuture
 
 from bridge.codecs import CodecError, dict_to_message, message_to_dict
@@ -75,12 +76,16 @@ async def call_ros_service(hub: Hub, client: Client, request: Any, *, timeout: f
     """
     loop = asyncio.get_running_loop()
     start = loop.time()
-    if not await wait_until_ready(client, min(timeout, ready_wait)):
-        raise CommandFailedError(field, f"{what} to be available",
-                                 f"no server after {min(timeout, ready_wait):g} s",
-                                 code=ErrorCode.UNAVAILABLE)
+    try:
+        if not await wait_until_ready(client, min(timeout, ready_wait)):
+            raise CommandFailedError(field, f"{what} to be available",
+                                     f"no server after {min(timeout, ready_wait):g} s",
+                                     code=ErrorCode.UNAVAILABLE)
+        ros_future = client.call_async(request)
+    except InvalidHandle:  # the bridge was removed meanwhile
+        raise CommandFailedError(field, f"{what} to be available", "a removed client",
+                                 code=ErrorCode.UNAVAILABLE) from None
     outcome: asyncio.Future[Any] = loop.create_future()
-    ros_future = client.call_async(request)
     # Runs in the executor thread (or at once if already done): hand off only.
     ros_future.add_done_callback(lambda done: hub.call_soon(_transfer, done, outcome))
     try:

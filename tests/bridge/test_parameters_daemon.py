@@ -305,3 +305,23 @@ def test_server_parameters_read_and_set_by_ros(processes: Processes,
                                            {"name": "needle.ids"}))
     assert error.code == ErrorCode.NOT_FOUND
     client.command("server_undeclare_parameter", {"name": "needle.length"})
+
+
+def test_server_declares_every_type(client: Connection) -> None:
+    every = {**EVERY_TYPE, "label": {"type": "string", "value": "tip ✓"},
+             "none": {"type": "string_array", "value": []},
+             "nobytes": {"type": "byte_array", "value": []}}
+    for name, value in every.items():
+        declared = client.command("server_declare_parameter",
+                                  {"name": f"every.{name}", "value": value})
+        assert declared["value"] == value, name
+    got = client.command("server_get_parameters",
+                         {"names": [f"every.{name}" for name in every]})["values"]
+    assert got == {f"every.{name}": value for name, value in every.items()}
+    client.wait_for("params:slicer_bridge", lambda m: isinstance(m.body, String) and all(
+        values_of(m).get(f"every.{name}") == value for name, value in every.items()))
+    for name in every:
+        client.command("server_undeclare_parameter", {"name": f"every.{name}"})
+    error = refused(lambda: client.command("server_declare_parameter", {
+        "name": "every.nothing", "value": {"type": "not_set", "value": None}}))
+    assert (error.code, error.field) == (ErrorCode.OUT_OF_RANGE, "value.type")
