@@ -1,0 +1,62 @@
+"""The baseline: the ROS -> OpenIGTLink relay a Python user would write with pyigtl's own
+server and rclpy (subscription callback -> pyigtl message -> server.send_message).
+
+usage: naive_relay.py PORT POSE_TOPIC IMAGE_TOPIC
+Prints READY once the server listens. Used by bench_daemon.py; not part of the product.
+"""
+
+import sys
+import threading
+
+import numpy as np
+import pyigtl
+import rclpy
+from geometry_msgs.msg import PoseStamped
+from rclpy.executors import ExternalShutdownException
+from sensor_msgs.msg import Image
+
+
+def quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def main() -> None:
+    port, pose_topic, image_topic = int(sys.argv[1]), sys.argv[2], sys.argv[3]
+    # pyigtl's server installs signal handlers: it must live in the main thread.
+    server = pyigtl.OpenIGTLinkServer(port=port, local_server=True)
+    rclpy.init()
+    node = rclpy.create_node("naive_relay")
+
+    def stamp_of(msg) -> float:
+        return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+    def on_pose(msg: PoseStamped) -> None:
+        matrix = np.eye(4)
+        o, p = msg.pose.orientation, msg.pose.position
+        matrix[:3, :3] = quaternion_matrix(o.x, o.y, o.z, o.w)
+        matrix[:3, 3] = (p.x * 1000.0, p.y * 1000.0, p.z * 1000.0)
+        server.send_message(pyigtl.TransformMessage(matrix, timestamp=stamp_of(msg),
+                                                    device_name="pose"), wait=False)
+
+    def on_image(msg: Image) -> None:
+        pixels = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(
+            1, msg.height, msg.width, 3)
+        server.send_message(pyigtl.ImageMessage(pixels, timestamp=stamp_of(msg),
+                                                device_name="camera"), wait=False)
+
+    node.create_subscription(PoseStamped, pose_topic, on_pose, 1000)
+    node.create_subscription(Image, image_topic, on_image, 10)
+    spinner = threading.Thread(target=rclpy.spin, args=(node,), daemon=True)
+    spinner.start()
+    print("READY", flush=True)
+    try:
+        threading.Event().wait()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+
+
+if __name__ == "__main__":
+    main()
