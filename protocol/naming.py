@@ -52,10 +52,12 @@ from protocol.errors import ProtocolError
 __all__ = [
     "DEFAULT_HASH_LENGTH",
     "KEY_CHILD",
+    "KEY_COLOR",
     "KEY_FRAME",
     "KEY_LINK",
     "KEY_NODE",
     "KEY_PARENT",
+    "KEY_PARENT_DEVICE",
     "KEY_ROBOT",
     "KEY_ROLE",
     "KEY_SERVICE",
@@ -135,9 +137,13 @@ KEY_NODE = "ros2.node"
 KEY_SERVICE = "ros2.service"
 KEY_ROLE = "ros2.role"
 KEY_UNITS = "ros2.units"
+# A robot visual's model: the device of the link TRANSFORM it goes under, and its colour
+# ("r g b a", floats 0..1), so a Slicer script can parent and colour it from attributes.
+KEY_PARENT_DEVICE = "ros2.parent_device"
+KEY_COLOR = "ros2.color"
 METADATA_KEYS: tuple[str, ...] = (
     KEY_TOPIC, KEY_TYPE, KEY_FRAME, KEY_PARENT, KEY_CHILD, KEY_ROBOT, KEY_LINK,
-    KEY_VISUAL, KEY_NODE, KEY_SERVICE, KEY_ROLE, KEY_UNITS,
+    KEY_VISUAL, KEY_NODE, KEY_SERVICE, KEY_ROLE, KEY_UNITS, KEY_PARENT_DEVICE, KEY_COLOR,
 )
 UNITS_MM = "mm"
 
