@@ -18,6 +18,7 @@ Pure Python 3.9+ and numpy; no I/O, no ROS import.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Union
 
@@ -178,7 +179,32 @@ def rotation_to_quaternion(rotation: ArrayLike) -> FloatArray:
 
 
 def pose_to_matrix(translation_m: ArrayLike, quaternion_xyzw: ArrayLike) -> FloatArray:
-    """ROS pose (translation in metres, quaternion x, y, z, w) -> 4x4 float64 matrix in mm."""
+    """ROS pose (translation in metres, quaternion x, y, z, w) -> 4x4 float64 matrix in mm.
+
+    This runs once per ROS message on the hot path, so a single pose is computed with plain
+    floats (numpy's per-call overhead is most of the cost for seven numbers); anything that
+    is not three and four finite numbers goes through the checking path below.
+    """
+    try:
+        tx, ty, tz = (float(v) for v in translation_m)  # type: ignore[union-attr]
+        x, y, z, w = (float(v) for v in quaternion_xyzw)  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        return _pose_to_matrix_checked(translation_m, quaternion_xyzw)
+    norm2 = x * x + y * y + z * z + w * w
+    if not (math.isfinite(tx + ty + tz) and math.isfinite(norm2)) or norm2 < 1e-24:
+        return _pose_to_matrix_checked(translation_m, quaternion_xyzw)
+    s = 2.0 / norm2  # normalises the quaternion on the way
+    xx, yy, zz = x * x * s, y * y * s, z * z * s
+    xy, xz, yz = x * y * s, x * z * s, y * z * s
+    wx, wy, wz = w * x * s, w * y * s, w * z * s
+    return np.array([
+        [1.0 - (yy + zz), xy - wz, xz + wy, tx * MM_PER_M],
+        [xy + wz, 1.0 - (xx + zz), yz - wx, ty * MM_PER_M],
+        [xz - wy, yz + wx, 1.0 - (xx + yy), tz * MM_PER_M],
+        [0.0, 0.0, 0.0, 1.0]], dtype=np.float64)
+
+
+def _pose_to_matrix_checked(translation_m: ArrayLike, quaternion_xyzw: ArrayLike) -> FloatArray:
     t = _as_float_array(translation_m, "translation", "3 numbers x, y, z in metres")
     if t.shape != (3,):
         raise _fail("translation", "shape (3,)", f"shape {t.shape}")

@@ -8,6 +8,7 @@ other than 0 0 0 1, a non-orthonormal rotation or a reflection raise `CodecError
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,8 +49,8 @@ __all__ = [
 
 
 def _finite(values: tuple[float, ...], field: str) -> None:
-    arr = np.asarray(values, dtype=np.float64)
-    if not np.all(np.isfinite(arr)):
+    # Per message on the hot path: plain floats, no numpy.
+    if not all(math.isfinite(v) for v in values):
         raise CodecError(field=field, expected="finite numbers", got=repr(list(values)))
 
 
