@@ -8,16 +8,26 @@ the file is checked by the same schema, and gets the same errors, as a client's 
       - {topic: /tool_pose, type: PoseStamped, max_rate_hz: 60}
     publishers:             # create_publisher
       - {topic: /target, type: geometry_msgs/msg/PoseStamped}
+
+A ``security:`` section (docs/security.md) locks the daemon down; the command-line options
+of the same names add to it (globs, networks) or override it (limits):
+
+    security:
+      read_only: true
+      allow: [127.0.0.1/32, 10.0.0.0/8]
+      deny_topics: ["/cmd_vel", "/rosout*"]
+      max_clients: 8
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import yaml
 
+from bridge.security import PolicyError, SecurityPolicy, positive_int
 from bridge.session import SessionLimits
 
 # Section name in the YAML file -> the command each of its entries is.
@@ -29,6 +39,7 @@ SECTIONS: dict[str, str] = {
     "parameter_clients": "create_parameter_client",
     "robots": "create_robot",
 }
+SECURITY_SECTION = "security"
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 18944
@@ -53,11 +64,23 @@ class DaemonConfig:
     namespace: str = ""
     log_level: str = "INFO"
     limits: SessionLimits = field(default_factory=SessionLimits)
+    security: SecurityPolicy = field(default_factory=SecurityPolicy)
     startup: tuple[StartupCommand, ...] = ()
     package_paths: tuple[tuple[str, str], ...] = ()
 
 
+@dataclass(frozen=True)
+class ConfigFile:
+    startup: tuple[StartupCommand, ...] = ()
+    security: Mapping[str, Any] = field(default_factory=dict)  # the raw `security:` section
+    name: str = ""
+
+
 def load_startup_commands(path: Path) -> tuple[StartupCommand, ...]:
+    return load_config_file(path).startup
+
+
+def load_config_file(path: Path) -> ConfigFile:
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as error:
@@ -67,15 +90,23 @@ def load_startup_commands(path: Path) -> tuple[StartupCommand, ...]:
     except yaml.YAMLError as error:
         raise ConfigError(f"{path} is not valid YAML: {error}") from None
     if document is None:
-        return ()
+        return ConfigFile(name=path.name)
+    expected = ", ".join((*SECTIONS, SECURITY_SECTION))
     if not isinstance(document, dict):
-        raise ConfigError(f"{path}: expected a mapping of sections "
-                          f"({', '.join(SECTIONS)}), got {type(document).__name__}")
+        raise ConfigError(f"{path}: expected a mapping of sections ({expected}), got "
+                          f"{type(document).__name__}")
     commands: list[StartupCommand] = []
+    security: Mapping[str, Any] = {}
     for section, entries in document.items():
+        if section == SECURITY_SECTION:
+            if not isinstance(entries, dict):
+                raise ConfigError(f"{path}: section {section!r} must be a mapping, got "
+                                  f"{type(entries).__name__}")
+            security = entries
+            continue
         if section not in SECTIONS:
             raise ConfigError(f"{path}: unknown section {section!r}; expected one of "
-                              f"{', '.join(SECTIONS)}")
+                              f"{expected}")
         if not isinstance(entries, list):
             raise ConfigError(f"{path}: section {section!r} must be a list, got "
                               f"{type(entries).__name__}")
@@ -85,4 +116,31 @@ def load_startup_commands(path: Path) -> tuple[StartupCommand, ...]:
                 raise ConfigError(f"{where}: expected a mapping of arguments, got "
                                   f"{type(entry).__name__}")
             commands.append(StartupCommand(SECTIONS[section], dict(entry), where))
-    return tuple(commands)
+    return ConfigFile(tuple(commands), security, path.name)
+
+
+def build_security(file_settings: Mapping[str, Any], cli_settings: Mapping[str, Any],
+                   where: str = "security") -> tuple[SecurityPolicy, SessionLimits]:
+    """The policy and session limits from the config's ``security:`` section and the
+    command line (same keys): lists add up, ``read_only`` is on if either says so, a limit
+    given on the command line wins over the file's."""
+    merged: dict[str, Any] = dict(file_settings)
+    for key, value in cli_settings.items():
+        if value is None or value == [] or value is False:
+            continue
+        if isinstance(value, list):
+            previous = merged.get(key) or []
+            merged[key] = [*([previous] if isinstance(previous, str) else previous), *value]
+        else:
+            merged[key] = value
+    try:
+        policy = SecurityPolicy.from_settings(merged, where)
+        limits = SessionLimits()
+        for key, attribute in (("max_message_bytes", "max_message_bytes"),
+                               ("max_send_buffer_bytes", "max_oneshot_bytes")):
+            if merged.get(key) is not None:
+                limits = replace(limits, **{attribute: positive_int(merged[key],
+                                                                    f"{where}.{key}")})
+    except PolicyError as error:
+        raise ConfigError(str(error)) from None
+    return policy, limits

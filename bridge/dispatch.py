@@ -14,8 +14,10 @@ from typing import Any, Awaitable, Callable, Mapping, Protocol, Sequence, Union
 
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
+from bridge.security import BridgeQuota, SecurityPolicy
 from protocol import commands as c
-from protocol.commands import CommandError, CommandFailedError, ErrorCode, Reply
+from protocol.commands import (CommandError, CommandFailedError, ErrorCode, OutOfRangeError,
+                               Reply)
 from protocol.messages import Command, Message, RtsCommand
 
 log = logging.getLogger(__name__)
@@ -42,10 +44,15 @@ class Capability(Protocol):
 
 
 class Dispatcher:
-    def __init__(self, ros: RosNode, hub: Hub, capabilities: Sequence[Capability]) -> None:
+    def __init__(self, ros: RosNode, hub: Hub, capabilities: Sequence[Capability], *,
+                 policy: SecurityPolicy = SecurityPolicy()) -> None:
         self._ros = ros
         self._hub = hub
         self._capabilities = tuple(capabilities)
+        # Security is checked here, by request fields, so no capability needs to know it.
+        self._policy = policy
+        self._quota = BridgeQuota(policy.max_bridges_per_client)
+        hub.add_closed_listener(self._quota.forget)
         self._tasks: set[asyncio.Task[None]] = set()
         # The one table of what this daemon serves, built from each capability's own list.
         # Ops of the schema missing here are answered NOT_SUPPORTED, naming the op.
@@ -102,7 +109,34 @@ class Dispatcher:
             raise CommandFailedError("op", "an op this daemon serves: " +
                                      ", ".join(sorted(self._handlers)), request.op,
                                      code=ErrorCode.NOT_SUPPORTED)
-        return handler(request, client)
+        self._policy.check_request(request, self._resolve, self._ros.fully_qualified_name)
+        if client is None:  # start-up config: judged by the policy, not counted
+            return handler(request, client)
+        reserved = self._quota.reserve(client, request.op)
+        try:
+            outcome = handler(request, client)
+        except BaseException:
+            self._quota.settle(client, request.op, reserved, None)
+            raise
+        if inspect.isawaitable(outcome):
+            return self._counted(outcome, client, request.op, reserved)
+        self._quota.settle(client, request.op, reserved, outcome)
+        return outcome
+
+    async def _counted(self, outcome: Awaitable[Result], client: Replier, op: str,
+                       reserved: bool) -> Result:
+        result: Result | None = None
+        try:
+            result = await outcome
+            return result
+        finally:
+            self._quota.settle(client, op, reserved, result)
+
+    def _resolve(self, name: str, field: str) -> str:
+        try:
+            return self._ros.resolve_topic(name)
+        except Exception as error:  # rclpy raises several name-validation exceptions
+            raise OutOfRangeError(field, "a valid ROS name", f"{name!r} ({error})") from None
 
     async def _finish(self, outcome: Awaitable[Result], client: Replier,
                       message: Message) -> None:

@@ -1,13 +1,22 @@
-"""The OpenIGTLink TCP server: accepts any number of clients, one `ClientSession` each."""
+"""The OpenIGTLink TCP server: accepts clients, one `ClientSession` each.
+
+At accept, the security policy decides: a peer outside ``--allow`` is closed at once, and a
+client over ``--max-clients`` gets a STATUS saying so, then is closed. Both are logged
+(rate-limited: a reconnect storm must not flood the log).
+"""
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from typing import Optional
 
 from bridge.hub import Hub
+from bridge.security import RateLimitedLog, SecurityPolicy, is_loopback_host
 from bridge.session import ClientSession, CommandHandler, SessionLimits
+from protocol.framing import encode
+from protocol.messages import Message, Status, StatusCode
 
 log = logging.getLogger(__name__)
 
@@ -18,14 +27,17 @@ class PortInUseError(OSError):
 
 class BridgeServer:
     def __init__(self, hub: Hub, commands: CommandHandler, *, host: str, port: int,
-                 limits: SessionLimits) -> None:
+                 limits: SessionLimits, policy: SecurityPolicy = SecurityPolicy()) -> None:
         self._hub = hub
         self._commands = commands
         self._host = host
         self._port = port
         self._limits = limits
+        self._policy = policy
+        self._refusals = RateLimitedLog()
         self._server: Optional[asyncio.base_events.Server] = None
         self.sessions: set[ClientSession] = set()
+        self.refused = 0
 
     async def start(self) -> None:
         loop = asyncio.get_running_loop()
@@ -38,16 +50,47 @@ class BridgeServer:
                                                   f"use (is another bridge or an OpenIGTLink "
                                                   f"server running?)") from None
             raise
+        if not is_loopback_host(self._host):
+            log.warning("listening on %s, reachable from other machines: OpenIGTLink has no "
+                        "authentication, so anyone who reaches this port can use the bridge%s",
+                        self._host, "" if self._policy.allowed_networks else
+                        " (restrict clients with --allow CIDR)")
 
     @property
     def port(self) -> int:
         assert self._server is not None and self._server.sockets
         return int(self._server.sockets[0].getsockname()[1])
 
-    def _new_session(self) -> ClientSession:
-        session = ClientSession(self._hub, self._commands, self._limits, self.sessions.discard)
+    def _new_session(self) -> asyncio.Protocol:
+        # The peer's address is known only once connected: the gate decides then.
+        return _Gate(self)
+
+    def _admit(self, transport: asyncio.Transport) -> None:
+        peer = transport.get_extra_info("peername")
+        address = str(peer[0]) if isinstance(peer, tuple) else str(peer)
+        who = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else address
+        if not self._policy.admits(address):
+            self.refused += 1
+            self._refusals.warning("allow", time.monotonic(), "refused client %s: not in the "
+                                   "allowed networks (--allow)", who)
+            transport.abort()  # nothing is said to a peer that may not connect
+            return
+        if len(self.sessions) >= self._policy.max_clients:
+            self.refused += 1
+            self._refusals.warning("max_clients", time.monotonic(), "refused client %s: "
+                                   "%d clients already connected (--max-clients)", who,
+                                   len(self.sessions))
+            text = (f"clients: expected at most {self._policy.max_clients} "
+                    f"(--max-clients), got one more; closing")
+            transport.write(encode(Message(device_name="", body=Status(
+                code=StatusCode.RESOURCE_ERROR, error_name="max_clients", text=text))))
+            transport.close()  # after the STATUS is written
+            return
+        session = ClientSession(self._hub, self._commands, self._limits, self.sessions.discard,
+                                read_only=self._policy.read_only)
         self.sessions.add(session)
-        return session
+        transport.set_protocol(session)
+        session.connection_made(transport)
 
     async def close(self) -> None:
         if self._server is None:
@@ -56,3 +99,18 @@ class BridgeServer:
         for session in tuple(self.sessions):
             session.close()
         await self._server.wait_closed()
+
+
+class _Gate(asyncio.Protocol):
+    """The protocol of a just-accepted connection: hands it to a `ClientSession` if the
+    policy admits the peer (the transport then talks to the session directly)."""
+
+    def __init__(self, server: BridgeServer) -> None:
+        self._server = server
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self._server._admit(transport)
+
+    def data_received(self, data: bytes) -> None:
+        pass  # a refused peer's bytes, until its transport is gone

@@ -61,6 +61,7 @@ __all__ = [
     "CreateTfLookup",
     "ErrorCode",
     "ErrorInfo",
+    "ForbiddenError",
     "GetLastMessage",
     "GetParameters",
     "Hello",
@@ -69,6 +70,7 @@ __all__ = [
     "ListRobots",
     "ListServices",
     "ListTopics",
+    "LimitReachedError",
     "LookupTransform",
     "MissingFieldError",
     "ObserveParameters",
@@ -163,6 +165,8 @@ class ErrorCode(IntEnum):
     UNAVAILABLE = 25
     TRANSFORM_UNAVAILABLE = 26
     NOT_SUPPORTED = 27
+    FORBIDDEN = 28
+    LIMIT_REACHED = 29
     INTERNAL = 99
 
 
@@ -222,6 +226,19 @@ class OutOfRangeError(CommandError):
     """A field has the right type but a value that is not allowed."""
 
     code = ErrorCode.OUT_OF_RANGE
+
+
+class ForbiddenError(CommandError):
+    """The daemon's security policy refuses the request (``--read-only``, or a topic,
+    service or parameter glob); the field names what was refused."""
+
+    code = ErrorCode.FORBIDDEN
+
+
+class LimitReachedError(CommandError):
+    """A per-client limit of the daemon is reached (``--max-bridges-per-client``)."""
+
+    code = ErrorCode.LIMIT_REACHED
 
 
 class CommandFailedError(CommandError):

@@ -461,7 +461,7 @@ def test_error_codes_are_stable() -> None:
         "MISSING_FIELD": 5, "UNKNOWN_FIELD": 6, "WRONG_TYPE": 7, "OUT_OF_RANGE": 8,
         "NOT_FOUND": 20, "ALREADY_EXISTS": 21, "UNKNOWN_ROS_TYPE": 22, "ROS_ERROR": 23,
         "TIMEOUT": 24, "UNAVAILABLE": 25, "TRANSFORM_UNAVAILABLE": 26, "NOT_SUPPORTED": 27,
-        "INTERNAL": 99,
+        "FORBIDDEN": 28, "LIMIT_REACHED": 29, "INTERNAL": 99,
     }
     assert {e.name: int(e) for e in ErrorCode} == expected
 
