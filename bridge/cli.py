@@ -9,7 +9,8 @@ import sys
 from pathlib import Path
 
 from bridge.config import DEFAULT_HOST, DEFAULT_PORT, ConfigError, DaemonConfig
-from bridge.config import load_startup_commands
+from bridge.config import ConfigFile, build_security, load_config_file
+from bridge.security import DEFAULT_MAX_BRIDGES_PER_CLIENT, DEFAULT_MAX_CLIENTS
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 
@@ -35,6 +36,36 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--package-path", type=_package_path, action="append", default=[],
                         metavar="NAME=DIR",
                         help="where package://NAME/... URIs of robot meshes point (repeatable)")
+    security = parser.add_argument_group(
+        "security", "OpenIGTLink has no authentication: lock the daemon down with these (also "
+                    "a `security:` section in --config; lists add up, limits given here win). "
+                    "See docs/security.md.")
+    security.add_argument("--allow", action="append", default=[], metavar="CIDR",
+                          help="accept clients only from this IPv4/IPv6 address or block "
+                               "(repeatable; others are closed at once and logged)")
+    security.add_argument("--read-only", action="store_true", default=False,
+                          help="clients can only receive: publishing, tf broadcasts, "
+                               "parameter changes and service calls are refused (FORBIDDEN)")
+    for kind in ("topic", "service", "parameter"):
+        what = "NODE.PARAM" if kind == "parameter" else f"/{kind}"
+        security.add_argument(f"--allow-{kind}", action="append", default=[], metavar="GLOB",
+                              help=f"allow only {kind}s matching a glob like {what}* "
+                                   f"(repeatable)")
+        security.add_argument(f"--deny-{kind}", action="append", default=[], metavar="GLOB",
+                              help=f"refuse {kind}s matching this glob; deny wins over allow "
+                                   f"(repeatable)")
+    security.add_argument("--max-clients", type=int, metavar="N",
+                          help=f"extra clients get a STATUS and are closed "
+                               f"(default {DEFAULT_MAX_CLIENTS})")
+    security.add_argument("--max-bridges-per-client", type=int, metavar="N",
+                          help=f"bridges one client may create (default "
+                               f"{DEFAULT_MAX_BRIDGES_PER_CLIENT}); more get LIMIT_REACHED")
+    security.add_argument("--max-message-bytes", type=int, metavar="BYTES",
+                          help="largest message body a client may send (default 64 MiB); a "
+                               "larger BODY_SIZE closes the connection")
+    security.add_argument("--max-send-buffer-bytes", type=int, metavar="BYTES",
+                          help="unsent one-shot bytes (meshes, replies) a client may let pile "
+                               "up before it is closed as too slow (default 256 MiB)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -61,10 +92,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _config_from(args: argparse.Namespace) -> DaemonConfig:
-    startup = load_startup_commands(args.config) if args.config else ()
+    file = load_config_file(args.config) if args.config else ConfigFile()
+    # The command line in the keys of the config's `security:` section: one parser for both.
+    cli = {"read_only": args.read_only, "allow": args.allow,
+           "allow_topics": args.allow_topic, "deny_topics": args.deny_topic,
+           "allow_services": args.allow_service, "deny_services": args.deny_service,
+           "allow_parameters": args.allow_parameter, "deny_parameters": args.deny_parameter,
+           "max_clients": args.max_clients, "max_bridges_per_client": args.max_bridges_per_client,
+           "max_message_bytes": args.max_message_bytes,
+           "max_send_buffer_bytes": args.max_send_buffer_bytes}
+    where = f"{file.name}: security (or its command-line option)" if file.name else "option"
+    security, limits = build_security(file.security, cli, where)
     return DaemonConfig(host=args.host, port=args.port, node_name=args.node_name,
-                        namespace=args.namespace, log_level=args.log_level, startup=startup,
-                        package_paths=tuple(args.package_path))
+                        namespace=args.namespace, log_level=args.log_level, startup=file.startup,
+                        package_paths=tuple(args.package_path), security=security,
+                        limits=limits)
 
 
 def _configure_logging(level: str) -> None:

@@ -43,8 +43,9 @@ class SessionLimits:
 
 class ClientSession(asyncio.Protocol):
     def __init__(self, hub: Hub, commands: CommandHandler, limits: SessionLimits,
-                 on_close: Callable[[ClientSession], None]) -> None:
+                 on_close: Callable[[ClientSession], None], *, read_only: bool = False) -> None:
         self._hub = hub
+        self._read_only = read_only  # --read-only: data messages to devices are refused
         self._commands = commands
         self._limits = limits
         self._on_close = on_close
@@ -139,6 +140,15 @@ class ClientSession(asyncio.Protocol):
             self._hub.deliver_reply(message, self)  # answers a COMMAND the daemon sent
         elif type_name.startswith(("STT_", "STP_", "RTS_")):
             pass  # streaming control and replies to queries we never make
+        elif self._read_only:
+            # Checked here, at data routing, as the dispatcher checks commands.
+            if message.device_name not in self._unrouted_warned:
+                self._unrouted_warned.add(message.device_name)
+                log.warning("client %s sent %s to device %r on a read-only daemon; refused "
+                            "(said once per device)", self.peer, type_name, message.device_name)
+                self.send_status(message.device_name, StatusCode.ACCESS_DENIED,
+                                 "the daemon is read-only (--read-only): clients cannot send "
+                                 "data to ROS")
         else:
             handler = self._hub.inbound_handler(message.device_name)
             if handler is None:
