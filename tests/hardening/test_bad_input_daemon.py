@@ -1,0 +1,149 @@
+"""Bad input against a running daemon: one client sends malformed bytes over a raw socket
+while another keeps receiving a tf stream. The other keeps its rate, the daemon keeps
+answering, every bad message gets a typed STATUS, and nothing is logged as a bug."""
+
+from __future__ import annotations
+
+import re
+import socket
+import struct
+import threading
+import time
+from typing import Iterator
+
+import pytest
+
+from hardening_tools import (RawClient, command_bytes, framing_breakers, header, is_reply,
+                             malformed_inputs, read_until_closed, transform_bytes)
+from protocol.messages import Message, StatusCode
+from slicer_client.connection import Connection
+from support import Processes, RunningDaemon, assert_clean_exit, start_daemon
+
+pytestmark = pytest.mark.ros
+RATE_HZ = 200
+
+
+@pytest.fixture(scope="module")
+def daemon(module_processes: Processes) -> Iterator[RunningDaemon]:
+    running = start_daemon(module_processes, "--max-message-bytes", "1000000")
+    yield running
+    assert_clean_exit(running)
+
+
+class Counter:
+    def __init__(self, device: str) -> None:
+        self.device = device
+        self.count = 0
+        self.lock = threading.Lock()
+
+    def __call__(self, message: Message) -> None:
+        if message.device_name == self.device:
+            with self.lock:
+                self.count += 1
+
+    def rate_over(self, seconds: float) -> float:
+        start = self.count
+        time.sleep(seconds)  # a measurement window, not synchronisation
+        return (self.count - start) / seconds
+
+
+def attack_once(port: int, devices: list[str]) -> None:
+    """Every malformed message on one connection, which must survive them all."""
+    attacker = RawClient(port)
+    try:
+        for data in malformed_inputs().values():
+            attacker.send(data)
+        nan, inf = float("nan"), float("inf")
+        for device in devices:  # routed devices: a publisher and a tf broadcaster
+            attacker.send(transform_bytes([nan] * 12, device))
+            attacker.send(transform_bytes([1, 0, 0, 0, 1, 0, 0, 0, 1, inf, 0, 0], device))
+            attacker.send(transform_bytes([2, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0], device))
+        attacker.send(command_bytes("hello", b"{}", command_id=4242))
+        attacker.read_until(is_reply(4242))
+    finally:
+        attacker.close()
+    for data in framing_breakers().values():
+        breaker = RawClient(port)
+        breaker.send(data)
+        said = read_until_closed(breaker.sock)
+        breaker.close()
+        assert said and said[-1].type_name == "STATUS", said
+    # Clients that go away mid-message: in the header, and in a declared 1 MB body.
+    for cut in (1, 30, 57):
+        with socket.create_connection(("127.0.0.1", port)) as sock:
+            sock.sendall(header("STRING", "x", 8, 0)[:cut])
+    with socket.create_connection(("127.0.0.1", port)) as sock:
+        sock.sendall(header("STRING", "x", 999_000, 0) + b"\x00" * 5000)
+
+
+def test_malformed_input_from_one_client_does_not_disturb_another(
+        daemon: RunningDaemon, processes: Processes) -> None:
+    counter = Counter("")
+    fast = Connection("127.0.0.1", daemon.port, on_message=counter)
+    try:
+        counter.device = fast.command("create_tf_lookup", {"parent": "bi_base",
+                                                           "child": "bi_link1"})["device"]
+        pose = fast.command("create_publisher", {"topic": "/bi_pose",
+                                                 "type": "PoseStamped"})["device"]
+        tf = fast.command("create_tf_broadcaster", {"parent": "bi_world",
+                                                    "child": "bi_tool"})["device"]
+        peer = processes.python("tf", "../hardening/peers/tf_robot_publisher.py",
+                                str(RATE_HZ), "--prefix", "bi_", "--seconds", "60")
+        peer.wait_for_output("READY", timeout=30)
+        fast.wait_for(counter.device, timeout=20)
+        before = counter.rate_over(2.0)
+        assert before > 0.25 * RATE_HZ, f"only {before:.0f}/s before the attack"
+
+        start, attacks = counter.count, 0
+        began = time.monotonic()
+        while time.monotonic() - began < 4.0:
+            attack_once(daemon.port, [pose, tf])
+            attacks += 1
+        during = (counter.count - start) / (time.monotonic() - began)
+        print(f"\nstream {before:.0f}/s before, {during:.0f}/s during {attacks} attack rounds "
+              f"({len(malformed_inputs()) + 6} bad messages, {len(framing_breakers())} "
+              f"framing breakers and 4 mid-message disconnects each)")
+        assert during > 0.8 * before, f"{during:.0f}/s during the attack, {before:.0f} before"
+        assert fast.command("hello")["version"]
+        assert not fast.closed
+    finally:
+        fast.close()
+    log = daemon.child.output()
+    assert "Traceback" not in log and not re.search(r" (ERROR|CRITICAL) ", log), log[-3000:]
+    assert "broke the OpenIGTLink framing" in log and "sent a bad message" in log
+
+
+def test_each_bad_message_gets_a_status_naming_the_problem(daemon: RunningDaemon) -> None:
+    client = RawClient(daemon.port)
+    try:
+        client.send(malformed_inputs()["wrong CRC"])
+        status = client.read_until(lambda m: m.type_name == "STATUS")
+        assert status.body.code == StatusCode.CHECKSUM_ERROR
+        client.send(malformed_inputs()["IMAGE size over buffer"])
+        status = client.read_until(lambda m: m.type_name == "STATUS")
+        assert "IMAGE" in status.body.text
+        client.send(command_bytes("publish", b"{\"topic\": \"/x\", \"value\": "
+                                  + b"[" * 50_000 + b"]" * 50_000 + b"}", command_id=9))
+        reply = client.read_until(is_reply(9))
+        assert "BAD_JSON" in reply.body.text and "nested" in reply.body.text
+        client.send(command_bytes("create_subscriber", b"{\"topic\": 3", command_id=10))
+        assert "BAD_JSON" in client.read_until(is_reply(10)).body.text
+        client.send(header("STRING", "x", 1 << 63, 0))
+        said = read_until_closed(client.sock)
+        assert said[-1].type_name == "STATUS" and "BODY_SIZE" in said[-1].body.text
+    finally:
+        client.close()
+
+
+def test_a_body_over_max_message_bytes_closes_that_client_only(daemon: RunningDaemon) -> None:
+    bystander = daemon.connect()
+    big = RawClient(daemon.port)
+    try:
+        body = struct.pack(">HH", 3, 0xFFFF) + b"x" * 0xFFFF
+        big.send(header("STRING", "big", 1_000_001, 0) + body)
+        said = read_until_closed(big.sock)
+        assert "max_body_size" in said[-1].body.text and "1000001" in said[-1].body.text
+        assert bystander.command("hello")["ops"]
+    finally:
+        big.close()
+        bystander.close()
