@@ -328,6 +328,7 @@ _DENIED_LOG_INTERVAL_S = 5.0
 class RateLimitedLog:
     """Logs a repeated warning at most once per interval per key, counting the rest."""
 
+    logger: logging.Logger = log
     interval_s: float = _DENIED_LOG_INTERVAL_S
     _last: dict[str, float] = field(default_factory=dict)
     _suppressed: dict[str, int] = field(default_factory=dict)
@@ -341,4 +342,4 @@ class RateLimitedLog:
         suppressed = self._suppressed.pop(key, 0)
         if suppressed:
             message += f" ({suppressed} more like it not logged)"
-        log.warning(message, *args)
+        self.logger.warning(message, *args)

@@ -34,7 +34,7 @@ class BridgeServer:
         self._port = port
         self._limits = limits
         self._policy = policy
-        self._refusals = RateLimitedLog()
+        self._refusals = RateLimitedLog(log)
         self._server: Optional[asyncio.base_events.Server] = None
         self.sessions: set[ClientSession] = set()
         self.refused = 0
