@@ -2,8 +2,9 @@
 
 usage: tf_robot_publisher.py RATE_HZ [--links 7] [--prefix P] [--seconds S] [--count N]
                              [--bad]
-Frames: Pbase -> Plink1 -> ... -> Plink7. Each link: translation (n * 1e-6, 0, 0.1) m,
-identity rotation, n = the tick number (so a lookup base->link1 reads n / 1000 mm in x).
+Frames: Pbase -> Plink1 -> ... -> Plink7. Each link: translation (n * 1e-5, 0, 0.1) m,
+identity rotation, n = the tick number (so a lookup base->linkK reads K * n / 100 mm in x;
+10 um a tick is well above the daemon's 1 um change tolerance).
 Ticks are paced against a monotonic schedule (catching up if late, never bursting more
 than 10 ticks). --bad: every 10th tick also sends a message with NaN translations, one with
 empty frame ids, one with a non-unit quaternion and one with 10,000 transforms.
@@ -75,7 +76,7 @@ def main() -> None:
             elif now - due > 10 * period:  # far behind: skip ahead, never burst
                 start = now - n * period
             stamp = node.get_clock().now().to_msg()
-            x = n * 1e-6
+            x = n * 1e-5
             publisher.publish(TFMessage(transforms=[
                 transform(stamp, names[i], names[i + 1], x) for i in range(args.links)]))
             if args.bad and n % 10 == 0:
