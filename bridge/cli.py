@@ -146,6 +146,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
+    if args.command == "demo":  # the daemon plus the demo robot's processes
+        from bridge.robots.demo_runner import run_demo
+
+        return run_demo(args)
     if args.command in ("run", "demo"):
         return _run_daemon(args)
     parser.error(f"unknown command {args.command}")

@@ -18,6 +18,7 @@ from bridge.config import DaemonConfig
 from bridge.dispatch import Dispatcher
 from bridge.hub import Hub
 from bridge.parameters import ParameterBridges
+from bridge.robots.capability import RobotBridges
 from bridge.ros_node import RosNode, RosOptions
 from bridge.server import BridgeServer
 from bridge.services import ServiceBridges
@@ -43,8 +44,11 @@ class Daemon:
         self.tf = TfBridges(self.ros, self.hub, names)
         self.parameters = ParameterBridges(self.ros, self.hub, names)
         self.services = ServiceBridges(self.ros, self.hub, names)
+        self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
+                                   parameters=self.parameters,
+                                   package_paths=dict(config.package_paths))
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
-                                                          self.services])
+                                                          self.services, self.robots])
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
                                    port=config.port, limits=config.limits)
 

@@ -24,7 +24,7 @@ import asyncio
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 from rcl_interfaces.msg import Parameter as RosParameter
 from rcl_interfaces.msg import ParameterDescriptor, ParameterEvent, ParameterType
@@ -139,6 +139,21 @@ class ParameterClient:
         return (self.list_client, self.get_client, self.set_client, self.types_client)
 
 
+@dataclass(eq=False)
+class ParameterWatch:
+    """Another capability's interest in one parameter of one node (robots watch
+    ``robot_description``); made by `ParameterBridges.watch_parameter`. Not a client-visible
+    bridge: no device, nothing streamed."""
+
+    node: str
+    name: str
+    on_change: Callable[[ParameterValue], None]
+    get_client: Client
+    ready: Optional[bool] = None  # None until the first check
+    value: Optional[ParameterValue] = None  # the last value reported
+    touched: int = 0  # serial of the last event that set `value`
+
+
 class ParameterBridges:
     """Parameter clients of other nodes, and the daemon node's own parameter server."""
 
@@ -152,6 +167,7 @@ class ParameterBridges:
         self._ready_wait_s = ready_wait_s
         self._check_interval_s = check_interval_s
         self.clients: dict[str, ParameterClient] = {}
+        self.watches: list[ParameterWatch] = []
         self._check_timer: Optional[asyncio.TimerHandle] = None
         self._tasks: set[asyncio.Task[None]] = set()
         self._event_serial = 0
@@ -289,9 +305,87 @@ class ParameterBridges:
         return {name: from_ros_value(value, f"values.{name}")
                 for name, value in zip(names, reply.values)}
 
+    # --- parameter watches (for other capabilities) ----------------------------------------
+    async def watch_parameter(self, node: str, name: str,
+                              on_change: Callable[[ParameterValue], None],
+                              ) -> tuple[ParameterWatch, Optional[ParameterValue]]:
+        """Fetch parameter ``name`` of ``node`` (a fully qualified node name) and keep
+        ``on_change(value)`` (loop thread) told of every later value: parameter events, and
+        a fetch whenever the node (re)appears. Returns the watch and the value now, or None
+        if the node is not there yet (then ``on_change`` gets it when it appears). The
+        node's readiness is judged as for parameter clients (`ready_wait_s` at first, then
+        the periodic check). A failed fetch of a node that is there raises `CommandError`.
+        """
+        watch = ParameterWatch(node, name, on_change,
+                               self._ros.node.create_client(GetParametersSrv,
+                                                            f"{node}/get_parameters"))
+        self.watches.append(watch)
+        self._update_watched()
+        try:
+            ready = await wait_until_ready(watch.get_client, self._ready_wait_s)
+            if watch not in self.watches:  # unwatched meanwhile
+                return watch, None
+            value = await self._fetch_watched(watch) if ready else None
+        except BaseException:
+            self.unwatch_parameter(watch)
+            raise
+        watch.ready = ready
+        self._schedule_check()
+        return watch, value
+
+    def unwatch_parameter(self, watch: ParameterWatch) -> None:
+        if watch not in self.watches:
+            return
+        self.watches.remove(watch)
+        self._update_watched()
+        self._ros.node.destroy_client(watch.get_client)
+
+    async def _fetch_watched(self, watch: ParameterWatch) -> ParameterValue:
+        started = self._event_serial
+        reply = await call_ros_service(
+            self._hub, watch.get_client, GetParametersSrv.Request(names=[watch.name]),
+            timeout=self._request_timeout_s, ready_wait=self._request_timeout_s,
+            what=f"the parameter services of {watch.node}", field="source.node")
+        value = (from_ros_value(reply.values[0], "source.parameter") if reply.values
+                 else ParameterValue("not_set"))
+        if watch.touched > started and watch.value is not None:
+            return watch.value  # an event during the fetch is newer than the reply
+        watch.value = value
+        return value
+
+    async def _refetch_watched(self, watch: ParameterWatch) -> None:
+        try:
+            value = await self._fetch_watched(watch)
+        except CommandError as error:
+            log.warning("could not fetch %s of %s: %s", watch.name, watch.node, error)
+            return
+        if watch in self.watches:
+            watch.on_change(value)
+
+    def _on_watched_event(self, event: ParameterEvent) -> None:
+        for watch in tuple(self.watches):
+            if watch.node != event.node:
+                continue
+            for p in (*event.new_parameters, *event.changed_parameters):
+                if p.name == watch.name:
+                    self._event_changed(watch, p.value)
+            if any(p.name == watch.name for p in event.deleted_parameters):
+                self._event_changed(watch, RosParameterValue())
+
+    def _event_changed(self, watch: ParameterWatch, ros_value: RosParameterValue) -> None:
+        try:
+            value = from_ros_value(ros_value, "source.parameter")
+        except CommandError as error:
+            log.warning("parameter %s of %s not usable: %s", watch.name, watch.node, error)
+            return
+        self._event_serial += 1
+        watch.touched = self._event_serial
+        watch.value = value
+        watch.on_change(value)
+
     # --- readiness -------------------------------------------------------------------------
     def _schedule_check(self) -> None:
-        if self._check_timer is None and self.clients:
+        if self._check_timer is None and (self.clients or self.watches):
             self._check_timer = asyncio.get_running_loop().call_later(
                 self._check_interval_s, self._check_readiness)
 
@@ -304,6 +398,16 @@ class ParameterBridges:
             ready = all(ros_client.service_is_ready() for ros_client in client.clients())
             if ready != client.ready:
                 self._set_ready(client, ready)
+        for watch in tuple(self.watches):
+            if watch.ready is None:
+                continue  # its first wait is still running
+            ready = watch.get_client.service_is_ready()
+            if ready != watch.ready:
+                watch.ready = ready
+                log.info("parameter %s of %s: node %s", watch.name, watch.node,
+                         "available" if ready else "gone")
+                if ready:  # (re)appeared: maybe with another value
+                    self._spawn(self._refetch_watched(watch))
         self._schedule_check()
 
     def _set_ready(self, client: ParameterClient, ready: bool) -> None:
@@ -364,8 +468,8 @@ class ParameterBridges:
                                  metadata=metadata_for(key)))
 
     def _update_watched(self) -> None:
-        self._watched = frozenset(node for node, client in self.clients.items()
-                                  if client.observed)
+        self._watched = frozenset([node for node, client in self.clients.items()
+                                   if client.observed] + [w.node for w in self.watches])
 
     def _on_event_ros(self, event: ParameterEvent) -> None:
         # Executor thread: only pick the watched nodes' events and hand them off.
@@ -373,6 +477,8 @@ class ParameterBridges:
             self._hub.call_soon(self._on_event, event)
 
     def _on_event(self, event: ParameterEvent) -> None:
+        if self.watches:
+            self._on_watched_event(event)
         client = self.clients.get(event.node)
         if client is None or not client.observed:
             return
@@ -538,3 +644,4 @@ class ParameterBridges:
         self._watched = frozenset()
         # The node, its clients and subscription are destroyed with it right after.
         self.clients.clear()
+        self.watches.clear()

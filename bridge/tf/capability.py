@@ -222,6 +222,7 @@ class TfBridges:
         self.lookups: dict[tuple[str, str], _Lookup] = {}
         self.broadcasters: dict[tuple[str, str], _Broadcaster] = {}
         self._by_key: dict[LookupKey, _Lookup] = {}
+        self.streams: dict[LookupKey, _Lookup] = {}  # other capabilities' (stream_lookup)
         self._by_device: dict[str, _Broadcaster] = {}
         self._tf_topic = ros.resolve_topic(tf_topic)
         self._tf_static_topic = ros.resolve_topic(tf_static_topic)
@@ -359,6 +360,34 @@ class TfBridges:
         return resolved
 
     # ------------------------------------------------------------------ lookups
+
+    def stream_lookup(self, parent: str, child: str, *, device: str,
+                      metadata: dict[str, str], rate_hz: Optional[float] = None,
+                      ) -> LookupKey:
+        """Stream parent <- child on ``device`` with ``metadata`` for another capability
+        (robots): the same change-driven evaluation and delivery as `create_lookup`, but
+        the caller owns the device name (and forgets it). Frames are taken as given (no
+        ``frame_prefix``). Returns the handle for `stop_lookup`."""
+        tag = f"device:{device}"  # one registration per device, beside clients' lookups
+        key = self.registry.add(parent, child, rate_hz=rate_hz, tag=tag)
+        stream = _Lookup(key, device, dict(metadata), (parent, child), rate_hz)
+        self._by_key[key] = stream
+        self.streams[key] = stream
+        self._arm()
+        return key
+
+    def stop_lookup(self, handle: LookupKey) -> None:
+        """Stop a `stream_lookup` (its device is the caller's to forget)."""
+        self.streams.pop(handle, None)
+        if self._by_key.pop(handle, None) is not None:
+            self.registry.remove(handle)
+
+    def stream_state(self, handle: LookupKey) -> str:
+        """"streaming", "error" or "pending" (no result yet) for a `stream_lookup`."""
+        last = self.registry.last_sent(handle)
+        if isinstance(last, StampedTransform):
+            return "streaming"
+        return "error" if isinstance(last, TfError) else "pending"
 
     def create_lookup(self, request: CreateTfLookup) -> dict[str, Any]:
         pair = self._pair(request.parent, request.child)
@@ -606,6 +635,7 @@ class TfBridges:
         for broadcaster in self.broadcasters.values():
             self._hub.unroute(broadcaster.device)
         self.lookups.clear()
+        self.streams.clear()
         self.broadcasters.clear()
         self._by_key.clear()
         self._by_device.clear()

@@ -1,0 +1,508 @@
+"""The daemon's robot capability: a URDF -> one POLYDATA per link visual (sent once per
+connection) + one TRANSFORM per link (streamed by tf when it changes).
+
+    create_robot ─► URDF from a parameter (ParameterBridges.watch_parameter), a latched
+                    topic (our subscription) or a file
+                 ─► load_robot in a worker thread (meshes: ms to seconds, never on the loop)
+                 ─► loop: hub.publish_persistent(POLYDATA per visual)
+                          tf.stream_lookup(fixed_frame <- tf_prefix + link) per link
+
+What SlicerROS2 does differently, and why not here: it reads the URDF from the parameter
+name ``robot_description`` whatever name was given (here: the name given), skips URDF
+primitives (here: boxes, cylinders, spheres are meshed), applies one mesh scale to every
+link (here: per visual), and polls every link's lookup at 50 Hz (here: a link's TRANSFORM
+goes out only when tf changed it, through the tf capability's change-driven registry).
+
+A description that is not there yet (node not up, nothing on the topic) is not an error:
+the robot is "waiting" and loads when the URDF appears; a STATUS on its description device
+(``urdf:<name>``) says which state it is in. A changed description (parameter event, new
+topic message, the node coming back) reloads the robot: meshes are re-published under the
+same device names, devices of links that are gone are forgotten. A malformed URDF is an
+error reply at creation; on a reload it leaves the robot as it was and says why (STATUS).
+
+Device names come from the daemon's `DeviceNameRegistry`, so they are the same on every
+reconnect (3D Slicer finds its nodes again by name).
+
+Units: the model's vertices are already in mm; the tf capability turns metres into mm.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import hashlib
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Optional
+
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String as StringMsg
+
+from bridge.dispatch import Handler
+from bridge.hub import Hub
+from bridge.parameters import ParameterBridges, ParameterWatch
+from bridge.robots.errors import RobotError, UrdfError
+from bridge.robots.model import RobotModel, VisualMesh, load_robot, load_robot_file, to_polydata
+from bridge.robots.resources import PackageResolver
+from bridge.ros_node import RosNode
+from bridge.services import resolve_name
+from bridge.tf.capability import TfBridges
+from bridge.tf.lookups import LookupKey
+from protocol.commands import (CommandError, CommandFailedError, CreateRobot, ErrorCode,
+                               ListRobots, OutOfRangeError, ParameterValue, RemoveRobot,
+                               RobotSource)
+from protocol.messages import Message, PolyData, Status, StatusCode
+from protocol.naming import (KEY_CHILD, KEY_COLOR, KEY_PARENT, KEY_PARENT_DEVICE, UNITS_MM,
+                             DeviceNameRegistry, NameKey, NamingError, metadata_for)
+
+__all__ = ["RobotBridges"]
+
+log = logging.getLogger(__name__)
+
+_STATUS_NAME = "slicer-ros2-bridge"
+# How long create_robot waits for a latched description on a topic before saying "waiting".
+_TOPIC_WAIT_S = 2.0
+# robot_state_publisher's own profile for robot_description: a late subscriber gets it.
+_DESCRIPTION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                              reliability=ReliabilityPolicy.RELIABLE,
+                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
+_DEFAULT_NODE = RobotSource.node
+_DEFAULT_TOPIC = RobotSource.topic
+
+
+@dataclass
+class _Link:
+    link: str
+    frame: str  # the tf frame: tf_prefix + link
+    key: NameKey
+    device: str
+    handle: LookupKey
+    visuals: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class _VisualInfo:
+    device: str
+    key: NameKey
+    link: str
+    index: int
+    name: str
+    vertices: int
+    triangles: int
+    rgba: tuple[float, float, float, float]
+    source: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"device": self.device, "link": self.link, "index": self.index,
+                "name": self.name, "vertices": self.vertices, "triangles": self.triangles,
+                "color": list(self.rgba), "source": self.source}
+
+
+@dataclass(eq=False)
+class _Robot:
+    name: str
+    request: CreateRobot
+    source: RobotSource  # names resolved (namespace applied)
+    tf_prefix: str
+    description_key: NameKey
+    description_device: str
+    state: str = "waiting"  # waiting | loaded | error
+    reason: str = ""  # why waiting, or the last load error
+    model: Optional[RobotModel] = None
+    urdf_digest: str = ""  # of the loaded text: an unchanged description is not reloaded
+    fixed_frame: str = ""
+    links: dict[str, _Link] = field(default_factory=dict)
+    visuals: dict[str, _VisualInfo] = field(default_factory=dict)  # device -> info
+    warnings: tuple[str, ...] = ()
+    loads: int = 0
+    generation: int = 0  # bumped per description received: only the newest load applies
+    watch: Optional[ParameterWatch] = None
+    subscription: Any = None
+    first_description: Optional[asyncio.Future[str]] = None
+    removed: bool = False
+    loaded: asyncio.Event = field(default_factory=asyncio.Event)
+
+
+class RobotBridges:
+    """Robots from URDF: meshes once per connection, link transforms from tf."""
+
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: TfBridges,
+                 parameters: ParameterBridges,
+                 package_paths: Mapping[str, Path] | None = None,
+                 topic_wait_s: float = _TOPIC_WAIT_S) -> None:
+        self._ros = ros
+        self._hub = hub
+        self._names = names
+        self._tf = tf
+        self._parameters = parameters
+        self._package_paths = {name: Path(folder) for name, folder in
+                               (package_paths or {}).items()}
+        self._topic_wait_s = topic_wait_s
+        self.robots: dict[str, _Robot] = {}
+        self._tasks: set[asyncio.Task[None]] = set()
+
+    # ------------------------------------------------------------------ ops
+
+    async def create_robot(self, request: CreateRobot) -> dict[str, Any]:
+        existing = self.robots.get(request.name)
+        if existing is not None:
+            if existing.request == request:  # a reconnecting client re-creates what it had
+                return self._describe(existing, existed=True)
+            raise CommandFailedError("name", "a robot name not in use (remove_robot first, "
+                                     "or repeat the same request)", request.name,
+                                     code=ErrorCode.ALREADY_EXISTS)
+        try:
+            description_key = NameKey.robot_description(request.name)
+            description_device = self._names.register(description_key)
+        except NamingError as error:
+            raise OutOfRangeError("name", "a robot name usable as a device name",
+                                  f"{request.name!r} ({error})") from None
+        robot = _Robot(request.name, request, self._resolve_source(request),
+                       request.tf_prefix, description_key, description_device)
+        self.robots[robot.name] = robot
+        try:
+            text = await self._first_description(robot)
+            if text is not None:
+                await self._load(robot, text, robot.generation, initial=True)
+            else:
+                self._status(robot, StatusCode.NOT_READY, f"waiting: {robot.reason}")
+                log.info("robot %s: %s", robot.name, robot.reason)
+        except BaseException:
+            self._drop(robot)
+            raise
+        return self._describe(robot, existed=False)
+
+    def remove_robot(self, request: RemoveRobot) -> dict[str, Any]:
+        robot = self.robots.get(request.name)
+        if robot is None:
+            raise CommandFailedError("name", "a robot created by create_robot", request.name,
+                                     code=ErrorCode.NOT_FOUND)
+        devices = self._devices_of(robot)
+        self._drop(robot)
+        log.info("robot %s removed (%d devices)", robot.name, len(devices))
+        return {"name": robot.name, "devices": devices}
+
+    async def wait_loaded(self, name: str, timeout: float) -> dict[str, Any]:
+        """The `create_robot` result of robot ``name`` once it has loaded, or as it is after
+        ``timeout`` (for `demo`, which creates a robot whose node is still starting)."""
+        robot = self.robots[name]
+        try:
+            await asyncio.wait_for(robot.loaded.wait(), timeout)
+        except asyncio.TimeoutError:
+            pass
+        return self._describe(robot, existed=True)
+
+    def list_robots(self, request: ListRobots) -> dict[str, Any]:
+        return {"robots": [self._summary(robot) for robot in self.robots.values()]}
+
+    # ------------------------------------------------------------------ sources
+
+    def _resolve_source(self, request: CreateRobot) -> RobotSource:
+        """Names as the ROS graph has them. A namespace applies to relative names and to
+        the defaults (``{"name": "PSM1", "namespace": "PSM1"}`` reads
+        ``/PSM1/robot_state_publisher``); other absolute names are kept."""
+        source = request.source
+        namespace = resolve_name(self._ros, request.namespace, "namespace") \
+            if request.namespace else ""
+
+        def place(name: str, default: str, field_name: str) -> str:
+            if namespace and (name == default or not name.startswith("/")):
+                name = f"{namespace.rstrip('/')}/{name.lstrip('/')}"
+            return resolve_name(self._ros, name, field_name)
+
+        if source.kind == "parameter":
+            return RobotSource("parameter", node=place(source.node, _DEFAULT_NODE,
+                                                       "source.node"),
+                               parameter=source.parameter)
+        if source.kind == "topic":
+            return RobotSource("topic", topic=place(source.topic, _DEFAULT_TOPIC,
+                                                    "source.topic"))
+        return source
+
+    async def _first_description(self, robot: _Robot) -> Optional[str]:
+        """The URDF text now, or None (then ``robot.reason`` says what it waits for)."""
+        source = robot.source
+        if source.kind == "file":
+            return None if robot.removed else "<file>"  # read by the loader (see _load)
+        if source.kind == "parameter":
+            robot.watch, value = await self._parameters.watch_parameter(
+                source.node, source.parameter,
+                lambda v: self._on_parameter(robot, v))
+            if value is None:
+                robot.reason = (f"parameter {source.parameter} of {source.node}: node not "
+                                f"available yet")
+                return None
+            return self._text_of(robot, value, initial=True)
+        # topic
+        loop = asyncio.get_running_loop()
+        robot.first_description = loop.create_future()
+        robot.subscription = self._ros.node.create_subscription(
+            StringMsg, source.topic, lambda msg: self._hub.call_soon(
+                self._on_topic, robot, msg.data), _DESCRIPTION_QOS)
+        try:
+            return await asyncio.wait_for(asyncio.shield(robot.first_description),
+                                          self._topic_wait_s)
+        except asyncio.TimeoutError:
+            robot.reason = f"topic {source.topic}: no description published yet"
+            return None
+
+    def _text_of(self, robot: _Robot, value: ParameterValue, *, initial: bool,
+                 ) -> Optional[str]:
+        source = robot.source
+        if value.type == "not_set":
+            robot.reason = f"parameter {source.parameter} of {source.node}: not set yet"
+            return None
+        if value.type != "string":
+            problem = CommandFailedError(
+                "source.parameter", f"a string parameter holding URDF XML "
+                f"({source.parameter} of {source.node})", f"a {value.type} parameter",
+                code=ErrorCode.WRONG_TYPE)
+            if initial:
+                raise problem
+            self._load_failed(robot, str(problem))
+            return None
+        return str(value.value)
+
+    def _on_parameter(self, robot: _Robot, value: ParameterValue) -> None:
+        """The watched parameter changed, or its node (re)appeared (loop thread)."""
+        if robot.removed:
+            return
+        text = self._text_of(robot, value, initial=False)
+        if text is not None:
+            self._reload(robot, text)
+
+    def _on_topic(self, robot: _Robot, text: str) -> None:
+        """A description arrived on the robot's topic (loop thread)."""
+        if robot.removed:
+            return
+        first = robot.first_description
+        if first is not None and not first.done():
+            first.set_result(text)  # create_robot is still waiting for it: it loads
+            return
+        self._reload(robot, text)
+
+    # ------------------------------------------------------------------ loading
+
+    def _reload(self, robot: _Robot, text: str) -> None:
+        if robot.state == "loaded" and _digest(text) == robot.urdf_digest:
+            return  # the node re-announced the same description
+        robot.generation += 1
+        self._spawn(self._load(robot, text, robot.generation, initial=False))
+
+    async def _load(self, robot: _Robot, text: str, generation: int, *,
+                    initial: bool) -> None:
+        """Load in a worker thread, then apply on the loop unless a newer description came.
+        A failure raises at creation (the error reply) and is reported otherwise."""
+        source = robot.source
+        loop = asyncio.get_running_loop()
+        if source.kind == "file":
+            path = self._file_path(source.path)
+            call = functools.partial(load_robot_file, path, package_paths=self._package_paths)
+            field_name = "source.path"
+        else:
+            call = functools.partial(load_robot, text, package_paths=self._package_paths)
+            field_name = "source.parameter" if source.kind == "parameter" else "source.topic"
+        try:
+            model = await loop.run_in_executor(None, call)
+        except RobotError as error:
+            what = f"a valid URDF ({_source_text(source)})"
+            problem = CommandFailedError(field_name, what, str(error),
+                                         code=ErrorCode.OUT_OF_RANGE)
+            if initial:
+                raise problem from None
+            if generation == robot.generation and not robot.removed:
+                self._load_failed(robot, str(problem))
+            return
+        if robot.removed or generation != robot.generation:
+            return  # removed, or a newer description is being loaded
+        self._apply(robot, model, text)
+
+    def _file_path(self, spec: str) -> Path:
+        try:  # a path, or a package:// / file:// URI resolved with --package-path
+            return PackageResolver(dict(self._package_paths)).resolve(spec)
+        except RobotError as error:
+            raise CommandFailedError("source.path", "a readable URDF file (path, package:// "
+                                     "or file:// URI)", f"{spec!r} ({error})",
+                                     code=ErrorCode.NOT_FOUND) from None
+
+    def _load_failed(self, robot: _Robot, reason: str) -> None:
+        robot.reason = reason
+        if robot.state != "loaded":
+            robot.state = "error"
+        log.warning("robot %s: description not loaded: %s%s", robot.name, reason,
+                    " (the previous one stays)" if robot.state == "loaded" else "")
+        self._status(robot, StatusCode.CONFIG_ERROR, f"description not loaded: {reason}")
+
+    def _apply(self, robot: _Robot, model: RobotModel, text: str) -> None:
+        """Publish the meshes and (re)wire the link lookups of a freshly loaded model."""
+        prefix = robot.tf_prefix
+        fixed = robot.request.fixed_frame or prefix + model.root_link
+        fixed = fixed.lstrip("/")
+        if fixed != robot.fixed_frame:  # every lookup starts from the fixed frame: redo all
+            self._forget_links(robot, set(robot.links))
+        wanted = set(model.links)
+        self._forget_links(robot, set(robot.links) - wanted)
+        robot.fixed_frame = fixed
+        for name in model.links:
+            link = robot.links.get(name)
+            if link is None:
+                frame = prefix + name
+                key = NameKey.robot_link(robot.name, name)
+                device = self._names.register(key)
+                metadata = metadata_for(key, frame=fixed, units=UNITS_MM)
+                metadata[KEY_PARENT] = fixed
+                metadata[KEY_CHILD] = frame
+                handle = self._tf.stream_lookup(fixed, frame, device=device,
+                                                metadata=metadata)
+                robot.links[name] = _Link(name, frame, key, device, handle)
+            robot.links[name].visuals = []
+        # Meshes: publish_persistent replaces a device's mesh; stale devices are forgotten.
+        fresh: dict[str, _VisualInfo] = {}
+        for visual in model.visuals:
+            info = self._publish_visual(robot, visual)
+            fresh[info.device] = info
+            robot.links[visual.link].visuals.append(info.device)
+        for device, info in robot.visuals.items():
+            if device not in fresh:
+                self._hub.forget(device)
+                self._names.release(info.key)
+        robot.visuals = fresh
+        robot.model = model
+        robot.urdf_digest = _digest(text)
+        robot.warnings = model.warnings
+        robot.state = "loaded"
+        robot.reason = ""
+        robot.loads += 1
+        robot.loaded.set()
+        summary = (f"loaded {model.name!r}: {len(model.links)} links, {len(model.visuals)} "
+                   f"visuals, fixed frame {fixed}")
+        if model.warnings:
+            summary += f"; {len(model.warnings)} warning(s): " + "; ".join(model.warnings)
+        self._status(robot, StatusCode.OK, summary)
+        log.info("robot %s %s", robot.name, summary)
+
+    def _publish_visual(self, robot: _Robot, visual: VisualMesh) -> _VisualInfo:
+        key = NameKey.robot_visual(robot.name, visual.link, visual.index)
+        device = self._names.register(key)
+        metadata = metadata_for(key, units=UNITS_MM)
+        metadata[KEY_PARENT_DEVICE] = robot.links[visual.link].device
+        metadata[KEY_COLOR] = " ".join(f"{c:.6g}" for c in visual.rgba)
+        body: PolyData = to_polydata(visual)
+        self._hub.publish_persistent(Message(device_name=device, body=body,
+                                             metadata=metadata))
+        return _VisualInfo(device, key, visual.link, visual.index, visual.name,
+                           len(visual.vertices), len(visual.triangles),
+                           tuple(float(c) for c in visual.rgba),  # type: ignore[arg-type]
+                           visual.source)
+
+    def _forget_links(self, robot: _Robot, names: set[str]) -> None:
+        for name in names:
+            link = robot.links.pop(name)
+            self._tf.stop_lookup(link.handle)
+            self._hub.forget(link.device)
+            self._names.release(link.key)
+
+    # ------------------------------------------------------------------ plumbing
+
+    def _status(self, robot: _Robot, code: int, text: str) -> None:
+        self._hub.stream(Message(device_name=robot.description_device,
+                                 body=Status(code=code, error_name=_STATUS_NAME,
+                                             text=text[:4000]),
+                                 metadata=metadata_for(robot.description_key)))
+
+    def _spawn(self, coroutine: Any) -> None:
+        task = asyncio.ensure_future(coroutine)
+        self._tasks.add(task)
+        task.add_done_callback(self._task_done)
+
+    def _task_done(self, task: asyncio.Task[None]) -> None:
+        self._tasks.discard(task)
+        if not task.cancelled() and task.exception() is not None:
+            log.error("robot reload failed unexpectedly", exc_info=task.exception())
+
+    def _devices_of(self, robot: _Robot) -> list[str]:
+        devices = [link.device for link in robot.links.values()]
+        devices += list(robot.visuals)
+        devices.append(robot.description_device)
+        return devices
+
+    def _drop(self, robot: _Robot) -> None:
+        """Forget every device of the robot, stop its lookups and its description source."""
+        robot.removed = True
+        if self.robots.get(robot.name) is robot:
+            del self.robots[robot.name]
+        self._forget_links(robot, set(robot.links))
+        for device, info in robot.visuals.items():
+            self._hub.forget(device)
+            self._names.release(info.key)
+        robot.visuals = {}
+        self._hub.forget(robot.description_device)
+        self._names.release(robot.description_key)
+        if robot.watch is not None:
+            self._parameters.unwatch_parameter(robot.watch)
+            robot.watch = None
+        if robot.subscription is not None:
+            self._ros.node.destroy_subscription(robot.subscription)
+            robot.subscription = None
+        if robot.first_description is not None and not robot.first_description.done():
+            robot.first_description.cancel()
+
+    # ------------------------------------------------------------------ capability
+
+    def handlers(self) -> dict[str, Handler]:
+        return {
+            CreateRobot.op: lambda request, _: self.create_robot(request),
+            RemoveRobot.op: lambda request, _: self.remove_robot(request),
+            ListRobots.op: lambda request, _: self.list_robots(request),
+        }
+
+    def _summary(self, robot: _Robot) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "kind": "robot", "name": robot.name, "state": robot.state,
+            "source": robot.source.to_dict(), "fixed_frame": robot.fixed_frame or None,
+            "tf_prefix": robot.tf_prefix, "links": len(robot.links),
+            "visuals": len(robot.visuals), "description_device": robot.description_device,
+            "loads": robot.loads, "warnings": len(robot.warnings)}
+        if robot.request.namespace:
+            out["namespace"] = robot.request.namespace
+        if robot.reason:
+            out["reason"] = robot.reason
+        return out
+
+    def _describe(self, robot: _Robot, existed: bool) -> dict[str, Any]:
+        model = robot.model
+        out: dict[str, Any] = {
+            "name": robot.name, "state": robot.state, "source": robot.source.to_dict(),
+            "fixed_frame": robot.fixed_frame or None, "tf_prefix": robot.tf_prefix,
+            "robot": model.name if model is not None else None,
+            "root_link": model.root_link if model is not None else None,
+            "description_device": robot.description_device,
+            "links": [{"link": link.link, "device": link.device, "frame": link.frame,
+                       "visuals": list(link.visuals)} for link in robot.links.values()],
+            "visuals": [info.to_dict() for info in robot.visuals.values()],
+            "warnings": list(robot.warnings), "existed": existed}
+        if robot.reason:
+            out["reason"] = robot.reason
+        return out
+
+    def describe(self) -> list[dict[str, Any]]:
+        return [self._summary(robot) for robot in self.robots.values()]
+
+    def close(self) -> None:
+        for task in tuple(self._tasks):
+            task.cancel()
+        for robot in list(self.robots.values()):
+            self._drop(robot)
+
+
+def _digest(text: str) -> str:
+    return hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()
+
+
+def _source_text(source: RobotSource) -> str:
+    if source.kind == "parameter":
+        return f"parameter {source.parameter} of {source.node}"
+    if source.kind == "topic":
+        return f"topic {source.topic}"
+    return f"file {source.path}"
