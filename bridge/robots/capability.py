@@ -111,6 +111,8 @@ class _Robot:
     reason: str = ""  # why waiting, or the last load error
     model: Optional[RobotModel] = None
     urdf_digest: str = ""  # of the loaded text: an unchanged description is not reloaded
+    loading_digest: str = ""  # of the text being loaded now (an event and a fetch may both
+    # bring the same new description)
     fixed_frame: str = ""
     links: dict[str, _Link] = field(default_factory=dict)
     visuals: dict[str, _VisualInfo] = field(default_factory=dict)  # device -> info
@@ -285,8 +287,11 @@ class RobotBridges:
     # ------------------------------------------------------------------ loading
 
     def _reload(self, robot: _Robot, text: str) -> None:
-        if robot.state == "loaded" and _digest(text) == robot.urdf_digest:
-            return  # the node re-announced the same description
+        digest = _digest(text)
+        if digest == robot.loading_digest or (robot.state == "loaded" and
+                                              digest == robot.urdf_digest):
+            return  # the node re-announced the same description, or it is loading already
+        robot.loading_digest = digest
         robot.generation += 1
         self._spawn(self._load(robot, text, robot.generation, initial=False))
 
@@ -306,6 +311,8 @@ class RobotBridges:
         try:
             model = await loop.run_in_executor(None, call)
         except RobotError as error:
+            if generation == robot.generation:
+                robot.loading_digest = ""
             what = f"a valid URDF ({_source_text(source)})"
             problem = CommandFailedError(field_name, what, str(error),
                                          code=ErrorCode.OUT_OF_RANGE)
@@ -316,6 +323,7 @@ class RobotBridges:
             return
         if robot.removed or generation != robot.generation:
             return  # removed, or a newer description is being loaded
+        robot.loading_digest = ""
         self._apply(robot, model, text)
 
     def _file_path(self, spec: str) -> Path:
