@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import signal
+import sys
 from typing import Awaitable, Callable, Optional
 
 from bridge.config import DaemonConfig
@@ -28,6 +29,8 @@ from protocol.naming import DeviceNameRegistry
 from protocol.errors import ProtocolError
 
 log = logging.getLogger("bridge")
+
+GIL_SWITCH_INTERVAL_S = 0.0005
 
 
 class StartupError(Exception):
@@ -76,6 +79,9 @@ class Daemon:
 async def run_daemon(config: DaemonConfig,
                      started: Optional[Callable[[Daemon], Awaitable[None]]] = None) -> None:
     """Run until SIGINT/SIGTERM; `started` runs once the daemon serves (used by `demo`)."""
+    # Two busy threads (ROS executor, asyncio loop) share the GIL; with the default 5 ms
+    # switch interval, a frame handed to the loop under load waits up to 5 ms to be sent.
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -174,7 +174,8 @@ class Dispatcher:
         bridges = [bridge for capability in self._capabilities
                    for bridge in capability.describe()]
         return {"bridges": bridges, "devices": self._hub.devices(),
-                "clients": [client.describe() for client in self._hub.clients]}
+                "clients": [client.describe() for client in self._hub.clients],
+                "hub_dropped": self._hub.dropped}
 
     def _list_topics(self, request: c.ListTopics, client: Replier | None) -> Result:
         return {"topics": [{"topic": name, "types": list(types)}

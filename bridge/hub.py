@@ -5,8 +5,10 @@ every streamed device, and a client that connects gets the current state at once
 newest value of each streamed device, and every persistent one-shot such as a robot mesh).
 
 Threads: the asyncio loop owns all state here. ROS callbacks run in the executor's thread
-and hand off through `post`, which coalesces per device and wakes the loop at most once
-per batch, so a burst of ROS messages costs one wake-up, not one per message.
+and hand off through `post`: messages queue in order (bounded) and the loop is woken at
+most once per batch, so a burst of ROS messages costs one wake-up, and each client gets
+the whole batch in one socket write. A fast client receives every message; only a slow
+client's own outbox replaces unsent values with newer ones.
 """
 
 from __future__ import annotations
@@ -15,12 +17,31 @@ import asyncio
 import logging
 import threading
 import time
+from collections import deque
 from typing import Callable, Protocol
 
 from bridge.outbox import Frame
 from protocol.messages import Message
 
 log = logging.getLogger(__name__)
+
+# Small stream messages waiting for the loop thread, in order: about 1 s at 4 kHz.
+MAX_PENDING = 4096
+# Larger messages (images, point clouds) are not queued: while the loop is behind, a newer
+# one replaces the one waiting for its device, as a stale frame is not worth its encoding.
+LARGE_MESSAGE_BYTES = 64 * 1024
+
+
+def approximate_size(message: Message) -> int:
+    """A cheap estimate of a message's encoded size, for bounding queues."""
+    body = message.body
+    for name in ("pixels", "points"):
+        array = getattr(body, name, None)
+        nbytes = getattr(array, "nbytes", None)
+        if nbytes is not None:
+            return int(nbytes) + 256
+    text = getattr(body, "text", None)
+    return len(text) + 256 if isinstance(text, str) else 256
 
 
 class Subscriber(Protocol):
@@ -30,6 +51,8 @@ class Subscriber(Protocol):
     def send_once(self, frame: Frame) -> None: ...
     def forget_device(self, device: str) -> None: ...
     def describe(self) -> dict[str, object]: ...
+    def begin_batch(self) -> None: ...
+    def end_batch(self) -> None: ...
 
 
 class Replier(Protocol):
@@ -60,8 +83,10 @@ class Hub:
         self._held: dict[str, Message] = {}
         # Hand-off from other threads.
         self._lock = threading.Lock()
-        self._incoming: dict[str, Message] = {}
+        self._incoming: deque[Message] = deque()
+        self._incoming_large: dict[str, Message] = {}
         self._wake_pending = False
+        self.dropped = 0  # stream values replaced or dropped before the loop took them
         self.streamed = 0
 
     # --- clients -------------------------------------------------------------------------
@@ -167,9 +192,20 @@ class Hub:
 
     # --- hand-off from other threads -----------------------------------------------------
     def post(self, message: Message) -> None:
-        """Thread-safe `stream`: the newest message per device wins until the loop runs."""
+        """Thread-safe `stream`. Small messages queue in order; if the loop falls
+        `MAX_PENDING` behind, the oldest go first. A large message replaces its device's
+        waiting one. Memory stays bounded and the newest value always arrives."""
+        large = approximate_size(message) > LARGE_MESSAGE_BYTES
         with self._lock:
-            self._incoming[message.device_name] = message
+            if large:
+                if self._incoming_large.pop(message.device_name, None) is not None:
+                    self.dropped += 1
+                self._incoming_large[message.device_name] = message
+            else:
+                if len(self._incoming) >= MAX_PENDING:
+                    self._incoming.popleft()
+                    self.dropped += 1
+                self._incoming.append(message)
             if self._wake_pending:
                 return
             self._wake_pending = True
@@ -187,7 +223,17 @@ class Hub:
 
     def _drain(self) -> None:
         with self._lock:
-            batch, self._incoming = self._incoming, {}
+            batch, self._incoming = self._incoming, deque()
+            large, self._incoming_large = self._incoming_large, {}
             self._wake_pending = False
-        for message in batch.values():
-            self.stream(message)
+        clients = tuple(self.clients)
+        for client in clients:
+            client.begin_batch()
+        try:
+            for message in batch:
+                self.stream(message)
+            for message in large.values():
+                self.stream(message)
+        finally:
+            for client in clients:
+                client.end_batch()

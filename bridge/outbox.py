@@ -11,7 +11,7 @@ lets them pile up past the bound is too slow to serve (`OutboxOverflow`).
 from __future__ import annotations
 
 from collections import OrderedDict, deque
-from typing import Optional
+from typing import Callable, Optional
 
 from protocol.framing import encode
 from protocol.messages import Message
@@ -52,11 +52,16 @@ class OutboxOverflow(Exception):
 
 
 class Outbox:
-    """Unsent encoded frames of one client. Not thread-safe: the event loop owns it."""
+    """Unsent frames of one client. Not thread-safe: the event loop owns it.
 
-    def __init__(self, *, max_oneshot_bytes: int) -> None:
+    Stream values wait as `Frame`s and are encoded only when written: a stalled client
+    then costs nothing per update, however many updates replace each other meanwhile.
+    """
+
+    def __init__(self, *, max_oneshot_bytes: int, header_version: Callable[[], int]) -> None:
         self._max_oneshot_bytes = max_oneshot_bytes
-        self._latest: OrderedDict[str, bytes] = OrderedDict()
+        self._header_version = header_version
+        self._latest: OrderedDict[str, Frame] = OrderedDict()
         self._oneshots: deque[bytes] = deque()
         self._oneshot_bytes = 0
         self.coalesced = 0  # older values replaced before they were sent
@@ -66,14 +71,15 @@ class Outbox:
 
     @property
     def pending_bytes(self) -> int:
-        return self._oneshot_bytes + sum(len(data) for data in self._latest.values())
+        """Bytes of waiting one-shots (stream values are bounded by the number of devices)."""
+        return self._oneshot_bytes
 
-    def put_latest(self, device: str, data: bytes) -> None:
+    def put_latest(self, device: str, frame: Frame) -> None:
         # A replaced value keeps its place in the queue, so a device updated at 1 kHz
         # cannot starve a slower one queued before it.
         if device in self._latest:
             self.coalesced += 1
-        self._latest[device] = data
+        self._latest[device] = frame
 
     def put_once(self, data: bytes) -> None:
         if self._oneshot_bytes + len(data) > self._max_oneshot_bytes:
@@ -91,5 +97,5 @@ class Outbox:
             self._oneshot_bytes -= len(data)
             return data
         if self._latest:
-            return self._latest.popitem(last=False)[1]
+            return self._latest.popitem(last=False)[1].encoded(self._header_version())
         return None

@@ -51,12 +51,14 @@ class ClientSession(asyncio.Protocol):
         self._on_close = on_close
         self._decoder = Decoder(max_body_size=limits.max_message_bytes)
         self._negotiator = HeaderVersionNegotiator()
-        self._outbox = Outbox(max_oneshot_bytes=limits.max_oneshot_bytes)
+        self._outbox = Outbox(max_oneshot_bytes=limits.max_oneshot_bytes,
+                              header_version=lambda: self._negotiator.outgoing_version)
         self._transport: Optional[asyncio.Transport] = None
         self._paused = False
         self._closing = False
         self._attached = False
         self._attach_timer: Optional[asyncio.TimerHandle] = None
+        self._batch: Optional[list[bytes]] = None  # frames gathered for one write
         self._unrouted_warned: set[str] = set()
         self.peer = "?"
         self.received = 0
@@ -189,11 +191,10 @@ class ClientSession(asyncio.Protocol):
     def send_stream(self, device: str, frame: Frame) -> None:
         if self._closing:
             return
-        data = frame.encoded(self.header_version)
         if self._paused or len(self._outbox):
-            self._outbox.put_latest(device, data)
+            self._outbox.put_latest(device, frame)
         else:
-            self._write(data)
+            self._write(frame.encoded(self.header_version))
 
     def send_once(self, frame: Frame) -> None:
         if self._closing:
@@ -224,10 +225,23 @@ class ClientSession(asyncio.Protocol):
         if self._transport is not None:
             self._transport.close()
 
+    def begin_batch(self) -> None:
+        """Gather the frames of one hub batch, to write them in one system call."""
+        self._batch = []
+
+    def end_batch(self) -> None:
+        batch, self._batch = self._batch, None
+        if batch and not self._closing:
+            assert self._transport is not None
+            self._transport.write(b"".join(batch) if len(batch) > 1 else batch[0])
+
     def _write(self, data: bytes) -> None:
         assert self._transport is not None
-        self._transport.write(data)
         self.sent += 1
+        if self._batch is not None:
+            self._batch.append(data)
+        else:
+            self._transport.write(data)
 
     def _flush(self) -> None:
         while not self._paused and not self._closing:

@@ -67,20 +67,20 @@ def test_a_client_that_never_reads_does_not_slow_others_and_memory_stays_bounded
                 fast_latest[0] = int(message.metadata["ros2.frame"].split(":")[1])
 
         fast._on_message = count
-        # 1280x960 rgb8 at 30 Hz: 110 MB/s that the stalled client never takes.
+        # 640x480 rgb8 at 30 Hz: 27 MB/s that the stalled client never takes.
         camera = processes.python("camera", "stream_publisher.py", "/clients_camera", "30",
-                                  "--image", "1280x960", "--count", "300")
+                                  "--image", "640x480", "--count", "300")
         camera.wait_for_output("SENT 100", timeout=30)
         rss_start = rss_bytes(daemon.child.pid)
         camera.wait_for_output("DONE", timeout=60)
         # The fast client keeps up and ends with the very last frame.
         wait_until(lambda: fast_latest[0] == 300, timeout=20, what="the last frame (seq:300)")
         rss_growth = rss_bytes(daemon.child.pid) - rss_start
-        # 200 frames of 3.7 MB went by: an unbounded buffer would have grown by ~740 MB.
+        # 200 frames of 0.9 MB went by: an unbounded buffer would have grown by ~180 MB.
         assert rss_growth < 80 * 1024 * 1024, f"daemon RSS grew by {rss_growth / 1e6:.0f} MB"
-        assert len(received) >= 200, f"the fast client got only {len(received)} of 300 frames"
+        assert len(received) >= 250, f"the fast client got only {len(received)} of 300 frames"
         stats = [c for c in fast.command("list_bridges")["clients"] if c["received"] == 0]
-        assert stats and stats[0]["coalesced"] > 0, stats
+        assert stats and stats[0]["coalesced"] > 200, stats  # the stalled one skipped them
         assert stats[0]["waiting"] <= 1  # one camera device: at most one frame waits
     finally:
         stalled.close()
