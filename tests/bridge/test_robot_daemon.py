@@ -528,3 +528,21 @@ def _alive(pid: int) -> bool:
             return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
     except OSError:
         return False
+
+
+# ------------------------------------------------------------------ start-up config
+
+def test_a_robot_from_the_yaml_start_up_config(processes: Processes, tmp_path: Path) -> None:
+    urdf = tmp_path / "cfg.urdf"
+    urdf.write_text(two_link_urdf())
+    config = tmp_path / "bridge.yaml"
+    config.write_text(f"robots:\n  - {{name: cfg, source: {{kind: file, path: '{urdf}'}}}}\n"
+                      f"  - {{name: cfg_waiting, namespace: nobody_here}}\n")
+    running = start_daemon(processes, "--config", str(config))
+    with running.connect() as connection:
+        for device in ("cfg:base:0", "cfg:arm:0", "cfg:tool:0"):
+            assert connection.wait_for(device, is_mesh).metadata["ros2.robot"] == "cfg"
+        connection.wait_for("cfg:base", matrix_close(np.eye(4), atol=1e-9))
+        states = {r["name"]: r["state"] for r in connection.command("list_robots")["robots"]}
+        assert states == {"cfg": "loaded", "cfg_waiting": "waiting"}
+    assert_clean_exit(running)
