@@ -1,0 +1,43 @@
+# slicer-ros2-bridge on the official ROS 2 Jazzy image.
+#
+#   docker build -t slicer-ros2-bridge .
+#   docker run --rm -it --net=host slicer-ros2-bridge                 # the daemon
+#   docker run --rm -it --net=host slicer-ros2-bridge demo            # with the demo robot
+#   docker run --rm -it --net=host -v $PWD/bridges.yaml:/bridges.yaml \
+#       slicer-ros2-bridge run --config /bridges.yaml
+#
+# --net=host: DDS discovery needs the host's network to see your other ROS 2 nodes, and
+# 3D Slicer on the host then reaches the daemon at 127.0.0.1:18944. Pass the same
+# ROS_DOMAIN_ID as your robot (-e ROS_DOMAIN_ID=...).
+#
+# Here ROS 2 (rclpy, the message packages, and the real tf2_msgs) comes from the image's
+# apt packages, not from PyPI wheels, so the project is installed without its ROS pins.
+FROM ros:jazzy
+
+RUN apt-get update \
+    && apt-get install -y --no-install-recommends \
+        python3-venv python3-numpy python3-yaml python3-lxml \
+        ros-jazzy-tf2-msgs ros-jazzy-common-interfaces \
+    && rm -rf /var/lib/apt/lists/*
+
+# A venv that sees the ROS Python packages of /opt/ros and apt's numpy.
+RUN python3 -m venv --system-site-packages /opt/bridge
+ENV PATH=/opt/bridge/bin:$PATH
+
+COPY pyproject.toml README.md /src/
+COPY protocol /src/protocol
+COPY bridge /src/bridge
+COPY slicer_client /src/slicer_client
+RUN pip install --no-cache-dir \
+        pyigtl==0.3.4 yourdfpy==0.0.60 trimesh==5.2.0 pycollada==0.9.3 crcmod==1.7 \
+    && pip install --no-cache-dir --no-deps /src
+
+# The daemon needs no privileges: run it as an ordinary user.
+RUN useradd --create-home --shell /usr/sbin/nologin bridge
+USER bridge
+WORKDIR /home/bridge
+
+EXPOSE 18944
+# /ros_entrypoint.sh (from the ros image) sources /opt/ros/jazzy/setup.bash first.
+ENTRYPOINT ["/ros_entrypoint.sh", "slicer-ros2-bridge"]
+CMD ["run"]
