@@ -85,13 +85,16 @@ def main() -> int:
     for name, path, pkgs in robots:
         model = load_robot_file(path, package_paths=pkgs, cache=MeshCache())
         size = to_bodies(path, pkgs, MeshCache())
-        cold = median_ms(lambda: to_bodies(path, pkgs, MeshCache()), args.repeat)
+        cold = median_ms(lambda path=path, pkgs=pkgs: to_bodies(path, pkgs, MeshCache()),
+                         args.repeat)
         warm_cache = MeshCache()
         to_bodies(path, pkgs, warm_cache)
-        cached = median_ms(lambda: to_bodies(path, pkgs, warm_cache), args.repeat)
-        baseline = median_ms(lambda: yourdfpy_load(path, pkgs), args.repeat)
+        cached = median_ms(lambda path=path, pkgs=pkgs, cache=warm_cache: to_bodies(
+            path, pkgs, cache), args.repeat)
+        baseline = median_ms(lambda path=path, pkgs=pkgs: yourdfpy_load(path, pkgs), args.repeat)
         joints = {j: 0.3 for j in model.kinematics.actuated_joints}
-        fk_us = median_ms(lambda: [model.link_poses(joints) for _ in range(100)],
+        fk_us = median_ms(lambda model=model, joints=joints: [model.link_poses(joints)
+                                                              for _ in range(100)],
                           args.repeat) * 10
         triangles = sum(len(v.triangles) for v in model.visuals)
         print(f"{name:<10} {len(model.visuals):>7} {triangles:>9} {size:>9} {cold:>8.1f} "

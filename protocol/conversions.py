@@ -186,8 +186,8 @@ def pose_to_matrix(translation_m: ArrayLike, quaternion_xyzw: ArrayLike) -> Floa
     is not three and four finite numbers goes through the checking path below.
     """
     try:
-        tx, ty, tz = (float(v) for v in translation_m)  # type: ignore[union-attr]
-        x, y, z, w = (float(v) for v in quaternion_xyzw)  # type: ignore[union-attr]
+        tx, ty, tz = (float(v) for v in translation_m)  # type: ignore[union-attr,arg-type]
+        x, y, z, w = (float(v) for v in quaternion_xyzw)  # type: ignore[union-attr,arg-type]
     except (TypeError, ValueError):
         return _pose_to_matrix_checked(translation_m, quaternion_xyzw)
     norm2 = x * x + y * y + z * z + w * w

@@ -78,7 +78,8 @@ def decode_name(raw: bytes, field: str, type_name: str = "") -> str:
     try:
         return text.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise BodyError(field, "UTF-8 text", f"{text!r} ({exc.reason})", type_name=type_name) from None
+        raise BodyError(field, "UTF-8 text", f"{text!r} ({exc.reason})",
+                        type_name=type_name) from None
 
 
 def encode_text(text: str, encoding: int, field: str) -> bytes:

@@ -355,7 +355,8 @@ def cells_from_array(indices: npt.ArrayLike) -> U32Array:
     """(M, k) point indices (k points per cell) -> flat uint32 cell array [k, i0..ik-1, ...]."""
     arr = np.asarray(indices)
     if arr.ndim != 2 or (arr.size and arr.dtype.kind not in "ui"):
-        raise EncodeError("cells", "an (M, k) integer array", f"dtype {arr.dtype}, shape {arr.shape}")
+        raise EncodeError("cells", "an (M, k) integer array",
+                          f"dtype {arr.dtype}, shape {arr.shape}")
     if arr.size and (int(arr.min()) < 0 or int(arr.max()) > _U32_MAX):
         raise EncodeError("cells", "indices in [0, 2**32)", f"[{arr.min()}, {arr.max()}]")
     m, k = arr.shape
@@ -526,7 +527,7 @@ class PolyData:
         if (pos - name_start) % 2:
             pos += 1  # padding to an even name-block length
         attributes: list[PolyDataAttribute] = []
-        for i, ((type_byte, ncomp, n), name) in enumerate(zip(attr_heads, names)):
+        for (type_byte, ncomp, n), name in zip(attr_heads, names):
             what = f"attribute {name!r}"
             try:
                 kind = AttributeKind(type_byte & 0x0F)

@@ -22,7 +22,7 @@ ROS node (the daemon's), so ``Create``/``Destroy`` of extra nodes are not offere
 from __future__ import annotations
 
 import itertools
-from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 

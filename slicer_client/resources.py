@@ -443,16 +443,17 @@ class Robot(Resource):
 
     @property
     def transforms(self) -> Dict[str, np.ndarray]:
-        return {n: l.matrix.copy() for n, l in self.links.items() if l.matrix is not None}
+        return {name: link.matrix.copy() for name, link in self.links.items()
+                if link.matrix is not None}
 
     def mesh_count(self) -> int:
-        return sum(len(l.meshes) for l in self.links.values())
+        return sum(len(link.meshes) for link in self.links.values())
 
     def wait_until_loaded(self, timeout: float = 30.0) -> None:
         """Wait until every link named in the create reply has a transform and every
         visual its mesh."""
         def loaded() -> bool:
-            for device, (link, index) in self._devices.items():
+            for link, index in self._devices.values():
                 entry = self.links.get(link)
                 if entry is None:
                     return False

@@ -3,7 +3,7 @@
 Public API::
 
     codec = codec_for("PoseStamped")          # any spelling resolve_type accepts
-    body = codec.to_igtl(msg)                   # or codec.encode(msg) -> Encoded(body, metadata, stamp)
+    body = codec.to_igtl(msg)                   # or codec.encode(msg) -> Encoded(...)
     msg = codec.from_igtl(body, stamp=(sec, ns), frame_id="map", metadata={...})
     value = codec.to_value(msg)                 # JSON-able "Slicer value"
     msg = codec.from_value(value, stamp=..., frame_id=...)

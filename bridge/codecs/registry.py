@@ -24,7 +24,8 @@ from typing import Any
 from bridge.codecs.errors import CodecError
 from protocol.commands import REFERENCE_TYPE_NAMES
 
-__all__ = ["REFERENCE_SHORT_NAMES", "installed_types", "message_class", "resolve_type", "ros_type_of",
+__all__ = ["REFERENCE_SHORT_NAMES", "installed_types", "message_class", "resolve_type",
+           "ros_type_of",
            "service_class"]
 
 # The reference's short names: one table, in the protocol (clients resolve them too).

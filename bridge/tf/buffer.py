@@ -595,7 +595,7 @@ def _check(tr: StampedTransform, index: int, static: bool) -> Tuple[str, str, in
 
 def _yaml_key(text: str) -> str:
     # Frame ids are usually plain words; quote anything YAML could read as something else.
-    if text and all(c.isalnum() or c in "_/.-" for c in text) and not text[0] in "-.":
+    if text and all(c.isalnum() or c in "_/.-" for c in text) and text[0] not in "-.":
         return text
     return _yaml_str(text)
 

@@ -16,7 +16,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 def main() -> int:
     try:
-        import slicer
+        import slicer  # noqa: F401  (only: are we inside 3D Slicer?)
     except ImportError:
         print("selftest.py runs inside 3D Slicer: Slicer --no-main-window --python-script "
               f"{os.path.abspath(__file__)}", file=sys.stderr)

@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import socket
 import time
 from pathlib import Path
 
-import numpy as np
-import pytest
 
-from protocol.messages import Image, Transform
-from slicer_client.connection import Connection
+from protocol.messages import Transform
 from support import Processes, RunningDaemon, wait_until
 
 

@@ -198,7 +198,8 @@ def test_named_materials_robot_level_and_inline() -> None:
     model = load_robot(robot(
         link("a", visual('<box size="1 1 1"/>', material='<material name="teal"/>')),
         link("b", visual('<box size="1 1 1"/>',
-                         material='<material name="rose"><color rgba="1 0.2 0.5 0.5"/></material>')),
+                         material='<material name="rose">'
+                                  '<color rgba="1 0.2 0.5 0.5"/></material>')),
         link("c", visual('<box size="1 1 1"/>', material='<material name="rose"/>')),
         link("d", visual('<box size="1 1 1"/>', material='<material name="nowhere"/>')),
         joints=fixed("ab", "a", "b") + fixed("bc", "b", "c") + fixed("cd", "c", "d"),
@@ -438,7 +439,8 @@ def test_progress_is_logged_when_loading_is_slow(tmp_path: Path, caplog) -> None
 
 def test_polydata_has_points_triangles_colours_and_normals() -> None:
     model = load_robot(robot(link("a", visual(
-        '<sphere radius="0.01"/>', material='<material name="m"><color rgba="1 0.5 0 1"/></material>'
+        '<sphere radius="0.01"/>',
+        material='<material name="m"><color rgba="1 0.5 0 1"/></material>'
     ))), options=LoadOptions(normals=True), cache=MeshCache())
     v = model.visuals[0]
     body = PolyData.unpack(to_polydata(v).pack())

@@ -112,7 +112,8 @@ def test_typed_scalars_and_arrays_come_back_as_slicer_values(daemon: RunningDaem
             topic = f"/ref_typed_{short.lower()}"
             sub = rosNode.CreateAndAddSubscriberNode(short, topic)
             pub = rosNode.CreateAndAddPublisherNode(short, topic)
-            wait_until(lambda: pub.Publish(value) >= 1 and sub.GetLastMessage() is not None,
+            wait_until(lambda pub=pub, sub=sub, value=value: pub.Publish(value) >= 1
+                       and sub.GetLastMessage() is not None,
                        timeout=20, what=f"a {short} message")
             assert sub.GetLastMessage() == value, short
 

@@ -35,4 +35,5 @@ def test_module_sources_compile_and_find_the_repository_root() -> None:
     source = MODULE.read_text()
     compile(source, str(MODULE), "exec")
     assert '"..", "..", ".."' in source  # the repo root, relative to the module file
-    assert (MODULE.parents[3] / "protocol").is_dir() and (MODULE.parents[3] / "slicer_client").is_dir()
+    root = MODULE.parents[3]
+    assert (root / "protocol").is_dir() and (root / "slicer_client").is_dir()

@@ -30,7 +30,8 @@ f32 = st.floats(-1e6, 1e6, allow_nan=False, width=32)
 
 def utf8_max(size: int, *, alphabet: Any = None) -> st.SearchStrategy[str]:
     """Text of at most ``size`` UTF-8 bytes, no NUL, no lone surrogates."""
-    chars = alphabet if alphabet is not None else st.characters(blacklist_categories=("Cs",), blacklist_characters="\0")
+    chars = alphabet if alphabet is not None else st.characters(
+        blacklist_categories=("Cs",), blacklist_characters="\0")
     return st.text(chars, max_size=size).filter(lambda s: len(s.encode("utf-8")) <= size)
 
 

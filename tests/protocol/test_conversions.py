@@ -177,7 +177,8 @@ def test_validate_matrix_accepts_rigid_and_float32_noise() -> None:
     [
         (np.eye(3), "matrix", "shape"),
         (np.full((4, 4), np.nan), "matrix", "finite"),
-        (np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [1, 0, 0, 1]]), "matrix[3]", "0 0 0 1"),
+        (np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [1, 0, 0, 1]]), "matrix[3]",
+         "0 0 0 1"),
         (np.diag([2.0, 1.0, 1.0, 1.0]), "matrix rotation", "orthonormal"),
         (np.diag([-1.0, 1.0, 1.0, 1.0]), "matrix rotation", "determinant"),
         ([["a"] * 4] * 4, "matrix", "4x4"),

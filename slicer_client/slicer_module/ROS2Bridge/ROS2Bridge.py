@@ -13,7 +13,6 @@ says. The reference CamelCase API is
 """
 
 import json
-import logging
 import os
 import sys
 
