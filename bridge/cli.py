@@ -7,6 +7,7 @@ import asyncio
 import logging
 import sys
 from pathlib import Path
+from typing import Awaitable, Callable
 
 from bridge.config import DEFAULT_HOST, DEFAULT_PORT, ConfigError, DaemonConfig
 from bridge.config import ConfigFile, build_security, load_config_file
@@ -114,8 +115,11 @@ def _configure_logging(level: str) -> None:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 
 
-def _run_daemon(args: argparse.Namespace) -> int:
-    from bridge.daemon import StartupError, run_daemon
+def run_with_config(args: argparse.Namespace,
+                    main: Callable[[DaemonConfig], Awaitable[None]]) -> int:
+    """Build the config from the options, set up logging, run `main(config)`; what stops
+    the start (bad config, port in use, a bad start-up bridge) is one line and exit 2."""
+    from bridge.daemon import StartupError
     from bridge.server import PortInUseError
 
     try:
@@ -125,7 +129,7 @@ def _run_daemon(args: argparse.Namespace) -> int:
         return 2
     _configure_logging(config.log_level)
     try:
-        asyncio.run(run_daemon(config))
+        asyncio.run(main(config))
     except PortInUseError as error:
         print(f"slicer-ros2-bridge: {error.strerror}", file=sys.stderr)
         return 2
@@ -150,8 +154,10 @@ def main(argv: list[str] | None = None) -> int:
         from bridge.robots.demo_runner import run_demo
 
         return run_demo(args)
-    if args.command in ("run", "demo"):
-        return _run_daemon(args)
+    if args.command == "run":
+        from bridge.daemon import run_daemon
+
+        return run_with_config(args, run_daemon)
     parser.error(f"unknown command {args.command}")
     return 2
 

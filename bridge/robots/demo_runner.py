@@ -28,6 +28,7 @@ import sys
 from pathlib import Path
 from typing import Optional
 
+from bridge.config import DaemonConfig
 from bridge.daemon import Daemon
 
 __all__ = ["DemoChildren", "run_demo"]
@@ -161,18 +162,15 @@ def _banner(daemon: Daemon, robot: dict[str, object]) -> str:
 
 def run_demo(args: argparse.Namespace) -> int:
     """The `demo` subcommand (called by `bridge.cli`); the exit code."""
-    from bridge.cli import _config_from, _configure_logging
-    from bridge.config import ConfigError
-    from bridge.daemon import StartupError, run_daemon
-    from bridge.robots.demo import demo_urdf_path
-    from bridge.server import PortInUseError
+    from bridge.cli import run_with_config
 
-    try:
-        config = _config_from(args)
-    except ConfigError as error:
-        print(f"slicer-ros2-bridge: {error}", file=sys.stderr)
-        return 2
-    _configure_logging(config.log_level)
+    return run_with_config(args, _demo)
+
+
+async def _demo(config: DaemonConfig) -> None:
+    from bridge.daemon import run_daemon
+    from bridge.robots.demo import demo_urdf_path
+
     urdf, packages = demo_urdf_path()
     config = dataclasses.replace(config, package_paths=tuple(config.package_paths) + tuple(
         (name, str(folder)) for name, folder in packages.items()))
@@ -186,18 +184,7 @@ def run_demo(args: argparse.Namespace) -> int:
             robot = await daemon.robots.wait_loaded("demo", _READY_TIMEOUT_S)
         print(_banner(daemon, dict(robot)), flush=True)
 
-    async def main() -> None:
-        try:
-            await run_daemon(config, started=started)
-        finally:
-            await children.stop()
-
     try:
-        asyncio.run(main())
-    except PortInUseError as error:
-        print(f"slicer-ros2-bridge: {error.strerror}", file=sys.stderr)
-        return 2
-    except StartupError as error:
-        print(f"slicer-ros2-bridge: {error}", file=sys.stderr)
-        return 2
-    return 0
+        await run_daemon(config, started=started)
+    finally:
+        await children.stop()
