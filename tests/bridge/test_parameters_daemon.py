@@ -15,7 +15,7 @@ from protocol import commands as c
 from protocol.commands import ErrorCode
 from protocol.messages import Message, Status, StatusCode, String
 from slicer_client.connection import CommandRefusedError, Connection
-from support import Child, Processes, start_daemon
+from support import Child, Processes, start_daemon, wait_until
 
 _nodes = itertools.count()
 
@@ -183,6 +183,12 @@ def test_node_that_appears_later_is_picked_up(processes: Processes,
     client.wait_for(device, has_values({"count": {"type": "integer", "value": 3},
                                         "label": {"type": "string", "value": f"/{name}"}}),
                     timeout=20)
+    # Values can come from /parameter_events before the readiness check sees the services.
+    def ready() -> bool:
+        return any(b.get("device") == device and b.get("ready")
+                   for b in client.command("list_bridges")["bridges"])
+
+    wait_until(ready, timeout=20, what=f"{name} ready")
     bridges = client.command("list_bridges")["bridges"]
     assert {"kind": "parameter_client", "node": f"/{name}", "device": device, "ready": True,
             "observed": ["count", "label"]} in bridges
