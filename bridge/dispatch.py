@@ -45,13 +45,13 @@ class Capability(Protocol):
 
 class Dispatcher:
     def __init__(self, ros: RosNode, hub: Hub, capabilities: Sequence[Capability], *,
-                 policy: SecurityPolicy = SecurityPolicy()) -> None:
+                 policy: SecurityPolicy | None = None) -> None:
         self._ros = ros
         self._hub = hub
         self._capabilities = tuple(capabilities)
         # Security is checked here, by request fields, so no capability needs to know it.
-        self._policy = policy
-        self._quota = BridgeQuota(policy.max_bridges_per_client)
+        self._policy = policy or SecurityPolicy()
+        self._quota = BridgeQuota(self._policy.max_bridges_per_client)
         hub.add_closed_listener(self._quota.forget)
         self._tasks: set[asyncio.Task[None]] = set()
         # The one table of what this daemon serves, built from each capability's own list.

@@ -27,13 +27,13 @@ class PortInUseError(OSError):
 
 class BridgeServer:
     def __init__(self, hub: Hub, commands: CommandHandler, *, host: str, port: int,
-                 limits: SessionLimits, policy: SecurityPolicy = SecurityPolicy()) -> None:
+                 limits: SessionLimits, policy: SecurityPolicy | None = None) -> None:
         self._hub = hub
         self._commands = commands
         self._host = host
         self._port = port
         self._limits = limits
-        self._policy = policy
+        self._policy = policy or SecurityPolicy()
         self._refusals = RateLimitedLog(log)
         self._server: Optional[asyncio.base_events.Server] = None
         self.sessions: set[ClientSession] = set()

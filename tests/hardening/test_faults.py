@@ -116,9 +116,9 @@ def test_ros_peers_killed_and_restarted_recover(daemon: RunningDaemon,
             tf.wait_for_output("READY", timeout=30)
             seen_pose = client.latest(pose)
             seen_link = client.latest(link)
-            wait_until(lambda: client.latest(pose) is not seen_pose, timeout=30,
+            wait_until(lambda seen=seen_pose: client.latest(pose) is not seen, timeout=30,
                        what=f"pose after peer start {round_}")
-            wait_until(lambda: client.latest(link) is not seen_link, timeout=30,
+            wait_until(lambda seen=seen_link: client.latest(link) is not seen, timeout=30,
                        what=f"lookup after peer start {round_}")
             got = client.command("get_parameters", {"node": "/kr_params",
                                                     "names": ["count"]}, timeout=20)
@@ -131,7 +131,7 @@ def test_ros_peers_killed_and_restarted_recover(daemon: RunningDaemon,
 
 def test_daemon_restarted_while_clients_reconnect_and_resync(processes: Processes) -> None:
     port = pick_free_port()
-    tf = processes.python("tf", TF_PEER, "200", "--prefix", "rs_", "--seconds", "120")
+    processes.python("tf", TF_PEER, "200", "--prefix", "rs_", "--seconds", "120")
     clients = []
     try:
         lookups = []
@@ -147,7 +147,8 @@ def test_daemon_restarted_while_clients_reconnect_and_resync(processes: Processe
                 wait_until(lambda: all(c.connected for c in clients), timeout=30,
                            what=f"all clients reconnected ({round_})")
             counts = [lookup.count for lookup in lookups]
-            wait_until(lambda: all(lk.count > n + 10 for lk, n in zip(lookups, counts)),
+            wait_until(lambda counts=counts: all(lk.count > n + 10
+                                                 for lk, n in zip(lookups, counts)),
                        timeout=30, what=f"every client's lookup streaming again ({round_})")
             assert daemon.stop(signal.SIGTERM) == 0
             wait_until(lambda: not any(c.connected for c in clients), timeout=10,
