@@ -51,9 +51,11 @@ class Daemon:
                                    parameters=self.parameters,
                                    package_paths=dict(config.package_paths))
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
-                                                          self.services, self.robots])
+                                                          self.services, self.robots],
+                                     policy=config.security)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
-                                   port=config.port, limits=config.limits)
+                                   port=config.port, limits=config.limits,
+                                   policy=config.security)
 
     async def start(self) -> None:
         try:
@@ -69,6 +71,7 @@ class Daemon:
             raise
         log.info("listening on %s:%d (OpenIGTLink); ROS node %s", self.config.host,
                  self.server.port, self.ros.fully_qualified_name)
+        log.info("security: %s", self.config.security.describe())
 
     async def stop(self) -> None:
         await self.server.close()
