@@ -19,6 +19,9 @@ from rclpy.signals import SignalHandlerOptions
 
 log = logging.getLogger(__name__)
 
+# How often an idle executor thread looks at the stop flag.
+_SPIN_TIMEOUT_S = 0.1
+
 
 @dataclass(frozen=True)
 class RosOptions:
@@ -41,6 +44,7 @@ class RosNode:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._thread: Optional[threading.Thread] = None
+        self._stopping = threading.Event()
 
     @property
     def fully_qualified_name(self) -> str:
@@ -52,16 +56,21 @@ class RosNode:
 
     def _spin(self) -> None:
         try:
-            self.executor.spin()
+            while not self._stopping.is_set() and self.context.ok():
+                self.executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
         except ExternalShutdownException:
             pass
         except Exception:  # keep the daemon's log honest if the executor dies
             log.exception("the ROS executor stopped with an error")
 
     def stop(self) -> None:
-        self.executor.shutdown(timeout_sec=2.0)
+        # The executor thread must be out of its callbacks before the executor's handles
+        # are destroyed: shutting down under a running callback raises InvalidHandle.
+        self._stopping.set()
+        self.executor.wake()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
+        self.executor.shutdown(timeout_sec=2.0)
         try:
             self.node.destroy_node()
         finally:

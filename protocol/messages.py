@@ -680,6 +680,9 @@ def _eye3() -> FloatArray:
     return np.eye(3, dtype=np.float64)
 
 
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
 @dataclass(eq=False)
 class Image:
     """Spec: image.md. 72-byte image header, then the pixels, i fastest.
@@ -726,6 +729,11 @@ class Image:
         _check_shape(origin, (3,), "IMAGE origin")
         axes = directions * spacing  # column a = unit axis a times its spacing
         centre = origin + axes @ ((np.array([i, j, k], dtype=np.float64) - 1.0) / 2.0)
+        geometry = np.concatenate([axes.T.ravel(), centre])
+        # The header holds float32: finite values beyond its range cannot be written.
+        if not np.all(np.isfinite(geometry)) or np.any(np.abs(geometry) > _FLOAT32_MAX):
+            raise EncodeError("IMAGE geometry", "spacing, directions and origin whose "
+                              "products fit float32", f"axes and centre {geometry.tolist()}")
         head = _IMAGE_HEAD.pack(
             1, c, scalar, _ENDIAN_LITTLE, coordinate, i, j, k,
             *axes[:, 0], *axes[:, 1], *axes[:, 2], *centre,

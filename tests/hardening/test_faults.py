@@ -184,9 +184,6 @@ def test_sigterm_during_heavy_traffic_exits_zero_promptly(processes: Processes) 
     assert took < 5.0
 
 
-@pytest.mark.xfail(strict=False, reason="bridge/ros_node.py stop(): executor.shutdown() "
-                   "destroys guard conditions while the executor thread still runs a "
-                   "callback (InvalidHandle logged at ERROR; exit code stays 0)")
 def test_stop_while_the_ros_executor_is_busy_logs_no_error(processes: Processes) -> None:
     daemon = start_daemon(processes)
     with daemon.connect() as client:

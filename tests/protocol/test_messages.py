@@ -428,3 +428,24 @@ def test_transform_fast_path_matches_conversions(body: Transform) -> None:
     assert Transform(np.asfortranarray(body.matrix)).pack() == expected
     assert Transform(body.matrix.astype(np.float32)).pack() == expected
     assert Transform(body.matrix.tolist()).pack() == expected  # type: ignore[arg-type]
+
+
+def test_image_whose_geometry_overflows_float32_is_an_encode_error() -> None:
+    """Found by the atheris campaign (bench/fuzz_decoder.py): an IMAGE that decodes, with
+    spacing x directions beyond float32, must not re-encode with a bare OverflowError."""
+    import base64
+
+    from protocol.errors import EncodeError
+    from protocol.framing import Decoder, encode
+
+    wire = base64.b64decode(
+        "AQcAAUlNQUdFAAAAAAAAAGltZwAAAAAAAAAAAAAAACkAAAAAAAAAAAAAAAAAAAAAAAAAYEpV4H94ra5dAAEE"
+        "AwIBAAMA/v/3P4YAAAAD////AAAAAAAAAD+AAAAAAAAAAAAAAAAAAAB/eQAAP4AAAD8AAAAAAAAAAAAAAACA"
+        "AAMAAgABAAECAwEAAAAAAAAhBAUGBwgJCgsMDQ4PEBESExQVFhc=")[2:]
+    decoder = Decoder(verify_crc=False)
+    decoder.feed(wire)
+    message = decoder.next_message()
+    assert message is not None and message.type_name == "IMAGE"
+    with pytest.raises(EncodeError) as error:
+        encode(message)
+    assert error.value.field == "IMAGE geometry"
