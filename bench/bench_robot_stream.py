@@ -37,7 +37,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -217,7 +217,7 @@ def main() -> int:
         for node in ["/robot_state_publisher"] + (["/omni/robot_state_publisher"]
                                                    if have_omni else []):
             client.command("create_parameter_client", {"node": node}, timeout=30)
-            wait_until(lambda: any(b.get("node") == node and b.get("ready") for b in
+            wait_until(lambda node=node: any(b.get("node") == node and b.get("ready") for b in
                                    client.command("list_bridges")["bridges"]), 30,
                        f"{node} to be discovered")
 

@@ -53,6 +53,8 @@ __all__ = [
     "DEFAULT_HASH_LENGTH",
     "KEY_CHILD",
     "KEY_COLOR",
+    "KEY_LINK_COUNT",
+    "KEY_VISUAL_COUNT",
     "KEY_FRAME",
     "KEY_LINK",
     "KEY_NODE",
@@ -141,9 +143,13 @@ KEY_UNITS = "ros2.units"
 # ("r g b a", floats 0..1), so a Slicer script can parent and colour it from attributes.
 KEY_PARENT_DEVICE = "ros2.parent_device"
 KEY_COLOR = "ros2.color"
+# On a robot's description device (STATUS OK once loaded): how many links and visuals it has.
+KEY_LINK_COUNT = "ros2.links"
+KEY_VISUAL_COUNT = "ros2.visuals"
 METADATA_KEYS: tuple[str, ...] = (
     KEY_TOPIC, KEY_TYPE, KEY_FRAME, KEY_PARENT, KEY_CHILD, KEY_ROBOT, KEY_LINK,
     KEY_VISUAL, KEY_NODE, KEY_SERVICE, KEY_ROLE, KEY_UNITS, KEY_PARENT_DEVICE, KEY_COLOR,
+    KEY_LINK_COUNT, KEY_VISUAL_COUNT,
 )
 UNITS_MM = "mm"
 

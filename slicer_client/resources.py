@@ -17,8 +17,8 @@ from typing import (TYPE_CHECKING, Any, Callable, Dict, List, Mapping, Optional,
 import numpy as np
 
 from protocol import commands as c
-from protocol.messages import Message, PolyData, String, Transform
-from protocol.naming import KEY_LINK, KEY_ROLE, KEY_VISUAL
+from protocol.messages import Message, PolyData, Status, String, Transform
+from protocol.naming import KEY_LINK, KEY_LINK_COUNT, KEY_ROLE, KEY_VISUAL, KEY_VISUAL_COUNT
 from slicer_client.bridge_state import BridgeSpec
 from slicer_client.matrices import as_numpy, as_rows
 from slicer_client.values import value_from_message
@@ -402,6 +402,9 @@ class Robot(Resource):
         self.name = name
         self.links: Dict[str, RobotLink] = {}
         self._devices: Dict[str, Tuple[str, Optional[int]]] = {}
+        # (links, visuals) from the daemon's "loaded" STATUS: a robot created while its
+        # description was not there yet learns its size only then.
+        self._expected: Optional[Tuple[int, int]] = None
 
     def _created(self, result: Mapping[str, Any]) -> None:
         super()._created(result)
@@ -419,6 +422,11 @@ class Robot(Resource):
 
     def _handle(self, message: Message) -> None:
         meta = message.metadata
+        if isinstance(message.body, Status) and KEY_LINK_COUNT in meta:
+            with self._changed:
+                self._expected = (int(meta[KEY_LINK_COUNT]), int(meta.get(KEY_VISUAL_COUNT, 0)))
+                self._changed.notify_all()
+            return
         known = self._devices.get(message.device_name)
         link_name = meta.get(KEY_LINK) or (known[0] if known else "")
         if not link_name:
@@ -453,6 +461,10 @@ class Robot(Resource):
         """Wait until every link named in the create reply has a transform and every
         visual its mesh."""
         def loaded() -> bool:
+            if not self._devices and self._expected is not None:
+                links, visuals = self._expected
+                with_pose = sum(1 for link in self.links.values() if link.matrix is not None)
+                return with_pose >= links and self.mesh_count() >= visuals
             for link, index in self._devices.values():
                 entry = self.links.get(link)
                 if entry is None:

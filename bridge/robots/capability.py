@@ -42,18 +42,19 @@ from std_msgs.msg import String as StringMsg
 from bridge.dispatch import Handler
 from bridge.hub import Hub
 from bridge.parameters import ParameterBridges, ParameterWatch
-from bridge.robots.errors import RobotError, UrdfError
+from bridge.robots.errors import RobotError
 from bridge.robots.model import RobotModel, VisualMesh, load_robot, load_robot_file, to_polydata
 from bridge.robots.resources import PackageResolver
 from bridge.ros_node import RosNode
 from bridge.services import resolve_name
 from bridge.tf.capability import TfBridges
 from bridge.tf.lookups import LookupKey
-from protocol.commands import (CommandError, CommandFailedError, CreateRobot, ErrorCode,
+from protocol.commands import (CommandFailedError, CreateRobot, ErrorCode,
                                ListRobots, OutOfRangeError, ParameterValue, RemoveRobot,
                                RobotSource)
 from protocol.messages import Message, PolyData, Status, StatusCode
-from protocol.naming import (KEY_CHILD, KEY_COLOR, KEY_PARENT, KEY_PARENT_DEVICE, UNITS_MM,
+from protocol.naming import (KEY_CHILD, KEY_COLOR, KEY_LINK_COUNT, KEY_PARENT, KEY_PARENT_DEVICE,
+                             KEY_VISUAL_COUNT, UNITS_MM,
                              DeviceNameRegistry, NameKey, NamingError, metadata_for)
 
 __all__ = ["RobotBridges"]
@@ -387,7 +388,11 @@ class RobotBridges:
                    f"visuals, fixed frame {fixed}")
         if model.warnings:
             summary += f"; {len(model.warnings)} warning(s): " + "; ".join(model.warnings)
-        self._status(robot, StatusCode.OK, summary)
+        # The counts let a client that created the robot while it was waiting know when
+        # every link and mesh has arrived.
+        self._status(robot, StatusCode.OK, summary,
+                     {KEY_LINK_COUNT: str(len(robot.links)),
+                      KEY_VISUAL_COUNT: str(len(robot.visuals))})
         log.info("robot %s %s", robot.name, summary)
 
     def _publish_visual(self, robot: _Robot, visual: VisualMesh) -> _VisualInfo:
@@ -413,11 +418,14 @@ class RobotBridges:
 
     # ------------------------------------------------------------------ plumbing
 
-    def _status(self, robot: _Robot, code: int, text: str) -> None:
+    def _status(self, robot: _Robot, code: int, text: str,
+                extra: Optional[dict[str, str]] = None) -> None:
+        metadata = metadata_for(robot.description_key)
+        metadata.update(extra or {})
         self._hub.stream(Message(device_name=robot.description_device,
                                  body=Status(code=code, error_name=_STATUS_NAME,
                                              text=text[:4000]),
-                                 metadata=metadata_for(robot.description_key)))
+                                 metadata=metadata))
 
     def _spawn(self, coroutine: Any) -> None:
         task = asyncio.ensure_future(coroutine)

@@ -425,7 +425,7 @@ def test_reload_on_a_changed_description_and_remove(processes: Processes, client
     assert reply["results"]["robot_description"]["ok"], reply
     try:
         for name in ("rl", "rl_topic"):
-            wait_until(lambda: robot_summary(client, name)["loads"] == 2, LOAD_TIMEOUT,
+            wait_until(lambda name=name: robot_summary(client, name)["loads"] == 2, LOAD_TIMEOUT,
                        f"{name} to reload")
             assert robot_summary(client, name)["links"] == 2
         # Same device name, new mesh (replaced); the tool's devices are forgotten.

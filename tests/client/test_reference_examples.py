@@ -185,8 +185,9 @@ def test_load_the_omni_robot(processes: Processes) -> None:
         __import__("sys").executable, "-u", "-m", "bridge.robots.state_publisher",
         str(omni / "urdf" / "omni.urdf")])
     rsp.wait_for_output("ready", timeout=30)
+    # A state publisher (like ROS's) publishes tf only for joints it has states for.
     processes.python("joints", "robot_joint_state_publisher.py", "waist=0.5",
-                     "shoulder=0.2", "elbow=-0.3")
+                     "shoulder=0.2", "elbow=-0.3", "yaw=0.0", "pitch=0.1", "roll=0.0")
     with slicer_client.connect("127.0.0.1", daemon.port) as rosLogic:  # noqa: N806
         rosNode = rosLogic.GetDefaultROS2Node()  # noqa: N806
         robot = rosNode.CreateAndAddRobotNode('omni', '/robot_state_publisher',
