@@ -9,14 +9,32 @@ What the daemon calls::
     model.warnings                          # missing or broken meshes, by file and link
 """
 
-from bridge.robots.description import (JointLimits, JointSpec, LinkSpec, Mimic,
-                                       RobotDescription, VisualSpec, parse_urdf)
-from bridge.robots.errors import MeshError, ResourceError, RobotError, UrdfError
-from bridge.robots.kinematics import Kinematics
-from bridge.robots.meshes import DEFAULT_MESH_CACHE, MeshCache
-from bridge.robots.model import (DEFAULT_RGBA, RGBA_ATTRIBUTE, LoadOptions, RobotModel,
-                                 VisualMesh, load_robot, load_robot_file, to_polydata)
-from bridge.robots.resources import PackageResolver, parse_package_path_option
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+# Exports are imported on first use: trimesh and yourdfpy cost ~60 MB of memory, which a
+# daemon that never loads a robot should not pay.
+_EXPORTS = {
+    "bridge.robots.description": ("JointLimits", "JointSpec", "LinkSpec", "Mimic",
+                                  "RobotDescription", "VisualSpec", "parse_urdf"),
+    "bridge.robots.errors": ("MeshError", "ResourceError", "RobotError", "UrdfError"),
+    "bridge.robots.kinematics": ("Kinematics",),
+    "bridge.robots.meshes": ("DEFAULT_MESH_CACHE", "MeshCache"),
+    "bridge.robots.model": ("DEFAULT_RGBA", "RGBA_ATTRIBUTE", "LoadOptions", "RobotModel",
+                            "VisualMesh", "load_robot", "load_robot_file", "to_polydata"),
+    "bridge.robots.resources": ("PackageResolver", "parse_package_path_option"),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
+
+
+def __getattr__(name: str) -> Any:
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module 'bridge.robots' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)
+
 
 __all__ = [
     "DEFAULT_MESH_CACHE",

@@ -34,7 +34,7 @@ import hashlib
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Optional
+from typing import TYPE_CHECKING, Any, Mapping, Optional
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String as StringMsg
@@ -43,7 +43,6 @@ from bridge.dispatch import Handler
 from bridge.hub import Hub
 from bridge.parameters import ParameterBridges, ParameterWatch
 from bridge.robots.errors import RobotError
-from bridge.robots.model import RobotModel, VisualMesh, load_robot, load_robot_file, to_polydata
 from bridge.robots.resources import PackageResolver
 from bridge.ros_node import RosNode
 from bridge.services import resolve_name
@@ -56,6 +55,9 @@ from protocol.messages import Message, PolyData, Status, StatusCode
 from protocol.naming import (KEY_CHILD, KEY_COLOR, KEY_LINK_COUNT, KEY_PARENT, KEY_PARENT_DEVICE,
                              KEY_VISUAL_COUNT, UNITS_MM,
                              DeviceNameRegistry, NameKey, NamingError, metadata_for)
+
+if TYPE_CHECKING:  # bridge.robots.model (trimesh, yourdfpy) loads with the first robot
+    from bridge.robots.model import RobotModel, VisualMesh
 
 __all__ = ["RobotBridges"]
 
@@ -300,6 +302,8 @@ class RobotBridges:
                     initial: bool) -> None:
         """Load in a worker thread, then apply on the loop unless a newer description came.
         A failure raises at creation (the error reply) and is reported otherwise."""
+        from bridge.robots.model import load_robot, load_robot_file
+
         source = robot.source
         loop = asyncio.get_running_loop()
         if source.kind == "file":
@@ -401,6 +405,8 @@ class RobotBridges:
         metadata = metadata_for(key, units=UNITS_MM)
         metadata[KEY_PARENT_DEVICE] = robot.links[visual.link].device
         metadata[KEY_COLOR] = " ".join(f"{c:.6g}" for c in visual.rgba)
+        from bridge.robots.model import to_polydata
+
         body: PolyData = to_polydata(visual)
         self._hub.publish_persistent(Message(device_name=device, body=body,
                                              metadata=metadata))
