@@ -8,7 +8,9 @@
 #
 # --net=host: DDS discovery needs the host's network to see your other ROS 2 nodes, and
 # 3D Slicer on the host then reaches the daemon at 127.0.0.1:18944. Pass the same
-# ROS_DOMAIN_ID as your robot (-e ROS_DOMAIN_ID=...).
+# ROS_DOMAIN_ID as your robot (-e ROS_DOMAIN_ID=...). Without host networking the daemon
+# must listen on all interfaces: `run --host 0.0.0.0 --allow <CIDR>` with
+# `-p 127.0.0.1:18944:18944` (docs/security.md).
 #
 # Here ROS 2 (rclpy, the message packages, and the real tf2_msgs) comes from the image's
 # apt packages, not from PyPI wheels, so the project is installed without its ROS pins.
@@ -32,10 +34,11 @@ RUN pip install --no-cache-dir \
         pyigtl==0.3.4 yourdfpy==0.0.60 trimesh==5.2.0 pycollada==0.9.3 crcmod==1.7 \
     && pip install --no-cache-dir --no-deps /src
 
-# The daemon needs no privileges: run it as an ordinary user.
-RUN useradd --create-home --shell /usr/sbin/nologin bridge
+# The daemon needs no privileges: run it as an ordinary user (docs/security.md).
+RUN useradd --create-home --uid 10001 --shell /usr/sbin/nologin bridge
 USER bridge
 WORKDIR /home/bridge
+ENV ROS_LOG_DIR=/home/bridge/.ros/log
 
 EXPOSE 18944
 # /ros_entrypoint.sh (from the ros image) sources /opt/ros/jazzy/setup.bash first.
