@@ -5,10 +5,11 @@ every streamed device, and a client that connects gets the current state at once
 newest value of each streamed device, and every persistent one-shot such as a robot mesh).
 
 Threads: the asyncio loop owns all state here. ROS callbacks run in the executor's thread
-and hand off through `post`: messages queue in order (bounded) and the loop is woken at
-most once per batch, so a burst of ROS messages costs one wake-up, and each client gets
-the whole batch in one socket write. A fast client receives every message; only a slow
-client's own outbox replaces unsent values with newer ones.
+and hand off through `post`: small messages queue in order (bounded), large ones (images,
+point clouds) replace their device's waiting one, and the loop is woken at most once per
+batch, so a burst of ROS messages costs one wake-up and each client gets the whole batch
+in one socket write. A fast client receives every small message; only a slow client's own
+outbox replaces its unsent values with newer ones.
 """
 
 from __future__ import annotations
