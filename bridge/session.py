@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+import time
 from dataclasses import dataclass
 from typing import Callable, Optional
 
@@ -28,6 +29,8 @@ from protocol.negotiation import HeaderVersionNegotiator
 log = logging.getLogger(__name__)
 
 CommandHandler = Callable[[Message, "ClientSession"], None]
+
+_BAD_MESSAGE_LOG_INTERVAL_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,8 @@ class ClientSession(asyncio.Protocol):
         self._attach_timer: Optional[asyncio.TimerHandle] = None
         self._batch: Optional[list[bytes]] = None  # frames gathered for one write
         self._unrouted_warned: set[str] = set()
+        self._bad_messages = 0
+        self._last_bad_warning = -_BAD_MESSAGE_LOG_INTERVAL_S
         self.peer = "?"
         self.received = 0
         self.sent = 0
@@ -113,7 +118,7 @@ class ClientSession(asyncio.Protocol):
                 try:
                     message = self._decoder.next_message()
                 except MessageError as error:
-                    log.warning("client %s sent a bad message: %s", self.peer, error)
+                    self._warn_bad_message(error)
                     self.send_status(getattr(error, "device_name", "") or "", _status_of(error),
                                      str(error))
                     continue
@@ -125,6 +130,19 @@ class ClientSession(asyncio.Protocol):
             log.warning("client %s broke the OpenIGTLink framing, closing: %s", self.peer, error)
             self.send_status("", StatusCode.UNKNOWN_ERROR, f"closing the connection: {error}")
             self.close()
+
+    def _warn_bad_message(self, error: MessageError) -> None:
+        """Every bad message gets its STATUS reply, but a client sending thousands must not
+        flood the log: one line per interval, with the count of the others."""
+        self._bad_messages += 1
+        now = time.monotonic()
+        if now - self._last_bad_warning < _BAD_MESSAGE_LOG_INTERVAL_S:
+            return
+        others = self._bad_messages - 1
+        log.warning("client %s sent a bad message: %s%s", self.peer, error,
+                    f" (and {others} more since the last warning)" if others else "")
+        self._bad_messages = 0
+        self._last_bad_warning = now
 
     # --- incoming messages -----------------------------------------------------------------
     def _handle(self, message: Message) -> None:
