@@ -37,6 +37,14 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--package-path", type=_package_path, action="append", default=[],
                         metavar="NAME=DIR",
                         help="where package://NAME/... URIs of robot meshes point (repeatable)")
+    parser.add_argument("--frame-prefix", default="", metavar="PREFIX",
+                        help="tf prefix of the robot instance this daemon serves, trailing / "
+                             "included (PSM1/): a client's relative frame id 'base' means "
+                             "'PSM1/base'; a leading / opts out ('/world' is 'world', "
+                             "'/PSM1/base' is 'PSM1/base'). One daemon per instance (PSM1/, "
+                             "PSM2/) lets the same client code serve each. Applies to tf "
+                             "lookups and broadcasters (and what --allow-frame judges), not "
+                             "to robot models: give create_robot a tf_prefix")
     security = parser.add_argument_group(
         "security", "OpenIGTLink has no authentication: lock the daemon down with these (also "
                     "a `security:` section in --config; lists add up, limits given here win). "
@@ -47,13 +55,16 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
     security.add_argument("--read-only", action="store_true", default=False,
                           help="clients can only receive: publishing, tf broadcasts, "
                                "parameter changes and service calls are refused (FORBIDDEN)")
-    for kind in ("topic", "service", "parameter"):
-        what = "NODE.PARAM" if kind == "parameter" else f"/{kind}"
+    for kind in ("topic", "service", "parameter", "frame"):
+        what = {"parameter": "NODE.PARAM", "frame": "PSM1/"}.get(kind, f"/{kind}")
+        # Frames: both ends of tf lookups and broadcasters, without a leading / and with
+        # --frame-prefix applied.
+        label = "tf frame" if kind == "frame" else kind
         security.add_argument(f"--allow-{kind}", action="append", default=[], metavar="GLOB",
-                              help=f"allow only {kind}s matching a glob like {what}* "
+                              help=f"allow only {label}s matching a glob like {what}* "
                                    f"(repeatable)")
         security.add_argument(f"--deny-{kind}", action="append", default=[], metavar="GLOB",
-                              help=f"refuse {kind}s matching this glob; deny wins over allow "
+                              help=f"refuse {label}s matching this glob; deny wins over allow "
                                    f"(repeatable)")
     security.add_argument("--max-clients", type=int, metavar="N",
                           help=f"extra clients get a STATUS and are closed "
@@ -99,6 +110,7 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
            "allow_topics": args.allow_topic, "deny_topics": args.deny_topic,
            "allow_services": args.allow_service, "deny_services": args.deny_service,
            "allow_parameters": args.allow_parameter, "deny_parameters": args.deny_parameter,
+           "allow_frames": args.allow_frame, "deny_frames": args.deny_frame,
            "max_clients": args.max_clients, "max_bridges_per_client": args.max_bridges_per_client,
            "max_message_bytes": args.max_message_bytes,
            "max_send_buffer_bytes": args.max_send_buffer_bytes}
@@ -107,7 +119,7 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
     return DaemonConfig(host=args.host, port=args.port, node_name=args.node_name,
                         namespace=args.namespace, log_level=args.log_level, startup=file.startup,
                         package_paths=tuple(args.package_path), security=security,
-                        limits=limits)
+                        limits=limits, frame_prefix=args.frame_prefix)
 
 
 def _configure_logging(level: str) -> None:

@@ -67,6 +67,8 @@ class DaemonConfig:
     security: SecurityPolicy = field(default_factory=SecurityPolicy)
     startup: tuple[StartupCommand, ...] = ()
     package_paths: tuple[tuple[str, str], ...] = ()
+    # Put before clients' relative tf frame ids ("PSM1/"): one daemon per robot instance.
+    frame_prefix: str = ""
 
 
 @dataclass(frozen=True)

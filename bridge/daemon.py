@@ -44,7 +44,7 @@ class Daemon:
         self.ros = RosNode(RosOptions(node_name=config.node_name, namespace=config.namespace))
         names = DeviceNameRegistry()
         self.topics = TopicBridges(self.ros, self.hub, names)
-        self.tf = TfBridges(self.ros, self.hub, names)
+        self.tf = TfBridges(self.ros, self.hub, names, frame_prefix=config.frame_prefix)
         self.parameters = ParameterBridges(self.ros, self.hub, names)
         self.services = ServiceBridges(self.ros, self.hub, names)
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
@@ -52,7 +52,8 @@ class Daemon:
                                    package_paths=dict(config.package_paths))
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.robots],
-                                     policy=config.security)
+                                     policy=config.security,
+                                     resolve_frame=self.tf.resolve_frame)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
                                    port=config.port, limits=config.limits,
                                    policy=config.security)

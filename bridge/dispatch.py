@@ -14,7 +14,7 @@ from typing import Any, Awaitable, Callable, Mapping, Protocol, Sequence, Union
 
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
-from bridge.security import BridgeQuota, SecurityPolicy
+from bridge.security import BridgeQuota, FrameResolver, SecurityPolicy, strip_frame
 from protocol import commands as c
 from protocol.commands import (CommandError, CommandFailedError, ErrorCode, OutOfRangeError,
                                Reply)
@@ -45,12 +45,16 @@ class Capability(Protocol):
 
 class Dispatcher:
     def __init__(self, ros: RosNode, hub: Hub, capabilities: Sequence[Capability], *,
-                 policy: SecurityPolicy | None = None) -> None:
+                 policy: SecurityPolicy | None = None,
+                 resolve_frame: FrameResolver = strip_frame) -> None:
         self._ros = ros
         self._hub = hub
         self._capabilities = tuple(capabilities)
         # Security is checked here, by request fields, so no capability needs to know it.
         self._policy = policy or SecurityPolicy()
+        # The tf capability's own frame resolution (--frame-prefix), so frame globs judge
+        # the frame that is really looked up or broadcast.
+        self._resolve_frame = resolve_frame
         self._quota = BridgeQuota(self._policy.max_bridges_per_client)
         hub.add_closed_listener(self._quota.forget)
         self._tasks: set[asyncio.Task[None]] = set()
@@ -109,7 +113,8 @@ class Dispatcher:
             raise CommandFailedError("op", "an op this daemon serves: " +
                                      ", ".join(sorted(self._handlers)), request.op,
                                      code=ErrorCode.NOT_SUPPORTED)
-        self._policy.check_request(request, self._resolve, self._ros.fully_qualified_name)
+        self._policy.check_request(request, self._resolve, self._ros.fully_qualified_name,
+                                   self._resolve_frame)
         if client is None:  # start-up config: judged by the policy, not counted
             return handler(request, client)
         reserved = self._quota.reserve(client, request.op)

@@ -7,7 +7,8 @@ bridges from the YAML config go through the same dispatcher, so they are judged 
 
 Name rules follow rosbridge / foxglove_bridge: shell-style globs on fully qualified names
 (``*`` also matches ``/``); a deny glob always wins; once any allow glob is given for a
-kind, only names matching one of them are allowed.
+kind, only names matching one of them are allowed. tf frames get the same rules, judged as
+the tf buffer holds them (``--frame-prefix`` applied, no leading ``/``).
 
 docs/security.md is the threat model and the user's guide to these options.
 """
@@ -21,12 +22,13 @@ from dataclasses import dataclass, field, replace
 from fnmatch import fnmatchcase
 from typing import Any, Callable, Optional, Union
 
-from protocol.commands import ForbiddenError, LimitReachedError
+from protocol.commands import CreateRobot, ForbiddenError, LimitReachedError, RobotSource
 
 log = logging.getLogger(__name__)
 
 Network = Union[ipaddress.IPv4Network, ipaddress.IPv6Network]
 NameResolver = Callable[[str, str], str]  # (name, field) -> fully qualified name
+FrameResolver = Callable[[str], str]  # a client's frame id -> the tf buffer's
 
 # Ops a --read-only daemon refuses: everything that changes the ROS graph or its state.
 # Receiving (subscribers, lookups, robots, reading parameters, listings) stays allowed.
@@ -84,6 +86,24 @@ TARGETS: dict[str, Target] = {
     "server_undeclare_parameter": Target("parameter", "name"),
 }
 
+# op -> its request fields that name tf frames (both ends: a lookup reveals, a broadcaster
+# writes, the pose of the child relative to the parent). A TRANSFORM sent to a broadcaster's
+# device needs no check of its own: it carries the frames of a broadcaster that exists, and
+# one whose frames the policy denies is never created.
+FRAME_FIELDS: dict[str, tuple[str, ...]] = {
+    "create_tf_lookup": ("parent", "child"),
+    "lookup_transform": ("parent", "child"),
+    "create_tf_broadcaster": ("parent", "child"),
+    "broadcast_transform": ("parent", "child"),
+}
+
+
+def strip_frame(frame: str) -> str:
+    """The frame resolver of a daemon without ``--frame-prefix``: tf2 ids have no leading
+    ``/``, so ``/base`` and ``base`` are one frame (and one name to judge)."""
+    return frame.lstrip("/")
+
+
 DEFAULT_MAX_CLIENTS = 64
 DEFAULT_MAX_BRIDGES_PER_CLIENT = 1000
 
@@ -94,7 +114,7 @@ class PolicyError(ValueError):
 
 @dataclass(frozen=True)
 class NameRules:
-    """Allow and deny globs for one kind of name (topics, services or parameters)."""
+    """Allow and deny globs for one kind of name (topics, services, parameters, frames)."""
 
     allow: tuple[str, ...] = ()
     deny: tuple[str, ...] = ()
@@ -124,6 +144,7 @@ class SecurityPolicy:
     topics: NameRules = NameRules()
     services: NameRules = NameRules()
     parameters: NameRules = NameRules()
+    frames: NameRules = NameRules()
     max_clients: int = DEFAULT_MAX_CLIENTS
     max_bridges_per_client: int = DEFAULT_MAX_BRIDGES_PER_CLIENT
 
@@ -141,17 +162,26 @@ class SecurityPolicy:
         return any(ip.version == net.version and ip in net for net in self.allowed_networks)
 
     # --- per request ---------------------------------------------------------------------
-    def check_request(self, request: Any, resolve: NameResolver, own_node: str) -> None:
+    def check_request(self, request: Any, resolve: NameResolver, own_node: str,
+                      resolve_frame: FrameResolver = strip_frame) -> None:
         """Raise `ForbiddenError` if the policy refuses this parsed request.
 
         `resolve(name, field)` makes a topic, service or node name fully qualified (so
         ``cmd_vel`` cannot slip past a deny glob on ``/cmd_vel``); `own_node` is the
-        daemon's node, owner of the ``server_*`` parameters.
+        daemon's node, owner of the ``server_*`` parameters; `resolve_frame` turns a
+        client's frame id into the one the tf buffer uses (the daemon passes the tf
+        capability's, so ``--frame-prefix`` cannot be used to slip past a frame glob).
         """
         op = request.op
         if self.read_only and op in WRITE_OPS:
             raise ForbiddenError("op", "an op that only receives (the daemon runs "
                                        "--read-only)", op)
+        if op in FRAME_FIELDS:
+            self._check_frames(request, FRAME_FIELDS[op], resolve_frame)
+            return
+        if isinstance(request, CreateRobot):
+            self._check_robot_source(request, resolve)
+            return
         target = TARGETS.get(op)
         if target is None:
             return
@@ -165,6 +195,36 @@ class SecurityPolicy:
         if not rules.permits(name):
             raise ForbiddenError(target.field, f"a {target.kind} this daemon exposes: "
                                  + rules.why_not(name), name)
+
+    def _check_frames(self, request: Any, fields: tuple[str, ...],
+                      resolve_frame: FrameResolver) -> None:
+        if not self.frames.active:
+            return
+        for name in fields:
+            # Judged as the buffer holds it; an empty result is the tf capability's error.
+            frame = strip_frame(resolve_frame(getattr(request, name)))
+            if frame and not self.frames.permits(frame):
+                raise ForbiddenError(name, "a tf frame this daemon exposes: "
+                                     + self.frames.why_not(frame), frame)
+
+    def _check_robot_source(self, request: CreateRobot, resolve: NameResolver) -> None:
+        """A robot reads its URDF from a parameter or a topic: the same rules as reading
+        them directly (else create_robot would read a denied parameter). A file source
+        names no ROS resource: nothing to judge here."""
+        source = request.source
+        if source.kind == "parameter" and self.parameters.active:
+            node = _robot_source_name(request, source.node, RobotSource.node,
+                                      "source.node", resolve)
+            full = f"{node}.{source.parameter}"
+            if not self.parameters.permits(full):
+                raise ForbiddenError("source.parameter", "a parameter this daemon exposes: "
+                                     + self.parameters.why_not(full), full)
+        elif source.kind == "topic" and self.topics.active:
+            topic = _robot_source_name(request, source.topic, RobotSource.topic,
+                                       "source.topic", resolve)
+            if not self.topics.permits(topic):
+                raise ForbiddenError("source.topic", "a topic this daemon exposes: "
+                                     + self.topics.why_not(topic), topic)
 
     def _check_parameters(self, request: Any, target: Target, rules: NameRules,
                           resolve: NameResolver, own_node: str) -> None:
@@ -203,7 +263,7 @@ class SecurityPolicy:
         networks = tuple(parse_network(text, f"{where}.allow")
                          for text in _globs(settings, "allow", where))
         policy = replace(policy, allowed_networks=networks)
-        for kind in ("topics", "services", "parameters"):
+        for kind in ("topics", "services", "parameters", "frames"):
             rules = NameRules(allow=_globs(settings, f"allow_{kind}", where),
                               deny=_globs(settings, f"deny_{kind}", where))
             policy = replace(policy, **{kind: rules})
@@ -219,7 +279,7 @@ class SecurityPolicy:
                                     if self.allowed_networks else "any address"),
                  f"at most {self.max_clients} clients",
                  f"{self.max_bridges_per_client} bridges per client"]
-        for kind in ("topics", "services", "parameters"):
+        for kind in ("topics", "services", "parameters", "frames"):
             rules: NameRules = getattr(self, kind)
             if rules.active:
                 parts.append(f"{kind} allow={list(rules.allow)} deny={list(rules.deny)}")
@@ -231,9 +291,22 @@ class SecurityPolicy:
 SECURITY_KEYS: tuple[str, ...] = (
     "read_only", "allow",
     "allow_topics", "deny_topics", "allow_services", "deny_services",
-    "allow_parameters", "deny_parameters",
+    "allow_parameters", "deny_parameters", "allow_frames", "deny_frames",
     "max_clients", "max_bridges_per_client", "max_message_bytes", "max_send_buffer_bytes",
 )
+
+
+def _robot_source_name(request: CreateRobot, name: str, default: str, field: str,
+                       resolve: NameResolver) -> str:
+    """The node or topic a robot reads, as RobotBridges._resolve_source places it: the
+    robot's ``namespace`` applies to relative names and to the default, then the daemon's
+    (``{"namespace": "PSM1"}`` reads ``/PSM1/robot_state_publisher``). Kept in step with it
+    by tests/hardening/test_security_frames_daemon.py, which asks a running daemon."""
+    if request.namespace:
+        namespace = resolve(request.namespace, "namespace")
+        if name == default or not name.startswith("/"):
+            name = f"{namespace.rstrip('/')}/{name.lstrip('/')}"
+    return resolve(name, field)
 
 
 def parse_network(text: str, where: str) -> Network:

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from bridge.config import ConfigError, build_security, load_config_file
-from bridge.security import (BridgeQuota, NameRules, SecurityPolicy, TARGETS, WRITE_OPS,
-                             is_loopback_host)
+from bridge.security import (FRAME_FIELDS, TARGETS, WRITE_OPS, BridgeQuota, NameRules,
+                             SecurityPolicy, is_loopback_host, strip_frame)
 from protocol import commands as c
 from protocol.commands import ErrorCode, ForbiddenError, LimitReachedError
 
@@ -182,3 +182,118 @@ def test_config_errors_name_the_key(tmp_path: Path, section: str, message: str) 
     with pytest.raises(ConfigError) as error:
         build_security(load_config_file(path).security, {})
     assert message in str(error.value)
+
+
+# ---------------------------------------------------------------------------- tf frames
+
+IDENTITY = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+FRAME_OPS = {
+    "create_tf_lookup": {}, "lookup_transform": {},
+    "create_tf_broadcaster": {}, "broadcast_transform": {"matrix": IDENTITY},
+}
+
+
+def test_every_tf_op_judges_both_frames_deny_wins_and_allow_lists() -> None:
+    assert set(FRAME_OPS) == set(FRAME_FIELDS)
+    policy = SecurityPolicy(frames=NameRules(allow=("PSM1/*", "world"),
+                                             deny=("PSM1/secret*",)))
+    for op, extra in FRAME_OPS.items():
+        check(policy, op, {"parent": "world", "child": "PSM1/tool", **extra})
+        for args, field, got, glob in (
+                ({"parent": "world", "child": "PSM1/secret_tool"}, "child",
+                 "PSM1/secret_tool", "'PSM1/secret*'"),  # allowed by one glob, denied by another
+                ({"parent": "PSM2/base", "child": "PSM1/tool"}, "parent", "PSM2/base",
+                 "PSM1/*"),  # not in the allow list
+                ({"parent": "world", "child": "/PSM1/secret_x"}, "child", "PSM1/secret_x",
+                 "'PSM1/secret*'")):  # a leading / does not slip past
+            with pytest.raises(ForbiddenError) as refused:
+                check(policy, op, {**args, **extra})
+            assert refused.value.error_code == ErrorCode.FORBIDDEN, op
+            assert (refused.value.field, refused.value.got) == (field, got), op
+            assert glob in str(refused.value) and "tf frame" in str(refused.value), op
+
+
+def test_frames_are_judged_as_the_tf_buffer_resolves_them() -> None:
+    # What the daemon passes with --frame-prefix PSM1/: TfBridges.resolve_frame.
+    def with_prefix(frame: str) -> str:
+        return frame.lstrip("/") if frame.startswith("/") else "PSM1/" + frame
+
+    policy = SecurityPolicy(frames=NameRules(allow=("PSM1/*",)))
+    policy.check_request(c.parse_request("create_tf_lookup", c.dumps(
+        {"parent": "base", "child": "/PSM1/tool"})), resolve, "/n", with_prefix)
+    with pytest.raises(ForbiddenError) as refused:
+        policy.check_request(c.parse_request("lookup_transform", c.dumps(
+            {"parent": "base", "child": "/PSM2/tool"})), resolve, "/n", with_prefix)
+    assert (refused.value.field, refused.value.got) == ("child", "PSM2/tool")
+    # Without a prefix, /world and world are one frame.
+    assert strip_frame("/world") == strip_frame("world") == "world"
+
+
+def test_frame_globs_leave_other_ops_and_removals_alone() -> None:
+    policy = SecurityPolicy(frames=NameRules(deny=("*",)))
+    check(policy, "remove_tf_lookup", {"parent": "a", "child": "b"})  # never created
+    check(policy, "create_subscriber", {"topic": "/t", "type": "String"})
+    check(policy, "create_robot", {"name": "r"})  # robot frames come from its URDF
+
+
+# ---------------------------------------------------------------------------- robots
+
+
+def robot(source: dict | None = None, namespace: str = "") -> dict:
+    args: dict = {"name": "r"}
+    if source is not None:
+        args["source"] = source
+    if namespace:
+        args["namespace"] = namespace
+    return args
+
+
+@pytest.mark.parametrize("args,field,got", [
+    (robot(), "source.parameter", "/robot_state_publisher.robot_description"),
+    (robot(namespace="PSM2"), "source.parameter",  # a relative namespace is the daemon's
+     "/lab/PSM2/robot_state_publisher.robot_description"),
+    # relative: the robot's namespace (itself under the daemon's /lab), then the daemon's
+    (robot({"kind": "parameter", "node": "rsp", "parameter": "urdf"}, "/PSM2"),
+     "source.parameter", "/PSM2/rsp.urdf"),
+    (robot({"kind": "parameter", "node": "rsp"}), "source.parameter", "/lab/rsp.robot_description"),
+    # an absolute node other than the default keeps its name whatever the namespace
+    (robot({"kind": "parameter", "node": "/PSM2/rsp"}, "PSM1"), "source.parameter",
+     "/PSM2/rsp.robot_description"),
+    (robot({"kind": "topic"}, "/PSM2"), "source.topic", "/PSM2/robot_description"),
+    (robot({"kind": "topic", "topic": "/other/urdf"}, "/PSM1"), "source.topic", "/other/urdf"),
+])
+def test_robot_sources_are_judged_like_reading_them(args: dict, field: str, got: str) -> None:
+    policy = SecurityPolicy(parameters=NameRules(allow=("/PSM1/*",)),
+                            topics=NameRules(allow=("/PSM1/*",)))
+    with pytest.raises(ForbiddenError) as refused:
+        check(policy, "create_robot", args)
+    assert refused.value.error_code == ErrorCode.FORBIDDEN
+    assert (refused.value.field, refused.value.got) == (field, got)
+    assert "/PSM1/*" in str(refused.value)
+
+
+@pytest.mark.parametrize("args", [
+    robot(namespace="/PSM1"),
+    robot({"kind": "parameter", "node": "/PSM1/robot_state_publisher"}, "/PSM2"),
+    robot({"kind": "topic"}, "/PSM1"),
+    robot({"kind": "topic", "topic": "description"}, "/PSM1"),
+    robot({"kind": "file", "path": "/opt/robots/psm.urdf"}),  # a file: --package-path's job
+])
+def test_robot_sources_that_the_globs_allow(args: dict) -> None:
+    check(SecurityPolicy(parameters=NameRules(allow=("/PSM1/*",)),
+                         topics=NameRules(allow=("/PSM1/*",))), "create_robot", args)
+    # read-only does not stop robots: they only receive
+    check(SecurityPolicy(read_only=True), "create_robot", args)
+
+
+def test_frame_options_merge_and_are_checked(tmp_path: Path) -> None:
+    path = tmp_path / "bridge.yaml"
+    path.write_text("security:\n  allow_frames: ['PSM1/*']\n  deny_frames: PSM1/secret*\n")
+    policy, _ = build_security(load_config_file(path).security,
+                               {"allow_frames": ["world"], "deny_frames": []})
+    assert policy.frames == NameRules(allow=("PSM1/*", "world"), deny=("PSM1/secret*",))
+    assert "frames allow=['PSM1/*', 'world']" in policy.describe()
+    path.write_text("security: {deny_frames: [7]}\n")
+    with pytest.raises(ConfigError) as error:
+        build_security(load_config_file(path).security, {})
+    assert "deny_frames: expected a list of non-empty strings" in str(error.value)
