@@ -37,6 +37,10 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--package-path", type=_package_path, action="append", default=[],
                         metavar="NAME=DIR",
                         help="where package://NAME/... URIs of robot meshes point (repeatable)")
+    parser.add_argument("--robot-dir", action="append", default=[], metavar="DIR",
+                        help="a folder whose URDF files clients may load by path "
+                             "(create_robot from a file; repeatable). --package-path folders "
+                             "count too; nothing else on this machine can be read")
     parser.add_argument("--frame-prefix", default="", metavar="PREFIX",
                         help="tf prefix of the robot instance this daemon serves, trailing / "
                              "included (PSM1/): a client's relative frame id 'base' means "
@@ -113,7 +117,7 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
            "allow_frames": args.allow_frame, "deny_frames": args.deny_frame,
            "max_clients": args.max_clients, "max_bridges_per_client": args.max_bridges_per_client,
            "max_message_bytes": args.max_message_bytes,
-           "max_send_buffer_bytes": args.max_send_buffer_bytes}
+           "max_send_buffer_bytes": args.max_send_buffer_bytes, "robot_dirs": args.robot_dir}
     where = f"{file.name}: security (or its command-line option)" if file.name else "option"
     security, limits = build_security(file.security, cli, where)
     return DaemonConfig(host=args.host, port=args.port, node_name=args.node_name,

@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import signal
 import sys
@@ -50,10 +51,13 @@ class Daemon:
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
                                    parameters=self.parameters,
                                    package_paths=dict(config.package_paths))
+        # Clients may load robot files from the --package-path folders too.
+        policy = dataclasses.replace(config.security, robot_dirs=config.security.robot_dirs
+                                     + tuple(folder for _, folder in config.package_paths))
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.robots],
-                                     policy=config.security,
-                                     resolve_frame=self.tf.resolve_frame)
+                                     policy=policy, resolve_frame=self.tf.resolve_frame,
+                                     resolve_file=self.robots.file_path)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
                                    port=config.port, limits=config.limits,
                                    policy=config.security)

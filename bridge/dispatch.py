@@ -14,7 +14,7 @@ from typing import Any, Awaitable, Callable, Mapping, Protocol, Sequence, Union
 
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
-from bridge.security import BridgeQuota, FrameResolver, SecurityPolicy, strip_frame
+from bridge.security import BridgeQuota, FileResolver, FrameResolver, SecurityPolicy, strip_frame
 from protocol import commands as c
 from protocol.commands import (CommandError, CommandFailedError, ErrorCode, OutOfRangeError,
                                Reply)
@@ -46,7 +46,8 @@ class Capability(Protocol):
 class Dispatcher:
     def __init__(self, ros: RosNode, hub: Hub, capabilities: Sequence[Capability], *,
                  policy: SecurityPolicy | None = None,
-                 resolve_frame: FrameResolver = strip_frame) -> None:
+                 resolve_frame: FrameResolver = strip_frame,
+                 resolve_file: FileResolver | None = None) -> None:
         self._ros = ros
         self._hub = hub
         self._capabilities = tuple(capabilities)
@@ -55,6 +56,7 @@ class Dispatcher:
         # The tf capability's own frame resolution (--frame-prefix), so frame globs judge
         # the frame that is really looked up or broadcast.
         self._resolve_frame = resolve_frame
+        self._resolve_file = resolve_file
         self._quota = BridgeQuota(self._policy.max_bridges_per_client)
         hub.add_closed_listener(self._quota.forget)
         self._tasks: set[asyncio.Task[None]] = set()
@@ -114,7 +116,8 @@ class Dispatcher:
                                      ", ".join(sorted(self._handlers)), request.op,
                                      code=ErrorCode.NOT_SUPPORTED)
         self._policy.check_request(request, self._resolve, self._ros.fully_qualified_name,
-                                   self._resolve_frame)
+                                   self._resolve_frame, from_client=client is not None,
+                                   resolve_file=self._resolve_file)
         if client is None:  # start-up config: judged by the policy, not counted
             return handler(request, client)
         reserved = self._quota.reserve(client, request.op)

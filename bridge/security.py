@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import ipaddress
 import logging
+import os
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from fnmatch import fnmatchcase
@@ -29,6 +30,7 @@ log = logging.getLogger(__name__)
 Network = Union[ipaddress.IPv4Network, ipaddress.IPv6Network]
 NameResolver = Callable[[str, str], str]  # (name, field) -> fully qualified name
 FrameResolver = Callable[[str], str]  # a client's frame id -> the tf buffer's
+FileResolver = Callable[[str], "os.PathLike[str] | str"]  # a robot file source -> its path
 
 # Ops a --read-only daemon refuses: everything that changes the ROS graph or its state.
 # Receiving (subscribers, lookups, robots, reading parameters, listings) stays allowed.
@@ -147,6 +149,9 @@ class SecurityPolicy:
     frames: NameRules = NameRules()
     max_clients: int = DEFAULT_MAX_CLIENTS
     max_bridges_per_client: int = DEFAULT_MAX_BRIDGES_PER_CLIENT
+    # Folders whose URDF files clients may load by path (`--robot-dir`, and the daemon adds
+    # every `--package-path` folder): a client must not make the daemon read any file.
+    robot_dirs: tuple[str, ...] = ()
 
     # --- at accept -----------------------------------------------------------------------
     def admits(self, address: str) -> bool:
@@ -163,14 +168,19 @@ class SecurityPolicy:
 
     # --- per request ---------------------------------------------------------------------
     def check_request(self, request: Any, resolve: NameResolver, own_node: str,
-                      resolve_frame: FrameResolver = strip_frame) -> None:
+                      resolve_frame: FrameResolver = strip_frame, *,
+                      from_client: bool = True,
+                      resolve_file: Optional[FileResolver] = None) -> None:
         """Raise `ForbiddenError` if the policy refuses this parsed request.
 
         `resolve(name, field)` makes a topic, service or node name fully qualified (so
         ``cmd_vel`` cannot slip past a deny glob on ``/cmd_vel``); `own_node` is the
         daemon's node, owner of the ``server_*`` parameters; `resolve_frame` turns a
         client's frame id into the one the tf buffer uses (the daemon passes the tf
-        capability's, so ``--frame-prefix`` cannot be used to slip past a frame glob).
+        capability's, so ``--frame-prefix`` cannot be used to slip past a frame glob);
+        `resolve_file` turns a robot's file source into the path the daemon would read.
+        `from_client` is False for the operator's own start-up config, whose file paths are
+        trusted.
         """
         op = request.op
         if self.read_only and op in WRITE_OPS:
@@ -181,6 +191,8 @@ class SecurityPolicy:
             return
         if isinstance(request, CreateRobot):
             self._check_robot_source(request, resolve)
+            if from_client and request.source.kind == "file" and resolve_file is not None:
+                self._check_robot_file(str(request.source.path), resolve_file)
             return
         target = TARGETS.get(op)
         if target is None:
@@ -226,6 +238,17 @@ class SecurityPolicy:
                 raise ForbiddenError("source.topic", "a topic this daemon exposes: "
                                      + self.topics.why_not(topic), topic)
 
+    def _check_robot_file(self, spec: str, resolve_file: FileResolver) -> None:
+        # Symlinks followed, so a link inside an allowed folder cannot point outside it.
+        real = os.path.realpath(resolve_file(spec))
+        for folder in self.robot_dirs:
+            root = os.path.realpath(folder)
+            if os.path.commonpath([real, root]) == root:
+                return
+        allowed = ", ".join(self.robot_dirs) or "none: start the daemon with --robot-dir"
+        raise ForbiddenError("source.path", f"a URDF file inside a --robot-dir or "
+                             f"--package-path folder ({allowed})", spec)
+
     def _check_parameters(self, request: Any, target: Target, rules: NameRules,
                           resolve: NameResolver, own_node: str) -> None:
         node = (resolve(getattr(request, target.node_field), target.node_field)
@@ -267,6 +290,8 @@ class SecurityPolicy:
             rules = NameRules(allow=_globs(settings, f"allow_{kind}", where),
                               deny=_globs(settings, f"deny_{kind}", where))
             policy = replace(policy, **{kind: rules})
+        dirs = _globs(settings, "robot_dirs", where)
+        policy = replace(policy, robot_dirs=tuple(dirs))
         for key in ("max_clients", "max_bridges_per_client"):
             if settings.get(key) is not None:
                 policy = replace(policy, **{key: positive_int(settings[key], f"{where}.{key}")})
@@ -293,6 +318,7 @@ SECURITY_KEYS: tuple[str, ...] = (
     "allow_topics", "deny_topics", "allow_services", "deny_services",
     "allow_parameters", "deny_parameters", "allow_frames", "deny_frames",
     "max_clients", "max_bridges_per_client", "max_message_bytes", "max_send_buffer_bytes",
+    "robot_dirs",
 )
 
 

@@ -331,6 +331,10 @@ class RobotBridges:
         robot.loading_digest = ""
         self._apply(robot, model, text)
 
+    def file_path(self, spec: str) -> Path:
+        """The file a file source names (the security policy checks where it lies)."""
+        return self._file_path(spec)
+
     def _file_path(self, spec: str) -> Path:
         try:  # a path, or a package:// / file:// URI resolved with --package-path
             return PackageResolver(dict(self._package_paths)).resolve(spec)

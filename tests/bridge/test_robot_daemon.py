@@ -170,10 +170,12 @@ def demo_package() -> tuple[Path, dict[str, Path]]:
 
 
 @pytest.fixture(scope="module")
-def daemon(module_processes: Processes,
-           demo_package: tuple[Path, dict[str, Path]]) -> Iterator[RunningDaemon]:
-    """One daemon for the module, knowing the Omni's and the demo's packages."""
-    args = ["--package-path", f"{DEMO_PACKAGE}={demo_package[1][DEMO_PACKAGE]}"]
+def daemon(module_processes: Processes, demo_package: tuple[Path, dict[str, Path]],
+           tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningDaemon]:
+    """One daemon for the module, knowing the Omni's and the demo's packages; clients may
+    load robot files from the tests' temporary folders."""
+    args = ["--package-path", f"{DEMO_PACKAGE}={demo_package[1][DEMO_PACKAGE]}",
+            "--robot-dir", str(tmp_path_factory.getbasetemp())]
     if OMNI.exists():
         args += ["--package-path", f"sensable_omni_model={OMNI}"]
     running = start_daemon(module_processes, *args)

@@ -50,12 +50,14 @@ def ros_transforms(echo: Child) -> list[dict[str, Any]]:
 
 
 @pytest.fixture(scope="module")
-def guarded(module_processes: Processes) -> Iterator[RunningDaemon]:
+def guarded(module_processes: Processes,
+            tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningDaemon]:
     """The PSM1 daemon of a two-arm setup, locked to PSM1's frames and parameters."""
     running = start_daemon(module_processes, "--frame-prefix", "PSM1/",
                            "--allow-frame", "PSM1/*", "--allow-frame", "world",
                            "--deny-frame", "PSM1/secret*",
-                           "--allow-parameter", "/PSM1/*", "--allow-topic", "/PSM1/*")
+                           "--allow-parameter", "/PSM1/*", "--allow-topic", "/PSM1/*",
+                           "--robot-dir", str(tmp_path_factory.getbasetemp()))
     yield running
     assert_clean_exit(running)
 
