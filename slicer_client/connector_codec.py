@@ -3,6 +3,19 @@ COMMAND (name, text) and reading the RTS_COMMAND reply, plus turning what a conn
 node shows (node class, attributes, text or matrix) back into a `Message` for a `Client`.
 
 Slicer's side (slicer_module/ROS2Bridge) passes the strings and values in and out.
+
+Facts about Slicer used here (checked in SlicerOpenIGTLink d090ca4 and OpenIGTLinkIO d7f6aef,
+see slicer_client/README.md "Verified against"):
+- `vtkSlicerOpenIGTLinkCommand.GetCommandStatus()` returns OpenIGTLinkIO's
+  `igtlioCommandStatus` (Logic/igtlioCommand.h): `COMMAND_STATUS` below. A blocking send
+  returns with RESPONSE_RECEIVED or EXPIRED; it returns at once, still UNKNOWN, when the
+  connector has no socket (`igtlioConnector::SendCommand` loops over zero clients), and
+  FAILED when writing to the socket failed.
+- `PushNode` on a text node sends a STRING whose ENCODING field is the text node's VTK
+  encoding id copied as is (vtkMRMLIGTLConnectorNode.cxx `AssignOutGoingNodeToDevice`),
+  and it clears the device's metadata (only `MRMLNodeName` and `Status` are sent).
+  VTK_ENCODING_UTF_8 is 3, which reads as MIBenum 3 (US-ASCII): so only ASCII text and
+  no metadata can be streamed through the connector (`outgoing_content`).
 """
 
 from __future__ import annotations
@@ -13,10 +26,28 @@ import numpy as np
 
 from protocol import commands as c
 from protocol.messages import Message, String, Transform
-from slicer_client.connection import CommandRefusedError, CommandTimeoutError
+from slicer_client.connection import (CommandRefusedError, CommandTimeoutError,
+                                      ConnectionClosedError)
 from slicer_client.scene_plan import metadata_from_attributes
 
-__all__ = ["build_command", "message_from_node", "parse_reply"]
+__all__ = ["COMMAND_STATUS", "SLICER_TEXT_ENCODING", "build_command", "message_from_node",
+           "outgoing_content", "parse_reply"]
+
+# igtlioCommandStatus values (OpenIGTLinkIO Logic/igtlioCommand.h), the same numbers as
+# vtkSlicerOpenIGTLinkCommand.CommandUnknown ... CommandResponseSent.
+COMMAND_STATUS: Dict[int, str] = {0: "unknown", 1: "waiting", 2: "expired", 3: "cancelled",
+                                  4: "failed", 5: "response_received", 6: "response_sent"}
+# What to give vtkMRMLTextNode.SetEncoding for an outgoing STRING: VTK_ENCODING_UTF_8 (3)
+# is sent unchanged as the STRING's MIBenum, and 3 is US-ASCII there.
+SLICER_TEXT_ENCODING = 3
+_NOT_SENT = {
+    "unknown": "was not sent: 3D Slicer's connector has no connection to the daemon "
+               "(it keeps retrying; wait for 'Connected')",
+    "failed": "could not be written to the daemon's socket by 3D Slicer's connector",
+    "cancelled": "was cancelled in 3D Slicer's connector",
+    "waiting": "is still waiting for its reply in 3D Slicer's connector",
+    "response_sent": "is an incoming command, not a reply",
+}
 
 
 def build_command(op: str, arguments: Optional[Mapping[str, Any]] = None) -> Tuple[str, str]:
@@ -36,11 +67,17 @@ def build_command(op: str, arguments: Optional[Mapping[str, Any]] = None) -> Tup
 
 
 def parse_reply(op: str, response_text: str, *, expired: bool = False,
-                timeout: float = 0.0, error_message: str = "") -> Dict[str, Any]:
+                timeout: float = 0.0, error_message: str = "",
+                status: Optional[int] = None) -> Dict[str, Any]:
     """The result of a command's RTS_COMMAND reply, or the typed error. The JSON text
-    decides (Slicer's `Status` metadata only says SUCCESS/FAIL)."""
-    if expired:
+    decides (Slicer's `Status` metadata only says SUCCESS/FAIL). `status` is the
+    command's `GetCommandStatus()` after a blocking send, when known."""
+    state = COMMAND_STATUS.get(status, f"status {status}") if status is not None \
+        else "response_received"
+    if expired or state == "expired":
         raise CommandTimeoutError(op, timeout)
+    if state != "response_received":
+        raise ConnectionClosedError(f"{op} {_NOT_SENT.get(state, f'ended with {state}')}")
     if not response_text.strip():
         info = c.ErrorInfo(c.ErrorCode.INTERNAL, error_message or "empty reply")
         raise CommandRefusedError(op, info)
@@ -67,3 +104,24 @@ def message_from_node(device: str, attributes: Mapping[str, str], *,
     if text is not None:
         return Message(device, String(text), metadata=metadata)
     return None
+
+
+def outgoing_content(message: Message) -> Tuple[str, Any]:
+    """What 3D Slicer's connector can stream for `message`: ("vtkMRMLLinearTransformNode",
+    4x4 rows in mm) or ("vtkMRMLTextNode", ASCII text). Anything else raises, naming why
+    (see the module doc: the connector drops metadata and labels text US-ASCII)."""
+    if message.metadata:
+        raise ValueError(f"{message.device_name}: 3D Slicer's connector sends no metadata "
+                         f"(got {', '.join(sorted(message.metadata))}); use a command "
+                         "(e.g. publish) or the socket client for that")
+    body = message.body
+    if isinstance(body, Transform):
+        return "vtkMRMLLinearTransformNode", np.asarray(body.matrix, dtype=np.float64).tolist()
+    if isinstance(body, String):
+        if not body.text.isascii():
+            raise ValueError(f"{message.device_name}: 3D Slicer's connector labels streamed "
+                             "text US-ASCII, and this text is not ASCII; publish it with "
+                             "a command (publisher.publish) instead")
+        return "vtkMRMLTextNode", body.text
+    raise TypeError(f"the connector transport streams TRANSFORM and STRING, not "
+                    f"{message.type_name}")

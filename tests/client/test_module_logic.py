@@ -10,11 +10,14 @@ import numpy as np
 import pytest
 
 from protocol import commands as c
-from protocol.messages import Message, String, Transform
+from protocol.messages import Message, Status, String, Transform
 from protocol.naming import NameKey, device_name_for, metadata_for
 from slicer_client import (BridgeSpec, BridgeState, CommandRefusedError, CommandTimeoutError,
                            MatrixError, StateFormatError, as_numpy, to_vtk)
-from slicer_client.connector_codec import build_command, message_from_node, parse_reply
+from slicer_client.connection import ConnectionClosedError
+from slicer_client.connector_codec import (COMMAND_STATUS, SLICER_TEXT_ENCODING,
+                                           build_command, message_from_node,
+                                           outgoing_content, parse_reply)
 from slicer_client.scene_plan import (DEFAULT_COLOUR, describe_bridges,
                                       metadata_from_attributes, model_colour, plan_node)
 from slicer_client.values import value_from_message
@@ -137,6 +140,34 @@ def test_parse_reply_success_refusal_expiry() -> None:
         parse_reply("hello", "", expired=True, timeout=5.0)
     with pytest.raises(CommandRefusedError, match="connector says no"):
         parse_reply("hello", "", error_message="connector says no")
+
+
+def test_parse_reply_follows_the_slicer_command_status() -> None:
+    # igtlioCommandStatus numbers, as vtkSlicerOpenIGTLinkCommand.GetCommandStatus() returns
+    assert COMMAND_STATUS[2] == "expired" and COMMAND_STATUS[5] == "response_received"
+    ok = c.Reply.success("list_bridges", {"bridges": []}).to_json()
+    assert parse_reply("list_bridges", ok, status=5) == {"bridges": []}
+    with pytest.raises(CommandTimeoutError, match="within 3"):
+        parse_reply("hello", "", status=2, timeout=3.0)
+    with pytest.raises(ConnectionClosedError, match="no connection to the daemon"):
+        parse_reply("hello", "", status=0)  # blocking send with no socket returns at once
+    with pytest.raises(ConnectionClosedError, match="socket"):
+        parse_reply("hello", "", status=4)
+    with pytest.raises(ConnectionClosedError, match="status 42"):
+        parse_reply("hello", "", status=42)
+
+
+def test_outgoing_content_is_what_the_connector_can_carry() -> None:
+    kind, rows = outgoing_content(Message("tfb:w>t", Transform(np.eye(4))))
+    assert kind == "vtkMRMLLinearTransformNode" and rows[3] == [0.0, 0.0, 0.0, 1.0]
+    assert outgoing_content(Message("pub:cmd", String("go"))) == ("vtkMRMLTextNode", "go")
+    assert SLICER_TEXT_ENCODING == 3  # VTK_ENCODING_UTF_8, read as MIBenum 3 (US-ASCII)
+    with pytest.raises(ValueError, match="not ASCII"):
+        outgoing_content(Message("pub:cmd", String("caf\u00e9")))
+    with pytest.raises(ValueError, match="no metadata"):
+        outgoing_content(Message("pub:cmd", String("go"), metadata={"ros2.topic": "/cmd"}))
+    with pytest.raises(TypeError, match="TRANSFORM and STRING"):
+        outgoing_content(Message("x", Status(text="hello")))
 
 
 def test_connector_nodes_become_messages() -> None:

@@ -1,45 +1,69 @@
 """ROS2Bridge: 3D Slicer module for the slicer-ros2-bridge daemon (no Slicer build needed).
 
 Install: add this folder (slicer_client/slicer_module/ROS2Bridge) to Edit > Application
-Settings > Modules > Additional module paths and restart Slicer. The repository root is
-put on sys.path from this file's location, so `protocol` and `slicer_client` are found
-in a clone with nothing else to install.
+Settings > Modules > Additional module paths and restart Slicer (5.4 or newer: the
+parameter node wrapper used here first shipped in 5.4; it needs the SlicerOpenIGTLink
+extension). The repository root is put on sys.path from this file's location, so
+`protocol` and `slicer_client` are found in a clone with nothing else to install.
 
 Transport: Slicer's own OpenIGTLinkIF connector node (client mode). Commands go through
 `vtkSlicerOpenIGTLinkCommand`; what arrives becomes MRML nodes made by the connector; this
 module only parents, colours and files them as the scene planner (slicer_client/scene_plan.py)
 says. The reference CamelCase API is
 `slicer.util.getModuleLogic('ROS2Bridge').GetDefaultROS2Node()`.
+
+Verified against (every Slicer/MRML/VTK call below was read in these sources; the list with
+the facts relied on is in slicer_client/README.md, "Verified against"):
+- openigtlink/SlicerOpenIGTLink d090ca4 (2025-11-13): OpenIGTLinkIF/MRML/
+  vtkMRMLIGTLConnectorNode.{h,cxx}, vtkSlicerOpenIGTLinkCommand.{h,cxx},
+  OpenIGTLinkIF/Logic/vtkSlicerOpenIGTLinkIFLogic.cxx, qSlicerOpenIGTLinkIFModule.cxx,
+  GenericSerialDeviceRemoteControl.py (Python use of commands);
+- IGSIO/OpenIGTLinkIO d7f6aef (2025-07-18): Logic/igtlioConnector.cxx, Logic/igtlioCommand.{h,cxx},
+  Converter/igtlioStringConverter.cxx, Converter/igtlioPolyDataConverter.cxx;
+- Slicer/Slicer 583e9b3 (main) and tags v5.2.0/v5.4.0: Base/Python/slicer/ScriptedLoadableModule.py,
+  util.py, parameterNodeWrapper/{wrapper,guiConnectors,validators}.py,
+  Utilities/Templates/Modules/Scripted/TemplateKey.py, Libs/MRML/Core/vtkMRMLScene.{h,cxx},
+  vtkMRMLNode.h, vtkMRMLTextNode.{h,cxx}, vtkMRMLTransformNode.cxx,
+  vtkMRMLTransformableNode.h, vtkMRMLDisplayNode.h, vtkMRMLDisplayableNode.h,
+  vtkMRMLSubjectHierarchyNode.h.
+Not verifiable here: anything at run time (Slicer cannot run on the build machine), the
+PythonQt/VTK wrapping of each overload (assumed from the public headers and from the
+SlicerOpenIGTLink Python modules that make the same calls).
 """
 
 import json
+import logging
 import os
 import sys
+import time
 
 _REPO_ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
 if _REPO_ROOT not in sys.path:
     sys.path.insert(0, _REPO_ROOT)
 
+from typing import Annotated  # noqa: E402  (Python 3.9+, as Slicer 5.4+ ships)
+
 import numpy as np  # noqa: E402
 import qt  # noqa: E402
 import slicer  # noqa: E402
 import vtk  # noqa: E402
+from slicer.parameterNodeWrapper import WithinRange, parameterNodeWrapper  # noqa: E402
 from slicer.ScriptedLoadableModule import (ScriptedLoadableModule,  # noqa: E402
                                            ScriptedLoadableModuleLogic,
                                            ScriptedLoadableModuleTest,
                                            ScriptedLoadableModuleWidget)
-from slicer.parameterNodeWrapper import parameterNodeWrapper  # noqa: E402
 from slicer.util import VTKObservationMixin  # noqa: E402
 
-from protocol.messages import String, Transform  # noqa: E402
 from slicer_client.bridge_state import BridgeState  # noqa: E402
 from slicer_client.client import Client  # noqa: E402
-from slicer_client.connection import CommandTimeoutError  # noqa: E402
-from slicer_client.connector_codec import build_command, message_from_node, parse_reply  # noqa: E402
+from slicer_client.connection import CommandTimeoutError, ConnectionClosedError  # noqa: E402
+from slicer_client.connector_codec import (SLICER_TEXT_ENCODING, build_command,  # noqa: E402
+                                           message_from_node, outgoing_content, parse_reply)
 from slicer_client.scene_plan import (ROBOTS_FOLDER, describe_bridges,  # noqa: E402
                                       metadata_from_attributes, plan_node)
 
 CONNECTOR_NAME = "ROS2BridgeConnector"
+log = logging.getLogger("ROS2Bridge")
 
 
 class ROS2Bridge(ScriptedLoadableModule):
@@ -62,7 +86,7 @@ class ROS2BridgeParameterNode:
     """GUI state and the saved bridges (bridgeState: slicer_client BridgeState JSON)."""
 
     host: str = "127.0.0.1"
-    port: int = 18944
+    port: Annotated[int, WithinRange(1, 65535)] = 18944  # the QSpinBox connector sets the range
     robotName: str = "robot"
     robotNode: str = "/robot_state_publisher"
     robotParameter: str = "robot_description"
@@ -71,8 +95,14 @@ class ROS2BridgeParameterNode:
 
 class ConnectorTransport:
     """slicer_client's Transport over an OpenIGTLinkIF connector node (see transport.py).
-    Commands block the GUI thread (Slicer keeps receiving meanwhile); received data comes
-    from the connector's nodes, observed here and handed to the client as Messages."""
+
+    Commands block the GUI thread: a blocking `SendCommand` loops on the IO connector's
+    PeriodicProcess every 5 ms, so replies (and incoming data) keep being read meanwhile.
+    Received data comes from the connector's nodes, observed here and handed to the client
+    as Messages. The connector reconnects by itself; its Connected/Disconnected events are
+    only delivered while it is connected (the OpenIGTLinkIF logic's 5 ms timer skips
+    unconnected connectors), so a loss is also noticed by `poll()` from the module's timer.
+    """
 
     def __init__(self, connector):
         self.connector = connector
@@ -81,6 +111,7 @@ class ConnectorTransport:
         self._node_observers = {}  # node id -> (node, tag)
         self._connector_tags = []
         self._first = True
+        self._up_now = False  # the listener was told "connected" and not "lost" since
 
     @property
     def connected(self):
@@ -88,60 +119,102 @@ class ConnectorTransport:
 
     def set_listener(self, listener):
         self._listener = listener
-        for event, handler in ((slicer.vtkMRMLIGTLConnectorNode.ConnectedEvent, self._up),
-                               (slicer.vtkMRMLIGTLConnectorNode.DisconnectedEvent, self._down)):
+        for event, handler in ((slicer.vtkMRMLIGTLConnectorNode.ConnectedEvent,
+                                self._onConnectedEvent),
+                               (slicer.vtkMRMLIGTLConnectorNode.DisconnectedEvent,
+                                self._onDisconnectedEvent)):
             self._connector_tags.append(self.connector.AddObserver(event, handler))
         if self.connected:
-            self._up()
+            self._up()  # errors reach whoever made the Client
 
-    def _up(self, caller=None, event=None):
+    def _up(self):
         first, self._first = self._first, False
+        self._up_now = True
         self._listener.on_connected(self.command, first)
 
-    def _down(self, caller=None, event=None):
+    def _onConnectedEvent(self, caller=None, event=None):
+        if self._up_now or self._listener is None:
+            return
+        try:
+            self._up()
+        except Exception:  # noqa: BLE001 - inside a VTK callback: log, keep the connector
+            log.exception("re-creating the bridges on %s failed", self.address)
+
+    def _onDisconnectedEvent(self, caller=None, event=None):
+        self._down()
+
+    def poll(self):
+        """Called from the module's timer: report a loss the connector has not yet sent."""
+        if self._up_now and not self.connected:
+            self._down()
+
+    def _down(self):
+        if not self._up_now or self._listener is None:
+            return
+        self._up_now = False
         self._listener.on_disconnected("the connector lost the daemon (it retries itself)")
 
     def command(self, op, arguments=None, *, timeout=5.0):
         name, text = build_command(op, arguments)
+        if not self.connected:
+            raise ConnectionClosedError(
+                f"{op}: 3D Slicer's connector is not connected to the daemon at "
+                f"{self.address} (it keeps retrying; start it with `slicer-ros2-bridge run`)")
         cmd = slicer.vtkSlicerOpenIGTLinkCommand()
         cmd.SetName(name)
         cmd.SetCommandContent(text)
-        cmd.SetBlocking(True)  # the connector processes incoming data while it waits
-        cmd.SetTimeoutSec(timeout)
+        cmd.SetTimeoutSec(float(timeout))
+        cmd.SetBlocking(True)  # returns once replied, expired, or at once if not sent
         self.connector.SendCommand(cmd)
-        expired = getattr(slicer.vtkSlicerOpenIGTLinkCommand, "CommandExpired", None)
-        error_message = getattr(cmd, "GetErrorMessage", lambda: "")()
-        return parse_reply(op, cmd.GetResponseContent() or "",
-                           expired=expired is not None and cmd.GetStatus() == expired,
-                           timeout=timeout, error_message=error_message or "")
+        return parse_reply(op, cmd.GetResponseContent() or "", status=cmd.GetCommandStatus(),
+                           timeout=timeout, error_message=cmd.GetErrorMessage() or "")
 
     def send(self, message):
-        """Push a TRANSFORM or STRING under its device name through an outgoing node."""
-        body = message.body
-        if isinstance(body, Transform):
-            node = self._outgoing("vtkMRMLLinearTransformNode", message.device_name)
+        """Stream a TRANSFORM or STRING under its device name through an outgoing node.
+        The connector pushes a registered node itself when its content changes (it
+        observes TransformModifiedEvent / TextModifiedEvent); an unchanged content is
+        pushed here, so every call sends exactly one message."""
+        class_name, payload = outgoing_content(message)  # raises for what cannot go
+        if not self.connected:
+            raise ConnectionClosedError(
+                f"sending to {message.device_name!r}: 3D Slicer's connector is not "
+                f"connected to the daemon at {self.address}")
+        node = self._outgoing(class_name, message.device_name)
+        if class_name == "vtkMRMLLinearTransformNode":
+            event = slicer.vtkMRMLTransformNode.TransformModifiedEvent
+        else:
+            event = slicer.vtkMRMLTextNode.TextModifiedEvent
+        was_modifying = node.StartModify()
+        if class_name == "vtkMRMLLinearTransformNode":
             matrix = vtk.vtkMatrix4x4()
             for i in range(4):
                 for j in range(4):
-                    matrix.SetElement(i, j, float(body.matrix[i, j]))
+                    matrix.SetElement(i, j, float(payload[i][j]))
             node.SetMatrixTransformToParent(matrix)
-        elif isinstance(body, String):
-            node = self._outgoing("vtkMRMLTextNode", message.device_name)
-            node.SetText(body.text)
         else:
-            raise TypeError(f"the connector transport sends TRANSFORM and STRING, not "
-                            f"{message.type_name}")
-        self.connector.PushNode(node)
+            node.SetText(payload, SLICER_TEXT_ENCODING)
+        pushes_itself = not was_modifying and node.GetCustomModifiedEventPending(event) > 0
+        node.EndModify(was_modifying)
+        if not pushes_itself:
+            self.connector.PushNode(node)
 
     def _outgoing(self, class_name, device):
         node = slicer.mrmlScene.GetFirstNode(device, class_name)
         if node is None:
             node = slicer.mrmlScene.AddNewNodeByClass(class_name, device)
-            self.connector.RegisterOutgoingMRMLNode(node)
+        registered = {self.connector.GetOutgoingMRMLNode(i).GetID()
+                      for i in range(self.connector.GetNumberOfOutgoingMRMLNodes())
+                      if self.connector.GetOutgoingMRMLNode(i) is not None}
+        if node.GetID() not in registered and not self.connector.RegisterOutgoingMRMLNode(node):
+            raise RuntimeError(f"3D Slicer's connector refused {class_name} {device!r} as an "
+                               "outgoing node")
         return node
 
     def watch(self, node):
-        """Forward a connector node's updates to the client as Messages."""
+        """Forward a connector node's updates to the client as Messages. The connector
+        ends its node modification once per received message, so ModifiedEvent (text) and
+        TransformModifiedEvent (transforms) fire once per message, or once per batch for
+        messages read during a blocking command."""
         if node.GetID() in self._node_observers:
             return
         event = (slicer.vtkMRMLTransformNode.TransformModifiedEvent
@@ -149,6 +222,11 @@ class ConnectorTransport:
         tag = node.AddObserver(event, lambda caller, _event: self._forward(caller))
         self._node_observers[node.GetID()] = (node, tag)
         self._forward(node)
+
+    def unwatch(self, node):
+        entry = self._node_observers.pop(node.GetID(), None)
+        if entry is not None:
+            entry[0].RemoveObserver(entry[1])
 
     def _forward(self, node):
         attributes = {name: node.GetAttribute(name) for name in node.GetAttributeNames()}
@@ -162,14 +240,19 @@ class ConnectorTransport:
         else:
             return
         if message is not None and self._listener is not None:
-            self._listener.on_message(message)
+            try:
+                self._listener.on_message(message)
+            except Exception:  # noqa: BLE001 - inside a VTK callback
+                log.exception("handling %s failed", node.GetName())
 
     def close(self):
         for tag in self._connector_tags:
             self.connector.RemoveObserver(tag)
+        self._connector_tags = []
         for node, tag in self._node_observers.values():
             node.RemoveObserver(tag)
         self._node_observers.clear()
+        self._listener = None
 
 
 class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
@@ -185,11 +268,18 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._planned = set()  # node ids already placed
         self._timer = qt.QTimer()
         self._timer.setInterval(200)  # new connector nodes are placed within 0.2 s
-        self._timer.connect("timeout()", self.updateScene)
+        self._timer.connect("timeout()", self._onTimer)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartSaveEvent, self._onSave)
+        self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
+                         self._onSceneStartClose)
 
     def getParameterNode(self):
         return ROS2BridgeParameterNode(super().getParameterNode())
+
+    def cleanup(self):
+        """Disconnect and stop observing the scene (tests, module unload)."""
+        self.disconnect()
+        self.removeObservers()
 
     # --- connection ---------------------------------------------------------------------
     def connect(self, host, port):
@@ -199,9 +289,11 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         if self.connector is None:
             self.connector = slicer.mrmlScene.AddNewNodeByClass("vtkMRMLIGTLConnectorNode",
                                                                 CONNECTOR_NAME)
-        self.connector.Stop()
-        self.connector.SetTypeClient(host, int(port))
-        self.connector.Start()
+        self.connector.Stop()  # returns 0 when it was not running
+        self.connector.SetTypeClient(str(host), int(port))
+        if not self.connector.Start():
+            raise RuntimeError(f"3D Slicer's connector did not start (client of {host}:{port})")
+        self.removeObservers(self._onConnected)
         self.addObserver(self.connector, slicer.vtkMRMLIGTLConnectorNode.ConnectedEvent,
                          self._onConnected)
         self._timer.start()
@@ -222,14 +314,30 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         return (self.connector is not None and self.connector.GetState()
                 == slicer.vtkMRMLIGTLConnectorNode.StateConnected)
 
+    def isActive(self):
+        """The connector runs (connected or retrying)."""
+        return (self.connector is not None and self.connector.GetState()
+                != slicer.vtkMRMLIGTLConnectorNode.StateOff)
+
     def _onConnected(self, caller=None, event=None):
         if self.client is not None:
             return  # the transport re-syncs the existing client itself
-        self.transport = ConnectorTransport(self.connector)
-        self.client = Client(self.transport)
+        transport = ConnectorTransport(self.connector)
+        try:
+            client = Client(transport)  # sends hello
+        except Exception:
+            transport.close()
+            if caller is None:
+                raise
+            log.exception("the daemon at %s did not answer hello", transport.address)
+            return
+        self.transport, self.client = transport, client
         saved = self.getParameterNode().bridgeState
         if saved:
-            self.client.restore(BridgeState.from_json(saved))
+            try:
+                client.restore(BridgeState.from_json(saved))
+            except Exception:  # noqa: BLE001 - a bad saved bridge must not stop the rest
+                log.exception("restoring the saved bridges failed")
 
     def requireClient(self):
         if self.client is None:
@@ -252,8 +360,19 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         if robot is not None:
             robot.remove()
         for node in list(slicer.util.getNodesByClass("vtkMRMLNode")):
-            if node.GetAttribute("OpenIGTLink.ros2.robot") == name:
-                slicer.mrmlScene.RemoveNode(node)
+            if node.GetScene() is None or node.GetAttribute("OpenIGTLink.ros2.robot") != name:
+                continue
+            if self.transport is not None:
+                self.transport.unwatch(node)
+            self._planned.discard(node.GetID())
+            displays = []
+            if node.IsA("vtkMRMLDisplayableNode"):
+                displays = [node.GetNthDisplayNode(i)
+                            for i in range(node.GetNumberOfDisplayNodes())]
+            slicer.mrmlScene.RemoveNode(node)  # display nodes are not removed with it
+            for display in displays:
+                if display is not None:
+                    slicer.mrmlScene.RemoveNode(display)
         sh = slicer.vtkMRMLSubjectHierarchyNode.GetSubjectHierarchyNode(slicer.mrmlScene)
         folder = sh.GetItemByName(f"robot {name}")
         if folder:
@@ -269,9 +388,14 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         return describe_bridges(self.requireClient().list_bridges())
 
     # --- scene building -----------------------------------------------------------------
+    def _onTimer(self):
+        if self.transport is not None:
+            self.transport.poll()
+        self.updateScene()
+
     def updateScene(self):
         """Place the connector's new nodes as the scene planner says."""
-        if self.connector is None:
+        if self.connector is None or self.connector.GetScene() is None:
             return
         link_devices = {}
         if self.client is not None:
@@ -328,7 +452,9 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             folder = sh.GetItemChildWithName(parent, plan.folder)
             if not folder:
                 folder = sh.CreateFolderItem(parent, plan.folder)
-            sh.SetItemParent(sh.GetItemByDataNode(node), folder)
+            item = sh.GetItemByDataNode(node)
+            if item:
+                sh.SetItemParent(item, folder)
 
     # --- saving -------------------------------------------------------------------------
     def _saveState(self):
@@ -338,6 +464,12 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
     def _onSave(self, caller=None, event=None):
         self._saveState()
 
+    def _onSceneStartClose(self, caller=None, event=None):
+        # The connector node leaves the scene; no timer would process it any more.
+        self.disconnect()
+        self.connector = None
+        self._planned.clear()
+
 
 class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
     def __init__(self, parent=None):
@@ -345,6 +477,7 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         VTKObservationMixin.__init__(self)
         self.logic = None
         self._parameterNode = None
+        self._parameterNodeGuiTag = None
 
     def setup(self):
         ScriptedLoadableModuleWidget.setup(self)
@@ -356,7 +489,6 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
 
         self.hostEdit = qt.QLineEdit()
         self.portSpin = qt.QSpinBox()
-        self.portSpin.setRange(1, 65535)
         self.connectButton = qt.QPushButton("Connect")
         self.connectButton.checkable = True
         self.statusLabel = qt.QLabel("Not connected")
@@ -393,6 +525,8 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         self.anotherRobotButton.connect("clicked(bool)", self.onAnotherRobot)
         self.removeRobotButton.connect("clicked(bool)", self.onRemoveRobot)
         self.refreshButton.connect("clicked(bool)", self.onRefresh)
+        self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
+                         self.onSceneStartClose)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.EndCloseEvent, self.onSceneEndClose)
         self.initializeParameterNode()
         self._statusTimer = qt.QTimer()
@@ -403,16 +537,34 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
     def cleanup(self):
         self.removeObservers()
         self._statusTimer.stop()
+        self.setParameterNode(None)
+        if self.logic is not None:
+            self.logic.cleanup()
+
+    def enter(self):
+        self.initializeParameterNode()
+
+    def onSceneStartClose(self, caller, event):
+        self.setParameterNode(None)
 
     def onSceneEndClose(self, caller, event):
         if self.parent.isEntered:
             self.initializeParameterNode()
 
     def initializeParameterNode(self):
-        self._parameterNode = self.logic.getParameterNode()
-        self._parameterNode.connectGui({
-            "host": self.hostEdit, "port": self.portSpin, "robotName": self.robotNameEdit,
-            "robotNode": self.robotNodeEdit, "robotParameter": self.robotParameterEdit})
+        self.setParameterNode(self.logic.getParameterNode())
+
+    def setParameterNode(self, parameterNode):
+        if self._parameterNode is not None and self._parameterNodeGuiTag is not None:
+            self._parameterNode.disconnectGui(self._parameterNodeGuiTag)
+            self._parameterNodeGuiTag = None
+        self._parameterNode = parameterNode
+        if self._parameterNode is not None:
+            # Widgets made in code: map parameter names to widgets explicitly
+            # (connectGui looks for the "SlicerParameterName" property of .ui widgets).
+            self._parameterNodeGuiTag = self._parameterNode.connectParametersToGui({
+                "host": self.hostEdit, "port": self.portSpin, "robotName": self.robotNameEdit,
+                "robotNode": self.robotNodeEdit, "robotParameter": self.robotParameterEdit})
 
     def updateStatus(self):
         if self.logic.isConnected():
@@ -420,10 +572,15 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
             self.statusLabel.text = (f"Connected to {info.get('node', 'the daemon')} "
                                      f"({self.logic.transport.address})"
                                      if self.logic.transport else "Connected")
-        elif self.logic.connector is not None:
+        elif self.logic.isActive():
             self.statusLabel.text = "Waiting for the daemon (retrying)..."
         else:
             self.statusLabel.text = "Not connected"
+        active = self.logic.isActive()
+        if self.connectButton.checked != active:  # e.g. after a scene close
+            wasBlocked = self.connectButton.blockSignals(True)
+            self.connectButton.checked = active
+            self.connectButton.blockSignals(wasBlocked)
 
     def onConnectToggled(self, on):
         with slicer.util.tryWithErrorDisplay("Failed to (dis)connect.", waitCursor=True):
@@ -501,6 +658,8 @@ class ROS2BridgeTest(ScriptedLoadableModuleTest):
         sh = slicer.vtkMRMLSubjectHierarchyNode.GetSubjectHierarchyNode(slicer.mrmlScene)
         folder = sh.GetItemParent(sh.GetItemByDataNode(model))
         self.assertEqual(sh.GetItemName(folder), "robot omni")
+        self.assertEqual(sh.GetItemName(sh.GetItemParent(folder)), ROBOTS_FOLDER)
+        logic.cleanup()
         self.delayDisplay("Scene placement passed")
 
     def test_daemon_round_trip(self):
@@ -509,28 +668,35 @@ class ROS2BridgeTest(ScriptedLoadableModuleTest):
             self.delayDisplay("ROS2BRIDGE_TEST_PORT not set: daemon round trip skipped")
             return
         logic = ROS2BridgeLogic()
-        logic.connect("127.0.0.1", int(port))
-        deadline = qt.QTime.currentTime().addSecs(10)
-        while not logic.isConnected() and qt.QTime.currentTime() < deadline:
-            slicer.app.processEvents()
-        self.assertTrue(logic.isConnected(), f"no daemon at 127.0.0.1:{port}")
-        rosNode = logic.GetDefaultROS2Node()  # noqa: N806
-        sub = rosNode.CreateAndAddSubscriberNode("String", "/selftest_string")
-        pub = rosNode.CreateAndAddPublisherNode("String", "/selftest_string")
-        for _ in range(200):
-            pub.Publish("hello from Slicer")
-            slicer.app.processEvents()
-            logic.updateScene()
-            if sub.GetLastMessage() == "hello from Slicer":
-                break
-        self.assertEqual(sub.GetLastMessage(), "hello from Slicer")
-        self.assertIn("subscriber: /selftest_string [std_msgs/msg/String] as selftest_string",
-                      logic.bridgeLines())
-        state = json.loads(BridgeState.from_json(logic.client.state().to_json()).to_json())
-        self.assertEqual(len(state["bridges"]), 2)
         try:
-            logic.client.command("list_bridges", timeout=5.0)
-        except CommandTimeoutError:
-            self.fail("list_bridges through the connector timed out")
-        logic.disconnect()
+            logic.connect("127.0.0.1", int(port))
+            deadline = time.monotonic() + 10.0
+            while logic.client is None and time.monotonic() < deadline:
+                slicer.app.processEvents()  # runs OpenIGTLinkIF's 5 ms connector timer
+                time.sleep(0.01)
+            self.assertTrue(logic.isConnected(), f"no daemon at 127.0.0.1:{port}")
+            self.assertIsNotNone(logic.client, "connected, but the hello failed (see log)")
+            rosNode = logic.GetDefaultROS2Node()  # noqa: N806
+            sub = rosNode.CreateAndAddSubscriberNode("String", "/selftest_string")
+            pub = rosNode.CreateAndAddPublisherNode("String", "/selftest_string")
+            deadline = time.monotonic() + 15.0  # ROS discovery can take a few seconds
+            while time.monotonic() < deadline:
+                pub.Publish("hello from Slicer")
+                for _ in range(20):
+                    slicer.app.processEvents()
+                    time.sleep(0.01)
+                logic.updateScene()
+                if sub.GetLastMessage() == "hello from Slicer":
+                    break
+            self.assertEqual(sub.GetLastMessage(), "hello from Slicer")
+            self.assertIn("subscriber: /selftest_string [std_msgs/msg/String] as "
+                          "selftest_string", logic.bridgeLines())
+            state = json.loads(BridgeState.from_json(logic.client.state().to_json()).to_json())
+            self.assertEqual(len(state["bridges"]), 2)
+            try:
+                logic.client.command("list_bridges", timeout=5.0)
+            except CommandTimeoutError:
+                self.fail("list_bridges through the connector timed out")
+        finally:
+            logic.cleanup()
         self.delayDisplay("Daemon round trip passed")
