@@ -13,7 +13,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from protocol.commands import QoS
 
-__all__ = ["qos_profile", "qos_to_dict"]
+__all__ = ["LATCHED_QOS", "TF_QOS", "TF_STATIC_SUBSCRIBER_QOS", "qos_profile", "qos_to_dict"]
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE,
                 "best_effort": ReliabilityPolicy.BEST_EFFORT}
@@ -34,3 +34,10 @@ def qos_to_dict(profile: QoSProfile) -> dict[str, Any]:
     durability = {v: k for k, v in _DURABILITY.items()}.get(
         profile.durability, str(profile.durability.name).lower())
     return {"depth": int(profile.depth), "reliability": reliability, "durability": durability}
+
+
+# tf2_ros's own profiles: /tf is volatile with depth 100; /tf_static and other latched
+# topics (robot_description) are transient local, so a late subscriber still gets them.
+TF_QOS = qos_profile(QoS(depth=100))
+TF_STATIC_SUBSCRIBER_QOS = qos_profile(QoS(depth=100, durability="transient_local"))
+LATCHED_QOS = qos_profile(QoS(depth=1, durability="transient_local"))

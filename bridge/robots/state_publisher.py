@@ -41,6 +41,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
+from bridge.qos import LATCHED_QOS, TF_QOS
 from bridge.robots._spin import ros_session, spin_until_signal
 from bridge.robots.description import RobotDescription, parse_urdf
 from bridge.robots.errors import RobotError
@@ -52,12 +53,6 @@ __all__ = ["DEFAULT_NODE_NAME", "StatePublisherNode", "transforms_message", "mai
 
 DEFAULT_NODE_NAME = "robot_state_publisher"
 
-LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                     reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
-TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                    reliability=ReliabilityPolicy.RELIABLE,
-                    durability=DurabilityPolicy.VOLATILE)
 # Best effort accepts reliable and best-effort publishers alike (as robot_state_publisher).
 JOINT_STATES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                               reliability=ReliabilityPolicy.BEST_EFFORT,
@@ -105,8 +100,8 @@ class StatePublisherNode(Node):
         self.declare_parameter("frame_prefix", frame_prefix,
                                ParameterDescriptor(description="Prefix of every tf frame id."))
         self._frame_prefix = frame_prefix
-        self._description_pub = self.create_publisher(String, "robot_description", LATCHED)
-        self._static_pub = self.create_publisher(TFMessage, "/tf_static", LATCHED)
+        self._description_pub = self.create_publisher(String, "robot_description", LATCHED_QOS)
+        self._static_pub = self.create_publisher(TFMessage, "/tf_static", LATCHED_QOS)
         self._tf_pub = self.create_publisher(TFMessage, "/tf", TF_QOS)
         self.create_subscription(JointState, "joint_states", self._on_joint_state,
                                  JOINT_STATES_QOS)

@@ -42,7 +42,7 @@ from typing import Any, Awaitable, Iterable, Optional, Union
 import numpy as np
 import numpy.typing as npt
 from geometry_msgs.msg import TransformStamped
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from bridge.qos import LATCHED_QOS, TF_QOS, TF_STATIC_SUBSCRIBER_QOS
 from tf2_msgs.msg import TFMessage
 
 from bridge.dispatch import Handler
@@ -86,17 +86,6 @@ _NS_PER_S = 1_000_000_000
 # A publisher of bad transforms must not flood the log: one warning per interval.
 _WARN_INTERVAL_S = 5.0
 
-# tf2_ros's own profiles: TransformListener/Broadcaster use depth 100 (volatile, reliable);
-# the static ones are transient local so a late subscriber still gets the latched message.
-_TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                     reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.VOLATILE)
-_TF_STATIC_SUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                                reliability=ReliabilityPolicy.RELIABLE,
-                                durability=DurabilityPolicy.TRANSIENT_LOCAL)
-_TF_STATIC_PUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                                reliability=ReliabilityPolicy.RELIABLE,
-                                durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 # ---------------------------------------------------------------------------- conversions
@@ -246,9 +235,9 @@ class TfBridges:
         self._static_transforms: dict[str, Any] = {}  # child -> TransformStamped (latched)
         node = ros.node
         self._subscriptions = [
-            node.create_subscription(TFMessage, self._tf_topic, self._on_tf, _TF_QOS),
+            node.create_subscription(TFMessage, self._tf_topic, self._on_tf, TF_QOS),
             node.create_subscription(TFMessage, self._tf_static_topic, self._on_tf_static,
-                                     _TF_STATIC_SUB_QOS),
+                                     TF_STATIC_SUBSCRIBER_QOS),
         ]
 
     # ------------------------------------------------------------------ ROS thread
@@ -562,10 +551,10 @@ class TfBridges:
         if static:
             if self._static_publisher is None:
                 self._static_publisher = node.create_publisher(
-                    TFMessage, self._tf_static_topic, _TF_STATIC_PUB_QOS)
+                    TFMessage, self._tf_static_topic, LATCHED_QOS)
             return self._static_publisher
         if self._tf_publisher is None:
-            self._tf_publisher = node.create_publisher(TFMessage, self._tf_topic, _TF_QOS)
+            self._tf_publisher = node.create_publisher(TFMessage, self._tf_topic, TF_QOS)
         return self._tf_publisher
 
     def _now_ns(self) -> int:
