@@ -213,7 +213,7 @@ class ParameterBridges:
         del self.clients[client.node]
         self._update_watched()
         for ros_client in client.clients():
-            self._ros.node.destroy_client(ros_client)
+            self._ros.destroy(ros_client)
         self._hub.forget(client.device)
         self._names.release(client.key)
         return {"node": client.node, "device": client.device}
@@ -338,7 +338,7 @@ class ParameterBridges:
             return
         self.watches.remove(watch)
         self._update_watched()
-        self._ros.node.destroy_client(watch.get_client)
+        self._ros.destroy(watch.get_client)
 
     async def _fetch_watched(self, watch: ParameterWatch) -> ParameterValue:
         started = self._event_serial
@@ -357,7 +357,10 @@ class ParameterBridges:
         try:
             value = await self._fetch_watched(watch)
         except CommandError as error:
-            log.warning("could not fetch %s of %s: %s", watch.name, watch.node, error)
+            log.warning("could not fetch %s of %s (tried again while the node is up): %s",
+                        watch.name, watch.node, error)
+            # Seen as gone: the next readiness check that finds the node refetches.
+            watch.ready = False
             return
         if watch in self.watches:
             watch.on_change(value)

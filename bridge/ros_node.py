@@ -8,19 +8,28 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from dataclasses import dataclass
-from typing import Optional
+from typing import Optional, Union
 
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.client import Client
 from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.service import Service
 from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
 
 log = logging.getLogger(__name__)
 
 # How often an idle executor thread looks at the stop flag.
 _SPIN_TIMEOUT_S = 0.1
+# After an error escaping a callback, a pause so that a repeating one cannot spin the CPU.
+_ERROR_PAUSE_S = 0.05
+
+RosEntity = Union[Subscription, Publisher, Client, Service]
 
 
 @dataclass(frozen=True)
@@ -55,13 +64,41 @@ class RosNode:
         self._thread.start()
 
     def _spin(self) -> None:
-        try:
-            while not self._stopping.is_set() and self.context.ok():
+        while not self._stopping.is_set() and self.context.ok():
+            try:
                 self.executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
-        except ExternalShutdownException:
-            pass
-        except Exception:  # keep the daemon's log honest if the executor dies
-            log.exception("the ROS executor stopped with an error")
+            except ExternalShutdownException:
+                return
+            except Exception:
+                # One failing callback must not stop every bridge: log it and keep spinning.
+                if self._stopping.is_set() or not self.context.ok():
+                    return
+                log.exception("a ROS callback failed; the executor goes on")
+                time.sleep(_ERROR_PAUSE_S)
+
+    def destroy(self, entity: RosEntity) -> None:
+        """Destroy a subscription, publisher, client or service of the node.
+
+        Done in the executor thread, between two waits: destroyed from another thread while
+        the executor builds its wait set, an entity's QoS event handlers raise InvalidHandle.
+        """
+        if self._stopping.is_set():
+            return  # stop() destroys the node and everything on it
+        thread = self._thread
+        if thread is None or not thread.is_alive() or threading.current_thread() is thread:
+            self._destroy_now(entity)
+        else:
+            self.executor.create_task(self._destroy_now, entity)
+
+    def _destroy_now(self, entity: RosEntity) -> None:
+        if isinstance(entity, Subscription):
+            self.node.destroy_subscription(entity)
+        elif isinstance(entity, Publisher):
+            self.node.destroy_publisher(entity)
+        elif isinstance(entity, Client):
+            self.node.destroy_client(entity)
+        else:
+            self.node.destroy_service(entity)
 
     def stop(self) -> None:
         # The executor thread must be out of its callbacks before the executor's handles

@@ -92,7 +92,7 @@ class SubscriberBridge:
                          self.codec.igtl_type, self.qos.to_dict(), self.max_rate_hz, self.count)
 
     def close(self) -> None:
-        self._ros.node.destroy_subscription(self._subscription)
+        self._ros.destroy(self._subscription)
         self._hub.forget(self.device)
 
 
@@ -147,7 +147,7 @@ class PublisherBridge:
 
     def close(self) -> None:
         self._hub.unroute(self.device)
-        self._ros.node.destroy_publisher(self._publisher)
+        self._ros.destroy(self._publisher)
 
 
 class TopicBridges:

@@ -469,7 +469,7 @@ class RobotBridges:
             self._parameters.unwatch_parameter(robot.watch)
             robot.watch = None
         if robot.subscription is not None:
-            self._ros.node.destroy_subscription(robot.subscription)
+            self._ros.destroy(robot.subscription)
             robot.subscription = None
         if robot.first_description is not None and not robot.first_description.done():
             robot.first_description.cancel()

@@ -628,13 +628,12 @@ class TfBridges:
         self.broadcasters.clear()
         self._by_key.clear()
         self._by_device.clear()
-        node = self._ros.node
         for subscription in self._subscriptions:
-            node.destroy_subscription(subscription)
+            self._ros.destroy(subscription)
         self._subscriptions = []
         for publisher in (self._tf_publisher, self._static_publisher):
             if publisher is not None:
-                node.destroy_publisher(publisher)
+                self._ros.destroy(publisher)
         self._tf_publisher = self._static_publisher = None
 
 

@@ -476,6 +476,26 @@ def test_a_robot_waits_for_its_node_and_loads_when_it_appears(
         client.command("remove_robot", {"name": "late"})
 
 
+def test_a_robot_whose_node_answers_late_loads_on_a_later_try(
+        processes: Processes, client: Connection) -> None:
+    """The node is seen at once but answers nothing for 7 s (more than the 4 s request
+    timeout): the first fetch fails, a later one loads the robot."""
+    result = client.command("create_robot", {"name": "slow", "namespace": "slow_ns"},
+                            timeout=LOAD_TIMEOUT)
+    try:
+        assert result["state"] == "waiting"
+        node = processes.python("slow", "param_node.py", "robot_state_publisher",
+                                "--namespace", "slow_ns", "--description", two_link_urdf(),
+                                "--busy-at-start", "7")
+        node.wait_for_output("READY", timeout=30)
+        arm = client.wait_for("slow:arm:0", is_mesh, timeout=LOAD_TIMEOUT)
+        assert "NOT BUSY" in node.output()  # it loaded after the busy time, not before
+        assert len(arm.body.points) == 8  # the arm's box
+        assert robot_summary(client, "slow")["state"] == "loaded"
+    finally:
+        client.command("remove_robot", {"name": "slow"})
+
+
 def test_device_names_are_the_registry_s(omni: dict[str, Any]) -> None:
     """Stable names: what a client computes from the scheme is what the daemon uses."""
     for item in omni["links"]:

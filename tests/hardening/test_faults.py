@@ -192,3 +192,40 @@ def test_stop_while_the_ros_executor_is_busy_logs_no_error(processes: Processes)
                               "--seconds", "30")
         tf.wait_for_output("SENT 1000", timeout=60)
     assert_clean_exit(daemon)  # stopped with 10,000-transform messages still queued
+
+
+def test_bridges_created_and_removed_under_traffic_keep_the_executor_alive(
+        processes: Processes) -> None:
+    """Removing a bridge while messages flow used to race the executor building its wait
+    set (rclpy raised InvalidHandle there and the executor thread died). Its own daemon,
+    so that the log checked at the end is this test's."""
+    daemon = start_daemon(processes)
+    with daemon.connect() as client:
+        stream = processes.python("stream", "stream_publisher.py", "/churn_pose", "1000",
+                                  "--count", "1000000")
+        params = processes.python("params", "param_node.py", "churn_params")
+        first = client.command("create_subscriber", {"topic": "/churn_pose",
+                                                      "type": "PoseStamped"})["device"]
+        stream.wait_for_output("READY", timeout=30)
+        params.wait_for_output("READY", timeout=30)
+        client.wait_for(first, timeout=20)
+        for round_ in range(400):
+            client.command("remove_subscriber", {"topic": "/churn_pose"})
+            if round_ % 10 == 0:
+                client.command("create_publisher", {"topic": "/churn_out", "type": "String"})
+                client.command("create_parameter_client", {"node": "/churn_params"})
+            client.command("create_subscriber", {"topic": "/churn_pose",
+                                                 "type": "PoseStamped"})
+            if round_ % 10 == 0:
+                client.command("remove_publisher", {"topic": "/churn_out"})
+                client.command("remove_parameter_client", {"node": "/churn_params"})
+        # The last subscriber still gets the stream: the executor is alive.
+        seen = client.latest(first)
+        wait_until(lambda: client.latest(first) is not seen, timeout=10,
+                   what="a pose after 400 rounds of create/remove")
+        position_mm = client.latest(first).body.matrix[0, 3]
+        assert 0 < position_mm < 1000  # the stream's n / 1000 mm, n < 1e6
+    code = daemon.child.stop()
+    log = daemon.child.output()
+    assert code == 0, log[-3000:]
+    assert "Traceback" not in log and not re.search(r" (ERROR|CRITICAL) ", log), log[-3000:]

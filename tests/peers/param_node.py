@@ -1,12 +1,15 @@
 """A node with one parameter of every type; prints each change it accepts.
 
-usage: param_node.py NAME [--namespace NS] [--description TEXT]
+usage: param_node.py NAME [--namespace NS] [--description TEXT] [--busy-at-start SECONDS]
+--busy-at-start: the node's only thread is busy that long right after READY, so that
+parameter requests arriving then go unanswered until it is over (a slow node).
 Prints READY once declared, then `CHANGED {"name": ..., "type": ..., "value": ...}` per
 parameter changed (by anyone, through the standard parameter services).
 """
 
 import argparse
 import json
+import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -27,6 +30,7 @@ def main() -> None:
     parser.add_argument("name")
     parser.add_argument("--namespace", default="")
     parser.add_argument("--description", default="<robot name='test'/>")
+    parser.add_argument("--busy-at-start", type=float, default=0.0)
     args = parser.parse_args()
     rclpy.init()
     node = rclpy.create_node(args.name, namespace=args.namespace or None)
@@ -46,6 +50,12 @@ def main() -> None:
             print("CHANGED " + json.dumps(plain(parameter)), flush=True)
 
     node.add_post_set_parameters_callback(changed)
+    if args.busy_at_start > 0:
+        def busy() -> None:
+            timer.cancel()
+            time.sleep(args.busy_at_start)
+            print("NOT BUSY", flush=True)
+        timer = node.create_timer(0.001, busy)
     print("READY", flush=True)
     try:
         rclpy.spin(node)
