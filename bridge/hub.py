@@ -140,7 +140,12 @@ class Hub:
             self._min_interval.pop(device, None)
 
     def forget(self, device: str) -> None:
-        """A bridge was removed: new clients no longer get its last value."""
+        """A bridge was removed: new clients no longer get its last value, and what it
+        posted that the loop has not taken yet is dropped (it would bring the device back)."""
+        with self._lock:
+            if any(m.device_name == device for m in self._incoming):
+                self._incoming = deque(m for m in self._incoming if m.device_name != device)
+            self._incoming_large.pop(device, None)
         self._latest.pop(device, None)
         self._persistent.pop(device, None)
         self._held.pop(device, None)

@@ -64,11 +64,14 @@ class SubscriberBridge:
         self.count = 0
         self.last_message: Any = None
         self._last_warning = 0.0
+        self._closed = False  # the subscription goes later, in the executor thread
         hub.set_rate_cap(device, max_rate_hz)
         self._subscription = ros.node.create_subscription(
             codec.message_class, topic, self._on_message, qos_profile(qos))
 
     def _on_message(self, msg: Any) -> None:  # ROS executor thread: convert, hand off
+        if self._closed:
+            return
         self.count += 1
         self.last_message = msg
         try:
@@ -92,6 +95,7 @@ class SubscriberBridge:
                          self.codec.igtl_type, self.qos.to_dict(), self.max_rate_hz, self.count)
 
     def close(self) -> None:
+        self._closed = True
         self._ros.destroy(self._subscription)
         self._hub.forget(self.device)
 
