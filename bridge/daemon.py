@@ -50,7 +50,8 @@ class Daemon:
         self.services = ServiceBridges(self.ros, self.hub, names)
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
                                    parameters=self.parameters,
-                                   package_paths=dict(config.package_paths))
+                                   package_paths=dict(config.package_paths),
+                                   frame_rules=config.security.frames)
         # Clients may load robot files from the --package-path folders too.
         policy = dataclasses.replace(config.security, robot_dirs=config.security.robot_dirs
                                      + tuple(folder for _, folder in config.package_paths))

@@ -190,6 +190,8 @@ class SecurityPolicy:
             self._check_frames(request, FRAME_FIELDS[op], resolve_frame)
             return
         if isinstance(request, CreateRobot):
+            if request.fixed_frame:  # links are judged when the URDF loads
+                self._check_frames(request, ("fixed_frame",), strip_frame)
             self._check_robot_source(request, resolve)
             if from_client and request.source.kind == "file" and resolve_file is not None:
                 self._check_robot_file(str(request.source.path), resolve_file)

@@ -24,6 +24,10 @@ Device names come from the daemon's `DeviceNameRegistry`, so they are the same o
 reconnect (3D Slicer finds its nodes again by name).
 
 Units: the model's vertices are already in mm; the tf capability turns metres into mm.
+
+Frame globs (``--allow-frame``/``--deny-frame``) hold for robots too: a link whose tf frame
+the policy denies is withheld (no TRANSFORM, no mesh; listed under "withheld"), and a robot
+whose fixed frame is denied does not load.
 """
 
 from __future__ import annotations
@@ -45,10 +49,11 @@ from bridge.parameters import ParameterBridges, ParameterWatch
 from bridge.robots.errors import RobotError
 from bridge.robots.resources import PackageResolver
 from bridge.ros_node import RosNode
+from bridge.security import NameRules
 from bridge.services import resolve_name
 from bridge.tf.capability import TfBridges
 from bridge.tf.lookups import LookupKey
-from protocol.commands import (CommandFailedError, CreateRobot, ErrorCode,
+from protocol.commands import (CommandFailedError, CreateRobot, ErrorCode, ForbiddenError,
                                ListRobots, OutOfRangeError, ParameterValue, RemoveRobot,
                                RobotSource)
 from protocol.messages import Message, PolyData, Status, StatusCode
@@ -118,6 +123,7 @@ class _Robot:
     # bring the same new description)
     fixed_frame: str = ""
     links: dict[str, _Link] = field(default_factory=dict)
+    withheld: dict[str, str] = field(default_factory=dict)  # link -> why (frame policy)
     visuals: dict[str, _VisualInfo] = field(default_factory=dict)  # device -> info
     warnings: tuple[str, ...] = ()
     loads: int = 0
@@ -135,8 +141,10 @@ class RobotBridges:
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: TfBridges,
                  parameters: ParameterBridges,
                  package_paths: Mapping[str, Path] | None = None,
+                 frame_rules: Optional[NameRules] = None,
                  topic_wait_s: float = _TOPIC_WAIT_S) -> None:
         self._ros = ros
+        self._frame_rules = frame_rules or NameRules()  # frame globs: allow all by default
         self._hub = hub
         self._names = names
         self._tf = tf
@@ -329,6 +337,14 @@ class RobotBridges:
         if robot.removed or generation != robot.generation:
             return  # removed, or a newer description is being loaded
         robot.loading_digest = ""
+        fixed = _fixed_frame(robot, model)
+        if self._frame_rules.active and not self._frame_rules.permits(fixed):
+            refused = ForbiddenError("fixed_frame", "a tf frame this daemon exposes: "
+                                     + self._frame_rules.why_not(fixed), fixed)
+            if initial:
+                raise refused
+            self._load_failed(robot, str(refused))
+            return
         self._apply(robot, model, text)
 
     def file_path(self, spec: str) -> Path:
@@ -354,14 +370,20 @@ class RobotBridges:
     def _apply(self, robot: _Robot, model: RobotModel, text: str) -> None:
         """Publish the meshes and (re)wire the link lookups of a freshly loaded model."""
         prefix = robot.tf_prefix
-        fixed = robot.request.fixed_frame or prefix + model.root_link
-        fixed = fixed.lstrip("/")
+        fixed = _fixed_frame(robot, model)
+        rules = self._frame_rules
         if fixed != robot.fixed_frame:  # every lookup starts from the fixed frame: redo all
             self._forget_links(robot, set(robot.links))
-        wanted = set(model.links)
+        robot.withheld = {name: f"frame {prefix + name!r} refused by the frame policy: "
+                                f"expected {rules.why_not(prefix + name)}"
+                          for name in model.links
+                          if rules.active and not rules.permits(prefix + name)}
+        wanted = set(model.links) - set(robot.withheld)
         self._forget_links(robot, set(robot.links) - wanted)
         robot.fixed_frame = fixed
         for name in model.links:
+            if name in robot.withheld:
+                continue
             link = robot.links.get(name)
             if link is None:
                 frame = prefix + name
@@ -377,6 +399,8 @@ class RobotBridges:
         # Meshes: publish_persistent replaces a device's mesh; stale devices are forgotten.
         fresh: dict[str, _VisualInfo] = {}
         for visual in model.visuals:
+            if visual.link in robot.withheld:
+                continue
             info = self._publish_visual(robot, visual)
             fresh[info.device] = info
             robot.links[visual.link].visuals.append(info.device)
@@ -394,6 +418,9 @@ class RobotBridges:
         robot.loaded.set()
         summary = (f"loaded {model.name!r}: {len(model.links)} links, {len(model.visuals)} "
                    f"visuals, fixed frame {fixed}")
+        if robot.withheld:
+            summary += (f"; {len(robot.withheld)} link(s) withheld by the frame policy: "
+                        + ", ".join(sorted(robot.withheld)))
         if model.warnings:
             summary += f"; {len(model.warnings)} warning(s): " + "; ".join(model.warnings)
         # The counts let a client that created the robot while it was waiting know when
@@ -488,6 +515,7 @@ class RobotBridges:
             "kind": "robot", "name": robot.name, "state": robot.state,
             "source": robot.source.to_dict(), "fixed_frame": robot.fixed_frame or None,
             "tf_prefix": robot.tf_prefix, "links": len(robot.links),
+            "withheld": len(robot.withheld),
             "visuals": len(robot.visuals), "description_device": robot.description_device,
             "loads": robot.loads, "warnings": len(robot.warnings)}
         if robot.request.namespace:
@@ -507,6 +535,8 @@ class RobotBridges:
             "links": [{"link": link.link, "device": link.device, "frame": link.frame,
                        "visuals": list(link.visuals)} for link in robot.links.values()],
             "visuals": [info.to_dict() for info in robot.visuals.values()],
+            "withheld": [{"link": name, "frame": robot.tf_prefix + name, "reason": why}
+                         for name, why in robot.withheld.items()],
             "warnings": list(robot.warnings), "existed": existed}
         if robot.reason:
             out["reason"] = robot.reason
@@ -520,6 +550,11 @@ class RobotBridges:
             task.cancel()
         for robot in list(self.robots.values()):
             self._drop(robot)
+
+
+def _fixed_frame(robot: _Robot, model: RobotModel) -> str:
+    """The frame every link's pose is given in: the request's, else the prefixed root."""
+    return (robot.request.fixed_frame or robot.tf_prefix + model.root_link).lstrip("/")
 
 
 def _digest(text: str) -> str:

@@ -185,11 +185,63 @@ def test_robot_sources_are_judged_by_the_parameter_and_topic_globs(
         # A file robot reads no parameter and no topic: the globs do not apply.
         urdf = tmp_path / "one_link.urdf"
         urdf.write_text("<robot name='one'><link name='base'/></robot>")
-        loaded = client.command("create_robot", {"name": "from_file", "source": {
-            "kind": "file", "path": str(urdf)}}, timeout=60)
+        loaded = client.command("create_robot", {"name": "from_file", "tf_prefix": "PSM1/",
+                                                 "source": {"kind": "file",
+                                                            "path": str(urdf)}}, timeout=60)
         assert loaded["robot"] == "one" and loaded["root_link"] == "base", loaded
+        assert loaded["fixed_frame"] == "PSM1/base", loaded
         for name in ("psm1", "psm1x", "psm1t", "from_file"):
             client.command("remove_robot", {"name": name})
+
+
+def test_robot_links_are_judged_by_the_frame_globs(guarded: RunningDaemon,
+                                                  tmp_path: Path) -> None:
+    """A link whose frame is denied is withheld (no transform, no mesh); a robot whose fixed
+    frame is denied is refused, before loading when the request names it."""
+    urdf = tmp_path / "arm.urdf"
+    box = "<visual><geometry><box size='0.01 0.02 0.03'/></geometry></visual>"
+    urdf.write_text(
+        "<robot name='arm'>"
+        f"<link name='base'>{box}</link><link name='arm'>{box}</link>"
+        f"<link name='secret_tool'>{box}</link>"
+        "<joint name='j1' type='fixed'><parent link='base'/><child link='arm'/></joint>"
+        "<joint name='j2' type='fixed'><parent link='arm'/><child link='secret_tool'/>"
+        "</joint></robot>")
+    source = {"kind": "file", "path": str(urdf)}
+    names = DeviceNameRegistry()
+    with guarded.connect() as client:
+        loaded = client.command("create_robot", {"name": "sec", "tf_prefix": "PSM1/",
+                                                 "source": source}, timeout=60)
+        try:
+            assert [link["link"] for link in loaded["links"]] == ["base", "arm"], loaded
+            assert [visual["link"] for visual in loaded["visuals"]] == ["base", "arm"]
+            [withheld] = loaded["withheld"]
+            assert withheld["link"] == "secret_tool"
+            assert withheld["frame"] == "PSM1/secret_tool"
+            assert "PSM1/secret*" in withheld["reason"], withheld
+            arm_mesh = names.register(NameKey.robot_visual("sec", "arm", 0))
+            client.wait_for(arm_mesh, timeout=10)
+            status = client.wait_for("urdf:sec", lambda m: m.body.code == StatusCode.OK)
+            assert "1 link(s) withheld by the frame policy: secret_tool" in status.body.text
+            assert status.metadata["ros2.links"] == "2", status.metadata
+            secret_mesh = names.register(NameKey.robot_visual("sec", "secret_tool", 0))
+            secret_link = names.register(NameKey.robot_link("sec", "secret_tool"))
+            assert client.latest(secret_mesh) is None and client.latest(secret_link) is None
+            listed = client.command("list_robots")["robots"]
+            assert [(r["name"], r["links"], r["withheld"]) for r in listed] == [("sec", 2, 1)]
+        finally:
+            client.command("remove_robot", {"name": "sec"})
+        # The fixed frame: named in the request, refused before anything loads ...
+        error = refusal(client, "create_robot", {"name": "sec2", "tf_prefix": "PSM1/",
+                                                 "fixed_frame": "PSM2/base",
+                                                 "source": source})
+        assert error.code == ErrorCode.FORBIDDEN and error.field == "fixed_frame"
+        assert "PSM2/base" in str(error)
+        # ... or the root link's, refused when the URDF says what it is.
+        error = refusal(client, "create_robot", {"name": "sec3", "source": source})
+        assert error.code == ErrorCode.FORBIDDEN and error.field == "fixed_frame"
+        assert "'base'" in str(error) or " base" in str(error), str(error)
+        assert client.command("list_robots")["robots"] == []
 
 
 # ---------------------------------------------------------------------------- --frame-prefix
