@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo run test bench lint clean
+.PHONY: setup demo run test bench fuzz lint clean
 
 setup:
 	@$(PYTHON) tools/setup_env.py
@@ -20,6 +20,16 @@ test: setup
 
 bench: setup
 	@for script in bench/bench_*.py; do echo "== $$script"; $(BIN)/python $$script || exit 1; done
+
+# Coverage-guided fuzzing of the decoder and the command schema, FUZZ_SECONDS long
+# (installs the pinned `fuzz` extra first). Findings land in .cache/fuzz/crash-*.
+FUZZ_SECONDS ?= 300
+fuzz: setup
+	@$(BIN)/python -m pip install --quiet --disable-pip-version-check -e ".[fuzz]" \
+		> .cache/pip-fuzz.log 2>&1 || { cat .cache/pip-fuzz.log; exit 1; }
+	@mkdir -p .cache/fuzz/corpus
+	cd .cache/fuzz && ../../$(BIN)/python ../../bench/fuzz_decoder.py \
+		-max_total_time=$(FUZZ_SECONDS) corpus
 
 lint: setup
 	$(BIN)/python -m ruff check protocol bridge slicer_client tests bench tools

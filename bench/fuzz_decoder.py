@@ -1,7 +1,9 @@
 """Coverage-guided fuzzing (atheris) of the OpenIGTLink decoder and the command schema.
 
-Install once:  .venv/bin/pip install atheris        (a wheel for CPython 3.11 on x86-64)
-Run:           .venv/bin/python bench/fuzz_decoder.py [-max_total_time=600] [CORPUS_DIR]
+Simplest:      make fuzz [FUZZ_SECONDS=600]   (installs the pinned `fuzz` extra, keeps
+               its corpus and findings in .cache/fuzz)
+By hand:       .venv/bin/pip install -e '.[fuzz]'   (atheris: a wheel for CPython 3.11 x86-64)
+               .venv/bin/python bench/fuzz_decoder.py [-max_total_time=600] [CORPUS_DIR]
                .venv/bin/python bench/fuzz_decoder.py -runs=200000
                .venv/bin/python bench/fuzz_decoder.py --seed-only CORPUS_DIR  (write seeds)
 
@@ -134,11 +136,14 @@ def main() -> None:
     import atheris
 
     argv = list(sys.argv)
-    if not any(not arg.startswith("-") for arg in argv[1:]):
+    folders = [Path(arg) for arg in argv[1:] if not arg.startswith("-")]
+    if not folders:
         corpus = Path(tempfile.mkdtemp(prefix="fuzz-corpus-"))
         write_seeds(corpus)
         argv.append(str(corpus))
         print(f"corpus: {corpus}", flush=True)
+    elif folders[0].is_dir() and not any(folders[0].iterdir()):
+        write_seeds(folders[0])  # a new corpus folder starts from the seeds too
     atheris.instrument_all()
     atheris.Setup(argv, test_one_input)
     atheris.Fuzz()
