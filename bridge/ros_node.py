@@ -28,6 +28,8 @@ log = logging.getLogger(__name__)
 _SPIN_TIMEOUT_S = 0.1
 # After an error escaping a callback, a pause so that a repeating one cannot spin the CPU.
 _ERROR_PAUSE_S = 0.05
+# A callback failing on every message is reported once per interval, with a count.
+_ERROR_LOG_INTERVAL_S = 5.0
 
 RosEntity = Union[Subscription, Publisher, Client, Service]
 
@@ -64,6 +66,8 @@ class RosNode:
         self._thread.start()
 
     def _spin(self) -> None:
+        last_logged = -_ERROR_LOG_INTERVAL_S
+        unlogged = 0
         while not self._stopping.is_set() and self.context.ok():
             try:
                 self.executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
@@ -73,7 +77,13 @@ class RosNode:
                 # One failing callback must not stop every bridge: log it and keep spinning.
                 if self._stopping.is_set() or not self.context.ok():
                     return
-                log.exception("a ROS callback failed; the executor goes on")
+                now = time.monotonic()
+                if now - last_logged >= _ERROR_LOG_INTERVAL_S:
+                    more = f" ({unlogged} more since the last report)" if unlogged else ""
+                    log.exception("a ROS callback failed; the executor goes on%s", more)
+                    last_logged, unlogged = now, 0
+                else:
+                    unlogged += 1
                 time.sleep(_ERROR_PAUSE_S)
 
     def destroy(self, entity: RosEntity) -> None:
