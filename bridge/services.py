@@ -162,13 +162,10 @@ class ServiceBridges:
     """The daemon's service clients (`call_service`) and client-served services."""
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
-                 availability_wait_s: float = 3.5, answer_timeout_s: float = 4.0) -> None:
-        # 3.5 s: a server missed by the first discovery announcements is found at the next
-        # round (Fast DDS: every 3 s); still below call_service's default timeout of 4 s.
+                 answer_timeout_s: float = 4.0) -> None:
         self._ros = ros
         self._hub = hub
         self._names = names
-        self._availability_wait_s = availability_wait_s
         self._answer_timeout_s = answer_timeout_s
         # Served coroutines wait for a client without holding a mutually exclusive group
         # (the node's default group also runs every subscription).
@@ -191,9 +188,11 @@ class ServiceBridges:
             raise WrongTypeError(f"request.{error.field}" if error.field else "request",
                                  error.expected, error.got) from None
         entry = self._client_for(service, ros_type, srv)
+        # The whole timeout may go to discovery: a server missed by the first announcements
+        # is found at the next round (Fast DDS: every 3 s, later under load).
         response = await call_ros_service(self._hub, entry.client, ros_request,
                                           timeout=request.timeout,
-                                          ready_wait=self._availability_wait_s,
+                                          ready_wait=request.timeout,
                                           what=f"service {service}", field="service")
         entry.calls += 1
         return {"service": service, "type": ros_type, "response": message_to_dict(response)}
