@@ -140,7 +140,7 @@ def test_service_call_through_the_pythonic_api_and_the_facade(ros: slicer_client
     server = processes.python("services", "service_server.py", "--namespace", "/py_srv")
     server.wait_for_output("READY", timeout=30)
     service = ros.service("/py_srv/set_enabled", "std_srvs/srv/SetBool")
-    response = service.call({"data": True}, timeout=4.0)
+    response = service.call({"data": True}, timeout=15.0)  # the first call may wait for discovery
     assert response["success"] is True
     server.wait_for_output('CALL set_enabled {"data": true}')
     node = ros.GetDefaultROS2Node().CreateAndAddServiceClientNode("std_srvs/srv/Trigger",
