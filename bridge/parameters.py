@@ -357,10 +357,11 @@ class ParameterBridges:
         try:
             value = await self._fetch_watched(watch)
         except CommandError as error:
-            log.warning("could not fetch %s of %s (tried again while the node is up): %s",
-                        watch.name, watch.node, error)
-            # Seen as gone: the next readiness check that finds the node refetches.
-            watch.ready = False
+            retry = error.error_code in (ErrorCode.TIMEOUT, ErrorCode.UNAVAILABLE)
+            log.warning("could not fetch %s of %s%s: %s", watch.name, watch.node,
+                        " (tried again while the node is up)" if retry else "", error)
+            if retry:  # seen as gone: the next readiness check that finds the node refetches
+                watch.ready = False
             return
         if watch in self.watches:
             watch.on_change(value)
