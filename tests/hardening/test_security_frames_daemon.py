@@ -224,6 +224,11 @@ def test_robot_links_are_judged_by_the_frame_globs(guarded: RunningDaemon,
             status = client.wait_for("urdf:sec", lambda m: m.body.code == StatusCode.OK)
             assert "1 link(s) withheld by the frame policy: secret_tool" in status.body.text
             assert status.metadata["ros2.links"] == "2", status.metadata
+            # The root link's TRANSFORM (identity: it is the fixed frame) has come, and the
+            # meshes went out together at load: a withheld link's would be here by now.
+            root = client.wait_for(names.register(NameKey.robot_link("sec", "base")),
+                                   timeout=10)
+            np.testing.assert_allclose(root.body.matrix, np.eye(4), atol=1e-9)
             secret_mesh = names.register(NameKey.robot_visual("sec", "secret_tool", 0))
             secret_link = names.register(NameKey.robot_link("sec", "secret_tool"))
             assert client.latest(secret_mesh) is None and client.latest(secret_link) is None
