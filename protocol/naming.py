@@ -28,10 +28,17 @@ service_server        service ``/spawn``         ``srv:spawn``
   ``A-Z a-z 0-9 _ . / -`` (and a robot name is not one of the role prefixes). Those
   characters exclude the separators ``: > ~``, so two different entities can never share a
   readable name.
-* Otherwise the name is ``<prefix><tail>~<hash>``: the end of the sanitised readable form
-  (the most specific part of a ROS name) and the first characters of a base32 SHA-256 of
-  the role and the exact ROS names. Only hashed names contain ``~``.
-* `DeviceNameRegistry` remembers what it handed out; if two entities' hashes ever collide,
+* Otherwise the name is abbreviated, readable first, then made unique with a short hash:
+  ``<prefix><abbreviation>~<hash>`` (a robot visual keeps its index last:
+  ``demo:upper_ar~dk4s:0``). The abbreviation keeps the shape of the readable form:
+  link and frame names lose a ``_link``/``_frame`` suffix; namespaces become initials
+  (``/robot/arm/measured_cp`` -> ``r/a/measured_cp``), then go; then parts are cut from
+  their ends: a robot's name or a parent frame first, down to 6 characters (they are
+  shared by many devices; the link or child frame tells them apart), then the others, then
+  the first again; each keeps at least its first 3 characters. The hash is base32
+  SHA-256 of the role and the exact ROS names, so it is the same on every run and machine.
+  Only these names contain ``~``.
+* `DeviceNameRegistry` remembers what it handed out; if two entities' names ever collide,
   the later one gets a longer hash, and it maps device names back to the ROS entity.
 
 Every message also carries metadata ``ros2.*`` with the full names (see `metadata_for`);
@@ -81,14 +88,18 @@ __all__ = [
 ]
 
 MAX_DEVICE_NAME_BYTES = 20
-# 6 base32 characters = 30 bits: a collision among 1000 names has odds of about 1 in 2000,
-# and the registry resolves even that one.
-DEFAULT_HASH_LENGTH = 6
+# 4 base32 characters = 20 bits. Two names collide only if their abbreviations match too,
+# and the registry resolves even that by lengthening the newcomer's hash.
+DEFAULT_HASH_LENGTH = 4
 _MAX_HASH_LENGTH = 16
 _HASH_SEPARATOR = "~"
 
 _SAFE_PART = re.compile(r"[A-Za-z0-9_./-]+\Z")
-_UNSAFE_TAIL_CHAR = re.compile(r"[^A-Za-z0-9_./:>-]")
+_UNSAFE_CHAR = re.compile(r"[^A-Za-z0-9_./-]")
+# Dropped from link and frame names before anything is cut: they say nothing in a name.
+_NOISE_SUFFIXES = ("_link", "_frame")
+_MIN_KEPT = 3  # an abbreviated part keeps at least this many leading characters
+_SHORT_NAME = 6  # a robot's or parent frame's name is cut to this before the others
 
 
 class NamingError(ProtocolError):
@@ -286,21 +297,77 @@ def _digest(key: NameKey) -> str:
 def device_name_for(key: NameKey, hash_length: int = DEFAULT_HASH_LENGTH) -> str:
     """The deterministic device name of ``key`` (ASCII, at most 20 bytes).
 
-    ``hash_length`` only matters for names that must be hashed; the registry raises it on a
-    collision.
+    ``hash_length`` only matters for names that must be abbreviated; the registry raises it
+    on a collision.
     """
     prefix = _PREFIX[key.role]
-    body = _readable_body(key)
-    readable = prefix + body
+    readable = prefix + _readable_body(key)
     if _is_lossless(key) and len(readable) <= MAX_DEVICE_NAME_BYTES:
         return readable
     if not 4 <= hash_length <= _MAX_HASH_LENGTH:
         raise NamingError(field="hash_length", expected=f"4..{_MAX_HASH_LENGTH}",
                           got=str(hash_length))
-    room = MAX_DEVICE_NAME_BYTES - len(prefix) - len(_HASH_SEPARATOR) - hash_length
-    tail = _UNSAFE_TAIL_CHAR.sub("_", body)  # separators stay, '~' and non-ASCII go
-    tail = tail[-room:].lstrip("/:>") if room > 0 else ""  # no name starting with a separator
-    return f"{prefix}{tail}{_HASH_SEPARATOR}{_digest(key)[:hash_length]}"
+    parts = [_UNSAFE_CHAR.sub("_", part) for part in key.parts]
+    suffix = ""
+    if key.role == Role.ROBOT_VISUAL:
+        suffix = ":" + (parts.pop() if key.parts[2].isdigit() else "x")
+    mark = _HASH_SEPARATOR + _digest(key)[:hash_length]
+    room = MAX_DEVICE_NAME_BYTES - len(prefix) - len(mark) - len(suffix)
+    return f"{prefix}{_abbreviate(key.role, parts, room)}{mark}{suffix}"
+
+
+def _abbreviate(role: Role, parts: list[str], room: int) -> str:
+    """The readable body of ``parts`` shortened to ``room`` characters, in steps that keep
+    it readable: noise suffixes go, then namespaces become initials, then go, then parts
+    are cut from their ends (their starts stay)."""
+    if role in (Role.TF_LOOKUP, Role.TF_BROADCASTER):
+        separator = ">"
+    elif role in (Role.SUBSCRIBER, Role.PUBLISHER, Role.PARAMETER_CLIENT,
+                  Role.PARAMETER_SERVER, Role.SERVICE_CLIENT, Role.SERVICE_SERVER):
+        separator = ""  # one graph name
+    else:
+        separator = ":"
+    # A robot's own name is kept whole as long as possible: it says which robot.
+    first = 1 if role in (Role.ROBOT_LINK, Role.ROBOT_VISUAL) else 0
+
+    def length() -> int:
+        return len(separator.join(parts))
+
+    for step in (_without_noise, _namespaces_to_initials, _without_namespaces):
+        for i in range(first, len(parts)):
+            if length() <= room:
+                return separator.join(parts)
+            parts[i] = step(parts[i])
+    # Then ends are cut. A robot's name or a parent frame is shared by many devices and
+    # the link or child frame tells them apart, so the first part goes first, but only
+    # down to a short name (PSM1, world) until the others are at their minimum.
+    for i, floor in [(0, _SHORT_NAME)] + [(i, _MIN_KEPT) for i in range(1, len(parts))] \
+            + [(0, _MIN_KEPT)]:
+        excess = length() - room
+        if excess <= 0:
+            break
+        parts[i] = parts[i][:max(min(floor, len(parts[i])), len(parts[i]) - excess)]
+    if length() > room:  # every part at its minimum: cut the whole
+        return separator.join(parts)[:max(room, 0)].rstrip(":>/")
+    return separator.join(parts).rstrip(":>/")
+
+
+def _without_noise(part: str) -> str:
+    for noise in _NOISE_SUFFIXES:
+        if part.endswith(noise) and len(part) > len(noise):
+            return part[:-len(noise)]
+    return part
+
+
+def _without_namespaces(part: str) -> str:
+    names = [name for name in part.split("/") if name]
+    return names[-1] if names else part
+
+
+def _namespaces_to_initials(part: str) -> str:
+    """``robot/arm/pose`` -> ``r/a/pose``: the last name says the most."""
+    *namespaces, last = part.split("/")
+    return "/".join([name[:1] for name in namespaces] + [last])
 
 
 def is_hashed_name(device_name: str) -> bool:

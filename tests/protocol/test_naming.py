@@ -7,6 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from protocol.naming import (
+    DEFAULT_HASH_LENGTH,
     KEY_CHILD,
     KEY_FRAME,
     KEY_LINK,
@@ -65,24 +66,91 @@ def test_lookup_and_subscriber_of_same_name_do_not_collide() -> None:
     assert len(names) == 6
 
 
-def test_long_names_get_tail_and_hash() -> None:
+def test_long_topics_shorten_their_namespaces_then_hash() -> None:
     key = NameKey.subscriber("/my_robot/arm/end_effector/measured_pose")
     name = device_name_for(key)
     assert len(name.encode("ascii")) <= MAX_DEVICE_NAME_BYTES
     assert is_hashed_name(name)
-    tail, digest = name.split("~")
-    assert "/my_robot/arm/end_effector/measured_pose".endswith(tail)
-    assert len(digest) == 6
+    body, digest = name.split("~")
+    assert len(digest) == DEFAULT_HASH_LENGTH
+    # Initials do not fit ("m/a/e/measured_pose"): the last name, which says the most, stays.
+    assert body == "measured_pose"
     # sha256-based: the same on every run and machine (hash() would be salted).
     assert name == device_name_for(NameKey.subscriber("my_robot/arm/end_effector/measured_pose"))
-    assert name == "measured_pose~" + digest
+    assert device_name_for(NameKey.subscriber("/robot/arm/measured_cp")).startswith(
+        "r/a/measured_cp~")
     assert device_name_for(NameKey.publisher("/my_robot/arm/end_effector/measured_pose")) != name
 
 
 def test_hash_is_stable_across_versions() -> None:
     # Pinned: changing it would orphan users' saved Slicer scenes.
     assert device_name_for(NameKey.robot_link("PSM1", "tool_tip_link_very_long")) == (
-        "ink_very_long~gafcmj")
+        "PSM1:tool_tip_l~gafc")
+
+
+@pytest.mark.parametrize(
+    ("key", "name"),
+    [
+        # The cases a plain OpenIGTLinkIF user met (issue: `er_arm_link:0~dk4syk`).
+        (NameKey.robot_visual("demo", "upper_arm_link", 0), "demo:upper_ar~dk4s:0"),
+        (NameKey.tf_lookup("base_link", "tool_flange"), "tf:base>tool_fl~ndef"),
+        # Long frames: noise suffixes go first, then namespaces, then the ends of names.
+        (NameKey.tf_lookup("world", "PSM1/tool_tip_link"), "tf:world>tool_t~ubma"),
+        (NameKey.tf_broadcaster("camera_optical_frame", "marker_7"), "tfb:camera>mark~74ab"),
+        # A robot's name is cut to 6 characters before the link goes below 3.
+        (NameKey.robot_visual("dvrk_PSM1", "tool_wrist_sca_shaft_link", 3),
+         "dvrk_P:tool_w~djqj:3"),
+        (NameKey.robot_description("a_very_long_robot_name_here"), "urdf:a_very_lon~kymh"),
+    ],
+)
+def test_long_names_are_abbreviated_readable_first(key: NameKey, name: str) -> None:
+    assert device_name_for(key) == name
+    assert len(name) <= MAX_DEVICE_NAME_BYTES
+
+
+def _robot_links(urdf: str) -> list[str]:
+    import xml.etree.ElementTree as ElementTree
+
+    return [link.get("name", "") for link in ElementTree.fromstring(urdf).iter("link")]
+
+
+def _demo_links() -> list[str]:
+    from bridge.robots.demo.urdf import DEMO_URDF
+
+    return _robot_links(DEMO_URDF)
+
+
+def _omni_links() -> list[str]:
+    from support import require_shared
+
+    urdf = require_shared("robots/sensable_omni_model/urdf/omni.urdf")
+    return _robot_links(urdf.read_text())
+
+
+@pytest.mark.parametrize(("robot", "links"), [("demo", _demo_links), ("omni", _omni_links),
+                                               ("sensable_omni_model", _omni_links)])
+def test_robot_names_keep_the_link_start_and_the_visual_index(robot: str, links: object) -> None:
+    registry = DeviceNameRegistry()
+    names: set[str] = set()
+    for link in links():  # type: ignore[operator]
+        for index in (0, 1, 12):
+            key = NameKey.robot_visual(robot, link, index)
+            name = registry.register(key)
+            assert len(name.encode("ascii")) <= MAX_DEVICE_NAME_BYTES
+            assert name.endswith(f":{index}")
+            if not is_hashed_name(name):
+                assert name == f"{robot}:{link}:{index}"
+                continue
+            robot_part, link_part = name.split("~")[0].split(":")
+            assert robot.startswith(robot_part) and len(robot_part) >= 3
+            # The link's start survives (less a `_link` suffix), never only its end.
+            assert link.startswith(link_part) and len(link_part) >= 3
+            names.add(name)
+        link_name = registry.register(NameKey.robot_link(robot, link))
+        assert len(link_name) <= MAX_DEVICE_NAME_BYTES
+        if is_hashed_name(link_name):
+            assert link.startswith(link_name.split("~")[0].split(":")[1])
+    assert len(registry) == len(set(registry))
 
 
 def test_separator_characters_force_hashing() -> None:
@@ -123,12 +191,12 @@ def test_registry_names_always_fit_and_are_unique(pairs: list[tuple[str, str]]) 
 
 
 class _CollidingRegistry(DeviceNameRegistry):
-    """Every 6-character hash is the same: forces the collision path."""
+    """Every shortest hash is the same: forces the collision path."""
 
     def _candidate(self, key: NameKey, hash_length: int) -> str:
         name = super()._candidate(key, hash_length)
-        if hash_length == 6 and is_hashed_name(name):
-            return name.split("~")[0][-5:] + "~aaaaaa"
+        if hash_length == DEFAULT_HASH_LENGTH and is_hashed_name(name):
+            return "topic~" + "a" * DEFAULT_HASH_LENGTH
         return name
 
 
@@ -138,9 +206,9 @@ def test_forced_collision_lengthens_hash() -> None:
     second = NameKey.subscriber("/another/long/namespace/two/topic")
     n1 = registry.register(first)
     n2 = registry.register(second)
-    assert n1.endswith("~aaaaaa") and n1.startswith("topic")
-    assert n2 != n1
-    assert len(n2.split("~")[1]) == 7
+    assert n1 == "topic~" + "a" * DEFAULT_HASH_LENGTH
+    assert n2 != n1 and n2.startswith("a/l/n/t/topic~")
+    assert len(n2.split("~")[1]) == DEFAULT_HASH_LENGTH + 1
     assert len(n2) <= MAX_DEVICE_NAME_BYTES
     assert registry.lookup(n1) == first
     assert registry.lookup(n2) == second
