@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Any, Callable, Dict, Mapping, Optional
+from collections import deque
+from typing import Any, Callable, Deque, Dict, Mapping, Optional
 
 from protocol.messages import Message
 from slicer_client.connection import (DEFAULT_HOST, DEFAULT_PORT, ConnectionClosedError,
@@ -32,6 +33,9 @@ __all__ = ["CommandFn", "ReconnectingTransport", "Transport", "TransportListener
 log = logging.getLogger(__name__)
 
 CommandFn = Callable[..., Dict[str, Any]]  # (op, args=None, *, timeout=...) -> result
+
+# Bound on messages kept for a listener not attached yet: a whole robot's meshes and more.
+_MAX_EARLY_MESSAGES = 10_000
 
 
 class TransportListener(Protocol):
@@ -76,6 +80,10 @@ class ReconnectingTransport:
         self._max_interval = max_interval
         self._connect_timeout = connect_timeout
         self._listener: Optional[TransportListener] = None
+        # Messages that came before the listener: the daemon sends its state (meshes once
+        # per connection) as soon as the client announces header v2, so none may be lost.
+        self._early: Deque[Message] = deque(maxlen=_MAX_EARLY_MESSAGES)
+        self._delivery = threading.Lock()  # keeps early and later messages in order
         self._lock = threading.Lock()
         self._ready = threading.Event()  # set while a connection is up and re-synced
         self._stop = threading.Event()
@@ -96,14 +104,24 @@ class ReconnectingTransport:
                           on_close=lambda reason: self._lost(generation, reason))
 
     def set_listener(self, listener: TransportListener) -> None:
-        """Attach the listener and run its first `on_connected` (re-sync of nothing)."""
-        self._listener = listener
+        """Attach the listener, hand it what arrived before it, in order, and run its
+        first `on_connected` (re-sync of nothing)."""
+        with self._delivery:
+            while self._early:
+                listener.on_message(self._early.popleft())
+            self._listener = listener
         listener.on_connected(self._conn.command, True)
         self._ready.set()
 
     def _on_message(self, message: Message) -> None:
-        if self._listener is not None:
-            self._listener.on_message(message)
+        with self._delivery:
+            if self._listener is None:
+                if len(self._early) == self._early.maxlen:
+                    log.warning("no listener yet for %s messages: the oldest is dropped",
+                                self._early.maxlen)
+                self._early.append(message)
+                return
+        self._listener.on_message(message)
 
     def _lost(self, generation: int, reason: Optional[BaseException]) -> None:
         # Reader thread of the lost connection. Old generations and close() are ignored.
