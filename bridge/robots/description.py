@@ -12,7 +12,7 @@ Lengths stay in METRES (the URDF's unit); conversion to mm happens in `model`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any, Mapping, Optional
 
@@ -379,12 +379,16 @@ def parse_urdf(xml: str | bytes) -> RobotDescription:
         parent_joint[joint.child] = name
         children.setdefault(joint.parent, []).append(name)
 
-    for joint in joints.values():
+    for joint in list(joints.values()):
         if joint.mimic is not None:
             source = joints.get(joint.mimic.joint)
             if source is None:
-                raise UrdfError(f"joint {joint.name!r} <mimic> joint", "the name of a <joint>",
-                                joint.mimic.joint)
+                # robot_state_publisher skips such a mimic and shows the rest: so do we.
+                warnings.append(f"joint {joint.name!r} mimics {joint.mimic.joint!r}, which is "
+                                f"not a joint of this robot: the mimic is ignored and "
+                                f"{joint.name!r} moves by its own joint state")
+                joints[joint.name] = replace(joint, mimic=None)
+                continue
             if not source.moves:
                 warnings.append(f"joint {joint.name!r} mimics {source.name!r}, a "
                                 f"{source.type} joint: its position is always the offset")

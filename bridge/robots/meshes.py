@@ -203,6 +203,27 @@ def _read_geometries(path: Path) -> tuple[list[trimesh.Trimesh], float]:
     return meshes, scale
 
 
+def _explain_empty_collada(path: Path) -> None:
+    """A COLLADA scene with no triangles may still hold them: its nodes were dropped for a
+    broken reference (a material binding to a missing id, typically). Say so, not "empty"."""
+    import collada
+
+    try:
+        document = collada.Collada(str(path), ignore=[collada.common.DaeError])
+        triangles = sum(len(primitive.triangleset()) if hasattr(primitive, "triangleset")
+                        else len(primitive)
+                        for geometry in document.geometries
+                        for primitive in geometry.primitives)
+    except Exception:  # unreadable even leniently: the plain message stands
+        return
+    if triangles:
+        causes = "; ".join(dict.fromkeys(str(error) for error in document.errors)) or \
+            "no <node> instantiates its geometry"
+        raise MeshError(str(path), "a COLLADA scene that places its triangles",
+                        f"{triangles} triangles in <library_geometries> that the scene drops "
+                        f"({causes})")
+
+
 def load_mesh_file(path: Path, scale: Sequence[float] = (1.0, 1.0, 1.0), *,
                    max_triangles: Optional[int] = None) -> MeshData:
     """Read a mesh file into a `MeshData` (metres, ``scale`` applied per axis).
@@ -212,6 +233,8 @@ def load_mesh_file(path: Path, scale: Sequence[float] = (1.0, 1.0, 1.0), *,
     """
     geoms, unit = _read_geometries(path)
     if not geoms:
+        if path.suffix.lower() == ".dae":
+            _explain_empty_collada(path)
         raise MeshError(str(path), "at least one triangle", "no triangles in the file")
     verts: list[F64] = []
     tris: list[U32] = []

@@ -279,9 +279,6 @@ GOOD_JOINT = ('<joint name="j" type="revolute"><parent link="a"/><child link="b"
      "joint 'j' <origin> xyz"),
     ("<robot name='r'><link name='a'/><link name='b'/>"
      + GOOD_JOINT.replace('xyz="0 0 1"', 'xyz="0 0 0"') + "</robot>", "joint 'j' <axis>"),
-    ("<robot name='r'><link name='a'/><link name='b'/>"
-     + GOOD_JOINT.replace("</joint>", "<mimic joint='ghost'/></joint>") + "</robot>",
-     "joint 'j' <mimic>"),
     ("<robot name='r'><link name='a'><visual><geometry/></visual></link></robot>", "link 'a'"),
     ("<robot name='r'><link name='a'><visual><geometry><box size='1 1'/></geometry></visual>"
      "</link></robot>", "link 'a' visual 0 <box>"),
@@ -300,6 +297,23 @@ def test_malformed_urdf_is_a_typed_error_naming_the_problem(text: str, names: st
         load_robot(text, cache=MeshCache())
     assert names in str(info.value)
     assert info.value.expected and info.value.field
+
+
+def test_a_mimic_of_a_missing_joint_is_skipped_as_robot_state_publisher_does() -> None:
+    # As in example-robot-data's hands: the robot loads, the joint moves on its own.
+    text = ("<robot name='r'><link name='a'/><link name='b'/>"
+            + GOOD_JOINT.replace("</joint>", "<mimic joint='ghost' multiplier='2'/></joint>")
+            + "</robot>")
+    model = load_robot(text, cache=MeshCache())
+    assert [w for w in model.warnings if "ghost" in w] == [
+        "joint 'j' mimics 'ghost', which is not a joint of this robot: the mimic is ignored "
+        "and 'j' moves by its own joint state"]
+    spec = parse_urdf(text)
+    assert spec.joints["j"].mimic is None
+    assert "j" in spec.actuated_joints
+    pose = model.link_poses({"j": 0.5})["b"]
+    assert pose[:3, :3] == pytest.approx(
+        np.array([[np.cos(0.5), -np.sin(0.5), 0], [np.sin(0.5), np.cos(0.5), 0], [0, 0, 1]]))
 
 
 def test_mimic_loop_is_refused() -> None:
@@ -470,3 +484,23 @@ def test_obj_with_two_materials_gives_per_vertex_colours(tmp_path: Path) -> None
         np.testing.assert_array_equal(v.vertex_rgba[tri], np.tile(expected, (3, 1)))
     (rgba,) = PolyData.unpack(to_polydata(v).pack()).attributes
     np.testing.assert_array_equal(rgba.data, v.vertex_rgba)
+
+
+def test_a_collada_scene_that_drops_its_triangles_says_why(tmp_path: Path) -> None:
+    from bridge.robots.demo import DEMO_PACKAGE, demo_urdf_path
+    from bridge.robots.meshes import MeshError, load_mesh_file
+
+    _, packages = demo_urdf_path(tmp_path / "demo")
+    good = packages[DEMO_PACKAGE] / "meshes" / "forearm.dae"
+    triangles = len(load_mesh_file(good).triangles)
+    text = good.read_text()
+    assert 'target="#forearm_material"' in text
+    broken = tmp_path / "broken.dae"
+    broken.write_text(text.replace('target="#forearm_material"', 'target="#missing"'))
+    with pytest.raises(MeshError) as info:
+        load_mesh_file(broken)
+    message = str(info.value)
+    # Not "no triangles in the file": the triangles are there, the binding is what broke.
+    assert "no triangles in the file" not in message
+    assert f"got {triangles} triangles in <library_geometries> that the scene drops" in message
+    assert "Material #missing not found" in message
