@@ -11,10 +11,10 @@ from slicer_client.bridge_state import BridgeSpec, BridgeState, StateFormatError
 from slicer_client.client import Client, connect
 from slicer_client.errors import (BridgeClientError, CommandRefusedError, CommandTimeoutError,
                                   ConnectionClosedError, DaemonUnreachableError,
-                                  ParameterRejectedError)
+                                  NotTheDaemonError, ParameterRejectedError)
 from slicer_client.matrices import MatrixError, as_numpy, to_vtk
 
 __all__ = ["BridgeClientError", "BridgeSpec", "BridgeState", "Client",
            "CommandRefusedError", "CommandTimeoutError", "ConnectionClosedError",
-           "DaemonUnreachableError", "MatrixError", "ParameterRejectedError",
+           "DaemonUnreachableError", "MatrixError", "NotTheDaemonError", "ParameterRejectedError",
            "StateFormatError", "as_numpy", "connect", "to_vtk"]

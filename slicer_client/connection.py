@@ -23,6 +23,7 @@ from protocol.messages import Command, Message, RtsCommand, Status
 __all__ = [
     "BridgeClientError",
     "DaemonUnreachableError",
+    "NotTheDaemonError",
     "ConnectionClosedError",
     "CommandRefusedError",
     "CommandTimeoutError",
@@ -43,6 +44,36 @@ class DaemonUnreachableError(BridgeClientError, ConnectionError):
                          f"{reason}. Is it running (`slicer-ros2-bridge run`, or `make demo`)?")
         self.host = host
         self.port = port
+
+
+class NotTheDaemonError(DaemonUnreachableError):
+    """Something else answers at host:port: another OpenIGTLink server (3D Slicer's own
+    OpenIGTLinkIF server listens on 18944 too) or no OpenIGTLink at all (a web server)."""
+
+    def __init__(self, host: str, port: int, peer: str) -> None:
+        BridgeClientError.__init__(
+            self, f"{host}:{port} is not the slicer-ros2-bridge daemon: {peer}. Start the "
+            f"daemon on a free port (`slicer-ros2-bridge run --port N`) and connect to that "
+            f"port.")
+        self.host = host
+        self.port = port
+        self.peer = peer
+
+
+# 3D Slicer's OpenIGTLinkIF announces header v2 on connect with a STATUS carrying this key
+# (SlicerOpenIGTLink, vtkMRMLIGTLConnectorNode::ProcessIOConnectorEvents); the daemon never
+# sends it, so it tells a Slicer server from the daemon at once.
+_SLICER_ANNOUNCEMENT_KEY = "dummy"
+
+
+def _describe_foreign_bytes(first: bytes) -> str:
+    if first.startswith((b"HTTP/", b"<!", b"<html", b"<HTML")):
+        kind = "an HTTP server answers there"
+    elif first.startswith(b"SSH-"):
+        kind = "an SSH server answers there"
+    else:
+        kind = "the peer does not speak OpenIGTLink"
+    return f"{kind} (its first bytes: {first[:24]!r})"
 
 
 class ConnectionClosedError(BridgeClientError, ConnectionError):
@@ -68,9 +99,9 @@ class CommandRefusedError(BridgeClientError):
 
 
 class CommandTimeoutError(BridgeClientError, TimeoutError):
-    def __init__(self, op: str, timeout: float) -> None:
-        super().__init__(f"no reply to {op} within {timeout} s (is the daemon busy or "
-                         f"stalled? its log says why)")
+    def __init__(self, op: str, timeout: float, why: str = "") -> None:
+        super().__init__(f"no reply to {op} within {timeout} s: " +
+                         (why or "is the daemon busy or stalled? Its log says why."))
         self.op = op
         self.timeout = timeout
 
@@ -110,6 +141,8 @@ class Connection:
         self._latest: Dict[str, Message] = {}
         self._arrived = threading.Condition(self._state_lock)
         self._closed = False
+        self._from_daemon = False  # a reply to a command came: the peer is the daemon
+        self._foreign: Optional[NotTheDaemonError] = None
         self.close_reason: Optional[BaseException] = None
         self.errors: List[str] = []  # bad messages and STATUS errors the daemon sent
         # Announce header v2 at once (as 3D Slicer does): replies then carry metadata.
@@ -126,6 +159,8 @@ class Connection:
         data = encode(message, header_version=2)
         with self._send_lock:
             if self._closed:
+                if self._foreign is not None:
+                    raise self._foreign
                 raise ConnectionClosedError("the connection to the daemon is closed")
             try:
                 self._sock.sendall(data)
@@ -148,11 +183,19 @@ class Connection:
                                            text=c.dumps(args)),
                               metadata={"client": "slicer_client"}))
             if not pending.event.wait(timeout):
+                if not self._from_daemon:
+                    raise CommandTimeoutError(
+                        op, timeout, f"{self.host}:{self.port} accepted the connection but "
+                        f"has answered no command: another OpenIGTLink server there (3D "
+                        f"Slicer's own listens on 18944 too), or a daemon that is stalled "
+                        f"(its log says why)")
                 raise CommandTimeoutError(op, timeout)
         finally:
             with self._state_lock:
                 self._pending.pop(command_id, None)
         reply = pending.reply
+        if reply is None and self._foreign is not None:
+            raise self._foreign
         if reply is None:
             raise ConnectionClosedError(f"the connection closed before {op} was answered"
                                         f" ({self.close_reason})")
@@ -189,11 +232,15 @@ class Connection:
     def _read_loop(self) -> None:
         decoder = Decoder()
         reason: Optional[BaseException] = None
+        first = b""  # the peer's first bytes, to name what it is if it is not OpenIGTLink
+        received = False
         try:
             while True:
                 data = self._sock.recv(1 << 20)
                 if not data:
                     break
+                if len(first) < 24:
+                    first += data[:24 - len(first)]
                 decoder.feed(data)
                 while True:
                     try:
@@ -203,9 +250,17 @@ class Connection:
                         continue
                     if message is None:
                         break
+                    received = True
                     self._dispatch(message)
+                if self._foreign is not None:
+                    reason = self._foreign
+                    break
         except FramingError as error:
             reason = error
+            if not received:
+                self._foreign = NotTheDaemonError(self.host, self.port,
+                                                  _describe_foreign_bytes(first))
+                reason = self._foreign
         except OSError as error:
             if not self._closed:
                 reason = error
@@ -214,12 +269,19 @@ class Connection:
 
     def _dispatch(self, message: Message) -> None:
         body = message.body
+        if (isinstance(body, Status) and not self._from_daemon
+                and _SLICER_ANNOUNCEMENT_KEY in message.metadata):
+            self._foreign = NotTheDaemonError(
+                self.host, self.port, "3D Slicer's own OpenIGTLinkIF server answers there (it "
+                "announced itself as Slicer does on connect)")
+            return
         if isinstance(body, RtsCommand):
             with self._state_lock:
                 pending = self._pending.get(body.command_id)
             if pending is not None:
                 try:
                     pending.reply = c.Reply.from_json(body.text)
+                    self._from_daemon = True
                 except c.CommandError as error:
                     pending.reply = c.Reply.failure(body.name, c.ErrorCode.INTERNAL,
                                                     f"unreadable reply: {error}")

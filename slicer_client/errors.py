@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from slicer_client.connection import (BridgeClientError, CommandRefusedError,
                                       CommandTimeoutError, ConnectionClosedError,
-                                      DaemonUnreachableError)
+                                      DaemonUnreachableError, NotTheDaemonError)
 
 __all__ = ["BridgeClientError", "CommandRefusedError", "CommandTimeoutError",
-           "ConnectionClosedError", "DaemonUnreachableError", "ParameterRejectedError"]
+           "ConnectionClosedError", "DaemonUnreachableError", "NotTheDaemonError",
+           "ParameterRejectedError"]
 
 
 class ParameterRejectedError(BridgeClientError):

@@ -20,7 +20,7 @@ from typing import Any, Callable, Deque, Dict, Mapping, Optional
 
 from protocol.messages import Message
 from slicer_client.connection import (DEFAULT_HOST, DEFAULT_PORT, ConnectionClosedError,
-                                      Connection, DaemonUnreachableError)
+                                      Connection, DaemonUnreachableError, NotTheDaemonError)
 
 try:  # Protocol is in typing from 3.8; keep the import local to typing users
     from typing import Protocol
@@ -125,6 +125,9 @@ class ReconnectingTransport:
 
     def _lost(self, generation: int, reason: Optional[BaseException]) -> None:
         # Reader thread of the lost connection. Old generations and close() are ignored.
+        if isinstance(reason, NotTheDaemonError) and not self._ready.is_set():
+            self.last_loss = str(reason)
+            return  # the first connection reached something else: connect() raises that
         with self._lock:
             if self._stop.is_set() or generation != self._generation:
                 return
