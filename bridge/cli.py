@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import Awaitable, Callable
 
+from bridge import graph_inspect
 from bridge.config import DEFAULT_HOST, DEFAULT_PORT, ConfigError, DaemonConfig
 from bridge.config import ConfigFile, build_security, load_config_file
 from bridge.security import DEFAULT_MAX_BRIDGES_PER_CLIENT, DEFAULT_MAX_CLIENTS
@@ -100,6 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
                                description="Run the daemon with the built-in demo robot "
                                            "moving (state publisher and joint motion included).")
     _add_daemon_options(demo)
+    graph_inspect.add_parsers(commands)
     # Parsed by its own module (it runs on its own too); listed here for --help.
     commands.add_parser("state-publisher", add_help=False,
                         help="a robot state publisher for any URDF (robot_description, /tf "
@@ -174,6 +176,8 @@ def main(argv: list[str] | None = None) -> int:
         from bridge.daemon import run_daemon
 
         return run_with_config(args, run_daemon)
+    if args.command in ("topics", "services", "echo"):
+        return graph_inspect.run(args)
     parser.error(f"unknown command {args.command}")
     return 2
 

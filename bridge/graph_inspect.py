@@ -1,0 +1,153 @@
+"""`slicer-ros2-bridge topics | services | echo`: look at the ROS graph from a shell.
+
+ROS 2 from PyPI wheels has no `ros2` command, so the checks SlicerROS2's documentation does
+with `ros2 topic list -t` and `ros2 topic echo` are offered here, printing the same way
+(one `/name [type]` line per topic; each message as YAML followed by `---`). They run a
+short-lived node of their own, not the daemon, and see what the daemon would see.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+from typing import TYPE_CHECKING, Any, Callable, Optional, TextIO
+
+if TYPE_CHECKING:  # rclpy is imported only when a subcommand runs: --help stays quick
+    from bridge.ros_node import RosNode
+
+# Discovery is not instant: how long the lists wait for the graph to fill by default.
+DEFAULT_DISCOVERY_S = 2.0
+
+
+class GraphInspectError(Exception):
+    """What the user asked for cannot be shown; the text says why and what to do."""
+
+
+def add_parsers(commands: Any) -> None:
+    """Add the `topics`, `services` and `echo` subcommands to the CLI's subparsers."""
+    for name, what in (("topics", "topic"), ("services", "service")):
+        listing = commands.add_parser(
+            name, help=f"list the ROS graph's {what}s with their types (as `ros2 {what} list "
+                       f"-t`)", description=f"List the {what}s the ROS graph has, with types.")
+        listing.add_argument("--wait", type=float, default=DEFAULT_DISCOVERY_S, metavar="S",
+                             help="seconds to wait for discovery (default %(default)s)")
+    echo = commands.add_parser(
+        "echo", help="print a topic's messages as YAML (as `ros2 topic echo`)",
+        description="Print the messages of a topic as YAML, each followed by `---`.")
+    echo.add_argument("topic", help="the topic, e.g. /tool_pose")
+    echo.add_argument("type", nargs="?",
+                      help="its type, e.g. geometry_msgs/msg/PoseStamped (default: the type "
+                           "the graph knows)")
+    echo.add_argument("--once", action="store_true", help="print one message and exit")
+    echo.add_argument("--count", type=int, metavar="N", help="print N messages and exit")
+    echo.add_argument("--timeout", type=float, metavar="S",
+                      help="give up after S seconds without a message (default: wait)")
+    echo.add_argument("--wait", type=float, default=DEFAULT_DISCOVERY_S, metavar="S",
+                      help="seconds to wait for the topic to appear (default %(default)s)")
+
+
+def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
+    """Run one of the subcommands; returns the exit code."""
+    try:
+        with _Inspector() as ros:
+            if args.command == "topics":
+                return _list(out, ros, ros.node.get_topic_names_and_types, args.wait)
+            if args.command == "services":
+                return _list(out, ros, ros.node.get_service_names_and_types, args.wait)
+            count = 1 if args.once else args.count
+            return _echo(out, ros, args.topic, args.type, count, args.timeout, args.wait)
+    except GraphInspectError as error:
+        print(f"slicer-ros2-bridge {args.command}: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 0
+
+
+class _Inspector:
+    """A node of its own, spinning in its thread, stopped on exit."""
+
+    def __enter__(self) -> RosNode:
+        from bridge.ros_node import RosNode, RosOptions
+
+        name = f"slicer_bridge_inspect_{time.time_ns() % 10**9}"
+        self._ros = RosNode(RosOptions(node_name=name))
+        self._ros.start()
+        return self._ros
+
+    def __exit__(self, *exc: object) -> None:
+        self._ros.stop()
+
+
+def _list(out: TextIO, ros: RosNode, names_and_types: Callable[[], list[tuple[str, list[str]]]],
+          wait: float) -> int:
+    # Discovery fills the graph over the first moments: look once the wait is over.
+    time.sleep(max(wait, 0.0))
+    seen = names_and_types()
+    own = ros.fully_qualified_name
+    for name, types in sorted(seen):
+        if name.startswith(own + "/"):  # the inspector's own parameter services
+            continue
+        print(f"{name} [{', '.join(types)}]", file=out)
+    return 0
+
+
+def _echo(out: TextIO, ros: RosNode, topic: str, type_name: Optional[str],
+          count: Optional[int], timeout: Optional[float], wait: float) -> int:
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from bridge.codecs import CodecError, message_to_yaml
+    from bridge.codecs.registry import message_class
+
+    try:
+        full = ros.resolve_topic(topic)
+    except Exception as error:  # rclpy raises several name-validation exceptions
+        raise GraphInspectError(f"expected a ROS topic name, got {topic!r} ({error})") from None
+    ros_type = type_name or _graph_type(ros, full, wait)
+    try:
+        cls = message_class(ros_type)
+    except CodecError as error:
+        raise GraphInspectError(f"expected a message type installed here, got {ros_type!r} "
+                                f"({error})") from None
+    printed = 0
+    done = threading.Event()
+    lock = threading.Lock()
+
+    def on_message(msg: Any) -> None:  # executor thread
+        nonlocal printed
+        with lock:
+            if done.is_set():
+                return
+            out.write(message_to_yaml(msg))
+            out.write("---\n")
+            out.flush()
+            printed += 1
+            if count is not None and printed >= count:
+                done.set()
+
+    # As `ros2 topic echo`: match whatever the publishers offer (latched ones included).
+    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_AVAILABLE,
+                     durability=DurabilityPolicy.BEST_AVAILABLE)
+    ros.node.create_subscription(cls, full, on_message, qos)
+    if not done.wait(timeout):
+        if timeout is not None and printed == 0:
+            raise GraphInspectError(f"no message on {full} within {timeout:g} s")
+    return 0
+
+
+def _graph_type(ros: RosNode, topic: str, wait: float) -> str:
+    deadline = time.monotonic() + max(wait, 0.0)
+    while True:
+        types = ros.topic_types(topic)
+        if types:
+            if len(types) > 1:
+                raise GraphInspectError(f"{topic} has several types ({', '.join(types)}): "
+                                        f"name one, e.g. `echo {topic} {types[0]}`")
+            return types[0]
+        if time.monotonic() >= deadline:
+            raise GraphInspectError(
+                f"expected a topic the ROS graph knows, got {topic} (nothing seen in "
+                f"{wait:g} s: is its publisher running, with the same ROS_DOMAIN_ID? Name "
+                f"the type to wait for it anyway: `echo {topic} pkg/msg/Type`)")
+        time.sleep(0.05)
