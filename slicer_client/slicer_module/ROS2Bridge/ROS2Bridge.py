@@ -4,7 +4,9 @@ Install: add this folder (slicer_client/slicer_module/ROS2Bridge) to Edit > Appl
 Settings > Modules > Additional module paths and restart Slicer (5.4 or newer: the
 parameter node wrapper used here first shipped in 5.4; it needs the SlicerOpenIGTLink
 extension). The repository root is put on sys.path from this file's location, so
-`protocol` and `slicer_client` are found in a clone with nothing else to install.
+`protocol` and `slicer_client` are found in a clone with nothing else to install. Built as
+the SlicerROS2Bridge extension (the repository's CMakeLists.txt), both packages are
+installed beside this file instead.
 
 Transport: Slicer's own OpenIGTLinkIF connector node (client mode). Commands go through
 `vtkSlicerOpenIGTLinkCommand`; what arrives becomes MRML nodes made by the connector; this
@@ -37,8 +39,11 @@ import os
 import sys
 import time
 
+# In a clone (module added as an additional module path) the packages are three folders up;
+# installed as an extension they sit beside this file, on Slicer's path already.
 _REPO_ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
-if _REPO_ROOT not in sys.path:
+if os.path.isfile(os.path.join(_REPO_ROOT, "slicer_client", "__init__.py")) \
+        and _REPO_ROOT not in sys.path:
     sys.path.insert(0, _REPO_ROOT)
 
 from typing import Annotated  # noqa: E402  (Python 3.9+, as Slicer 5.4+ ships)
