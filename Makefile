@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo run test bench fuzz lint clean
+.PHONY: setup demo run test bench fuzz lint clean wheel client-wheel
 
 setup:
 	@$(PYTHON) tools/setup_env.py
@@ -31,9 +31,17 @@ fuzz: setup
 	cd .cache/fuzz && ../../$(BIN)/python ../../bench/fuzz_decoder.py \
 		-max_total_time=$(FUZZ_SECONDS) corpus
 
+# The daemon's wheel (protocol, bridge, slicer_client; pinned ROS 2 wheels as dependencies)
+# and the client's own (slicer_client and protocol, numpy only, Python 3.9+), into dist/.
+wheel: setup
+	$(BIN)/python -m pip wheel --no-deps --wheel-dir dist .
+
+client-wheel: setup
+	$(BIN)/python tools/build_client_wheel.py --out dist
+
 lint: setup
 	$(BIN)/python -m ruff check protocol bridge slicer_client tests bench tools
 	$(BIN)/python -m mypy
 
 clean:
-	rm -rf $(VENV) build .cache .pytest_cache .hypothesis
+	rm -rf $(VENV) build dist .cache .pytest_cache .hypothesis

@@ -12,6 +12,8 @@ from typing import Awaitable, Callable
 from bridge import graph_inspect
 from bridge.config import DEFAULT_HOST, DEFAULT_PORT, ConfigError, DaemonConfig
 from bridge.config import ConfigFile, build_security, load_config_file
+from bridge.interfaces import (InterfaceBuildError, build_into_this_environment,
+                               missing_runtime_line)
 from bridge.security import DEFAULT_MAX_BRIDGES_PER_CLIENT, DEFAULT_MAX_CLIENTS
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
@@ -102,6 +104,11 @@ def build_parser() -> argparse.ArgumentParser:
                                            "moving (state publisher and joint motion included).")
     _add_daemon_options(demo)
     graph_inspect.add_parsers(commands)
+    commands.add_parser("build-interfaces",
+                        help="build the ROS interfaces PyPI lacks (tf2_msgs) into this "
+                             "environment",
+                        description="Build tf2_msgs into this Python environment with CMake "
+                                    "(needs the 'interfaces' extra, a C/C++ compiler, make).")
     # Parsed by its own module (it runs on its own too); listed here for --help.
     commands.add_parser("state-publisher", add_help=False,
                         help="a robot state publisher for any URDF (robot_description, /tf "
@@ -157,9 +164,27 @@ def run_with_config(args: argparse.Namespace,
     return 0
 
 
+def _build_interfaces() -> int:
+    import tempfile
+
+    try:
+        with tempfile.TemporaryDirectory(prefix="slicer-ros2-bridge-interfaces-") as scratch:
+            built = build_into_this_environment(Path(scratch))
+    except InterfaceBuildError as error:
+        print(f"slicer-ros2-bridge build-interfaces: {error}", file=sys.stderr)
+        return 1
+    print(f"built into {sys.prefix}: {', '.join(built)}" if built
+          else "nothing to build: every interface package is importable already")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["state-publisher"]:
+        lacking = missing_runtime_line()
+        if lacking is not None:
+            print(f"slicer-ros2-bridge: {lacking}", file=sys.stderr)
+            return 2
         from bridge.robots import state_publisher
 
         return state_publisher.main(argv[1:])
@@ -167,6 +192,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()
+        return 2
+    if args.command == "build-interfaces":
+        return _build_interfaces()
+    # A wheel installed without ROS or tf2_msgs says so in one line, not with a traceback.
+    lacking = missing_runtime_line()
+    if lacking is not None:
+        print(f"slicer-ros2-bridge: {lacking}", file=sys.stderr)
         return 2
     if args.command == "demo":  # the daemon plus the demo robot's processes
         from bridge.robots.demo_runner import run_demo

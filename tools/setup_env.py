@@ -6,8 +6,8 @@ What it does, printing each step:
      cmake wheel from PyPI in its place);
   2. creates `.venv` and installs the project with its pinned dependencies (ROS 2 Jazzy from
      PyPI wheels, test tools, interface build tools);
-  3. builds the `tf2_msgs` interface package (ros_interfaces/tf2_msgs) into the venv, because
-     tf2_msgs has no PyPI wheel.
+  3. builds the `tf2_msgs` interface package (bridge/interfaces/tf2_msgs) into the venv,
+     because tf2_msgs has no PyPI wheel.
 
 It needs no root and writes nothing outside the repository (pip's cache and temporary files
 go to `.cache/`). A second run that finds a stamp matching the inputs returns in a moment.
@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import re
 import shutil
 import subprocess
 import sys
@@ -27,12 +26,16 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+# How to build the interfaces is the package's own knowledge (the CLI's build-interfaces
+# uses it too); it imports nothing but the standard library.
+from bridge.interfaces import (INTERFACES_DIR, MIN_CMAKE, build_steps,  # noqa: E402
+                               cmake_version, interface_packages)
+
 VENV = REPO / ".venv"
 CACHE = REPO / ".cache"
 BUILD = REPO / "build"
-INTERFACES = REPO / "ros_interfaces"
 STAMP = VENV / ".slicer-ros2-bridge-setup"
-MIN_CMAKE = (3, 20)
 CMAKE_WHEEL = "cmake==3.31.6"
 # The ROS wheels are built for these CPython versions only.
 SUPPORTED_PYTHONS = ((3, 10), (3, 11), (3, 12), (3, 13))
@@ -57,7 +60,7 @@ def inputs_digest() -> str:
     for name in STAMP_INPUTS:
         digest.update(name.encode())
         digest.update((REPO / name).read_bytes())
-    for path in sorted(INTERFACES.rglob("*")):
+    for path in sorted(INTERFACES_DIR.rglob("*")):
         if path.is_file():
             digest.update(str(path.relative_to(REPO)).encode())
             digest.update(path.read_bytes())
@@ -122,16 +125,6 @@ def check_build_tools() -> None:
                          f"apt-get install python3-dev")
 
 
-def cmake_version(cmake: str) -> tuple[int, ...] | None:
-    try:
-        out = subprocess.run([cmake, "--version"], capture_output=True, text=True,
-                             check=True).stdout
-    except (OSError, subprocess.CalledProcessError):
-        return None
-    found = re.search(r"(\d+)\.(\d+)", out)
-    return tuple(int(part) for part in found.groups()) if found else None
-
-
 def ensure_cmake() -> str:
     """A cmake >= 3.20: the system's, or else the cmake wheel installed into the venv."""
     venv_cmake = VENV / "bin" / "cmake"
@@ -162,16 +155,13 @@ def install_project() -> None:
 
 
 def build_interfaces(cmake: str) -> None:
-    for package in sorted(p for p in INTERFACES.iterdir() if (p / "package.xml").exists()):
+    for package in interface_packages():
         build_dir = BUILD / "ros_interfaces" / package.name
         build_dir.mkdir(parents=True, exist_ok=True)
         say(f"building interface package {package.name} into the venv (cmake, ~10 s)")
-        py = str(venv_python())
-        run([cmake, str(package), f"-DCMAKE_INSTALL_PREFIX={VENV}", f"-DCMAKE_PREFIX_PATH={VENV}",
-             f"-DPython3_EXECUTABLE={py}", "-DBUILD_TESTING=OFF"],
-            cwd=build_dir, log=build_dir / "configure.log")
-        jobs = str(max(1, min(4, os.cpu_count() or 1)))
-        run(["make", f"-j{jobs}", "install"], cwd=build_dir, log=build_dir / "build.log")
+        for step in build_steps(package, build_dir=build_dir, prefix=VENV,
+                                python=str(venv_python()), cmake=cmake):
+            run(step.argv, cwd=step.cwd, log=step.log)
 
 
 def verify() -> None:
