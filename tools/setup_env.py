@@ -156,8 +156,10 @@ def install_project() -> None:
 
 def build_interfaces(cmake: str) -> None:
     for package in interface_packages():
-        build_dir = BUILD / "ros_interfaces" / package.name
-        build_dir.mkdir(parents=True, exist_ok=True)
+        build_dir = BUILD / "interfaces" / package.name
+        # From scratch: a CMake cache left by an older layout would refuse the source.
+        shutil.rmtree(build_dir, ignore_errors=True)
+        build_dir.mkdir(parents=True)
         say(f"building interface package {package.name} into the venv (cmake, ~10 s)")
         for step in build_steps(package, build_dir=build_dir, prefix=VENV,
                                 python=str(venv_python()), cmake=cmake):
