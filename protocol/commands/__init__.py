@@ -29,28 +29,28 @@ from __future__ import annotations
 
 from protocol.commands.errors import *  # noqa: F403
 from protocol.commands.errors import __all__ as _errors
-from protocol.commands.graph import *  # noqa: F403
-from protocol.commands.graph import __all__ as _graph
+from protocol.commands.wire import *  # noqa: F403
+from protocol.commands.wire import __all__ as _wire
+from protocol.commands.values import *  # noqa: F403
+from protocol.commands.values import __all__ as _values
+from protocol.commands.types import *  # noqa: F403
+from protocol.commands.types import __all__ as _types
 from protocol.commands.op import *  # noqa: F403
 from protocol.commands.op import __all__ as _op
+from protocol.commands.graph import *  # noqa: F403
+from protocol.commands.graph import __all__ as _graph
+from protocol.commands.topics import *  # noqa: F403
+from protocol.commands.topics import __all__ as _topics
 from protocol.commands.parameters import *  # noqa: F403
 from protocol.commands.parameters import __all__ as _parameters
-from protocol.commands.replies import *  # noqa: F403
-from protocol.commands.replies import __all__ as _replies
+from protocol.commands.tf import *  # noqa: F403
+from protocol.commands.tf import __all__ as _tf
 from protocol.commands.robots import *  # noqa: F403
 from protocol.commands.robots import __all__ as _robots
 from protocol.commands.services import *  # noqa: F403
 from protocol.commands.services import __all__ as _services
-from protocol.commands.tf import *  # noqa: F403
-from protocol.commands.tf import __all__ as _tf
-from protocol.commands.topics import *  # noqa: F403
-from protocol.commands.topics import __all__ as _topics
-from protocol.commands.types import *  # noqa: F403
-from protocol.commands.types import __all__ as _types
-from protocol.commands.values import *  # noqa: F403
-from protocol.commands.values import __all__ as _values
-from protocol.commands.wire import *  # noqa: F403
-from protocol.commands.wire import __all__ as _wire
+from protocol.commands.replies import *  # noqa: F403
+from protocol.commands.replies import __all__ as _replies
 
 __all__ = [*_errors, *_wire, *_values, *_types, *_op, *_graph, *_topics, *_parameters,
            *_tf, *_robots, *_services, *_replies]

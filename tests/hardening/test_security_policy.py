@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from bridge.config import ConfigError, build_security, load_config_file
-from bridge.security import (FRAME_FIELDS, TARGETS, WRITE_OPS, BridgeQuota, NameRules,
-                             SecurityPolicy, is_loopback_host, strip_frame)
+from bridge.security import (OPERATOR, BridgeOwners, BridgeQuota, NameRules, SecurityPolicy,
+                             is_loopback_host, strip_frame)
 from protocol import commands as c
 from protocol.commands import ErrorCode, ForbiddenError, LimitReachedError
 
@@ -48,7 +48,8 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
         "call_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
         "advertise_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
     }
-    assert set(writes) == WRITE_OPS
+    # The declarations say what writes: this list is the expectation they are held to.
+    assert set(writes) == {op for op, cls in c.REQUEST_TYPES.items() if cls.writes}
     for op, args in writes.items():
         with pytest.raises(ForbiddenError) as refused:
             check(policy, op, args)
@@ -104,11 +105,50 @@ def test_parameters_are_judged_as_node_dot_name() -> None:
     assert refused.value.field == "names"
 
 
-def test_every_judged_field_exists_on_its_request_class() -> None:
-    for op, target in TARGETS.items():
-        names = {f for f in c.REQUEST_TYPES[op].__dataclass_fields__}
-        assert target.field in names, op
-        assert target.node_field is None or target.node_field in names, op
+def test_read_only_clients_remove_nothing() -> None:
+    policy = SecurityPolicy(read_only=True)
+    removals = [op for op, cls in c.REQUEST_TYPES.items() if cls.removes is not None]
+    assert len(removals) == len(c.bridge_kinds())
+    for op in removals:
+        identity = c.bridge_kinds()[c.REQUEST_TYPES[op].removes].bridge.identity
+        args = {name: {"topic": "/t", "service": "/s", "node": "/n", "parent": "a",
+                       "child": "b", "name": "r"}[name] for name in identity}
+        with pytest.raises(ForbiddenError) as refused:
+            check(policy, op, args)
+        assert refused.value.field == "op" and "remove nothing" in str(refused.value)
+
+
+def test_no_client_removes_the_operators_bridges() -> None:
+    owners, client, other = BridgeOwners(), object(), object()
+    owners.created(("subscriber", ("/a",)), OPERATOR)
+    owners.created(("subscriber", ("/b",)), client)
+    owners.created(("subscriber", ("/a",)), client)  # asked again: still the operator's
+    with pytest.raises(ForbiddenError) as refused:
+        owners.check_removal(("subscriber", ("/a",)), "topic", other)
+    assert refused.value.field == "topic" and "operator" in str(refused.value)
+    owners.check_removal(("subscriber", ("/b",)), "topic", other)  # a client's: any client
+    owners.check_removal(("subscriber", ("/a",)), "topic", None)  # the operator itself
+    owners.forget(client, {"served_service"})
+    assert owners.owner(("subscriber", ("/b",))) is client  # bridges outlive their client
+
+
+def test_a_request_class_the_schema_does_not_declare_is_refused() -> None:
+    class Fake:  # looks like an op, is not one of the schema's
+        op = "create_subscriber"
+        writes = False
+        removes = None
+        to_client = False
+
+        def resources(self) -> tuple:
+            return ()
+
+    with pytest.raises(ForbiddenError) as refused:
+        SecurityPolicy().check_request(Fake(), resolve, "/n")  # type: ignore[arg-type]
+    assert refused.value.field == "op" and refused.value.got == "Fake"
+    # ... and the daemon's own messages to clients are not ops a client may send
+    with pytest.raises(ForbiddenError):
+        check(SecurityPolicy(), "service_request", {"service": "/s", "type": "a/B",
+                                                    "request": {}})
 
 
 @pytest.mark.parametrize("address,admitted", [
@@ -135,16 +175,17 @@ def test_quota_counts_live_bridges_per_client() -> None:
     a, b = object(), object()
     for _ in range(2):
         reserved = quota.reserve(a, "create_subscriber")
-        quota.settle(a, "create_subscriber", reserved, {"existed": False})
+        quota.settle(a, reserved, {"existed": False})
     with pytest.raises(LimitReachedError) as refused:
         quota.reserve(a, "create_tf_lookup")
     assert refused.value.error_code == ErrorCode.LIMIT_REACHED
     assert "at most 2 bridges per client" in str(refused.value)
     assert "--max-bridges-per-client" in str(refused.value)
-    quota.settle(b, "create_robot", quota.reserve(b, "create_robot"), None)  # failed: free
-    quota.settle(b, "create_robot", quota.reserve(b, "create_robot"), {"existed": True})
+    quota.settle(b, quota.reserve(b, "create_robot"), None)  # failed: free
+    quota.settle(b, quota.reserve(b, "create_robot"), {"existed": True})
     assert quota.count(b) == 0
-    quota.settle(a, "remove_subscriber", quota.reserve(a, "remove_subscriber"), {})
+    assert not quota.reserve(a, "remove_subscriber")  # a removal takes no slot...
+    quota.release(a)  # ... and frees one of the bridge's maker, whoever removed it
     assert quota.count(a) == 1
     assert not quota.reserve(a, "hello")  # not a creation: nothing to count
     quota.forget(a)
@@ -194,7 +235,9 @@ FRAME_OPS = {
 
 
 def test_every_tf_op_judges_both_frames_deny_wins_and_allow_lists() -> None:
-    assert set(FRAME_OPS) == set(FRAME_FIELDS)
+    assert set(FRAME_OPS) == {op for op, cls in c.REQUEST_TYPES.items()
+                              if "parent" in getattr(cls, "__dataclass_fields__", {})
+                              and cls.removes is None}
     policy = SecurityPolicy(frames=NameRules(allow=("PSM1/*", "world"),
                                              deny=("PSM1/secret*",)))
     for op, extra in FRAME_OPS.items():
