@@ -95,20 +95,13 @@ def _request_names(request: Mapping[str, Any], names_field: str) -> tuple[str, .
     return tuple(value)
 
 
-def _message_type(text: Optional[str]) -> Optional[str]:
+def _resolved(resolve: Callable[[str], str], text: Optional[str]) -> Optional[str]:
+    """A type as given -> ``pkg/msg|srv/Type``, or None (the capability says why it cannot
+    use a bad one)."""
     if text is None:
         return None
     try:
-        return resolve_message_type(text)
-    except OutOfRangeError:
-        return None  # the capability says why it cannot use the type
-
-
-def _service_type(text: Optional[str]) -> Optional[str]:
-    if text is None:
-        return None
-    try:
-        return resolve_service_type(text)
+        return resolve(text)
     except OutOfRangeError:
         return None
 
@@ -246,7 +239,7 @@ class SecurityPolicy:
         if self.topics.active and not self.topics.permits(topic):
             raise ForbiddenError(use.field, "a topic this daemon exposes: "
                                  + self.topics.why_not(topic), topic)
-        ros_type = _message_type(use.type)
+        ros_type = _resolved(resolve_message_type, use.type)
         # A tf topic carries frames: only a TFMessage can be judged transform by transform
         # (the bridge's MessageGuard does it); another type on /tf cannot be judged.
         if self.frames.active and topic in _TF_TOPICS and use.type is not None \
@@ -258,7 +251,8 @@ class SecurityPolicy:
         if self.services.active and not self.services.permits(service):
             raise ForbiddenError(use.field, "a service this daemon exposes: "
                                  + self.services.why_not(service), service)
-        found = parameter_service(service, _service_type(use.type))
+        ros_type = _resolved(resolve_service_type, use.type)
+        found = parameter_service(service, ros_type)
         if found is None or not self.parameters.active:
             return
         node, suffix = found
@@ -268,7 +262,7 @@ class SecurityPolicy:
             return
         if names_field is None:
             return  # listing: the reply shows only the names the globs allow
-        if _service_type(use.type) != kind:  # the names cannot be read from the request
+        if ros_type != kind:  # the request's parameter names cannot be read by its type
             self._judge_parameters(node, (), use.field)
             return
         self._judge_parameters(node, _request_names(use.request or {}, names_field),

@@ -340,3 +340,105 @@ def test_frame_options_merge_and_are_checked(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as error:
         build_security(load_config_file(path).security, {})
     assert "deny_frames: expected a list of non-empty strings" in str(error.value)
+
+
+# ---------------------------------------------------------------------------- other routes
+
+
+def call(service: str, kind: str, request: dict) -> dict:
+    return {"service": service, "type": f"rcl_interfaces/srv/{kind}", "request": request}
+
+
+def test_any_nodes_parameter_services_are_judged_by_the_parameter_globs() -> None:
+    policy = SecurityPolicy(parameters=NameRules(allow=("/arm.speed",)))
+    check(policy, "call_service", call("/arm/get_parameters", "GetParameters",
+                                       {"names": ["speed"]}))
+    for service, kind, request, got in (
+            ("/arm/get_parameters", "GetParameters", {"names": ["speed", "limit"]},
+             "/arm.limit"),
+            ("arm/set_parameters", "SetParameters",  # relative: judged resolved
+             {"parameters": [{"name": "limit", "value": {"type": 2}}]}, "/lab/arm.limit"),
+            ("/arm/set_parameters_atomically", "SetParametersAtomically",
+             {"parameters": [{"name": "limit"}]}, "/arm.limit"),
+            ("/arm/describe_parameters", "DescribeParameters", {"names": ["limit"]},
+             "/arm.limit"),
+            ("/arm/get_parameter_types", "GetParameterTypes", {"names": ["limit"]},
+             "/arm.limit"),
+            ("/arm/get_parameters", "GetParameters", {}, "all parameters of /arm"),
+            # a parameter type under another name is still a node's parameter service
+            ("/arm/renamed", "GetParameters", {"names": ["limit"]}, "/arm.limit")):
+        with pytest.raises(ForbiddenError) as refused:
+            check(policy, "call_service", call(service, kind, request))
+        assert refused.value.got == got, service
+    # a parameter service name with another type: its names cannot be read, so refused
+    with pytest.raises(ForbiddenError):
+        check(policy, "call_service", {"service": "/arm/set_parameters",
+                                       "type": "std_srvs/srv/Trigger"})
+    # listing is allowed; its response shows only the allowed names
+    check(policy, "call_service", call("/arm/list_parameters", "ListParameters", {}))
+    response = {"result": {"names": ["speed", "limit"], "prefixes": ["lim"]}}
+    assert policy.filter_service_response("/arm/list_parameters",
+                                          "rcl_interfaces/srv/ListParameters", response) == \
+        {"result": {"names": ["speed"], "prefixes": []}}
+    with pytest.raises(ForbiddenError):  # serving a node's parameters: all of them
+        check(policy, "advertise_service", {"service": "/ghost/get_parameters",
+                                            "type": "rcl_interfaces/srv/GetParameters"})
+    # without parameter globs nothing changes
+    check(SecurityPolicy(), "call_service", call("/arm/set_parameters", "SetParameters", {}))
+
+
+class _Stamped:
+    def __init__(self, parent: str, child: str) -> None:
+        self.header = type("H", (), {"frame_id": parent})()
+        self.child_frame_id = child
+
+
+class _TfMessage:
+    def __init__(self, transforms: list) -> None:
+        self.transforms = transforms
+
+
+def test_tf_topics_are_judged_transform_by_transform() -> None:
+    policy = SecurityPolicy(frames=NameRules(allow=("PSM1/*", "world")))
+    guard = policy.message_guard("/robot/tf", "tf2_msgs/msg/TFMessage")  # by type
+    assert guard is not None and policy.message_guard("/tf", "any") is not None  # by name
+    assert policy.message_guard("/x", "std_msgs/msg/String") is None
+    assert SecurityPolicy().message_guard("/tf", "tf2_msgs/msg/TFMessage") is None
+    allowed, denied = _Stamped("world", "PSM1/tool"), _Stamped("/world", "PSM2/tool")
+    kept = guard.filter(_TfMessage([allowed, denied]))
+    assert kept is not None and kept.transforms == [allowed]
+    assert guard.filter(_TfMessage([denied])) is None
+    guard.check(_TfMessage([allowed]))
+    with pytest.raises(ForbiddenError) as refused:
+        guard.check(_TfMessage([allowed, denied]))
+    assert (refused.value.field, refused.value.got) == \
+        ("value.transforms[1].child_frame_id", "PSM2/tool")
+    # only a TFMessage can be judged on a tf topic
+    with pytest.raises(ForbiddenError) as refused:
+        check(policy, "create_publisher", {"topic": "/tf", "type": "String"})
+    assert refused.value.field == "type"
+
+
+def test_robot_files_refused_and_missing_get_one_answer(tmp_path: Path) -> None:
+    inside, outside = tmp_path / "robots", tmp_path / "elsewhere"
+    inside.mkdir()
+    outside.mkdir()
+    (inside / "a.urdf").write_text("<robot/>")
+    (outside / "b.urdf").write_text("<robot/>")
+    (inside / "link.urdf").symlink_to(outside / "b.urdf")
+    policy = SecurityPolicy(robot_dirs=(str(inside),))
+
+    def judge(path: Path, from_client: bool = True) -> None:
+        policy.check_request(c.parse_request("create_robot", c.dumps(
+            {"name": "r", "source": {"kind": "file", "path": str(path)}})), resolve, "/n",
+            from_client=from_client, resolve_file=lambda spec: spec)
+
+    judge(inside / "a.urdf")
+    answers = []
+    for path in (outside / "b.urdf", outside / "none.urdf", inside / "none.urdf",
+                 inside / "link.urdf"):
+        with pytest.raises(ForbiddenError) as refused:
+            judge(path)
+        answers.append(str(refused.value).replace(str(path), "P"))
+    assert len(set(answers)) == 1, answers
+    judge(outside / "b.urdf", from_client=False)  # the operator's config is trusted
