@@ -229,8 +229,8 @@ class SecurityPolicy:
                     raise ForbiddenError(use.field, "a tf frame this daemon exposes: "
                                          + self.frames.why_not(frame), frame)
         elif isinstance(use, FileUse):
-            if from_client and resolve_file is not None:
-                self._judge_file(use, resolve_file)
+            if from_client:  # without a resolver, the path is judged as it is written
+                self._judge_file(use, resolve_file or str)
         else:  # a new kind of resource that this policy does not know yet: fail closed
             raise ForbiddenError("op", "resources this daemon's policy can judge",
                                  type(use).__name__)

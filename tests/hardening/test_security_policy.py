@@ -320,13 +320,19 @@ def test_robot_sources_are_judged_like_reading_them(args: dict, field: str, got:
     robot({"kind": "parameter", "node": "/PSM1/robot_state_publisher"}, "/PSM2"),
     robot({"kind": "topic"}, "/PSM1"),
     robot({"kind": "topic", "topic": "description"}, "/PSM1"),
-    robot({"kind": "file", "path": "/opt/robots/psm.urdf"}),  # a file: --package-path's job
 ])
 def test_robot_sources_that_the_globs_allow(args: dict) -> None:
     check(SecurityPolicy(parameters=NameRules(allow=("/PSM1/*",)),
                          topics=NameRules(allow=("/PSM1/*",))), "create_robot", args)
     # read-only does not stop robots: they only receive
     check(SecurityPolicy(read_only=True), "create_robot", args)
+
+
+def test_a_robot_file_is_judged_by_the_robot_dirs_not_the_globs() -> None:
+    args = robot({"kind": "file", "path": "/opt/robots/psm.urdf"})
+    with pytest.raises(ForbiddenError) as refused:  # no --robot-dir: no file (fail closed)
+        check(SecurityPolicy(parameters=NameRules(allow=("/PSM1/*",))), "create_robot", args)
+    assert refused.value.field == "source.path" and "--robot-dir" in str(refused.value)
 
 
 def test_frame_options_merge_and_are_checked(tmp_path: Path) -> None:
