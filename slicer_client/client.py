@@ -289,11 +289,13 @@ class Client:
         elif spec.op == "create_tf_broadcaster":
             resource = self.tf_broadcaster(a["parent"], a["child"],
                                            static=bool(a.get("static", False)))
-        else:  # create_robot
+        elif spec.op == "create_robot":
             resource = self.robot(a["name"], source=a.get("source"),
                                   fixed_frame=a.get("fixed_frame"),
                                   tf_prefix=a.get("tf_prefix", ""),
                                   namespace=a.get("namespace", ""))
+        else:  # a bridge kind without a Pythonic class yet: its spec alone re-creates it
+            resource = self._add(Resource(self, spec))
         return resource
 
     # --- direct commands -----------------------------------------------------------------

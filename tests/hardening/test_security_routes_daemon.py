@@ -343,3 +343,15 @@ def test_the_facade_removes_from_a_new_connection_what_the_rules_allow(
             time.sleep(0.1)
         assert "/client_feed" not in names and "/operator_feed" in names
     assert_clean_exit(daemon)
+
+
+def test_the_daemon_serves_every_client_op_the_schema_declares(frames_daemon: RunningDaemon,
+                                                               ) -> None:
+    from protocol.commands import REQUEST_TYPES
+
+    with frames_daemon.connect() as client:
+        ops = client.command("hello")["ops"]
+        assert ops == sorted(op for op, cls in REQUEST_TYPES.items() if not cls.to_client)
+        error = refusal(client, "service_request", {"service": "/s", "type": "std_srvs/Trigger",
+                                                    "request": {}})
+        assert error.code == ErrorCode.NOT_SUPPORTED  # the daemon's to send, not to serve
