@@ -19,9 +19,10 @@ from typing import Any, Callable, Optional
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
 from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
+from bridge.logging_limits import RateLimitedLog
+from bridge.message_guards import MessageGuard
 from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
-from bridge.message_guards import MessageGuard
 from bridge.security import SecurityPolicy
 from protocol.commands import (CommandFailedError, CreatePublisher, CreateSubscriber, ErrorCode,
                                ForbiddenError, GetLastMessage, Op, OutOfRangeError, Publish, QoS,
@@ -119,6 +120,7 @@ class PublisherBridge:
         self.device = device
         self.frame_id = frame_id
         self._guard = guard  # the security policy on what a message writes (tf frames...)
+        self._refusals = RateLimitedLog(log)
         self.count = 0
         self._ros = ros
         self._hub = hub
@@ -150,14 +152,15 @@ class PublisherBridge:
                                        metadata=message.metadata)
             self._check(msg)
         except ForbiddenError as error:
-            log.info("refused %s for %s from a client: %s", message.type_name, self.topic,
-                     error)
+            self._refusals.warning(self.topic, None, "refused %s for %s from a client: %s",
+                                   message.type_name, self.topic, error)
             client.send_status(message.device_name, StatusCode.ACCESS_DENIED,
                                f"not published to {self.topic}: {error}")
             return
         except CodecError as error:
-            log.warning("refused %s for %s from a client: %s", message.type_name, self.topic,
-                        error)
+            # A client can send bad data as fast as it likes: the log says it once a while.
+            self._refusals.warning(self.topic, None, "refused %s for %s from a client: %s",
+                                   message.type_name, self.topic, error)
             client.send_status(message.device_name, StatusCode.CONFIG_ERROR,
                                f"not published to {self.topic}: {error}")
             return
