@@ -28,6 +28,11 @@ Units: the model's vertices are already in mm; the tf capability turns metres in
 Frame globs (``--allow-frame``/``--deny-frame``) hold for robots too: a link whose tf frame
 the policy denies is withheld (no TRANSFORM, no mesh; listed under "withheld"), and a robot
 whose fixed frame is denied does not load.
+
+Files: a robot a client creates reads meshes only inside the mesh roots (``--robot-dir`` and
+``--package-path`` folders), whatever the source of its description, since a client can put
+any URDF in a parameter or on a topic; a mesh outside them is a warning worded as for a
+missing one (`bridge.robots.resources`). The operator's start-up robots are trusted.
 """
 
 from __future__ import annotations
