@@ -29,10 +29,12 @@ Frame globs (``--allow-frame``/``--deny-frame``) hold for robots too: a link who
 the policy denies is withheld (no TRANSFORM, no mesh; listed under "withheld"), and a robot
 whose fixed frame is denied does not load.
 
-Files: a robot a client creates reads meshes only inside the mesh roots (``--robot-dir`` and
-``--package-path`` folders), whatever the source of its description, since a client can put
-any URDF in a parameter or on a topic; a mesh outside them is a warning worded as for a
-missing one (`bridge.robots.resources`). The operator's start-up robots are trusted.
+Files: a robot reads meshes only inside the mesh roots (``--robot-dir`` and
+``--package-path`` folders) whatever the source of its description, since a client can put
+any URDF in a parameter or on a topic (and change the one an operator's robot reads); a
+mesh outside them is a warning worded as for a missing one (`bridge.robots.resources`).
+Only a URDF file named by the operator's start-up config is trusted to read meshes from
+anywhere.
 """
 
 from __future__ import annotations
@@ -135,7 +137,7 @@ class _Robot:
     subscription: Any = None
     first_description: Optional[asyncio.Future[str]] = None
     removed: bool = False
-    # Meshes only from these folders (a client's robot); None: the operator's, trusted.
+    # Meshes only from these folders; None: an operator's URDF file, trusted.
     mesh_roots: Optional[tuple[Path, ...]] = None
     loaded: asyncio.Event = field(default_factory=asyncio.Event)
 
@@ -167,9 +169,10 @@ class RobotBridges:
 
     async def create_robot(self, request: CreateRobot,
                            client: Optional[Replier] = None) -> dict[str, Any]:
-        """`client` None: the operator's start-up robot, whose meshes may come from
-        anywhere; a client's robot reads meshes only inside the mesh roots, whatever its
-        description's source (a file, a parameter, a topic, the daemon's own server)."""
+        """`client` None: the operator's start-up robot. Only a URDF file the operator's
+        config names is trusted to read meshes anywhere; a description from a parameter or
+        a topic can be changed by any client or ROS peer, so it reads meshes only inside
+        the mesh roots, whoever made the robot, and so does every robot of a client."""
         existing = self.robots.get(request.name)
         if existing is not None:
             if existing.request == request:  # a reconnecting client re-creates what it had
@@ -185,7 +188,8 @@ class RobotBridges:
                                   f"{request.name!r} ({error})") from None
         robot = _Robot(request.name, request, self._resolve_source(request),
                        request.tf_prefix, description_key, description_device,
-                       mesh_roots=None if client is None else self._mesh_roots)
+                       mesh_roots=None if client is None and request.source.kind == "file"
+                       else self._mesh_roots)
         self.robots[robot.name] = robot
         try:
             text = await self._first_description(robot)

@@ -265,6 +265,38 @@ def test_a_clients_robot_reads_meshes_only_inside_the_robot_dirs(
         client.command("remove_robot", {"name": name})
 
 
+def test_an_operators_robot_reads_a_changed_description_s_meshes_only_inside(
+        processes: Processes, folders: dict[str, Path], tmp_path: Path) -> None:
+    # The operator's robot reads another node's parameter; a client (or any ROS peer) can
+    # change that parameter, so what it names is not the operator's to vouch for.
+    inside = (folders["allowed"] / "inside.stl").as_uri()
+    peer = processes.python("victim", "param_node.py", "victim_rsp", "--description",
+                            urdf({"inside": inside}))
+    peer.wait_for_output("READY")
+    config = tmp_path / "bridge.yaml"
+    config.write_text("robots:\n  - {name: op_robot, source: {kind: parameter, "
+                      "node: /victim_rsp}}\n")
+    daemon = start_daemon(processes, "--config", str(config),
+                          "--robot-dir", str(folders["allowed"]))
+
+    def robot(client: Connection) -> dict[str, Any]:
+        return client.command("list_robots")["robots"][0]
+
+    with daemon.connect() as client:
+        wait_until(lambda: robot(client)["loads"] >= 1, 30, "the operator's robot")
+        assert robot(client)["visuals"] == 1
+        evil = urdf({"inside": inside, "secret": (folders["outside"] / "secret.stl").as_uri()})
+        client.command("call_service", {
+            "service": "/victim_rsp/set_parameters", "type": "rcl_interfaces/srv/SetParameters",
+            "request": {"parameters": [{"name": "robot_description",
+                                        "value": {"type": 4, "string_value": evil}}]},
+            "timeout": 15})
+        wait_until(lambda: robot(client)["loads"] >= 2, 30, "the reload")
+        assert robot(client)["visuals"] == 1, robot(client)
+        assert not any(d.startswith("op_robot:secret") for d in client.devices())
+    assert_clean_exit(daemon)
+
+
 def test_a_refused_urdf_file_and_a_missing_one_get_the_same_reply(
         files_daemon: RunningDaemon, folders: dict[str, Path]) -> None:
     (folders["outside"] / "robot.urdf").write_text(urdf({}))
