@@ -29,16 +29,13 @@ import yaml
 
 from bridge.security import PolicyError, SecurityPolicy, positive_int
 from bridge.session import SessionLimits
+from protocol.commands import bridge_kinds
 
-# Section name in the YAML file -> the command each of its entries is.
-SECTIONS: dict[str, str] = {
-    "subscribers": "create_subscriber",
-    "publishers": "create_publisher",
-    "tf_lookups": "create_tf_lookup",
-    "tf_broadcasters": "create_tf_broadcaster",
-    "parameter_clients": "create_parameter_client",
-    "robots": "create_robot",
-}
+# Section name in the YAML file -> the command each of its entries is: every creating op
+# that declares a section (`protocol.commands.Bridge.section`).
+SECTIONS: dict[str, str] = {kind.bridge.section: kind.create.op
+                            for kind in bridge_kinds().values()
+                            if kind.bridge.section is not None}
 SECURITY_SECTION = "security"
 
 DEFAULT_HOST = "127.0.0.1"

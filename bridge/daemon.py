@@ -14,6 +14,7 @@ import dataclasses
 import logging
 import signal
 import sys
+from pathlib import Path
 from typing import Awaitable, Callable, Optional
 
 from bridge.config import DaemonConfig
@@ -44,17 +45,19 @@ class Daemon:
         self.hub = Hub(loop)
         self.ros = RosNode(RosOptions(node_name=config.node_name, namespace=config.namespace))
         names = DeviceNameRegistry()
-        self.topics = TopicBridges(self.ros, self.hub, names)
-        self.tf = TfBridges(self.ros, self.hub, names, frame_prefix=config.frame_prefix)
-        self.parameters = ParameterBridges(self.ros, self.hub, names)
-        self.services = ServiceBridges(self.ros, self.hub, names)
+        # Clients' robots may read files (URDF, meshes) from the --package-path folders too.
+        policy = dataclasses.replace(config.security, robot_dirs=config.security.robot_dirs
+                                     + tuple(folder for _, folder in config.package_paths))
+        self.topics = TopicBridges(self.ros, self.hub, names, policy=policy)
+        self.tf = TfBridges(self.ros, self.hub, names, frame_prefix=config.frame_prefix,
+                            frame_rules=policy.frames)
+        self.parameters = ParameterBridges(self.ros, self.hub, names, policy=policy)
+        self.services = ServiceBridges(self.ros, self.hub, names, policy=policy)
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
                                    parameters=self.parameters,
                                    package_paths=dict(config.package_paths),
-                                   frame_rules=config.security.frames)
-        # Clients may load robot files from the --package-path folders too.
-        policy = dataclasses.replace(config.security, robot_dirs=config.security.robot_dirs
-                                     + tuple(folder for _, folder in config.package_paths))
+                                   frame_rules=policy.frames,
+                                   mesh_roots=tuple(Path(d) for d in policy.robot_dirs))
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.robots],
                                      policy=policy, resolve_frame=self.tf.resolve_frame,

@@ -3,6 +3,12 @@
 Every request gets a reply carrying its command id: a result, or an error naming the field,
 what was expected and what came. Nothing a request does can take the daemon down: an
 unexpected exception is logged as a bug and answered as INTERNAL.
+
+Capabilities register one handler per request class. What the dispatcher does around a
+handler comes from the op's declarations (`protocol.commands.op`): the security policy
+judges its resources, a creation is counted against its client's quota and recorded with
+who made it (the operator's start-up config or a client), and a removal is allowed by the
+ownership rules (`bridge.security.BridgeOwners`).
 """
 
 from __future__ import annotations
@@ -10,14 +16,16 @@ from __future__ import annotations
 import asyncio
 import inspect
 import logging
-from typing import Any, Awaitable, Callable, Mapping, Protocol, Sequence, Union
+from typing import (Any, Awaitable, Callable, Mapping, Optional, Protocol, Sequence, Union,
+                    cast)
 
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
-from bridge.security import BridgeQuota, FileResolver, FrameResolver, SecurityPolicy, strip_frame
+from bridge.security import (OPERATOR, BridgeKey, BridgeOwners, BridgeQuota, FileResolver,
+                             FrameResolver, SecurityPolicy, strip_frame)
 from protocol import commands as c
-from protocol.commands import (CommandError, CommandFailedError, ErrorCode, OutOfRangeError,
-                               Reply)
+from protocol.commands import (CommandError, CommandFailedError, ErrorCode, Op,
+                               OutOfRangeError, Reply)
 from protocol.messages import Command, Message, RtsCommand
 
 log = logging.getLogger(__name__)
@@ -32,8 +40,8 @@ DAEMON_VERSION = "0.1.0"
 class Capability(Protocol):
     """One area of the daemon (topics, tf, parameters, services, robots)."""
 
-    def handlers(self) -> Mapping[str, Handler]:
-        """The ops it serves: op name -> handler."""
+    def handlers(self) -> Mapping[type[Op], Handler]:
+        """The ops it serves: request class -> handler."""
         ...
 
     def describe(self) -> list[dict[str, Any]]:
@@ -41,6 +49,19 @@ class Capability(Protocol):
         ...
 
     def close(self) -> None: ...
+
+
+# Identity fields by what they name: resolved the way the capabilities resolve them.
+_NAME_FIELDS = ("topic", "service", "node")
+_FRAME_FIELDS = ("parent", "child")
+_KINDS = c.bridge_kinds()
+
+
+def _identity_fields(request: c.Request) -> tuple[str, ...]:
+    cls = type(request)
+    if cls.creates is not None:
+        return cls.creates.identity
+    return _KINDS[cast(str, cls.removes)].bridge.identity
 
 
 class Dispatcher:
@@ -58,23 +79,25 @@ class Dispatcher:
         self._resolve_frame = resolve_frame
         self._resolve_file = resolve_file
         self._quota = BridgeQuota(self._policy.max_bridges_per_client)
-        hub.add_closed_listener(self._quota.forget)
+        self._owners = BridgeOwners()
+        hub.add_closed_listener(self._client_left)
         self._tasks: set[asyncio.Task[None]] = set()
         # The one table of what this daemon serves, built from each capability's own list.
         # Ops of the schema missing here are answered NOT_SUPPORTED, naming the op.
-        self._handlers: dict[str, Handler] = {
-            c.Hello.op: self._hello,
-            c.ListBridges.op: self._list_bridges,
-            c.ListTopics.op: self._list_topics,
-            c.ListServices.op: self._list_services,
+        own: dict[type[Op], Handler] = {
+            c.Hello: self._hello,
+            c.ListBridges: self._list_bridges,
+            c.ListTopics: self._list_topics,
+            c.ListServices: self._list_services,
         }
-        for capability in self._capabilities:
-            for op, handler in capability.handlers().items():
-                if op not in c.REQUEST_TYPES:
-                    raise ValueError(f"{op!r} is not an op of the command schema")
-                if op in self._handlers:
-                    raise ValueError(f"two handlers for {op!r}")
-                self._handlers[op] = handler
+        self._handlers: dict[str, Handler] = {}
+        for table in (own, *(capability.handlers() for capability in self._capabilities)):
+            for cls, handler in table.items():
+                if c.REQUEST_TYPES.get(cls.op) is not cls or cls.to_client:
+                    raise ValueError(f"{cls.__name__} is not a client op of the schema")
+                if cls.op in self._handlers:
+                    raise ValueError(f"two handlers for {cls.op!r}")
+                self._handlers[cls.op] = handler
 
     # --- entry points -------------------------------------------------------------------
     def handle(self, message: Message, client: Replier) -> None:
@@ -108,6 +131,13 @@ class Dispatcher:
         for capability in reversed(self._capabilities):
             capability.close()
 
+    def _client_left(self, client: Replier) -> None:
+        # Its bridges live on (any client may remove them), except those that live only
+        # as long as their client (a served service); its count goes.
+        self._quota.forget(client)
+        self._owners.forget(client, {kind for kind, k in _KINDS.items()
+                                     if k.bridge.per_connection})
+
     # --- plumbing -----------------------------------------------------------------------
     def _run(self, request: c.Request, client: Replier | None) -> Result | Awaitable[Result]:
         handler = self._handlers.get(request.op)
@@ -118,27 +148,60 @@ class Dispatcher:
         self._policy.check_request(request, self._resolve, self._ros.fully_qualified_name,
                                    self._resolve_frame, from_client=client is not None,
                                    resolve_file=self._resolve_file)
-        if client is None:  # start-up config: judged by the policy, not counted
-            return handler(request, client)
-        reserved = self._quota.reserve(client, request.op)
+        key = self._bridge_key(request)
+        if key is not None and type(request).removes is not None:
+            self._owners.check_removal(key, _identity_fields(request)[0], client)
+        reserved = client is not None and self._quota.reserve(client, request.op)
         try:
             outcome = handler(request, client)
         except BaseException:
-            self._quota.settle(client, request.op, reserved, None)
+            self._settle(request, client, key, reserved, None)
             raise
         if inspect.isawaitable(outcome):
-            return self._counted(outcome, client, request.op, reserved)
-        self._quota.settle(client, request.op, reserved, outcome)
+            return self._counted(outcome, request, client, key, reserved)
+        self._settle(request, client, key, reserved, outcome)
         return outcome
 
-    async def _counted(self, outcome: Awaitable[Result], client: Replier, op: str,
+    async def _counted(self, outcome: Awaitable[Result], request: c.Request,
+                       client: Replier | None, key: Optional[BridgeKey],
                        reserved: bool) -> Result:
         result: Result | None = None
         try:
             result = await outcome
             return result
         finally:
-            self._quota.settle(client, op, reserved, result)
+            self._settle(request, client, key, reserved, result)
+
+    def _settle(self, request: c.Request, client: Replier | None, key: Optional[BridgeKey],
+                reserved: bool, result: Optional[Result]) -> None:
+        """After a handler: count the client's bridges, record who made or removed one."""
+        if client is not None:
+            self._quota.settle(client, reserved, result)
+        if key is None or result is None:
+            return
+        if type(request).creates is not None:
+            self._owners.created(key, OPERATOR if client is None else client)
+        elif type(request).removes is not None:
+            owner = self._owners.removed(key)
+            if owner is not None and owner != OPERATOR:
+                self._quota.release(owner)
+
+    def _bridge_key(self, request: c.Request) -> Optional[BridgeKey]:
+        """(kind, identity) of the bridge a create or remove request names, with names
+        resolved as the capabilities keep them (so ``cmd`` and ``/cmd`` are one bridge)."""
+        cls = type(request)
+        kind = cls.creates.kind if cls.creates is not None else cls.removes
+        if kind is None:
+            return None
+        values = []
+        for name in _identity_fields(request):
+            value = str(getattr(request, name))
+            if name in _FRAME_FIELDS:
+                value = self._resolve_frame(value)
+            elif name in _NAME_FIELDS:
+                value = self._resolve(value, name)
+            values.append(value)
+        return kind, tuple(values)
 
     def _resolve(self, name: str, field: str) -> str:
         try:

@@ -41,8 +41,9 @@ from rclpy.qos import qos_profile_parameter_events
 from bridge.dispatch import Handler
 from bridge.hub import Hub
 from bridge.ros_node import RosNode
+from bridge.security import SecurityPolicy
 from bridge.services import call_ros_service, resolve_name, wait_until_ready
-from protocol.commands import (CommandError, CommandFailedError, CreateParameterClient,
+from protocol.commands import (Op, CommandError, CommandFailedError, CreateParameterClient,
                                ErrorCode, GetParameters, ListParameters, ObserveParameters,
                                OutOfRangeError, ParameterValue, RemoveParameterClient,
                                ServerDeclareParameter, ServerGetParameters,
@@ -159,8 +160,12 @@ class ParameterBridges:
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
                  request_timeout_s: float = 4.0, ready_wait_s: float = 2.0,
-                 check_interval_s: float = 0.5) -> None:
+                 check_interval_s: float = 0.5,
+                 policy: Optional[SecurityPolicy] = None) -> None:
         self._ros = ros
+        # A listing shows only the names the parameter globs allow (the dispatcher judged
+        # every request that names parameters; a listing names none).
+        self._policy = policy or SecurityPolicy()
         self._hub = hub
         self._names = names
         self._request_timeout_s = request_timeout_s
@@ -222,7 +227,7 @@ class ParameterBridges:
         client = self._client(request.node)
         listed = await self._call(client, client.list_client,
                                   ListParametersSrv.Request(prefixes=[], depth=0))
-        names = sorted(listed.result.names)
+        names = sorted(self._policy.visible_parameters(client.node, listed.result.names))
         types: dict[str, str] = {}
         if names:
             typed = await self._call(client, client.types_client,
@@ -609,18 +614,18 @@ class ParameterBridges:
                           dumps({"node": self._server_node, "values": values}))
 
     # --- capability ------------------------------------------------------------------------
-    def handlers(self) -> dict[str, Handler]:
+    def handlers(self) -> dict[type[Op], Handler]:
         return {
-            CreateParameterClient.op: lambda r, _: self.create_parameter_client(r),
-            RemoveParameterClient.op: lambda r, _: self.remove_parameter_client(r),
-            ListParameters.op: lambda r, _: self.list_parameters(r),
-            GetParameters.op: lambda r, _: self.get_parameters(r),
-            SetParameters.op: lambda r, _: self.set_parameters(r),
-            ObserveParameters.op: lambda r, _: self.observe_parameters(r),
-            ServerDeclareParameter.op: lambda r, _: self.server_declare_parameter(r),
-            ServerSetParameter.op: lambda r, _: self.server_set_parameter(r),
-            ServerGetParameters.op: lambda r, _: self.server_get_parameters(r),
-            ServerUndeclareParameter.op: lambda r, _: self.server_undeclare_parameter(r),
+            CreateParameterClient: lambda r, _: self.create_parameter_client(r),
+            RemoveParameterClient: lambda r, _: self.remove_parameter_client(r),
+            ListParameters: lambda r, _: self.list_parameters(r),
+            GetParameters: lambda r, _: self.get_parameters(r),
+            SetParameters: lambda r, _: self.set_parameters(r),
+            ObserveParameters: lambda r, _: self.observe_parameters(r),
+            ServerDeclareParameter: lambda r, _: self.server_declare_parameter(r),
+            ServerSetParameter: lambda r, _: self.server_set_parameter(r),
+            ServerGetParameters: lambda r, _: self.server_get_parameters(r),
+            ServerUndeclareParameter: lambda r, _: self.server_undeclare_parameter(r),
         }
 
     def _describe_client(self, client: ParameterClient,

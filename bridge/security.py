@@ -5,10 +5,20 @@ policy decides from what can be known: the peer's address (at accept, `admits`),
 request itself (in the dispatcher, `check_request`, before any capability runs). Start-up
 bridges from the YAML config go through the same dispatcher, so they are judged alike.
 
+The policy judges resources, never op names: each request declares what it touches
+(`protocol.commands.op`: topics, services, parameters, tf frames, files) and whether it
+writes, and every declared resource is judged by the rules of its kind. A request class the
+schema does not declare cannot be judged, and is refused (fail closed). Some resources are
+named inside messages rather than requests: a tf topic's transforms, a parameter service's
+or a parameter event's parameters; `message_guard`, `visible_parameters` and
+`filter_service_response` apply the same rules there, so no route reaches a resource that
+another route refuses.
+
 Name rules follow rosbridge / foxglove_bridge: shell-style globs on fully qualified names
 (``*`` also matches ``/``); a deny glob always wins; once any allow glob is given for a
 kind, only names matching one of them are allowed. tf frames get the same rules, judged as
-the tf buffer holds them (``--frame-prefix`` applied, no leading ``/``).
+the tf buffer holds them (``--frame-prefix`` applied, no leading ``/``); parameters are
+judged as ``<node>.<name>``.
 
 docs/security.md is the threat model and the user's guide to these options.
 """
@@ -19,11 +29,21 @@ import ipaddress
 import logging
 import os
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from fnmatch import fnmatchcase
 from typing import Any, Callable, Optional, Union
 
-from protocol.commands import CreateRobot, ForbiddenError, LimitReachedError, RobotSource
+from bridge.logging_limits import RateLimitedLog
+from bridge.message_guards import (PARAMETER_EVENT_TYPE, TF_MESSAGE_TYPE, MessageGuard,
+                                   ParameterEventGuard, TfMessageGuard)
+from protocol.commands import (REQUEST_TYPES, FileUse, ForbiddenError, FrameUse,
+                               LimitReachedError, Op, OutOfRangeError, ParameterUse, Resource,
+                               ServiceUse, TopicUse, resolve_message_type, resolve_service_type)
+
+__all__ = ["DEFAULT_MAX_BRIDGES_PER_CLIENT", "DEFAULT_MAX_CLIENTS", "OPERATOR",
+           "PARAMETER_SERVICES", "SECURITY_KEYS", "BridgeOwners", "BridgeQuota", "NameRules",
+           "PolicyError", "RateLimitedLog", "SecurityPolicy", "inside", "is_loopback_host",
+           "parameter_service", "parse_network", "positive_int", "strip_frame"]
 
 log = logging.getLogger(__name__)
 
@@ -32,72 +52,67 @@ NameResolver = Callable[[str, str], str]  # (name, field) -> fully qualified nam
 FrameResolver = Callable[[str], str]  # a client's frame id -> the tf buffer's
 FileResolver = Callable[[str], "os.PathLike[str] | str"]  # a robot file source -> its path
 
-# Ops a --read-only daemon refuses: everything that changes the ROS graph or its state.
-# Receiving (subscribers, lookups, robots, reading parameters, listings) stays allowed.
-WRITE_OPS: frozenset[str] = frozenset({
-    "create_publisher", "publish",
-    "create_tf_broadcaster", "broadcast_transform",
-    "set_parameters", "server_declare_parameter", "server_set_parameter",
-    "server_undeclare_parameter",
-    "call_service", "advertise_service",
-})
+# Who made a bridge that no client made: the operator's start-up config.
+OPERATOR = "operator"
 
-# Ops that create one bridge (counted against --max-bridges-per-client) and the op that
-# removes it again.
-CREATE_OPS: frozenset[str] = frozenset({
-    "create_subscriber", "create_publisher", "create_tf_lookup", "create_tf_broadcaster",
-    "create_parameter_client", "create_robot", "advertise_service",
-})
-REMOVE_OPS: dict[str, str] = {
-    "remove_subscriber": "create_subscriber", "remove_publisher": "create_publisher",
-    "remove_tf_lookup": "create_tf_lookup", "remove_tf_broadcaster": "create_tf_broadcaster",
-    "remove_parameter_client": "create_parameter_client", "remove_robot": "create_robot",
-    "unadvertise_service": "advertise_service",
+# The parameter services every rclcpp/rclpy node offers (service name suffix -> type and
+# the request field that names the parameters; None: the call lists them).
+PARAMETER_SERVICES: dict[str, tuple[str, Optional[str]]] = {
+    "get_parameters": ("rcl_interfaces/srv/GetParameters", "names"),
+    "get_parameter_types": ("rcl_interfaces/srv/GetParameterTypes", "names"),
+    "describe_parameters": ("rcl_interfaces/srv/DescribeParameters", "names"),
+    "set_parameters": ("rcl_interfaces/srv/SetParameters", "parameters"),
+    "set_parameters_atomically": ("rcl_interfaces/srv/SetParametersAtomically",
+                                  "parameters"),
+    "list_parameters": ("rcl_interfaces/srv/ListParameters", None),
 }
+_TF_TOPICS = ("/tf", "/tf_static")
 
 
-@dataclass(frozen=True)
-class Target:
-    """Which request field names the ROS resource an op touches.
-
-    ``kind`` is ``topic``, ``service`` or ``parameter``. For parameters, ``node_field``
-    names the node field (``None``: the daemon's own node) and the judged name is
-    ``<node>.<parameter>`` (``/robot_state_publisher.robot_description``), as in
-    foxglove_bridge.
-    """
-
-    kind: str
-    field: str
-    node_field: Optional[str] = None
+def parameter_service(service: str, ros_type: Optional[str]) -> Optional[tuple[str, str]]:
+    """(node, suffix) if `service` (fully qualified) is a node's standard parameter service,
+    by its name or by its type; else None."""
+    node, _, suffix = service.rpartition("/")
+    if suffix not in PARAMETER_SERVICES:
+        by_type = [s for s, (kind, _) in PARAMETER_SERVICES.items() if kind == ros_type]
+        if not by_type:
+            return None
+        suffix = by_type[0]
+    return node or "/", suffix
 
 
-# op -> what the name rules judge. Removals are not judged: a denied bridge never exists.
-TARGETS: dict[str, Target] = {
-    "create_subscriber": Target("topic", "topic"),
-    "create_publisher": Target("topic", "topic"),
-    "publish": Target("topic", "topic"),
-    "get_last_message": Target("topic", "topic"),
-    "call_service": Target("service", "service"),
-    "advertise_service": Target("service", "service"),
-    "get_parameters": Target("parameter", "names", "node"),
-    "set_parameters": Target("parameter", "values", "node"),
-    "observe_parameters": Target("parameter", "names", "node"),
-    "server_declare_parameter": Target("parameter", "name"),
-    "server_set_parameter": Target("parameter", "name"),
-    "server_get_parameters": Target("parameter", "names"),
-    "server_undeclare_parameter": Target("parameter", "name"),
-}
+def _request_names(request: Mapping[str, Any], names_field: str) -> tuple[str, ...]:
+    """The parameter names a standard parameter service request carries (``names``, or
+    the ``name`` of each of ``parameters``); anything else in their place is judged as
+    naming every parameter."""
+    value = request.get(names_field)
+    if not isinstance(value, list):
+        return ()
+    if names_field == "parameters":
+        value = [p.get("name") if isinstance(p, dict) else None for p in value]
+    if not value or not all(isinstance(n, str) and n for n in value):
+        return ()
+    return tuple(value)
 
-# op -> its request fields that name tf frames (both ends: a lookup reveals, a broadcaster
-# writes, the pose of the child relative to the parent). A TRANSFORM sent to a broadcaster's
-# device needs no check of its own: it carries the frames of a broadcaster that exists, and
-# one whose frames the policy denies is never created.
-FRAME_FIELDS: dict[str, tuple[str, ...]] = {
-    "create_tf_lookup": ("parent", "child"),
-    "lookup_transform": ("parent", "child"),
-    "create_tf_broadcaster": ("parent", "child"),
-    "broadcast_transform": ("parent", "child"),
-}
+
+def _resolved(resolve: Callable[[str], str], text: Optional[str]) -> Optional[str]:
+    """A type as given -> ``pkg/msg|srv/Type``, or None (the capability says why it cannot
+    use a bad one)."""
+    if text is None:
+        return None
+    try:
+        return resolve(text)
+    except OutOfRangeError:
+        return None
+
+
+def inside(path: str, folders: Iterable[str]) -> bool:
+    """Is `path` (already real: symlinks resolved) inside one of `folders`?"""
+    for folder in folders:
+        root = os.path.realpath(folder)
+        if os.path.commonpath([path, root]) == root:
+            return True
+    return False
 
 
 def strip_frame(frame: str) -> str:
@@ -167,7 +182,7 @@ class SecurityPolicy:
         return any(ip.version == net.version and ip in net for net in self.allowed_networks)
 
     # --- per request ---------------------------------------------------------------------
-    def check_request(self, request: Any, resolve: NameResolver, own_node: str,
+    def check_request(self, request: Op, resolve: NameResolver, own_node: str,
                       resolve_frame: FrameResolver = strip_frame, *,
                       from_client: bool = True,
                       resolve_file: Optional[FileResolver] = None) -> None:
@@ -182,94 +197,131 @@ class SecurityPolicy:
         `from_client` is False for the operator's own start-up config, whose file paths are
         trusted.
         """
-        op = request.op
-        if self.read_only and op in WRITE_OPS:
+        cls = type(request)
+        if REQUEST_TYPES.get(cls.op) is not cls:  # fail closed: nothing undeclared runs
+            raise ForbiddenError("op", "an op the command schema declares", cls.__name__)
+        if cls.to_client:
+            raise ForbiddenError("op", "an op a client sends (the daemon sends this one)",
+                                 cls.op)
+        if self.read_only and (cls.writes or cls.removes is not None):
             raise ForbiddenError("op", "an op that only receives (the daemon runs "
-                                       "--read-only)", op)
-        if op in FRAME_FIELDS:
-            self._check_frames(request, FRAME_FIELDS[op], resolve_frame)
-            return
-        if isinstance(request, CreateRobot):
-            if request.fixed_frame:  # links are judged when the URDF loads
-                self._check_frames(request, ("fixed_frame",), strip_frame)
-            self._check_robot_source(request, resolve)
-            if from_client and request.source.kind == "file" and resolve_file is not None:
-                self._check_robot_file(str(request.source.path), resolve_file)
-            return
-        target = TARGETS.get(op)
-        if target is None:
-            return
-        rules = self._rules(target.kind)
-        if not rules.active:
-            return
-        if target.kind == "parameter":
-            self._check_parameters(request, target, rules, resolve, own_node)
-            return
-        name = resolve(getattr(request, target.field), target.field)
-        if not rules.permits(name):
-            raise ForbiddenError(target.field, f"a {target.kind} this daemon exposes: "
-                                 + rules.why_not(name), name)
+                                       "--read-only: clients change and remove nothing)",
+                                 cls.op)
+        for use in request.resources():
+            self._judge(use, resolve, own_node, resolve_frame, from_client, resolve_file)
 
-    def _check_frames(self, request: Any, fields: tuple[str, ...],
-                      resolve_frame: FrameResolver) -> None:
-        if not self.frames.active:
+    def _judge(self, use: Resource, resolve: NameResolver, own_node: str,
+               resolve_frame: FrameResolver, from_client: bool,
+               resolve_file: Optional[FileResolver]) -> None:
+        if isinstance(use, TopicUse):
+            self._judge_topic(use, resolve(use.name, use.field))
+        elif isinstance(use, ServiceUse):
+            self._judge_service(use, resolve(use.name, use.field))
+        elif isinstance(use, ParameterUse):
+            node = (resolve(use.node, use.node_field or use.field) if use.node is not None
+                    else own_node)
+            self._judge_parameters(node, use.names, use.field)
+        elif isinstance(use, FrameUse):
+            if self.frames.active:
+                # Judged as the buffer holds it; an empty result is the tf capability's error.
+                frame = strip_frame(resolve_frame(use.frame) if use.client_frame else use.frame)
+                if frame and not self.frames.permits(frame):
+                    raise ForbiddenError(use.field, "a tf frame this daemon exposes: "
+                                         + self.frames.why_not(frame), frame)
+        elif isinstance(use, FileUse):
+            if from_client:  # without a resolver, the path is judged as it is written
+                self._judge_file(use, resolve_file or str)
+        else:  # a new kind of resource that this policy does not know yet: fail closed
+            raise ForbiddenError("op", "resources this daemon's policy can judge",
+                                 type(use).__name__)
+
+    def _judge_topic(self, use: TopicUse, topic: str) -> None:
+        if self.topics.active and not self.topics.permits(topic):
+            raise ForbiddenError(use.field, "a topic this daemon exposes: "
+                                 + self.topics.why_not(topic), topic)
+        ros_type = _resolved(resolve_message_type, use.type)
+        # A tf topic carries frames: only a TFMessage can be judged transform by transform
+        # (the bridge's MessageGuard does it); another type on /tf cannot be judged.
+        if self.frames.active and topic in _TF_TOPICS and use.type is not None \
+                and ros_type != TF_MESSAGE_TYPE:
+            raise ForbiddenError("type", f"{TF_MESSAGE_TYPE} on a tf topic (frame globs are "
+                                 f"set)", use.type)
+
+    def _judge_service(self, use: ServiceUse, service: str) -> None:
+        if self.services.active and not self.services.permits(service):
+            raise ForbiddenError(use.field, "a service this daemon exposes: "
+                                 + self.services.why_not(service), service)
+        ros_type = _resolved(resolve_service_type, use.type)
+        found = parameter_service(service, ros_type)
+        if found is None or not self.parameters.active:
             return
-        for name in fields:
-            # Judged as the buffer holds it; an empty result is the tf capability's error.
-            frame = strip_frame(resolve_frame(getattr(request, name)))
-            if frame and not self.frames.permits(frame):
-                raise ForbiddenError(name, "a tf frame this daemon exposes: "
-                                     + self.frames.why_not(frame), frame)
+        node, suffix = found
+        kind, names_field = PARAMETER_SERVICES[suffix]
+        if use.serves:  # answering for a node's parameters: all of them, unjudgeable
+            self._judge_parameters(node, (), use.field)
+            return
+        if names_field is None:
+            return  # listing: the reply shows only the names the globs allow
+        if ros_type != kind:  # the request's parameter names cannot be read by its type
+            self._judge_parameters(node, (), use.field)
+            return
+        self._judge_parameters(node, _request_names(use.request or {}, names_field),
+                               f"request.{names_field}")
 
-    def _check_robot_source(self, request: CreateRobot, resolve: NameResolver) -> None:
-        """A robot reads its URDF from a parameter or a topic: the same rules as reading
-        them directly (else create_robot would read a denied parameter). A file source
-        names no ROS resource: nothing to judge here."""
-        source = request.source
-        if source.kind == "parameter" and self.parameters.active:
-            node = _robot_source_name(request, source.node, RobotSource.node,
-                                      "source.node", resolve)
-            full = f"{node}.{source.parameter}"
-            if not self.parameters.permits(full):
-                raise ForbiddenError("source.parameter", "a parameter this daemon exposes: "
-                                     + self.parameters.why_not(full), full)
-        elif source.kind == "topic" and self.topics.active:
-            topic = _robot_source_name(request, source.topic, RobotSource.topic,
-                                       "source.topic", resolve)
-            if not self.topics.permits(topic):
-                raise ForbiddenError("source.topic", "a topic this daemon exposes: "
-                                     + self.topics.why_not(topic), topic)
-
-    def _check_robot_file(self, spec: str, resolve_file: FileResolver) -> None:
-        # Symlinks followed, so a link inside an allowed folder cannot point outside it.
-        real = os.path.realpath(resolve_file(spec))
-        for folder in self.robot_dirs:
-            root = os.path.realpath(folder)
-            if os.path.commonpath([real, root]) == root:
-                return
-        allowed = ", ".join(self.robot_dirs) or "none: start the daemon with --robot-dir"
-        raise ForbiddenError("source.path", f"a URDF file inside a --robot-dir or "
-                             f"--package-path folder ({allowed})", spec)
-
-    def _check_parameters(self, request: Any, target: Target, rules: NameRules,
-                          resolve: NameResolver, own_node: str) -> None:
-        node = (resolve(getattr(request, target.node_field), target.node_field)
-                if target.node_field else own_node)
-        value = getattr(request, target.field)
-        names: Iterable[str] = (value,) if isinstance(value, str) else tuple(value)
+    def _judge_parameters(self, node: str, names: Iterable[str], field: str) -> None:
+        if not self.parameters.active:
+            return
+        names = tuple(names)
         if not names:
             # "All parameters" cannot be judged name by name before they are known.
-            raise ForbiddenError(target.field, "explicit parameter names (parameter globs "
-                                 "are set)", "all parameters")
+            raise ForbiddenError(field, "explicit parameter names (parameter globs are set)",
+                                 f"all parameters of {node}")
         for name in names:
             full = f"{node}.{name}"
-            if not rules.permits(full):
-                raise ForbiddenError(target.field, "a parameter this daemon exposes: "
-                                     + rules.why_not(full), full)
+            if not self.parameters.permits(full):
+                raise ForbiddenError(field, "a parameter this daemon exposes: "
+                                     + self.parameters.why_not(full), full)
 
-    def _rules(self, kind: str) -> NameRules:
-        return {"topic": self.topics, "service": self.services,
-                "parameter": self.parameters}[kind]
+    def _judge_file(self, use: FileUse, resolve_file: FileResolver) -> None:
+        # A missing file and a refused one get one answer: the reply must not tell a client
+        # whether a path it chose exists. Symlinks are followed, so a link inside an
+        # allowed folder cannot point outside it.
+        allowed = ", ".join(self.robot_dirs) or "none: start the daemon with --robot-dir"
+        refused = ForbiddenError(use.field, f"an existing file inside a --robot-dir or "
+                                 f"--package-path folder ({allowed})", use.path)
+        try:
+            real = os.path.realpath(resolve_file(use.path))
+        except Exception:  # noqa: BLE001 - unresolvable is answered as refused
+            raise refused from None
+        if not inside(real, self.robot_dirs) or not os.path.isfile(real):
+            raise refused
+
+    # --- inside messages -------------------------------------------------------------------
+    def message_guard(self, topic: str, ros_type: str) -> Optional[MessageGuard]:
+        """The guard a topic bridge of `ros_type` on `topic` (fully qualified) applies to
+        each message, or None when nothing in its messages is judged."""
+        if self.frames.active and (ros_type == TF_MESSAGE_TYPE or topic in _TF_TOPICS):
+            return TfMessageGuard(self.frames.permits, self.frames.why_not)
+        if self.parameters.active and ros_type == PARAMETER_EVENT_TYPE:
+            return ParameterEventGuard(self.parameters.permits, self.parameters.why_not)
+        return None
+
+    def visible_parameters(self, node: str, names: Iterable[str]) -> list[str]:
+        """Of `node`'s parameter `names`, those the parameter globs let a client see."""
+        return [n for n in names if self.parameters.permits(f"{node}.{n}")]
+
+    def filter_service_response(self, service: str, ros_type: str,
+                                response: dict[str, Any]) -> dict[str, Any]:
+        """A `call_service` response as a client may see it: a node's parameter listing
+        keeps only the names the globs allow (the call itself was judged before)."""
+        found = parameter_service(service, ros_type)
+        if found is None or not self.parameters.active or found[1] != "list_parameters":
+            return response
+        result = dict(response.get("result") or {})
+        result["names"] = self.visible_parameters(found[0], result.get("names") or ())
+        result["prefixes"] = []  # a prefix can name a parameter the globs hide
+        return {**response, "result": result}
+
 
     # --- construction --------------------------------------------------------------------
     @classmethod
@@ -324,19 +376,6 @@ SECURITY_KEYS: tuple[str, ...] = (
 )
 
 
-def _robot_source_name(request: CreateRobot, name: str, default: str, field: str,
-                       resolve: NameResolver) -> str:
-    """The node or topic a robot reads, as RobotBridges._resolve_source places it: the
-    robot's ``namespace`` applies to relative names and to the default, then the daemon's
-    (``{"namespace": "PSM1"}`` reads ``/PSM1/robot_state_publisher``). Kept in step with it
-    by tests/hardening/test_security_frames_daemon.py, which asks a running daemon."""
-    if request.namespace:
-        namespace = resolve(request.namespace, "namespace")
-        if name == default or not name.startswith("/"):
-            name = f"{namespace.rstrip('/')}/{name.lstrip('/')}"
-    return resolve(name, field)
-
-
 def parse_network(text: str, where: str) -> Network:
     """``10.0.0.0/8``, ``::1``, ``192.168.1.20`` (one host) -> a network."""
     try:
@@ -375,12 +414,50 @@ def is_loopback_host(host: str) -> bool:
         return False  # a host name: whatever it resolves to may be reachable from outside
 
 
+BridgeKey = tuple[str, tuple[str, ...]]  # (bridge kind, its identity values)
+
+
+class BridgeOwners:
+    """Who made each live bridge: `OPERATOR` (the start-up config) or the client object.
+
+    The rules (docs/security.md): no client removes the operator's bridges; a client may
+    remove any bridge a client made, its own or one a former connection made (bridges live
+    on when their client leaves, except the services a client serves); a ``--read-only``
+    daemon's clients remove nothing (`SecurityPolicy.check_request`).
+    """
+
+    def __init__(self) -> None:
+        self._owners: dict[BridgeKey, object] = {}
+
+    def created(self, key: BridgeKey, owner: object) -> None:
+        self._owners.setdefault(key, owner)  # asking again for a bridge keeps its maker
+
+    def owner(self, key: BridgeKey) -> Optional[object]:
+        return self._owners.get(key)
+
+    def removed(self, key: BridgeKey) -> Optional[object]:
+        return self._owners.pop(key, None)
+
+    def forget(self, client: object, kinds: Iterable[str]) -> None:
+        """`client` left: its bridges of `kinds` (those that die with it) are gone."""
+        kinds = set(kinds)
+        for key in [k for k, owner in self._owners.items()
+                    if owner is client and k[0] in kinds]:
+            del self._owners[key]
+
+    def check_removal(self, key: BridgeKey, field: str, client: object) -> None:
+        """Raise `ForbiddenError` if `client` (None: the operator) may not remove `key`."""
+        if client is not None and self._owners.get(key) == OPERATOR:
+            raise ForbiddenError(field, f"a {key[0]} a client created (the operator's "
+                                 f"start-up bridges stay)", "/".join(key[1]))
+
+
 class BridgeQuota:
     """Counts each client's live bridges against ``max_bridges_per_client``.
 
     A creation reserves a slot before it runs (so a burst of slow async creations cannot
-    overshoot) and gives it back if it fails or found an existing bridge; a removal by the
-    same client frees one.
+    overshoot) and gives it back if it fails or found an existing bridge; the removal of a
+    bridge (by whichever client) frees a slot of the client that made it.
     """
 
     def __init__(self, limit: int) -> None:
@@ -389,7 +466,8 @@ class BridgeQuota:
 
     def reserve(self, client: object, op: str) -> bool:
         """Before `op` runs for `client`; True if a slot was taken (to `settle` later)."""
-        if op not in CREATE_OPS:
+        cls = REQUEST_TYPES.get(op)
+        if cls is None or cls.creates is None:
             return False
         count = self._counts.get(client, 0)
         if count >= self.limit:
@@ -399,13 +477,11 @@ class BridgeQuota:
         self._counts[client] = count + 1
         return True
 
-    def settle(self, client: object, op: str, reserved: bool,
+    def settle(self, client: object, reserved: bool,
                result: Optional[Mapping[str, Any]]) -> None:
-        """After `op` for `client` finished (`result` None: it failed)."""
+        """After a creation for `client` finished (`result` None: it failed)."""
         if reserved and (result is None or result.get("existed") is True):
-            self._release(client)
-        elif op in REMOVE_OPS and result is not None:
-            self._release(client)
+            self.release(client)
 
     def forget(self, client: object) -> None:
         """The client left: its bridges live on (they are daemon-wide), its count goes."""
@@ -414,33 +490,10 @@ class BridgeQuota:
     def count(self, client: object) -> int:
         return self._counts.get(client, 0)
 
-    def _release(self, client: object) -> None:
+    def release(self, client: object) -> None:
+        """One bridge `client` made is gone."""
         count = self._counts.get(client, 0)
         if count > 1:
             self._counts[client] = count - 1
         else:
             self._counts.pop(client, None)
-
-
-_DENIED_LOG_INTERVAL_S = 5.0
-
-
-@dataclass
-class RateLimitedLog:
-    """Logs a repeated warning at most once per interval per key, counting the rest."""
-
-    logger: logging.Logger = log
-    interval_s: float = _DENIED_LOG_INTERVAL_S
-    _last: dict[str, float] = field(default_factory=dict)
-    _suppressed: dict[str, int] = field(default_factory=dict)
-
-    def warning(self, key: str, now: float, message: str, *args: object) -> None:
-        last = self._last.get(key)
-        if last is not None and now - last < self.interval_s:
-            self._suppressed[key] = self._suppressed.get(key, 0) + 1
-            return
-        self._last[key] = now
-        suppressed = self._suppressed.pop(key, 0)
-        if suppressed:
-            message += f" ({suppressed} more like it not logged)"
-        self.logger.warning(message, *args)

@@ -31,7 +31,8 @@ from bridge.codecs.registry import service_class
 from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
-from protocol.commands import (AdvertiseService, CallService, CommandError, CommandFailedError,
+from bridge.security import SecurityPolicy
+from protocol.commands import (Op, AdvertiseService, CallService, CommandError, CommandFailedError,
                                ErrorCode, OutOfRangeError, Reply, ServiceRequest,
                                UnadvertiseService, WrongTypeError, loads)
 from protocol.messages import Command, Message, RtsCommand
@@ -162,8 +163,11 @@ class ServiceBridges:
     """The daemon's service clients (`call_service`) and client-served services."""
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
-                 answer_timeout_s: float = 4.0) -> None:
+                 answer_timeout_s: float = 4.0,
+                 policy: Optional[SecurityPolicy] = None) -> None:
         self._ros = ros
+        # A parameter listing through call_service shows what the parameter globs allow.
+        self._policy = policy or SecurityPolicy()
         self._hub = hub
         self._names = names
         self._answer_timeout_s = answer_timeout_s
@@ -195,7 +199,9 @@ class ServiceBridges:
                                           ready_wait=request.timeout,
                                           what=f"service {service}", field="service")
         entry.calls += 1
-        return {"service": service, "type": ros_type, "response": message_to_dict(response)}
+        return {"service": service, "type": ros_type, "response":
+                self._policy.filter_service_response(service, ros_type,
+                                                     message_to_dict(response))}
 
     def _client_for(self, service: str, ros_type: str, srv: Any) -> CalledService:
         entry = self.called.get((service, ros_type))
@@ -372,11 +378,11 @@ class ServiceBridges:
             self._unadvertise(served)
 
     # --- capability ------------------------------------------------------------------------
-    def handlers(self) -> dict[str, Handler]:
+    def handlers(self) -> dict[type[Op], Handler]:
         return {
-            CallService.op: lambda request, _: self.call_service(request),
-            AdvertiseService.op: self.advertise_service,
-            UnadvertiseService.op: self.unadvertise_service,
+            CallService: lambda request, _: self.call_service(request),
+            AdvertiseService: self.advertise_service,
+            UnadvertiseService: self.unadvertise_service,
         }
 
     def describe(self) -> list[dict[str, Any]]:

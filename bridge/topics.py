@@ -14,19 +14,22 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
 from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
+from bridge.logging_limits import RateLimitedLog
+from bridge.message_guards import MessageGuard
 from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
+from bridge.security import SecurityPolicy
 from protocol.commands import (CommandFailedError, CreatePublisher, CreateSubscriber, ErrorCode,
-                               GetLastMessage, OutOfRangeError, Publish, QoS, RemovePublisher,
-                               RemoveSubscriber, WrongTypeError)
+                               ForbiddenError, GetLastMessage, Op, OutOfRangeError, Publish, QoS,
+                               RemovePublisher, RemoveSubscriber, WrongTypeError)
 from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
 from protocol.messages import Message, StatusCode
-from protocol.naming import UNITS_MM, DeviceNameRegistry, NameKey, metadata_for
+from protocol.naming import KEY_FRAME, UNITS_MM, DeviceNameRegistry, NameKey, metadata_for
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +55,8 @@ class TopicInfo:
 class SubscriberBridge:
     def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QoS,
                  device: str, metadata: dict[str, str],
-                 max_rate_hz: Optional[float] = None) -> None:
+                 max_rate_hz: Optional[float] = None,
+                 message_filter: Optional[Callable[[Any], Any]] = None) -> None:
         self.topic = topic
         self.codec = codec
         self.qos = qos
@@ -61,6 +65,8 @@ class SubscriberBridge:
         self._hub = hub
         self._ros = ros
         self._metadata = metadata
+        # The security policy's view of a message (tf frames, parameters): None = drop it.
+        self._filter = message_filter
         self.count = 0
         self.last_message: Any = None
         self._last_warning = 0.0
@@ -72,6 +78,10 @@ class SubscriberBridge:
     def _on_message(self, msg: Any) -> None:  # ROS executor thread: convert, hand off
         if self._closed:
             return
+        if self._filter is not None:
+            msg = self._filter(msg)
+            if msg is None:
+                return
         self.count += 1
         self.last_message = msg
         try:
@@ -102,12 +112,15 @@ class SubscriberBridge:
 
 class PublisherBridge:
     def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QoS,
-                 device: str, frame_id: str = "") -> None:
+                 device: str, frame_id: str = "",
+                 guard: Optional[MessageGuard] = None) -> None:
         self.topic = topic
         self.codec = codec
         self.qos = qos
         self.device = device
         self.frame_id = frame_id
+        self._guard = guard  # the security policy on what a message writes (tf frames...)
+        self._refusals = RateLimitedLog(log)
         self.count = 0
         self._ros = ros
         self._hub = hub
@@ -120,20 +133,34 @@ class PublisherBridge:
 
     def publish_value(self, value: Any) -> int:
         """Publish a client's JSON value; returns the number of ROS subscribers.
-        Raises `CodecError` naming the bad part of the value."""
+        Raises `CodecError` naming the bad part of the value, `ForbiddenError` if it writes
+        what the security policy denies."""
         msg = self.codec.from_value(value, stamp=self._stamp_now(), frame_id=self.frame_id)
+        self._check(msg)
         return self._publish(msg)
+
+    def _check(self, msg: Any) -> None:
+        if self._guard is not None:
+            self._guard.check(msg)
 
     def on_igtl(self, message: Message, client: Replier) -> None:
         """A client sent data to this publisher's device (loop thread)."""
         try:
             msg = self.codec.from_igtl(message.body, stamp=self._stamp_now(),
-                                       frame_id=message.metadata.get("ros2.frame", "")
+                                       frame_id=message.metadata.get(KEY_FRAME, "")
                                        or self.frame_id,
                                        metadata=message.metadata)
+            self._check(msg)
+        except ForbiddenError as error:
+            self._refusals.warning(self.topic, None, "refused %s for %s from a client: %s",
+                                   message.type_name, self.topic, error)
+            client.send_status(message.device_name, StatusCode.ACCESS_DENIED,
+                               f"not published to {self.topic}: {error}")
+            return
         except CodecError as error:
-            log.warning("refused %s for %s from a client: %s", message.type_name, self.topic,
-                        error)
+            # A client can send bad data as fast as it likes: the log says it once a while.
+            self._refusals.warning(self.topic, None, "refused %s for %s from a client: %s",
+                                   message.type_name, self.topic, error)
             client.send_status(message.device_name, StatusCode.CONFIG_ERROR,
                                f"not published to {self.topic}: {error}")
             return
@@ -157,10 +184,13 @@ class PublisherBridge:
 class TopicBridges:
     """The daemon's subscriber and publisher bridges, one of each kind per topic."""
 
-    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry) -> None:
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
+                 policy: Optional[SecurityPolicy] = None) -> None:
         self._ros = ros
         self._hub = hub
         self._names = names
+        # Judges what messages name (a tf topic's frames); the dispatcher judged the request.
+        self._policy = policy or SecurityPolicy()
         self.subscribers: dict[str, SubscriberBridge] = {}
         self.publishers: dict[str, PublisherBridge] = {}
 
@@ -211,10 +241,14 @@ class TopicBridges:
         bridge = SubscriberBridge(
             self._ros, self._hub, topic=topic, codec=codec, qos=request.qos,
             device=device, metadata=metadata_for(key, ros_type=ros_type, units=UNITS_MM),
-            max_rate_hz=request.rate_hz)
+            max_rate_hz=request.rate_hz, message_filter=self._filter_for(topic, ros_type))
         self.subscribers[topic] = bridge
         log.info("subscribed to %s (%s) as device %r", topic, ros_type, device)
         return _describe(bridge.info(), existed=False)
+
+    def _filter_for(self, topic: str, ros_type: str) -> Optional[Callable[[Any], Any]]:
+        guard = self._policy.message_guard(topic, ros_type)
+        return None if guard is None else guard.filter
 
     def remove_subscriber(self, request: RemoveSubscriber) -> dict[str, Any]:
         topic = self._resolve(request.topic)
@@ -235,7 +269,8 @@ class TopicBridges:
         self._check_graph(topic, ros_type)
         device = self._names.register(NameKey.publisher(topic))
         bridge = PublisherBridge(self._ros, self._hub, topic=topic, codec=codec,
-                                 qos=request.qos, device=device)
+                                 qos=request.qos, device=device,
+                                 guard=self._policy.message_guard(topic, ros_type))
         self.publishers[topic] = bridge
         log.info("publishing %s (%s); clients send to device %r", topic, ros_type, device)
         return _describe(bridge.info(), existed=False)
@@ -278,14 +313,14 @@ class TopicBridges:
             result["value"] = bridge.codec.to_value(message)
         return result
 
-    def handlers(self) -> dict[str, Handler]:
+    def handlers(self) -> dict[type[Op], Handler]:
         return {
-            CreateSubscriber.op: lambda request, _: self.create_subscriber(request),
-            RemoveSubscriber.op: lambda request, _: self.remove_subscriber(request),
-            CreatePublisher.op: lambda request, _: self.create_publisher(request),
-            RemovePublisher.op: lambda request, _: self.remove_publisher(request),
-            Publish.op: lambda request, _: self.publish(request),
-            GetLastMessage.op: lambda request, _: self.get_last_message(request),
+            CreateSubscriber: lambda request, _: self.create_subscriber(request),
+            RemoveSubscriber: lambda request, _: self.remove_subscriber(request),
+            CreatePublisher: lambda request, _: self.create_publisher(request),
+            RemovePublisher: lambda request, _: self.remove_publisher(request),
+            Publish: lambda request, _: self.publish(request),
+            GetLastMessage: lambda request, _: self.get_last_message(request),
         }
 
     def describe(self) -> list[dict[str, Any]]:

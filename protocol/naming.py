@@ -60,6 +60,10 @@ __all__ = [
     "DEFAULT_HASH_LENGTH",
     "KEY_CHILD",
     "KEY_COLOR",
+    "KEY_DROPPED",
+    "KEY_ENCODING",
+    "KEY_FORMAT",
+    "KEY_LABELS",
     "KEY_LINK_COUNT",
     "KEY_VISUAL_COUNT",
     "KEY_FRAME",
@@ -70,6 +74,7 @@ __all__ = [
     "KEY_ROBOT",
     "KEY_ROLE",
     "KEY_SERVICE",
+    "KEY_SHAPE",
     "KEY_TOPIC",
     "KEY_TYPE",
     "KEY_UNITS",
@@ -157,6 +162,12 @@ KEY_COLOR = "ros2.color"
 # On a robot's description device (STATUS OK once loaded): how many links and visuals it has.
 KEY_LINK_COUNT = "ros2.links"
 KEY_VISUAL_COUNT = "ros2.visuals"
+# What the codecs add about a message's content.
+KEY_SHAPE = "ros2.shape"  # "2x3": shape of a multi-array / table
+KEY_ENCODING = "ros2.encoding"  # sensor_msgs/Image encoding of the ROS side ("bgr8")
+KEY_FORMAT = "ros2.format"  # "text" or "json": how to read a STRING body
+KEY_LABELS = "ros2.labels"  # JSON list of MultiArrayDimension labels
+KEY_DROPPED = "ros2.dropped"  # points left out of a cloud for a NaN/inf coordinate
 METADATA_KEYS: tuple[str, ...] = (
     KEY_TOPIC, KEY_TYPE, KEY_FRAME, KEY_PARENT, KEY_CHILD, KEY_ROBOT, KEY_LINK,
     KEY_VISUAL, KEY_NODE, KEY_SERVICE, KEY_ROLE, KEY_UNITS, KEY_PARENT_DEVICE, KEY_COLOR,

@@ -19,17 +19,14 @@ __all__ = ["CREATE_OPS", "REMOVE_OPS", "BridgeSpec", "BridgeState", "StateFormat
 
 STATE_VERSION = 1
 
-# Ops that create something the daemon keeps, and the op (and key fields) that removes it.
+# Ops that create something the daemon keeps, and the op (and identity fields) that removes
+# it, from the ops' own declarations; bridges that die with their connection (a served
+# service) are not restored.
+_KINDS = [kind for kind in c.bridge_kinds().values() if not kind.bridge.per_connection]
 REMOVE_OPS: Dict[str, Tuple[str, Tuple[str, ...]]] = {
-    "create_subscriber": ("remove_subscriber", ("topic",)),
-    "create_publisher": ("remove_publisher", ("topic",)),
-    "create_parameter_client": ("remove_parameter_client", ("node",)),
-    "create_tf_lookup": ("remove_tf_lookup", ("parent", "child")),
-    "create_tf_broadcaster": ("remove_tf_broadcaster", ("parent", "child")),
-    "create_robot": ("remove_robot", ("name",)),
-}
+    kind.create.op: (kind.remove.op, kind.bridge.identity) for kind in _KINDS}
 CREATE_OPS = tuple(REMOVE_OPS)
-FOLLOW_UP_OPS = ("observe_parameters",)
+FOLLOW_UP_OPS = tuple(follow.op for kind in _KINDS for follow in kind.follow_ups)
 
 
 class StateFormatError(ValueError):

@@ -26,8 +26,9 @@ import numpy as np
 
 from protocol.messages import Message
 from protocol.naming import KEY_ROBOT
-from slicer_client.bridge_state import BridgeSpec, BridgeState
-from slicer_client.connection import DEFAULT_HOST, DEFAULT_PORT
+from protocol import commands as c
+from slicer_client.bridge_state import REMOVE_OPS, BridgeSpec, BridgeState
+from slicer_client.connection import DEFAULT_HOST, DEFAULT_PORT, CommandRefusedError
 from slicer_client.matrices import as_numpy
 from slicer_client.resources import (ParameterClient, Publisher, Resource, Robot, Service,
                                      Subscriber, TfBroadcaster, TfLookup)
@@ -86,14 +87,14 @@ class Client:
             self._apply(resource, command)
         if not first:
             for callback in list(self._connection_callbacks):
-                self._emit(callback, True, "")
+                self.emit(callback, True, "")
 
     def on_disconnected(self, reason: str) -> None:
         for callback in list(self._connection_callbacks):
-            self._emit(callback, False, reason)
+            self.emit(callback, False, reason)
 
     # --- event delivery ------------------------------------------------------------------
-    def _emit(self, callback: Callable[..., None], *args: Any) -> None:
+    def emit(self, callback: Callable[..., None], *args: Any) -> None:
         if self._mode == _QUEUE:
             self._events.put((callback, args))
             return
@@ -151,7 +152,7 @@ class Client:
             self._resources[key] = resource
         return resource
 
-    def _remove(self, resource: Resource) -> None:
+    def remove_resource(self, resource: Resource) -> None:
         op, args = resource.spec.remove_command()
         try:
             self.command(op, args)
@@ -161,7 +162,7 @@ class Client:
                 for device in resource.devices():
                     self._by_device.pop(device, None)
 
-    def _spec_changed(self, resource: Resource) -> None:
+    def spec_changed(self, resource: Resource) -> None:
         """A resource's follow-up commands changed (kept for re-sync and saving)."""
 
     def subscribe(self, topic: str, type: str, *, qos: Optional[Mapping[str, Any]] = None,
@@ -231,6 +232,33 @@ class Client:
         with self._lock:
             return self._resources.get((op, *identity))
 
+    def remove_bridge(self, op: str, *identity: str) -> bool:
+        """Remove the bridge `op` (its create op) with `identity` made: this client's own
+        resource, or one the daemon keeps from an earlier connection or another client (the
+        daemon's rules decide: docs/security.md). False if the daemon has no such bridge;
+        a refusal raises `CommandRefusedError`."""
+        resource = self.find(op, *identity)
+        if resource is not None:
+            try:
+                resource.remove()
+            except CommandRefusedError as error:
+                if error.code != c.ErrorCode.NOT_FOUND:
+                    raise
+                return False
+            return True
+        if op not in REMOVE_OPS:
+            raise ValueError(f"op: expected one of {', '.join(REMOVE_OPS)}, got {op!r}")
+        remove_op, fields = REMOVE_OPS[op]
+        if len(identity) != len(fields):
+            raise ValueError(f"identity: expected {', '.join(fields)}, got {identity!r}")
+        try:
+            self.command(remove_op, dict(zip(fields, identity)))
+        except CommandRefusedError as error:
+            if error.code == c.ErrorCode.NOT_FOUND:
+                return False
+            raise
+        return True
+
     # --- state (re-sync list, scene saving) ---------------------------------------------
     def state(self) -> BridgeState:
         return BridgeState(tuple(r.spec for r in self.resources()))
@@ -261,11 +289,13 @@ class Client:
         elif spec.op == "create_tf_broadcaster":
             resource = self.tf_broadcaster(a["parent"], a["child"],
                                            static=bool(a.get("static", False)))
-        else:  # create_robot
+        elif spec.op == "create_robot":
             resource = self.robot(a["name"], source=a.get("source"),
                                   fixed_frame=a.get("fixed_frame"),
                                   tf_prefix=a.get("tf_prefix", ""),
                                   namespace=a.get("namespace", ""))
+        else:  # a bridge kind without a Pythonic class yet: its spec alone re-creates it
+            resource = self._add(Resource(self, spec))
         return resource
 
     # --- direct commands -----------------------------------------------------------------

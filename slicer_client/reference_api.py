@@ -22,7 +22,7 @@ ROS node (the daemon's), so ``Create``/``Destroy`` of extra nodes are not offere
 from __future__ import annotations
 
 import itertools
-from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Protocol, Tuple
 
 import numpy as np
 
@@ -31,8 +31,38 @@ from slicer_client.matrices import fill_vtk, is_vtk_matrix, to_vtk
 from slicer_client.resources import (ParameterClient, Publisher, Resource, Robot, Service,
                                      Subscriber, TfBroadcaster, TfLookup, parameter_to_python)
 
-if TYPE_CHECKING:
-    from slicer_client.client import Client
+
+class FacadeClient(Protocol):
+    """What the facade uses of a `slicer_client.Client` (a protocol, so this module does
+    not import the client, which hands the facade out)."""
+
+    daemon_info: Dict[str, Any]
+
+    @property
+    def connected(self) -> bool: ...
+
+    def find(self, op: str, *identity: str) -> Optional[Resource]: ...
+
+    def remove_bridge(self, op: str, *identity: str) -> bool: ...
+
+    def subscribe(self, topic: str, type: str, *, qos: Optional[Mapping[str, Any]] = None,
+                  rate_hz: Optional[float] = None,
+                  callback: Optional[Callable[[Any], None]] = None) -> Subscriber: ...
+
+    def publisher(self, topic: str, type: str, *,
+                  qos: Optional[Mapping[str, Any]] = None) -> Publisher: ...
+
+    def parameters(self, node: str) -> ParameterClient: ...
+
+    def tf_lookup(self, parent: str, child: str, *, rate_hz: Optional[float] = None,
+                  callback: Optional[Callable[[Any], None]] = None) -> TfLookup: ...
+
+    def tf_broadcaster(self, parent: str, child: str, *,
+                       static: bool = False) -> TfBroadcaster: ...
+
+    def service(self, service: str, type: str) -> Service: ...
+
+    def robot(self, name: str, **options: Any) -> Robot: ...
 
 __all__ = ["ParameterNode", "PublisherNode", "ROS2Node", "RobotNode", "ServiceClientNode",
            "SubscriberNode", "Tf2BroadcasterNode", "Tf2LookupNode", "short_type_name"]
@@ -388,7 +418,7 @@ def _transform_node_matrix(node: Any) -> Any:
 class ROS2Node:
     """The reference's ``vtkMRMLROS2NodeNode``: the daemon's ROS node, seen from here."""
 
-    def __init__(self, client: Client) -> None:
+    def __init__(self, client: FacadeClient) -> None:
         self.client = client
         self.matrix_type = "numpy"  # or "vtk"
         self._nodes: Dict[Tuple[str, ...], _Node] = {}
@@ -406,14 +436,15 @@ class ROS2Node:
         return None if resource is None else self._nodes.get(resource.spec.key)
 
     def _drop(self, *key: str) -> bool:
+        """Remove a bridge: one this connection made, or one the daemon keeps from another
+        (an earlier connection's, another client's) if its rules allow; False if there is
+        none. A refusal (an operator's bridge, a --read-only daemon) raises."""
         resource = self.client.find(*key)
-        if resource is None:
-            return False
-        resource.remove()
-        node = self._nodes.pop(resource.spec.key, None)
+        removed = self.client.remove_bridge(*key)
+        node = self._nodes.pop(resource.spec.key, None) if resource is not None else None
         if node is not None:
             node.RemoveAllObservers()
-        return True
+        return removed
 
     def GetROS2NodeName(self) -> str:  # noqa: N802
         return str(self.client.daemon_info.get("node", "/slicer_bridge"))

@@ -1,4 +1,5 @@
-"""One object per daemon-side resource: what a `Client` hands out.
+"""One object per daemon-side resource: what a `Client` hands out (through the
+`ResourceOwner` protocol, so this module does not import the client).
 
 Each resource knows the command that creates it (its `BridgeSpec`, replayed after a
 reconnect), the device name the daemon answered with, and how to read the messages that
@@ -11,8 +12,7 @@ from __future__ import annotations
 import json
 import threading
 from dataclasses import dataclass
-from typing import (TYPE_CHECKING, Any, Callable, Dict, List, Mapping, Optional, Sequence,
-                    Tuple)
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -21,10 +21,8 @@ from protocol.messages import Message, PolyData, Status, String, Transform
 from protocol.naming import KEY_LINK, KEY_LINK_COUNT, KEY_ROLE, KEY_VISUAL, KEY_VISUAL_COUNT
 from slicer_client.bridge_state import BridgeSpec
 from slicer_client.matrices import as_numpy, as_rows
+from slicer_client.owner import ResourceOwner
 from slicer_client.values import value_from_message
-
-if TYPE_CHECKING:
-    from slicer_client.client import Client
 
 __all__ = ["ParameterClient", "Publisher", "Resource", "Robot", "RobotLink", "Service",
            "Subscriber", "TfBroadcaster", "TfLookup", "parameter_to_python"]
@@ -46,7 +44,7 @@ def _drop_none(args: Dict[str, Any]) -> Dict[str, Any]:
 class Resource:
     """Base: creation spec, device name, callbacks, removal."""
 
-    def __init__(self, client: Client, spec: BridgeSpec) -> None:
+    def __init__(self, client: ResourceOwner, spec: BridgeSpec) -> None:
         self._client = client
         self.spec = spec
         self.device: str = ""
@@ -69,7 +67,7 @@ class Resource:
 
     def _notify(self, *args: Any) -> None:
         for callback in list(self._callbacks):
-            self._client._emit(callback, *args)
+            self._client.emit(callback, *args)
 
     def _wait(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
         with self._changed:
@@ -89,7 +87,7 @@ class Resource:
     def remove(self) -> None:
         """Remove it daemon-side and forget it (it is no longer re-created)."""
         if not self.removed:
-            self._client._remove(self)
+            self._client.remove_resource(self)
             self.removed = True
 
     def __repr__(self) -> str:
@@ -99,7 +97,7 @@ class Resource:
 class Subscriber(Resource):
     """A ROS subscription streamed to this client (the reference's subscriber node)."""
 
-    def __init__(self, client: Client, topic: str, type: str, *,
+    def __init__(self, client: ResourceOwner, topic: str, type: str, *,
                  qos: Optional[Mapping[str, Any]] = None,
                  rate_hz: Optional[float] = None) -> None:
         super().__init__(client, BridgeSpec("create_subscriber", _drop_none(
@@ -152,7 +150,7 @@ class Subscriber(Resource):
 class Publisher(Resource):
     """A ROS publisher fed by this client."""
 
-    def __init__(self, client: Client, topic: str, type: str, *,
+    def __init__(self, client: ResourceOwner, topic: str, type: str, *,
                  qos: Optional[Mapping[str, Any]] = None) -> None:
         super().__init__(client, BridgeSpec("create_publisher", _drop_none(
             {"topic": topic, "type": type, "qos": _qos_dict(qos)})))
@@ -205,7 +203,7 @@ def parameter_to_python(value: c.ParameterValue) -> Any:
 class ParameterClient(Resource):
     """Another ROS node's parameters: list, get, set, observe (typed values)."""
 
-    def __init__(self, client: Client, node: str) -> None:
+    def __init__(self, client: ResourceOwner, node: str) -> None:
         super().__init__(client, BridgeSpec("create_parameter_client", {"node": node}))
         self.node = node
         self.observed: Tuple[str, ...] = ()
@@ -271,13 +269,13 @@ class ParameterClient(Resource):
         self.spec = BridgeSpec(self.spec.op, self.spec.args, (
             ("observe_parameters", {"node": self.node, "names": list(names)}),)
             if names else ())
-        self._client._spec_changed(self)
+        self._client.spec_changed(self)
 
 
 class TfLookup(Resource):
     """parent -> child from tf2, streamed as a 4x4 matrix in mm whenever it changes."""
 
-    def __init__(self, client: Client, parent: str, child: str, *,
+    def __init__(self, client: ResourceOwner, parent: str, child: str, *,
                  rate_hz: Optional[float] = None) -> None:
         super().__init__(client, BridgeSpec("create_tf_lookup", _drop_none(
             {"parent": parent, "child": child, "rate_hz": rate_hz})))
@@ -310,7 +308,8 @@ class TfLookup(Resource):
 
 
 class TfBroadcaster(Resource):
-    def __init__(self, client: Client, parent: str, child: str, *, static: bool = False) -> None:
+    def __init__(self, client: ResourceOwner, parent: str, child: str, *,
+                 static: bool = False) -> None:
         super().__init__(client, BridgeSpec("create_tf_broadcaster",
                                             {"parent": parent, "child": child,
                                              "static": static}))
@@ -338,7 +337,7 @@ class TfBroadcaster(Resource):
 class Service:
     """A ROS service client (nothing is created daemon-side: each call is one command)."""
 
-    def __init__(self, client: Client, service: str, type: str) -> None:
+    def __init__(self, client: ResourceOwner, service: str, type: str) -> None:
         c.resolve_service_type(type)  # fail early on a bad type name
         self._client = client
         self.service = service
@@ -362,9 +361,9 @@ class Service:
             try:
                 response = self.call(request, timeout)
             except Exception as error:  # noqa: BLE001 - handed to the callback
-                self._client._emit(callback, None, error)
+                self._client.emit(callback, None, error)
             else:
-                self._client._emit(callback, response, None)
+                self._client.emit(callback, response, None)
         worker = threading.Thread(target=run, name=f"service {self.service}", daemon=True)
         worker.start()
         return worker
@@ -390,7 +389,7 @@ class Robot(Resource):
     transform per link, as they arrive; read from the messages' ros2.* metadata.
     Callbacks get (kind, link_name, value) with kind "transform" or "mesh"."""
 
-    def __init__(self, client: Client, name: str, *, node: str = "/robot_state_publisher",
+    def __init__(self, client: ResourceOwner, name: str, *, node: str = "/robot_state_publisher",
                  parameter: str = "robot_description", fixed_frame: Optional[str] = None,
                  tf_prefix: str = "", namespace: str = "",
                  source: Optional[Mapping[str, Any]] = None) -> None:

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from protocol.messages import Image, Message, String, Transform
-from protocol.naming import KEY_TYPE
+from protocol.naming import KEY_FORMAT, KEY_TYPE
 
 __all__ = ["value_from_message", "value_from_text"]
 
@@ -42,7 +42,7 @@ def value_from_message(message: Message) -> Any:
         return np.array(body.matrix, dtype=np.float64)
     if isinstance(body, String):
         return value_from_text(body.text, message.metadata.get(KEY_TYPE, ""),
-                               message.metadata.get("ros2.format", ""))
+                               message.metadata.get(KEY_FORMAT, ""))
     if isinstance(body, Image):
         return body.pixels
     return body

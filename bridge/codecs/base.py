@@ -27,7 +27,8 @@ from bridge.codecs.generic import message_to_yaml
 from bridge.codecs.registry import message_class
 from protocol.errors import ProtocolError
 from protocol.messages import String
-from protocol.naming import KEY_FRAME, KEY_TYPE
+# The codecs' metadata keys live in the protocol, next to the other ros2.* keys.
+from protocol.naming import KEY_ENCODING, KEY_FORMAT, KEY_FRAME, KEY_LABELS, KEY_SHAPE, KEY_TYPE
 
 __all__ = [
     "KEY_ENCODING",
@@ -51,11 +52,6 @@ Body = Any  # one of protocol.messages' body classes (Transform, String, Image, 
 # A ROS time: builtin_interfaces/Time, or (sec, nanosec).
 Stamp = Union[Any, tuple[int, int], None]
 
-# Metadata keys the codecs suggest, next to protocol.naming's ros2.* keys.
-KEY_SHAPE = "ros2.shape"  # "2x3": shape of a multi-array / table
-KEY_ENCODING = "ros2.encoding"  # sensor_msgs/Image encoding of the ROS side ("bgr8")
-KEY_FORMAT = "ros2.format"  # "text" or "json": how to read a STRING body
-KEY_LABELS = "ros2.labels"  # JSON list of MultiArrayDimension labels
 
 
 @dataclass(frozen=True)

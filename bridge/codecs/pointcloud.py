@@ -29,7 +29,7 @@ from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import numeric_array
 from protocol.conversions import metres_to_mm, mm_to_metres
 from protocol.messages import AttributeKind, Point, PolyData, PolyDataAttribute, cells_from_array
-from protocol.naming import KEY_UNITS, UNITS_MM
+from protocol.naming import KEY_DROPPED, KEY_UNITS, UNITS_MM
 
 __all__ = [
     "KEY_DROPPED",
@@ -41,7 +41,6 @@ __all__ = [
     "cloud2_arrays",
 ]
 
-KEY_DROPPED = "ros2.dropped"  # points left out for a NaN/inf coordinate
 RGBA_ATTRIBUTE = "RGBA"
 
 # sensor_msgs/PointField datatypes -> numpy base types.

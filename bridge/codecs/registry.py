@@ -1,12 +1,8 @@
 """ROS type names: resolve what a user typed to ``pkg/msg/Type`` and load the message class.
 
-Accepted spellings (the reference SlicerROS2 accepts the first three):
-
-* a short name of the reference: ``"String"``, ``"Int"``, ``"DoubleTable"``, ``"PoseStamped"``;
-* a reference node class name: ``"vtkMRMLROS2PublisherStringNode"``,
-  ``"vtkMRMLROS2SubscriberPoseStampedNode"``;
-* ``"std_msgs/msg/String"`` (canonical), ``"std_msgs/String"``, ``"std_msgs.msg.String"``;
-* any other bare message name (``"NavSatFix"``) found in exactly one installed package.
+Accepted spellings: the protocol's grammar (`protocol.commands.types`: short names of the
+reference, its node class names, ``pkg/msg/Type``, ``pkg/Type``, ``pkg.msg.Type``) and any
+other bare message name (``"NavSatFix"``) found in exactly one installed package.
 
 rclpy only: no ament index is needed (the PyPI wheels install none), installed interface
 packages are found on ``sys.path`` by their ``msg/__init__.py``.
@@ -22,7 +18,7 @@ from functools import cache, lru_cache
 from typing import Any
 
 from bridge.codecs.errors import CodecError
-from protocol.commands import REFERENCE_TYPE_NAMES
+from protocol.commands import REFERENCE_TYPE_NAMES, OutOfRangeError, resolve_message_type
 
 __all__ = ["REFERENCE_SHORT_NAMES", "installed_types", "message_class", "resolve_type",
            "ros_type_of",
@@ -31,12 +27,8 @@ __all__ = ["REFERENCE_SHORT_NAMES", "installed_types", "message_class", "resolve
 # The reference's short names: one table, in the protocol (clients resolve them too).
 REFERENCE_SHORT_NAMES = REFERENCE_TYPE_NAMES
 
-_NODE_CLASS = re.compile(r"^vtkMRMLROS2(?:Publisher|Subscriber)(\w+)Node$")
 _IDENT = r"[A-Za-z][A-Za-z0-9_]*"
 _CANONICAL = re.compile(rf"^({_IDENT})/msg/({_IDENT})$")
-_TWO_PART = re.compile(rf"^({_IDENT})/({_IDENT})$")
-_DOTTED = re.compile(rf"^({_IDENT})\.msg\.({_IDENT})$")
-_BARE = re.compile(rf"^{_IDENT}$")
 _IMPORT_LINE = re.compile(rf"^from\s+({_IDENT})\.msg\.\w+\s+import\s+({_IDENT})", re.MULTILINE)
 
 
@@ -126,34 +118,18 @@ def installed_types() -> tuple[str, ...]:
 def resolve_type(name: str) -> str:
     """Any accepted spelling of a message type -> canonical ``pkg/msg/Type``.
 
-    The type is checked to be installed. An unknown or ambiguous name raises `CodecError`
+    The grammar is the protocol's (`protocol.commands.resolve_message_type`, one for the
+    whole project); here bare names are also looked up among the installed packages, and
+    the type is checked to be installed. An unknown or ambiguous name raises `CodecError`
     with ``field="type"`` naming it.
     """
     if not isinstance(name, str):
         raise CodecError(field="type", expected="a message type name (str)",
                          got=type(name).__name__)
-    text = name.strip()
-    node = _NODE_CLASS.match(text)
-    if node is not None:
-        text = node.group(1)  # then resolved like a short or bare name
-    for pattern in (_CANONICAL, _TWO_PART, _DOTTED):
-        m = pattern.match(text)
-        if m is not None:
-            ros_type = f"{m.group(1)}/msg/{m.group(2)}"
-            message_class(ros_type)
-            return ros_type
-    if text in REFERENCE_SHORT_NAMES:
-        ros_type = REFERENCE_SHORT_NAMES[text]
-        message_class(ros_type)
-        return ros_type
-    if _BARE.match(text):
-        pkgs = _installed_messages().get(text, ())
-        if len(pkgs) == 1:
-            ros_type = f"{pkgs[0]}/msg/{text}"
-            message_class(ros_type)
-            return ros_type
-        if len(pkgs) > 1:
-            raise _unknown(name, "an unambiguous name; spell one of "
-                           + ", ".join(f"{p}/msg/{text}" for p in pkgs))
-    raise _unknown(name, "a known message type ('pkg/msg/Type', 'pkg/Type', a reference short "
-                   "name such as 'PoseStamped', or 'vtkMRMLROS2Subscriber<Name>Node')")
+    try:
+        ros_type = resolve_message_type(
+            name, packages_of=lambda bare: _installed_messages().get(bare, ()))
+    except OutOfRangeError as error:
+        raise _unknown(name.strip(), error.expected) from None
+    message_class(ros_type)
+    return ros_type

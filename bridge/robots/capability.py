@@ -28,6 +28,13 @@ Units: the model's vertices are already in mm; the tf capability turns metres in
 Frame globs (``--allow-frame``/``--deny-frame``) hold for robots too: a link whose tf frame
 the policy denies is withheld (no TRANSFORM, no mesh; listed under "withheld"), and a robot
 whose fixed frame is denied does not load.
+
+Files: a robot reads meshes only inside the mesh roots (``--robot-dir`` and
+``--package-path`` folders) whatever the source of its description, since a client can put
+any URDF in a parameter or on a topic (and change the one an operator's robot reads); a
+mesh outside them is a warning worded as for a missing one (`bridge.robots.resources`).
+Only a URDF file named by the operator's start-up config is trusted to read meshes from
+anywhere.
 """
 
 from __future__ import annotations
@@ -44,7 +51,6 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from std_msgs.msg import String as StringMsg
 
 from bridge.dispatch import Handler
-from bridge.hub import Hub
 from bridge.parameters import ParameterBridges, ParameterWatch
 from bridge.robots.errors import RobotError
 from bridge.robots.resources import PackageResolver
@@ -53,8 +59,9 @@ from bridge.security import NameRules
 from bridge.services import resolve_name
 from bridge.tf.capability import TfBridges
 from bridge.tf.lookups import LookupKey
+from bridge.hub import Hub, Replier
 from protocol.commands import (CommandFailedError, CreateRobot, ErrorCode, ForbiddenError,
-                               ListRobots, OutOfRangeError, ParameterValue, RemoveRobot,
+                               ListRobots, Op, OutOfRangeError, ParameterValue, RemoveRobot,
                                RobotSource)
 from protocol.messages import Message, PolyData, Status, StatusCode
 from protocol.naming import (KEY_CHILD, KEY_COLOR, KEY_LINK_COUNT, KEY_PARENT, KEY_PARENT_DEVICE,
@@ -75,8 +82,6 @@ _TOPIC_WAIT_S = 2.0
 _DESCRIPTION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                               reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
-_DEFAULT_NODE = RobotSource.node
-_DEFAULT_TOPIC = RobotSource.topic
 
 
 @dataclass
@@ -132,6 +137,8 @@ class _Robot:
     subscription: Any = None
     first_description: Optional[asyncio.Future[str]] = None
     removed: bool = False
+    # Meshes only from these folders; None: an operator's URDF file, trusted.
+    mesh_roots: Optional[tuple[Path, ...]] = None
     loaded: asyncio.Event = field(default_factory=asyncio.Event)
 
 
@@ -142,8 +149,11 @@ class RobotBridges:
                  parameters: ParameterBridges,
                  package_paths: Mapping[str, Path] | None = None,
                  frame_rules: Optional[NameRules] = None,
+                 mesh_roots: tuple[Path, ...] = (),
                  topic_wait_s: float = _TOPIC_WAIT_S) -> None:
         self._ros = ros
+        # Where a client's robot may read meshes: --robot-dir and --package-path folders.
+        self._mesh_roots = tuple(Path(folder) for folder in mesh_roots)
         self._frame_rules = frame_rules or NameRules()  # frame globs: allow all by default
         self._hub = hub
         self._names = names
@@ -157,7 +167,12 @@ class RobotBridges:
 
     # ------------------------------------------------------------------ ops
 
-    async def create_robot(self, request: CreateRobot) -> dict[str, Any]:
+    async def create_robot(self, request: CreateRobot,
+                           client: Optional[Replier] = None) -> dict[str, Any]:
+        """`client` None: the operator's start-up robot. Only a URDF file the operator's
+        config names is trusted to read meshes anywhere; a description from a parameter or
+        a topic can be changed by any client or ROS peer, so it reads meshes only inside
+        the mesh roots, whoever made the robot, and so does every robot of a client."""
         existing = self.robots.get(request.name)
         if existing is not None:
             if existing.request == request:  # a reconnecting client re-creates what it had
@@ -172,7 +187,9 @@ class RobotBridges:
             raise OutOfRangeError("name", "a robot name usable as a device name",
                                   f"{request.name!r} ({error})") from None
         robot = _Robot(request.name, request, self._resolve_source(request),
-                       request.tf_prefix, description_key, description_device)
+                       request.tf_prefix, description_key, description_device,
+                       mesh_roots=None if client is None and request.source.kind == "file"
+                       else self._mesh_roots)
         self.robots[robot.name] = robot
         try:
             text = await self._first_description(robot)
@@ -212,25 +229,16 @@ class RobotBridges:
     # ------------------------------------------------------------------ sources
 
     def _resolve_source(self, request: CreateRobot) -> RobotSource:
-        """Names as the ROS graph has them. A namespace applies to relative names and to
-        the defaults (``{"name": "PSM1", "namespace": "PSM1"}`` reads
-        ``/PSM1/robot_state_publisher``); other absolute names are kept."""
-        source = request.source
-        namespace = resolve_name(self._ros, request.namespace, "namespace") \
-            if request.namespace else ""
-
-        def place(name: str, default: str, field_name: str) -> str:
-            if namespace and (name == default or not name.startswith("/")):
-                name = f"{namespace.rstrip('/')}/{name.lstrip('/')}"
-            return resolve_name(self._ros, name, field_name)
-
+        """Names as the ROS graph has them: the request's placed source
+        (`CreateRobot.placed_source`: its namespace applied), resolved in the daemon's."""
+        source = request.placed_source()
         if source.kind == "parameter":
-            return RobotSource("parameter", node=place(source.node, _DEFAULT_NODE,
-                                                       "source.node"),
+            return RobotSource("parameter", node=resolve_name(self._ros, source.node,
+                                                              "source.node"),
                                parameter=source.parameter)
         if source.kind == "topic":
-            return RobotSource("topic", topic=place(source.topic, _DEFAULT_TOPIC,
-                                                    "source.topic"))
+            return RobotSource("topic", topic=resolve_name(self._ros, source.topic,
+                                                           "source.topic"))
         return source
 
     async def _first_description(self, robot: _Robot) -> Optional[str]:
@@ -316,10 +324,12 @@ class RobotBridges:
         loop = asyncio.get_running_loop()
         if source.kind == "file":
             path = self._file_path(source.path)
-            call = functools.partial(load_robot_file, path, package_paths=self._package_paths)
+            call = functools.partial(load_robot_file, path, package_paths=self._package_paths,
+                                     allowed_roots=robot.mesh_roots)
             field_name = "source.path"
         else:
-            call = functools.partial(load_robot, text, package_paths=self._package_paths)
+            call = functools.partial(load_robot, text, package_paths=self._package_paths,
+                                     allowed_roots=robot.mesh_roots)
             field_name = "source.parameter" if source.kind == "parameter" else "source.topic"
         try:
             model = await loop.run_in_executor(None, call)
@@ -503,11 +513,11 @@ class RobotBridges:
 
     # ------------------------------------------------------------------ capability
 
-    def handlers(self) -> dict[str, Handler]:
+    def handlers(self) -> dict[type[Op], Handler]:
         return {
-            CreateRobot.op: lambda request, _: self.create_robot(request),
-            RemoveRobot.op: lambda request, _: self.remove_robot(request),
-            ListRobots.op: lambda request, _: self.list_robots(request),
+            CreateRobot: self.create_robot,
+            RemoveRobot: lambda request, _: self.remove_robot(request),
+            ListRobots: lambda request, _: self.list_robots(request),
         }
 
     def _summary(self, robot: _Robot) -> dict[str, Any]:

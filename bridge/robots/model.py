@@ -231,23 +231,27 @@ def _load(description: RobotDescription, resolver: PackageResolver, cache: MeshC
 def load_robot(urdf: str | bytes, *, package_paths: Optional[Mapping[str, Path]] = None,
                base_dir: Optional[Path] = None, options: LoadOptions = LoadOptions(),
                cache: Optional[MeshCache] = None,
-               logger: Optional[logging.Logger] = None) -> RobotModel:
+               logger: Optional[logging.Logger] = None,
+               allowed_roots: Optional[tuple[Path, ...]] = None) -> RobotModel:
     """Load a robot from URDF TEXT (for example a ``robot_description`` parameter).
 
     ``package_paths`` maps package names to folders for ``package://`` URIs (searched
     before ROS_PACKAGE_PATH and the ament index, see `bridge.robots.resources`);
     relative mesh paths are taken relative to ``base_dir`` (default: current directory).
+    ``allowed_roots``: meshes only from inside these folders (a client's robot).
     Raises `UrdfError` for a malformed URDF; mesh problems become ``warnings``.
     """
     description = parse_urdf(urdf)
-    resolver = PackageResolver(dict(package_paths or {}), base_dir=base_dir)
+    resolver = PackageResolver(dict(package_paths or {}), base_dir=base_dir,
+                               allowed_roots=allowed_roots)
     return _load(description, resolver, cache if cache is not None else DEFAULT_MESH_CACHE,
                  options, logger or _log)
 
 
 def load_robot_file(path: str | Path, *, package_paths: Optional[Mapping[str, Path]] = None,
                     options: LoadOptions = LoadOptions(), cache: Optional[MeshCache] = None,
-                    logger: Optional[logging.Logger] = None) -> RobotModel:
+                    logger: Optional[logging.Logger] = None,
+                    allowed_roots: Optional[tuple[Path, ...]] = None) -> RobotModel:
     """Load a robot from a URDF FILE; relative mesh paths are relative to its folder."""
     p = Path(path)
     try:
@@ -255,7 +259,8 @@ def load_robot_file(path: str | Path, *, package_paths: Optional[Mapping[str, Pa
     except OSError as exc:
         raise UrdfError(str(p), "a readable URDF file", f"{type(exc).__name__}: {exc}") from None
     return load_robot(data, package_paths=package_paths, base_dir=p.resolve().parent,
-                      options=options, cache=cache, logger=logger)
+                      options=options, cache=cache, logger=logger,
+                      allowed_roots=allowed_roots)
 
 
 # ---------------------------------------------------------------------------- POLYDATA

@@ -14,6 +14,11 @@ else to the current directory. Nothing is ever downloaded: ``http(s)://`` is ref
 
 The environment is read once, when the resolver is made, so one robot load sees one
 consistent search path; package folders found are remembered per resolver.
+
+A resolver with ``allowed_roots`` (a robot a client asked for) resolves only to files inside
+those folders (symlinks followed); a file outside them and a missing file get the same
+`ResourceError`, which names the URI as written and nothing the daemon found, so a client
+cannot use a robot's warnings to learn what exists on the daemon's machine.
 """
 
 from __future__ import annotations
@@ -67,6 +72,7 @@ class PackageResolver:
     base_dir: Optional[Path] = None
     ros_package_path: Optional[tuple[Path, ...]] = None
     ament_prefix_path: Optional[tuple[Path, ...]] = None
+    allowed_roots: Optional[tuple[Path, ...]] = None  # None: any file (the operator's robots)
     _found: dict[str, Optional[Path]] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -125,6 +131,9 @@ class PackageResolver:
                 raise ResourceError(uri, "package://PACKAGE/PATH", uri)
             folder = self.find_package(package)
             if folder is None:
+                if self.allowed_roots is not None:  # same answer as a refused file
+                    raise ResourceError(uri, "an existing file inside a --robot-dir or "
+                                        "--package-path folder", repr(uri))
                 raise ResourceError(uri, "a known package", self.searched(package))
             path = folder / relative
         elif scheme == "file":
@@ -137,6 +146,13 @@ class PackageResolver:
         else:
             raise ResourceError(uri, "a package://, file:// URI or a local path "
                                 "(nothing is downloaded)", f"scheme {scheme}://")
+        if self.allowed_roots is not None:
+            real = Path(os.path.realpath(path))
+            if not path.is_file() or not any(real.is_relative_to(os.path.realpath(root))
+                                             for root in self.allowed_roots):
+                raise ResourceError(uri, "an existing file inside a --robot-dir or "
+                                    "--package-path folder", repr(uri))
+            return real
         if not path.is_file():
             raise ResourceError(uri, "an existing file", f"{path} does not exist"
                                 if not path.exists() else f"{path} is not a file")

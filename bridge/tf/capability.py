@@ -47,7 +47,9 @@ from tf2_msgs.msg import TFMessage
 
 from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
+from bridge.logging_limits import RateLimitedLog
 from bridge.ros_node import RosNode
+from bridge.security import NameRules
 from bridge.tf.buffer import StampedTransform, TfBuffer
 from bridge.tf.errors import (
     ConnectivityError,
@@ -58,6 +60,7 @@ from bridge.tf.errors import (
 )
 from bridge.tf.lookups import LookupKey, LookupRegistry, LookupResult
 from protocol.commands import (
+    Op,
     BroadcastTransform,
     CommandFailedError,
     CreateTfBroadcaster,
@@ -83,8 +86,6 @@ __all__ = ["TfBridges", "tf_message_to_transforms", "status_for_error"]
 log = logging.getLogger(__name__)
 
 _NS_PER_S = 1_000_000_000
-# A publisher of bad transforms must not flood the log: one warning per interval.
-_WARN_INTERVAL_S = 5.0
 
 
 
@@ -201,8 +202,11 @@ class TfBridges:
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
                  frame_prefix: str = "", cache_time_s: float = 10.0,
-                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static") -> None:
+                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static",
+                 frame_rules: Optional[NameRules] = None) -> None:
         self._ros = ros
+        # list_bridges names the buffer's frames: only those the frame globs expose.
+        self._frame_rules = frame_rules or NameRules()
         self._hub = hub
         self._names = names
         self._prefix = frame_prefix.lstrip("/")
@@ -211,7 +215,6 @@ class TfBridges:
         self.lookups: dict[tuple[str, str], _Lookup] = {}
         self.broadcasters: dict[tuple[str, str], _Broadcaster] = {}
         self._by_key: dict[LookupKey, _Lookup] = {}
-        self.streams: dict[LookupKey, _Lookup] = {}  # other capabilities' (stream_lookup)
         self._by_device: dict[str, _Broadcaster] = {}
         self._tf_topic = ros.resolve_topic(tf_topic)
         self._tf_static_topic = ros.resolve_topic(tf_static_topic)
@@ -219,8 +222,7 @@ class TfBridges:
         self._lock = threading.Lock()
         self._pending_frames: set[str] = set()
         self._drain_scheduled = False
-        self._last_warning = 0.0
-        self._suppressed = 0
+        self._refusals = RateLimitedLog(log)
         # Loop-thread state.
         self._timer: Optional[asyncio.TimerHandle] = None
         self._timer_due_ns: Optional[int] = None
@@ -261,16 +263,9 @@ class TfBridges:
             self._note_changed(changed)
 
     def _warn_rejected(self, error: RejectedTransformsError, static: bool) -> None:
-        now = time.monotonic()
-        if now - self._last_warning < _WARN_INTERVAL_S:
-            self._suppressed += len(error.rejected)
-            return
-        more = f" ({self._suppressed} more refused since the last warning)" \
-            if self._suppressed else ""
-        self._last_warning = now
-        self._suppressed = 0
-        log.warning("refused %d transform(s) from %s: %s%s", len(error.rejected),
-                    self._tf_static_topic if static else self._tf_topic, error, more)
+        topic = self._tf_static_topic if static else self._tf_topic
+        self._refusals.warning(topic, None, "refused %d transform(s) from %s: %s",
+                               len(error.rejected), topic, error, count=len(error.rejected))
 
     def _note_changed(self, frames: Iterable[str]) -> None:
         with self._lock:
@@ -361,22 +356,13 @@ class TfBridges:
         key = self.registry.add(parent, child, rate_hz=rate_hz, tag=tag)
         stream = _Lookup(key, device, dict(metadata), (parent, child), rate_hz)
         self._by_key[key] = stream
-        self.streams[key] = stream
         self._arm()
         return key
 
     def stop_lookup(self, handle: LookupKey) -> None:
         """Stop a `stream_lookup` (its device is the caller's to forget)."""
-        self.streams.pop(handle, None)
         if self._by_key.pop(handle, None) is not None:
             self.registry.remove(handle)
-
-    def stream_state(self, handle: LookupKey) -> str:
-        """"streaming", "error" or "pending" (no result yet) for a `stream_lookup`."""
-        last = self.registry.last_sent(handle)
-        if isinstance(last, StampedTransform):
-            return "streaming"
-        return "error" if isinstance(last, TfError) else "pending"
 
     def create_lookup(self, request: CreateTfLookup) -> dict[str, Any]:
         pair = self._pair(request.parent, request.child)
@@ -563,14 +549,14 @@ class TfBridges:
 
     # ------------------------------------------------------------------ capability
 
-    def handlers(self) -> dict[str, Handler]:
+    def handlers(self) -> dict[type[Op], Handler]:
         return {
-            CreateTfLookup.op: lambda request, _: self.create_lookup(request),
-            RemoveTfLookup.op: lambda request, _: self.remove_lookup(request),
-            LookupTransform.op: lambda request, _: self.lookup_transform(request),
-            CreateTfBroadcaster.op: lambda request, _: self.create_broadcaster(request),
-            RemoveTfBroadcaster.op: lambda request, _: self.remove_broadcaster(request),
-            BroadcastTransform.op: lambda request, _: self.broadcast(request),
+            CreateTfLookup: lambda request, _: self.create_lookup(request),
+            RemoveTfLookup: lambda request, _: self.remove_lookup(request),
+            LookupTransform: lambda request, _: self.lookup_transform(request),
+            CreateTfBroadcaster: lambda request, _: self.create_broadcaster(request),
+            RemoveTfBroadcaster: lambda request, _: self.remove_broadcaster(request),
+            BroadcastTransform: lambda request, _: self.broadcast(request),
         }
 
     def describe(self) -> list[dict[str, Any]]:
@@ -578,7 +564,8 @@ class TfBridges:
                                      for lookup in self.lookups.values()]
         out.extend(self._describe_broadcaster(b) for b in self.broadcasters.values())
         out.append({"kind": "tf_buffer", "topics": [self._tf_topic, self._tf_static_topic],
-                    "frame_prefix": self._prefix, "frames": self.buffer.frames(),
+                    "frame_prefix": self._prefix,
+                    "frames": [f for f in self.buffer.frames() if self._frame_rules.permits(f)],
                     "received": dict(self.received),
                     "cache_time_s": self.buffer.cache_time_s})
         return out
@@ -624,7 +611,6 @@ class TfBridges:
         for broadcaster in self.broadcasters.values():
             self._hub.unroute(broadcaster.device)
         self.lookups.clear()
-        self.streams.clear()
         self.broadcasters.clear()
         self._by_key.clear()
         self._by_device.clear()

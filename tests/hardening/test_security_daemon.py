@@ -85,8 +85,11 @@ def test_max_bridges_per_client_names_the_limit(locked: RunningDaemon) -> None:
         assert error.code == ErrorCode.LIMIT_REACHED
         assert "at most 2 bridges per client" in str(error)
         second.command("create_tf_lookup", {"parent": "w", "child": "q3"})  # its own count
-        first.command("remove_tf_lookup", {"parent": "w", "child": "q1"})
-        first.command("create_tf_lookup", {"parent": "w", "child": "q4"})  # a slot freed
+        # A --read-only daemon's clients remove nothing, so no slot comes free that way.
+        error = refusal(first, "remove_tf_lookup", {"parent": "w", "child": "q1"})
+        assert error.code == ErrorCode.FORBIDDEN and "read-only" in str(error)
+        assert refusal(first, "create_tf_lookup", {"parent": "w", "child": "q4"}).code == \
+            ErrorCode.LIMIT_REACHED
 
 
 def test_max_clients_extra_client_gets_a_status_and_is_closed(locked: RunningDaemon) -> None:

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from bridge.config import ConfigError, build_security, load_config_file
-from bridge.security import (FRAME_FIELDS, TARGETS, WRITE_OPS, BridgeQuota, NameRules,
-                             SecurityPolicy, is_loopback_host, strip_frame)
+from bridge.security import (OPERATOR, BridgeOwners, BridgeQuota, NameRules, SecurityPolicy,
+                             is_loopback_host, strip_frame)
 from protocol import commands as c
 from protocol.commands import ErrorCode, ForbiddenError, LimitReachedError
 
@@ -48,7 +48,8 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
         "call_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
         "advertise_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
     }
-    assert set(writes) == WRITE_OPS
+    # The declarations say what writes: this list is the expectation they are held to.
+    assert set(writes) == {op for op, cls in c.REQUEST_TYPES.items() if cls.writes}
     for op, args in writes.items():
         with pytest.raises(ForbiddenError) as refused:
             check(policy, op, args)
@@ -104,11 +105,50 @@ def test_parameters_are_judged_as_node_dot_name() -> None:
     assert refused.value.field == "names"
 
 
-def test_every_judged_field_exists_on_its_request_class() -> None:
-    for op, target in TARGETS.items():
-        names = {f for f in c.REQUEST_TYPES[op].__dataclass_fields__}
-        assert target.field in names, op
-        assert target.node_field is None or target.node_field in names, op
+def test_read_only_clients_remove_nothing() -> None:
+    policy = SecurityPolicy(read_only=True)
+    removals = [op for op, cls in c.REQUEST_TYPES.items() if cls.removes is not None]
+    assert len(removals) == len(c.bridge_kinds())
+    for op in removals:
+        identity = c.bridge_kinds()[c.REQUEST_TYPES[op].removes].bridge.identity
+        args = {name: {"topic": "/t", "service": "/s", "node": "/n", "parent": "a",
+                       "child": "b", "name": "r"}[name] for name in identity}
+        with pytest.raises(ForbiddenError) as refused:
+            check(policy, op, args)
+        assert refused.value.field == "op" and "remove nothing" in str(refused.value)
+
+
+def test_no_client_removes_the_operators_bridges() -> None:
+    owners, client, other = BridgeOwners(), object(), object()
+    owners.created(("subscriber", ("/a",)), OPERATOR)
+    owners.created(("subscriber", ("/b",)), client)
+    owners.created(("subscriber", ("/a",)), client)  # asked again: still the operator's
+    with pytest.raises(ForbiddenError) as refused:
+        owners.check_removal(("subscriber", ("/a",)), "topic", other)
+    assert refused.value.field == "topic" and "operator" in str(refused.value)
+    owners.check_removal(("subscriber", ("/b",)), "topic", other)  # a client's: any client
+    owners.check_removal(("subscriber", ("/a",)), "topic", None)  # the operator itself
+    owners.forget(client, {"served_service"})
+    assert owners.owner(("subscriber", ("/b",))) is client  # bridges outlive their client
+
+
+def test_a_request_class_the_schema_does_not_declare_is_refused() -> None:
+    class Fake:  # looks like an op, is not one of the schema's
+        op = "create_subscriber"
+        writes = False
+        removes = None
+        to_client = False
+
+        def resources(self) -> tuple:
+            return ()
+
+    with pytest.raises(ForbiddenError) as refused:
+        SecurityPolicy().check_request(Fake(), resolve, "/n")  # type: ignore[arg-type]
+    assert refused.value.field == "op" and refused.value.got == "Fake"
+    # ... and the daemon's own messages to clients are not ops a client may send
+    with pytest.raises(ForbiddenError):
+        check(SecurityPolicy(), "service_request", {"service": "/s", "type": "a/B",
+                                                    "request": {}})
 
 
 @pytest.mark.parametrize("address,admitted", [
@@ -135,16 +175,17 @@ def test_quota_counts_live_bridges_per_client() -> None:
     a, b = object(), object()
     for _ in range(2):
         reserved = quota.reserve(a, "create_subscriber")
-        quota.settle(a, "create_subscriber", reserved, {"existed": False})
+        quota.settle(a, reserved, {"existed": False})
     with pytest.raises(LimitReachedError) as refused:
         quota.reserve(a, "create_tf_lookup")
     assert refused.value.error_code == ErrorCode.LIMIT_REACHED
     assert "at most 2 bridges per client" in str(refused.value)
     assert "--max-bridges-per-client" in str(refused.value)
-    quota.settle(b, "create_robot", quota.reserve(b, "create_robot"), None)  # failed: free
-    quota.settle(b, "create_robot", quota.reserve(b, "create_robot"), {"existed": True})
+    quota.settle(b, quota.reserve(b, "create_robot"), None)  # failed: free
+    quota.settle(b, quota.reserve(b, "create_robot"), {"existed": True})
     assert quota.count(b) == 0
-    quota.settle(a, "remove_subscriber", quota.reserve(a, "remove_subscriber"), {})
+    assert not quota.reserve(a, "remove_subscriber")  # a removal takes no slot...
+    quota.release(a)  # ... and frees one of the bridge's maker, whoever removed it
     assert quota.count(a) == 1
     assert not quota.reserve(a, "hello")  # not a creation: nothing to count
     quota.forget(a)
@@ -194,7 +235,9 @@ FRAME_OPS = {
 
 
 def test_every_tf_op_judges_both_frames_deny_wins_and_allow_lists() -> None:
-    assert set(FRAME_OPS) == set(FRAME_FIELDS)
+    assert set(FRAME_OPS) == {op for op, cls in c.REQUEST_TYPES.items()
+                              if "parent" in getattr(cls, "__dataclass_fields__", {})
+                              and cls.removes is None}
     policy = SecurityPolicy(frames=NameRules(allow=("PSM1/*", "world"),
                                              deny=("PSM1/secret*",)))
     for op, extra in FRAME_OPS.items():
@@ -277,13 +320,19 @@ def test_robot_sources_are_judged_like_reading_them(args: dict, field: str, got:
     robot({"kind": "parameter", "node": "/PSM1/robot_state_publisher"}, "/PSM2"),
     robot({"kind": "topic"}, "/PSM1"),
     robot({"kind": "topic", "topic": "description"}, "/PSM1"),
-    robot({"kind": "file", "path": "/opt/robots/psm.urdf"}),  # a file: --package-path's job
 ])
 def test_robot_sources_that_the_globs_allow(args: dict) -> None:
     check(SecurityPolicy(parameters=NameRules(allow=("/PSM1/*",)),
                          topics=NameRules(allow=("/PSM1/*",))), "create_robot", args)
     # read-only does not stop robots: they only receive
     check(SecurityPolicy(read_only=True), "create_robot", args)
+
+
+def test_a_robot_file_is_judged_by_the_robot_dirs_not_the_globs() -> None:
+    args = robot({"kind": "file", "path": "/opt/robots/psm.urdf"})
+    with pytest.raises(ForbiddenError) as refused:  # no --robot-dir: no file (fail closed)
+        check(SecurityPolicy(parameters=NameRules(allow=("/PSM1/*",))), "create_robot", args)
+    assert refused.value.field == "source.path" and "--robot-dir" in str(refused.value)
 
 
 def test_frame_options_merge_and_are_checked(tmp_path: Path) -> None:
@@ -297,3 +346,105 @@ def test_frame_options_merge_and_are_checked(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as error:
         build_security(load_config_file(path).security, {})
     assert "deny_frames: expected a list of non-empty strings" in str(error.value)
+
+
+# ---------------------------------------------------------------------------- other routes
+
+
+def call(service: str, kind: str, request: dict) -> dict:
+    return {"service": service, "type": f"rcl_interfaces/srv/{kind}", "request": request}
+
+
+def test_any_nodes_parameter_services_are_judged_by_the_parameter_globs() -> None:
+    policy = SecurityPolicy(parameters=NameRules(allow=("/arm.speed",)))
+    check(policy, "call_service", call("/arm/get_parameters", "GetParameters",
+                                       {"names": ["speed"]}))
+    for service, kind, request, got in (
+            ("/arm/get_parameters", "GetParameters", {"names": ["speed", "limit"]},
+             "/arm.limit"),
+            ("arm/set_parameters", "SetParameters",  # relative: judged resolved
+             {"parameters": [{"name": "limit", "value": {"type": 2}}]}, "/lab/arm.limit"),
+            ("/arm/set_parameters_atomically", "SetParametersAtomically",
+             {"parameters": [{"name": "limit"}]}, "/arm.limit"),
+            ("/arm/describe_parameters", "DescribeParameters", {"names": ["limit"]},
+             "/arm.limit"),
+            ("/arm/get_parameter_types", "GetParameterTypes", {"names": ["limit"]},
+             "/arm.limit"),
+            ("/arm/get_parameters", "GetParameters", {}, "all parameters of /arm"),
+            # a parameter type under another name is still a node's parameter service
+            ("/arm/renamed", "GetParameters", {"names": ["limit"]}, "/arm.limit")):
+        with pytest.raises(ForbiddenError) as refused:
+            check(policy, "call_service", call(service, kind, request))
+        assert refused.value.got == got, service
+    # a parameter service name with another type: its names cannot be read, so refused
+    with pytest.raises(ForbiddenError):
+        check(policy, "call_service", {"service": "/arm/set_parameters",
+                                       "type": "std_srvs/srv/Trigger"})
+    # listing is allowed; its response shows only the allowed names
+    check(policy, "call_service", call("/arm/list_parameters", "ListParameters", {}))
+    response = {"result": {"names": ["speed", "limit"], "prefixes": ["lim"]}}
+    assert policy.filter_service_response("/arm/list_parameters",
+                                          "rcl_interfaces/srv/ListParameters", response) == \
+        {"result": {"names": ["speed"], "prefixes": []}}
+    with pytest.raises(ForbiddenError):  # serving a node's parameters: all of them
+        check(policy, "advertise_service", {"service": "/ghost/get_parameters",
+                                            "type": "rcl_interfaces/srv/GetParameters"})
+    # without parameter globs nothing changes
+    check(SecurityPolicy(), "call_service", call("/arm/set_parameters", "SetParameters", {}))
+
+
+class _Stamped:
+    def __init__(self, parent: str, child: str) -> None:
+        self.header = type("H", (), {"frame_id": parent})()
+        self.child_frame_id = child
+
+
+class _TfMessage:
+    def __init__(self, transforms: list) -> None:
+        self.transforms = transforms
+
+
+def test_tf_topics_are_judged_transform_by_transform() -> None:
+    policy = SecurityPolicy(frames=NameRules(allow=("PSM1/*", "world")))
+    guard = policy.message_guard("/robot/tf", "tf2_msgs/msg/TFMessage")  # by type
+    assert guard is not None and policy.message_guard("/tf", "any") is not None  # by name
+    assert policy.message_guard("/x", "std_msgs/msg/String") is None
+    assert SecurityPolicy().message_guard("/tf", "tf2_msgs/msg/TFMessage") is None
+    allowed, denied = _Stamped("world", "PSM1/tool"), _Stamped("/world", "PSM2/tool")
+    kept = guard.filter(_TfMessage([allowed, denied]))
+    assert kept is not None and kept.transforms == [allowed]
+    assert guard.filter(_TfMessage([denied])) is None
+    guard.check(_TfMessage([allowed]))
+    with pytest.raises(ForbiddenError) as refused:
+        guard.check(_TfMessage([allowed, denied]))
+    assert (refused.value.field, refused.value.got) == \
+        ("value.transforms[1].child_frame_id", "PSM2/tool")
+    # only a TFMessage can be judged on a tf topic
+    with pytest.raises(ForbiddenError) as refused:
+        check(policy, "create_publisher", {"topic": "/tf", "type": "String"})
+    assert refused.value.field == "type"
+
+
+def test_robot_files_refused_and_missing_get_one_answer(tmp_path: Path) -> None:
+    inside, outside = tmp_path / "robots", tmp_path / "elsewhere"
+    inside.mkdir()
+    outside.mkdir()
+    (inside / "a.urdf").write_text("<robot/>")
+    (outside / "b.urdf").write_text("<robot/>")
+    (inside / "link.urdf").symlink_to(outside / "b.urdf")
+    policy = SecurityPolicy(robot_dirs=(str(inside),))
+
+    def judge(path: Path, from_client: bool = True) -> None:
+        policy.check_request(c.parse_request("create_robot", c.dumps(
+            {"name": "r", "source": {"kind": "file", "path": str(path)}})), resolve, "/n",
+            from_client=from_client, resolve_file=lambda spec: spec)
+
+    judge(inside / "a.urdf")
+    answers = []
+    for path in (outside / "b.urdf", outside / "none.urdf", inside / "none.urdf",
+                 inside / "link.urdf"):
+        with pytest.raises(ForbiddenError) as refused:
+            judge(path)
+        answers.append(str(refused.value).replace(str(path), "P"))
+    assert len(set(answers)) == 1, answers
+    judge(outside / "b.urdf", from_client=False)  # the operator's config is trusted

@@ -1,0 +1,176 @@
+"""Parameter ops: other nodes' parameters (clients, get, set, observe) and the
+daemon's own parameter server (``server_*``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import cast
+
+from protocol.commands.errors import OutOfRangeError
+from protocol.commands.fields import MAX_NAME, MAX_TEXT, PARAM_NAME, Args, check_str
+from protocol.commands.op import Bridge, Op, ParameterUse, Resource
+from protocol.commands.values import ParameterValue
+
+__all__ = ["CreateParameterClient", "GetParameters", "ListParameters", "ObserveParameters",
+           "RemoveParameterClient", "ServerDeclareParameter", "ServerGetParameters",
+           "ServerSetParameter", "ServerUndeclareParameter", "SetParameters"]
+
+
+@dataclass(frozen=True)
+class CreateParameterClient(Op, op="create_parameter_client", writes=False,
+                            creates=Bridge("parameter_client", ("node",),
+                                           section="parameter_clients")):
+    """Watch another node's parameters (``/robot_state_publisher`` or ``ns/node``)."""
+
+    node: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()  # the node only; its parameters are judged when read
+
+    @classmethod
+    def from_args(cls, a: Args) -> CreateParameterClient:
+        return cls(node=a.ros_name("node"))
+
+
+@dataclass(frozen=True)
+class RemoveParameterClient(
+        Op, op="remove_parameter_client", writes=False, removes="parameter_client"):
+    node: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()  # judged by who made the bridge
+
+    @classmethod
+    def from_args(cls, a: Args) -> RemoveParameterClient:
+        return cls(node=a.ros_name("node"))
+
+
+@dataclass(frozen=True)
+class ListParameters(Op, op="list_parameters", writes=False):
+    node: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()  # names only; the reply lists those the globs allow
+
+    @classmethod
+    def from_args(cls, a: Args) -> ListParameters:
+        return cls(node=a.ros_name("node"))
+
+
+@dataclass(frozen=True)
+class GetParameters(Op, op="get_parameters", writes=False):
+    """Values of a remote node's parameters (unknown ones come back ``not_set``)."""
+
+    node: str
+    names: tuple[str, ...]
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (ParameterUse("names", self.names, self.node, "node"),)
+
+    @classmethod
+    def from_args(cls, a: Args) -> GetParameters:
+        return cls(node=a.ros_name("node"), names=a.str_list("names", pattern=PARAM_NAME))
+
+
+def _param_values(a: Args, name: str) -> dict[str, ParameterValue]:
+    raw = a.req_obj_raw(name)
+    out: dict[str, ParameterValue] = {}
+    for key, value in raw.items():
+        path = f"{a.path(name)}.{key}"
+        check_str(key, path, MAX_NAME, False, PARAM_NAME, "a parameter name")
+        out[key] = ParameterValue.from_json_value(value, path)
+    if not out:
+        raise OutOfRangeError(a.path(name), "at least one parameter", "an empty object")
+    return out
+
+
+@dataclass(frozen=True)
+class SetParameters(Op, op="set_parameters", writes=True):
+    """Set a remote node's parameters; the reply gives each one's outcome."""
+
+    node: str
+    values: dict[str, ParameterValue]
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (ParameterUse("values", tuple(self.values), self.node, "node", writes=True),)
+
+    @classmethod
+    def from_args(cls, a: Args) -> SetParameters:
+        return cls(node=a.ros_name("node"), values=_param_values(a, "values"))
+
+
+@dataclass(frozen=True)
+class ObserveParameters(Op, op="observe_parameters", writes=False, follows="parameter_client"):
+    """Replace the set of a parameter client's parameters whose changes are pushed to
+    the client (a STRING message under the client's device name); ``[]`` stops."""
+
+    node: str
+    names: tuple[str, ...]
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (ParameterUse("names", self.names, self.node, "node"),)
+
+    @classmethod
+    def from_args(cls, a: Args) -> ObserveParameters:
+        return cls(node=a.ros_name("node"), names=a.str_list("names", pattern=PARAM_NAME))
+
+
+@dataclass(frozen=True)
+class ServerDeclareParameter(Op, op="server_declare_parameter", writes=True):
+    """Declare a parameter on the daemon's own ROS node (a parameter server for Slicer)."""
+
+    name: str
+    value: ParameterValue
+    read_only: bool = False
+    description: str = ""
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (ParameterUse("name", (self.name,), writes=True),)
+
+    @classmethod
+    def from_args(cls, a: Args) -> ServerDeclareParameter:
+        return cls(name=a.req_str("name", pattern=PARAM_NAME),
+                   value=ParameterValue.from_json_value(a.any("value"), a.path("value")),
+                   read_only=a.opt_bool("read_only", False),
+                   description=cast(str, a.opt_str("description", "", max_len=MAX_TEXT,
+                                                    allow_empty=True)))
+
+
+@dataclass(frozen=True)
+class ServerSetParameter(Op, op="server_set_parameter", writes=True):
+    name: str
+    value: ParameterValue
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (ParameterUse("name", (self.name,), writes=True),)
+
+    @classmethod
+    def from_args(cls, a: Args) -> ServerSetParameter:
+        return cls(name=a.req_str("name", pattern=PARAM_NAME),
+                   value=ParameterValue.from_json_value(a.any("value"), a.path("value")))
+
+
+@dataclass(frozen=True)
+class ServerGetParameters(Op, op="server_get_parameters", writes=False):
+    """Values of the daemon's own parameters; ``names`` omitted or empty = all."""
+
+    names: tuple[str, ...] = ()
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (ParameterUse("names", self.names),)
+
+    @classmethod
+    def from_args(cls, a: Args) -> ServerGetParameters:
+        return cls(names=a.str_list("names", pattern=PARAM_NAME, required=False))
+
+
+@dataclass(frozen=True)
+class ServerUndeclareParameter(Op, op="server_undeclare_parameter", writes=True):
+    name: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (ParameterUse("name", (self.name,), writes=True),)
+
+    @classmethod
+    def from_args(cls, a: Args) -> ServerUndeclareParameter:
+        return cls(name=a.req_str("name", pattern=PARAM_NAME))

@@ -1,0 +1,105 @@
+"""Service ops: calling ROS services, and services a client serves."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from dataclasses import field
+from typing import Any, cast
+
+from protocol.commands.errors import WrongTypeError
+from protocol.commands.fields import MISSING, Args
+from protocol.commands.op import Bridge, Op, Resource, ServiceUse
+from protocol.commands.types import resolve_service_type
+from protocol.commands.wire import json_type
+
+__all__ = ["AdvertiseService", "CallService", "ServiceRequest", "UnadvertiseService"]
+
+
+def _srv_type(a: Args) -> str:
+    text = a.req_str("type")
+    resolve_service_type(text, a.path("type"))
+    return text
+
+
+@dataclass(frozen=True)
+class CallService(Op, op="call_service", writes=True):
+    """Call a ROS service. Keep ``timeout`` below the client's own command timeout
+    (3D Slicer's default is 5 s) so the daemon's TIMEOUT reply arrives first."""
+
+    service: str
+    type: str
+    request: dict[str, Any] = field(default_factory=dict)
+    timeout: float = 4.0
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (ServiceUse("service", self.service, self.type, request=self.request),)
+
+    @property
+    def ros_type(self) -> str:
+        return resolve_service_type(self.type)
+
+    @classmethod
+    def from_args(cls, a: Args) -> CallService:
+        service, kind = a.ros_name("service"), _srv_type(a)
+        raw = a.raw("request", False)
+        if raw is MISSING:
+            raw = {}
+        elif not isinstance(raw, dict):
+            raise WrongTypeError(a.path("request"), "an object", json_type(raw))
+        return cls(service=service, type=kind, request=raw,
+                   timeout=cast(float, a.opt_float("timeout", 4.0, low=0.0, high=300.0,
+                                                   low_open=True)))
+
+
+@dataclass(frozen=True)
+class AdvertiseService(Op, op="advertise_service", writes=True,
+                       creates=Bridge("served_service", ("service",), per_connection=True)):
+    """Offer a ROS service served by this client: each call reaches the client as a
+    `ServiceRequest` COMMAND, answered with an RTS_COMMAND reply ``{"response": {...}}``."""
+
+    service: str
+    type: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (ServiceUse("service", self.service, self.type, serves=True),)
+
+    @property
+    def ros_type(self) -> str:
+        return resolve_service_type(self.type)
+
+    @classmethod
+    def from_args(cls, a: Args) -> AdvertiseService:
+        return cls(service=a.ros_name("service"), type=_srv_type(a))
+
+
+@dataclass(frozen=True)
+class UnadvertiseService(Op, op="unadvertise_service", writes=False, removes="served_service"):
+    service: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()  # only the client that serves it may
+
+    @classmethod
+    def from_args(cls, a: Args) -> UnadvertiseService:
+        return cls(service=a.ros_name("service"))
+
+
+@dataclass(frozen=True)
+class ServiceRequest(Op, op="service_request", writes=False, to_client=True):
+    """Sent by the daemon to the client that advertised ``service``: one ROS call to serve
+    within ``timeout`` seconds."""
+
+    service: str
+    type: str
+    request: dict[str, Any] = field(default_factory=dict)
+    timeout: float = 4.0
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()  # the daemon sends it; no client may
+
+    @classmethod
+    def from_args(cls, a: Args) -> ServiceRequest:
+        service, kind = a.ros_name("service"), _srv_type(a)
+        return cls(service=service, type=kind, request=a.req_obj_raw("request"),
+                   timeout=cast(float, a.opt_float("timeout", 4.0, low=0.0, high=300.0,
+                                                   low_open=True)))

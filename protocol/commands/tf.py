@@ -1,0 +1,118 @@
+"""tf2 ops: streamed and one-shot lookups, broadcasters, one-off broadcasts."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import cast
+
+from protocol.commands.fields import Args
+from protocol.commands.op import Bridge, FrameUse, Op, Resource
+from protocol.commands.values import Matrix4, Stamp, matrix_from
+
+__all__ = ["BroadcastTransform", "CreateTfBroadcaster", "CreateTfLookup", "LookupTransform",
+           "RemoveTfBroadcaster", "RemoveTfLookup"]
+
+
+def _stamp(a: Args, name: str) -> Stamp | None:
+    sub = a.opt_obj(name)
+    return Stamp.from_args(sub) if sub is not None else None
+
+
+@dataclass(frozen=True)
+class CreateTfLookup(Op, op="create_tf_lookup", writes=False,
+                     creates=Bridge("tf_lookup", ("parent", "child"), section="tf_lookups")):
+    """Stream parent->child as a TRANSFORM (mm) whenever it changes, at most ``rate_hz``."""
+
+    parent: str
+    child: str
+    rate_hz: float | None = None
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (FrameUse("parent", self.parent), FrameUse("child", self.child))
+
+    @classmethod
+    def from_args(cls, a: Args) -> CreateTfLookup:
+        return cls(parent=a.frame("parent"), child=a.frame("child"), rate_hz=a.rate_hz())
+
+
+@dataclass(frozen=True)
+class RemoveTfLookup(Op, op="remove_tf_lookup", writes=False, removes="tf_lookup"):
+    parent: str
+    child: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()  # judged by who made the bridge
+
+    @classmethod
+    def from_args(cls, a: Args) -> RemoveTfLookup:
+        return cls(parent=a.frame("parent"), child=a.frame("child"))
+
+
+@dataclass(frozen=True)
+class LookupTransform(Op, op="lookup_transform", writes=False):
+    """One tf lookup; ``time`` omitted = latest; waits up to ``timeout`` seconds."""
+
+    parent: str
+    child: str
+    time: Stamp | None = None
+    timeout: float = 0.0
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (FrameUse("parent", self.parent), FrameUse("child", self.child))
+
+    @classmethod
+    def from_args(cls, a: Args) -> LookupTransform:
+        return cls(parent=a.frame("parent"), child=a.frame("child"), time=_stamp(a, "time"),
+                   timeout=cast(float, a.opt_float("timeout", 0.0, low=0.0, high=60.0)))
+
+
+@dataclass(frozen=True)
+class CreateTfBroadcaster(Op, op="create_tf_broadcaster", writes=True,
+                          creates=Bridge("tf_broadcaster", ("parent", "child"),
+                                         section="tf_broadcasters")):
+    """Broadcast parent->child; ``static`` uses /tf_static (latched)."""
+
+    parent: str
+    child: str
+    static: bool = False
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (FrameUse("parent", self.parent), FrameUse("child", self.child))
+
+    @classmethod
+    def from_args(cls, a: Args) -> CreateTfBroadcaster:
+        return cls(parent=a.frame("parent"), child=a.frame("child"),
+                   static=a.opt_bool("static", False))
+
+
+@dataclass(frozen=True)
+class RemoveTfBroadcaster(Op, op="remove_tf_broadcaster", writes=False, removes="tf_broadcaster"):
+    parent: str
+    child: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()  # judged by who made the bridge
+
+    @classmethod
+    def from_args(cls, a: Args) -> RemoveTfBroadcaster:
+        return cls(parent=a.frame("parent"), child=a.frame("child"))
+
+
+@dataclass(frozen=True)
+class BroadcastTransform(Op, op="broadcast_transform", writes=True):
+    """Broadcast one parent->child transform given as a rigid 4x4 matrix in mm (rows);
+    ``stamp`` omitted = the daemon's current time."""
+
+    parent: str
+    child: str
+    matrix: Matrix4
+    stamp: Stamp | None = None
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (FrameUse("parent", self.parent), FrameUse("child", self.child))
+
+    @classmethod
+    def from_args(cls, a: Args) -> BroadcastTransform:
+        return cls(parent=a.frame("parent"), child=a.frame("child"),
+                   matrix=matrix_from(a.any("matrix"), a.path("matrix")),
+                   stamp=_stamp(a, "stamp"))

@@ -1,0 +1,99 @@
+"""ROS interface type names: the one grammar every part of the project resolves them with.
+
+Accepted spellings of a message type: ``pkg/msg/Type`` (canonical), ``pkg/Type``,
+``pkg.msg.Type``, a short name of the reference SlicerROS2 (``PoseStamped``, ``Int``), a
+reference node class name (``vtkMRMLROS2SubscriberStringNode``), and, where the caller can
+look installed packages up (the daemon, `bridge.codecs.registry`), any other bare message
+name found in exactly one package. Services: ``pkg/srv/Type`` or ``pkg/Type``.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Callable, Optional, Sequence
+
+from protocol.commands.errors import OutOfRangeError
+
+__all__ = ["REFERENCE_TYPE_NAMES", "PackagesOf", "resolve_message_type",
+           "resolve_service_type"]
+
+# A bare message name -> the installed packages that define it.
+PackagesOf = Callable[[str], Sequence[str]]
+
+# The reference SlicerROS2's short names (and its class-name stems) -> ROS message type.
+# Several share a type (a vtkTable and a vtkDoubleArray both travel as Float64MultiArray).
+REFERENCE_TYPE_NAMES: dict[str, str] = {
+    "Empty": "std_msgs/msg/Empty",
+    "String": "std_msgs/msg/String",
+    "Bool": "std_msgs/msg/Bool",
+    "Int": "std_msgs/msg/Int64",
+    "Int64": "std_msgs/msg/Int64",
+    "Double": "std_msgs/msg/Float64",
+    "Float": "std_msgs/msg/Float64",
+    "Float64": "std_msgs/msg/Float64",
+    "IntArray": "std_msgs/msg/Int64MultiArray",
+    "IntTable": "std_msgs/msg/Int64MultiArray",
+    "IntNArray": "std_msgs/msg/Int64MultiArray",
+    "Int64MultiArray": "std_msgs/msg/Int64MultiArray",
+    "DoubleArray": "std_msgs/msg/Float64MultiArray",
+    "FloatArray": "std_msgs/msg/Float64MultiArray",
+    "DoubleTable": "std_msgs/msg/Float64MultiArray",
+    "Float64MultiArray": "std_msgs/msg/Float64MultiArray",
+    "Pose": "geometry_msgs/msg/Pose",
+    "PoseStamped": "geometry_msgs/msg/PoseStamped",
+    "PoseArray": "geometry_msgs/msg/PoseArray",
+    "Transform": "geometry_msgs/msg/Transform",
+    "TransformStamped": "geometry_msgs/msg/TransformStamped",
+    "Wrench": "geometry_msgs/msg/Wrench",
+    "WrenchStamped": "geometry_msgs/msg/WrenchStamped",
+    "Point": "geometry_msgs/msg/Point",
+    "PointStamped": "geometry_msgs/msg/PointStamped",
+    "JointState": "sensor_msgs/msg/JointState",
+    "Joy": "sensor_msgs/msg/Joy",
+    "JoyV2": "sensor_msgs/msg/Joy",
+    "Image": "sensor_msgs/msg/Image",
+    "UInt8Image": "sensor_msgs/msg/Image",
+    "PointCloud": "sensor_msgs/msg/PointCloud",
+    "PointCloud2": "sensor_msgs/msg/PointCloud2",
+}
+_PKG = r"[a-z][a-z0-9_]*"
+_NAME = r"[A-Z][A-Za-z0-9]*"
+_SPELLINGS = (re.compile(rf"({_PKG})/msg/({_NAME})\Z"), re.compile(rf"({_PKG})/({_NAME})\Z"),
+              re.compile(rf"({_PKG})\.msg\.({_NAME})\Z"))
+_SERVICE = re.compile(rf"({_PKG})/(?:srv/)?({_NAME})\Z")
+_BARE = re.compile(rf"{_NAME}\Z")
+_CLASS_NAME = re.compile(r"vtkMRMLROS2(?:Subscriber|Publisher)([A-Za-z0-9]+)Node\Z")
+_EXPECTED = "pkg/msg/Type, pkg/Type, or a short name such as String or PoseStamped"
+
+
+def resolve_message_type(text: str, field: str = "type", *,
+                         packages_of: Optional[PackagesOf] = None) -> str:
+    """Any accepted spelling (see the module) -> ``pkg/msg/Type``; `OutOfRangeError` naming
+    `field` otherwise. A bare name other than a short name needs `packages_of`."""
+    if not isinstance(text, str):
+        raise OutOfRangeError(field, _EXPECTED, type(text).__name__)
+    given = text.strip()
+    class_match = _CLASS_NAME.match(given)
+    stem = class_match.group(1) if class_match else given
+    if stem in REFERENCE_TYPE_NAMES:
+        return REFERENCE_TYPE_NAMES[stem]
+    for spelling in _SPELLINGS:
+        full = spelling.match(given)
+        if full:
+            return f"{full.group(1)}/msg/{full.group(2)}"
+    if packages_of is not None and _BARE.match(stem):
+        packages = tuple(packages_of(stem))
+        if len(packages) == 1:
+            return f"{packages[0]}/msg/{stem}"
+        if packages:
+            raise OutOfRangeError(field, "an unambiguous name; spell one of "
+                                  + ", ".join(f"{p}/msg/{stem}" for p in packages), repr(given))
+    raise OutOfRangeError(field, _EXPECTED, repr(given))
+
+
+def resolve_service_type(text: str, field: str = "type") -> str:
+    """``pkg/srv/Type`` or ``pkg/Type`` -> ``pkg/srv/Type``."""
+    full = _SERVICE.match(text.strip()) if isinstance(text, str) else None
+    if full:
+        return f"{full.group(1)}/srv/{full.group(2)}"
+    raise OutOfRangeError(field, "a service type pkg/srv/Type", repr(text))
