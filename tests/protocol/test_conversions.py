@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -260,8 +261,10 @@ def test_timestamp_round_trip_property(sec: int, ns: int) -> None:
 def test_any_igtl_stamp_converts_within_half_ns(ts: int) -> None:
     sec, ns = ros_time_from_igtl(ts)
     assert 0 <= ns <= 999_999_999
-    exact = (ts >> 32) * 10**9 + (ts & 0xFFFFFFFF) * 10**9 / 2**32
-    assert abs(sec * 10**9 + ns - exact) <= 0.5
+    # Exact arithmetic: floats near 2**62 ns are ~512 ns apart, so a float "exact" value
+    # made this test fail on large stamps (hypothesis found one) while the code was right.
+    exact = Fraction(ts >> 32) * 10**9 + Fraction((ts & 0xFFFFFFFF) * 10**9, 2**32)
+    assert abs(sec * 10**9 + ns - exact) <= Fraction(1, 2)
 
 
 def test_fraction_just_below_a_second_carries() -> None:
