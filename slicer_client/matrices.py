@@ -82,3 +82,40 @@ def to_vtk(matrix: Any, target: Optional[Any] = None) -> Any:
                               "`pip install vtk`), or use the numpy matrices") from None
         target = vtk.vtkMatrix4x4()
     return fill_vtk(matrix, target)
+
+
+class Matrix4x4:
+    """The part of vtkMatrix4x4's API that scripts written for the reference use
+    (`SetElement`, `GetElement`, `Identity`, `DeepCopy`), for Pythons without vtk. It starts
+    as the identity, as vtkMatrix4x4 does; `numpy.asarray(m)` gives its values."""
+
+    def __init__(self) -> None:
+        self._values = np.eye(4)
+
+    def SetElement(self, i: int, j: int, value: float) -> None:  # noqa: N802
+        self._values[i, j] = float(value)
+
+    def GetElement(self, i: int, j: int) -> float:  # noqa: N802
+        return float(self._values[i, j])
+
+    def Identity(self) -> None:  # noqa: N802
+        self._values = np.eye(4)
+
+    def DeepCopy(self, other: Any) -> None:  # noqa: N802
+        self._values = as_numpy(other, rigid=False).copy()
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> Any:
+        return self._values.astype(dtype) if dtype is not None else self._values.copy()
+
+    def __repr__(self) -> str:
+        return f"Matrix4x4({self._values.tolist()})"
+
+
+def blank_matrix() -> Any:
+    """A new identity matrix: a vtkMatrix4x4 where vtk is there (3D Slicer), else a
+    `Matrix4x4` with the same element API."""
+    try:
+        import vtk
+    except ImportError:
+        return Matrix4x4()
+    return vtk.vtkMatrix4x4()

@@ -27,7 +27,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Protocol, Tuple
 import numpy as np
 
 from protocol import commands as c
-from slicer_client.matrices import fill_vtk, is_vtk_matrix, to_vtk
+from slicer_client.matrices import blank_matrix, fill_vtk, is_vtk_matrix, to_vtk
 from slicer_client.resources import (ParameterClient, Publisher, Resource, Robot, Service,
                                      Subscriber, TfBroadcaster, TfLookup, parameter_to_python)
 
@@ -67,7 +67,11 @@ class FacadeClient(Protocol):
 __all__ = ["ParameterNode", "PublisherNode", "ROS2Node", "RobotNode", "ServiceClientNode",
            "SubscriberNode", "Tf2BroadcasterNode", "Tf2LookupNode", "short_type_name"]
 
-_VTK_EVENT_NAMES = {33: "ModifiedEvent"}  # vtkCommand::ModifiedEvent
+# Slicer's integer event ids: vtkCommand::ModifiedEvent, vtkMRMLTransformNode::
+# TransformModifiedEvent, and the reference's vtkMRMLROS2ParameterNode::ParameterModifiedEvent
+# (vtkCommand::UserEvent + 54).
+_VTK_EVENT_NAMES = {33: "ModifiedEvent", 15000: "TransformModifiedEvent",
+                    1054: "ParameterModifiedEvent"}
 _tags = itertools.count(1)
 
 
@@ -128,6 +132,34 @@ class _Node(_Observable):
         return matrix.copy()
 
 
+# What GetBlankMessage gives per ROS type: the reference returns a new Slicer object of the
+# publisher's Slicer type; these are the same kinds of value that Publish takes here.
+_BLANK_SCALARS: Dict[str, Any] = {
+    "std_msgs/msg/String": "", "std_msgs/msg/Bool": False, "std_msgs/msg/Int64": 0,
+    "std_msgs/msg/Int32": 0, "std_msgs/msg/Float64": 0.0, "std_msgs/msg/Float32": 0.0,
+}
+_MATRIX_TYPES = frozenset({"geometry_msgs/msg/Pose", "geometry_msgs/msg/PoseStamped",
+                           "geometry_msgs/msg/Transform", "geometry_msgs/msg/TransformStamped"})
+_LIST_TYPES = frozenset({"std_msgs/msg/Int64MultiArray", "std_msgs/msg/Float64MultiArray",
+                         "geometry_msgs/msg/PoseArray"})
+
+
+def blank_message(ros_type: str) -> Any:
+    """A new, empty value for `ros_type`: an identity matrix (vtkMatrix4x4 in Slicer) for
+    poses, "" / False / 0 / 0.0 for scalars, [] for arrays and pose arrays, and {} (every
+    field at its default) for any other type."""
+    full = c.resolve_message_type(ros_type, "type")
+    if full in _MATRIX_TYPES:
+        return blank_matrix()
+    if full in _BLANK_SCALARS:
+        return _BLANK_SCALARS[full]
+    if full in _LIST_TYPES:
+        return []
+    if full == "geometry_msgs/msg/WrenchStamped":
+        return [0.0] * 6
+    return {}
+
+
 class SubscriberNode(_Node):
     resource: Subscriber
 
@@ -160,6 +192,9 @@ class SubscriberNode(_Node):
     def GetLastMessageYAML(self) -> str:  # noqa: N802
         return self.resource.last_message_yaml()
 
+    def GetBlankMessage(self) -> Any:  # noqa: N802
+        return blank_message(self.GetROSType())
+
 
 class PublisherNode(_Node):
     resource: Publisher
@@ -175,6 +210,10 @@ class PublisherNode(_Node):
 
     def GetNumberOfMessages(self) -> int:  # noqa: N802
         return self.resource.sent
+
+    def GetBlankMessage(self) -> Any:  # noqa: N802
+        """A new value to fill and publish, of the kind this publisher takes."""
+        return blank_message(self.GetROSType())
 
     def Publish(self, value: Any) -> int:  # noqa: N802
         """Publish; returns the number of ROS subscribers (as the reference)."""
@@ -205,11 +244,16 @@ class ParameterNode(_Node):
         return self.resource.node
 
     def AddParameter(self, name: str) -> bool:  # noqa: N802
-        """Track (and observe) one parameter; its current value is fetched now."""
+        """Track (and observe) one parameter. Returns at once, as the reference does: the
+        value is fetched now if the node is there, else pushed when it appears
+        (`IsParameterSet` is False until then)."""
         if name not in self._tracked:
-            self.resource.observe([*self._tracked, name])
+            ready = self.resource.observe([*self._tracked, name])
             self._tracked.append(name)
-        self.resource.get_typed([name])
+        else:
+            ready = self.resource.ready
+        if ready and name not in self.resource.values:
+            self.resource.get_typed([name])
         return True
 
     def RemoveParameter(self, name: str) -> bool:  # noqa: N802
@@ -232,10 +276,10 @@ class ParameterNode(_Node):
         if name not in self._tracked:
             raise KeyError(f"parameter {name!r} of {self.resource.node} is not tracked: "
                            f"call AddParameter({name!r}) first")
+        # Never blocks: the daemon pushes observed values when they change or the node
+        # appears; until then the parameter is not set.
         value = self.resource.values.get(name)
-        if value is None:
-            value = self.resource.get_typed([name])[name]
-        return value
+        return c.ParameterValue("not_set", None) if value is None else value
 
     def IsParameterSet(self, name: str) -> bool:  # noqa: N802
         return name in self._tracked and self._typed(name).type != "not_set"
@@ -349,8 +393,10 @@ class Tf2LookupNode(_Node):
         return bool(self.resource.parent and self.resource.child)
 
     def GetMatrixTransformToParent(self, target: Any = None) -> Any:  # noqa: N802
-        """The latest parent -> child (4x4, mm); None before tf could connect them."""
-        return self._matrix_out(self.resource.matrix, target)
+        """The latest parent -> child (4x4, mm); the identity until tf connects them, as
+        the reference's lookup node (a transform node) gives."""
+        matrix = self.resource.matrix
+        return self._matrix_out(np.eye(4) if matrix is None else matrix, target)
 
 
 class RobotNode(_Node):

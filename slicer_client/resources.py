@@ -208,6 +208,7 @@ class ParameterClient(Resource):
         self.node = node
         self.observed: Tuple[str, ...] = ()
         self.values: Dict[str, c.ParameterValue] = {}  # last known, kept by observe/get
+        self.ready = False  # the node's parameter services answered (observe's reply)
 
     def _restore(self, command: Callable[..., Dict[str, Any]]) -> None:
         if self.observed:
@@ -260,16 +261,23 @@ class ParameterClient(Resource):
             from slicer_client.errors import ParameterRejectedError
             raise ParameterRejectedError(self.node, name, str(outcome.get("reason", "")))
 
-    def observe(self, names: Sequence[str], timeout: float = 10.0) -> None:
-        """Have changes of `names` pushed (replaces the observed set; [] stops).
-        Callbacks get (name, value)."""
-        self._client.command("observe_parameters", {"node": self.node, "names": list(names)},
-                             timeout=timeout)
+    def observe(self, names: Sequence[str], timeout: float = 10.0) -> bool:
+        """Have changes of `names` pushed (replaces the observed set; [] stops), and when
+        the node is absent, pushed once it appears. Callbacks get (name, value). Returns
+        whether the node is there now."""
+        result = self._client.command("observe_parameters",
+                                      {"node": self.node, "names": list(names)},
+                                      timeout=timeout)
+        self.ready = bool(result.get("ready", False))
+        with self._changed:
+            for name, raw in dict(result.get("values", {})).items():
+                self.values[name] = c.ParameterValue.from_json_value(raw, f"values.{name}")
         self.observed = tuple(names)
         self.spec = BridgeSpec(self.spec.op, self.spec.args, (
             ("observe_parameters", {"node": self.node, "names": list(names)}),)
             if names else ())
         self._client.spec_changed(self)
+        return self.ready
 
 
 class TfLookup(Resource):
