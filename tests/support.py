@@ -21,6 +21,17 @@ REPO = Path(__file__).resolve().parent.parent
 PEERS = Path(__file__).resolve().parent / "peers"
 SHARED = REPO.parent / "shared"
 
+# Every deadline of the suite is multiplied by this one factor. Deadlines only bound waits
+# on events (a line printed, a message received, a condition polled), so a generous factor
+# costs nothing while tests pass; it lets the suite hold on a loaded machine. Raise it with
+# SLICER_BRIDGE_TEST_TIME_SCALE for slower machines still.
+TIME_SCALE = float(os.environ.get("SLICER_BRIDGE_TEST_TIME_SCALE", "3"))
+
+
+def scaled(seconds: float) -> float:
+    """A deadline of ``seconds`` on an idle machine, scaled for this one."""
+    return seconds * TIME_SCALE
+
 
 def pick_free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
