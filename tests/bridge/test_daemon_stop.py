@@ -18,7 +18,7 @@ def start_hanging(processes: Processes, mode: str, *args: str):  # type: ignore[
     port = pick_free_port()
     child = processes.python("hanging", HANGING, "--hang", mode, "run", "--port", str(port),
                              *args)
-    child.wait_for_output("listening on", timeout=scaled(30))
+    child.wait_for_output("listening on", timeout=30)
     return child
 
 
@@ -36,7 +36,7 @@ def test_a_hung_teardown_is_cut_short_at_the_stop_timeout(processes: Processes,
     child = start_hanging(processes, "released", "--stop-timeout", "2")
     start = time.monotonic()
     child.popen.send_signal(sig)
-    child.wait_for_output("TEARDOWN HANGS", timeout=scaled(10))
+    child.wait_for_output("TEARDOWN HANGS", timeout=10)
     code = wait_exit(child, scaled(10))
     took = time.monotonic() - start
     output = child.output()
@@ -53,7 +53,7 @@ def test_a_teardown_hung_holding_the_gil_still_ends(processes: Processes) -> Non
     """No Python thread can run: faulthandler's C watchdog dumps the stacks and exits."""
     child = start_hanging(processes, "held", "--stop-timeout", "1")
     child.popen.send_signal(signal.SIGTERM)
-    child.wait_for_output("TEARDOWN HANGS", timeout=scaled(10))
+    child.wait_for_output("TEARDOWN HANGS", timeout=10)
     code = wait_exit(child, scaled(10))
     output = child.output()
     assert code == 1, output[-3000:]
@@ -64,7 +64,7 @@ def test_a_teardown_hung_holding_the_gil_still_ends(processes: Processes) -> Non
 def test_a_second_signal_ends_a_hung_stop_at_once(processes: Processes) -> None:
     child = start_hanging(processes, "held", "--stop-timeout", "600")
     child.popen.send_signal(signal.SIGTERM)
-    child.wait_for_output("TEARDOWN HANGS", timeout=scaled(10))
+    child.wait_for_output("TEARDOWN HANGS", timeout=10)
     child.popen.send_signal(signal.SIGTERM)
     assert wait_exit(child, scaled(5)) == -signal.SIGTERM
 

@@ -31,14 +31,14 @@ def test_the_demo_s_children_end_with_it(processes: Processes, sig: signal.Signa
     # A ROS domain of its own: other modules' robots are /robot_state_publisher too.
     domain = str(int(os.environ["ROS_DOMAIN_ID"]) % 100 + 1)
     demo = processes.bridge("demo", "--port", str(port), env={"ROS_DOMAIN_ID": domain})
-    demo.wait_for_output("Stop with Ctrl-C", timeout=scaled(90))
+    demo.wait_for_output("Stop with Ctrl-C", timeout=90)
     helpers = [pid for pid, _, cmd in children_of(demo.pid)
                if "state_publisher" in cmd or "joint_motion" in cmd]
     assert len(helpers) == 2, children_of(demo.pid)
     demo.popen.send_signal(sig)
     try:
         code = demo.popen.wait(scaled(20))
-        wait_until(lambda: not any(alive(pid) for pid in helpers), timeout=scaled(15),
+        wait_until(lambda: not any(alive(pid) for pid in helpers), timeout=15,
                    what=f"the demo's children {helpers} gone after {sig.name}")
     finally:
         for pid in filter(alive, helpers):  # orphans are not the test runner's children

@@ -44,7 +44,7 @@ def test_a_half_sent_frame_is_closed_at_the_deadline_and_a_silent_client_stays(
         slow = socket.create_connection(("127.0.0.1", daemon.port), timeout=5)
         start = time.monotonic()
         slow.sendall(header("STRING", "x", 64, 0)[:7])  # 7 bytes of a header, then nothing
-        replies = read_until_closed(slow, timeout=scaled(10))
+        replies = read_until_closed(slow, timeout=10)
         took = time.monotonic() - start
         slow.close()
         assert replies and replies[-1].type_name == "STATUS", replies
@@ -55,7 +55,7 @@ def test_a_half_sent_frame_is_closed_at_the_deadline_and_a_silent_client_stays(
         assert still_open(silent)
         served = RawClient(daemon.port)
         served.send(command_bytes("hello", b"{}", command_id=5))
-        assert served.read_until(is_reply(5), timeout=scaled(10))
+        assert served.read_until(is_reply(5), timeout=10)
         served.close()
         assert still_open(silent)
     finally:
@@ -74,9 +74,9 @@ def test_frames_finished_within_the_deadline_are_never_cut(processes: Processes)
             data = command_bytes("hello", b"{}", command_id=command_id)
             client.send(data[:30])
             wait_until(lambda: any(c["receiving_bytes"] == 30 for c in clients(daemon.port)),
-                       timeout=scaled(10), what="the daemon holding 30 bytes of a frame")
+                       timeout=10, what="the daemon holding 30 bytes of a frame")
             client.send(data[30:])
-            assert client.read_until(is_reply(command_id), timeout=scaled(10))
+            assert client.read_until(is_reply(command_id), timeout=10)
     finally:
         client.close()
 
@@ -91,7 +91,7 @@ def test_stalled_frames_make_room_for_a_new_client(processes: Processes) -> None
         """A newcomer is refused (max_clients) until a stalled frame is a second old."""
         client = RawClient(daemon.port)
         client.send(command_bytes("hello", b"{}", command_id=3))
-        reply = client.read_until(lambda m: is_reply(3)(m) or is_status(m), timeout=scaled(10))
+        reply = client.read_until(lambda m: is_reply(3)(m) or is_status(m), timeout=10)
         if reply.type_name == "RTS_COMMAND":
             admitted.append(client)
             return True
@@ -102,11 +102,11 @@ def test_stalled_frames_make_room_for_a_new_client(processes: Processes) -> None
     try:
         for sock in stalled:
             sock.sendall(header("STRING", "x", 64, 0)[:7])
-        wait_until(try_to_join, timeout=scaled(20), what="a newcomer admitted")
-        wait_until(lambda: sum(not still_open(s) for s in stalled) == 1, timeout=scaled(10),
+        wait_until(try_to_join, timeout=20, what="a newcomer admitted")
+        wait_until(lambda: sum(not still_open(s) for s in stalled) == 1, timeout=10,
                    what="one stalled client closed")
         (evicted,) = [sock for sock in stalled if not still_open(sock)]
-        replies = read_until_closed(evicted, timeout=scaled(10))
+        replies = read_until_closed(evicted, timeout=10)
         assert replies[-1].body.code == StatusCode.RESOURCE_ERROR
         assert "client slots are taken" in replies[-1].body.text
         assert sum(still_open(s) for s in stalled) == 2  # one was enough
@@ -127,11 +127,11 @@ def test_half_sent_bodies_share_one_budget(processes: Processes) -> None:
         for sock in holders:
             sock.sendall(header("STRING", "x", body, 0) + bytes(MIB))
         wait_until(lambda: sum(c["receiving_bytes"] >= MIB for c in clients(daemon.port)) == 2,
-                   timeout=scaled(10), what="two bodies being received")
+                   timeout=10, what="two bodies being received")
         # A third large body does not fit in what is left: refused from its header.
         third = socket.create_connection(("127.0.0.1", daemon.port), timeout=5)
         third.sendall(header("STRING", "x", body, 0))
-        replies = read_until_closed(third, timeout=scaled(10))
+        replies = read_until_closed(third, timeout=10)
         third.close()
         assert replies[-1].body.code == StatusCode.RESOURCE_ERROR, replies
         text = replies[-1].body.text
@@ -140,14 +140,14 @@ def test_half_sent_bodies_share_one_budget(processes: Processes) -> None:
         # Small messages are not held back by it.
         small = RawClient(daemon.port)
         small.send(command_bytes("hello", b"{}", command_id=4))
-        assert small.read_until(is_reply(4), timeout=scaled(10))
+        assert small.read_until(is_reply(4), timeout=10)
         small.close()
         # A holder that leaves gives its share back: a new large body fits again.
         holders.pop().close()
         fourth = RawClient(daemon.port)
         fourth.send(header("STRING", "x", body, 0) + bytes(MIB))
         wait_until(lambda: sum(c["receiving_bytes"] >= MIB for c in clients(daemon.port)) == 2,
-                   timeout=scaled(10), what="the freed share taken by a new body")
+                   timeout=10, what="the freed share taken by a new body")
         assert still_open(fourth.sock)
         fourth.close()
     finally:
