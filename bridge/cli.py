@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 from typing import Awaitable, Callable, TypeVar
 
+from bridge.allocator import keep_large_buffers_returnable
 from bridge.config import DEFAULT_HOST, DEFAULT_PORT, ConfigError, DaemonConfig
 from bridge.config import ConfigFile, build_security, load_config_file
 from bridge.security import DEFAULT_MAX_BRIDGES_PER_CLIENT, DEFAULT_MAX_CLIENTS
@@ -183,6 +184,7 @@ def run_with_config(args: argparse.Namespace,
         print(f"slicer-ros2-bridge: {error}", file=sys.stderr)
         return 2
     _configure_logging(config.log_level)
+    keep_large_buffers_returnable()  # before ROS starts its threads
     try:
         asyncio.run(main(config))
     except PortInUseError as error:

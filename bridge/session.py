@@ -336,13 +336,15 @@ class ClientSession(asyncio.Protocol):
         self._outbox.discard(device)
 
     def close(self) -> None:
-        """Close the connection; the receive buffer goes now, queued replies are flushed."""
+        """Close the connection. What the transport already holds is still flushed; the
+        receive buffer and the frames not yet handed to the transport go now."""
         self._closing = True
         if self._frame_timer is not None:
             self._frame_timer.cancel()
             self._frame_timer = None
         self.frame_started = None
         self._decoder.close()
+        self._outbox.clear()
         if self._transport is not None:
             self._transport.close()
 
