@@ -2,7 +2,7 @@
 figures before and after, and a fresh client served during each.
 
 Run: .venv/bin/python bench/attacks.py [--only NAME ...] [--flood-seconds 10] [--json OUT]
-     [-- DAEMON OPTIONS ...]
+     [--flood-depth 10] [--flood-remove] [-- DAEMON OPTIONS ...]
 
 The daemon runs as a user runs it (`bridge.cli run`, default options unless given after
 ``--``), in its own ROS domain, localhost only. Attacks, in order:
@@ -19,8 +19,10 @@ Measured for each: the daemon's RSS, open fds, threads and ROS entities (the dae
 publishers, subscribers, services and clients in the ROS graph) before, at the peak and
 after (once RSS has settled, at most 15 s); whether a fresh client connecting mid-attack
 got its hello answered (and in how long); what the attackers were told (STATUS texts) and
-how many connections the daemon closed. Exit code 1 if a fresh client was not served or
-fds/entities did not come back.
+how many connections the daemon closed. --flood-remove then removes the flood's
+subscriber and measures again, which shows what the subscription itself holds (its ROS
+history of --flood-depth messages, its last message, the hub's latest value). Exit code 1
+if a fresh client was not served or fds/entities did not come back.
 """
 
 from __future__ import annotations
@@ -320,6 +322,10 @@ def main() -> int:
     parser.add_argument("--only", action="append", choices=["slowloris", "half_sent_bodies",
                                                             "hold_and_go", "flood"])
     parser.add_argument("--flood-seconds", type=float, default=10.0)
+    parser.add_argument("--flood-depth", type=int, default=10,
+                        help="the flood subscriber's QoS depth (history kept by ROS)")
+    parser.add_argument("--flood-remove", action="store_true",
+                        help="remove the flood subscriber after the floods and measure again")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
     chosen = args.only or ["slowloris", "half_sent_bodies", "hold_and_go", "flood"]
@@ -365,8 +371,9 @@ def main() -> int:
             for round_ in range(1, rounds + 1):
                 if name == "flood" and subscriber is None:
                     subscriber = Connection("127.0.0.1", port, on_message=count_cloud)
-                    subscriber.command("create_subscriber", {"topic": FLOOD_TOPIC,
-                                                             "type": "PointCloud2"})
+                    subscriber.command("create_subscriber", {
+                        "topic": FLOOD_TOPIC, "type": "PointCloud2",
+                        "qos": {"depth": args.flood_depth}})
                 before = {**settled(pid), **graph.entities()}
                 peak = Peak(pid)
                 if name == "slowloris":
@@ -387,6 +394,11 @@ def main() -> int:
                 print(f"\n== {label}\n   before {before}\n   peak RSS {peak_rss} MB\n"
                       f"   after  {after}\n   {json.dumps(outcome)}", flush=True)
         if subscriber is not None:
+            if args.flood_remove:
+                before = {**settled(pid), **graph.entities()}
+                subscriber.command("remove_subscriber", {"topic": FLOOD_TOPIC})
+                after = {**settled(pid), **graph.entities()}
+                print(f"\n== flood subscriber removed\n   before {before}\n   after  {after}")
             subscriber.close()
             subscriber = None
         ok = all(r["served_s"] is not None for r in results)
