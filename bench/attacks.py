@@ -47,7 +47,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from protocol.framing import Decoder  # noqa: E402
-from slicer_client.connection import Connection  # noqa: E402
+from slicer_client.connection import BridgeClientError, Connection  # noqa: E402
 
 MIB = 1 << 20
 HEADER = struct.Struct(">H12s20sQQQ")
@@ -151,7 +151,7 @@ def fresh_client_served(port: int, timeout: float = 20.0) -> Optional[float]:
             with Connection("127.0.0.1", port) as client:
                 client.command("hello", timeout=max(0.5, timeout - (time.monotonic() - start)))
                 return time.monotonic() - start
-        except Exception:  # refused at max-clients, or closed: try again
+        except (BridgeClientError, OSError):  # refused at max-clients, or closed: again
             time.sleep(0.1)
     return None
 
