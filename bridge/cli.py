@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import logging
 import sys
 from pathlib import Path
-from typing import Awaitable, Callable
+from typing import Awaitable, Callable, TypeVar
 
 from bridge import graph_inspect
+from bridge.allocator import keep_large_buffers_returnable
 from bridge.config import DEFAULT_HOST, DEFAULT_PORT, ConfigError, DaemonConfig
 from bridge.config import ConfigFile, build_security, load_config_file
 from bridge.interfaces import (InterfaceBuildError, build_into_this_environment,
@@ -18,12 +20,27 @@ from bridge.security import DEFAULT_MAX_BRIDGES_PER_CLIENT, DEFAULT_MAX_CLIENTS
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 
+T = TypeVar("T", int, float)
+
 
 def _package_path(text: str) -> tuple[str, str]:
     name, sep, folder = text.partition("=")
     if not sep or not name or not folder:
         raise argparse.ArgumentTypeError(f"expected NAME=DIR, got {text!r}")
     return name, folder
+
+
+def _positive(kind: Callable[[str], T]) -> Callable[[str], T]:
+    def parse(text: str) -> T:
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        if value is None or not value > 0:  # type: ignore[operator]
+            raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+        return value
+    parse.__name__ = kind.__name__  # argparse names the type in its own errors
+    return parse
 
 
 def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
@@ -85,6 +102,20 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
     security.add_argument("--max-send-buffer-bytes", type=int, metavar="BYTES",
                           help="unsent one-shot bytes (meshes, replies) a client may let pile "
                                "up before it is closed as too slow (default 256 MiB)")
+    security.add_argument("--max-receive-buffer-bytes", type=_positive(int), metavar="BYTES",
+                          help="bytes of partly received message bodies all clients together "
+                               "may hold (default twice --max-message-bytes); a body that "
+                               "does not fit gets a STATUS and its connection is closed")
+    security.add_argument("--frame-deadline", type=_positive(float), metavar="SECONDS",
+                          help="a message whose first byte has arrived must be complete this "
+                               "long after (plus 1 s per 8 MiB of its body), or the "
+                               "connection is closed (default 5); clients that only receive "
+                               "are not affected")
+    parser.add_argument("--stop-timeout", type=_positive(float), metavar="SECONDS",
+                        default=DaemonConfig.stop_timeout_s,
+                        help="on SIGTERM/SIGINT/SIGHUP, exit after this long even if ROS's "
+                             "teardown has not finished (logged); a second signal exits at "
+                             f"once (default {DaemonConfig.stop_timeout_s:g})")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -129,10 +160,19 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
            "max_send_buffer_bytes": args.max_send_buffer_bytes, "robot_dirs": args.robot_dir}
     where = f"{file.name}: security (or its command-line option)" if file.name else "option"
     security, limits = build_security(file.security, cli, where)
+    if args.max_receive_buffer_bytes is not None:
+        if args.max_receive_buffer_bytes < limits.max_message_bytes:
+            raise ConfigError(f"--max-receive-buffer-bytes: expected at least "
+                              f"--max-message-bytes ({limits.max_message_bytes}), got "
+                              f"{args.max_receive_buffer_bytes}")
+        limits = dataclasses.replace(limits, receive_budget_bytes=args.max_receive_buffer_bytes)
+    if args.frame_deadline is not None:
+        limits = dataclasses.replace(limits, frame_deadline_s=args.frame_deadline)
     return DaemonConfig(host=args.host, port=args.port, node_name=args.node_name,
                         namespace=args.namespace, log_level=args.log_level, startup=file.startup,
                         package_paths=tuple(args.package_path), security=security,
-                        limits=limits, frame_prefix=args.frame_prefix)
+                        limits=limits, frame_prefix=args.frame_prefix,
+                        stop_timeout_s=args.stop_timeout)
 
 
 def _configure_logging(level: str) -> None:
@@ -153,6 +193,7 @@ def run_with_config(args: argparse.Namespace,
         print(f"slicer-ros2-bridge: {error}", file=sys.stderr)
         return 2
     _configure_logging(config.log_level)
+    keep_large_buffers_returnable()  # before ROS starts its threads
     try:
         asyncio.run(main(config))
     except PortInUseError as error:
@@ -203,7 +244,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "demo":  # the daemon plus the demo robot's processes
         from bridge.robots.demo_runner import run_demo
 
-        return run_demo(args)
+        return run_with_config(args, run_demo)
     if args.command == "run":
         from bridge.daemon import run_daemon
 

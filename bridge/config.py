@@ -66,6 +66,8 @@ class DaemonConfig:
     package_paths: tuple[tuple[str, str], ...] = ()
     # Put before clients' relative tf frame ids ("PSM1/"): one daemon per robot instance.
     frame_prefix: str = ""
+    # After a stop signal, the process exits after this long even if ROS's teardown hangs.
+    stop_timeout_s: float = 10.0
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
-"""Wires the daemon together and runs it until SIGINT or SIGTERM.
+"""Wires the daemon together and runs it until SIGINT, SIGTERM or SIGHUP (then it exits
+within ``--stop-timeout`` whatever ROS's teardown does: see `bridge.shutdown`).
 
     ROS executor thread                     asyncio loop (main thread)
     ───────────────────                     ──────────────────────────
@@ -12,7 +13,6 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import logging
-import signal
 import sys
 from pathlib import Path
 from typing import Awaitable, Callable, Optional
@@ -24,6 +24,7 @@ from bridge.parameters import ParameterBridges
 from bridge.robots.capability import RobotBridges
 from bridge.ros_node import RosNode, RosOptions
 from bridge.server import BridgeServer
+from bridge.shutdown import StopSignals
 from bridge.services import ServiceBridges
 from bridge.tf.capability import TfBridges
 from bridge.topics import TopicBridges
@@ -89,21 +90,26 @@ class Daemon:
 
 
 async def run_daemon(config: DaemonConfig,
-                     started: Optional[Callable[[Daemon], Awaitable[None]]] = None) -> None:
-    """Run until SIGINT/SIGTERM; `started` runs once the daemon serves (used by `demo`)."""
+                     started: Optional[Callable[[Daemon], Awaitable[None]]] = None, *,
+                     stopping: Optional[Callable[[], None]] = None) -> None:
+    """Run until SIGINT/SIGTERM/SIGHUP; `started` runs once the daemon serves and
+    `stopping` when the stop begins (used by `demo`). After the signal the process ends
+    within ``config.stop_timeout_s``."""
     # Two busy threads (ROS executor, asyncio loop) share the GIL; with the default 5 ms
     # switch interval, a frame handed to the loop under load waits up to 5 ms to be sent.
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     loop = asyncio.get_running_loop()
-    stop = asyncio.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
+    signals = StopSignals(loop, timeout_s=config.stop_timeout_s)
+    signals.install()
     daemon = Daemon(config, loop)
     await daemon.start()
     try:
         if started is not None:
             await started(daemon)
-        await stop.wait()
-        log.info("shutting down")
+        await signals.requested.wait()
+        log.info("shutting down (%s)", signals.signal_name)
     finally:
+        signals.watchdog.start()  # an error ends the run too: its teardown is bounded alike
+        if stopping is not None:
+            stopping()
         await daemon.stop()

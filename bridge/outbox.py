@@ -99,3 +99,9 @@ class Outbox:
         if self._latest:
             return self._latest.popitem(last=False)[1].encoded(self._header_version())
         return None
+
+    def clear(self) -> None:
+        """Drop every waiting frame (the client is gone)."""
+        self._latest.clear()
+        self._oneshots.clear()
+        self._oneshot_bytes = 0

@@ -3,6 +3,11 @@
 At accept, the security policy decides: a peer outside ``--allow`` is closed at once, and a
 client over ``--max-clients`` gets a STATUS saying so, then is closed. Both are logged
 (rate-limited: a reconnect storm must not flood the log).
+
+A half-sent frame must not hold a client slot: when all slots are taken, the client whose
+unfinished frame is the oldest (over `STALLED_FRAME_EVICT_S`) is closed to make room.
+Clients that only receive, or that send whole messages, are never evicted. All sessions
+share one `ReceiveBudget` for partly received bodies.
 """
 
 from __future__ import annotations
@@ -15,10 +20,15 @@ from typing import Optional
 from bridge.hub import Hub
 from bridge.security import RateLimitedLog, SecurityPolicy, is_loopback_host
 from bridge.session import ClientSession, CommandHandler, SessionLimits
+from protocol.framing import ReceiveBudget
 from protocol.framing import encode
 from protocol.messages import Message, Status, StatusCode
 
 log = logging.getLogger(__name__)
+
+# An unfinished frame this old may be closed to admit a new client when all slots are
+# taken: far above a frame's transit time on any working link, far below the deadline.
+STALLED_FRAME_EVICT_S = 1.0
 
 
 class PortInUseError(OSError):
@@ -35,6 +45,8 @@ class BridgeServer:
         self._limits = limits
         self._policy = policy or SecurityPolicy()
         self._refusals = RateLimitedLog(log)
+        self._incidents = RateLimitedLog(log)  # deadlines and budget, over all sessions
+        self.budget: ReceiveBudget = limits.receive_budget()
         self._server: Optional[asyncio.base_events.Server] = None
         self.sessions: set[ClientSession] = set()
         self.refused = 0
@@ -75,7 +87,7 @@ class BridgeServer:
                                    "allowed networks (--allow)", who)
             transport.abort()  # nothing is said to a peer that may not connect
             return
-        if len(self.sessions) >= self._policy.max_clients:
+        if len(self.sessions) >= self._policy.max_clients and not self._evict_stalled(who):
             self.refused += 1
             self._refusals.warning("max_clients", time.monotonic(), "refused client %s: "
                                    "%d clients already connected (--max-clients)", who,
@@ -87,10 +99,29 @@ class BridgeServer:
             transport.close()  # after the STATUS is written
             return
         session = ClientSession(self._hub, self._commands, self._limits, self.sessions.discard,
-                                read_only=self._policy.read_only)
+                                read_only=self._policy.read_only, budget=self.budget,
+                                incidents=self._incidents)
         self.sessions.add(session)
         transport.set_protocol(session)
         session.connection_made(transport)
+
+    def _evict_stalled(self, newcomer: str) -> bool:
+        """Close the client with the oldest unfinished frame, if one is old enough, to make
+        room for ``newcomer``; whether a slot was freed."""
+        now = asyncio.get_running_loop().time()
+        stalled = [(s.frame_started, id(s), s) for s in self.sessions
+                   if s.frame_started is not None and now - s.frame_started
+                   >= STALLED_FRAME_EVICT_S]
+        if not stalled:
+            return False
+        started, _, victim = min(stalled, key=lambda item: (item[0], item[1]))
+        self._incidents.warning("evict", time.monotonic(), "all %d client slots taken: "
+                                "closing client %s, whose frame has been unfinished for "
+                                "%.1f s, to admit %s", len(self.sessions), victim.peer,
+                                now - started, newcomer)
+        victim.close_stalled()
+        self.sessions.discard(victim)  # its slot is free now, not once its socket is gone
+        return True
 
     async def close(self) -> None:
         if self._server is None:

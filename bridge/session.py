@@ -5,6 +5,12 @@ body) gets a STATUS reply naming the problem and the stream goes on; a broken st
 (malformed header, oversized body) gets a STATUS and the connection is closed. Nothing a
 client sends can raise out of here into the server.
 
+Bounds on what a client holds: a frame that has started must be complete within
+``frame_deadline_s`` (plus a second per ``min_receive_rate`` bytes of its declared body),
+or the connection is closed; a client that never sends is not affected. Partly received
+bodies count against the daemon-wide `ReceiveBudget`. At close the receive and send
+buffers are dropped at once: nothing waits for the cyclic garbage collector.
+
 Writing: frames go straight to the transport while it keeps up; once its buffer passes the
 high-water mark, they wait in the client's `Outbox`, where a newer value of a device
 replaces an unsent older one.
@@ -14,15 +20,18 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import operator
 import socket
 import time
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable, Optional
 
 from bridge.hub import Hub
 from bridge.outbox import Frame, Outbox, OutboxOverflow
-from protocol.errors import CrcMismatchError, FramingError, MessageError
-from protocol.framing import Decoder
+from bridge.security import RateLimitedLog
+from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
+from protocol.framing import Decoder, ReceiveBudget
 from protocol.messages import Message, Status, StatusCode
 from protocol.negotiation import HeaderVersionNegotiator
 
@@ -42,20 +51,40 @@ class SessionLimits:
     # How long a new client may take to show it reads header v2 (3D Slicer sends a STATUS
     # at once) before it gets the current state as v1; OpenIGTLink 1.11 peers never send.
     negotiation_grace_s: float = 0.25
+    # A started frame must be complete this long after its first byte (slowloris), plus a
+    # second per `min_receive_rate` bytes of its declared body (a 64 MiB body: 13 s).
+    frame_deadline_s: float = 5.0
+    min_receive_rate: int = 8 * 1024 * 1024
+    # Bytes of partly received bodies all clients together may hold; None: twice
+    # max_message_bytes, so one client can send the largest message while another does.
+    receive_budget_bytes: Optional[int] = None
+
+    def receive_budget(self) -> ReceiveBudget:
+        total = self.receive_budget_bytes
+        return ReceiveBudget(2 * self.max_message_bytes if total is None else total)
 
 
 class ClientSession(asyncio.Protocol):
     def __init__(self, hub: Hub, commands: CommandHandler, limits: SessionLimits,
-                 on_close: Callable[[ClientSession], None], *, read_only: bool = False) -> None:
+                 on_close: Callable[[ClientSession], None], *, read_only: bool = False,
+                 budget: Optional[ReceiveBudget] = None,
+                 incidents: Optional[RateLimitedLog] = None) -> None:
         self._hub = hub
         self._read_only = read_only  # --read-only: data messages to devices are refused
         self._commands = commands
         self._limits = limits
-        self._on_close = on_close
-        self._decoder = Decoder(max_body_size=limits.max_message_bytes)
+        self._on_close: Optional[Callable[[ClientSession], None]] = on_close
+        self._incidents = incidents or RateLimitedLog(log)  # shared by the server's sessions
+        self._decoder = Decoder(max_body_size=limits.max_message_bytes,
+                                budget=budget or limits.receive_budget())
         self._negotiator = HeaderVersionNegotiator()
+        # Over the negotiator, not over self: a lambda over self would make a reference
+        # cycle and leave a closed session (and its buffers) to the cyclic GC.
         self._outbox = Outbox(max_oneshot_bytes=limits.max_oneshot_bytes,
-                              header_version=lambda: self._negotiator.outgoing_version)
+                              header_version=partial(operator.attrgetter("outgoing_version"),
+                                                     self._negotiator))
+        self._frame_timer: Optional[asyncio.TimerHandle] = None
+        self.frame_started: Optional[float] = None  # loop time of an unfinished frame's start
         self._transport: Optional[asyncio.Transport] = None
         self._paused = False
         self._closing = False
@@ -96,13 +125,26 @@ class ClientSession(asyncio.Protocol):
 
     def connection_lost(self, exc: Optional[Exception]) -> None:
         self._closing = True
-        if self._attach_timer is not None:
-            self._attach_timer.cancel()
+        self._release()
         if self._attached:
             self._hub.detach(self)
-        self._on_close(self)
+        if self._on_close is not None:
+            on_close, self._on_close = self._on_close, None
+            on_close(self)
         self._hub.client_closed(self)
+        self._transport = None
         log.info("client %s disconnected%s", self.peer, f" ({exc})" if exc else "")
+
+    def _release(self) -> None:
+        """Drop what the session holds (buffers, budget, timers) at once. Idempotent."""
+        for timer in (self._attach_timer, self._frame_timer):
+            if timer is not None:
+                timer.cancel()
+        self._attach_timer = self._frame_timer = None
+        self.frame_started = None
+        self._decoder.close()
+        self._outbox.clear()
+        self._batch = None
 
     def pause_writing(self) -> None:
         self._paused = True
@@ -112,6 +154,9 @@ class ClientSession(asyncio.Protocol):
         self._flush()
 
     def data_received(self, data: bytes) -> None:
+        if self._closing:
+            return  # the rest of a stream we gave up on
+        frames_before = self._decoder.frames
         try:
             self._decoder.feed(data)
             while not self._closing:
@@ -126,10 +171,62 @@ class ClientSession(asyncio.Protocol):
                     break
                 self.received += 1
                 self._handle(message)
+        except ReceiveBudgetError as error:
+            self._incidents.warning("budget", time.monotonic(), "client %s: body refused, "
+                                    "closing: %s", self.peer, error)
+            self.send_status("", StatusCode.RESOURCE_ERROR, f"closing the connection: {error}")
+            self.close()
         except FramingError as error:
             log.warning("client %s broke the OpenIGTLink framing, closing: %s", self.peer, error)
             self.send_status("", StatusCode.UNKNOWN_ERROR, f"closing the connection: {error}")
             self.close()
+        self._watch_frame(frames_before)
+
+    def _watch_frame(self, frames_before: int) -> None:
+        """Keep a deadline on the unfinished frame, if any (the decoder has no clock)."""
+        decoder = self._decoder
+        if self._closing or not decoder.frame_in_progress:
+            if self._frame_timer is not None:
+                self._frame_timer.cancel()
+                self._frame_timer = None
+            self.frame_started = None
+            return
+        loop = asyncio.get_running_loop()
+        if self.frame_started is None or decoder.frames != frames_before:
+            self.frame_started = loop.time()  # a new frame began in this chunk
+        deadline = self.frame_started + self._frame_allowance(decoder.pending_body_size)
+        if self._frame_timer is None or self._frame_timer.when() != deadline:
+            if self._frame_timer is not None:
+                self._frame_timer.cancel()
+            self._frame_timer = loop.call_at(deadline, self._frame_overdue)
+
+    def _frame_allowance(self, body_size: Optional[int]) -> float:
+        return self._limits.frame_deadline_s + (body_size or 0) / self._limits.min_receive_rate
+
+    def _frame_overdue(self) -> None:
+        self._frame_timer = None
+        if self._closing:
+            return
+        body = self._decoder.pending_body_size
+        allowance = self._frame_allowance(body)
+        what = "header" if body is None else f"{body}-byte body"
+        self._incidents.warning(
+            "deadline", time.monotonic(), "client %s: a frame (%s) unfinished %.1f s after its "
+            "first byte, closing (--frame-deadline)", self.peer, what, allowance)
+        self.send_status("", StatusCode.TIME_OUT,
+                         f"closing the connection: frame deadline: expected a complete "
+                         f"message within {allowance:.1f} s of its first byte, got "
+                         f"{self._decoder.buffered} bytes of it")
+        self.close()
+
+    def close_stalled(self) -> None:
+        """Close for a newcomer's sake: all slots are taken and this frame is unfinished."""
+        if self._closing:
+            return
+        self.send_status("", StatusCode.RESOURCE_ERROR,
+                         "closing the connection: all client slots are taken and this "
+                         "connection's frame is unfinished (expected a complete message)")
+        self.close()
 
     def _warn_bad_message(self, error: MessageError) -> None:
         """Every bad message gets its STATUS reply, but a client sending thousands must not
@@ -239,7 +336,15 @@ class ClientSession(asyncio.Protocol):
         self._outbox.discard(device)
 
     def close(self) -> None:
+        """Close the connection. What the transport already holds is still flushed; the
+        receive buffer and the frames not yet handed to the transport go now."""
         self._closing = True
+        if self._frame_timer is not None:
+            self._frame_timer.cancel()
+            self._frame_timer = None
+        self.frame_started = None
+        self._decoder.close()
+        self._outbox.clear()
         if self._transport is not None:
             self._transport.close()
 
@@ -272,7 +377,8 @@ class ClientSession(asyncio.Protocol):
         return {"peer": self.peer, "header_version": self.header_version,
                 "received": self.received, "sent": self.sent,
                 "coalesced": self._outbox.coalesced, "waiting": len(self._outbox),
-                "waiting_bytes": self._outbox.pending_bytes}
+                "waiting_bytes": self._outbox.pending_bytes,
+                "receiving_bytes": self._decoder.buffered}
 
 
 def _status_of(error: MessageError) -> int:

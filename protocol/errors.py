@@ -7,6 +7,7 @@ log line or an error reply can say exactly what was wrong. The tree::
     +-- FramingError               the byte stream cannot continue: close the connection
     |   +-- HeaderError            malformed 58-byte header (for example unknown header version)
     |   +-- BodyTooLargeError      BODY_SIZE over the decoder's limit (refused before allocation)
+    |   +-- ReceiveBudgetError     BODY_SIZE over what the shared `ReceiveBudget` has left
     +-- MessageError               one message is bad, framing is intact: the stream goes on
     |   +-- CrcMismatchError       the body's CRC-64 differs from the header's
     |   +-- BodyError              malformed content; attribute type_name names the message type
@@ -30,6 +31,7 @@ __all__ = [
     "HeaderError",
     "MessageError",
     "ProtocolError",
+    "ReceiveBudgetError",
 ]
 
 
@@ -75,6 +77,11 @@ class HeaderError(FramingError):
 
 class BodyTooLargeError(FramingError):
     """BODY_SIZE exceeds the decoder's limit; refused before any allocation."""
+
+
+class ReceiveBudgetError(FramingError):
+    """A body does not fit in what the shared budget of partly received bodies has left;
+    refused from the header, before any of it is stored."""
 
 
 class MessageError(ProtocolError):

@@ -6,8 +6,14 @@ Decoder error contract (see protocol.errors):
 
 * `MessageError` (`CrcMismatchError`, `BodyError`): raised by `next_message` after the bad
   message was consumed; call again to go on with the next one.
-* `FramingError` (`HeaderError`, `BodyTooLargeError`): message boundaries are lost; the
-  decoder stays broken and raises the same error on every later call. Close the connection.
+* `FramingError` (`HeaderError`, `BodyTooLargeError`, `ReceiveBudgetError`): message
+  boundaries are lost; the decoder stays broken and raises the same error on every later
+  call. Close the connection.
+
+Bounding what clients hold: a `ReceiveBudget` shared by many decoders caps the bytes of
+bodies announced and not yet complete, so N slow senders cannot pin N x ``max_body_size``.
+The decoder reports `frame_in_progress` and `frames` so its owner can put a deadline on a
+frame (the decoder has no clock), and `close` gives its buffer and budget back at once.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from protocol.errors import (
     EncodeError,
     FramingError,
     ProtocolError,
+    ReceiveBudgetError,
 )
 from protocol.header import (
     EXT_HEADER_SIZE,
@@ -35,9 +42,13 @@ from protocol.header import (
 )
 from protocol.messages import Message, unpack_body
 
-__all__ = ["DEFAULT_MAX_BODY_SIZE", "Decoder", "encode"]
+__all__ = ["DEFAULT_MAX_BODY_SIZE", "DEFAULT_UNCOUNTED_BODY_BYTES", "Decoder", "ReceiveBudget",
+           "encode"]
 
 DEFAULT_MAX_BODY_SIZE = 64 * 1024 * 1024  # 64 MiB: a 512^3 uint8 volume with room to spare
+# Bodies up to this size are not counted against a `ReceiveBudget`: commands and poses must
+# get through while large senders have used it up (64 clients x 256 KiB = 16 MiB at most).
+DEFAULT_UNCOUNTED_BODY_BYTES = 256 * 1024
 
 _U32_MAX = 0xFFFFFFFF
 
@@ -70,6 +81,46 @@ def encode(message: Message, *, header_version: int = 1) -> bytes:
     return header.pack() + body
 
 
+class ReceiveBudget:
+    """Bytes of partly received bodies that the decoders sharing it may hold together.
+
+    A decoder claims a body's size (minus ``uncounted_body_bytes``) when its header is read,
+    before any body byte is stored, and releases it when the body is complete or the
+    decoder is closed. Not thread-safe: one event loop owns the decoders sharing it.
+    """
+
+    def __init__(self, total_bytes: int, *,
+                 uncounted_body_bytes: int = DEFAULT_UNCOUNTED_BODY_BYTES) -> None:
+        if total_bytes <= 0 or uncounted_body_bytes < 0:
+            raise ValueError(f"total_bytes > 0 and uncounted_body_bytes >= 0 expected, got "
+                             f"{total_bytes}, {uncounted_body_bytes}")
+        self.total_bytes = total_bytes
+        self.uncounted_body_bytes = uncounted_body_bytes
+        self.in_use = 0
+
+    @property
+    def available(self) -> int:
+        return self.total_bytes - self.in_use
+
+    def cost(self, body_size: int) -> int:
+        """What a body of ``body_size`` bytes counts against the budget."""
+        return max(0, body_size - self.uncounted_body_bytes)
+
+    def claim(self, body_size: int) -> int:
+        """Claim a body's cost and return it, or raise `ReceiveBudgetError`."""
+        cost = self.cost(body_size)
+        if cost > self.available:
+            raise ReceiveBudgetError(
+                "BODY_SIZE", f"a body that fits in the {self.available} bytes left of the "
+                f"shared budget for partly received bodies ({self.total_bytes} bytes, the "
+                f"rest held by other connections' unfinished bodies)", body_size)
+        self.in_use += cost
+        return cost
+
+    def release(self, cost: int) -> None:
+        self.in_use -= cost
+
+
 class Decoder:
     """Incremental decoder: `feed` bytes of any chunk size, then take messages with
     `next_message` (or iterate `messages`).
@@ -77,17 +128,32 @@ class Decoder:
     Bytes are appended to one buffer and consumed by advancing an offset; the consumed prefix
     is dropped once it is at least half of the buffer, so each byte is moved O(1) times
     whatever the chunking. A BODY_SIZE above ``max_body_size`` is refused from the header
-    alone, before any body byte is awaited or stored.
+    alone, before any body byte is awaited or stored; so is one that does not fit in
+    ``budget`` (shared with other decoders). A buffer whose bytes were all consumed is
+    dropped, so an idle decoder holds nothing of the last large message.
     """
 
     def __init__(self, *, max_body_size: int = DEFAULT_MAX_BODY_SIZE,
-                 verify_crc: bool = True) -> None:
+                 verify_crc: bool = True, budget: ReceiveBudget | None = None) -> None:
         self.max_body_size = max_body_size
         self.verify_crc = verify_crc
+        self._budget = budget
+        self._claimed = 0
         self._buffer = bytearray()
         self._offset = 0
         self._header: tuple[int, bytes, bytes, int, int, int] | None = None
         self._broken: FramingError | None = None
+        self.frames = 0  # frames consumed, good or bad: a deadline restarts with each
+
+    @property
+    def frame_in_progress(self) -> bool:
+        """Part of a frame has arrived (after the complete ones were taken)."""
+        return len(self._buffer) > self._offset
+
+    @property
+    def pending_body_size(self) -> int | None:
+        """BODY_SIZE of the frame whose header has been read, None before its header."""
+        return None if self._header is None else self._header[4]
 
     @property
     def buffered(self) -> int:
@@ -107,6 +173,28 @@ class Decoder:
             del self._buffer[: self._offset]
             self._offset = 0
         self._buffer += data
+
+    def close(self) -> None:
+        """Drop buffered bytes and give back the budget claimed; later calls raise
+        `FramingError`. Idempotent."""
+        self._release_claim()
+        self._buffer = bytearray()
+        self._offset = 0
+        self._header = None
+        if self._broken is None:
+            self._broken = FramingError("decoder", "an open decoder", "a closed one")
+        # Its traceback holds the frames that raised it, and with them their owners.
+        self._broken.__traceback__ = None
+
+    def _release_claim(self) -> None:
+        if self._claimed and self._budget is not None:
+            self._budget.release(self._claimed)
+        self._claimed = 0
+
+    def _break(self, error: FramingError) -> FramingError:
+        self._broken = error
+        self._release_claim()
+        return error
 
     def _take(self, size: int) -> bytes:
         start = self._offset
@@ -129,13 +217,16 @@ class Decoder:
             try:
                 fields = unpack_raw(self._buffer[start:start + HEADER_SIZE])
             except FramingError as exc:
-                self._broken = exc
-                raise
+                raise self._break(exc) from None
             body_size = fields[4]
             if body_size > self.max_body_size:
-                self._broken = BodyTooLargeError(
-                    "BODY_SIZE", f"<= {self.max_body_size} bytes (max_body_size)", body_size)
-                raise self._broken
+                raise self._break(BodyTooLargeError(
+                    "BODY_SIZE", f"<= {self.max_body_size} bytes (max_body_size)", body_size))
+            if self._budget is not None:
+                try:
+                    self._claimed = self._budget.claim(body_size)
+                except ReceiveBudgetError as exc:
+                    raise self._break(exc) from None
             self._header = fields
         version, type_raw, name_raw, timestamp, body_size, crc = self._header
         if self.buffered < HEADER_SIZE + body_size:
@@ -143,6 +234,12 @@ class Decoder:
         self._header = None
         self._offset += HEADER_SIZE
         body = self._take(body_size)
+        self.frames += 1
+        self._release_claim()
+        if self._offset == len(self._buffer):
+            # All consumed: let the (possibly 64 MiB) buffer go now, not at the next feed.
+            self._buffer = bytearray()
+            self._offset = 0
         return _decode(version, type_raw, name_raw, timestamp, body, crc, self.verify_crc)
 
     def messages(self) -> Iterator[Message]:

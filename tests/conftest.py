@@ -7,6 +7,7 @@
 - `processes`: starts a child (the daemon, an rclpy peer) and guarantees it is stopped.
 - `module_processes`: the same, shared by the tests of one module.
 - every test fails if it leaves a child process of the test runner behind.
+- property tests (hypothesis) have no per-example deadline.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ from pathlib import Path
 from typing import Iterator
 
 import pytest
+from hypothesis import settings
 
-from support import Processes, children_of, pick_free_port
+from support import Processes, children_of, pick_free_port, scaled
 
 # 0 and 101 are left alone; other ROS users on this host tend to sit on the default 0.
 _DOMAIN_ID = random.Random(os.getpid() ^ int(time.time())).randint(1, 100)
@@ -31,6 +33,12 @@ os.environ.pop("ROS_STATIC_PEERS", None)
 os.environ["ROS_LOG_DIR"] = tempfile.mkdtemp(prefix="slicer-ros2-bridge-roslog-")
 os.environ["RCUTILS_LOGGING_BUFFERED_STREAM"] = "0"
 os.environ["PYTHONUNBUFFERED"] = "1"
+
+# Property tests: no per-example time limit (hypothesis' default is 200 ms), which a loaded
+# machine exceeds without anything being wrong. Loaded before the test modules are, so
+# their own @settings inherit it.
+settings.register_profile("suite", deadline=None)
+settings.load_profile("suite")
 
 
 def pytest_report_header(config: pytest.Config) -> str:
@@ -68,7 +76,7 @@ def no_leftover_children() -> Iterator[None]:
     before = {pid for pid, _, _ in children_of(os.getpid())}
     yield
     # A child that is exiting may take a moment to go.
-    deadline = time.monotonic() + 3.0
+    deadline = time.monotonic() + scaled(3.0)
     left = [c for c in children_of(os.getpid()) if c[0] not in before]
     while left and time.monotonic() < deadline:
         time.sleep(0.05)

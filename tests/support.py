@@ -21,6 +21,18 @@ REPO = Path(__file__).resolve().parent.parent
 PEERS = Path(__file__).resolve().parent / "peers"
 SHARED = REPO.parent / "shared"
 
+# Every deadline of the suite is multiplied by this one factor: the waiting helpers here
+# and in tests/hardening/hardening_tools.py apply it to the timeouts they are given, other
+# waits call `scaled`. Deadlines only bound waits on events (a line printed, a message
+# received, a condition polled), so a generous factor costs nothing while tests pass; it
+# lets the suite hold on a loaded machine. SLICER_BRIDGE_TEST_TIME_SCALE sets it.
+TIME_SCALE = float(os.environ.get("SLICER_BRIDGE_TEST_TIME_SCALE", "3"))
+
+
+def scaled(seconds: float) -> float:
+    """A deadline of ``seconds`` on an idle machine, scaled for this one."""
+    return seconds * TIME_SCALE
+
 
 def pick_free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
@@ -46,7 +58,8 @@ class Child:
 
     def wait_for_output(self, needle: str, timeout: float = 20.0) -> str:
         """Wait until `needle` appears in the output after what earlier waits consumed;
-        return the line holding it."""
+        return the line holding it. ``timeout`` is scaled (`scaled`)."""
+        timeout = scaled(timeout)
         deadline = time.monotonic() + timeout
         while True:
             text = self.output()
@@ -66,11 +79,12 @@ class Child:
             time.sleep(0.02)
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> Optional[int]:
-        """Signal the child, wait for it, kill its whole process group if it lingers."""
+        """Signal the child, wait for it (``timeout``, scaled), kill its whole process
+        group if it lingers."""
         if self.popen.poll() is None:
             try:
                 self.popen.send_signal(sig)
-                self.popen.wait(timeout)
+                self.popen.wait(scaled(timeout))
             except subprocess.TimeoutExpired:
                 pass
         try:
@@ -151,7 +165,9 @@ def children_of(pid: int) -> list[tuple[int, str, str]]:
 
 def wait_until(predicate: Callable[[], bool], timeout: float = 10.0,
                what: str = "condition") -> None:
-    """Poll a cheap predicate until it holds; fail naming `what` after `timeout`."""
+    """Poll a cheap predicate until it holds; fail naming `what` after `timeout`
+    (scaled)."""
+    timeout = scaled(timeout)
     deadline = time.monotonic() + timeout
     while not predicate():
         if time.monotonic() > deadline:

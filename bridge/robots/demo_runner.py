@@ -9,15 +9,18 @@ What runs (all stopped by one Ctrl-C):
 - the robot ``demo``, created in the daemon from ``/robot_state_publisher``'s
   ``robot_description`` parameter, as a user would with ``create_robot``.
 
-The children run in their own process groups: a terminal's Ctrl-C reaches the daemon only,
-which then stops them itself (SIGINT, then SIGKILL after a grace period), so a child's exit
-during shutdown is never mistaken for a crash. A child that dies while the demo runs is
-logged at ERROR with its exit code and last output lines; the daemon keeps serving.
+The children run in their own process groups: a terminal's Ctrl-C (or hang-up) reaches the
+daemon only, which then stops them itself (SIGINT, then SIGKILL after a grace period), so a
+child's exit during shutdown is never mistaken for a crash. Whatever ends the demo, its
+children end with it: SIGINT, SIGTERM and SIGHUP stop them as above, and if the demo
+process is killed outright each child notices its parent is gone (`bridge.robots._spin`:
+PR_SET_PDEATHSIG on Linux, a parent-pid check everywhere) and stops. A child that dies
+while the demo runs is logged at ERROR with its exit code and last output lines; the
+daemon keeps serving.
 """
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import collections
 import dataclasses
@@ -29,7 +32,8 @@ from pathlib import Path
 from typing import Optional
 
 from bridge.config import DaemonConfig
-from bridge.daemon import Daemon
+from bridge.daemon import Daemon, run_daemon
+from bridge.robots._spin import PARENT_PID_ENV
 
 __all__ = ["DemoChildren", "run_demo"]
 
@@ -73,7 +77,8 @@ class DemoChildren:
             child.ready = loop.create_future()
             child.process = await asyncio.create_subprocess_exec(
                 *child.argv, stdin=asyncio.subprocess.DEVNULL, stdout=asyncio.subprocess.PIPE,
-                stderr=asyncio.subprocess.STDOUT, start_new_session=True)
+                stderr=asyncio.subprocess.STDOUT, start_new_session=True,
+                env={**os.environ, PARENT_PID_ENV: str(os.getpid())})
             child.watcher = asyncio.ensure_future(self._watch(child))
             log.debug("demo: started %s (pid %d)", child.name, child.process.pid)
         for child in self.children:
@@ -103,7 +108,10 @@ class DemoChildren:
                       "Its last output:\n%s", child.name, process.pid, code,
                       "\n".join(child.tail) or "(none)")
 
-    async def stop(self) -> None:
+    def request_stop(self) -> None:
+        """Ask every child to stop (SIGINT to its group) without waiting. Idempotent."""
+        if self._stopping:
+            return
         self._stopping = True
         for child in self.children:
             if child.process is not None and child.process.returncode is None:
@@ -111,6 +119,9 @@ class DemoChildren:
                     os.killpg(child.process.pid, signal.SIGINT)
                 except ProcessLookupError:
                     pass
+
+    async def stop(self) -> None:
+        self.request_stop()
         for child in self.children:
             process = child.process
             if process is None:
@@ -160,15 +171,8 @@ def _banner(daemon: Daemon, robot: dict[str, object]) -> str:
     ])
 
 
-def run_demo(args: argparse.Namespace) -> int:
-    """The `demo` subcommand (called by `bridge.cli`); the exit code."""
-    from bridge.cli import run_with_config
-
-    return run_with_config(args, _demo)
-
-
-async def _demo(config: DaemonConfig) -> None:
-    from bridge.daemon import run_daemon
+async def run_demo(config: DaemonConfig) -> None:
+    """The `demo` subcommand's main (`bridge.cli` runs it with the parsed configuration)."""
     from bridge.robots.demo import demo_urdf_path
 
     urdf, packages = demo_urdf_path()
@@ -185,6 +189,7 @@ async def _demo(config: DaemonConfig) -> None:
         print(_banner(daemon, dict(robot)), flush=True)
 
     try:
-        await run_daemon(config, started=started)
+        # The children stop alongside the daemon's own teardown, not after it.
+        await run_daemon(config, started=started, stopping=children.request_stop)
     finally:
         await children.stop()

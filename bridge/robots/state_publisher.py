@@ -42,7 +42,7 @@ from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
 from bridge.qos import LATCHED_QOS, TF_QOS
-from bridge.robots._spin import ros_session, spin_until_signal
+from bridge.robots._spin import inherited_parent_pid, ros_session, spin_until_signal
 from bridge.robots.description import RobotDescription, parse_urdf
 from bridge.robots.errors import RobotError
 from bridge.robots.kinematics import Kinematics
@@ -233,7 +233,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     except RobotError as exc:
         print(f"state-publisher: {exc}", file=sys.stderr)
         return 2
-    with ros_session() as session:
+    with ros_session(parent_pid=inherited_parent_pid()) as session:
         node = StatePublisherNode(urdf, node_name=args.node_name, namespace=args.namespace,
                                   frame_prefix=args.frame_prefix)
         name = node.get_fully_qualified_name()

@@ -8,7 +8,7 @@ from pathlib import Path
 
 
 from protocol.messages import Transform
-from support import Processes, RunningDaemon, wait_until
+from support import Processes, RunningDaemon, scaled, wait_until
 
 
 def rss_bytes(pid: int) -> int:
@@ -94,7 +94,7 @@ def test_a_late_client_gets_the_current_state_at_once(daemon: RunningDaemon,
         publisher.wait_for_output("DONE")
     # Nothing is published any more; a new client still gets the latest value on connect.
     with daemon.connect() as late:
-        message = late.wait_for(device, timeout=5)
+        message = late.wait_for(device, timeout=scaled(5))
         assert sequence_of(message) == 7
         assert message.metadata["ros2.topic"] == "/clients_late"
 

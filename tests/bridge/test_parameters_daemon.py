@@ -15,7 +15,7 @@ from protocol import commands as c
 from protocol.commands import ErrorCode
 from protocol.messages import Message, Status, StatusCode, String
 from slicer_client.connection import CommandRefusedError, Connection
-from support import Child, Processes, start_daemon, wait_until
+from support import Child, Processes, scaled, start_daemon, wait_until
 
 _nodes = itertools.count()
 
@@ -152,7 +152,7 @@ def test_observed_changes_are_pushed(processes: Processes, daemon: Any,
     # A client joining later gets the current values at once.
     late = daemon.connect()
     try:
-        late.wait_for(device, has_values(expected), timeout=5)
+        late.wait_for(device, has_values(expected), timeout=scaled(5))
     finally:
         late.close()
 

@@ -11,6 +11,7 @@ import pytest
 from std_msgs.msg import String
 
 from bridge.ros_node import RosNode, RosOptions
+from support import scaled
 
 pytestmark = pytest.mark.ros
 
@@ -34,7 +35,7 @@ def test_a_failing_callback_is_logged_and_the_executor_goes_on(
     with caplog.at_level(logging.ERROR, logger="bridge.ros_node"):
         ros.start()
         try:
-            assert healthy.wait(10), f"the executor stopped after {len(ticks)} ticks"
+            assert healthy.wait(scaled(10)), f"the executor stopped after {len(ticks)} ticks"
         finally:
             ros.stop()
     failures = [r for r in caplog.records if "a ROS callback failed" in r.getMessage()]
@@ -52,7 +53,7 @@ def test_destroy_from_another_thread_removes_the_entities() -> None:
         publisher = ros.node.create_publisher(String, "/ros_node_test_out", 10)
         ros.destroy(subscription)
         ros.destroy(publisher)
-        deadline = time.monotonic() + 5
+        deadline = time.monotonic() + scaled(5)
         while ((subscription in ros.node.subscriptions or publisher in ros.node.publishers)
                and time.monotonic() < deadline):
             time.sleep(0.01)

@@ -21,7 +21,7 @@ import pytest
 from protocol.conversions import ros_time_from_igtl
 from protocol.messages import Message, Status, StatusCode, Transform
 from slicer_client.connection import CommandRefusedError, Connection
-from support import Child, Processes, RunningDaemon, start_daemon, wait_until
+from support import Child, Processes, RunningDaemon, scaled, start_daemon, wait_until
 
 _prefixes = itertools.count()
 HALF = math.sqrt(0.5)
@@ -138,7 +138,7 @@ def test_chain_lookup_streams_the_composed_matrix_in_mm(
     assert {p + f for f in ("world", "base", "link1", "tool")} <= set(buffer_info["frames"])
     # A client that joins later gets the latest value at once.
     with daemon.connect() as late:
-        late.wait_for(device, is_matrix(WORLD_TOOL), timeout=5)
+        late.wait_for(device, is_matrix(WORLD_TOOL), timeout=scaled(5))
     client.command("remove_tf_lookup", {"parent": p + "world", "child": p + "tool"})
     with pytest.raises(CommandRefusedError) as gone:
         client.command("remove_tf_lookup", {"parent": p + "world", "child": p + "tool"})
@@ -176,7 +176,7 @@ def test_a_moving_chain_streams_every_change_and_a_rate_cap_holds(
     last = WORLD_BASE @ BASE_LINK1 @ link1_tool(250.0 + 200 * 0.1)
     client.wait_for(device, is_matrix(last), timeout=30)
     chain.wait_for_output("DONE", timeout=20)
-    client.wait_for(capped, is_matrix(BASE_LINK1 @ link1_tool(270.0)), timeout=5)
+    client.wait_for(capped, is_matrix(BASE_LINK1 @ link1_tool(270.0)), timeout=scaled(5))
     seen = len(counter.of(device))
     # Each tick moves the tool by 0.1 mm: most ticks reach the client (coalescing may merge
     # a few when the loop is busy, never invent any).
@@ -309,7 +309,7 @@ def test_broadcast_reaches_ros_in_metres_with_a_stamp(
                                                        "child": p + "needle"})
     assert created["device"].startswith("tfb:") and created["topic"] == "/tf"
     matrix = [[0, -1, 0, 3.1415], [1, 0, 0, -20], [0, 0, 1, 1000], [0, 0, 0, 1]]
-    deadline = time.monotonic() + 20
+    deadline = time.monotonic() + scaled(20)
     received = None
     while received is None and time.monotonic() < deadline:
         reply = client.command("broadcast_transform", {"parent": p + "world",
@@ -380,7 +380,7 @@ def test_transform_sent_to_a_broadcaster_device_is_published(
     device = client.command("create_tf_broadcaster", {"parent": p + "world",
                                                       "child": p + "pointer"})["device"]
     matrix = np.array([[1, 0, 0, 3.1415], [0, 0, -1, 0], [0, 1, 0, -7], [0, 0, 0, 1]], float)
-    deadline = time.monotonic() + 20
+    deadline = time.monotonic() + scaled(20)
     received = None
     while received is None and time.monotonic() < deadline:
         client.send(Message(device, Transform(matrix=matrix)))
@@ -395,9 +395,9 @@ def test_transform_sent_to_a_broadcaster_device_is_published(
 
     # A scaled (non-orthonormal) matrix: a STATUS naming the field, nothing published.
     sent = listed[0]["messages"]
-    scaled = matrix.copy()
-    scaled[:3, :3] *= 2.0
-    client.send(Message(device, Transform(matrix=scaled)))
+    stretched = matrix.copy()
+    stretched[:3, :3] *= 2.0
+    client.send(Message(device, Transform(matrix=stretched)))
     status = client.wait_for(device, is_status, timeout=10)
     assert status.body.code == StatusCode.CONFIG_ERROR
     assert "not broadcast on /tf" in status.body.text

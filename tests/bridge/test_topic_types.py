@@ -24,7 +24,7 @@ from protocol.framing import Decoder, encode
 from protocol.header import HEADER_SIZE, Header
 from protocol.messages import Image, Message, PolyData, String, Transform
 from slicer_client.connection import CommandRefusedError, Connection
-from support import Child, Processes, RunningDaemon
+from support import Child, Processes, RunningDaemon, scaled
 
 _topics = itertools.count()
 HALF = math.sqrt(0.5)
@@ -41,7 +41,7 @@ def read_ros(child: Child, timeout: float = 20.0) -> dict[str, Any]:
 
 def publish_until_received(client: Connection, echo: Child, topic: str, value: Any) -> dict:
     """Publish every 100 ms until the ROS peer prints a message (discovery takes a moment)."""
-    deadline = time.monotonic() + 20
+    deadline = time.monotonic() + scaled(20)
     while time.monotonic() < deadline:
         client.command("publish", {"topic": topic, "value": value})
         if "MSG " in echo.output():
@@ -51,7 +51,7 @@ def publish_until_received(client: Connection, echo: Child, topic: str, value: A
 
 
 def send_until_received(client: Connection, echo: Child, message: Message) -> dict:
-    deadline = time.monotonic() + 20
+    deadline = time.monotonic() + scaled(20)
     while time.monotonic() < deadline:
         client.send(message)
         if "MSG " in echo.output():

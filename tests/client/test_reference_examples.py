@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import slicer_client
-from support import Processes, RunningDaemon, require_shared, start_daemon, wait_until
+from support import Processes, RunningDaemon, require_shared, scaled, start_daemon, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -25,7 +25,7 @@ def echo(processes: Processes, topic: str, msg_type: str, *flags: str):
 def publish_until_received(pub, value, child, timeout: float = 20.0) -> dict:
     """Publish repeatedly until the rclpy peer prints a message (discovery races)."""
     import time
-    deadline = time.monotonic() + timeout
+    deadline = time.monotonic() + scaled(timeout)
     while True:
         pub.Publish(value)
         try:

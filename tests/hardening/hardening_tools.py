@@ -13,6 +13,7 @@ from protocol.crc64 import crc64
 from protocol.errors import MessageError
 from protocol.framing import Decoder, encode
 from protocol.messages import Command, Message, Status, String, Transform
+from support import scaled
 
 import numpy as np
 
@@ -116,7 +117,9 @@ def framing_breakers() -> dict[str, bytes]:
 
 
 def read_until_closed(sock: socket.socket, timeout: float = 10.0) -> list[Message]:
-    """Every message the daemon sends on `sock` until it closes the connection."""
+    """Every message the daemon sends on `sock` until it closes the connection
+    (``timeout`` scaled)."""
+    timeout = scaled(timeout)
     decoder = Decoder()
     messages: list[Message] = []
     deadline = time.monotonic() + timeout
@@ -163,7 +166,8 @@ class RawClient:
         self.sock.sendall(data)
 
     def read_until(self, predicate, timeout: float = 10.0) -> Message:
-        """Read until a message satisfies `predicate`; return it."""
+        """Read until a message satisfies `predicate`; return it (``timeout`` scaled)."""
+        timeout = scaled(timeout)
         deadline = time.monotonic() + timeout
         while True:
             for index, message in enumerate(self.received):

@@ -11,6 +11,7 @@ import pytest
 
 from bridge.robots import model as robots
 from bridge.robots.errors import UrdfError
+from support import scaled
 
 
 def chain(links: int, visual: str = "") -> str:
@@ -49,7 +50,7 @@ def test_malformed_urdf_is_a_urdf_error_or_a_model(urdf: str | bytes) -> None:
         assert error.field and error.expected  # names what was wrong
     else:
         assert loaded.description is not None
-    assert time.monotonic() - start < 5.0
+    assert time.monotonic() - start < scaled(5.0)  # no entity expansion blow-up
 
 
 def test_ten_thousand_links_load_in_bounded_time() -> None:
@@ -59,7 +60,7 @@ def test_ten_thousand_links_load_in_bounded_time() -> None:
     took = time.monotonic() - start
     print(f"\n10,000-link URDF with a box each: {len(loaded.visuals)} visuals in {took:.1f} s")
     assert len(loaded.description.links) == 10_000
-    assert took < 60.0
+    assert took < scaled(60.0)
 
 
 def test_a_mesh_that_is_not_a_mesh_is_a_warning(tmp_path: Path) -> None:

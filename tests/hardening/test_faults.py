@@ -76,8 +76,9 @@ def test_hostile_ros_messages_are_logged_rate_limited_and_serving_goes_on(
             client.command("create_subscriber", {"topic": topic, "type": kind})
         lookup = client.command("create_tf_lookup", {"parent": "hb_base",
                                                      "child": "hb_link2"})["device"]
+        # A count, not a duration: under load the peer ticks slower, and the wait scales.
         tf = processes.python("tf", TF_PEER, "100", "--prefix", "hb_", "--bad",
-                              "--seconds", "30")
+                              "--count", "1000")
         bad = processes.python("bad", BAD_PEER, "/bad_", "--rounds", "20")
         bad.wait_for_output("DONE", timeout=60)
         tf.wait_for_output("SENT 1000", timeout=60)
@@ -173,15 +174,16 @@ def test_sigterm_during_heavy_traffic_exits_zero_promptly(processes: Processes) 
         tf.wait_for_output("SENT 1000", timeout=60)
         stream.wait_for_output("SENT 100", timeout=60)
         start = time.monotonic()
-        code = daemon.child.stop(signal.SIGTERM, timeout=10)
+        code = daemon.child.stop(signal.SIGTERM, timeout=5)
         took = time.monotonic() - start
     finally:
         for client in clients:
             client.close()
     print(f"\nSIGTERM under 1 kHz x 7 tf to 56 lookups + 30 Hz VGA images: exit {code} "
           f"in {took:.2f} s")
+    # Promptly: within the (scaled) 5 s Child.stop waits before it kills the process.
     assert code == 0, daemon.child.output()[-3000:]
-    assert took < 5.0
+    assert "cut short" not in daemon.child.output()  # not thanks to the stop watchdog
 
 
 def test_stop_while_the_ros_executor_is_busy_logs_no_error(processes: Processes) -> None:
@@ -189,7 +191,7 @@ def test_stop_while_the_ros_executor_is_busy_logs_no_error(processes: Processes)
     with daemon.connect() as client:
         client.command("create_tf_lookup", {"parent": "sb_base", "child": "sb_link1"})
         tf = processes.python("tf", TF_PEER, "100", "--prefix", "sb_", "--bad",
-                              "--seconds", "30")
+                              "--count", "1000")
         tf.wait_for_output("SENT 1000", timeout=60)
     assert_clean_exit(daemon)  # stopped with 10,000-transform messages still queued
 

@@ -18,7 +18,7 @@ from protocol.messages import Message, StatusCode, Transform
 from protocol.naming import DeviceNameRegistry, NameKey
 from slicer_client.connection import CommandRefusedError, Connection
 from support import (Child, Processes, RunningDaemon, assert_clean_exit, pick_free_port,
-                     start_daemon)
+                     scaled, start_daemon)
 
 pytestmark = pytest.mark.ros
 
@@ -121,7 +121,7 @@ def test_broadcasters_of_denied_frames_never_reach_ros(guarded: RunningDaemon,
         status = raw.read_until(lambda m: m.type_name == "STATUS"
                                 and m.device_name == denied_device)
         assert status.body.code == StatusCode.NOT_FOUND
-        deadline = time.monotonic() + 20
+        deadline = time.monotonic() + scaled(20)
         while time.monotonic() < deadline and not any(
                 t["child_frame_id"] == "PSM1/needle" for t in ros_transforms(echo)):
             raw.send(transform_bytes([1, 0, 0, 0, 1, 0, 0, 0, 1, 10, 20, 30], created["device"]))

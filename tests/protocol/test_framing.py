@@ -19,8 +19,9 @@ from protocol.errors import (
     HeaderError,
     MessageError,
     ProtocolError,
+    ReceiveBudgetError,
 )
-from protocol.framing import DEFAULT_MAX_BODY_SIZE, Decoder, encode
+from protocol.framing import DEFAULT_MAX_BODY_SIZE, Decoder, ReceiveBudget, encode
 from protocol.header import HEADER_SIZE, Header
 from protocol.messages import (
     Message,
@@ -384,3 +385,83 @@ def test_header_unpack_standalone() -> None:
     assert header.pack() == data[:HEADER_SIZE]
     with pytest.raises(HeaderError):
         Header.unpack(data[:57])
+
+
+# ------------------------------------------------------------------ what a decoder holds
+
+
+def blob(size: int, name: str = "big") -> bytes:
+    return encode(Message(name, RawBody("BLOB", bytes(size))))
+
+
+def test_frame_in_progress_and_frames_count_track_the_stream() -> None:
+    decoder = Decoder()
+    data = encode(tf_message())
+    assert not decoder.frame_in_progress and decoder.pending_body_size is None
+    decoder.feed(data[:7])  # a slowloris' 7 bytes
+    assert decoder.next_message() is None
+    assert decoder.frame_in_progress and decoder.pending_body_size is None
+    decoder.feed(data[7:HEADER_SIZE + 1])
+    assert decoder.next_message() is None
+    assert decoder.pending_body_size == len(data) - HEADER_SIZE and decoder.frames == 0
+    decoder.feed(data[HEADER_SIZE + 1:] + data[:3])  # the end of one, the start of the next
+    assert decoder.next_message() == tf_message() and decoder.next_message() is None
+    assert decoder.frames == 1 and decoder.frame_in_progress and decoder.buffered == 3
+
+
+def test_a_bad_message_counts_as_a_finished_frame() -> None:
+    bad = bytearray(encode(tf_message()))
+    bad[HEADER_SIZE] ^= 0xFF
+    decoder = Decoder()
+    decoder.feed(bytes(bad))
+    with pytest.raises(CrcMismatchError):
+        decoder.next_message()
+    assert decoder.frames == 1 and not decoder.frame_in_progress
+
+
+def test_a_consumed_large_buffer_is_dropped_at_once() -> None:
+    decoder = Decoder()
+    decoder.feed(blob(4 << 20))
+    assert decoder.next_message() is not None
+    assert decoder.buffered == 0 and len(decoder._buffer) == 0  # not kept to the next feed
+
+
+def test_budget_is_claimed_from_the_header_and_released_with_the_body() -> None:
+    budget = ReceiveBudget(3 << 20, uncounted_body_bytes=1 << 20)
+    first, second = Decoder(budget=budget), Decoder(budget=budget)
+    data = blob(3 << 20)
+    first.feed(data[:HEADER_SIZE])
+    assert first.next_message() is None
+    assert budget.in_use == 2 << 20  # the declared body less the uncounted part, no body yet
+    assert budget.cost(100) == 0
+    second.feed(data[:HEADER_SIZE + 10])
+    with pytest.raises(ReceiveBudgetError) as info:
+        second.next_message()
+    assert isinstance(info.value, FramingError) and info.value.got == 3 << 20
+    assert "1048576 bytes left" in str(info.value) and "3145728 bytes" in str(info.value)
+    assert budget.in_use == 2 << 20  # the refused one claimed nothing
+    # A small message still gets through while the budget is taken.
+    small = Decoder(budget=budget)
+    small.feed(encode(tf_message()))
+    assert small.next_message() == tf_message()
+    first.feed(data[HEADER_SIZE:])
+    assert first.next_message() is not None
+    assert budget.in_use == 0
+
+
+def test_close_gives_back_buffer_and_budget_and_refuses_more() -> None:
+    budget = ReceiveBudget(8 << 20)
+    decoder = Decoder(budget=budget)
+    data = blob(5 << 20)
+    decoder.feed(data[:len(data) // 2])
+    assert decoder.next_message() is None and budget.in_use > 0
+    decoder.close()
+    decoder.close()  # idempotent
+    assert budget.in_use == 0 and decoder.buffered == 0 and not decoder.frame_in_progress
+    with pytest.raises(FramingError, match="closed"):
+        decoder.feed(b"x")
+
+
+def test_budget_arguments_are_checked() -> None:
+    with pytest.raises(ValueError, match="total_bytes > 0"):
+        ReceiveBudget(0)

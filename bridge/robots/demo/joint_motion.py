@@ -114,7 +114,7 @@ def main(argv: Optional[list[str]] = None) -> int:
         parser.error("--rate must be positive")
 
     # ROS imports here: JointMotion itself is usable (and testable) without ROS.
-    from bridge.robots._spin import ros_session, spin_until_signal
+    from bridge.robots._spin import inherited_parent_pid, ros_session, spin_until_signal
     from bridge.robots.errors import RobotError
     from bridge.robots.state_publisher import read_urdf
 
@@ -130,7 +130,7 @@ def main(argv: Optional[list[str]] = None) -> int:
         print(f"joint_motion: {exc}", file=sys.stderr)
         return 2
 
-    with ros_session() as session:
+    with ros_session(parent_pid=inherited_parent_pid()) as session:
         node = create_joint_motion_node(motion, rate_hz=args.rate, node_name=args.node_name,
                                         namespace=args.namespace)
         spin_until_signal(session, [node], on_ready=lambda: print(

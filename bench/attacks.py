@@ -1,0 +1,445 @@
+"""Attacks on a running daemon (issue 12), each bounded, on 127.0.0.1 only, with the daemon's
+figures before and after, and a fresh client served during each.
+
+Run: .venv/bin/python bench/attacks.py [--only NAME ...] [--flood-seconds 10] [--json OUT]
+     [--flood-depth 10] [--flood-remove] [-- DAEMON OPTIONS ...]
+
+The daemon runs as a user runs it (`bridge.cli run`, default options unless given after
+``--``), in its own ROS domain, localhost only. Attacks, in order:
+
+- slowloris: 64 connections (the default --max-clients) each send 7 bytes of a header
+  and nothing more, and hold on for the frame deadline and 3 s more;
+- half-sent bodies: 16 connections each declare a 59 MiB body and send all but its last
+  KiB, then hold on;
+- hold and go: 6 clients each send 40 MiB of a body, then disconnect without finishing;
+- flood (a measurement): a rclpy peer publishes a 20 MB PointCloud2 at 10 Hz to a topic a
+  client subscribes to, for --flood-seconds, three floods in a row.
+
+Measured for each: the daemon's RSS, open fds, threads and ROS entities (the daemon node's
+publishers, subscribers, services and clients in the ROS graph) before, at the peak and
+after (once RSS has settled, at most 15 s); whether a fresh client connecting mid-attack
+got its hello answered (and in how long); what the attackers were told (STATUS texts) and
+how many connections the daemon closed. --flood-remove then removes the flood's
+subscriber and measures again, which shows what the subscription itself holds (its ROS
+history of --flood-depth messages, its last message, the hub's latest value). Exit code 1
+if a fresh client was not served or fds/entities did not come back.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import select
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from protocol.framing import Decoder  # noqa: E402
+from slicer_client.connection import BridgeClientError, Connection  # noqa: E402
+
+MIB = 1 << 20
+HEADER = struct.Struct(">H12s20sQQQ")
+DAEMON_NODE = "slicer_bridge"
+FLOOD_TOPIC = "/attack_cloud"
+FLOOD_POINTS = 20_000_000 // 16  # x, y, z, rgb float32: 16 bytes a point, 20 MB a message
+
+
+def header(body_size: int, type_name: bytes = b"STRING") -> bytes:
+    return HEADER.pack(1, type_name, b"attack", 0, body_size, 0)
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+# ------------------------------------------------------------------------- measuring
+
+
+class Graph:
+    """The daemon node's ROS entities, as the ROS graph shows them."""
+
+    def __init__(self) -> None:
+        import rclpy
+
+        self._rclpy = rclpy
+        rclpy.init()
+        self.node = rclpy.create_node("attack_bench_observer")
+
+    def entities(self) -> dict[str, int]:
+        """Counts per kind; all 0 while the graph has not discovered the node yet."""
+        node, ns = DAEMON_NODE, "/"
+        if (node, ns) not in self.node.get_node_names_and_namespaces():
+            return dict.fromkeys(("publishers", "subscribers", "services", "clients"), 0)
+        return {
+            "publishers": len(self.node.get_publisher_names_and_types_by_node(node, ns)),
+            "subscribers": len(self.node.get_subscriber_names_and_types_by_node(node, ns)),
+            "services": len(self.node.get_service_names_and_types_by_node(node, ns)),
+            "clients": len(self.node.get_client_names_and_types_by_node(node, ns)),
+        }
+
+    def close(self) -> None:
+        self.node.destroy_node()
+        self._rclpy.try_shutdown()
+
+
+def proc_figures(pid: int) -> dict[str, int]:
+    status = Path(f"/proc/{pid}/status").read_text().splitlines()
+    fields = {line.split(":")[0]: line.split(":")[1].split() for line in status}
+    return {"rss_mb": int(fields["VmRSS"][0]) // 1024, "threads": int(fields["Threads"][0]),
+            "fds": len(os.listdir(f"/proc/{pid}/fd"))}
+
+
+def settled(pid: int, timeout: float = 15.0) -> dict[str, int]:
+    """Figures once RSS has stopped falling for a second (or after ``timeout``)."""
+    deadline = time.monotonic() + timeout
+    last = proc_figures(pid)
+    stable_since = time.monotonic()
+    while time.monotonic() < deadline:
+        time.sleep(0.25)
+        now = proc_figures(pid)
+        if now["rss_mb"] < last["rss_mb"] - 1 or now["fds"] != last["fds"]:
+            stable_since = time.monotonic()
+        elif time.monotonic() - stable_since >= 1.0:
+            return now
+        last = now
+    return last
+
+
+class Peak:
+    """Samples the daemon's RSS every 100 ms in the background; the maximum seen."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self.rss_mb = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.1):
+            try:
+                self.rss_mb = max(self.rss_mb, proc_figures(self.pid)["rss_mb"])
+            except OSError:
+                return
+
+    def stop(self) -> int:
+        self._stop.set()
+        self._thread.join()
+        return self.rss_mb
+
+
+def fresh_client_served(port: int, timeout: float = 20.0) -> Optional[float]:
+    """Seconds until a new client's hello is answered (retrying a refused connection), or
+    None if it never was."""
+    start = time.monotonic()
+    while time.monotonic() - start < timeout:
+        try:
+            with Connection("127.0.0.1", port) as client:
+                client.command("hello", timeout=max(0.5, timeout - (time.monotonic() - start)))
+                return time.monotonic() - start
+        except (BridgeClientError, OSError):  # refused at max-clients, or closed: again
+            time.sleep(0.1)
+    return None
+
+
+def statuses(sock: socket.socket) -> list[str]:
+    """The texts of the STATUS messages the daemon has sent on ``sock`` so far."""
+    decoder = Decoder()
+    sock.setblocking(False)
+    try:
+        while data := sock.recv(1 << 16):
+            decoder.feed(data)
+    except OSError:  # nothing more for now (BlockingIOError), or reset
+        pass
+    return [m.body.text for m in decoder.messages() if m.type_name == "STATUS"]
+
+
+def closed_by_daemon(sock: socket.socket) -> bool:
+    readable, _, _ = select.select([sock], [], [], 0)
+    return bool(readable)
+
+
+# ------------------------------------------------------------------------- attacks
+
+
+def slowloris(port: int, deadline_s: float) -> dict[str, Any]:
+    socks = []
+    for _ in range(64):
+        try:
+            sock = socket.create_connection(("127.0.0.1", port), timeout=5)
+            sock.sendall(header(64)[:7])
+            socks.append(sock)
+        except OSError:
+            break
+    served = fresh_client_served(port)
+    end = time.monotonic() + deadline_s + 3.0
+    while time.monotonic() < end and not all(closed_by_daemon(s) for s in socks):
+        time.sleep(0.1)
+    closed = sum(closed_by_daemon(s) for s in socks)
+    said = [statuses(s) for s in socks[:1]]
+    for sock in socks:
+        sock.close()
+    return {"connections": len(socks), "closed_by_daemon": closed, "served_s": served,
+            "told": said[0][:1] if said else []}
+
+
+def half_sent_bodies(port: int) -> dict[str, Any]:
+    body = 59 * MIB
+    chunk = bytes(MIB)
+    socks: list[socket.socket] = []
+    refused = 0
+
+    def attack(sock: socket.socket) -> None:
+        nonlocal refused
+        try:
+            sock.sendall(header(body))
+            for _ in range(58):
+                sock.sendall(chunk)
+            sock.sendall(bytes(MIB - 1024))  # all but the last KiB
+        except OSError:
+            refused += 1
+
+    threads = []
+    for _ in range(16):
+        sock = socket.create_connection(("127.0.0.1", port), timeout=30)
+        socks.append(sock)
+        thread = threading.Thread(target=attack, args=(sock,))
+        thread.start()
+        threads.append(thread)
+    served = fresh_client_served(port)
+    for thread in threads:
+        thread.join()
+    told = [t for s in socks for t in statuses(s)]
+    held = sum(not closed_by_daemon(s) for s in socks)
+    for sock in socks:
+        sock.close()
+    return {"connections": 16, "declared_mib_each": 59, "held_by_daemon": held,
+            "refused": 16 - held, "served_s": served, "told": told[:1]}
+
+
+def hold_and_go(port: int) -> dict[str, Any]:
+    socks = []
+    for _ in range(6):
+        sock = socket.create_connection(("127.0.0.1", port), timeout=30)
+        try:
+            sock.sendall(header(41 * MIB))
+            for _ in range(40):
+                sock.sendall(bytes(MIB))
+        except OSError:
+            pass
+        socks.append(sock)
+    served = fresh_client_served(port)
+    held = sum(not closed_by_daemon(s) for s in socks)
+    told = [t for s in socks for t in statuses(s)]
+    for sock in socks:
+        sock.close()
+    return {"clients": 6, "held_40_mib": held, "refused": 6 - held, "served_s": served,
+            "told": told[:1]}
+
+
+def flood(port: int, env: dict[str, str], logs: Path, seconds: float,
+          received: Callable[[], int], round_: int) -> dict[str, Any]:
+    before = received()
+    peer = subprocess.Popen([sys.executable, "-u", __file__, "--flood-peer", FLOOD_TOPIC,
+                             str(seconds)], env=env, cwd=str(REPO), stdin=subprocess.DEVNULL,
+                            stdout=(logs / f"flood{round_}.log").open("wb"),
+                            stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        time.sleep(seconds / 2)  # mid-flood
+        served = fresh_client_served(port)
+        peer.wait(seconds * 3 + 30)
+    finally:
+        if peer.poll() is None:
+            os.killpg(peer.pid, signal.SIGKILL)
+            peer.wait()
+    text = (logs / f"flood{round_}.log").read_text()
+    sent = int(text.split("SENT ")[-1].split()[0]) if "SENT " in text else 0
+    return {"seconds": seconds, "sent": sent, "delivered_to_client": received() - before,
+            "served_s": served}
+
+
+def flood_peer(topic: str, seconds: float) -> int:
+    """A rclpy peer: a 20 MB PointCloud2 at 10 Hz on ``topic`` for ``seconds``."""
+    import numpy as np
+    import rclpy
+    from sensor_msgs.msg import PointCloud2, PointField
+
+    rclpy.init()
+    node = rclpy.create_node("attack_flood_peer")
+    publisher = node.create_publisher(PointCloud2, topic, 2)
+    deadline = time.monotonic() + 20
+    while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    fields = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1)
+              for i, n in enumerate(("x", "y", "z", "rgb"))]
+    rng = np.random.default_rng(0)
+    points = rng.random((FLOOD_POINTS, 4), dtype=np.float32)
+    message = PointCloud2(height=1, width=FLOOD_POINTS, fields=fields, is_bigendian=False,
+                          point_step=16, row_step=16 * FLOOD_POINTS, is_dense=True)
+    message.data = points.tobytes()
+    print("READY", flush=True)
+    start = time.monotonic()
+    n = 0
+    while time.monotonic() - start < seconds:
+        n += 1
+        due = start + n * 0.1
+        if due > time.monotonic():
+            time.sleep(due - time.monotonic())
+        message.header.frame_id = f"seq:{n}"
+        publisher.publish(message)
+    print(f"SENT {n}", flush=True)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+# ------------------------------------------------------------------------- driver
+
+
+def main() -> int:
+    if sys.argv[1:2] == ["--flood-peer"]:
+        return flood_peer(sys.argv[2], float(sys.argv[3]))
+    argv = sys.argv[1:]
+    daemon_args: list[str] = []
+    if "--" in argv:
+        daemon_args = argv[argv.index("--") + 1:]
+        argv = argv[:argv.index("--")]
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--only", action="append", choices=["slowloris", "half_sent_bodies",
+                                                            "hold_and_go", "flood"])
+    parser.add_argument("--flood-seconds", type=float, default=10.0)
+    parser.add_argument("--flood-depth", type=int, default=10,
+                        help="the flood subscriber's QoS depth (history kept by ROS)")
+    parser.add_argument("--flood-remove", action="store_true",
+                        help="remove the flood subscriber after the floods and measure again")
+    parser.add_argument("--json", type=Path)
+    args = parser.parse_args(argv)
+    chosen = args.only or ["slowloris", "half_sent_bodies", "hold_and_go", "flood"]
+
+    logs = Path(tempfile.mkdtemp(prefix="attacks-"))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(102, 200)),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(logs / "roslog"),
+               PYTHONUNBUFFERED="1")
+    env.pop("ROS_STATIC_PEERS", None)
+    os.environ.update({k: env[k] for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE",
+                                           "ROS_LOG_DIR")})
+    port = free_port()
+    deadline_s = 5.0
+    if "--frame-deadline" in daemon_args:
+        deadline_s = float(daemon_args[daemon_args.index("--frame-deadline") + 1])
+    log_path = logs / "daemon.log"
+    daemon = subprocess.Popen([sys.executable, "-u", "-m", "bridge.cli", "run", "--port",
+                               str(port), *daemon_args], env=env, cwd=str(REPO),
+                              stdin=subprocess.DEVNULL, stdout=log_path.open("wb"),
+                              stderr=subprocess.STDOUT, start_new_session=True)
+    graph: Optional[Graph] = None
+    subscriber: Optional[Connection] = None
+    clouds_received = [0]
+
+    def count_cloud(message: Any) -> None:
+        clouds_received[0] += 1
+    results: list[dict[str, Any]] = []
+    try:
+        start = time.monotonic()
+        while "listening on" not in log_path.read_text(errors="replace"):
+            if daemon.poll() is not None or time.monotonic() - start > 60:
+                raise RuntimeError(f"the daemon did not start:\n{log_path.read_text()}")
+            time.sleep(0.05)
+        graph = Graph()
+        discovered = time.monotonic() + 30
+        while graph.entities()["publishers"] == 0 and time.monotonic() < discovered:
+            time.sleep(0.1)  # the baseline needs the daemon's node in the graph
+        pid = daemon.pid
+        print(f"attacks on the daemon (pid {pid}, port {port}, options "
+              f"{daemon_args or 'default'}); logs in {logs}", flush=True)
+        for name in chosen:
+            rounds = 3 if name == "flood" else 1
+            for round_ in range(1, rounds + 1):
+                if name == "flood" and subscriber is None:
+                    subscriber = Connection("127.0.0.1", port, on_message=count_cloud)
+                    subscriber.command("create_subscriber", {
+                        "topic": FLOOD_TOPIC, "type": "PointCloud2",
+                        "qos": {"depth": args.flood_depth}})
+                before = {**settled(pid), **graph.entities()}
+                peak = Peak(pid)
+                if name == "slowloris":
+                    outcome = slowloris(port, deadline_s)
+                elif name == "half_sent_bodies":
+                    outcome = half_sent_bodies(port)
+                elif name == "hold_and_go":
+                    outcome = hold_and_go(port)
+                else:
+                    outcome = flood(port, env, logs, args.flood_seconds,
+                                    lambda: clouds_received[0], round_)
+                peak_rss = peak.stop()
+                after = {**settled(pid), **graph.entities()}
+                label = name if rounds == 1 else f"{name} {round_}"
+                result = {"attack": label, "before": before, "peak_rss_mb": peak_rss,
+                          "after": after, **outcome}
+                results.append(result)
+                print(f"\n== {label}\n   before {before}\n   peak RSS {peak_rss} MB\n"
+                      f"   after  {after}\n   {json.dumps(outcome)}", flush=True)
+        if subscriber is not None:
+            if args.flood_remove:
+                before = {**settled(pid), **graph.entities()}
+                subscriber.command("remove_subscriber", {"topic": FLOOD_TOPIC})
+                after = {**settled(pid), **graph.entities()}
+                print(f"\n== flood subscriber removed\n   before {before}\n   after  {after}")
+            subscriber.close()
+            subscriber = None
+        ok = all(r["served_s"] is not None for r in results)
+        for r in results:
+            b, a = r["before"], r["after"]
+            if not r["attack"].startswith("flood"):
+                ok = ok and a["fds"] <= b["fds"] and all(
+                    a[k] <= b[k] for k in ("publishers", "subscribers", "services", "clients"))
+        print("\n| attack | RSS MB before | peak | after | fds before/after | threads "
+              "before/after | entities (pub/sub/srv/cli) before -> after | fresh client "
+              "served in |")
+        print("|---|---|---|---|---|---|---|---|")
+        for r in results:
+            b, a = r["before"], r["after"]
+            ent = "/".join(str(b[k]) for k in ("publishers", "subscribers", "services",
+                                              "clients"))
+            ent_after = "/".join(str(a[k]) for k in ("publishers", "subscribers", "services",
+                                                    "clients"))
+            served = "no" if r["served_s"] is None else f"{r['served_s']:.2f} s"
+            print(f"| {r['attack']} | {b['rss_mb']} | {r['peak_rss_mb']} | {a['rss_mb']} | "
+                  f"{b['fds']}/{a['fds']} | {b['threads']}/{a['threads']} | {ent} -> "
+                  f"{ent_after} | {served} |")
+        if args.json:
+            args.json.write_text(json.dumps(results, indent=2))
+        daemon.send_signal(signal.SIGINT)
+        code = daemon.wait(30)
+        print(f"daemon exit code {code}; {'PASS' if ok and code == 0 else 'FAIL'}")
+        return 0 if ok and code == 0 else 1
+    finally:
+        if subscriber is not None:
+            subscriber.close()
+        if graph is not None:
+            graph.close()
+        if daemon.poll() is None:
+            daemon.send_signal(signal.SIGINT)
+            try:
+                daemon.wait(30)
+            except subprocess.TimeoutExpired:
+                os.killpg(daemon.pid, signal.SIGKILL)
+                daemon.wait()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
