@@ -18,7 +18,8 @@ import time
 from typing import Optional
 
 from bridge.hub import Hub
-from bridge.security import RateLimitedLog, SecurityPolicy, is_loopback_host
+from bridge.logging_limits import RateLimitedLog
+from bridge.security import SecurityPolicy, is_loopback_host
 from bridge.session import ClientSession, CommandHandler, SessionLimits
 from protocol.framing import ReceiveBudget
 from protocol.framing import encode

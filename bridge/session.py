@@ -28,8 +28,8 @@ from functools import partial
 from typing import Callable, Optional
 
 from bridge.hub import Hub
+from bridge.logging_limits import RateLimitedLog
 from bridge.outbox import Frame, Outbox, OutboxOverflow
-from bridge.security import RateLimitedLog
 from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
 from protocol.framing import Decoder, ReceiveBudget
 from protocol.messages import Message, Status, StatusCode
@@ -39,7 +39,6 @@ log = logging.getLogger(__name__)
 
 CommandHandler = Callable[[Message, "ClientSession"], None]
 
-_BAD_MESSAGE_LOG_INTERVAL_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -92,8 +91,7 @@ class ClientSession(asyncio.Protocol):
         self._attach_timer: Optional[asyncio.TimerHandle] = None
         self._batch: Optional[list[bytes]] = None  # frames gathered for one write
         self._unrouted_warned: set[str] = set()
-        self._bad_messages = 0
-        self._last_bad_warning = -_BAD_MESSAGE_LOG_INTERVAL_S
+        self._bad_log = RateLimitedLog(log)
         self.peer = "?"
         self.received = 0
         self.sent = 0
@@ -231,15 +229,8 @@ class ClientSession(asyncio.Protocol):
     def _warn_bad_message(self, error: MessageError) -> None:
         """Every bad message gets its STATUS reply, but a client sending thousands must not
         flood the log: one line per interval, with the count of the others."""
-        self._bad_messages += 1
-        now = time.monotonic()
-        if now - self._last_bad_warning < _BAD_MESSAGE_LOG_INTERVAL_S:
-            return
-        others = self._bad_messages - 1
-        log.warning("client %s sent a bad message: %s%s", self.peer, error,
-                    f" (and {others} more since the last warning)" if others else "")
-        self._bad_messages = 0
-        self._last_bad_warning = now
+        self._bad_log.warning("bad message", None, "client %s sent a bad message: %s",
+                              self.peer, error)
 
     # --- incoming messages -----------------------------------------------------------------
     def _handle(self, message: Message) -> None:
