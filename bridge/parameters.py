@@ -111,6 +111,16 @@ def from_ros_value(msg: RosParameterValue, path: str) -> ParameterValue:
     return ParameterValue(kind, raw)
 
 
+def _explain_refusal(node: str, name: str, reason: str) -> str:
+    """A node's reason for refusing a parameter, made to name it. rclpy nodes answer an
+    undeclared name with "Invalid access to undeclared parameter(s): []" (their list is
+    always empty), which says neither which parameter nor why."""
+    if reason.startswith("Invalid access to undeclared parameter"):
+        return (f"{node} has not declared {name!r}: a ROS node takes only the parameters it "
+                f"declared")
+    return reason
+
+
 def _rclpy_parameter(name: str, value: ParameterValue) -> Parameter:
     return Parameter.from_parameter_msg(RosParameter(name=name, value=to_ros_value(value)))
 
@@ -252,7 +262,8 @@ class ParameterBridges:
             raise CommandFailedError("values", f"{len(names)} results from {client.node}",
                                      str(len(reply.results)), code=ErrorCode.ROS_ERROR)
         return {"node": client.node,
-                "results": {name: {"ok": bool(result.successful), "reason": result.reason}
+                "results": {name: {"ok": bool(result.successful),
+                                   "reason": _explain_refusal(client.node, name, result.reason)}
                             for name, result in zip(names, reply.results)}}
 
     async def observe_parameters(self, request: ObserveParameters) -> dict[str, Any]:

@@ -117,6 +117,12 @@ def test_set_from_the_client(processes: Processes, client: Connection) -> None:
     assert {n: r["ok"] for n, r in result["results"].items()} == {
         "ratio": True, "counts": True, "count": False, "blob": True}
     assert "type" in result["results"]["count"]["reason"].lower()
+    # rclpy's own reason for an undeclared name lists no name ("...parameter(s): []").
+    undeclared = client.command("set_parameters", {"node": name, "values": {
+        "no_such_param": {"type": "integer", "value": 1}}})["results"]["no_such_param"]
+    assert undeclared == {"ok": False, "reason": f"/{name} has not declared 'no_such_param': "
+                                                 f"a ROS node takes only the parameters it "
+                                                 f"declared"}
     assert changed_line(peer, "ratio") == {"name": "ratio", "type": "double", "value": 2.5}
     assert changed_line(peer, "counts") == {"name": "counts", "type": "integer_array",
                                             "value": []}
