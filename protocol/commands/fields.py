@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 from collections.abc import Mapping
@@ -41,9 +42,15 @@ class Args:
         self._used.add(name)
         if name not in self._data or (self._data[name] is None and not required):
             if required:
-                raise MissingFieldError(self.path(name), "a value", "nothing")
+                raise MissingFieldError(self.path(name), "a value", self._nothing_for(name))
             return MISSING
         return self._data[name]
+
+    def _nothing_for(self, name: str) -> str:
+        # A missing field is often a misspelt one: name the key that came instead.
+        close = difflib.get_close_matches(name, [k for k in self._data if isinstance(k, str)
+                                                 and k not in self._used], n=1, cutoff=0.6)
+        return f"nothing (but an unknown key {close[0]!r}: a typo?)" if close else "nothing"
 
     def allow(self, name: str) -> None:
         """Accept `name` without reading it (``schema``, read by the envelope)."""

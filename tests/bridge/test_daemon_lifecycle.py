@@ -50,6 +50,19 @@ def test_bad_config_file_is_refused_with_its_location(tmp_path: Path) -> None:
     assert "Traceback" not in result.stderr
 
 
+def test_a_misspelt_config_key_is_named(tmp_path: Path) -> None:
+    config = tmp_path / "bridges.yaml"
+    config.write_text("subscribers:\n  - {topic: /ok, typ: String}\n")
+    result = subprocess.run([sys.executable, "-m", "bridge.cli", "run", "--port",
+                             str(pick_free_port()), "--config", str(config)],
+                            cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert "bridges.yaml: subscribers[0]" in lines[0]
+    assert "type: expected a value, got nothing (but an unknown key 'typ': a typo?)" in lines[0]
+
+
 def test_unknown_config_section_names_the_sections(tmp_path: Path) -> None:
     config = tmp_path / "bridges.yaml"
     config.write_text("subscriberz: []\n")
