@@ -336,7 +336,9 @@ class RobotBridges:
         except RobotError as error:
             if generation == robot.generation:
                 robot.loading_digest = ""
-            what = f"a valid URDF ({_source_text(source)})"
+            # A file's error names its path already; say it once.
+            what = "a valid URDF" if source.kind == "file" else \
+                f"a valid URDF ({_source_text(source)})"
             problem = CommandFailedError(field_name, what, str(error),
                                          code=ErrorCode.OUT_OF_RANGE)
             if initial:
@@ -366,7 +368,7 @@ class RobotBridges:
             return PackageResolver(dict(self._package_paths)).resolve(spec)
         except RobotError as error:
             raise CommandFailedError("source.path", "a readable URDF file (path, package:// "
-                                     "or file:// URI)", f"{spec!r} ({error})",
+                                     "or file:// URI)", str(error),
                                      code=ErrorCode.NOT_FOUND) from None
 
     def _load_failed(self, robot: _Robot, reason: str) -> None:

@@ -257,7 +257,9 @@ def load_robot_file(path: str | Path, *, package_paths: Optional[Mapping[str, Pa
     try:
         data = p.read_bytes()
     except OSError as exc:
-        raise UrdfError(str(p), "a readable URDF file", f"{type(exc).__name__}: {exc}") from None
+        # strerror, not str(exc): that repeats the path the field already names.
+        raise UrdfError(str(p), "a readable URDF file",
+                        exc.strerror or type(exc).__name__) from None
     return load_robot(data, package_paths=package_paths, base_dir=p.resolve().parent,
                       options=options, cache=cache, logger=logger,
                       allowed_roots=allowed_roots)

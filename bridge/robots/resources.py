@@ -154,8 +154,10 @@ class PackageResolver:
                                     "--package-path folder", repr(uri))
             return real
         if not path.is_file():
-            raise ResourceError(uri, "an existing file", f"{path} does not exist"
-                                if not path.exists() else f"{path} is not a file")
+            # Name the resolved path only where it differs from what was asked for.
+            where = "" if str(path) == uri else f"{path}: "
+            raise ResourceError(uri, "an existing file", f"{where}nothing there"
+                                if not path.exists() else f"{where}not a file")
         return path
 
     def _anchor(self, path: Path) -> Path:

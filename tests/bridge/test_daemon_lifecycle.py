@@ -63,6 +63,19 @@ def test_a_misspelt_config_key_is_named(tmp_path: Path) -> None:
     assert "type: expected a value, got nothing (but an unknown key 'typ': a typo?)" in lines[0]
 
 
+def test_a_missing_urdf_is_named_once(tmp_path: Path) -> None:
+    missing = tmp_path / "nowhere" / "robot.urdf"
+    config = tmp_path / "bridges.yaml"
+    config.write_text(f"robots:\n  - {{name: r, source: {{kind: file, path: '{missing}'}}}}\n")
+    result = subprocess.run([sys.executable, "-m", "bridge.cli", "run", "--port",
+                             str(pick_free_port()), "--config", str(config)],
+                            cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2, result.stderr
+    line = result.stderr.strip().splitlines()[-1]
+    assert line.count(str(missing)) == 1, line
+    assert "nothing there" in line and "Traceback" not in result.stderr
+
+
 def test_unknown_config_section_names_the_sections(tmp_path: Path) -> None:
     config = tmp_path / "bridges.yaml"
     config.write_text("subscriberz: []\n")
