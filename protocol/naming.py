@@ -66,6 +66,7 @@ __all__ = [
     "KEY_LABELS",
     "KEY_LINK_COUNT",
     "KEY_VISUAL_COUNT",
+    "KEY_WARNINGS",
     "KEY_FRAME",
     "KEY_LINK",
     "KEY_NODE",
@@ -162,6 +163,7 @@ KEY_COLOR = "ros2.color"
 # On a robot's description device (STATUS OK once loaded): how many links and visuals it has.
 KEY_LINK_COUNT = "ros2.links"
 KEY_VISUAL_COUNT = "ros2.visuals"
+KEY_WARNINGS = "ros2.warnings"  # JSON list of the load's warnings (missing meshes...)
 # What the codecs add about a message's content.
 KEY_SHAPE = "ros2.shape"  # "2x3": shape of a multi-array / table
 KEY_ENCODING = "ros2.encoding"  # sensor_msgs/Image encoding of the ROS side ("bgr8")
@@ -171,7 +173,7 @@ KEY_DROPPED = "ros2.dropped"  # points left out of a cloud for a NaN/inf coordin
 METADATA_KEYS: tuple[str, ...] = (
     KEY_TOPIC, KEY_TYPE, KEY_FRAME, KEY_PARENT, KEY_CHILD, KEY_ROBOT, KEY_LINK,
     KEY_VISUAL, KEY_NODE, KEY_SERVICE, KEY_ROLE, KEY_UNITS, KEY_PARENT_DEVICE, KEY_COLOR,
-    KEY_LINK_COUNT, KEY_VISUAL_COUNT,
+    KEY_LINK_COUNT, KEY_VISUAL_COUNT, KEY_WARNINGS,
 )
 UNITS_MM = "mm"
 

@@ -10,6 +10,7 @@ default, or in whatever thread calls `Client.process_events()` (see client.py).
 from __future__ import annotations
 
 import json
+import logging
 import threading
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
@@ -18,7 +19,8 @@ import numpy as np
 
 from protocol import commands as c
 from protocol.messages import Message, PolyData, Status, String, Transform
-from protocol.naming import KEY_LINK, KEY_LINK_COUNT, KEY_ROLE, KEY_VISUAL, KEY_VISUAL_COUNT
+from protocol.naming import (KEY_LINK, KEY_LINK_COUNT, KEY_ROLE, KEY_VISUAL, KEY_VISUAL_COUNT,
+                             KEY_WARNINGS)
 from slicer_client.bridge_state import BridgeSpec
 from slicer_client.matrices import as_numpy, as_rows
 from slicer_client.owner import ResourceOwner
@@ -28,6 +30,7 @@ __all__ = ["ParameterClient", "Publisher", "Resource", "Robot", "RobotLink", "Se
            "Subscriber", "TfBroadcaster", "TfLookup", "parameter_to_python"]
 
 Callback = Callable[..., None]
+log = logging.getLogger("slicer_client")
 
 
 def _qos_dict(qos: Optional[Mapping[str, Any]]) -> Optional[Dict[str, Any]]:
@@ -395,7 +398,8 @@ class RobotLink:
 class Robot(Resource):
     """A robot: one mesh (PolyData, mm, in its link's frame) per link visual and one
     transform per link, as they arrive; read from the messages' ros2.* metadata.
-    Callbacks get (kind, link_name, value) with kind "transform" or "mesh"."""
+    Callbacks get (kind, link_name, value) with kind "transform" or "mesh", and
+    ("warning", "", text) for each warning of a load (also logged, and in `warnings`)."""
 
     def __init__(self, client: ResourceOwner, name: str, *, node: str = "/robot_state_publisher",
                  parameter: str = "robot_description", fixed_frame: Optional[str] = None,
@@ -412,9 +416,26 @@ class Robot(Resource):
         # (links, visuals) from the daemon's "loaded" STATUS: a robot created while its
         # description was not there yet learns its size only then.
         self._expected: Optional[Tuple[int, int]] = None
+        self.warnings: List[str] = []  # of the latest load: missing meshes, skipped joints
+
+    def _warn(self, warnings: Sequence[str]) -> None:
+        """Each new warning of a load is logged once and given to the callbacks as
+        ("warning", "", text): a robot that loads with missing meshes must not look fine."""
+        fresh = [w for w in warnings if w not in self.warnings]
+        self.warnings = list(warnings)
+        for warning in fresh:
+            log.warning("robot %s: %s", self.name, warning)
+            self._notify("warning", "", warning)
+
+    def progress(self) -> Tuple[int, Optional[int]]:
+        """(meshes received, meshes expected); expected is None until the daemon said."""
+        expected = sum(1 for _, index in self._devices.values() if index is not None) \
+            if self._devices else (self._expected[1] if self._expected else None)
+        return self.mesh_count(), expected
 
     def _created(self, result: Mapping[str, Any]) -> None:
         super()._created(result)
+        self._warn([str(w) for w in result.get("warnings", [])])
         with self._changed:
             for item in result.get("links", []):
                 link = self.links.setdefault(item["link"], RobotLink(item["link"]))
@@ -433,6 +454,11 @@ class Robot(Resource):
             with self._changed:
                 self._expected = (int(meta[KEY_LINK_COUNT]), int(meta.get(KEY_VISUAL_COUNT, 0)))
                 self._changed.notify_all()
+            try:
+                warnings = json.loads(meta.get(KEY_WARNINGS, "[]"))
+            except ValueError:
+                warnings = [f"unreadable warnings from the daemon: {meta[KEY_WARNINGS]!r}"]
+            self._warn([str(w) for w in warnings] if isinstance(warnings, list) else [])
             return
         known = self._devices.get(message.device_name)
         link_name = meta.get(KEY_LINK) or (known[0] if known else "")

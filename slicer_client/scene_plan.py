@@ -156,3 +156,20 @@ def describe_bridges(result: Mapping[str, Any]) -> List[str]:
         device = f" as {b['device']}" if b.get("device") else ""
         lines.append(f"{kind}: {what}{device}")
     return lines
+
+
+def robot_status_lines(robots: Sequence[Any]) -> List[str]:
+    """What the module shows under its robot controls: per robot its load progress (meshes
+    received of expected) and each warning of its latest load. `robots` are
+    `slicer_client.resources.Robot` objects (any with name, progress() and warnings)."""
+    lines: List[str] = []
+    for robot in robots:
+        received, expected = robot.progress()
+        if expected is None:
+            lines.append(f"{robot.name}: waiting for its description")
+        elif received < expected:
+            lines.append(f"{robot.name}: {received} of {expected} meshes received (loading)")
+        else:
+            lines.append(f"{robot.name}: {received} of {expected} meshes received")
+        lines.extend(f"  warning: {warning}" for warning in robot.warnings)
+    return lines

@@ -40,6 +40,7 @@ anywhere.
 from __future__ import annotations
 
 import asyncio
+import json
 import functools
 import hashlib
 import logging
@@ -65,7 +66,7 @@ from protocol.commands import (CommandFailedError, CreateRobot, ErrorCode, Forbi
                                RobotSource)
 from protocol.messages import Message, PolyData, Status, StatusCode
 from protocol.naming import (KEY_CHILD, KEY_COLOR, KEY_LINK_COUNT, KEY_PARENT, KEY_PARENT_DEVICE,
-                             KEY_VISUAL_COUNT, UNITS_MM,
+                             KEY_VISUAL_COUNT, KEY_WARNINGS, UNITS_MM,
                              DeviceNameRegistry, NameKey, NamingError, metadata_for)
 
 if TYPE_CHECKING:  # bridge.robots.model (trimesh, yourdfpy) loads with the first robot
@@ -439,7 +440,8 @@ class RobotBridges:
         # every link and mesh has arrived.
         self._status(robot, StatusCode.OK, summary,
                      {KEY_LINK_COUNT: str(len(robot.links)),
-                      KEY_VISUAL_COUNT: str(len(robot.visuals))})
+                      KEY_VISUAL_COUNT: str(len(robot.visuals)),
+                      KEY_WARNINGS: json.dumps(list(model.warnings))})
         log.info("robot %s %s", robot.name, summary)
 
     def _publish_visual(self, robot: _Robot, visual: VisualMesh) -> _VisualInfo:

@@ -65,7 +65,8 @@ from slicer_client.connection import CommandTimeoutError, ConnectionClosedError 
 from slicer_client.connector_codec import (SLICER_TEXT_ENCODING, build_command,  # noqa: E402
                                            message_from_node, outgoing_content, parse_reply)
 from slicer_client.scene_plan import (ROBOTS_FOLDER, describe_bridges,  # noqa: E402
-                                      metadata_from_attributes, plan_node)
+                                      metadata_from_attributes, plan_node,
+                                      robot_status_lines)
 
 CONNECTOR_NAME = "ROS2BridgeConnector"
 log = logging.getLogger("ROS2Bridge")
@@ -270,6 +271,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.connector = None
         self.transport = None
         self.client = None
+        self.problems = []  # errors met outside a button's handler, shown in the GUI
         self._planned = set()  # node ids already placed
         self._timer = qt.QTimer()
         self._timer.setInterval(200)  # new connector nodes are placed within 0.2 s
@@ -330,19 +332,21 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         transport = ConnectorTransport(self.connector)
         try:
             client = Client(transport)  # sends hello
-        except Exception:
+        except Exception as error:
             transport.close()
             if caller is None:
                 raise
             log.exception("the daemon at %s did not answer hello", transport.address)
+            self.problems.append(f"The daemon at {transport.address} did not answer: {error}")
             return
         self.transport, self.client = transport, client
         saved = self.getParameterNode().bridgeState
         if saved:
             try:
                 client.restore(BridgeState.from_json(saved))
-            except Exception:  # noqa: BLE001 - a bad saved bridge must not stop the rest
+            except Exception as error:  # noqa: BLE001 - a bad saved bridge must not stop the rest
                 log.exception("restoring the saved bridges failed")
+                self.problems.append(f"Restoring the scene's saved bridges failed: {error}")
 
     def requireClient(self):
         if self.client is None:
@@ -391,6 +395,13 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
 
     def bridgeLines(self):
         return describe_bridges(self.requireClient().list_bridges())
+
+    def robotLines(self):
+        """Load progress and warnings of every robot, for the GUI (not only the log)."""
+        if self.client is None:
+            return []
+        return robot_status_lines([r for r in self.client.resources()
+                                   if r.spec.op == "create_robot"])
 
     # --- scene building -----------------------------------------------------------------
     def _onTimer(self):
@@ -518,6 +529,13 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         row.addWidget(self.anotherRobotButton)
         form.addRow(row)
         form.addRow(self.robotCombo, self.removeRobotButton)
+        self.robotStatusLabel = qt.QLabel("")
+        self.robotStatusLabel.wordWrap = True
+        form.addRow("Robots:", self.robotStatusLabel)
+        self.problemsLabel = qt.QLabel("")
+        self.problemsLabel.wordWrap = True
+        self.problemsLabel.styleSheet = "color: #b00020"
+        form.addRow(self.problemsLabel)
 
         self.bridgeList = qt.QListWidget()
         self.refreshButton = qt.QPushButton("Refresh bridges")
@@ -581,6 +599,8 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
             self.statusLabel.text = "Waiting for the daemon (retrying)..."
         else:
             self.statusLabel.text = "Not connected"
+        self.robotStatusLabel.text = "\n".join(self.logic.robotLines())
+        self.problemsLabel.text = "\n".join(self.logic.problems[-5:])
         active = self.logic.isActive()
         if self.connectButton.checked != active:  # e.g. after a scene close
             wasBlocked = self.connectButton.blockSignals(True)

@@ -1,0 +1,50 @@
+"""A robot that loads with problems says so to the user: in the reply, through the client's
+logging and callbacks, and in the module's robot lines (not only in the daemon's log)."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import pytest
+
+import slicer_client
+from slicer_client.scene_plan import robot_status_lines
+from support import Processes, assert_clean_exit, start_daemon
+
+pytestmark = pytest.mark.ros
+
+URDF = """<robot name="warned">
+  <link name="base"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>
+  <link name="arm"><visual><geometry><mesh filename="meshes/missing.stl"/></geometry></visual>
+  </link>
+  <joint name="j" type="fixed"><parent link="base"/><child link="arm"/></joint>
+</robot>"""
+
+
+def test_a_missing_mesh_reaches_the_user(processes: Processes, tmp_path: Path,
+                                         caplog: pytest.LogCaptureFixture) -> None:
+    urdf = tmp_path / "warned.urdf"
+    urdf.write_text(URDF)
+    daemon = start_daemon(processes, "--robot-dir", str(tmp_path))
+    seen: list[tuple[str, str, object]] = []
+    with caplog.at_level(logging.WARNING, logger="slicer_client"), \
+            slicer_client.connect("127.0.0.1", daemon.port) as ros:
+        robot = ros.robot("warned", source={"kind": "file", "path": str(urdf)},
+                          callback=lambda kind, link, value: seen.append((kind, link, value)))
+        assert robot.info["warnings"] == robot.warnings
+        (warning,) = robot.warnings
+        assert "meshes/missing.stl" in warning and "arm" in warning
+        assert ("warning", "", warning) in seen
+        assert [r.getMessage() for r in caplog.records
+                if r.name == "slicer_client"] == [f"robot warned: {warning}"]
+        robot._wait(lambda: robot.mesh_count() == 1, 30, "the box's mesh")
+        assert robot_status_lines([robot]) == ["warned: 1 of 1 meshes received",
+                                               f"  warning: {warning}"]
+        # A client that only listens (the module, a robot loaded later) reads them from the
+        # robot's description device.
+        with daemon.connect() as listener:
+            status = listener.wait_for("urdf:warned", timeout=30)
+            assert json.loads(status.metadata["ros2.warnings"]) == [warning]
+    assert_clean_exit(daemon)
