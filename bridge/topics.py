@@ -29,7 +29,7 @@ from protocol.commands import (CommandFailedError, CreatePublisher, CreateSubscr
                                RemovePublisher, RemoveSubscriber, WrongTypeError)
 from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
 from protocol.messages import Message, StatusCode
-from protocol.naming import KEY_FRAME, UNITS_MM, DeviceNameRegistry, NameKey, metadata_for
+from protocol.naming import KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
 
 log = logging.getLogger(__name__)
 
@@ -240,7 +240,7 @@ class TopicBridges:
         device = self._names.register(key)
         bridge = SubscriberBridge(
             self._ros, self._hub, topic=topic, codec=codec, qos=request.qos,
-            device=device, metadata=metadata_for(key, ros_type=ros_type, units=UNITS_MM),
+            device=device, metadata=metadata_for(key, ros_type=ros_type),
             max_rate_hz=request.rate_hz, message_filter=self._filter_for(topic, ros_type))
         self.subscribers[topic] = bridge
         log.info("subscribed to %s (%s) as device %r", topic, ros_type, device)
