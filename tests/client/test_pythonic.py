@@ -150,3 +150,17 @@ def test_service_call_through_the_pythonic_api_and_the_facade(ros: slicer_client
     with pytest.raises(slicer_client.CommandRefusedError) as caught:
         ros.service("/py_srv/nobody_here", "std_srvs/srv/Trigger").call({}, timeout=0.5)
     assert caught.value.code in (ErrorCode.UNAVAILABLE, ErrorCode.TIMEOUT)
+
+
+def test_hello_replies_what_protocol_readme_documents(ros: slicer_client.Client) -> None:
+    import re
+
+    from support import REPO
+
+    row = next(line for line in (REPO / "protocol" / "README.md").read_text().splitlines()
+               if line.startswith("| `hello` |"))
+    documented = set(re.findall(r'"(\w+)":', row.split("|")[3]))
+    reply = ros.command("hello", {"client": "test"})
+    assert set(reply) == documented
+    assert reply["schema"] == 1 and reply["ops"] == sorted(reply["ops"])
+    assert reply["node"] == "/slicer_bridge"
