@@ -16,6 +16,7 @@ from bridge.config import DEFAULT_HOST, DEFAULT_PORT, ConfigError, DaemonConfig
 from bridge.config import ConfigFile, build_security, load_config_file
 from bridge.interfaces import (InterfaceBuildError, build_into_this_environment,
                                missing_runtime_line)
+from bridge.ros_args import RosArgsError, apply_parameters, split_ros_args
 from bridge.security import DEFAULT_MAX_BRIDGES_PER_CLIENT, DEFAULT_MAX_CLIENTS
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
@@ -172,6 +173,7 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
                         namespace=args.namespace, log_level=args.log_level, startup=file.startup,
                         package_paths=tuple(args.package_path), security=security,
                         limits=limits, frame_prefix=args.frame_prefix,
+                        ros_args=tuple(getattr(args, "ros_args", ())),
                         stop_timeout_s=args.stop_timeout)
 
 
@@ -205,6 +207,13 @@ def run_with_config(args: argparse.Namespace,
     return 0
 
 
+def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
+    for action in parser._actions:  # noqa: SLF001 - argparse keeps subparsers there
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            return action.choices[command]  # type: ignore[no-any-return]
+    raise LookupError(command)
+
+
 def _build_interfaces() -> int:
     import tempfile
 
@@ -230,7 +239,21 @@ def main(argv: list[str] | None = None) -> int:
 
         return state_publisher.main(argv[1:])
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        ours, ros_args = split_ros_args(argv)
+    except RosArgsError as error:
+        print(f"slicer-ros2-bridge: --ros-args: {error}", file=sys.stderr)
+        return 2
+    args = parser.parse_args(ours)
+    if args.command in ("run", "demo"):
+        try:
+            apply_parameters(_subparser(parser, args.command), args, ours, ros_args.parameters)
+        except RosArgsError as error:
+            print(f"slicer-ros2-bridge: --ros-args: {error}", file=sys.stderr)
+            return 2
+        args.ros_args = tuple(ros_args.argv)
+    elif ros_args.argv:
+        parser.error(f"--ros-args: expected only with run or demo, got {args.command}")
     if args.command is None:
         parser.print_help()
         return 2

@@ -68,6 +68,8 @@ class DaemonConfig:
     frame_prefix: str = ""
     # After a stop signal, the process exits after this long even if ROS's teardown hangs.
     stop_timeout_s: float = 10.0
+    # What followed --ros-args (remaps, __node, __ns, ...), for the daemon's node to apply.
+    ros_args: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
