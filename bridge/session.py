@@ -234,9 +234,17 @@ class ClientSession(asyncio.Protocol):
 
     # --- incoming messages -----------------------------------------------------------------
     def _handle(self, message: Message) -> None:
+        announced = not self._negotiator.peer_speaks_v2
         self._negotiator.observe(message)
+        announced = announced and self._negotiator.peer_speaks_v2
         if not self._attached and self._negotiator.peer_speaks_v2:
             self._attach()
+        elif announced and self._attached:
+            # v2 came after the grace time: the state went out as v1, without the metadata
+            # 3D Slicer names and places nodes by, and meshes go once per connection.
+            log.info("client %s announced header v2 late: sending the state again",
+                     self.peer)
+            self._hub.attach(self)
         type_name = message.type_name
         if type_name == "COMMAND":
             self._commands(message, self)
