@@ -233,7 +233,7 @@ class TfBridges:
         self._tf_publisher: Any = None
         self._static_publisher: Any = None
         self._static_transforms: dict[str, Any] = {}  # child -> TransformStamped (latched)
-        node = ros.node
+        node = ros.stream_node  # the EventsExecutor's node: /tf may come at kHz rates
         self._subscriptions = [
             node.create_subscription(TFMessage, self._tf_topic, self._on_tf, TF_QOS),
             node.create_subscription(TFMessage, self._tf_static_topic, self._on_tf_static,
@@ -318,6 +318,10 @@ class TfBridges:
         self._timer_due_ns = due
 
     def _deliver(self, results: list[tuple[LookupKey, LookupResult]]) -> None:
+        with self._hub.batch():  # one socket write per client for the whole update
+            self._deliver_each(results)
+
+    def _deliver_each(self, results: list[tuple[LookupKey, LookupResult]]) -> None:
         for key, result in results:
             lookup = self._by_key.get(key)
             if lookup is None:
