@@ -216,7 +216,7 @@ def run_phase(publisher: Child, readers: list[Child], rate: float, seconds: floa
     the readers' reports, the measured process's CPU share, and the load average."""
     publisher.ask(f"WAIT {subscribers}", "MATCHED")
     if warmup:  # discovery settles, first allocations, connections attached
-        publisher.ask(f"RUN {min(rate, 500)} 0.5", "DONE")
+        publisher.ask(f"RUN {min(rate, 500)} 1", "DONE")
         time.sleep(0.5)
     for reader in readers:
         reader.say("RESET")
@@ -425,47 +425,48 @@ def lag(fig: Figure) -> str:
     return f"{ms(fig.per_second[0])} → {ms(fig.per_second[-1])}"
 
 
+def _row(label: str, figures: tuple[Figure, ...], cell: Any) -> str:
+    return f"| {label} | " + " | ".join(cell(f) if f.rate else "" for f in figures) + " |"
+
+
 def table(results: Results, args: argparse.Namespace) -> str:
     rows = ["| | rclpy floor | slicer-ros2-bridge | naive pyigtl relay |", "|---|---|---|---|"]
-    f, b, n = (results.pose.get(k, Figure()) for k in ("floor", "bridge", "naive"))
+    pose = tuple(results.pose.get(k, Figure()) for k in ("floor", "bridge", "naive"))
     rate = f"{args.rate / 1000:g} kHz"
-    rows.append(f"| PoseStamped at {rate} → 1 client: p50 / p99 (ms) | {ms(f.p50)} / "
-                f"{ms(f.p99)} | {ms(b.p50)} / {ms(b.p99)} | {ms(n.p50)} / {ms(n.p99)} |")
-    rows.append(f"| … delivered | {f.delivered_text()} | {b.delivered_text()} | "
-                f"{n.delivered_text()} |")
-    rows.append(f"| … process CPU (share of one core) | {pct(f.cpu)} | {pct(b.cpu)} | "
-                f"{pct(n.cpu)} |")
+    rows.append(_row(f"PoseStamped at {rate} → 1 client: p50 / p99 (ms)", pose,
+                     lambda f: f"{ms(f.p50)} / {ms(f.p99)}"))
+    rows.append(_row("… delivered", pose, Figure.delivered_text))
+    rows.append(_row("… process CPU (share of one core)", pose, lambda f: pct(f.cpu)))
     for clients, fig in sorted(results.clients.items()):
-        rows.append(f"| PoseStamped at {rate} → {clients} clients: delivered; p50 / p99 (ms); "
-                    f"CPU | | {fig.delivered_text()}; {ms(fig.p50)} / {ms(fig.p99)}; "
-                    f"{pct(fig.cpu)} | (serves one client) |")
-    bf, bb, bn = (results.burst.get(k, Figure()) for k in ("floor", "bridge", "naive"))
-    burst = f"{args.burst_rate:,.0f} PoseStamped/s for {args.burst_seconds:g} s → 1 client"
-    rows.append(f"| {burst}: delivered | {bf.delivered_text()} | {bb.delivered_text()} | "
-                f"{bn.delivered_text()} |")
-    rows.append(f"| … lag, p50 of the first → last second (ms) | {lag(bf)} | {lag(bb)} | "
-                f"{lag(bn)} |")
-    rows.append(f"| … process CPU | {pct(bf.cpu)} | {pct(bb.cpu)} | {pct(bn.cpu)} |")
+        rows.append(_row(f"PoseStamped at {rate} → {clients} clients: delivered; p50 / p99 "
+                         "(ms); CPU", (Figure(), fig),
+                         lambda f: f"{f.delivered_text()}; {ms(f.p50)} / {ms(f.p99)}; "
+                                   f"{pct(f.cpu)}") + " (serves one client) |")
+    burst = tuple(results.burst.get(k, Figure()) for k in ("floor", "bridge", "naive"))
+    rows.append(_row(f"{args.burst_rate:,.0f} PoseStamped/s for {args.burst_seconds:g} s → "
+                     "1 client: delivered", burst, Figure.delivered_text))
+    rows.append(_row("… lag, p50 of the first → last second (ms)", burst, lag))
+    rows.append(_row("… process CPU", burst, lambda f: pct(f.cpu)))
     if results.tf is not None:
-        t = results.tf
-        rows.append(f"| tf of a {LINKS}-link robot at {rate}, {LINKS} streamed lookups → 8 "
-                    f"clients: CPU; p50 / p99 (ms) | | {pct(t.cpu)}; {ms(t.p50)} / "
-                    f"{ms(t.p99)} | |")
-    ib, inv = results.image.get("bridge", Figure()), results.image.get("naive", Figure())
+        rows.append(_row(f"tf of a {LINKS}-link robot at {rate}, {LINKS} streamed lookups → 8 "
+                         "clients: CPU; p50 / p99 (ms)", (Figure(), results.tf),
+                         lambda f: f"{pct(f.cpu)}; {ms(f.p50)} / {ms(f.p99)}") + " |")
     if results.image:
-        hop = ib.extra.get("hop_p50", float("nan"))
-        rows.append(f"| 640×480 rgb8 Image at 30 Hz: ROS hop, p50 (ms) | {ms(hop)} | | |")
-        rows.append(f"| … publish() → last byte at the client: p50 / p99 (ms) | | "
-                    f"{ms(ib.p50)} / {ms(ib.p99)} | {ms(inv.p50)} / {ms(inv.p99)} |")
         nan = float("nan")
-        rows.append(f"| … the relay's share: its last byte written minus the plain "
-                    f"subscriber's receive, same message, p50 / p99 (ms) | | "
-                    f"{ms(ib.extra.get('share_p50', nan))} / "
-                    f"{ms(ib.extra.get('share_p99', nan))} | "
-                    f"{ms(inv.extra.get('share_p50', nan))} / "
-                    f"{ms(inv.extra.get('share_p99', nan))} |")
-    rows.append(f"| relay process memory (RSS, MiB) | | {results.rss.get('bridge', 0):.0f} | "
-                f"{results.rss.get('naive', 0):.0f} |")
+        image = (Figure(), results.image.get("bridge", Figure()),
+                 results.image.get("naive", Figure()))
+        hop = image[1].extra.get("hop_p50", nan)
+        rows.append(f"| 640×480 rgb8 Image at 30 Hz: ROS hop (publish() → plain subscriber), "
+                    f"p50 (ms) | {ms(hop)} | | |")
+        rows.append(_row("… publish() → last byte at the client: p50 / p99 (ms)", image,
+                         lambda f: f"{ms(f.p50)} / {ms(f.p99)}"))
+        rows.append(_row("… the relay's own share (its client's last byte minus the plain "
+                         "subscriber's receive, same message): p50 / p99 (ms)", image,
+                         lambda f: f"{ms(f.extra.get('share_p50', nan))} / "
+                                   f"{ms(f.extra.get('share_p99', nan))}"))
+    if results.rss:
+        rows.append(f"| relay process memory (RSS, MiB) | | {results.rss.get('bridge', 0):.0f} | "
+                    f"{results.rss.get('naive', 0):.0f} |")
     return "\n".join(rows)
 
 

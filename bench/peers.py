@@ -54,8 +54,13 @@ class Recorder:
         with getattr(self, "lock", threading.Lock()):
             # stream -> list of (arrival_ns, stamp_ns)
             self.samples: dict[str, list[tuple[int, int]]] = {}
+            # Messages published before the reset (a warm-up's, a reliable retransmission
+            # after discovery) are not part of what is measured next.
+            self.since = time.time_ns()
 
     def add(self, stream: str, arrival_ns: int, stamp_ns: int) -> None:
+        if stamp_ns < self.since:
+            return
         samples = self.samples.get(stream)
         if samples is None:
             samples = self.samples[stream] = []

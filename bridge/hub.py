@@ -4,12 +4,21 @@ Bridges are daemon-wide, as with an OpenIGTLink server in 3D Slicer: every clien
 every streamed device, and a client that connects gets the current state at once (the
 newest value of each streamed device, and every persistent one-shot such as a robot mesh).
 
-Threads: the asyncio loop owns all state here. ROS callbacks run in the executor's thread
-and hand off through `post`: small messages queue in order (bounded), large ones (images,
-point clouds) replace their device's waiting one, and the loop is woken at most once per
-batch, so a burst of ROS messages costs one wake-up and each client gets the whole batch
-in one socket write. A fast client receives every small message; only a slow client's own
-outbox replaces its unsent values with newer ones.
+Threads: the asyncio loop owns the clients and their buffers. ROS callbacks run in an
+executor thread and hand values over through a `StreamChannel` (`post_frame`):
+
+* the hot path: a small value, with nothing waiting for the loop, is written from the
+  executor thread to each client that keeps up, under that client's write lock
+  (`Subscriber.write_direct`): no loop wake-up per message. A client that is behind gets
+  the value through the loop instead (`hand_over`), in order, into its own outbox;
+* otherwise small values queue in order (bounded), large ones (images, point clouds)
+  replace their device's waiting one, and the loop is woken at most once per batch, so a
+  burst costs one wake-up and each client gets the whole batch in one socket write.
+
+A client that keeps up receives every small message in order; only a slow client's own
+outbox replaces its unsent values with newer ones. A closed channel drops what is posted
+through it, so a callback still running when its bridge is removed cannot bring the
+device back.
 """
 
 from __future__ import annotations

@@ -354,3 +354,75 @@ def test_the_stamp_of_a_frame_survives_the_direct_path() -> None:
     frame = _fast_frame("PoseStamped", msg, "tool", {})
     header = struct.unpack(">H12s20sQQQ", frame.encoded(2)[:58])
     assert header[3] == igtl_timestamp_from_ros(1_700_000_000, 5)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.tuples(stamps, names, names, st.tuples(finite, finite, finite),
+                          st.tuples(unit, unit, unit, unit)), max_size=9))
+def test_tf_bytes_give_the_transforms_the_ordinary_path_gives(transforms) -> None:
+    from tf2_msgs.msg import TFMessage
+
+    from bridge.tf.capability import tf_cdr_to_transforms, tf_message_to_transforms
+
+    msg = TFMessage(transforms=[_transform_stamped(*t) for t in transforms])
+    data = serialize_message(msg)
+    assert tf_cdr_to_transforms(data) == tf_message_to_transforms(
+        deserialize_message(data, TFMessage))
+
+
+class _HeldStringCodec:
+    """std_msgs/String's codec, whose conversion waits for a signal: a callback held just
+    after its closed-check, as the executor thread can be when close() runs."""
+
+    def __init__(self) -> None:
+        from bridge.codecs.scalars import StringCodec
+
+        self.inner = StringCodec("std_msgs/msg/String", "STRING")
+        self.entered = threading.Event()
+        self.release = threading.Event()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+    def encode(self, msg: Any) -> Any:
+        self.entered.set()
+        assert self.release.wait(30)
+        return self.inner.encode(msg)
+
+
+@pytest.mark.ros
+def test_a_subscriber_callback_running_when_its_bridge_closes_does_not_bring_it_back() -> None:
+    """Issue 11's race, with a real node: the callback passed its check, close() ran, then
+    the callback posted. No client, now or later, may see the removed device."""
+    from std_msgs.msg import String as RosString
+
+    from protocol.commands import QoS
+    from bridge.ros_node import RosNode, RosOptions
+    from bridge.topics import SubscriberBridge
+
+    served = _Served(direct_writes=True)
+    ros = RosNode(RosOptions(node_name="hot_path_race"))
+    try:
+        codec = _HeldStringCodec()
+        bridge = SubscriberBridge(ros, served.hub, topic="/hot_path_race",
+                                  codec=codec,  # type: ignore[arg-type]
+                                  qos=QoS(), device="raced", metadata={})
+        callback = threading.Thread(target=bridge._on_message, args=(RosString(data="late"),))
+        callback.start()
+        assert codec.entered.wait(30)
+
+        async def close() -> None:
+            bridge.close()
+
+        served.call(close())
+        codec.release.set()
+        callback.join(30)
+        served.call(asyncio.sleep(0.05))  # a drain the late post may have scheduled runs
+        assert "raced" not in served.call(_devices(served.hub))
+        late = served.connect()
+        other = served.hub.open_channel("other")
+        _post_from_another_thread(served.hub, other, [_numbered("other", 1)])
+        assert [m.device_name for m in late.read_until(1)] == ["other"]
+    finally:
+        ros.stop()
+        served.close()
