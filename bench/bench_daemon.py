@@ -14,8 +14,9 @@ time of each message's last byte; and the baselines:
 * the naive relay (bench/naive_relay.py): pyigtl's server + rclpy, what a Python user would
   write. pyigtl's server serves one client at a time, so it has no multi-client figures.
 
-Each relay runs alone while it is measured. CPU is the relay process's user + system time
-(/proc/PID/stat) over the phase, as a share of one core; "per kHz" divides it by the
+Each relay runs alone while it is measured. Every pose subscriber (floor, daemon, naive
+relay) keeps the last 5,000 messages (peers.POSE_DEPTH). CPU is the relay process's user +
+system time (/proc/PID/stat) over the phase, as a share of one core; "per kHz" divides it by the
 message rate in thousands of messages a second (so it is the cost of 1,000 msg/s).
 Latency figures depend on the machine's load, CPU time much less: the load average is
 printed with every phase. The table at the end is the one in README.md ("Performance").
@@ -39,6 +40,9 @@ from typing import Any, Optional
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
+
+from peers import POSE_DEPTH  # noqa: E402
 
 PEERS = REPO / "bench" / "peers.py"
 POSE_TOPIC = "/bench_pose"
@@ -151,12 +155,13 @@ class Relay:
                     ros_type = {"pose": "PoseStamped", "image": "Image"}[name]
                     self.devices[name] = setup.command("create_subscriber", {
                         "topic": topic, "type": ros_type,
-                        "qos": {"depth": 1000 if name == "pose" else 10}})["device"]
+                        "qos": {"depth": POSE_DEPTH if name == "pose" else 10}})["device"]
         else:
             self.child = Child("naive relay", [sys.executable, str(REPO / "bench" /
                                                                     "naive_relay.py"),
                                                str(self.port), topics.get("pose", POSE_TOPIC),
-                                               topics.get("image", IMAGE_TOPIC)])
+                                               topics.get("image", IMAGE_TOPIC),
+                                               str(POSE_DEPTH)])
             threading.Thread(target=self._drain_output, daemon=True).start()
             self.devices = {"pose": "pose", "image": "camera"}
 
@@ -215,9 +220,8 @@ def run_phase(publisher: Child, readers: list[Child], rate: float, seconds: floa
     """Publish at `rate` for `seconds` once `subscribers` ROS subscribers matched; returns
     the readers' reports, the measured process's CPU share, and the load average."""
     publisher.ask(f"WAIT {subscribers}", "MATCHED")
-    if warmup:  # discovery settles, first allocations, connections attached
-        publisher.ask(f"RUN {min(rate, 500)} 1", "DONE")
-        time.sleep(0.5)
+    if warmup:
+        _warm_up(publisher, readers, rate)
     for reader in readers:
         reader.say("RESET")
     time.sleep(0.2)
@@ -229,6 +233,21 @@ def run_phase(publisher: Child, readers: list[Child], rate: float, seconds: floa
     time.sleep(max(0.5, seconds * 0.05))  # the last messages arrive
     reports = [reader.report() for reader in readers]
     return reports, (cpu1 - cpu0) / (t1 - t0), average_load
+
+
+def _warm_up(publisher: Child, readers: list[Child], rate: float) -> None:
+    """Publish until every reader has received messages published after a reset: the whole
+    path works end to end (a publisher may see its subscriber before the subscriber has
+    matched it, and then reliable delivery resends late), first allocations are done."""
+    deadline = time.monotonic() + 30
+    while True:
+        publisher.ask(f"RUN {min(rate, 500)} 0.5", "DONE")
+        for reader in readers:
+            reader.say("RESET")
+        publisher.ask(f"RUN {min(rate, 200)} 0.3", "DONE")
+        time.sleep(0.3)
+        if all(r.report()["all"]["n"] > 0 for r in readers) or time.monotonic() > deadline:
+            return
 
 
 def figure_from(reports: list[dict[str, Any]], sent: int, rate: float, cpu: float,
@@ -405,6 +424,9 @@ def print_progress(what: str, fig: Figure) -> None:
     print(f"  {what:<34} delivered {fig.delivered_text():<24} p50 {fig.p50:7.3f} ms  "
           f"p99 {fig.p99:7.3f} ms  CPU {fig.cpu * 100:5.1f}% of a core  (load {fig.load})",
           flush=True)
+    if len(fig.per_second) > 1:
+        print(f"  {'':<34} p50 of each second (ms): "
+              + " ".join(f"{v:.2f}" for v in fig.per_second), flush=True)
 
 
 # ------------------------------------------------------------------------------ report

@@ -35,6 +35,10 @@ import time
 from typing import Any, Callable
 
 _HEADER = struct.Struct(">H12s20sQQQ")
+# KEEP_LAST depth of every pose subscriber and publisher (floor, daemon, naive relay): half a
+# second at 10 kHz, so that a reliable retransmission (rmw_fastrtps waits for the writer's
+# next heartbeat, ~0.1 s) does not overflow the history of any of them.
+POSE_DEPTH = 5000
 _NS = 1_000_000_000
 
 
@@ -236,7 +240,7 @@ def _message(kind: str) -> tuple[Any, Any, Callable[[Any, int], None]]:
 def publish(kind: str, topic: str) -> None:
     node = _ros_setup()
     cls, message, set_stamp = _message(kind)
-    depth = 10 if kind == "image" else 1000
+    depth = 10 if kind == "image" else POSE_DEPTH
     publisher = node.create_publisher(cls, topic, depth)
     print("READY", flush=True)
     for line in sys.stdin:
@@ -278,7 +282,7 @@ def floor(kind: str, topic: str) -> None:
         with recorder.lock:
             recorder.add(kind, arrival, stamp.sec * _NS + stamp.nanosec)
 
-    node.create_subscription(cls, topic, on_message, 10 if kind == "image" else 1000)
+    node.create_subscription(cls, topic, on_message, 10 if kind == "image" else POSE_DEPTH)
     threading.Thread(target=_serve_commands, args=(recorder, lambda: os._exit(0)),
                      daemon=True).start()
     print("READY", flush=True)
