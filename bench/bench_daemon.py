@@ -1,18 +1,31 @@
-"""Daemon benchmark: ROS -> OpenIGTLink latency, throughput, image latency and memory,
-against the naive relay a Python user would write (pyigtl's server + rclpy), measured in
-the same run on the same machine.
+"""Daemon benchmark: ROS -> OpenIGTLink latency, throughput and CPU, each figure measured in
+the same run beside its baselines, every party in its own process.
 
-    .venv/bin/python bench/bench_daemon.py            # ~1 minute
-    .venv/bin/python bench/bench_daemon.py --quick    # ~20 s
+    .venv/bin/python bench/bench_daemon.py            # about 3 minutes
+    .venv/bin/python bench/bench_daemon.py --quick    # about 1 minute, shorter phases
 
-Latency is from the rclpy `publish()` call (its time goes in header.stamp) to the decoded
-message at a client socket in this process; both relays carry the stamp into the
-OpenIGTLink timestamp. Each relay runs alone while it is measured.
+Parties (bench/peers.py): a publisher that sleeps between messages and stamps each one
+with ``time.time_ns()`` just before ``publish()``; raw OpenIGTLink readers (one process,
+any number of connections; header v2 announced as 3D Slicer does) that take the arrival
+time of each message's last byte; and the baselines:
+
+* the rclpy floor: a plain rclpy subscriber (``rclpy.spin``, default executor) in its own
+  process; its latency is the ROS hop alone, its CPU what one plain subscriber costs;
+* the naive relay (bench/naive_relay.py): pyigtl's server + rclpy, what a Python user would
+  write. pyigtl's server serves one client at a time, so it has no multi-client figures.
+
+Each relay runs alone while it is measured. Every pose subscriber (floor, daemon, naive
+relay) keeps the last 5,000 messages (peers.POSE_DEPTH). CPU is the relay process's user +
+system time (/proc/PID/stat) over the phase, as a share of one core; "per kHz" divides it by the
+message rate in thousands of messages a second (so it is the cost of 1,000 msg/s).
+Latency figures depend on the machine's load, CPU time much less: the load average is
+printed with every phase. The table at the end is the one in README.md ("Performance").
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import random
 import socket
@@ -23,125 +36,95 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Optional
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
 
-# Isolate from other ROS users of this host before rclpy is imported.
-os.environ["ROS_DOMAIN_ID"] = str(random.randint(1, 100))
-os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="bench-roslog-"))
+from peers import POSE_DEPTH  # noqa: E402
 
-import numpy as np  # noqa: E402
-import rclpy  # noqa: E402
-from builtin_interfaces.msg import Time  # noqa: E402
-from geometry_msgs.msg import PoseStamped  # noqa: E402
-from sensor_msgs.msg import Image  # noqa: E402
-
-from protocol.conversions import ros_time_from_igtl  # noqa: E402
-from protocol.framing import Decoder  # noqa: E402
-from slicer_client.connection import Connection  # noqa: E402
-
+PEERS = REPO / "bench" / "peers.py"
 POSE_TOPIC = "/bench_pose"
 IMAGE_TOPIC = "/bench_image"
+LINKS = 7
+CLK_TCK = os.sysconf("SC_CLK_TCK")
 
 
-@dataclass
-class Receiver:
-    """A plain TCP client: decodes everything, records latency per device."""
-
-    port: int
-    latencies: dict[str, list[int]] = field(default_factory=dict)
-    counts: dict[str, int] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        self._sock = socket.create_connection(("127.0.0.1", self.port), timeout=10)
-        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self._sock.settimeout(None)
-        self._lock = threading.Lock()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        decoder = Decoder(max_body_size=1 << 26)
-        while True:
-            try:
-                data = self._sock.recv(1 << 20)
-            except OSError:
-                return
-            if not data:
-                return
-            arrived = time.time_ns()
-            decoder.feed(data)
-            for message in decoder.messages():
-                if message.type_name not in ("TRANSFORM", "IMAGE") or not message.timestamp:
-                    continue
-                sec, nanosec = ros_time_from_igtl(message.timestamp)
-                with self._lock:
-                    self.latencies.setdefault(message.device_name, []).append(
-                        arrived - (sec * 1_000_000_000 + nanosec))
-                    self.counts[message.device_name] = self.counts.get(
-                        message.device_name, 0) + 1
-
-    def reset(self) -> None:
-        with self._lock:
-            self.latencies.clear()
-            self.counts.clear()
-
-    def take(self, device: str) -> list[int]:
-        with self._lock:
-            return list(self.latencies.get(device, []))
-
-    def close(self) -> None:
-        self._sock.close()
-        self._thread.join(2)
+# ------------------------------------------------------------------------------ processes
 
 
-class Publisher:
-    """rclpy publishers in this process, paced in a loop (timers cannot do kHz)."""
+class Child:
+    """A child process speaking the peers' line protocol (READY, commands on stdin)."""
 
-    def __init__(self) -> None:
-        rclpy.init()
-        self.node = rclpy.create_node("bench_publisher")
-        self.poses = self.node.create_publisher(PoseStamped, POSE_TOPIC, 1000)
-        self.images = self.node.create_publisher(Image, IMAGE_TOPIC, 10)
-        self.pose = PoseStamped()
-        self.pose.header.frame_id = "world"
-        self.pose.pose.position.x = 0.0031415
-        self.pose.pose.orientation.w = 1.0
-        self.image = Image(height=480, width=640, encoding="rgb8", step=640 * 3)
-        self.image.data = np.random.default_rng(0).integers(
-            0, 255, 640 * 480 * 3, dtype=np.uint8).tobytes()
+    def __init__(self, name: str, argv: list[str], ready: str = "READY") -> None:
+        self.name = name
+        self.popen = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                      stderr=subprocess.STDOUT, text=True, cwd=REPO,
+                                      start_new_session=True, bufsize=1)
+        self.expect(ready, 60)
 
-    def wait_for_subscriber(self, publisher: object, timeout: float = 20.0) -> None:
+    def expect(self, word: str, timeout: float = 120) -> str:
+        assert self.popen.stdout is not None
         deadline = time.monotonic() + timeout
-        while publisher.get_subscription_count() == 0:  # type: ignore[attr-defined]
-            if time.monotonic() > deadline:
-                raise SystemExit("no relay subscribed to the benchmark topic")
-            time.sleep(0.01)
+        seen = []
+        while time.monotonic() < deadline:
+            line = self.popen.stdout.readline()
+            if not line:
+                raise SystemExit(f"{self.name} exited before {word!r}: {''.join(seen)[-2000:]}")
+            if word in line:
+                return line.strip()
+            seen.append(line)
+        raise SystemExit(f"{self.name}: no {word!r} within {timeout} s")
 
-    @staticmethod
-    def _stamp(header: object) -> None:
-        now = time.time_ns()
-        header.stamp = Time(sec=now // 1_000_000_000,  # type: ignore[attr-defined]
-                            nanosec=now % 1_000_000_000)
+    def say(self, line: str) -> None:
+        assert self.popen.stdin is not None
+        self.popen.stdin.write(line + "\n")
+        self.popen.stdin.flush()
 
-    def run(self, publisher: object, message: object, rate_hz: float, seconds: float) -> int:
-        period = 1.0 / rate_hz
-        count = int(rate_hz * seconds)
-        start = time.perf_counter()
-        for n in range(count):
-            target = start + n * period
-            while (delay := target - time.perf_counter()) > 0:
-                # sleep(0) releases the GIL: the receiver thread must not starve.
-                time.sleep(delay - 0.0003 if delay > 0.0005 else 0)
-            self._stamp(message.header)  # type: ignore[attr-defined]
-            publisher.publish(message)  # type: ignore[attr-defined]
-        return count
+    def ask(self, line: str, answer: str, timeout: float = 120) -> str:
+        self.say(line)
+        return self.expect(answer, timeout)
 
-    def close(self) -> None:
-        self.node.destroy_node()
-        rclpy.try_shutdown()
+    def report(self) -> dict[str, Any]:
+        self.say("REPORT")
+        assert self.popen.stdout is not None
+        while True:
+            line = self.popen.stdout.readline()
+            if not line:
+                raise SystemExit(f"{self.name} exited before its report")
+            if line.startswith("{"):
+                return json.loads(line)  # type: ignore[no-any-return]
+
+    def cpu_seconds(self) -> float:
+        fields = Path(f"/proc/{self.popen.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / CLK_TCK
+
+    def rss_mib(self) -> float:
+        for line in Path(f"/proc/{self.popen.pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+        return float("nan")
+
+    def stop(self) -> None:
+        if self.popen.poll() is None:
+            try:
+                self.say("QUIT")
+            except (BrokenPipeError, OSError):
+                pass
+            try:
+                self.popen.wait(3)
+            except subprocess.TimeoutExpired:
+                self.popen.terminate()
+                try:
+                    self.popen.wait(10)
+                except subprocess.TimeoutExpired:
+                    self.popen.kill()
+                    self.popen.wait()
+
+
+def peer(name: str, *args: str) -> Child:
+    return Child(name, [sys.executable, str(PEERS), *args])
 
 
 def free_port() -> int:
@@ -150,161 +133,409 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def start(argv: list[str], ready: str) -> subprocess.Popen[str]:
-    env = dict(os.environ)
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=env, cwd=REPO, start_new_session=True)
-    assert proc.stdout is not None
-    for line in proc.stdout:
-        if ready in line:
-            threading.Thread(target=proc.stdout.read, daemon=True).start()  # drain
-            return proc
-    raise SystemExit(f"{argv} exited before '{ready}'")
+def load() -> str:
+    return f"{os.getloadavg()[0]:.2f}"
 
 
-def stop(proc: subprocess.Popen[str]) -> None:
-    proc.terminate()
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
+class Relay:
+    """The daemon or the naive relay: a process listening on a port."""
+
+    def __init__(self, kind: str, topics: dict[str, str]) -> None:
+        self.kind = kind
+        self.port = free_port()
+        if kind == "bridge":
+            self.child = Child("daemon", [sys.executable, "-m", "bridge.cli", "run", "--port",
+                                          str(self.port), "--log-level", "INFO"], "listening on")
+            threading.Thread(target=self._drain_output, daemon=True).start()
+            from slicer_client.connection import Connection
+
+            self.devices = {}
+            with Connection("127.0.0.1", self.port) as setup:
+                for name, topic in topics.items():
+                    ros_type = {"pose": "PoseStamped", "image": "Image"}[name]
+                    self.devices[name] = setup.command("create_subscriber", {
+                        "topic": topic, "type": ros_type,
+                        "qos": {"depth": POSE_DEPTH if name == "pose" else 10}})["device"]
+        else:
+            self.child = Child("naive relay", [sys.executable, str(REPO / "bench" /
+                                                                    "naive_relay.py"),
+                                               str(self.port), topics.get("pose", POSE_TOPIC),
+                                               topics.get("image", IMAGE_TOPIC),
+                                               str(POSE_DEPTH)])
+            threading.Thread(target=self._drain_output, daemon=True).start()
+            self.devices = {"pose": "pose", "image": "camera"}
+
+    def _drain_output(self) -> None:
+        assert self.child.popen.stdout is not None
+        for _ in self.child.popen.stdout:
+            pass
+
+    def stop(self) -> None:
+        self.child.popen.terminate()
+        try:
+            self.child.popen.wait(10)
+        except subprocess.TimeoutExpired:
+            self.child.popen.kill()
+            self.child.popen.wait()
 
 
-def memory_kib(pid: int) -> tuple[int, int]:
-    """(VmRSS, VmHWM) in KiB."""
-    fields = dict(line.split(":", 1) for line in Path(f"/proc/{pid}/status").read_text()
-                  .splitlines() if ":" in line)
-    return int(fields["VmRSS"].split()[0]), int(fields["VmHWM"].split()[0])
-
-
-def stats_ms(latencies_ns: list[int]) -> dict[str, float]:
-    if not latencies_ns:
-        return {"n": 0, "p50": float("nan"), "p99": float("nan"), "max": float("nan")}
-    values = np.asarray(latencies_ns, dtype=np.float64) / 1e6
-    return {"n": len(values), "p50": float(np.percentile(values, 50)),
-            "p99": float(np.percentile(values, 99)), "max": float(values.max())}
+# ------------------------------------------------------------------------------ phases
 
 
 @dataclass
-class RelayResult:
-    name: str
-    latency: dict[str, float]
-    throughput: list[tuple[int, int, float, float]]  # rate, received/s, lag first, lag last
-    image: dict[str, float]
-    memory_kib: tuple[int, int] = (0, 0)
+class Figure:
+    """One party's figures in one phase."""
+
+    sent: int = 0
+    delivered: list[int] = field(default_factory=list)  # per client (or the one subscriber)
+    p50: float = float("nan")
+    p99: float = float("nan")
+    max: float = float("nan")
+    out_of_order: int = 0
+    per_second: list[float] = field(default_factory=list)  # p50 of each second (lag)
+    cpu: float = float("nan")  # share of one core
+    rate: float = 0.0
+    load: str = ""
+    extra: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def all_delivered(self) -> bool:
+        return bool(self.delivered) and min(self.delivered) >= self.sent
+
+    def delivered_text(self) -> str:
+        if not self.delivered:
+            return "-"
+        low = min(self.delivered)
+        clients = f" (each of {len(self.delivered)})" if len(self.delivered) > 1 else ""
+        return f"{low:,}/{self.sent:,}{clients}"
+
+    @property
+    def cpu_per_khz(self) -> float:
+        return self.cpu / (self.rate / 1000.0) if self.rate else float("nan")
 
 
-def measure(name: str, publisher: Publisher, receiver: Receiver, pose_device: str,
-            image_device: str, args: argparse.Namespace, pid: int) -> RelayResult:
-    publisher.wait_for_subscriber(publisher.poses)
-    publisher.wait_for_subscriber(publisher.images)
-    # Warm-up: discovery, first allocations.
-    publisher.run(publisher.poses, publisher.pose, 200, 0.5)
-    time.sleep(0.5)
-    receiver.reset()
-    publisher.run(publisher.poses, publisher.pose, args.rate, args.seconds)
-    time.sleep(0.5)
-    latency = stats_ms(receiver.take(pose_device))
-    latency["sent"] = int(args.rate * args.seconds)
+def run_phase(publisher: Child, readers: list[Child], rate: float, seconds: float,
+              measured: Optional[Child], subscribers: int, *,
+              warmup: bool = True) -> tuple[list[dict[str, Any]], float, str]:
+    """Publish at `rate` for `seconds` once `subscribers` ROS subscribers matched; returns
+    the readers' reports, the measured process's CPU share, and the load average."""
+    publisher.ask(f"WAIT {subscribers}", "MATCHED")
+    if warmup:
+        _warm_up(publisher, readers, rate)
+    for reader in readers:
+        reader.say("RESET")
+    time.sleep(0.2)
+    cpu0, t0 = (measured.cpu_seconds() if measured else 0.0), time.monotonic()
+    line = publisher.ask(f"RUN {rate} {seconds}", "DONE", timeout=seconds * 10 + 60)
+    cpu1, t1 = (measured.cpu_seconds() if measured else 0.0), time.monotonic()
+    average_load = load()
+    del line
+    time.sleep(max(0.5, seconds * 0.05))  # the last messages arrive
+    reports = [reader.report() for reader in readers]
+    return reports, (cpu1 - cpu0) / (t1 - t0), average_load
 
-    throughput = []
-    for rate in args.throughput_rates:
-        receiver.reset()
-        started = time.perf_counter()
-        sent = publisher.run(publisher.poses, publisher.pose, rate, args.burst_seconds)
-        elapsed = time.perf_counter() - started
-        time.sleep(0.5)
-        lat = receiver.take(pose_device)
-        quarter = max(1, len(lat) // 4)
-        throughput.append((rate, int(len(lat) / elapsed), stats_ms(lat[:quarter])["p50"],
-                           stats_ms(lat[-quarter:])["p50"]))
-        del sent
 
-    receiver.reset()
-    publisher.run(publisher.images, publisher.image, 30, args.seconds)
-    time.sleep(0.5)
-    image = stats_ms(receiver.take(image_device))
-    image["sent"] = int(30 * args.seconds)
-    return RelayResult(name, latency, throughput, image, memory_kib(pid))
+def _warm_up(publisher: Child, readers: list[Child], rate: float) -> None:
+    """Publish until every reader has received messages published after a reset: the whole
+    path works end to end (a publisher may see its subscriber before the subscriber has
+    matched it, and then reliable delivery resends late), first allocations are done."""
+    deadline = time.monotonic() + 30
+    while True:
+        publisher.ask(f"RUN {min(rate, 500)} 0.5", "DONE")
+        for reader in readers:
+            reader.say("RESET")
+        publisher.ask(f"RUN {min(rate, 200)} 0.3", "DONE")
+        time.sleep(0.3)
+        if all(r.report()["all"]["n"] > 0 for r in readers) or time.monotonic() > deadline:
+            return
+
+
+def figure_from(reports: list[dict[str, Any]], sent: int, rate: float, cpu: float,
+                average_load: str, device: Optional[str] = None) -> Figure:
+    streams = [s for r in reports for name, s in r["streams"].items()
+               if device is None or name.endswith(":" + device) or name == device]
+    latencies = {"p50": [], "p99": [], "max": []}  # type: dict[str, list[float]]
+    for s in streams:
+        for key in latencies:
+            latencies[key].append(s[key])
+    fig = Figure(sent=sent, delivered=[s["n"] for s in streams], rate=rate, cpu=cpu,
+                 load=average_load, out_of_order=sum(s["out_of_order"] for s in streams))
+    if streams:
+        # Clients see the same messages at nearly the same time: the median client's p50,
+        # the worst client's p99 and max.
+        fig.p50 = sorted(latencies["p50"])[len(streams) // 2]
+        fig.p99 = max(latencies["p99"])
+        fig.max = max(latencies["max"])
+        fig.per_second = streams[0]["per_second"]
+    return fig
+
+
+def readers_for(port: int, clients: int, *, v1: bool = False,
+                setup: Optional[list[dict[str, Any]]] = None) -> list[Child]:
+    """Reader processes, up to 16 connections each (their parsing must not be the limit)."""
+    out = []
+    left = clients
+    first = True
+    while left > 0:
+        n = min(16, left)
+        args = ["read", str(port), str(n)]
+        if v1:
+            args.append("--v1")
+        if setup and first:
+            args += ["--setup", json.dumps(setup)]
+        out.append(peer(f"reader x{n}", *args))
+        left -= n
+        first = False
+    return out
+
+
+def stop_all(children: list[Child]) -> None:
+    for child in children:
+        child.stop()
+
+
+@dataclass
+class Results:
+    pose: dict[str, Figure] = field(default_factory=dict)
+    clients: dict[int, Figure] = field(default_factory=dict)
+    burst: dict[str, Figure] = field(default_factory=dict)
+    tf: Optional[Figure] = None
+    image: dict[str, Figure] = field(default_factory=dict)
+    rss: dict[str, float] = field(default_factory=dict)
+
+
+def pose_phases(args: argparse.Namespace, results: Results) -> None:
+    publisher = peer("pose publisher", "publish", "pose", POSE_TOPIC)
+    try:
+        # The floor: a plain rclpy subscriber.
+        floor = peer("rclpy floor", "floor", "pose", POSE_TOPIC)
+        try:
+            reports, cpu, avg = run_phase(publisher, [floor], args.rate, args.seconds, floor, 1)
+            results.pose["floor"] = figure_from(reports, int(args.rate * args.seconds),
+                                                args.rate, cpu, avg)
+            print_progress("floor, pose 1 client", results.pose["floor"])
+            reports, cpu, avg = run_phase(publisher, [floor], args.burst_rate,
+                                          args.burst_seconds, floor, 1)
+            results.burst["floor"] = figure_from(reports, int(args.burst_rate *
+                                                              args.burst_seconds),
+                                                 args.burst_rate, cpu, avg)
+            print_progress("floor, pose burst", results.burst["floor"])
+        finally:
+            floor.stop()
+        for kind in ("bridge", "naive"):
+            relay = Relay(kind, {"pose": POSE_TOPIC})
+            try:
+                readers = readers_for(relay.port, 1, v1=kind == "naive")
+                try:
+                    reports, cpu, avg = run_phase(publisher, readers, args.rate, args.seconds,
+                                                  relay.child, 1)
+                    results.pose[kind] = figure_from(reports, int(args.rate * args.seconds),
+                                                     args.rate, cpu, avg)
+                    print_progress(f"{kind}, pose 1 client", results.pose[kind])
+                    reports, cpu, avg = run_phase(publisher, readers, args.burst_rate,
+                                                  args.burst_seconds, relay.child, 1)
+                    results.burst[kind] = figure_from(
+                        reports, int(args.burst_rate * args.burst_seconds), args.burst_rate,
+                        cpu, avg)
+                    print_progress(f"{kind}, pose burst", results.burst[kind])
+                finally:
+                    stop_all(readers)
+                if kind == "bridge":
+                    for clients in (8, 32):
+                        readers = readers_for(relay.port, clients)
+                        try:
+                            reports, cpu, avg = run_phase(publisher, readers, args.rate,
+                                                          args.seconds, relay.child, 1)
+                            results.clients[clients] = figure_from(
+                                reports, int(args.rate * args.seconds), args.rate, cpu, avg)
+                            print_progress(f"bridge, pose {clients} clients",
+                                           results.clients[clients])
+                        finally:
+                            stop_all(readers)
+                results.rss[kind] = relay.child.rss_mib()
+            finally:
+                relay.stop()
+    finally:
+        publisher.stop()
+
+
+def tf_phase(args: argparse.Namespace, results: Results) -> None:
+    publisher = peer("tf publisher", "publish", "tf", "/tf")
+    relay = Relay("bridge", {})
+    setup = [{"op": "create_tf_lookup", "arguments": {"parent": "base", "child": f"link{i}"}}
+             for i in range(1, LINKS + 1)]
+    readers = readers_for(relay.port, 8, setup=setup)
+    try:
+        reports, cpu, avg = run_phase(publisher, readers, args.rate, args.seconds, relay.child,
+                                      1)
+        fig = figure_from(reports, int(args.rate * args.seconds), args.rate, cpu, avg)
+        # Every (client, link) stream counts: 8 x 7 of them.
+        fig.extra["streams"] = len(fig.delivered)
+        results.tf = fig
+        print_progress("bridge, tf 7 links 8 clients", fig)
+    finally:
+        stop_all(readers)
+        relay.stop()
+        publisher.stop()
+
+
+def image_phase(args: argparse.Namespace, results: Results) -> None:
+    """VGA images: the floor subscriber and the relay receive the same messages; the relay's
+    share is, per message, the reader's last byte minus the floor's receive time."""
+    publisher = peer("image publisher", "publish", "image", IMAGE_TOPIC)
+    try:
+        for kind in ("bridge", "naive"):
+            floor = peer("rclpy floor", "floor", "image", IMAGE_TOPIC)
+            relay = Relay(kind, {"image": IMAGE_TOPIC, "pose": POSE_TOPIC})
+            readers = readers_for(relay.port, 1, v1=kind == "naive")
+            try:
+                reports, cpu, avg = run_phase(publisher, [*readers, floor], 30, args.seconds,
+                                              relay.child, 2)
+                reports, floor_report = reports[:-1], reports[-1]
+                fig = figure_from(reports, int(30 * args.seconds), 30, cpu, avg)
+                fig.extra.update(_image_share(reports[0], floor_report))
+                results.image[kind] = fig
+                print_progress(f"{kind}, VGA image", fig)
+            finally:
+                stop_all(readers)
+                relay.stop()
+                floor.stop()
+    finally:
+        publisher.stop()
+
+
+def _image_share(reader: dict[str, Any], floor: dict[str, Any]) -> dict[str, float]:
+    """The ROS hop (the floor's latency) and, per message matched by stamp, the reader's
+    last byte minus the floor's receive time: the relay's own share."""
+    hop = floor["streams"].get("image", {})
+    out = {"hop_p50": hop.get("p50", float("nan")), "hop_p99": hop.get("p99", float("nan"))}
+    received = {stamp // 1000: arrival for stamp, arrival in hop.get("arrivals", [])}
+    shares = sorted((arrival - received[stamp // 1000]) / 1e6
+                    for s in reader["streams"].values() for stamp, arrival in s.get("arrivals", [])
+                    if stamp // 1000 in received)
+    if shares:
+        out["share_p50"] = shares[len(shares) // 2]
+        out["share_p99"] = shares[min(len(shares) - 1, int(0.99 * len(shares)))]
+        out["matched"] = len(shares)
+    return out
+
+
+def print_progress(what: str, fig: Figure) -> None:
+    print(f"  {what:<34} delivered {fig.delivered_text():<24} p50 {fig.p50:7.3f} ms  "
+          f"p99 {fig.p99:7.3f} ms  CPU {fig.cpu * 100:5.1f}% of a core  (load {fig.load})",
+          flush=True)
+    if len(fig.per_second) > 1:
+        print(f"  {'':<34} p50 of each second (ms): "
+              + " ".join(f"{v:.2f}" for v in fig.per_second), flush=True)
+
+
+# ------------------------------------------------------------------------------ report
+
+
+def ms(value: float) -> str:
+    return "-" if value != value else (f"{value:.2f}" if value < 10 else f"{value:.0f}")
+
+
+def pct(value: float) -> str:
+    return "-" if value != value else f"{value * 100:.0f}%" if value >= 0.1 else \
+        f"{value * 100:.1f}%"
+
+
+def lag(fig: Figure) -> str:
+    if not fig.per_second:
+        return "-"
+    return f"{ms(fig.per_second[0])} → {ms(fig.per_second[-1])}"
+
+
+def _row(label: str, figures: tuple[Figure, ...], cell: Any) -> str:
+    return f"| {label} | " + " | ".join(cell(f) if f.rate else "" for f in figures) + " |"
+
+
+def table(results: Results, args: argparse.Namespace) -> str:
+    rows = ["| | rclpy floor | slicer-ros2-bridge | naive pyigtl relay |", "|---|---|---|---|"]
+    pose = tuple(results.pose.get(k, Figure()) for k in ("floor", "bridge", "naive"))
+    rate = f"{args.rate / 1000:g} kHz"
+    rows.append(_row(f"PoseStamped at {rate} → 1 client: p50 / p99 (ms)", pose,
+                     lambda f: f"{ms(f.p50)} / {ms(f.p99)}"))
+    rows.append(_row("… delivered", pose, Figure.delivered_text))
+    rows.append(_row("… process CPU (share of one core)", pose, lambda f: pct(f.cpu)))
+    for clients, fig in sorted(results.clients.items()):
+        rows.append(_row(f"PoseStamped at {rate} → {clients} clients: delivered; p50 / p99 "
+                         "(ms); CPU", (Figure(), fig),
+                         lambda f: f"{f.delivered_text()}; {ms(f.p50)} / {ms(f.p99)}; "
+                                   f"{pct(f.cpu)}") + " (serves one client) |")
+    burst = tuple(results.burst.get(k, Figure()) for k in ("floor", "bridge", "naive"))
+    rows.append(_row(f"{args.burst_rate:,.0f} PoseStamped/s for {args.burst_seconds:g} s → "
+                     "1 client: delivered", burst, Figure.delivered_text))
+    rows.append(_row("… lag, p50 of the first → last second (ms)", burst, lag))
+    rows.append(_row("… process CPU", burst, lambda f: pct(f.cpu)))
+    if results.tf is not None:
+        rows.append(_row(f"tf of a {LINKS}-link robot at {rate}, {LINKS} streamed lookups → 8 "
+                         "clients: CPU; p50 / p99 (ms)", (Figure(), results.tf),
+                         lambda f: f"{pct(f.cpu)}; {ms(f.p50)} / {ms(f.p99)}") + " |")
+    if results.image:
+        nan = float("nan")
+        image = (Figure(), results.image.get("bridge", Figure()),
+                 results.image.get("naive", Figure()))
+        hop = image[1].extra.get("hop_p50", nan)
+        rows.append(f"| 640×480 rgb8 Image at 30 Hz: ROS hop (publish() → plain subscriber), "
+                    f"p50 (ms) | {ms(hop)} | | |")
+        rows.append(_row("… publish() → last byte at the client: p50 / p99 (ms)", image,
+                         lambda f: f"{ms(f.p50)} / {ms(f.p99)}"))
+        rows.append(_row("… the relay's own share (its client's last byte minus the plain "
+                         "subscriber's receive, same message): p50 / p99 (ms)", image,
+                         lambda f: f"{ms(f.extra.get('share_p50', nan))} / "
+                                   f"{ms(f.extra.get('share_p99', nan))}"))
+    if results.rss:
+        rows.append(f"| relay process memory (RSS, MiB) | | {results.rss.get('bridge', 0):.0f} | "
+                    f"{results.rss.get('naive', 0):.0f} |")
+    return "\n".join(rows)
+
+
+def per_khz(results: Results) -> str:
+    lines = ["CPU per 1,000 msg/s (share of one core per kHz of messages in):"]
+    for name, fig in (("floor", results.pose.get("floor")),
+                      ("bridge, 1 client", results.pose.get("bridge")),
+                      ("naive, 1 client", results.pose.get("naive")),
+                      *((f"bridge, {c} clients", f) for c, f in sorted(results.clients.items())),
+                      ("bridge, burst", results.burst.get("bridge")),
+                      ("naive, burst", results.burst.get("naive")),
+                      ("bridge, tf (per TFMessage)", results.tf)):
+        if fig is not None:
+            lines.append(f"  {name:<28} {pct(fig.cpu_per_khz):>7}   (load {fig.load})")
+    return "\n".join(lines)
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", action="store_true", help="shorter phases")
-    parser.add_argument("--rate", type=float, default=1000.0, help="latency phase rate (Hz)")
+    parser.add_argument("--quick", action="store_true", help="shorter phases (~1 minute)")
+    parser.add_argument("--rate", type=float, default=1000.0, help="pose and tf rate (Hz)")
+    parser.add_argument("--burst-rate", type=float, default=10_000.0,
+                        help="the sustained-throughput phase's rate (msg/s)")
+    parser.add_argument("--only", choices=("pose", "tf", "image"), action="append",
+                        help="run only these phases (repeatable)")
     args = parser.parse_args()
     args.seconds = 2.0 if args.quick else 5.0
-    args.burst_seconds = 1.0 if args.quick else 2.0
-    args.throughput_rates = [1000, 3000, 5000] if args.quick else [1000, 2000, 3000, 4000, 6000]
-
-    # The publisher loop and the receiver thread share this process's GIL.
-    sys.setswitchinterval(0.0002)
-    publisher = Publisher()
-    results = []
-    try:
-        # Ours.
-        port = free_port()
-        daemon = start([sys.executable, "-m", "bridge.cli", "run", "--port", str(port),
-                        "--log-level", "INFO"], "listening on")
-        try:
-            with Connection("127.0.0.1", port) as setup:
-                pose_device = setup.command("create_subscriber", {
-                    "topic": POSE_TOPIC, "type": "PoseStamped", "qos": {"depth": 1000}})["device"]
-                image_device = setup.command("create_subscriber", {
-                    "topic": IMAGE_TOPIC, "type": "Image"})["device"]
-            receiver = Receiver(port)
-            results.append(measure("slicer-ros2-bridge", publisher, receiver, pose_device,
-                                   image_device, args, daemon.pid))
-            receiver.close()
-        finally:
-            stop(daemon)
-        # The naive relay.
-        port = free_port()
-        relay = start([sys.executable, str(REPO / "bench" / "naive_relay.py"), str(port),
-                       POSE_TOPIC, IMAGE_TOPIC], "READY")
-        try:
-            receiver = Receiver(port)
-            results.append(measure("naive pyigtl relay", publisher, receiver, "pose",
-                                   "camera", args, relay.pid))
-            receiver.close()
-        finally:
-            stop(relay)
-    finally:
-        publisher.close()
-    report(results, args)
+    args.burst_seconds = 3.0 if args.quick else 10.0
+    os.environ["ROS_DOMAIN_ID"] = str(random.randint(101, 200))
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="bench-roslog-"))
+    phases = args.only or ["pose", "tf", "image"]
+    print(f"{os.cpu_count()} CPUs, load {load()} at the start; "
+          f"{'quick' if args.quick else 'full'} run", flush=True)
+    results = Results()
+    if "pose" in phases:
+        pose_phases(args, results)
+    if "tf" in phases:
+        tf_phase(args, results)
+    if "image" in phases:
+        image_phase(args, results)
+    print()
+    print(table(results, args))
+    print()
+    print(per_khz(results))
     return 0
-
-
-def report(results: list[RelayResult], args: argparse.Namespace) -> None:
-    ours, naive = results
-    print(f"\nPoseStamped -> TRANSFORM at {args.rate:.0f} Hz for {args.seconds:.0f} s "
-          f"(latency in ms, publish() -> decoded at the client)")
-    print(f"{'relay':<22}{'received':>10}{'p50':>9}{'p99':>9}{'max':>9}")
-    for r in results:
-        print(f"{r.name:<22}{r.latency['n']:>6}/{r.latency['sent']:<4}"
-              f"{r.latency['p50']:>8.3f}{r.latency['p99']:>9.3f}{r.latency['max']:>9.2f}")
-    print(f"p50 ratio naive/ours: {naive.latency['p50'] / ours.latency['p50']:.1f}x, "
-          f"p99 ratio: {naive.latency['p99'] / ours.latency['p99']:.1f}x")
-
-    print(f"\nSustained PoseStamped throughput ({args.burst_seconds:.0f} s bursts; lag = p50 "
-          f"latency in the first and last quarter, ms)")
-    print(f"{'relay':<22}{'rate':>7}{'recv/s':>9}{'lag first':>11}{'lag last':>10}")
-    for r in results:
-        for rate, received, first, last in r.throughput:
-            print(f"{r.name:<22}{rate:>7}{received:>9}{first:>11.3f}{last:>10.3f}")
-
-    print("\n640x480 rgb8 Image -> IMAGE at 30 Hz (ms)")
-    print(f"{'relay':<22}{'received':>10}{'p50':>9}{'p99':>9}{'max':>9}")
-    for r in results:
-        print(f"{r.name:<22}{r.image['n']:>6}/{r.image['sent']:<4}{r.image['p50']:>8.3f}"
-              f"{r.image['p99']:>9.3f}{r.image['max']:>9.2f}")
-    print(f"image p50 ratio naive/ours: {naive.image['p50'] / ours.image['p50']:.1f}x")
-
-    print("\nRelay process memory (MiB): RSS at the end / peak")
-    for r in results:
-        print(f"{r.name:<22}{r.memory_kib[0] / 1024:>8.1f} / {r.memory_kib[1] / 1024:.1f}")
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """The baseline: the ROS -> OpenIGTLink relay a Python user would write with pyigtl's own
 server and rclpy (subscription callback -> pyigtl message -> server.send_message).
 
-usage: naive_relay.py PORT POSE_TOPIC IMAGE_TOPIC
+usage: naive_relay.py PORT POSE_TOPIC IMAGE_TOPIC [POSE_DEPTH]
 Prints READY once the server listens. Used by bench_daemon.py; not part of the product.
 """
 
@@ -25,6 +25,7 @@ def quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
 
 def main() -> None:
     port, pose_topic, image_topic = int(sys.argv[1]), sys.argv[2], sys.argv[3]
+    pose_depth = int(sys.argv[4]) if len(sys.argv) > 4 else 1000
     # pyigtl's server installs signal handlers: it must live in the main thread.
     server = pyigtl.OpenIGTLinkServer(port=port, local_server=True)
     rclpy.init()
@@ -47,7 +48,7 @@ def main() -> None:
         server.send_message(pyigtl.ImageMessage(pixels, timestamp=stamp_of(msg),
                                                 device_name="camera"), wait=False)
 
-    node.create_subscription(PoseStamped, pose_topic, on_pose, 1000)
+    node.create_subscription(PoseStamped, pose_topic, on_pose, pose_depth)
     node.create_subscription(Image, image_topic, on_image, 10)
     spinner = threading.Thread(target=rclpy.spin, args=(node,), daemon=True)
     spinner.start()

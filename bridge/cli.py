@@ -187,6 +187,7 @@ def run_with_config(args: argparse.Namespace,
     """Build the config from the options, set up logging, run `main(config)`; what stops
     the start (bad config, port in use, a bad start-up bridge) is one line and exit 2."""
     from bridge.daemon import StartupError
+    from bridge.ros_node import RosArgumentsError
     from bridge.server import PortInUseError
 
     try:
@@ -201,7 +202,7 @@ def run_with_config(args: argparse.Namespace,
     except PortInUseError as error:
         print(f"slicer-ros2-bridge: {error.strerror}", file=sys.stderr)
         return 2
-    except StartupError as error:
+    except (StartupError, RosArgumentsError) as error:
         print(f"slicer-ros2-bridge: {error}", file=sys.stderr)
         return 2
     return 0

@@ -44,7 +44,8 @@ class Daemon:
     def __init__(self, config: DaemonConfig, loop: asyncio.AbstractEventLoop) -> None:
         self.config = config
         self.hub = Hub(loop)
-        self.ros = RosNode(RosOptions(node_name=config.node_name, namespace=config.namespace))
+        self.ros = RosNode(RosOptions(node_name=config.node_name, namespace=config.namespace,
+                                      ros_args=config.ros_args))
         names = DeviceNameRegistry()
         # Clients' robots may read files (URDF, meshes) from the --package-path folders too.
         policy = dataclasses.replace(config.security, robot_dirs=config.security.robot_dirs

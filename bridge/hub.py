@@ -4,12 +4,21 @@ Bridges are daemon-wide, as with an OpenIGTLink server in 3D Slicer: every clien
 every streamed device, and a client that connects gets the current state at once (the
 newest value of each streamed device, and every persistent one-shot such as a robot mesh).
 
-Threads: the asyncio loop owns all state here. ROS callbacks run in the executor's thread
-and hand off through `post`: small messages queue in order (bounded), large ones (images,
-point clouds) replace their device's waiting one, and the loop is woken at most once per
-batch, so a burst of ROS messages costs one wake-up and each client gets the whole batch
-in one socket write. A fast client receives every small message; only a slow client's own
-outbox replaces its unsent values with newer ones.
+Threads: the asyncio loop owns the clients and their buffers. ROS callbacks run in an
+executor thread and hand values over through a `StreamChannel` (`post_frame`):
+
+* the hot path: a small value, with nothing waiting for the loop, is written from the
+  executor thread to each client that keeps up, under that client's write lock
+  (`Subscriber.write_direct`): no loop wake-up per message. A client that is behind gets
+  the value through the loop instead (`hand_over`), in order, into its own outbox;
+* otherwise small values queue in order (bounded), large ones (images, point clouds)
+  replace their device's waiting one, and the loop is woken at most once per batch, so a
+  burst costs one wake-up and each client gets the whole batch in one socket write.
+
+A client that keeps up receives every small message in order; only a slow client's own
+outbox replaces its unsent values with newer ones. A closed channel drops what is posted
+through it, so a callback still running when its bridge is removed cannot bring the
+device back.
 """
 
 from __future__ import annotations
@@ -19,7 +28,8 @@ import logging
 import threading
 import time
 from collections import deque
-from typing import Callable, Protocol
+from contextlib import contextmanager
+from typing import Callable, Iterator, Protocol
 
 from bridge.outbox import Frame
 from protocol.messages import Message
@@ -54,6 +64,11 @@ class Subscriber(Protocol):
     def describe(self) -> dict[str, object]: ...
     def begin_batch(self) -> None: ...
     def end_batch(self) -> None: ...
+    # Direct writes from another thread (see `Hub.post_frame`).
+    @property
+    def header_version(self) -> int: ...
+    def write_direct(self, data: bytes) -> bool: ...
+    def hand_over(self, device: str, frame: Frame) -> None: ...
 
 
 class Replier(Protocol):
@@ -70,9 +85,11 @@ ClosedListener = Callable[[Replier], None]
 
 
 class Hub:
-    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+    def __init__(self, loop: asyncio.AbstractEventLoop, *, direct_writes: bool = True) -> None:
         self._loop = loop
+        self._direct_writes = direct_writes
         self.clients: set[Subscriber] = set()
+        self._client_tuple: tuple[Subscriber, ...] = ()  # what other threads iterate
         self._latest: dict[str, Frame] = {}
         self._persistent: dict[str, Frame] = {}
         self._inbound: dict[str, InboundHandler] = {}
@@ -81,50 +98,81 @@ class Hub:
         # Rate caps: device -> minimum seconds between two sends, and what they hold back.
         self._min_interval: dict[str, float] = {}
         self._last_sent: dict[str, float] = {}
-        self._held: dict[str, Message] = {}
+        self._held: dict[str, Frame] = {}
         # Hand-off from other threads.
         self._lock = threading.Lock()
-        self._incoming: deque[Message] = deque()
-        self._incoming_large: dict[str, Message] = {}
+        self._incoming: deque[tuple[str, Frame]] = deque()
+        self._incoming_large: dict[str, Frame] = {}
         self._wake_pending = False
+        self._draining = False
+        self._batching = False
         self.dropped = 0  # stream values replaced or dropped before the loop took them
         self.streamed = 0
+        self.batches = 0  # loop wake-ups that took posted values: streamed / batches per wake
+        self.direct = 0  # values written to every client from the posting thread
 
     # --- clients -------------------------------------------------------------------------
     def attach(self, client: Subscriber) -> None:
-        self.clients.add(client)
-        for frame in self._persistent.values():
-            client.send_once(frame)
-        for device, frame in self._latest.items():
-            client.send_stream(device, frame)
+        # Under the hand-off lock: a direct write of a newer value cannot pass the current
+        # state on its way to the new client.
+        with self._lock:
+            self.clients.add(client)
+            self._client_tuple = tuple(self.clients)
+            for frame in self._persistent.values():
+                client.send_once(frame)
+            for device, frame in self._latest.items():
+                client.send_stream(device, frame)
 
     def detach(self, client: Subscriber) -> None:
-        self.clients.discard(client)
+        with self._lock:
+            self.clients.discard(client)
+            self._client_tuple = tuple(self.clients)
 
     # --- outbound (loop thread) ------------------------------------------------------------
     def stream(self, message: Message) -> None:
         """Send the newest value of a streamed device to every client, respecting its cap."""
-        device = message.device_name
-        interval = self._min_interval.get(device)
-        if interval:
-            now = time.monotonic()
-            wait = self._last_sent.get(device, 0.0) + interval - now
-            if wait > 0:
-                if device not in self._held:
-                    self._loop.call_later(wait, self._release_held, device)
-                self._held[device] = message
-                return
-            self._last_sent[device] = now
-        frame = Frame(message)
+        self.stream_frame(message.device_name, Frame(message))
+
+    def stream_frame(self, device: str, frame: Frame) -> None:
+        """`stream` for a value already made into a `Frame` (a hot path's `TemplateFrame`)."""
+        if self._min_interval:
+            interval = self._min_interval.get(device)
+            if interval:
+                now = time.monotonic()
+                wait = self._last_sent.get(device, 0.0) + interval - now
+                if wait > 0:
+                    if device not in self._held:
+                        self._loop.call_later(wait, self._release_held, device)
+                    self._held[device] = frame
+                    return
+                self._last_sent[device] = now
         self._latest[device] = frame
         self.streamed += 1
         for client in tuple(self.clients):
             client.send_stream(device, frame)
 
+    @contextmanager
+    def batch(self) -> Iterator[None]:
+        """Loop thread: what is streamed inside reaches each client in one socket write
+        (a tf update of many lookups, for example), not one write per message."""
+        if self._batching:
+            yield
+            return
+        self._batching = True
+        clients = tuple(self.clients)
+        for client in clients:
+            client.begin_batch()
+        try:
+            yield
+        finally:
+            self._batching = False
+            for client in clients:
+                client.end_batch()
+
     def _release_held(self, device: str) -> None:
-        message = self._held.pop(device, None)
-        if message is not None:
-            self.stream(message)
+        frame = self._held.pop(device, None)
+        if frame is not None:
+            self.stream_frame(device, frame)
 
     def publish_persistent(self, message: Message) -> None:
         """A one-shot every client gets once per connection (a mesh); replaces an older one."""
@@ -143,10 +191,10 @@ class Hub:
         """A bridge was removed: new clients no longer get its last value, and what it
         posted that the loop has not taken yet is dropped (it would bring the device back)."""
         with self._lock:
-            if any(m.device_name == device for m in self._incoming):
-                self._incoming = deque(m for m in self._incoming if m.device_name != device)
+            if any(d == device for d, _ in self._incoming):
+                self._incoming = deque(item for item in self._incoming if item[0] != device)
             self._incoming_large.pop(device, None)
-        self._latest.pop(device, None)
+            self._latest.pop(device, None)
         self._persistent.pop(device, None)
         self._held.pop(device, None)
         self._min_interval.pop(device, None)
@@ -159,7 +207,8 @@ class Hub:
         return frame.message if frame else None
 
     def devices(self) -> list[str]:
-        return sorted(set(self._latest) | set(self._persistent))
+        with self._lock:  # another thread may add a device to _latest
+            return sorted(set(self._latest) | set(self._persistent))
 
     # --- inbound ---------------------------------------------------------------------------
     def route(self, device: str, handler: InboundHandler) -> None:
@@ -197,21 +246,64 @@ class Hub:
                 log.exception("a closed-client listener failed")
 
     # --- hand-off from other threads -----------------------------------------------------
-    def post(self, message: Message) -> None:
-        """Thread-safe `stream`. Small messages queue in order; if the loop falls
-        `MAX_PENDING` behind, the oldest go first. A large message replaces its device's
-        waiting one. Memory stays bounded and the newest value always arrives."""
-        large = approximate_size(message) > LARGE_MESSAGE_BYTES
+    def open_channel(self, device: str) -> StreamChannel:
+        """A way in for one streamed device from another thread (a ROS callback)."""
+        return StreamChannel(device)
+
+    def close_channel(self, channel: StreamChannel) -> None:
+        """Nothing posted through `channel` reaches clients any more, even from a callback
+        that was already running, and the device is forgotten (`forget`)."""
         with self._lock:
+            channel.closed = True
+        self.forget(channel.device)
+
+    def post(self, message: Message) -> None:
+        """Thread-safe `stream` (see `post_frame`)."""
+        self._post(message.device_name, Frame(message),
+                   approximate_size(message) > LARGE_MESSAGE_BYTES, None)
+
+    def post_frame(self, channel: StreamChannel, frame: Frame, *, large: bool = False) -> None:
+        """Thread-safe `stream_frame` through an open channel.
+
+        A small value, when nothing is waiting for the loop, is written at once from this
+        thread to every client that keeps up (`Subscriber.write_direct`); a client that
+        does not gets it through the loop (`hand_over`), in order. Otherwise values queue
+        for the loop, in order; if it falls `MAX_PENDING` behind, the oldest go first. A
+        large value replaces its device's waiting one. Memory stays bounded, the newest
+        value always arrives, and the loop is woken once per batch."""
+        device = channel.device
+        if (self._direct_writes and not large and device not in self._min_interval):
+            with self._lock:
+                if channel.closed:
+                    return
+                if not (self._wake_pending or self._draining):
+                    self._write_direct(device, frame)
+                    return
+        self._post(device, frame, large, channel)
+
+    def _write_direct(self, device: str, frame: Frame) -> None:
+        # Under self._lock, with nothing queued for the loop: this value is the newest.
+        self._latest[device] = frame
+        self.streamed += 1
+        self.direct += 1
+        for client in self._client_tuple:
+            if not client.write_direct(frame.encoded(client.header_version)):
+                client.hand_over(device, frame)
+
+    def _post(self, device: str, frame: Frame, large: bool,
+              channel: StreamChannel | None) -> None:
+        with self._lock:
+            if channel is not None and channel.closed:
+                return  # the bridge is gone: its device must not come back
             if large:
-                if self._incoming_large.pop(message.device_name, None) is not None:
+                if self._incoming_large.pop(device, None) is not None:
                     self.dropped += 1
-                self._incoming_large[message.device_name] = message
+                self._incoming_large[device] = frame
             else:
                 if len(self._incoming) >= MAX_PENDING:
                     self._incoming.popleft()
                     self.dropped += 1
-                self._incoming.append(message)
+                self._incoming.append((device, frame))
             if self._wake_pending:
                 return
             self._wake_pending = True
@@ -219,6 +311,11 @@ class Hub:
             self._loop.call_soon_threadsafe(self._drain)
         except RuntimeError:  # the loop closed during shutdown: nobody to send to
             pass
+
+    @property
+    def pending(self) -> int:
+        """Values posted from other threads that the loop has not taken yet."""
+        return len(self._incoming) + len(self._incoming_large)
 
     def call_soon(self, callback: Callable[..., object], *args: object) -> None:
         """Run `callback(*args)` on the loop thread (from any thread)."""
@@ -232,14 +329,27 @@ class Hub:
             batch, self._incoming = self._incoming, deque()
             large, self._incoming_large = self._incoming_large, {}
             self._wake_pending = False
-        clients = tuple(self.clients)
-        for client in clients:
-            client.begin_batch()
+            self._draining = True  # no direct write may pass this batch
+        self.batches += 1
         try:
-            for message in batch:
-                self.stream(message)
-            for message in large.values():
-                self.stream(message)
+            with self.batch():
+                stream_frame = self.stream_frame
+                for device, frame in batch:
+                    stream_frame(device, frame)
+                for device, frame in large.items():
+                    stream_frame(device, frame)
         finally:
-            for client in clients:
-                client.end_batch()
+            with self._lock:
+                self._draining = False
+
+
+class StreamChannel:
+    """One streamed device's hand-off to the hub (`Hub.open_channel`). Once closed, what is
+    posted through it is dropped: a callback still running when its bridge was removed
+    cannot bring the device back."""
+
+    __slots__ = ("device", "closed")
+
+    def __init__(self, device: str) -> None:
+        self.device = device
+        self.closed = False

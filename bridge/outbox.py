@@ -11,12 +11,12 @@ lets them pile up past the bound is too slow to serve (`OutboxOverflow`).
 from __future__ import annotations
 
 from collections import OrderedDict, deque
-from typing import Callable, Optional
+from typing import Any, Callable, Optional
 
-from protocol.framing import encode
-from protocol.messages import Message
+from protocol.framing import StreamTemplate, encode
+from protocol.messages import Body, Message
 
-__all__ = ["Frame", "Outbox", "OutboxOverflow"]
+__all__ = ["Frame", "Outbox", "OutboxOverflow", "TemplateFrame"]
 
 
 class Frame:
@@ -27,16 +27,54 @@ class Frame:
     one encode serves every client of that version.
     """
 
-    __slots__ = ("message", "_encoded")
+    __slots__ = ("_message", "_encoded")
 
     def __init__(self, message: Message) -> None:
-        self.message = message
+        self._message = message
         self._encoded: dict[int, bytes] = {}
+
+    @property
+    def message(self) -> Message:
+        return self._message
 
     def encoded(self, header_version: int) -> bytes:
         data = self._encoded.get(header_version)
         if data is None:
             data = encode(self.message, header_version=header_version)
+            self._encoded[header_version] = data
+        return data
+
+
+class TemplateFrame(Frame):
+    """A streamed message kept as its packed content and time stamp, from a hot path that
+    never built a `Message`: its bytes come from the stream's `StreamTemplate` (the same as
+    `encode` gives), and the `Message` is made only if something asks for it (a GET_
+    query, a client that connects later and reads header v1)."""
+
+    __slots__ = ("_template", "_content", "_timestamp", "_values", "_body_of")
+
+    def __init__(self, template: StreamTemplate, content: bytes, timestamp: int,
+                 values: Any, body_of: Callable[[Any], Body]) -> None:
+        self._message = None  # type: ignore[assignment]
+        self._encoded = {}
+        self._template = template
+        self._content = content
+        self._timestamp = timestamp
+        self._values = values
+        self._body_of = body_of
+
+    @property
+    def message(self) -> Message:
+        if self._message is None:
+            t = self._template
+            self._message = Message(device_name=t.device_name, body=self._body_of(self._values),
+                                    timestamp=self._timestamp, metadata=dict(t.metadata))
+        return self._message
+
+    def encoded(self, header_version: int) -> bytes:
+        data = self._encoded.get(header_version)
+        if data is None:
+            data = self._template.encode(self._content, self._timestamp, header_version)
             self._encoded[header_version] = data
         return data
 

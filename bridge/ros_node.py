@@ -1,7 +1,18 @@
-"""The daemon's one rclpy node, with its executor spinning in a thread of its own.
+"""The daemon's rclpy nodes, each with its executor spinning in a thread of its own.
 
 This is the only module that starts or stops ROS. It keeps rclpy's global state out of the
 way (a private `Context`) and leaves signal handling to the daemon's event loop.
+
+Two nodes, two executors:
+
+* ``node`` (``<name>``): services, parameters, tf, robots, publishers; rclpy's
+  SingleThreadedExecutor, which runs the coroutine callbacks the served services need;
+* ``stream_node`` (``<name>_streams``): the subscriptions streamed to clients, under
+  rclpy's C++ EventsExecutor. The SingleThreadedExecutor rebuilds its wait set in Python on
+  every wake-up (about 0.35 ms of CPU per message received, and a share of a core for a
+  thousand idle subscriptions); the EventsExecutor queues events in C++ and calls Python
+  only for the callback (about 0.05 ms). Jazzy's EventsExecutor cannot run coroutine
+  service callbacks (ros2/rclpy#1473, fixed after 7.1.x), hence the split.
 """
 
 from __future__ import annotations
@@ -15,7 +26,8 @@ from typing import Optional, Union
 import rclpy
 from rclpy.client import Client
 from rclpy.context import Context
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.service import Service
@@ -34,27 +46,61 @@ _ERROR_LOG_INTERVAL_S = 5.0
 RosEntity = Union[Subscription, Publisher, Client, Service]
 
 
+def _topic_remaps(ros_args: tuple[str, ...]) -> Optional[list[str]]:
+    """The topic remapping rules of `ros_args` (not __node/__ns, not parameters)."""
+    rules: list[str] = []
+    for flag, value in zip(ros_args, ros_args[1:]):
+        if flag in ("-r", "--remap") and not value.startswith(("__node:=", "__ns:=",
+                                                                  "__name:=")):
+            rules += ["-r", value]
+    return ["--ros-args", *rules] if rules else None
+
+
 @dataclass(frozen=True)
 class RosOptions:
     node_name: str = "slicer_bridge"
     namespace: str = ""
+    # What followed --ros-args: remaps (__node, __ns, topics), parameters, ... for `node`.
+    ros_args: tuple[str, ...] = ()
+
+
+class RosArgumentsError(Exception):
+    """rcl refused the --ros-args (an unknown flag, a bad remap); its text says which."""
 
 
 class RosNode:
     def __init__(self, options: RosOptions) -> None:
         self.options = options
         self.context = Context()
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        # Not sys.argv: its --ros-args are the main node's alone (a global __node remap would
+        # give the stream node the same name).
+        rclpy.init(args=["slicer-ros2-bridge"], context=self.context,
+                   signal_handler_options=SignalHandlerOptions.NO)
         try:
             # Undeclared parameters are refused: clients declare them (parameter server).
             self.node = Node(options.node_name, namespace=options.namespace or None,
-                             context=self.context)
-        except Exception:
+                             context=self.context,
+                             cli_args=["--ros-args", *options.ros_args] if options.ros_args
+                             else None)
+            # Same namespace and topic remaps as `node`, so a client's remapped topic is
+            # streamed from where `node` would publish or subscribe it.
+            self.stream_node = Node(f"{self.node.get_name()}_streams",
+                                    namespace=self.node.get_namespace(), context=self.context,
+                                    start_parameter_services=False,
+                                    cli_args=_topic_remaps(options.ros_args))
+        except Exception as error:
             rclpy.try_shutdown(context=self.context)
+            if options.ros_args and type(error).__name__ in ("UnknownROSArgsError",
+                                                             "RCLError", "InvalidHandle"):
+                raise RosArgumentsError(f"--ros-args {' '.join(options.ros_args)}: "
+                                        f"{error}") from None
             raise
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self.stream_executor = EventsExecutor(context=self.context)
+        self.stream_executor.add_node(self.stream_node)
         self._thread: Optional[threading.Thread] = None
+        self._stream_thread: Optional[threading.Thread] = None
         self._stopping = threading.Event()
 
     @property
@@ -62,15 +108,19 @@ class RosNode:
         return self.node.get_fully_qualified_name()
 
     def start(self) -> None:
-        self._thread = threading.Thread(target=self._spin, name="ros-executor", daemon=True)
+        self._thread = threading.Thread(target=self._spin, args=(self.executor,),
+                                        name="ros-executor", daemon=True)
         self._thread.start()
+        self._stream_thread = threading.Thread(target=self._spin, args=(self.stream_executor,),
+                                               name="ros-streams", daemon=True)
+        self._stream_thread.start()
 
-    def _spin(self) -> None:
+    def _spin(self, executor: Executor) -> None:
         last_logged = -_ERROR_LOG_INTERVAL_S
         unlogged = 0
         while not self._stopping.is_set() and self.context.ok():
             try:
-                self.executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
+                executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
             except ExternalShutdownException:
                 return
             except Exception:
@@ -94,32 +144,39 @@ class RosNode:
         """
         if self._stopping.is_set():
             return  # stop() destroys the node and everything on it
-        thread = self._thread
+        streamed = isinstance(entity, Subscription) and entity in self.stream_node.subscriptions
+        node, executor, thread = ((self.stream_node, self.stream_executor, self._stream_thread)
+                                  if streamed else (self.node, self.executor, self._thread))
         if thread is None or not thread.is_alive() or threading.current_thread() is thread:
-            self._destroy_now(entity)
+            self._destroy_now(node, entity)
         else:
-            self.executor.create_task(self._destroy_now, entity)
+            executor.create_task(self._destroy_now, node, entity)
 
-    def _destroy_now(self, entity: RosEntity) -> None:
+    @staticmethod
+    def _destroy_now(node: Node, entity: RosEntity) -> None:
         if isinstance(entity, Subscription):
-            self.node.destroy_subscription(entity)
+            node.destroy_subscription(entity)
         elif isinstance(entity, Publisher):
-            self.node.destroy_publisher(entity)
+            node.destroy_publisher(entity)
         elif isinstance(entity, Client):
-            self.node.destroy_client(entity)
+            node.destroy_client(entity)
         else:
-            self.node.destroy_service(entity)
+            node.destroy_service(entity)
 
     def stop(self) -> None:
         # The executor thread must be out of its callbacks before the executor's handles
         # are destroyed: shutting down under a running callback raises InvalidHandle.
         self._stopping.set()
         self.executor.wake()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
+        self.stream_executor.wake()
+        for thread in (self._thread, self._stream_thread):
+            if thread is not None:
+                thread.join(timeout=5.0)
         self.executor.shutdown(timeout_sec=2.0)
+        self.stream_executor.shutdown(timeout_sec=2.0)
         try:
             self.node.destroy_node()
+            self.stream_node.destroy_node()
         finally:
             rclpy.try_shutdown(context=self.context)
 

@@ -14,6 +14,14 @@ buffers are dropped at once: nothing waits for the cyclic garbage collector.
 Writing: frames go straight to the transport while it keeps up; once its buffer passes the
 high-water mark, they wait in the client's `Outbox`, where a newer value of a device
 replaces an unsent older one.
+
+Direct writes (the hot path): while a client keeps up (nothing waiting anywhere on its
+side), the hub may write a small stream frame to its socket from the ROS executor thread
+(`write_direct`), which saves the loop a wake-up per message. Every write to the socket,
+from either thread, holds the session's write lock, so frames never interleave; whatever
+a direct write could not finish is written by the loop before anything else, and a client
+that is behind is never written directly: its frames take the loop's path (`hand_over`),
+in order, and meet the outbox there.
 """
 
 from __future__ import annotations
@@ -21,7 +29,9 @@ from __future__ import annotations
 import asyncio
 import logging
 import operator
+import os
 import socket
+import threading
 import time
 from dataclasses import dataclass
 from functools import partial
@@ -90,11 +100,17 @@ class ClientSession(asyncio.Protocol):
         self._attached = False
         self._attach_timer: Optional[asyncio.TimerHandle] = None
         self._batch: Optional[list[bytes]] = None  # frames gathered for one write
+        # Direct writes from the executor thread (see the module docstring).
+        self._wlock = threading.Lock()
+        self._direct: Optional[socket.socket] = None  # a dup of the transport's socket
+        self._stash: Optional[bytes] = None  # the rest of a partial direct write
+        self._handed = 0  # frames handed to the loop and not written yet
+        self._sent_direct = 0
         self._unrouted_warned: set[str] = set()
         self._bad_log = RateLimitedLog(log)
         self.peer = "?"
         self.received = 0
-        self.sent = 0
+        self._sent = 0
 
     # --- asyncio.Protocol ------------------------------------------------------------------
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -107,6 +123,12 @@ class ClientSession(asyncio.Protocol):
             # Latency matters more than packet count: no Nagle delay.
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         transport.set_write_buffer_limits(high=self._limits.write_high_water)
+        if sock is not None and transport.get_extra_info("sslcontext") is None:
+            # Its own descriptor: closed in connection_lost, under the write lock, before
+            # the transport closes its own, so a direct write can never reach a reused fd.
+            direct = socket.socket(fileno=os.dup(sock.fileno()))
+            direct.setblocking(False)
+            self._direct = direct
         log.info("client %s connected", self.peer)
         # Streams start once the header version is known: the current state sent as v1
         # would reach 3D Slicer without metadata, and meshes are sent only once.
@@ -122,8 +144,12 @@ class ClientSession(asyncio.Protocol):
         self._hub.attach(self)
 
     def connection_lost(self, exc: Optional[Exception]) -> None:
-        self._closing = True
-        self._release()
+        with self._wlock:  # the executor thread writes directly: nothing after this
+            self._closing = True
+            if self._direct is not None:
+                self._direct.close()
+                self._direct = None
+            self._release()
         if self._attached:
             self._hub.detach(self)
         if self._on_close is not None:
@@ -299,6 +325,11 @@ class ClientSession(asyncio.Protocol):
 
     # --- outgoing --------------------------------------------------------------------------
     @property
+    def sent(self) -> int:
+        """Frames written (or gathered for a batch write) to this client."""
+        return self._sent + self._sent_direct
+
+    @property
     def header_version(self) -> int:
         return self._negotiator.outgoing_version
 
@@ -337,13 +368,14 @@ class ClientSession(asyncio.Protocol):
     def close(self) -> None:
         """Close the connection. What the transport already holds is still flushed; the
         receive buffer and the frames not yet handed to the transport go now."""
-        self._closing = True
-        if self._frame_timer is not None:
-            self._frame_timer.cancel()
-            self._frame_timer = None
-        self.frame_started = None
-        self._decoder.close()
-        self._outbox.clear()
+        with self._wlock:
+            self._closing = True
+            if self._frame_timer is not None:
+                self._frame_timer.cancel()
+                self._frame_timer = None
+            self.frame_started = None
+            self._decoder.close()
+            self._outbox.clear()
         if self._transport is not None:
             self._transport.close()
 
@@ -354,15 +386,22 @@ class ClientSession(asyncio.Protocol):
     def end_batch(self) -> None:
         batch, self._batch = self._batch, None
         if batch and not self._closing:
-            assert self._transport is not None
-            self._transport.write(b"".join(batch) if len(batch) > 1 else batch[0])
+            self._transport_write(b"".join(batch) if len(batch) > 1 else batch[0])
 
     def _write(self, data: bytes) -> None:
         assert self._transport is not None
-        self.sent += 1
+        self._sent += 1
         if self._batch is not None:
             self._batch.append(data)
         else:
+            self._transport_write(data)
+
+    def _transport_write(self, data: bytes) -> None:
+        assert self._transport is not None
+        with self._wlock:
+            if self._stash is not None:  # the rest of a direct write goes first
+                stash, self._stash = self._stash, None
+                self._transport.write(stash)
             self._transport.write(data)
 
     def _flush(self) -> None:
@@ -371,6 +410,54 @@ class ClientSession(asyncio.Protocol):
             if data is None:
                 return
             self._write(data)
+
+    # --- direct writes (ROS executor thread) -------------------------------------------------
+    def write_direct(self, data: bytes) -> bool:
+        """Write a stream frame now, from another thread, if nothing of this client waits
+        anywhere; False (nothing written) if it must take the loop's path (`hand_over`)."""
+        with self._wlock:
+            direct = self._direct
+            transport = self._transport
+            if (direct is None or transport is None or self._closing or self._paused
+                    or self._handed or self._stash is not None or self._batch is not None
+                    or len(self._outbox) or transport.is_closing()
+                    or transport.get_write_buffer_size()):
+                return False
+            try:
+                sent = direct.send(data)
+            except (BlockingIOError, InterruptedError):
+                sent = 0
+            except OSError:  # the loop's transport meets the same error and closes
+                self._direct = None
+                direct.close()
+                return False
+            if sent == 0:
+                return False
+            self._sent_direct += 1
+            if sent < len(data):
+                self._stash = data[sent:]
+                self._hub.call_soon(self._write_stash)
+            return True
+
+    def hand_over(self, device: str, frame: Frame) -> None:
+        """A stream frame `write_direct` refused: the loop sends it, after any handed before
+        it, and until then this client gets no direct write."""
+        with self._wlock:
+            self._handed += 1
+        self._hub.call_soon(self._take_handed, device, frame)
+
+    def _take_handed(self, device: str, frame: Frame) -> None:
+        try:
+            self.send_stream(device, frame)
+        finally:
+            with self._wlock:
+                self._handed -= 1
+
+    def _write_stash(self) -> None:
+        with self._wlock:
+            stash, self._stash = self._stash, None
+            if stash is not None and not self._closing and self._transport is not None:
+                self._transport.write(stash)
 
     def describe(self) -> dict[str, object]:
         return {"peer": self.peer, "header_version": self.header_version,

@@ -12,15 +12,18 @@ subscribers, as the reference's Publish does.
 from __future__ import annotations
 
 import logging
-import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Optional
 
+from rclpy.serialization import deserialize_message
+
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
+from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
 from bridge.dispatch import Handler
-from bridge.hub import Hub, Replier
+from bridge.hub import LARGE_MESSAGE_BYTES, Hub, Replier, approximate_size
 from bridge.logging_limits import RateLimitedLog
 from bridge.message_guards import MessageGuard
+from bridge.outbox import Frame, TemplateFrame
 from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
 from bridge.security import SecurityPolicy
@@ -33,8 +36,6 @@ from protocol.naming import KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
 
 log = logging.getLogger(__name__)
 
-# A stream of bad ROS messages must not flood the log: one warning per bridge per interval.
-_WARN_INTERVAL_S = 5.0
 
 
 @dataclass
@@ -53,6 +54,16 @@ class TopicInfo:
 
 
 class SubscriberBridge:
+    """One ROS topic streamed to every client as one device.
+
+    Hot types (Pose, PoseStamped, TransformStamped) are taken raw: the callback gets the
+    serialized bytes and `RawPoseStream` turns them into the TRANSFORM's bytes without
+    building an rclpy message; `last_message` deserializes the last bytes only when asked.
+    Other types are taken as rclpy messages and converted by their codec. Either way the
+    callback hands one `Frame` to the hub through the bridge's channel, which `close`
+    closes first: a callback still running then cannot bring the device back.
+    """
+
     def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QoS,
                  device: str, metadata: dict[str, str],
                  max_rate_hz: Optional[float] = None,
@@ -68,46 +79,80 @@ class SubscriberBridge:
         # The security policy's view of a message (tf frames, parameters): None = drop it.
         self._filter = message_filter
         self.count = 0
-        self.last_message: Any = None
-        self._last_warning = 0.0
-        self._closed = False  # the subscription goes later, in the executor thread
+        # (serialized bytes or None, message or None) of the last message, replaced whole.
+        self._last: tuple[Optional[bytes], Any] = (None, None)
+        self._bad = RateLimitedLog(log)  # a stream of bad messages: one line per interval
+        self._channel = hub.open_channel(device)
         hub.set_rate_cap(device, max_rate_hz)
-        self._subscription = ros.node.create_subscription(
-            codec.message_class, topic, self._on_message, qos_profile(qos))
+        # A filtered stream needs the message itself: only unfiltered poses go raw.
+        self._fast = (RawPoseStream(codec, device, metadata)
+                      if has_fast_path(codec.ros_type) and message_filter is None else None)
+        if self._fast is not None:
+            self._subscription = ros.stream_node.create_subscription(
+                codec.message_class, topic, self._on_raw, qos_profile(qos), raw=True)
+        else:
+            self._subscription = ros.stream_node.create_subscription(
+                codec.message_class, topic, self._on_message, qos_profile(qos))
+
+    @property
+    def last_message(self) -> Any:
+        """The last message received (None before the first), as an rclpy message."""
+        last = self._last
+        data, msg = last
+        if msg is None and data is not None:
+            msg = deserialize_message(data, self.codec.message_class)
+            if self._last is last:
+                self._last = (data, msg)
+        return msg
+
+    def _on_raw(self, data: bytes) -> None:  # ROS executor thread: convert, hand off
+        if self._channel.closed:
+            return
+        self.count += 1
+        self._last = (data, None)
+        assert self._fast is not None
+        try:
+            template, content, timestamp, values = self._fast.convert(data)
+        except NotFast:
+            self._convert(deserialize_message(data, self.codec.message_class))
+            return
+        self._hub.post_frame(self._channel,
+                             TemplateFrame(template, content, timestamp, values, transform_body))
 
     def _on_message(self, msg: Any) -> None:  # ROS executor thread: convert, hand off
-        if self._closed:
+        if self._channel.closed:
             return
         if self._filter is not None:
             msg = self._filter(msg)
             if msg is None:
                 return
         self.count += 1
-        self.last_message = msg
+        self._last = (None, msg)
+        self._convert(msg)
+
+    def _convert(self, msg: Any) -> None:
         try:
             encoded = self.codec.encode(msg)
         except CodecError as error:
-            now = time.monotonic()
-            if now - self._last_warning > _WARN_INTERVAL_S:
-                self._last_warning = now
-                log.warning("cannot convert a %s from %s, not sent: %s", self.codec.ros_type,
-                            self.topic, error)
+            self._bad.warning("convert", None, "cannot convert a %s from %s, not sent: %s",
+                              self.codec.ros_type, self.topic, error)
             return
         stamp = (igtl_timestamp_from_ros(*encoded.stamp) if encoded.stamp and encoded.stamp[0] > 0
                  else igtl_timestamp_now())
         metadata = dict(self._metadata)
         metadata.update(encoded.metadata)
-        self._hub.post(Message(device_name=self.device, body=encoded.body, timestamp=stamp,
-                               metadata=metadata))
+        message = Message(device_name=self.device, body=encoded.body, timestamp=stamp,
+                          metadata=metadata)
+        self._hub.post_frame(self._channel, Frame(message),
+                             large=approximate_size(message) > LARGE_MESSAGE_BYTES)
 
     def info(self) -> TopicInfo:
         return TopicInfo("subscriber", self.topic, self.codec.ros_type, self.device,
                          self.codec.igtl_type, self.qos.to_dict(), self.max_rate_hz, self.count)
 
     def close(self) -> None:
-        self._closed = True
+        self._hub.close_channel(self._channel)
         self._ros.destroy(self._subscription)
-        self._hub.forget(self.device)
 
 
 class PublisherBridge:

@@ -39,6 +39,7 @@ __all__ = [
     "matrix_to_pose",
     "metres_to_mm",
     "mm_to_metres",
+    "pose_to_igtl12",
     "pose_to_matrix",
     "quaternion_to_rotation",
     "ros_time_from_igtl",
@@ -190,18 +191,33 @@ def pose_to_matrix(translation_m: ArrayLike, quaternion_xyzw: ArrayLike) -> Floa
         x, y, z, w = (float(v) for v in quaternion_xyzw)  # type: ignore[union-attr,arg-type]
     except (TypeError, ValueError):
         return _pose_to_matrix_checked(translation_m, quaternion_xyzw)
+    v = pose_to_igtl12(tx, ty, tz, x, y, z, w)
+    if v is None:
+        return _pose_to_matrix_checked(translation_m, quaternion_xyzw)
+    return np.array([[v[0], v[3], v[6], v[9]], [v[1], v[4], v[7], v[10]],
+                     [v[2], v[5], v[8], v[11]], [0.0, 0.0, 0.0, 1.0]], dtype=np.float64)
+
+
+def pose_to_igtl12(tx: float, ty: float, tz: float, x: float, y: float, z: float,
+                   w: float) -> tuple[float, ...] | None:
+    """ROS pose (metres, quaternion x, y, z, w) as plain floats -> the 12 numbers of an
+    OpenIGTLink TRANSFORM in wire order (R11 R21 R31 R12 R22 R32 R13 R23 R33, then the
+    translation in mm), or None if a number is not finite or the quaternion is zero (the
+    caller then takes the checked path, which says what is wrong).
+
+    The one quaternion -> matrix formula for single poses: `pose_to_matrix` uses it too.
+    """
     norm2 = x * x + y * y + z * z + w * w
     if not (math.isfinite(tx + ty + tz) and math.isfinite(norm2)) or norm2 < 1e-24:
-        return _pose_to_matrix_checked(translation_m, quaternion_xyzw)
+        return None
     s = 2.0 / norm2  # normalises the quaternion on the way
     xx, yy, zz = x * x * s, y * y * s, z * z * s
     xy, xz, yz = x * y * s, x * z * s, y * z * s
     wx, wy, wz = w * x * s, w * y * s, w * z * s
-    return np.array([
-        [1.0 - (yy + zz), xy - wz, xz + wy, tx * MM_PER_M],
-        [xy + wz, 1.0 - (xx + zz), yz - wx, ty * MM_PER_M],
-        [xz - wy, yz + wx, 1.0 - (xx + yy), tz * MM_PER_M],
-        [0.0, 0.0, 0.0, 1.0]], dtype=np.float64)
+    return (1.0 - (yy + zz), xy + wz, xz - wy,
+            xy - wz, 1.0 - (xx + zz), yz + wx,
+            xz + wy, yz - wx, 1.0 - (xx + yy),
+            tx * MM_PER_M, ty * MM_PER_M, tz * MM_PER_M)
 
 
 def _pose_to_matrix_checked(translation_m: ArrayLike, quaternion_xyzw: ArrayLike) -> FloatArray:

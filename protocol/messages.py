@@ -15,6 +15,7 @@ copy them before writing into them. Decoding never runs Python loops per point o
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass, field, fields
 from enum import IntEnum
@@ -115,6 +116,7 @@ def _check_shape(arr: AnyArray, shape: tuple[int, ...], field_name: str) -> None
 # NaN (refusing NaN is the bridge's job, not the decoder's).
 _IGTL12_INDEX = igtl12_to_matrix(np.arange(12, dtype=np.float64))[:3, :].astype(np.intp)
 _IGTL12_WIRE_ORDER = np.argsort(_IGTL12_INDEX.reshape(12))  # wire slot -> entry of matrix[:3]
+_TWELVE_F32 = struct.Struct(">12f")
 
 
 @dataclass(eq=False)
@@ -129,11 +131,16 @@ class Transform:
     def pack(self) -> bytes:
         m = self.matrix
         if isinstance(m, np.ndarray) and m.shape == (4, 4) and m.dtype.kind == "f":
-            # Fast path (a few us): the same gather as conversions.matrix_to_igtl12, via the
-            # index table derived from it; anything unusual goes through the checked path.
-            values = m[:3].reshape(12)[_IGTL12_WIRE_ORDER]
-            if np.isfinite(values).all():
-                return values.astype(">f4").tobytes()
+            # Fast path (about 1 us): the same gather as conversions.matrix_to_igtl12, via the
+            # index table derived from it, packed from Python floats (numpy's per-call
+            # overhead is most of the cost for 12 numbers); anything unusual (NaN, a value
+            # beyond float32) goes through the checked path.
+            values = m[:3].reshape(12)[_IGTL12_WIRE_ORDER].tolist()
+            if all(map(math.isfinite, values)):
+                try:
+                    return _TWELVE_F32.pack(*values)
+                except OverflowError:
+                    pass
         try:
             checked = matrix_to_igtl12(m)
         except ConversionError as exc:

@@ -43,7 +43,10 @@ import numpy as np
 import numpy.typing as npt
 from geometry_msgs.msg import TransformStamped
 from bridge.qos import LATCHED_QOS, TF_QOS, TF_STATIC_SUBSCRIBER_QOS
+from rclpy.serialization import deserialize_message
 from tf2_msgs.msg import TFMessage
+
+from bridge.codecs.cdr import CdrError, read_tf_message
 
 from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
@@ -107,6 +110,18 @@ def tf_message_to_transforms(msg: Any) -> list[StampedTransform]:
                                     stamp.sec * _NS_PER_S + stamp.nanosec,
                                     (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w)))
     return out
+
+
+def tf_cdr_to_transforms(data: bytes) -> list[StampedTransform]:
+    """A serialized TFMessage -> `StampedTransform`s, read without rclpy messages (the same
+    values as `tf_message_to_transforms` of the deserialized message)."""
+    try:
+        raw = read_tf_message(data)
+    except CdrError:  # another CDR encoding: the ordinary way
+        return tf_message_to_transforms(deserialize_message(data, TFMessage))
+    return [StampedTransform(frame, child, sec * _NS_PER_S + nanosec, (tx, ty, tz),
+                             (x, y, z, w))
+            for sec, nanosec, frame, child, tx, ty, tz, x, y, z, w in raw]
 
 
 def _transform_stamped(st: StampedTransform) -> Any:
@@ -235,22 +250,24 @@ class TfBridges:
         self._tf_publisher: Any = None
         self._static_publisher: Any = None
         self._static_transforms: dict[str, Any] = {}  # child -> TransformStamped (latched)
-        node = ros.node
+        # The EventsExecutor's node, taken raw: /tf may come at kHz rates, and rclpy builds
+        # six Python objects per transform (most of the daemon's CPU in a 1 kHz robot).
+        node = ros.stream_node
         self._subscriptions = [
-            node.create_subscription(TFMessage, self._tf_topic, self._on_tf, TF_QOS),
+            node.create_subscription(TFMessage, self._tf_topic, self._on_tf, TF_QOS, raw=True),
             node.create_subscription(TFMessage, self._tf_static_topic, self._on_tf_static,
-                                     TF_STATIC_SUBSCRIBER_QOS),
+                                     TF_STATIC_SUBSCRIBER_QOS, raw=True),
         ]
 
     # ------------------------------------------------------------------ ROS thread
 
-    def _on_tf(self, msg: Any) -> None:
+    def _on_tf(self, data: bytes) -> None:
         self.received["tf"] += 1
-        self._store(tf_message_to_transforms(msg), static=False)
+        self._store(tf_cdr_to_transforms(data), static=False)
 
-    def _on_tf_static(self, msg: Any) -> None:
+    def _on_tf_static(self, data: bytes) -> None:
         self.received["tf_static"] += 1
-        self._store(tf_message_to_transforms(msg), static=True)
+        self._store(tf_cdr_to_transforms(data), static=True)
 
     def _store(self, transforms: list[StampedTransform], *, static: bool) -> None:
         """Store one batch (any thread) and hand its changed frames to the loop."""
@@ -313,6 +330,10 @@ class TfBridges:
         self._timer_due_ns = due
 
     def _deliver(self, results: list[tuple[LookupKey, LookupResult]]) -> None:
+        with self._hub.batch():  # one socket write per client for the whole update
+            self._deliver_each(results)
+
+    def _deliver_each(self, results: list[tuple[LookupKey, LookupResult]]) -> None:
         for key, result in results:
             lookup = self._by_key.get(key)
             if lookup is None:

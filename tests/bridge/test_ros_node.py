@@ -64,3 +64,37 @@ def test_destroy_from_another_thread_removes_the_entities() -> None:
         assert ros.node.count_subscribers("/ros_node_test_out") == 0
     finally:
         ros.stop()
+
+
+def test_streamed_subscriptions_have_their_own_executor_and_are_destroyed_there() -> None:
+    """`stream_node` runs under the EventsExecutor: its callbacks run, a failing one does not
+    stop it, and `destroy` from another thread removes its subscription."""
+    ros = RosNode(RosOptions(node_name="ros_node_test_streams"))
+    got: list[str] = []
+    arrived = threading.Event()
+
+    def on_message(msg: String) -> None:
+        if msg.data == "fail":
+            raise ValueError("a callback bug")
+        got.append(msg.data)
+        arrived.set()
+
+    subscription = ros.stream_node.create_subscription(String, "/ros_node_test_streams",
+                                                       on_message, 10)
+    publisher = ros.node.create_publisher(String, "/ros_node_test_streams", 10)
+    ros.start()
+    try:
+        deadline = time.monotonic() + 15
+        while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        publisher.publish(String(data="fail"))
+        while not arrived.is_set() and time.monotonic() < deadline:
+            publisher.publish(String(data="ok"))
+            arrived.wait(0.1)
+        assert got and got[0] == "ok"
+        ros.destroy(subscription)
+        while subscription in ros.stream_node.subscriptions and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert subscription not in ros.stream_node.subscriptions
+    finally:
+        ros.stop()

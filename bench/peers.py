@@ -1,0 +1,318 @@
+"""The benchmark's peers, each run as its own process by bench_daemon.py (never imported
+by the daemon): a publisher that sleeps between messages, a plain rclpy subscriber (the
+ROS floor), and a raw OpenIGTLink reader with any number of connections.
+
+    peers.py publish KIND TOPIC      KIND: pose | image | tf
+    peers.py floor KIND TOPIC
+    peers.py read PORT CLIENTS [--setup JSON]
+
+Every peer prints READY when it can start, then obeys lines on stdin:
+
+* publisher: ``RUN RATE SECONDS`` publishes at RATE Hz for SECONDS, stamping each message
+  with ``time.time_ns()`` just before ``publish()``, then prints ``DONE <count>``. It
+  sleeps until each message is due (a publisher that spins would take the CPU the daemon
+  needs on a 2-core machine) and catches up without sleeping when it is late;
+* floor and reader: ``RESET`` forgets what was received, ``REPORT`` prints one JSON line
+  of figures (see `Recorder.report`), ``QUIT`` exits.
+
+Latency is ``arrival - stamp`` in one host clock (``time.time_ns``). The reader takes the
+arrival time when `recv` returns the chunk that completes a message: for an image, its
+last byte. It parses only the 58-byte OpenIGTLink header (timestamp, body size), so its
+own cost is the same whichever relay it reads.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import selectors
+import socket
+import struct
+import sys
+import threading
+import time
+from typing import Any, Callable
+
+_HEADER = struct.Struct(">H12s20sQQQ")
+# KEEP_LAST depth of every pose subscriber and publisher (floor, daemon, naive relay): half a
+# second at 10 kHz, so that a reliable retransmission (rmw_fastrtps waits for the writer's
+# next heartbeat, ~0.1 s) does not overflow the history of any of them.
+POSE_DEPTH = 5000
+_NS = 1_000_000_000
+
+
+def _stamp_ns(igtl_timestamp: int) -> int:
+    sec, frac = igtl_timestamp >> 32, igtl_timestamp & 0xFFFFFFFF
+    return sec * _NS + (frac * _NS >> 32)
+
+
+class Recorder:
+    """Latencies and arrival order per stream, thread-safe enough for one writer."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.reset()
+
+    def reset(self) -> None:
+        with getattr(self, "lock", threading.Lock()):
+            # stream -> list of (arrival_ns, stamp_ns)
+            self.samples: dict[str, list[tuple[int, int]]] = {}
+            # Messages published before the reset (a warm-up's, a reliable retransmission
+            # after discovery) are not part of what is measured next.
+            self.since = time.time_ns()
+
+    def add(self, stream: str, arrival_ns: int, stamp_ns: int) -> None:
+        if stamp_ns < self.since:
+            return
+        samples = self.samples.get(stream)
+        if samples is None:
+            samples = self.samples[stream] = []
+        samples.append((arrival_ns, stamp_ns))
+
+    def report(self) -> dict[str, Any]:
+        """Per stream: count, out-of-order arrivals, latency percentiles (ms) and the p50 of
+        each second (lag over time); all streams together as "all"."""
+        with self.lock:
+            streams = {name: list(values) for name, values in self.samples.items()}
+        out: dict[str, Any] = {"streams": {}}
+        every: list[float] = []
+        for name, values in streams.items():
+            latencies = [(a - s) / 1e6 for a, s in values]
+            every.extend(latencies)
+            stamps = [s for _, s in values]
+            disorder = sum(1 for x, y in zip(stamps, stamps[1:]) if y <= x)
+            out["streams"][name] = {"n": len(values), "out_of_order": disorder,
+                                    **_percentiles(latencies), "per_second": _per_second(values)}
+            if len(values) <= 2000:  # few (images): each one, to match with another party
+                out["streams"][name]["arrivals"] = [[s, a] for a, s in values]
+        out["all"] = _percentiles(every)
+        out["all"]["n"] = len(every)
+        return out
+
+
+def _percentiles(values: list[float]) -> dict[str, float]:
+    if not values:
+        return {"p50": float("nan"), "p99": float("nan"), "max": float("nan")}
+    ordered = sorted(values)
+
+    def pick(q: float) -> float:
+        return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+    return {"p50": pick(0.50), "p99": pick(0.99), "max": ordered[-1]}
+
+
+def _per_second(values: list[tuple[int, int]]) -> list[float]:
+    if not values:
+        return []
+    first = values[0][1]
+    buckets: dict[int, list[float]] = {}
+    for arrival, stamp in values:
+        buckets.setdefault((stamp - first) // _NS, []).append((arrival - stamp) / 1e6)
+    return [round(_percentiles(buckets[k])["p50"], 3) for k in sorted(buckets)]
+
+
+def _serve_commands(recorder: Recorder, quit_: Callable[[], None]) -> None:
+    for line in sys.stdin:
+        word = line.strip()
+        if word == "RESET":
+            recorder.reset()
+        elif word == "REPORT":
+            print(json.dumps(recorder.report()), flush=True)
+        elif word == "QUIT":
+            break
+    quit_()
+
+
+# ------------------------------------------------------------------------------ reader
+
+
+def read(port: int, clients: int, setup: list[dict[str, Any]], v2: bool) -> None:
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    from protocol.framing import encode
+    from protocol.messages import Message, Status
+
+    if setup:
+        from slicer_client.connection import Connection
+
+        # Commands (tf lookups) on one extra connection that stays open: bridges it
+        # creates live as long as the daemon.
+        keeper = Connection("127.0.0.1", port)
+        for command in setup:
+            keeper.command(command["op"], command.get("arguments", {}))
+    recorder = Recorder()
+    selector = selectors.DefaultSelector()
+    for index in range(clients):
+        sock = socket.create_connection(("127.0.0.1", port), timeout=10)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        if v2:  # as 3D Slicer does: a STATUS in header v2 at once, then v2 with metadata
+            sock.sendall(encode(Message("", Status(text="bench reader")), header_version=2))
+        sock.setblocking(False)
+        selector.register(sock, selectors.EVENT_READ, [index, bytearray()])
+    stop = threading.Event()
+    threading.Thread(target=_serve_commands, args=(recorder, stop.set), daemon=True).start()
+    print("READY", flush=True)
+    unpack = _HEADER.unpack_from
+    header_size = _HEADER.size
+    while not stop.is_set():
+        for key, _ in selector.select(timeout=0.2):
+            index, buffer = key.data
+            try:
+                chunk = key.fileobj.recv(1 << 20)  # type: ignore[union-attr]
+            except BlockingIOError:
+                continue
+            arrival = time.time_ns()
+            if not chunk:
+                selector.unregister(key.fileobj)
+                continue
+            buffer += chunk
+            offset = 0
+            with recorder.lock:
+                while len(buffer) - offset >= header_size:
+                    _, type_raw, name_raw, stamp, size, _ = unpack(buffer, offset)
+                    end = offset + header_size + size
+                    if end > len(buffer):
+                        break
+                    offset = end
+                    if stamp and type_raw[:5] in (b"TRANS", b"IMAGE"):
+                        name = name_raw.rstrip(b"\0").decode()
+                        recorder.add(f"{index}:{name}", arrival, _stamp_ns(stamp))
+            del buffer[:offset]
+
+
+# ------------------------------------------------------------------------------ ROS side
+
+
+def _ros_setup() -> Any:
+    import rclpy
+
+    rclpy.init()
+    return rclpy.create_node(f"bench_peer_{os.getpid()}")
+
+
+def _message(kind: str) -> tuple[Any, Any, Callable[[Any, int], None]]:
+    """(message class, a template message, set_stamp(msg, n))."""
+    from builtin_interfaces.msg import Time
+
+    def header_stamp(msg: Any, now: int) -> None:
+        msg.header.stamp = Time(sec=now // _NS, nanosec=now % _NS)
+
+    if kind == "pose":
+        from geometry_msgs.msg import PoseStamped
+
+        pose = PoseStamped()
+        pose.header.frame_id = "world"
+        pose.pose.position.x = 0.0031415
+        pose.pose.orientation.w = 1.0
+        return PoseStamped, pose, header_stamp
+    if kind == "image":
+        import numpy as np
+        from sensor_msgs.msg import Image
+
+        image = Image(height=480, width=640, encoding="rgb8", step=640 * 3)
+        image.header.frame_id = "camera"
+        image.data = np.random.default_rng(0).integers(0, 255, 640 * 480 * 3,
+                                                        dtype=np.uint8).tobytes()
+        return Image, image, header_stamp
+    if kind == "tf":
+        from geometry_msgs.msg import TransformStamped
+        from tf2_msgs.msg import TFMessage
+
+        names = ["base"] + [f"link{i}" for i in range(1, 8)]
+        message = TFMessage(transforms=[TransformStamped() for _ in range(7)])
+        for t, parent, child in zip(message.transforms, names, names[1:]):
+            t.header.frame_id, t.child_frame_id = parent, child
+            t.transform.translation.z = 0.1
+            t.transform.rotation.w = 1.0
+        tick = [0]
+
+        def tf_stamp(msg: Any, now: int) -> None:
+            tick[0] += 1
+            stamp = Time(sec=now // _NS, nanosec=now % _NS)
+            for t in msg.transforms:  # every link moves 10 um a tick: every lookup changes
+                t.header.stamp = stamp
+                t.transform.translation.x = tick[0] * 1e-5
+
+        return TFMessage, message, tf_stamp
+    raise SystemExit(f"unknown kind {kind!r}: expected pose, image or tf")
+
+
+def publish(kind: str, topic: str) -> None:
+    node = _ros_setup()
+    cls, message, set_stamp = _message(kind)
+    depth = 10 if kind == "image" else POSE_DEPTH
+    publisher = node.create_publisher(cls, topic, depth)
+    print("READY", flush=True)
+    for line in sys.stdin:
+        parts = line.split()
+        if parts and parts[0] == "WAIT":  # WAIT N: until N subscribers matched
+            deadline = time.monotonic() + 30
+            while (publisher.get_subscription_count() < int(parts[1])
+                   and time.monotonic() < deadline):
+                time.sleep(0.01)
+            print(f"MATCHED {publisher.get_subscription_count()}", flush=True)
+        elif parts and parts[0] == "RUN":
+            rate, seconds = float(parts[1]), float(parts[2])
+            count = int(rate * seconds)
+            period = 1.0 / rate
+            start = time.monotonic()
+            for n in range(count):
+                delay = start + n * period - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                set_stamp(message, time.time_ns())
+                publisher.publish(message)
+            print(f"DONE {count}", flush=True)
+        elif parts and parts[0] == "QUIT":
+            break
+    node.destroy_node()
+
+
+def floor(kind: str, topic: str) -> None:
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    node = _ros_setup()
+    cls, _, _ = _message(kind)
+    recorder = Recorder()
+
+    def on_message(msg: Any) -> None:
+        arrival = time.time_ns()
+        stamp = msg.header.stamp if kind != "tf" else msg.transforms[0].header.stamp
+        with recorder.lock:
+            recorder.add(kind, arrival, stamp.sec * _NS + stamp.nanosec)
+
+    node.create_subscription(cls, topic, on_message, 10 if kind == "image" else POSE_DEPTH)
+    threading.Thread(target=_serve_commands, args=(recorder, lambda: os._exit(0)),
+                     daemon=True).start()
+    print("READY", flush=True)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="role", required=True)
+    for role in ("publish", "floor"):
+        p = sub.add_parser(role)
+        p.add_argument("kind", choices=("pose", "image", "tf"))
+        p.add_argument("topic")
+    p = sub.add_parser("read")
+    p.add_argument("port", type=int)
+    p.add_argument("clients", type=int)
+    p.add_argument("--setup", default="[]", help="JSON list of {op, arguments} to run first")
+    p.add_argument("--v1", action="store_true", help="do not announce header v2 (pyigtl)")
+    args = parser.parse_args()
+    if args.role == "publish":
+        publish(args.kind, args.topic)
+    elif args.role == "floor":
+        floor(args.kind, args.topic)
+    else:
+        read(args.port, args.clients, json.loads(args.setup), not args.v1)
+
+
+if __name__ == "__main__":
+    main()

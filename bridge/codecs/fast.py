@@ -1,0 +1,96 @@
+"""The hot path of a streamed pose: CDR bytes in, a TRANSFORM's packed content and its
+stream's `StreamTemplate` out, with no rclpy message, numpy array or `Message` built.
+
+The bytes it makes are the ones `TypeCodec.encode` + `protocol.framing.encode` make for the
+same message (tests compare them): the numbers go through the one quaternion formula
+(`protocol.conversions.pose_to_igtl12`), and the metadata of each (frame_id,
+child_frame_id) pair is computed once by the ordinary codec and then reused. Whatever this
+path does not handle (another CDR encoding, a NaN, a zero quaternion) raises `NotFast`,
+and the caller converts that message the ordinary way, which says what is wrong with it.
+"""
+
+from __future__ import annotations
+
+import struct
+from bridge.codecs.base import TypeCodec
+from bridge.codecs.cdr import RAW_POSE_READERS, CdrError
+from protocol.conversions import (
+    igtl12_to_matrix,
+    igtl_timestamp_from_ros,
+    igtl_timestamp_now,
+    pose_to_igtl12,
+)
+from protocol.errors import ProtocolError
+from protocol.framing import StreamTemplate
+from protocol.messages import Transform
+
+__all__ = ["NotFast", "RawPoseStream", "has_fast_path", "transform_body"]
+
+_TWELVE = struct.Struct(">12f")
+_U32_MAX = 0xFFFFFFFF
+# Distinct (frame_id, child_frame_id) pairs remembered per stream: a publisher that changes
+# frame ids on every message only costs a re-computation, never memory.
+_MAX_TEMPLATES = 64
+
+
+class NotFast(Exception):
+    """This message takes the ordinary path (the reason is in the message)."""
+
+
+def has_fast_path(ros_type: str) -> bool:
+    return ros_type in RAW_POSE_READERS
+
+
+def transform_body(values: tuple[float, ...]) -> Transform:
+    """The `Transform` body of 12 wire-order numbers (for a `TemplateFrame`'s message)."""
+    return Transform(matrix=igtl12_to_matrix(values))
+
+
+class RawPoseStream:
+    """One streamed Pose / PoseStamped / TransformStamped topic's conversion."""
+
+    def __init__(self, codec: TypeCodec, device: str, metadata: dict[str, str]) -> None:
+        self._codec = codec
+        self._read = RAW_POSE_READERS[codec.ros_type]
+        self._device = device
+        self._metadata = metadata
+        self._templates: dict[tuple[str, str], StreamTemplate] = {}
+
+    def convert(self, data: bytes) -> tuple[StreamTemplate, bytes, int, tuple[float, ...]]:
+        """CDR bytes -> (template, TRANSFORM content, IGTL time stamp, the 12 numbers)."""
+        try:
+            sec, nanosec, frame, child, tx, ty, tz, x, y, z, w = self._read(data)
+        except CdrError as error:
+            raise NotFast(str(error)) from None
+        values = pose_to_igtl12(tx, ty, tz, x, y, z, w)
+        if values is None:
+            raise NotFast("a NaN, an infinity or a zero quaternion")
+        try:
+            content = _TWELVE.pack(*values)
+        except OverflowError:
+            raise NotFast("a number beyond float32") from None
+        template = self._templates.get((frame, child))
+        if template is None:
+            template = self._template_for(data, frame, child)
+        if sec > 0 and 0 <= nanosec < 1_000_000_000 and sec <= _U32_MAX:
+            timestamp = igtl_timestamp_from_ros(sec, nanosec)
+        else:
+            timestamp = igtl_timestamp_now()
+        return template, content, timestamp, values
+
+    def _template_for(self, data: bytes, frame: str, child: str) -> StreamTemplate:
+        from rclpy.serialization import deserialize_message
+
+        # The ordinary codec says what metadata this frame pair gets: one place for it.
+        try:
+            encoded = self._codec.encode(deserialize_message(data, self._codec.message_class))
+            metadata = dict(self._metadata)
+            metadata.update(encoded.metadata)
+            template = StreamTemplate(self._codec.igtl_type, self._device, metadata)
+        except (ProtocolError, ValueError, TypeError) as error:
+            raise NotFast(f"metadata: {error}") from None
+        if len(self._templates) >= _MAX_TEMPLATES:
+            self._templates.clear()
+        self._templates[(frame, child)] = template
+        return template
+

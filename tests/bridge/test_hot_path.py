@@ -1,0 +1,430 @@
+"""The streaming hot path: CDR bytes read without rclpy, frames made without a `Message`,
+direct writes from the executor thread, and the hub's guarantees around them (order,
+nothing lost for a client that keeps up, newest-wins for one that does not, a removed
+device staying gone). Real sockets, real rclpy serialization; no timing assertions."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import socket
+import struct
+import threading
+from typing import Any, Iterator
+
+import pytest
+from geometry_msgs.msg import Pose, PoseStamped, TransformStamped
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from rclpy.serialization import deserialize_message, serialize_message
+
+from bridge.codecs import codec_for
+from bridge.codecs.cdr import CdrError, read_pose, read_pose_stamped, read_transform_stamped
+from bridge.codecs.fast import NotFast, RawPoseStream, transform_body
+from bridge.hub import Hub
+from bridge.outbox import Frame, TemplateFrame
+from bridge.session import ClientSession, SessionLimits
+from protocol.conversions import igtl_timestamp_from_ros
+from protocol.framing import Decoder, encode
+from protocol.messages import Message, String
+
+finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False)
+unit = st.floats(min_value=-1.0, max_value=1.0, allow_nan=False)
+names = st.text(min_size=0, max_size=23)  # every alignment of what follows a string
+stamps = st.tuples(st.integers(0, 2**31 - 1), st.integers(0, 999_999_999))
+
+
+def _quaternion(q: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+    return q if sum(v * v for v in q) > 1e-6 else (0.0, 0.0, 0.0, 1.0)
+
+
+def _pose_stamped(stamp: tuple[int, int], frame: str, t: tuple[float, ...],
+                  q: tuple[float, ...]) -> PoseStamped:
+    msg = PoseStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
+    msg.header.frame_id = frame
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = t
+    o = msg.pose.orientation
+    o.x, o.y, o.z, o.w = q
+    return msg
+
+
+def _transform_stamped(stamp: tuple[int, int], frame: str, child: str, t: tuple[float, ...],
+                       q: tuple[float, ...]) -> TransformStamped:
+    msg = TransformStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
+    msg.header.frame_id, msg.child_frame_id = frame, child
+    tr = msg.transform.translation
+    tr.x, tr.y, tr.z = t
+    r = msg.transform.rotation
+    r.x, r.y, r.z, r.w = q
+    return msg
+
+
+# --------------------------------------------------------------------- CDR -> numbers
+
+
+@settings(max_examples=200, deadline=None)
+@given(stamps, names, st.tuples(finite, finite, finite), st.tuples(unit, unit, unit, unit))
+def test_pose_stamped_bytes_read_as_rclpy_deserializes_them(stamp, frame, t, q) -> None:
+    data = serialize_message(_pose_stamped(stamp, frame, t, q))
+    ours = read_pose_stamped(data)
+    theirs = deserialize_message(data, PoseStamped)
+    p, o = theirs.pose.position, theirs.pose.orientation
+    assert ours == (theirs.header.stamp.sec, theirs.header.stamp.nanosec,
+                    theirs.header.frame_id, "", p.x, p.y, p.z, o.x, o.y, o.z, o.w)
+
+
+@settings(max_examples=200, deadline=None)
+@given(stamps, names, names, st.tuples(finite, finite, finite),
+       st.tuples(unit, unit, unit, unit))
+def test_transform_stamped_bytes_read_as_rclpy_deserializes_them(stamp, frame, child, t,
+                                                                  q) -> None:
+    data = serialize_message(_transform_stamped(stamp, frame, child, t, q))
+    ours = read_transform_stamped(data)
+    theirs = deserialize_message(data, TransformStamped)
+    tr, r = theirs.transform.translation, theirs.transform.rotation
+    assert ours == (theirs.header.stamp.sec, theirs.header.stamp.nanosec,
+                    theirs.header.frame_id, theirs.child_frame_id,
+                    tr.x, tr.y, tr.z, r.x, r.y, r.z, r.w)
+
+
+@given(st.tuples(finite, finite, finite), st.tuples(unit, unit, unit, unit))
+def test_pose_bytes_read_as_rclpy_deserializes_them(t, q) -> None:
+    msg = Pose()
+    msg.position.x, msg.position.y, msg.position.z = t
+    msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = q
+    assert read_pose(serialize_message(msg))[4:] == (*t, *q)
+
+
+def test_bytes_it_does_not_read_are_refused_not_misread() -> None:
+    data = serialize_message(_pose_stamped((1, 2), "world", (1, 2, 3), (0, 0, 0, 1)))
+    with pytest.raises(CdrError, match="little-endian"):
+        read_pose_stamped(b"\x00\x00" + data[2:])  # big-endian CDR
+    with pytest.raises(CdrError):
+        read_pose_stamped(data[:40])  # cut short
+    with pytest.raises(CdrError):
+        read_transform_stamped(data[:14])
+
+
+# --------------------------------------------------------------- bytes on the wire
+
+
+def _ordinary_bytes(codec_name: str, msg: Any, device: str, metadata: dict[str, str],
+                    version: int) -> bytes:
+    """What the ordinary path (rclpy message -> codec -> Message -> encode) sends, for the
+    message as the daemon receives it: a string ends at its first NUL on the wire."""
+    msg = deserialize_message(serialize_message(msg), type(msg))
+    encoded = codec_for(codec_name).encode(msg)
+    meta = dict(metadata)
+    meta.update(encoded.metadata)
+    assert encoded.stamp is not None
+    message = Message(device_name=device, body=encoded.body,
+                      timestamp=igtl_timestamp_from_ros(*encoded.stamp), metadata=meta)
+    return encode(message, header_version=version)
+
+
+def _fast_frame(codec_name: str, msg: Any, device: str,
+                metadata: dict[str, str]) -> TemplateFrame:
+    stream = RawPoseStream(codec_for(codec_name), device, metadata)
+    template, content, timestamp, values = stream.convert(serialize_message(msg))
+    return TemplateFrame(template, content, timestamp, values, transform_body)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.tuples(st.integers(1, 2**31 - 1), st.integers(0, 999_999_999)), names, names,
+       st.tuples(finite, finite, finite), st.tuples(unit, unit, unit, unit))
+def test_fast_frames_are_the_bytes_of_the_ordinary_path(stamp, frame, child, t, q) -> None:
+    q = _quaternion(q)
+    metadata = {"ros2.topic": "/tool"}
+    for name, msg in (("PoseStamped", _pose_stamped(stamp, frame, t, q)),
+                      ("TransformStamped", _transform_stamped(stamp, frame, child, t, q))):
+        fast = _fast_frame(name, msg, "tool", metadata)
+        for version in (1, 2):
+            assert fast.encoded(version) == _ordinary_bytes(name, msg, "tool", metadata,
+                                                            version), (name, version)
+        # The Message made on demand (GET_TRANSFORM, a late v1 client) says the same.
+        assert encode(fast.message, header_version=2) == fast.encoded(2)
+
+
+def test_what_the_fast_path_cannot_convert_goes_the_ordinary_way() -> None:
+    stream = RawPoseStream(codec_for("PoseStamped"), "tool", {})
+    nan = _pose_stamped((1, 0), "w", (math.nan, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+    zero = _pose_stamped((1, 0), "w", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0))
+    huge = _pose_stamped((1, 0), "w", (1e300, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+    for msg in (nan, zero, huge):
+        with pytest.raises(NotFast):
+            stream.convert(serialize_message(msg))
+
+
+# ------------------------------------------------------------- hub + real sockets
+
+
+class _Peer:
+    """A real TCP client of a `ClientSession` served by a loop in a thread."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock = sock
+        self.decoder = Decoder()
+
+    def read_until(self, count: int, timeout: float = 30.0) -> list[Message]:
+        self.sock.settimeout(timeout)
+        out: list[Message] = []
+        while len(out) < count:
+            data = self.sock.recv(1 << 16)
+            assert data, f"closed after {len(out)} of {count} messages"
+            self.decoder.feed(data)
+            out.extend(self.decoder.messages())
+        return out
+
+
+class _Served:
+    """A hub and its sessions on a loop in a thread: the daemon's wiring without ROS."""
+
+    def __init__(self, direct_writes: bool) -> None:
+        self.loop = asyncio.new_event_loop()
+        self.hub = Hub(self.loop, direct_writes=direct_writes)
+        self.sessions: list[ClientSession] = []
+        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
+        self.thread.start()
+        self.server = self.call(self._serve())
+
+    async def _serve(self) -> asyncio.AbstractServer:
+        limits = SessionLimits(write_high_water=64 * 1024, negotiation_grace_s=0.0)
+
+        def session() -> ClientSession:
+            s = ClientSession(self.hub, lambda m, c: None, limits, lambda c: None)
+            self.sessions.append(s)
+            return s
+
+        return await self.loop.create_server(session, "127.0.0.1", 0)
+
+    def call(self, coroutine: Any) -> Any:
+        return asyncio.run_coroutine_threadsafe(coroutine, self.loop).result(30)
+
+    def connect(self, rcvbuf: int = 0) -> _Peer:
+        count = len(self.hub.clients) + 1
+        sock = socket.socket()
+        if rcvbuf:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+        sock.connect(self.server.sockets[0].getsockname())
+        for _ in range(3000):  # attached once the (zero) negotiation grace has passed
+            if len(self.hub.clients) >= count:
+                break
+            threading.Event().wait(0.01)
+        assert len(self.hub.clients) >= count
+        return _Peer(sock)
+
+    def close(self) -> None:
+        async def stop() -> None:
+            self.server.close()
+            for s in self.sessions:
+                s.close()
+
+        self.call(stop())
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self.thread.join(10)
+        self.loop.close()
+
+
+@pytest.fixture(params=[True, False], ids=["direct", "loop-only"])
+def served(request: pytest.FixtureRequest) -> Iterator[_Served]:
+    s = _Served(direct_writes=request.param)
+    try:
+        yield s
+    finally:
+        s.close()
+
+
+def _numbered(device: str, n: int) -> Frame:
+    return Frame(Message(device_name=device, body=String(text=str(n)), timestamp=n))
+
+
+def _post_from_another_thread(hub: Hub, channel: Any, frames: list[Frame]) -> None:
+    poster = threading.Thread(target=lambda: [hub.post_frame(channel, f) for f in frames])
+    poster.start()
+    poster.join()
+
+
+def test_a_burst_reaches_a_client_that_keeps_up_whole_and_in_order(served: _Served) -> None:
+    peer = served.connect()
+    channel = served.hub.open_channel("burst")
+    count = 3000
+    reader = threading.Thread(target=lambda: received.extend(peer.read_until(count)))
+    received: list[Message] = []
+    reader.start()
+    _post_from_another_thread(served.hub, channel, [_numbered("burst", n)
+                                                    for n in range(1, count + 1)])
+    reader.join(60)
+    assert [int(m.body.text) for m in received] == list(range(1, count + 1))
+
+
+def test_a_stalled_client_gets_the_newest_value_and_the_others_everything(
+        served: _Served) -> None:
+    fast = served.connect()
+    stalled = served.connect(rcvbuf=4096)  # never reads until the end
+    channels = {d: served.hub.open_channel(d) for d in ("a", "b")}
+    count = 4000
+    pad = "x" * 400  # fills the stalled client's socket buffers quickly
+    frames = [(d, Frame(Message(device_name=d, body=String(text=f"{n}:{pad}"))))
+              for n in range(1, count + 1) for d in ("a", "b")]
+    got: list[Message] = []
+    reader = threading.Thread(target=lambda: got.extend(fast.read_until(2 * count)))
+    reader.start()
+
+    def post() -> None:
+        # As fast as the loop takes them, never so far ahead that the hub's own bound
+        # (MAX_PENDING) drops values: that is not what this test is about.
+        for d, f in frames:
+            while served.hub.pending > 1000:
+                threading.Event().wait(0.001)
+            served.hub.post_frame(channels[d], f)
+
+    poster = threading.Thread(target=post)
+    poster.start()
+    poster.join()
+    reader.join(60)
+    assert [(m.device_name, m.body.text.split(":")[0]) for m in got] == \
+        [(d, str(n)) for n in range(1, count + 1) for d in ("a", "b")]
+    # The stalled client's buffer holds one value per device, however many were posted.
+    waiting = served.call(_describe_all(served))
+    assert max(w["waiting"] for w in waiting) <= 2
+    assert any(w["coalesced"] > 0 for w in waiting)
+    # Once it reads, the last value of each device arrives.
+    stalled.sock.settimeout(30)
+    last: dict[str, str] = {}
+    while last != {"a": str(count), "b": str(count)}:
+        data = stalled.sock.recv(1 << 16)
+        assert data
+        stalled.decoder.feed(data)
+        for m in stalled.decoder.messages():
+            last[m.device_name] = m.body.text.split(":")[0]
+
+
+async def _describe_all(served: _Served) -> list[dict[str, Any]]:
+    return [s.describe() for s in served.sessions]
+
+
+def test_a_value_posted_after_its_channel_closed_never_reaches_a_client(
+        served: _Served) -> None:
+    hub = served.hub
+    channel = hub.open_channel("removed")
+    _post_from_another_thread(hub, channel, [_numbered("removed", 1)])
+    served.call(asyncio.sleep(0.05))
+    assert "removed" in served.call(_devices(hub))
+
+    async def close() -> None:
+        hub.close_channel(channel)
+
+    served.call(close())
+    # A callback that checked before the close posts after it (the race of issue 11).
+    _post_from_another_thread(hub, channel, [_numbered("removed", 2)])
+    served.call(asyncio.sleep(0.05))
+    assert "removed" not in served.call(_devices(hub))
+    # A client connecting later gets nothing of it.
+    late = served.connect()
+    other = hub.open_channel("other")
+    _post_from_another_thread(hub, other, [_numbered("other", 7)])
+    first = late.read_until(1)
+    assert [(m.device_name, m.body.text) for m in first] == [("other", "7")]
+
+
+async def _devices(hub: Hub) -> list[str]:
+    return hub.devices()
+
+
+def test_a_partial_direct_write_is_finished_before_anything_else(served: _Served) -> None:
+    """Frames larger than a socket buffer: direct writes stop half-way and the loop writes
+    the rest first; the client still reads whole frames, in order."""
+    peer = served.connect(rcvbuf=8192)
+    channel = served.hub.open_channel("big")
+    body = "y" * 60_000  # under the hub's large-message bound: posted as a small value
+    count = 60
+    frames = [Frame(Message(device_name="big", body=String(text=f"{n}:{body}")))
+              for n in range(1, count + 1)]
+    _post_from_another_thread(served.hub, channel, frames)
+    # Newest-wins may coalesce some (the client fell behind); the last one always comes,
+    # whole, and nothing is reordered.
+    numbers: list[int] = []
+    while not numbers or numbers[-1] != count:
+        numbers.extend(int(m.body.text.split(":")[0]) for m in peer.read_until(1))
+    assert numbers == sorted(set(numbers))
+
+
+def test_the_stamp_of_a_frame_survives_the_direct_path() -> None:
+    msg = _pose_stamped((1_700_000_000, 5), "w", (0.1, 0.2, 0.3), (0.0, 0.0, 0.0, 1.0))
+    frame = _fast_frame("PoseStamped", msg, "tool", {})
+    header = struct.unpack(">H12s20sQQQ", frame.encoded(2)[:58])
+    assert header[3] == igtl_timestamp_from_ros(1_700_000_000, 5)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.tuples(stamps, names, names, st.tuples(finite, finite, finite),
+                          st.tuples(unit, unit, unit, unit)), max_size=9))
+def test_tf_bytes_give_the_transforms_the_ordinary_path_gives(transforms) -> None:
+    from tf2_msgs.msg import TFMessage
+
+    from bridge.tf.capability import tf_cdr_to_transforms, tf_message_to_transforms
+
+    msg = TFMessage(transforms=[_transform_stamped(*t) for t in transforms])
+    data = serialize_message(msg)
+    assert tf_cdr_to_transforms(data) == tf_message_to_transforms(
+        deserialize_message(data, TFMessage))
+
+
+class _HeldStringCodec:
+    """std_msgs/String's codec, whose conversion waits for a signal: a callback held just
+    after its closed-check, as the executor thread can be when close() runs."""
+
+    def __init__(self) -> None:
+        from bridge.codecs.scalars import StringCodec
+
+        self.inner = StringCodec("std_msgs/msg/String", "STRING")
+        self.entered = threading.Event()
+        self.release = threading.Event()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+    def encode(self, msg: Any) -> Any:
+        self.entered.set()
+        assert self.release.wait(30)
+        return self.inner.encode(msg)
+
+
+@pytest.mark.ros
+def test_a_subscriber_callback_running_when_its_bridge_closes_does_not_bring_it_back() -> None:
+    """Issue 11's race, with a real node: the callback passed its check, close() ran, then
+    the callback posted. No client, now or later, may see the removed device."""
+    from std_msgs.msg import String as RosString
+
+    from protocol.commands import QoS
+    from bridge.ros_node import RosNode, RosOptions
+    from bridge.topics import SubscriberBridge
+
+    served = _Served(direct_writes=True)
+    ros = RosNode(RosOptions(node_name="hot_path_race"))
+    try:
+        codec = _HeldStringCodec()
+        bridge = SubscriberBridge(ros, served.hub, topic="/hot_path_race",
+                                  codec=codec,  # type: ignore[arg-type]
+                                  qos=QoS(), device="raced", metadata={})
+        callback = threading.Thread(target=bridge._on_message, args=(RosString(data="late"),))
+        callback.start()
+        assert codec.entered.wait(30)
+
+        async def close() -> None:
+            bridge.close()
+
+        served.call(close())
+        codec.release.set()
+        callback.join(30)
+        served.call(asyncio.sleep(0.05))  # a drain the late post may have scheduled runs
+        assert "raced" not in served.call(_devices(served.hub))
+        late = served.connect()
+        other = served.hub.open_channel("other")
+        _post_from_another_thread(served.hub, other, [_numbered("other", 1)])
+        assert [m.device_name for m in late.read_until(1)] == ["other"]
+    finally:
+        ros.stop()
+        served.close()
