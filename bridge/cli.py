@@ -17,7 +17,8 @@ from bridge.config import ConfigFile, build_security, load_config_file
 from bridge.interfaces import (InterfaceBuildError, build_into_this_environment,
                                missing_runtime_line)
 from bridge.ros_args import RosArgsError, apply_parameters, split_ros_args
-from bridge.security import DEFAULT_MAX_BRIDGES_PER_CLIENT, DEFAULT_MAX_CLIENTS
+from bridge.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_CLIENT,
+                             DEFAULT_MAX_CLIENTS)
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 
@@ -97,6 +98,10 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
     security.add_argument("--max-bridges-per-client", type=int, metavar="N",
                           help=f"bridges one client may create (default "
                                f"{DEFAULT_MAX_BRIDGES_PER_CLIENT}); more get LIMIT_REACHED")
+    security.add_argument("--max-bridges", type=int, metavar="N",
+                          help=f"bridges all clients together may have made and not removed "
+                               f"(default {DEFAULT_MAX_BRIDGES}; they outlive their client, "
+                               f"so reconnecting does not reset it); more get LIMIT_REACHED")
     security.add_argument("--max-message-bytes", type=int, metavar="BYTES",
                           help="largest message body a client may send (default 64 MiB); a "
                                "larger BODY_SIZE closes the connection")
@@ -157,6 +162,7 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
            "allow_parameters": args.allow_parameter, "deny_parameters": args.deny_parameter,
            "allow_frames": args.allow_frame, "deny_frames": args.deny_frame,
            "max_clients": args.max_clients, "max_bridges_per_client": args.max_bridges_per_client,
+           "max_bridges": args.max_bridges,
            "max_message_bytes": args.max_message_bytes,
            "max_send_buffer_bytes": args.max_send_buffer_bytes, "robot_dirs": args.robot_dir}
     where = f"{file.name}: security (or its command-line option)" if file.name else "option"

@@ -78,7 +78,8 @@ class Dispatcher:
         # the frame that is really looked up or broadcast.
         self._resolve_frame = resolve_frame
         self._resolve_file = resolve_file
-        self._quota = BridgeQuota(self._policy.max_bridges_per_client)
+        self._quota = BridgeQuota(self._policy.max_bridges_per_client,
+                                  self._policy.max_bridges)
         self._owners = BridgeOwners()
         hub.add_closed_listener(self._client_left)
         self._tasks: set[asyncio.Task[None]] = set()
@@ -134,9 +135,10 @@ class Dispatcher:
     def _client_left(self, client: Replier) -> None:
         # Its bridges live on (any client may remove them), except those that live only
         # as long as their client (a served service); its count goes.
+        gone = self._owners.forget(client, {kind for kind, k in _KINDS.items()
+                                            if k.bridge.per_connection})
+        self._quota.release(client, gone)
         self._quota.forget(client)
-        self._owners.forget(client, {kind for kind, k in _KINDS.items()
-                                     if k.bridge.per_connection})
 
     # --- plumbing -----------------------------------------------------------------------
     def _run(self, request: c.Request, client: Replier | None) -> Result | Awaitable[Result]:

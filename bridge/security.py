@@ -40,7 +40,8 @@ from protocol.commands import (REQUEST_TYPES, FileUse, ForbiddenError, FrameUse,
                                LimitReachedError, Op, OutOfRangeError, ParameterUse, Resource,
                                ServiceUse, TopicUse, resolve_message_type, resolve_service_type)
 
-__all__ = ["DEFAULT_MAX_BRIDGES_PER_CLIENT", "DEFAULT_MAX_CLIENTS", "OPERATOR",
+__all__ = ["DEFAULT_MAX_BRIDGES", "DEFAULT_MAX_BRIDGES_PER_CLIENT", "DEFAULT_MAX_CLIENTS",
+           "OPERATOR",
            "PARAMETER_SERVICES", "SECURITY_KEYS", "BridgeOwners", "BridgeQuota", "NameRules",
            "PolicyError", "RateLimitedLog", "SecurityPolicy", "inside", "is_loopback_host",
            "parameter_service", "parse_network", "positive_int", "strip_frame"]
@@ -123,6 +124,9 @@ def strip_frame(frame: str) -> str:
 
 DEFAULT_MAX_CLIENTS = 64
 DEFAULT_MAX_BRIDGES_PER_CLIENT = 1000
+# Over all clients, past and present: bridges outlive their client, so a per-client count
+# alone would let a client that reconnects make as many again.
+DEFAULT_MAX_BRIDGES = 2000
 
 
 class PolicyError(ValueError):
@@ -164,6 +168,7 @@ class SecurityPolicy:
     frames: NameRules = NameRules()
     max_clients: int = DEFAULT_MAX_CLIENTS
     max_bridges_per_client: int = DEFAULT_MAX_BRIDGES_PER_CLIENT
+    max_bridges: int = DEFAULT_MAX_BRIDGES  # made by clients, all together
     # Folders whose URDF files clients may load by path (`--robot-dir`, and the daemon adds
     # every `--package-path` folder): a client must not make the daemon read any file.
     robot_dirs: tuple[str, ...] = ()
@@ -346,7 +351,7 @@ class SecurityPolicy:
             policy = replace(policy, **{kind: rules})
         dirs = _globs(settings, "robot_dirs", where)
         policy = replace(policy, robot_dirs=tuple(dirs))
-        for key in ("max_clients", "max_bridges_per_client"):
+        for key in ("max_clients", "max_bridges_per_client", "max_bridges"):
             if settings.get(key) is not None:
                 policy = replace(policy, **{key: positive_int(settings[key], f"{where}.{key}")})
         return policy
@@ -357,7 +362,8 @@ class SecurityPolicy:
                  "clients from " + (", ".join(map(str, self.allowed_networks))
                                     if self.allowed_networks else "any address"),
                  f"at most {self.max_clients} clients",
-                 f"{self.max_bridges_per_client} bridges per client"]
+                 f"{self.max_bridges_per_client} bridges per client, "
+                 f"{self.max_bridges} from all clients"]
         for kind in ("topics", "services", "parameters", "frames"):
             rules: NameRules = getattr(self, kind)
             if rules.active:
@@ -371,7 +377,8 @@ SECURITY_KEYS: tuple[str, ...] = (
     "read_only", "allow",
     "allow_topics", "deny_topics", "allow_services", "deny_services",
     "allow_parameters", "deny_parameters", "allow_frames", "deny_frames",
-    "max_clients", "max_bridges_per_client", "max_message_bytes", "max_send_buffer_bytes",
+    "max_clients", "max_bridges_per_client", "max_bridges", "max_message_bytes",
+    "max_send_buffer_bytes",
     "robot_dirs",
 )
 
@@ -438,12 +445,14 @@ class BridgeOwners:
     def removed(self, key: BridgeKey) -> Optional[object]:
         return self._owners.pop(key, None)
 
-    def forget(self, client: object, kinds: Iterable[str]) -> None:
-        """`client` left: its bridges of `kinds` (those that die with it) are gone."""
+    def forget(self, client: object, kinds: Iterable[str]) -> int:
+        """`client` left: its bridges of `kinds` (those that die with it) are gone; returns
+        how many."""
         kinds = set(kinds)
-        for key in [k for k, owner in self._owners.items()
-                    if owner is client and k[0] in kinds]:
+        gone = [k for k, owner in self._owners.items() if owner is client and k[0] in kinds]
+        for key in gone:
             del self._owners[key]
+        return len(gone)
 
     def check_removal(self, key: BridgeKey, field: str, client: object) -> None:
         """Raise `ForbiddenError` if `client` (None: the operator) may not remove `key`."""
@@ -453,15 +462,19 @@ class BridgeOwners:
 
 
 class BridgeQuota:
-    """Counts each client's live bridges against ``max_bridges_per_client``.
+    """Counts live client-made bridges: each client's against ``limit`` and all of them,
+    whoever made them and whether or not that client is still here, against ``total``.
 
     A creation reserves a slot before it runs (so a burst of slow async creations cannot
     overshoot) and gives it back if it fails or found an existing bridge; the removal of a
-    bridge (by whichever client) frees a slot of the client that made it.
+    bridge (by whichever client) frees the slot of the client that made it. A client that
+    leaves takes its own count with it, not the total: its bridges live on.
     """
 
-    def __init__(self, limit: int) -> None:
+    def __init__(self, limit: int, total: int = DEFAULT_MAX_BRIDGES) -> None:
         self.limit = limit
+        self.total_limit = total
+        self.total = 0
         self._counts: dict[object, int] = {}
 
     def reserve(self, client: object, op: str) -> bool:
@@ -474,7 +487,12 @@ class BridgeQuota:
             raise LimitReachedError("op", f"at most {self.limit} bridges per client "
                                           f"(--max-bridges-per-client)",
                                     f"a bridge more ({op})")
+        if self.total >= self.total_limit:
+            raise LimitReachedError("op", f"at most {self.total_limit} bridges made by "
+                                          f"clients, all together (--max-bridges; remove some)",
+                                    f"a bridge more ({op})")
         self._counts[client] = count + 1
+        self.total += 1
         return True
 
     def settle(self, client: object, reserved: bool,
@@ -490,10 +508,11 @@ class BridgeQuota:
     def count(self, client: object) -> int:
         return self._counts.get(client, 0)
 
-    def release(self, client: object) -> None:
-        """One bridge `client` made is gone."""
-        count = self._counts.get(client, 0)
-        if count > 1:
-            self._counts[client] = count - 1
+    def release(self, client: object, bridges: int = 1) -> None:
+        """`bridges` that `client` made are gone (the client may have left)."""
+        self.total = max(0, self.total - bridges)
+        count = self._counts.get(client, 0) - bridges
+        if count > 0:
+            self._counts[client] = count
         else:
             self._counts.pop(client, None)

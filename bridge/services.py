@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 import logging
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any, Optional
 
@@ -33,7 +34,7 @@ from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
 from bridge.security import SecurityPolicy
 from protocol.commands import (Op, AdvertiseService, CallService, CommandError, CommandFailedError,
-                               ErrorCode, OutOfRangeError, Reply, ServiceRequest,
+                               ErrorCode, LimitReachedError, OutOfRangeError, Reply, ServiceRequest,
                                UnadvertiseService, WrongTypeError, loads)
 from protocol.messages import Command, Message, RtsCommand
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
@@ -131,7 +132,10 @@ class CalledService:
     ros_type: str
     client: Client
     device: str
+    key: NameKey
     calls: int = 0
+    in_flight: int = 0  # calls waiting for their answer: the client must not go meanwhile
+    last_used: float = 0.0  # loop time
 
 
 @dataclass
@@ -159,12 +163,19 @@ class ServedService:
     closed: bool = False
 
 
+# call_service's cached rclpy clients: how many at most, and how long one may sit unused.
+MAX_SERVICE_CLIENTS = 64
+IDLE_SERVICE_CLIENT_S = 60.0
+
+
 class ServiceBridges:
     """The daemon's service clients (`call_service`) and client-served services."""
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
                  answer_timeout_s: float = 4.0,
-                 policy: Optional[SecurityPolicy] = None) -> None:
+                 policy: Optional[SecurityPolicy] = None,
+                 max_service_clients: int = MAX_SERVICE_CLIENTS,
+                 idle_client_s: float = IDLE_SERVICE_CLIENT_S) -> None:
         self._ros = ros
         # A parameter listing through call_service shows what the parameter globs allow.
         self._policy = policy or SecurityPolicy()
@@ -175,7 +186,12 @@ class ServiceBridges:
         # (the node's default group also runs every subscription).
         self._group = ReentrantCallbackGroup()
         self._ids = itertools.count(1)
-        self.called: dict[tuple[str, str], CalledService] = {}
+        # call_service's rclpy clients, least recently used first: each is a ROS entity
+        # (and discovery traffic), so at most `max_service_clients`, and none kept idle.
+        self.called: OrderedDict[tuple[str, str], CalledService] = OrderedDict()
+        self._max_called = max_service_clients
+        self._idle_s = idle_client_s
+        self._idle_timer: Optional[asyncio.TimerHandle] = None
         self.served: dict[str, ServedService] = {}
         self._pending: dict[tuple[Replier, int], _PendingAnswer] = {}
         hub.add_reply_listener(self._on_reply)
@@ -192,25 +208,62 @@ class ServiceBridges:
             raise WrongTypeError(f"request.{error.field}" if error.field else "request",
                                  error.expected, error.got) from None
         entry = self._client_for(service, ros_type, srv)
-        # The whole timeout may go to discovery: a server missed by the first announcements
-        # is found at the next round (Fast DDS: every 3 s, later under load).
-        response = await call_ros_service(self._hub, entry.client, ros_request,
-                                          timeout=request.timeout,
-                                          ready_wait=request.timeout,
-                                          what=f"service {service}", field="service")
+        entry.in_flight += 1
+        try:
+            # The whole timeout may go to discovery: a server missed by the first
+            # announcements is found at the next round (Fast DDS: every 3 s, later under load).
+            response = await call_ros_service(self._hub, entry.client, ros_request,
+                                              timeout=request.timeout,
+                                              ready_wait=request.timeout,
+                                              what=f"service {service}", field="service")
+        finally:
+            entry.in_flight -= 1
+            entry.last_used = asyncio.get_running_loop().time()
         entry.calls += 1
         return {"service": service, "type": ros_type, "response":
                 self._policy.filter_service_response(service, ros_type,
                                                      message_to_dict(response))}
 
     def _client_for(self, service: str, ros_type: str, srv: Any) -> CalledService:
+        now = asyncio.get_running_loop().time()
         entry = self.called.get((service, ros_type))
-        if entry is None:
-            client = self._ros.node.create_client(srv, service, callback_group=self._group)
-            device = self._names.register(NameKey.service_client(service))
-            entry = CalledService(service, ros_type, client, device)
-            self.called[(service, ros_type)] = entry
+        if entry is not None:
+            self.called.move_to_end((service, ros_type))
+            entry.last_used = now
+            return entry
+        if len(self.called) >= self._max_called:
+            idle = next((k for k, e in self.called.items() if e.in_flight == 0), None)
+            if idle is None:
+                raise LimitReachedError("service", f"at most {self._max_called} services called "
+                                        f"at once", f"a call to {service} more")
+            self._drop_client(idle)
+        client = self._ros.node.create_client(srv, service, callback_group=self._group)
+        key = NameKey.service_client(service)
+        entry = CalledService(service, ros_type, client, self._names.register(key), key,
+                              last_used=now)
+        self.called[(service, ros_type)] = entry
+        self._schedule_idle_check()
         return entry
+
+    def _drop_client(self, key: tuple[str, str]) -> None:
+        entry = self.called.pop(key)
+        self._ros.destroy(entry.client)
+        if not any(e.key == entry.key for e in self.called.values()):
+            self._names.release(entry.key)
+
+    def _schedule_idle_check(self) -> None:
+        if self._idle_timer is None and self.called:
+            self._idle_timer = asyncio.get_running_loop().call_later(self._idle_s,
+                                                                      self._drop_idle)
+
+    def _drop_idle(self) -> None:
+        """A client not used for `idle_client_s` goes: the next call makes a new one."""
+        self._idle_timer = None
+        deadline = asyncio.get_running_loop().time() - self._idle_s
+        for key in [k for k, e in self.called.items()
+                    if e.in_flight == 0 and e.last_used <= deadline]:
+            self._drop_client(key)
+        self._schedule_idle_check()
 
     # --- advertise_service -----------------------------------------------------------------
     def advertise_service(self, request: AdvertiseService,
@@ -403,6 +456,9 @@ class ServiceBridges:
         self._pending.clear()
         self.served.clear()
         self.called.clear()
+        if self._idle_timer is not None:
+            self._idle_timer.cancel()
+            self._idle_timer = None
 
 
 def _describe_served(served: ServedService, existed: bool | None = None) -> dict[str, Any]:

@@ -154,3 +154,27 @@ def test_a_bad_option_is_a_clear_error(processes: Processes) -> None:
     child = processes.bridge("run", "--port", str(pick_free_port()), "--allow", "10.0.0.0/33")
     assert child.popen.wait(60) == 2
     assert "expected an IPv4 or IPv6 address or CIDR block" in child.output()
+
+
+def test_reconnecting_does_not_multiply_the_bridges(processes: Processes) -> None:
+    daemon = start_daemon(processes, "--max-bridges-per-client", "3", "--max-bridges", "5")
+    made = 0
+    for _ in range(2):  # a client that makes its fill, leaves, and comes back
+        with daemon.connect() as client:
+            for _ in range(3):
+                if made == 5:
+                    break
+                client.command("create_tf_lookup", {"parent": "w", "child": f"r{made}"})
+                made += 1
+    with daemon.connect() as client:
+        # Bridges outlive their client: the daemon-wide count holds after reconnects.
+        error = refusal(client, "create_tf_lookup", {"parent": "w", "child": "r5"})
+        assert error.code == ErrorCode.LIMIT_REACHED
+        assert "at most 5 bridges made by clients, all together (--max-bridges" in str(error)
+        # Any client may remove a client's bridge, and that frees the daemon-wide slot.
+        client.command("remove_tf_lookup", {"parent": "w", "child": "r0"})
+        client.command("create_tf_lookup", {"parent": "w", "child": "r5"})
+        listed = [b for b in client.command("list_bridges")["bridges"]
+                  if b.get("kind") == "tf_lookup"]
+        assert len(listed) == 5
+    assert_clean_exit(daemon)

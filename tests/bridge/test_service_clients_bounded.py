@@ -1,0 +1,99 @@
+"""call_service's rclpy clients are bounded: at most N cached, the least recently used
+(idle) one destroyed for a new one, idle ones destroyed after a while, never one that is
+waiting for its answer. Real daemon parts in this process, a real server in another."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+
+import pytest
+
+from bridge.hub import Hub
+from bridge.ros_node import RosNode, RosOptions
+from bridge.services import ServiceBridges
+from protocol import commands as c
+from protocol.naming import DeviceNameRegistry
+from support import Processes, scaled
+
+pytestmark = pytest.mark.ros
+
+
+def _call(service: str, srv_type: str, request: dict, timeout: float = 20.0) -> c.Request:
+    return c.parse_request("call_service", json.dumps(
+        {"service": service, "type": srv_type, "request": request, "timeout": timeout}))
+
+
+async def _until(predicate, what: str, timeout: float = 20.0) -> None:
+    deadline = asyncio.get_running_loop().time() + scaled(timeout)
+    while not predicate():
+        if asyncio.get_running_loop().time() > deadline:
+            raise AssertionError(f"{what}: not within {scaled(timeout)} s")
+        await asyncio.sleep(0.02)
+
+
+def test_service_clients_are_cached_bounded_and_dropped_when_idle(processes: Processes) -> None:
+    server = processes.python("server", "service_server.py", "--namespace", "/sb",
+                              "--slow-seconds", "3")
+    server.wait_for_output("READY", timeout=30)
+
+    async def scenario() -> None:
+        ros = RosNode(RosOptions(node_name=f"bounds_{os.getpid()}"))
+        ros.start()
+        hub = Hub(asyncio.get_running_loop())
+        services = ServiceBridges(ros, hub, DeviceNameRegistry(), max_service_clients=2,
+                                  idle_client_s=scaled(1.5))
+        try:
+            await services.call_service(_call("/sb/trigger", "std_srvs/srv/Trigger", {}))
+            await services.call_service(_call("/sb/set_enabled", "std_srvs/srv/SetBool",
+                                              {"data": True}))
+            assert len(services.called) == 2 and len(list(ros.node.clients)) == 2
+            # A third service: the least recently used idle client makes room.
+            slow = asyncio.ensure_future(services.call_service(
+                _call("/sb/slow", "std_srvs/srv/Trigger", {})))
+            await _until(lambda: ("/sb/slow", "std_srvs/srv/Trigger") in services.called,
+                         "the slow call's client")
+            assert list(services.called) == [("/sb/set_enabled", "std_srvs/srv/SetBool"),
+                                             ("/sb/slow", "std_srvs/srv/Trigger")]
+            await _until(lambda: len(list(ros.node.clients)) == 2, "the evicted client destroyed")
+            # While the slow call waits for its answer its client is never the one evicted.
+            await services.call_service(_call("/sb/trigger", "std_srvs/srv/Trigger", {}))
+            assert list(services.called) == [("/sb/slow", "std_srvs/srv/Trigger"),
+                                             ("/sb/trigger", "std_srvs/srv/Trigger")]
+            response = await slow
+            assert response["response"]["success"] is True
+            # Unused for longer than idle_client_s: every client is destroyed.
+            await _until(lambda: not services.called and not list(ros.node.clients),
+                         "idle clients dropped", timeout=30)
+            assert [d for d in services.describe() if d["kind"] == "service_client"] == []
+        finally:
+            services.close()
+            ros.stop()
+
+    asyncio.run(scenario())
+
+
+def test_with_every_client_busy_a_new_service_is_refused(processes: Processes) -> None:
+    server = processes.python("server", "service_server.py", "--namespace", "/sb2",
+                              "--slow-seconds", "3")
+    server.wait_for_output("READY", timeout=30)
+
+    async def scenario() -> None:
+        ros = RosNode(RosOptions(node_name=f"busy_{os.getpid()}"))
+        ros.start()
+        hub = Hub(asyncio.get_running_loop())
+        services = ServiceBridges(ros, hub, DeviceNameRegistry(), max_service_clients=1)
+        try:
+            slow = asyncio.ensure_future(services.call_service(
+                _call("/sb2/slow", "std_srvs/srv/Trigger", {})))
+            await _until(lambda: len(services.called) == 1, "the slow call's client")
+            with pytest.raises(c.LimitReachedError, match="at most 1 services called at once"):
+                await services.call_service(_call("/sb2/trigger", "std_srvs/srv/Trigger", {}))
+            assert (await slow)["response"]["success"] is True
+            assert len(list(ros.node.clients)) == 1
+        finally:
+            services.close()
+            ros.stop()
+
+    asyncio.run(scenario())
