@@ -5,6 +5,7 @@ waiting for its answer. Real daemon parts in this process, a real server in anot
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import os
 
@@ -25,6 +26,20 @@ def _call(service: str, srv_type: str, request: dict, timeout: float = 20.0) -> 
         {"service": service, "type": srv_type, "request": request, "timeout": timeout}))
 
 
+@contextlib.asynccontextmanager
+async def _services(name: str, **bounds: float):
+    """A real RosNode, hub and ServiceBridges in this process, stopped on exit."""
+    ros = RosNode(RosOptions(node_name=f"{name}_{os.getpid()}"))
+    ros.start()
+    services = ServiceBridges(ros, Hub(asyncio.get_running_loop()), DeviceNameRegistry(),
+                              **bounds)  # type: ignore[arg-type]
+    try:
+        yield ros, services
+    finally:
+        services.close()
+        ros.stop()
+
+
 async def _until(predicate, what: str, timeout: float = 20.0) -> None:
     deadline = asyncio.get_running_loop().time() + scaled(timeout)
     while not predicate():
@@ -39,12 +54,8 @@ def test_service_clients_are_cached_bounded_and_dropped_when_idle(processes: Pro
     server.wait_for_output("READY", timeout=30)
 
     async def scenario() -> None:
-        ros = RosNode(RosOptions(node_name=f"bounds_{os.getpid()}"))
-        ros.start()
-        hub = Hub(asyncio.get_running_loop())
-        services = ServiceBridges(ros, hub, DeviceNameRegistry(), max_service_clients=2,
-                                  idle_client_s=scaled(1.5))
-        try:
+        async with _services("bounds", max_service_clients=2,
+                             idle_client_s=scaled(1.5)) as (ros, services):
             await services.call_service(_call("/sb/trigger", "std_srvs/srv/Trigger", {}))
             await services.call_service(_call("/sb/set_enabled", "std_srvs/srv/SetBool",
                                               {"data": True}))
@@ -67,9 +78,6 @@ def test_service_clients_are_cached_bounded_and_dropped_when_idle(processes: Pro
             await _until(lambda: not services.called and not list(ros.node.clients),
                          "idle clients dropped", timeout=30)
             assert [d for d in services.describe() if d["kind"] == "service_client"] == []
-        finally:
-            services.close()
-            ros.stop()
 
     asyncio.run(scenario())
 
@@ -80,11 +88,7 @@ def test_with_every_client_busy_a_new_service_is_refused(processes: Processes) -
     server.wait_for_output("READY", timeout=30)
 
     async def scenario() -> None:
-        ros = RosNode(RosOptions(node_name=f"busy_{os.getpid()}"))
-        ros.start()
-        hub = Hub(asyncio.get_running_loop())
-        services = ServiceBridges(ros, hub, DeviceNameRegistry(), max_service_clients=1)
-        try:
+        async with _services("busy", max_service_clients=1) as (ros, services):
             slow = asyncio.ensure_future(services.call_service(
                 _call("/sb2/slow", "std_srvs/srv/Trigger", {})))
             await _until(lambda: len(services.called) == 1, "the slow call's client")
@@ -92,8 +96,5 @@ def test_with_every_client_busy_a_new_service_is_refused(processes: Processes) -
                 await services.call_service(_call("/sb2/trigger", "std_srvs/srv/Trigger", {}))
             assert (await slow)["response"]["success"] is True
             assert len(list(ros.node.clients)) == 1
-        finally:
-            services.close()
-            ros.stop()
 
     asyncio.run(scenario())

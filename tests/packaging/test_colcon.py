@@ -14,9 +14,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
+from installed_daemon import assert_serves_hello_and_a_pose
 from support import REPO, Processes, pick_free_port
 
 pytestmark = pytest.mark.ros
@@ -70,20 +70,4 @@ def test_ros2_run_bridge_answers_hello_and_bridges_a_topic(workspace: Path,
             f"print(get_package_prefix('{PACKAGE}'))\")")
     daemon = processes.start("colcon-bridge", _sourced(
         workspace, f"exec {find}/lib/{PACKAGE}/bridge --port {port}"), cwd=workspace)
-    daemon.wait_for_output("listening on", timeout=60)
-    publisher = processes.python("pose", "pose_publisher.py", "/colcon_pose", "0.5", "0",
-                                 "0", "0", "0", "0", "1")
-    publisher.wait_for_output("READY", timeout=30)
-    from protocol.messages import Transform
-    from slicer_client.connection import Connection
-
-    with Connection("127.0.0.1", port) as connection:
-        hello = connection.command("hello", timeout=30)
-        assert hello["node"] == "/slicer_bridge"
-        reply = connection.command("create_subscriber",
-                                   {"topic": "/colcon_pose", "type": "PoseStamped"}, timeout=30)
-        pose = connection.wait_for(reply["device"], timeout=30)
-        assert isinstance(pose.body, Transform)
-        assert np.asarray(pose.body.matrix)[:3, 3] == pytest.approx([500.0, 0.0, 0.0])
-    assert daemon.stop() == 0, daemon.output()[-3000:]
-    assert "Traceback" not in daemon.output()
+    assert_serves_hello_and_a_pose(daemon, port, processes, "/colcon_pose")

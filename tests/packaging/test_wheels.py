@@ -18,9 +18,9 @@ import sys
 import venv
 from pathlib import Path
 
-import numpy as np
 import pytest
 
+from installed_daemon import assert_serves_hello_and_a_pose
 from support import REPO, Processes, assert_clean_exit, pick_free_port, start_daemon
 
 pytestmark = pytest.mark.ros
@@ -99,24 +99,7 @@ def test_the_daemon_wheel_reports_what_it_lacks_then_builds_it_and_bridges(
 
     port = pick_free_port()
     daemon = processes.start("wheel-daemon", [cli, "run", "--port", str(port)])
-    daemon.wait_for_output("listening on", timeout=60)
-    publisher = processes.python("pose", "pose_publisher.py", "/wheel_pose", "0.1", "0.2",
-                                 "0.3", "0", "0", "0", "1")
-    publisher.wait_for_output("READY", timeout=30)
-    from protocol.messages import Transform
-    from slicer_client.connection import Connection
-
-    with Connection("127.0.0.1", port) as connection:
-        hello = connection.command("hello", timeout=30)
-        assert hello["schema"] == 1 and "create_subscriber" in hello["ops"]
-        reply = connection.command("create_subscriber",
-                                   {"topic": "/wheel_pose", "type": "PoseStamped"}, timeout=30)
-        pose = connection.wait_for(reply["device"], timeout=30)
-        assert isinstance(pose.body, Transform)
-        # metres in ROS, millimetres on the wire
-        assert np.asarray(pose.body.matrix)[:3, 3] == pytest.approx([100.0, 200.0, 300.0])
-    assert daemon.stop() == 0, daemon.output()[-3000:]
-    assert "Traceback" not in daemon.output()
+    assert_serves_hello_and_a_pose(daemon, port, processes, "/wheel_pose")
 
 
 def test_the_client_wheel_installs_with_numpy_alone_into_python_3_9(
