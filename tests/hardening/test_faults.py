@@ -80,12 +80,13 @@ def test_hostile_ros_messages_are_logged_rate_limited_and_serving_goes_on(
         tf = processes.python("tf", TF_PEER, "100", "--prefix", "hb_", "--bad",
                               "--count", "1000")
         bad = processes.python("bad", BAD_PEER, "/bad_", "--rounds", "20")
-        bad.wait_for_output("DONE", timeout=60)
-        tf.wait_for_output("SENT 1000", timeout=60)
-        # Good data keeps flowing next to the bad.
+        # Good data keeps flowing next to the bad: judged while the peers still send (a
+        # daemon that keeps up has nothing newer once the tf peer has stopped).
         first = client.wait_for(lookup, timeout=10)
         wait_until(lambda: client.latest(lookup).timestamp != first.timestamp, timeout=10,
                    what="a newer lookup value")
+        bad.wait_for_output("DONE", timeout=60)
+        tf.wait_for_output("SENT 1000", timeout=60)
         assert client.command("hello")["ops"]
         assert not client.closed
     log = daemon.child.output()
