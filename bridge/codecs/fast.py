@@ -12,6 +12,7 @@ and the caller converts that message the ordinary way, which says what is wrong 
 from __future__ import annotations
 
 import struct
+from typing import Optional
 from bridge.codecs.base import TypeCodec
 from bridge.codecs.cdr import RAW_POSE_READERS, CdrError
 from protocol.conversions import (
@@ -41,6 +42,14 @@ def has_fast_path(ros_type: str) -> bool:
     return ros_type in RAW_POSE_READERS
 
 
+def pack_transform(values: tuple[float, ...]) -> Optional[bytes]:
+    """A TRANSFORM's content from its 12 wire-order numbers; None if one is beyond float32."""
+    try:
+        return _TWELVE.pack(*values)
+    except OverflowError:
+        return None
+
+
 def transform_body(values: tuple[float, ...]) -> Transform:
     """The `Transform` body of 12 wire-order numbers (for a `TemplateFrame`'s message)."""
     return Transform(matrix=igtl12_to_matrix(values))
@@ -65,10 +74,9 @@ class RawPoseStream:
         values = pose_to_igtl12(tx, ty, tz, x, y, z, w)
         if values is None:
             raise NotFast("a NaN, an infinity or a zero quaternion")
-        try:
-            content = _TWELVE.pack(*values)
-        except OverflowError:
-            raise NotFast("a number beyond float32") from None
+        content = pack_transform(values)
+        if content is None:
+            raise NotFast("a number beyond float32")
         template = self._templates.get((frame, child))
         if template is None:
             template = self._template_for(data, frame, child)

@@ -428,3 +428,23 @@ def test_a_subscriber_callback_running_when_its_bridge_closes_does_not_bring_it_
     finally:
         ros.stop()
         served.close()
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(1, 2**62), st.tuples(finite, finite, finite), st.tuples(unit, unit, unit, unit))
+def test_a_tf_lookups_template_frame_is_the_bytes_of_the_ordinary_path(stamp_ns, t, q) -> None:
+    from bridge.tf.buffer import StampedTransform
+    from bridge.tf.capability import _Lookup, _igtl_timestamp
+    from protocol.messages import Transform
+    from protocol.naming import UNITS_MM, NameKey, metadata_for
+
+    q = _quaternion(q)
+    result = StampedTransform("world", "tool", stamp_ns, t, q)
+    metadata = metadata_for(NameKey.tf_lookup("world", "tool"), frame="world", units=UNITS_MM)
+    lookup = _Lookup(("world", "tool"), "tf:world>tool", metadata, ("world", "tool"), None)
+    frame = lookup.frame_of(result)
+    assert frame is not None
+    ordinary = Message(device_name="tf:world>tool", body=Transform(matrix=result.matrix_mm()),
+                       timestamp=_igtl_timestamp(stamp_ns), metadata=metadata)
+    for version in (1, 2):
+        assert frame.encoded(version) == encode(ordinary, header_version=version)

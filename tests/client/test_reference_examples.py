@@ -128,7 +128,10 @@ def test_read_parameters_of_an_rclpy_node(daemon: RunningDaemon,
         for name in ("flag", "count", "ratio", "label", "flags", "counts", "ratios",
                      "labels"):
             assert param.AddParameter(name)
-        assert param.IsParameterSet('count')
+        # As in the reference, values arrive from the node (at once when the daemon has
+        # discovered it already, else when it does).
+        wait_until(lambda: all(param.IsParameterSet(n) for n in ("flag", "count", "labels")),
+                   timeout=30, what="the tracked parameters")
         assert param.GetParameterType('count') == 'integer'
         assert param.GetParameterAsBool('flag') is True
         assert param.GetParameterAsInteger('count') == 42
