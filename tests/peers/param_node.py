@@ -50,13 +50,13 @@ def main() -> None:
             print("CHANGED " + json.dumps(plain(parameter)), flush=True)
 
     node.add_post_set_parameters_callback(changed)
-    if args.busy_at_start > 0:
-        def busy() -> None:
-            timer.cancel()
-            time.sleep(args.busy_at_start)
-            print("NOT BUSY", flush=True)
-        timer = node.create_timer(0.001, busy)
     print("READY", flush=True)
+    if args.busy_at_start > 0:
+        # Not spinning at all: discovery runs in DDS's own threads, so the node is seen, but
+        # no request is answered until this is over. (A timer callback could lose the race
+        # against a request already queued when spinning starts.)
+        time.sleep(args.busy_at_start)
+        print("NOT BUSY", flush=True)
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
