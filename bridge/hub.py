@@ -281,6 +281,37 @@ class Hub:
                     return
         self._post(device, frame, large, channel)
 
+    def post_frames(self, frames: list[tuple[str, Frame]]) -> None:
+        """Thread-safe `stream_frame` of several small values at once (one tf update of
+        many lookups): each client that keeps up gets them in one socket write from this
+        thread; otherwise they go through the loop, in order, as `post_frame`'s do. The
+        caller keeps removed devices out (the tf capability's delivery lock)."""
+        if not frames:
+            return
+        if self._direct_writes and not any(d in self._min_interval for d, _ in frames):
+            with self._lock:
+                if not (self._wake_pending or self._draining):
+                    self._write_direct_many(frames)
+                    return
+        for device, frame in frames:
+            self._post(device, frame, False, None)
+
+    def _write_direct_many(self, frames: list[tuple[str, Frame]]) -> None:
+        # Under self._lock, with nothing queued for the loop (see _write_direct).
+        for device, frame in frames:
+            self._latest[device] = frame
+        self.streamed += len(frames)
+        self.direct += len(frames)
+        joined: dict[int, bytes] = {}  # header version -> the whole update, encoded once
+        for client in self._client_tuple:
+            version = client.header_version
+            data = joined.get(version)
+            if data is None:
+                data = joined[version] = b"".join(f.encoded(version) for _, f in frames)
+            if not client.write_direct(data):
+                for device, frame in frames:
+                    client.hand_over(device, frame)
+
     def _write_direct(self, device: str, frame: Frame) -> None:
         # Under self._lock, with nothing queued for the loop: this value is the newest.
         self._latest[device] = frame

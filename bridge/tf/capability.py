@@ -1,14 +1,13 @@
 """The daemon's tf2 capability: the buffer fed from /tf and /tf_static, lookups streamed to
 clients when they change, one-shot lookups, and broadcasters publishing clients' transforms.
 
-    ROS executor thread                               asyncio loop thread
-    ───────────────────                               ───────────────────
-    /tf, /tf_static ─► convert the whole TFMessage
-                       buffer.set_transforms(batch)
-                       changed frames ─► pending set ─(one call_soon per burst)─► _drain:
-                                                         registry.updates(changed) ─► hub.stream
-                                                         wake one-shot lookups that wait
-                                                         arm the rate-cap timer (registry.due)
+    ROS streams thread (EventsExecutor)            asyncio loop thread
+    ───────────────────────────────────            ───────────────────
+    /tf, /tf_static ─► read the TFMessage raw                create/remove lookups
+                       buffer.set_transforms(batch)          timer: registry.due (rate
+                       registry.updates(changed frames)         caps, new lookups)
+                       hub.post_frames: one write per        wake one-shot lookups
+                       client for the whole update           that wait (when any do)
 
 Why this shape (and not the reference's): SlicerROS2 runs every lookup on a 50 Hz timer
 whether anything moved or not, so a client sees a change up to 20 ms late and idle lookups
@@ -16,9 +15,12 @@ cost CPU forever. Here a lookup is evaluated only when a frame of its chain chan
 (`LookupRegistry`), and sent only when its result differs from the last one sent; a lookup
 with ``rate_hz`` gets at most that many messages a second, the newest value winning.
 
-Threads: the ROS callback does the least it can (convert, store, merge the changed frames
-into a set under a lock) and schedules the loop at most once until the loop has taken the
-set, so a burst of /tf messages costs one loop wake-up. Everything else runs on the loop.
+Threads: a /tf batch is evaluated and written where it arrives, as the pose hot path is
+(`Hub.post_frames`): a 7-link robot at 1 kHz would otherwise cost a loop wake-up and a GIL
+hand-off per message. The loop is woken only when it has something to do: a rate-capped
+result to release earlier than its timer, or a one-shot lookup waiting for data. One
+delivery lock orders evaluation and writing between the two threads, so a newer result is
+never overtaken by an older one, and a removed lookup's device never comes back.
 
 Frames: a client's frame ids are used as given unless ``frame_prefix`` is set (the
 ``tf_prefix`` idea of ROS 1, for a daemon started with ``--namespace`` next to a namespaced
@@ -37,7 +39,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Awaitable, Iterable, Optional, Union
+from typing import Any, Awaitable, Optional, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -52,7 +54,7 @@ from bridge.codecs.fast import pack_transform, transform_body
 from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
 from bridge.logging_limits import RateLimitedLog
-from bridge.outbox import TemplateFrame
+from bridge.outbox import Frame, TemplateFrame
 from bridge.ros_node import RosNode
 from bridge.security import NameRules
 from bridge.tf.buffer import StampedTransform, TfBuffer
@@ -254,10 +256,11 @@ class TfBridges:
         self._by_device: dict[str, _Broadcaster] = {}
         self._tf_topic = ros.resolve_topic(tf_topic)
         self._tf_static_topic = ros.resolve_topic(tf_static_topic)
-        # Hand-off from the ROS thread: changed frames merged until the loop takes them.
+        # Evaluation + writing of lookups, from either thread (see the module docstring).
+        self._deliver_lock = threading.Lock()
+        # Streams thread -> loop: at most one call scheduled at a time.
         self._lock = threading.Lock()
-        self._pending_frames: set[str] = set()
-        self._drain_scheduled = False
+        self._loop_call_scheduled = False
         self._refusals = RateLimitedLog(log)
         # Loop-thread state.
         self._timer: Optional[asyncio.TimerHandle] = None
@@ -265,7 +268,7 @@ class TfBridges:
         self._changed_event: Optional[asyncio.Event] = None
         self._closed = False
         self.received = {"tf": 0, "tf_static": 0}
-        self.drains = 0
+        self.updates = 0  # tf batches that changed a frame some lookup follows or waits for
         # Publishers are made on first use, so a daemon that never broadcasts does not show
         # up as a /tf publisher in the ROS graph.
         self._tf_publisher: Any = None
@@ -291,38 +294,43 @@ class TfBridges:
         self._store(tf_cdr_to_transforms(data), static=True)
 
     def _store(self, transforms: list[StampedTransform], *, static: bool) -> None:
-        """Store one batch (any thread) and hand its changed frames to the loop."""
+        """Store one batch and deliver the lookups it changed (any thread)."""
         try:
             changed = self.buffer.set_transforms(transforms, static=static)
         except RejectedTransformsError as error:
             self._warn_rejected(error, static)
             changed = error.changed
-        if changed:
-            self._note_changed(changed)
+        if not changed:
+            return
+        with self._deliver_lock:
+            if self._closed:
+                return
+            self._post(self.registry.updates(changed, time.monotonic_ns()))
+            due = self.registry.next_due_ns()
+        armed = self._timer_due_ns
+        if self._changed_event is not None or (due is not None and (armed is None
+                                                                    or due < armed)):
+            self._call_loop()
 
     def _warn_rejected(self, error: RejectedTransformsError, static: bool) -> None:
         topic = self._tf_static_topic if static else self._tf_topic
         self._refusals.warning(topic, None, "refused %d transform(s) from %s: %s",
                                len(error.rejected), topic, error, count=len(error.rejected))
 
-    def _note_changed(self, frames: Iterable[str]) -> None:
+    def _call_loop(self) -> None:
         with self._lock:
-            self._pending_frames.update(frames)
-            if self._drain_scheduled:
+            if self._loop_call_scheduled:
                 return
-            self._drain_scheduled = True
-        self._hub.call_soon(self._drain)
+            self._loop_call_scheduled = True
+        self._hub.call_soon(self._on_change)
 
     # ------------------------------------------------------------------ loop thread
 
-    def _drain(self) -> None:
+    def _on_change(self) -> None:
         with self._lock:
-            frames, self._pending_frames = self._pending_frames, set()
-            self._drain_scheduled = False
+            self._loop_call_scheduled = False
         if self._closed:
             return
-        self.drains += 1
-        self._deliver(self.registry.updates(frames, time.monotonic_ns()))
         event, self._changed_event = self._changed_event, None
         if event is not None:
             event.set()  # one-shot lookups that wait for data try again
@@ -333,7 +341,10 @@ class TfBridges:
         self._timer_due_ns = None
         if self._closed:
             return
-        self._deliver(self.registry.due(time.monotonic_ns()))
+        with self._deliver_lock:
+            if self._closed:
+                return
+            self._post(self.registry.due(time.monotonic_ns()))
         self._arm()
 
     def _arm(self) -> None:
@@ -350,11 +361,18 @@ class TfBridges:
         self._timer = loop.call_later(delay, self._on_timer)
         self._timer_due_ns = due
 
-    def _deliver(self, results: list[tuple[LookupKey, LookupResult]]) -> None:
-        with self._hub.batch():  # one socket write per client for the whole update
-            self._deliver_each(results)
+    # ------------------------------------------------------------------ delivery (locked)
 
-    def _deliver_each(self, results: list[tuple[LookupKey, LookupResult]]) -> None:
+    def _post(self, results: list[tuple[LookupKey, LookupResult]]) -> None:
+        """Results -> frames -> every client, one write each (under the delivery lock)."""
+        frames = self._frames_of(results)
+        if frames:
+            self.updates += 1
+            self._hub.post_frames(frames)
+
+    def _frames_of(self, results: list[tuple[LookupKey, LookupResult]],
+                   ) -> list[tuple[str, Frame]]:
+        frames: list[tuple[str, Frame]] = []
         for key, result in results:
             lookup = self._by_key.get(key)
             if lookup is None:
@@ -363,15 +381,17 @@ class TfBridges:
             if isinstance(result, StampedTransform):
                 frame = lookup.frame_of(result)
                 if frame is not None:
-                    self._hub.stream_frame(lookup.device, frame)
+                    frames.append((lookup.device, frame))
                     continue
                 body: Union[Transform, Status] = Transform(matrix=result.matrix_mm())
                 timestamp = _igtl_timestamp(result.stamp_ns)
             else:
                 body = status_for_error(result)
                 timestamp = igtl_timestamp_now()
-            self._hub.stream(Message(device_name=lookup.device, body=body,
-                                     timestamp=timestamp, metadata=lookup.metadata))
+            frames.append((lookup.device, Frame(Message(
+                device_name=lookup.device, body=body, timestamp=timestamp,
+                metadata=lookup.metadata))))
+        return frames
 
     # ------------------------------------------------------------------ frames
 
@@ -399,16 +419,17 @@ class TfBridges:
         the caller owns the device name (and forgets it). Frames are taken as given (no
         ``frame_prefix``). Returns the handle for `stop_lookup`."""
         tag = f"device:{device}"  # one registration per device, beside clients' lookups
-        key = self.registry.add(parent, child, rate_hz=rate_hz, tag=tag)
-        stream = _Lookup(key, device, dict(metadata), (parent, child), rate_hz)
-        self._by_key[key] = stream
+        with self._deliver_lock:  # the streams thread must not evaluate it unregistered
+            key = self.registry.add(parent, child, rate_hz=rate_hz, tag=tag)
+            self._by_key[key] = _Lookup(key, device, dict(metadata), (parent, child), rate_hz)
         self._arm()
         return key
 
     def stop_lookup(self, handle: LookupKey) -> None:
         """Stop a `stream_lookup` (its device is the caller's to forget)."""
-        if self._by_key.pop(handle, None) is not None:
-            self.registry.remove(handle)
+        with self._deliver_lock:  # after this, nothing more is written to its device
+            if self._by_key.pop(handle, None) is not None:
+                self.registry.remove(handle)
 
     def create_lookup(self, request: CreateTfLookup) -> dict[str, Any]:
         pair = self._pair(request.parent, request.child)
@@ -421,11 +442,13 @@ class TfBridges:
             return self._describe_lookup(existing, existed=True)
         name_key = NameKey.tf_lookup(*pair)
         device = self._names.register(name_key)
-        key = self.registry.add(pair[0], pair[1], rate_hz=request.rate_hz)
-        lookup = _Lookup(key, device, metadata_for(name_key, frame=pair[0], units=UNITS_MM),
-                         (request.parent, request.child), request.rate_hz)
-        self.lookups[pair] = lookup
-        self._by_key[key] = lookup
+        with self._deliver_lock:  # the streams thread must not evaluate it unregistered
+            key = self.registry.add(pair[0], pair[1], rate_hz=request.rate_hz)
+            lookup = _Lookup(key, device, metadata_for(name_key, frame=pair[0],
+                                                       units=UNITS_MM),
+                             (request.parent, request.child), request.rate_hz)
+            self.lookups[pair] = lookup
+            self._by_key[key] = lookup
         self._arm()  # the first result comes from registry.due, on the next loop turn
         log.info("tf lookup %s -> %s streams as device %r", pair[0], pair[1], device)
         return self._describe_lookup(lookup, existed=False)
@@ -436,8 +459,9 @@ class TfBridges:
         if lookup is None:
             raise CommandFailedError("child", "a lookup created by create_tf_lookup",
                                      f"{pair[0]} -> {pair[1]}", code=ErrorCode.NOT_FOUND)
-        del self._by_key[lookup.key]
-        self.registry.remove(lookup.key)
+        with self._deliver_lock:  # after this, nothing more is written to its device
+            del self._by_key[lookup.key]
+            self.registry.remove(lookup.key)
         self._hub.forget(lookup.device)
         self._names.release(NameKey.tf_lookup(*pair))
         return {"parent": pair[0], "child": pair[1], "device": lookup.device}
@@ -648,7 +672,8 @@ class TfBridges:
         return out
 
     def close(self) -> None:
-        self._closed = True
+        with self._deliver_lock:  # a delivery under way ends before the devices are forgotten
+            self._closed = True
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None

@@ -449,3 +449,80 @@ def test_a_tf_lookups_template_frame_is_the_bytes_of_the_ordinary_path(stamp_ns,
                        timestamp=_igtl_timestamp(stamp_ns), metadata=metadata)
     for version in (1, 2):
         assert frame.encoded(version) == encode(ordinary, header_version=version)
+
+
+# ---------------------------------------------------------------------------- tf updates
+
+
+def test_a_tf_update_reaches_each_client_whole_in_one_write() -> None:
+    """`Hub.post_frames`: the lookups one /tf message changed go to every client that keeps
+    up as one socket write from the posting thread, in order."""
+    served = _Served(direct_writes=True)
+    try:
+        peers = [served.connect() for _ in range(3)]
+        devices = [f"link{i}" for i in range(1, 8)]
+        update = [(d, _numbered(d, i)) for i, d in enumerate(devices, 1)]
+        poster = threading.Thread(target=served.hub.post_frames, args=(update,))
+        poster.start()
+        poster.join()
+        for peer in peers:
+            got = peer.read_until(len(devices))
+            assert [(m.device_name, m.body.text) for m in got] == \
+                [(d, str(i)) for i, d in enumerate(devices, 1)]
+        assert [s._sent_direct for s in served.sessions] == [1, 1, 1]
+        assert served.hub.direct == len(devices)
+    finally:
+        served.close()
+
+
+def test_a_removed_lookup_never_comes_back_while_tf_keeps_arriving() -> None:
+    """tf lookups are evaluated and written on the thread /tf arrives on: removing one on
+    the loop while that thread delivers must leave its device gone for good."""
+    from bridge.ros_node import RosNode, RosOptions
+    from bridge.tf.buffer import StampedTransform
+    from bridge.tf.capability import TfBridges
+    from protocol.commands import CreateTfLookup, RemoveTfLookup
+    from protocol.naming import DeviceNameRegistry
+
+    served = _Served(direct_writes=True)
+    ros = RosNode(RosOptions(node_name="tf_race_test"))
+    stop = threading.Event()
+    try:
+        tf = TfBridges(ros, served.hub, DeviceNameRegistry())
+
+        async def create() -> str:
+            return str(tf.create_lookup(CreateTfLookup(parent="base", child="tool"))["device"])
+
+        device = served.call(create())
+
+        def publish() -> None:  # what the streams thread does with each /tf message
+            n = 0
+            while not stop.is_set():
+                n += 1
+                tf._store([StampedTransform("base", "tool", n, (n * 1e-3, 0.0, 0.0),
+                                            (0.0, 0.0, 0.0, 1.0))], static=False)
+
+        publisher = threading.Thread(target=publish)
+        publisher.start()
+        for _ in range(3000):
+            if device in served.call(_devices(served.hub)):
+                break
+            threading.Event().wait(0.01)
+        assert device in served.call(_devices(served.hub))
+
+        async def remove() -> None:
+            tf.remove_lookup(RemoveTfLookup(parent="base", child="tool"))
+
+        served.call(remove())
+        delivered = tf.updates
+        for _ in range(3):  # more /tf after the removal: delivered nowhere
+            served.call(asyncio.sleep(0.05))
+            assert device not in served.call(_devices(served.hub))
+        stop.set()
+        publisher.join(30)
+        assert tf.updates == delivered
+        tf.close()
+    finally:
+        stop.set()
+        served.close()
+        ros.stop()
