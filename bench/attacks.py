@@ -322,8 +322,9 @@ def main() -> int:
     parser.add_argument("--only", action="append", choices=["slowloris", "half_sent_bodies",
                                                             "hold_and_go", "flood"])
     parser.add_argument("--flood-seconds", type=float, default=10.0)
-    parser.add_argument("--flood-depth", type=int, default=10,
-                        help="the flood subscriber's QoS depth (history kept by ROS)")
+    parser.add_argument("--flood-depth", type=int, default=None,
+                        help="the flood subscriber's QoS depth (history kept by ROS; default: "
+                             "the bridge's, 1 for point clouds)")
     parser.add_argument("--flood-remove", action="store_true",
                         help="remove the flood subscriber after the floods and measure again")
     parser.add_argument("--json", type=Path)
@@ -371,9 +372,9 @@ def main() -> int:
             for round_ in range(1, rounds + 1):
                 if name == "flood" and subscriber is None:
                     subscriber = Connection("127.0.0.1", port, on_message=count_cloud)
+                    qos = {} if args.flood_depth is None else {"depth": args.flood_depth}
                     subscriber.command("create_subscriber", {
-                        "topic": FLOOD_TOPIC, "type": "PointCloud2",
-                        "qos": {"depth": args.flood_depth}})
+                        "topic": FLOOD_TOPIC, "type": "PointCloud2", "qos": qos})
                 before = {**settled(pid), **graph.entities()}
                 peak = Peak(pid)
                 if name == "slowloris":

@@ -13,10 +13,10 @@ from __future__ import annotations
 from collections import OrderedDict, deque
 from typing import Any, Callable, Optional
 
-from protocol.framing import StreamTemplate, encode
+from protocol.framing import Decoder, StreamTemplate, encode
 from protocol.messages import Body, Message
 
-__all__ = ["Frame", "Outbox", "OutboxOverflow", "TemplateFrame"]
+__all__ = ["BulkFrame", "Frame", "Outbox", "OutboxOverflow", "TemplateFrame"]
 
 
 class Frame:
@@ -43,6 +43,40 @@ class Frame:
             data = encode(self.message, header_version=header_version)
             self._encoded[header_version] = data
         return data
+
+
+class BulkFrame(Frame):
+    """A large message (an image, a point cloud) kept, once encoded, as its header-v2
+    bytes alone.
+
+    The hub keeps each device's newest value for clients that connect later: holding the
+    body's arrays beside their encoding would keep a 20 MB cloud twice. v2 bytes carry
+    everything (metadata too), so a v1 peer's bytes or the `Message` (a GET_ query) are
+    made from them again when asked for, which is rare, and not kept."""
+
+    __slots__ = ()
+    _KEPT_VERSION = 2
+
+    @property
+    def message(self) -> Message:
+        if self._message is not None:
+            return self._message
+        data = self._encoded[self._KEPT_VERSION]
+        decoder = Decoder(max_body_size=len(data))
+        decoder.feed(data)
+        message = decoder.next_message()
+        assert message is not None, "a frame's own bytes decode"
+        return message
+
+    def encoded(self, header_version: int) -> bytes:
+        kept = self._encoded.get(self._KEPT_VERSION)
+        if kept is None:
+            kept = encode(self._message, header_version=self._KEPT_VERSION)
+            self._encoded[self._KEPT_VERSION] = kept
+            self._message = None  # type: ignore[assignment]
+        if header_version == self._KEPT_VERSION:
+            return kept
+        return encode(self.message, header_version=header_version)
 
 
 class TemplateFrame(Frame):

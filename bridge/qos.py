@@ -13,7 +13,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from protocol.commands import QoS
 
-__all__ = ["LATCHED_QOS", "TF_QOS", "TF_STATIC_SUBSCRIBER_QOS", "qos_profile", "qos_to_dict"]
+__all__ = ["BULK_DEPTH", "DEFAULT_DEPTH", "LATCHED_QOS", "TF_QOS", "TF_STATIC_SUBSCRIBER_QOS",
+           "default_depth", "qos_profile", "qos_to_dict"]
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE,
                 "best_effort": ReliabilityPolicy.BEST_EFFORT}
@@ -21,8 +22,21 @@ _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE,
                "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
 
 
+# The history a bridge keeps when the client does not say (rclpy's own default).
+DEFAULT_DEPTH = 10
+# Bulk types (images, point clouds): the bridge sends only the newest of those waiting, so
+# a deeper history would only keep stale copies alive (Fast DDS keeps a payload per slot:
+# 10 x a 20 MB cloud is 200 MB).
+BULK_DEPTH = 1
+
+
+def default_depth(bulk: bool) -> int:
+    return BULK_DEPTH if bulk else DEFAULT_DEPTH
+
+
 def qos_profile(qos: QoS) -> QoSProfile:
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=qos.depth,
+    depth = DEFAULT_DEPTH if qos.depth is None else qos.depth
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
                       reliability=_RELIABILITY[qos.reliability],
                       durability=_DURABILITY[qos.durability])
 

@@ -23,8 +23,8 @@ from bridge.dispatch import Handler
 from bridge.hub import LARGE_MESSAGE_BYTES, Hub, Replier, approximate_size
 from bridge.logging_limits import RateLimitedLog
 from bridge.message_guards import MessageGuard
-from bridge.outbox import Frame, TemplateFrame
-from bridge.qos import qos_profile
+from bridge.outbox import BulkFrame, Frame, TemplateFrame
+from bridge.qos import default_depth, qos_profile
 from bridge.ros_node import RosNode
 from bridge.security import SecurityPolicy
 from protocol.commands import (CommandFailedError, CreatePublisher, CreateSubscriber, ErrorCode,
@@ -35,6 +35,10 @@ from protocol.messages import Message, StatusCode
 from protocol.naming import KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
 
 log = logging.getLogger(__name__)
+
+# `get_last_message` answers with the whole message (JSON and YAML): a larger one (a 20 MB
+# point cloud) would be a reply of many MB, and keeping it would hold that much per topic.
+LAST_MESSAGE_MAX_BYTES = 8 * 1024 * 1024
 
 
 
@@ -79,24 +83,25 @@ class SubscriberBridge:
         # The security policy's view of a message (tf frames, parameters): None = drop it.
         self._filter = message_filter
         self.count = 0
-        # (serialized bytes or None, message or None) of the last message, replaced whole.
+        # (serialized bytes or None, message or None) of the last message, replaced whole;
+        # (None, None) with `last_size` set when it was too large to keep.
         self._last: tuple[Optional[bytes], Any] = (None, None)
+        self.last_size = 0
         self._bad = RateLimitedLog(log)  # a stream of bad messages: one line per interval
         self._channel = hub.open_channel(device)
         hub.set_rate_cap(device, max_rate_hz)
         # A filtered stream needs the message itself: only unfiltered poses go raw.
         self._fast = (RawPoseStream(codec, device, metadata)
                       if has_fast_path(codec.ros_type) and message_filter is None else None)
-        if self._fast is not None:
-            self._subscription = ros.stream_node.create_subscription(
-                codec.message_class, topic, self._on_raw, qos_profile(qos), raw=True)
-        else:
-            self._subscription = ros.stream_node.create_subscription(
-                codec.message_class, topic, self._on_message, qos_profile(qos))
+        # Taken serialized whatever the type: the size is known before anything is kept,
+        # and the last message stays as its bytes (deserialized only when asked for).
+        self._subscription = ros.stream_node.create_subscription(
+            codec.message_class, topic, self._on_raw, qos_profile(qos), raw=True)
 
     @property
     def last_message(self) -> Any:
-        """The last message received (None before the first), as an rclpy message."""
+        """The last message received (None before the first, or if it was larger than
+        `LAST_MESSAGE_MAX_BYTES`: see `last_size`), as an rclpy message."""
         last = self._last
         data, msg = last
         if msg is None and data is not None:
@@ -105,29 +110,39 @@ class SubscriberBridge:
                 self._last = (data, msg)
         return msg
 
+    def _keep(self, data: bytes, msg: Any = None) -> None:
+        self.last_size = len(data)
+        if len(data) > LAST_MESSAGE_MAX_BYTES:
+            self._last = (None, None)
+        elif msg is not None:
+            self._last = (None, msg)
+        else:
+            self._last = (data, None)
+
     def _on_raw(self, data: bytes) -> None:  # ROS executor thread: convert, hand off
         if self._channel.closed:
             return
-        self.count += 1
-        self._last = (data, None)
-        assert self._fast is not None
-        try:
-            template, content, timestamp, values = self._fast.convert(data)
-        except NotFast:
-            self._convert(deserialize_message(data, self.codec.message_class))
+        fast = self._fast
+        if fast is not None:
+            self.count += 1
+            self._keep(data)
+            try:
+                template, content, timestamp, values = fast.convert(data)
+            except NotFast:
+                self._convert(deserialize_message(data, self.codec.message_class))
+                return
+            self._hub.post_frame(self._channel, TemplateFrame(template, content, timestamp,
+                                                              values, transform_body))
             return
-        self._hub.post_frame(self._channel,
-                             TemplateFrame(template, content, timestamp, values, transform_body))
-
-    def _on_message(self, msg: Any) -> None:  # ROS executor thread: convert, hand off
-        if self._channel.closed:
-            return
+        msg = deserialize_message(data, self.codec.message_class)
         if self._filter is not None:
             msg = self._filter(msg)
             if msg is None:
                 return
+            self._keep(data, msg)  # what the policy lets through, not the bytes
+        else:
+            self._keep(data)
         self.count += 1
-        self._last = (None, msg)
         self._convert(msg)
 
     def _convert(self, msg: Any) -> None:
@@ -143,8 +158,9 @@ class SubscriberBridge:
         metadata.update(encoded.metadata)
         message = Message(device_name=self.device, body=encoded.body, timestamp=stamp,
                           metadata=metadata)
-        self._hub.post_frame(self._channel, Frame(message),
-                             large=approximate_size(message) > LARGE_MESSAGE_BYTES)
+        large = approximate_size(message) > LARGE_MESSAGE_BYTES
+        self._hub.post_frame(self._channel, BulkFrame(message) if large else Frame(message),
+                             large=large)
 
     def info(self) -> TopicInfo:
         return TopicInfo("subscriber", self.topic, self.codec.ros_type, self.device,
@@ -284,7 +300,8 @@ class TopicBridges:
         key = NameKey.subscriber(topic)
         device = self._names.register(key)
         bridge = SubscriberBridge(
-            self._ros, self._hub, topic=topic, codec=codec, qos=request.qos,
+            self._ros, self._hub, topic=topic, codec=codec,
+            qos=request.qos.with_default_depth(default_depth(codec.bulk)),
             device=device, metadata=metadata_for(key, ros_type=ros_type),
             max_rate_hz=request.rate_hz, message_filter=self._filter_for(topic, ros_type))
         self.subscribers[topic] = bridge
@@ -314,7 +331,8 @@ class TopicBridges:
         self._check_graph(topic, ros_type)
         device = self._names.register(NameKey.publisher(topic))
         bridge = PublisherBridge(self._ros, self._hub, topic=topic, codec=codec,
-                                 qos=request.qos, device=device,
+                                 qos=request.qos.with_default_depth(default_depth(codec.bulk)),
+                                 device=device,
                                  guard=self._policy.message_guard(topic, ros_type))
         self.publishers[topic] = bridge
         log.info("publishing %s (%s); clients send to device %r", topic, ros_type, device)
@@ -350,6 +368,11 @@ class TopicBridges:
             raise CommandFailedError("topic", "a topic with a subscriber bridge", topic,
                                      code=ErrorCode.NOT_FOUND)
         message = bridge.last_message
+        if message is None and bridge.count:
+            raise CommandFailedError(
+                "topic", f"a last message of at most {LAST_MESSAGE_MAX_BYTES} bytes (larger "
+                "ones stream to the subscriber's device but are not kept)",
+                f"{bridge.last_size} bytes on {topic}", code=ErrorCode.NOT_SUPPORTED)
         result: dict[str, Any] = {"topic": topic, "type": bridge.codec.ros_type,
                                   "count": bridge.count, "received": message is not None}
         if message is not None:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import base64
 import binascii
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -146,6 +146,8 @@ def _from_pixels(pixels: np.ndarray, wanted: str | None, field: str) -> Any:
 @dataclass(frozen=True)
 class ImageCodec(TypeCodec):
     """sensor_msgs/Image <-> IMAGE (one slice, 1 mm pixels, upright in Slicer's Red view)."""
+
+    bulk: ClassVar[bool] = True
 
     def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         pixels, _ = image_pixels(msg)

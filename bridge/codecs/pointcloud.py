@@ -20,7 +20,7 @@ Packed colour: the 4 bytes of the float32 field read as uint32 0xAARRGGBB (PCL's
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -354,6 +354,8 @@ class PointCloud2Codec(TypeCodec):
     POINT is accepted on the way back. Value: ``{"points": [[x, y, z] mm...],
     "rgba": [[r, g, b, a] 0..255...]}`` (rgba only if coloured)."""
 
+    bulk: ClassVar[bool] = True
+
     def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         cloud = cloud2_arrays(msg)
         return arrays_to_polydata(cloud), _meta(cloud)
@@ -372,6 +374,8 @@ class PointCloud2Codec(TypeCodec):
 class PointCloudCodec(TypeCodec):
     """sensor_msgs/PointCloud (v1) <-> POLYDATA, as PointCloud2; colour in a packed ``rgb``
     channel, other channels as SCALAR attributes."""
+
+    bulk: ClassVar[bool] = True
 
     def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         cloud = cloud1_arrays(msg)

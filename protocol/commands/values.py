@@ -3,9 +3,10 @@ description sources and 4x4 matrices in mm."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, cast
+from typing import Any, Optional, cast
 
 from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import (MAX_TEXT, MISSING, PARAM_NAME, ROS_NAME, ROS_NAME_DESC,
@@ -25,20 +26,28 @@ _DURABILITY = ("volatile", "transient_local")
 
 @dataclass(frozen=True)
 class QoS:
-    """ROS quality of service of a subscriber or publisher (KEEP_LAST history)."""
+    """ROS quality of service of a subscriber or publisher (KEEP_LAST history).
 
-    depth: int = 10
+    ``depth`` None: the bridge's default for the message type (`DEFAULT_DEPTH`, or 1 for
+    bulk types such as images and point clouds, whose older copies nobody gets)."""
+
+    depth: Optional[int] = None
     reliability: str = "reliable"  # reliable | best_effort
     durability: str = "volatile"  # volatile | transient_local
 
     def to_dict(self) -> dict[str, Any]:
-        return {"depth": self.depth, "reliability": self.reliability,
-                "durability": self.durability}
+        out: dict[str, Any] = {} if self.depth is None else {"depth": self.depth}
+        out.update(reliability=self.reliability, durability=self.durability)
+        return out
+
+    def with_default_depth(self, depth: int) -> QoS:
+        """This QoS with ``depth`` filled in if the client left it to the bridge."""
+        return self if self.depth is not None else dataclasses.replace(self, depth=depth)
 
     @classmethod
     def from_args(cls, a: Args) -> QoS:
         qos = cls(
-            depth=cast(int, a.opt_int("depth", 10, low=1, high=10_000)),
+            depth=a.opt_int("depth", None, low=1, high=10_000),
             reliability=a.choice("reliability", _RELIABILITY, "reliable"),
             durability=a.choice("durability", _DURABILITY, "volatile"),
         )

@@ -409,7 +409,8 @@ def test_a_subscriber_callback_running_when_its_bridge_closes_does_not_bring_it_
         bridge = SubscriberBridge(ros, served.hub, topic="/hot_path_race",
                                   codec=codec,  # type: ignore[arg-type]
                                   qos=QoS(), device="raced", metadata={})
-        callback = threading.Thread(target=bridge._on_message, args=(RosString(data="late"),))
+        callback = threading.Thread(target=bridge._on_raw,
+                                    args=(serialize_message(RosString(data="late")),))
         callback.start()
         assert codec.entered.wait(30)
 

@@ -131,3 +131,36 @@ def test_a_session_the_daemon_closes_is_freed_at_once(no_gc: None, ending: str) 
             assert "frame deadline" in replies[-1].body.text
         assert server.budget.in_use == 0
     run_with_server(scenario, limits=limits)
+
+
+# ---------------------------------------------------------------------------- bulk frames
+
+
+def _cloud() -> Message:
+    import numpy as np
+
+    from protocol.messages import PolyData
+
+    rng = np.random.default_rng(7)
+    points = rng.uniform(-500, 500, (200_000, 3)).astype(np.float32)
+    vertices = np.array([1, 0, 1, 1, 1, 2], dtype=np.uint32)
+    return Message(device_name="cloud", body=PolyData(points=points, vertices=vertices),
+                   timestamp=123 << 32, metadata={"ros2.type": "sensor_msgs/msg/PointCloud2"})
+
+
+@pytest.mark.parametrize("first", [1, 2])
+def test_a_bulk_frame_keeps_one_encoding_and_gives_the_same_bytes(first: int) -> None:
+    """The hub's newest value of an image or a cloud is held once (its bytes), not as body
+    arrays and bytes; other versions and the message come back from those bytes."""
+    from bridge.outbox import BulkFrame, Frame
+
+    message = _cloud()
+    bulk, plain = BulkFrame(message), Frame(message)
+    other = 3 - first
+    assert bulk.encoded(first) == plain.encoded(first)
+    assert bulk._message is None and list(bulk._encoded) == [2]  # v2 keeps the metadata
+    assert bulk.encoded(other) == plain.encoded(other)
+    assert list(bulk._encoded) == [2]  # v1 bytes are made again when asked for, not kept
+    again = bulk.message
+    assert encode(again, header_version=2) == plain.encoded(2)
+    assert again.device_name == "cloud" and again.timestamp == message.timestamp

@@ -170,7 +170,11 @@ def test_to_json_parse_round_trip(cls: type, data: st.DataObject) -> None:
 
 def test_create_subscriber_defaults_and_type_resolution() -> None:
     req = c.CreateSubscriber.from_json('{"topic": "/tool", "type": "PoseStamped"}')
-    assert req == c.CreateSubscriber("/tool", "PoseStamped", c.QoS(10, "reliable", "volatile"))
+    # No depth given: the bridge chooses by type (10, or 1 for images and point clouds).
+    assert req == c.CreateSubscriber("/tool", "PoseStamped",
+                                     c.QoS(None, "reliable", "volatile"))
+    assert req.qos.with_default_depth(10).depth == 10
+    assert c.QoS(3).with_default_depth(10).depth == 3
     assert req.ros_type == "geometry_msgs/msg/PoseStamped"
     assert req.rate_hz is None
 
