@@ -359,3 +359,29 @@ def test_nan_transform_from_a_client_is_refused(daemon: RunningDaemon, client: C
     listed = {b["topic"]: b for b in client.command("list_bridges")["bridges"]
               if b["kind"] in ("subscriber", "publisher")}
     assert listed[topic]["messages"] == 0
+
+
+def test_bulk_types_keep_one_message_and_a_large_last_message_is_not_kept(
+        daemon: RunningDaemon, client: Connection, processes: Processes) -> None:
+    """Images and point clouds get a history of 1 unless the client says otherwise (the
+    bridge sends only the newest anyway), and a message above 8 MiB streams but is not kept
+    for get_last_message, which says so."""
+    string_topic = fresh_topic("small")
+    small = client.command("create_subscriber", {"topic": string_topic, "type": "String"})
+    assert small["qos"]["depth"] == 10
+    chosen = client.command("create_subscriber", {"topic": fresh_topic("deep"), "type": "Image",
+                                                  "qos": {"depth": 4}})
+    assert chosen["qos"]["depth"] == 4
+    topic = fresh_topic("large_image")
+    created = client.command("create_subscriber", {"topic": topic, "type": "Image"})
+    assert created["qos"]["depth"] == 1
+    # 2000 x 1600 rgb8: 9.6 MB, above the 8 MiB kept for get_last_message.
+    processes.python("camera", "stream_publisher.py", topic, "5", "--image", "2000x1600",
+                     "--count", "2")
+    message = client.wait_for(created["device"], timeout=scaled(30))
+    assert isinstance(message.body, Image) and message.body.pixels.shape == (1, 1600, 2000, 3)
+    with pytest.raises(CommandRefusedError) as refused:
+        client.command("get_last_message", {"topic": topic})
+    assert refused.value.field == "topic"
+    assert "at most 8388608 bytes" in str(refused.value)
+    assert "9600" in str(refused.value)  # the size it had (9,600,0xx bytes serialized)
