@@ -292,11 +292,12 @@ def test_doc_parameters_example_on_a_node_that_appears_later(
         assert parameterNode.AddParameter('robot_description') is True
         assert parameterNode.IsParameterSet('robot_description') is False
         assert parameterNode.GetParameterType('robot_description') == "not_set"
+        # Observed before the node starts: the value may arrive before READY is read.
+        modified = threading.Event()
+        parameterNode.AddObserver(1054, lambda caller, event: modified.set())  # int id
         node = processes.python("doc_params", "param_node.py", "doc_state_publisher",
                                 "--description", "<robot name='doc'/>")
         node.wait_for_output("READY", timeout=30)
-        modified = threading.Event()
-        parameterNode.AddObserver(1054, lambda caller, event: modified.set())  # int id
         wait_until(lambda: parameterNode.IsParameterSet('robot_description'), timeout=30,
                    what="the parameter once its node is there")
         robotDescription = None  # noqa: N806
