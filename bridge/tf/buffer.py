@@ -37,7 +37,7 @@ import operator
 import threading
 from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
-from typing import Iterable, List, Optional, Sequence, Tuple
+from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 import numpy.typing as npt
@@ -134,6 +134,8 @@ class _FrameCache:
 # One link of a chain at a given time: the frame's cache, the older sample's index and the
 # interpolation ratio towards the next sample (0.0: the sample itself).
 _Slot = Tuple[_FrameCache, int, float]
+# top<-frame at time t, keyed (top, frame, t): what one batch of lookups has composed.
+_Memo = Dict[Tuple[str, str, int], Tf7]
 
 
 def _locate(cache: _FrameCache, t: int) -> Tuple[str, int, float]:
@@ -167,12 +169,13 @@ def _value(slot: _Slot) -> Tf7:
 
 
 def _up(slots: Sequence[_Slot]) -> Tf7:
-    """top<-bottom for the links of one side, listed bottom-up."""
+    """top<-bottom for the links of one side, listed bottom-up; composed top-down, as
+    `TfBuffer._up_at` does, so both give the same bits."""
     if not slots:
         return IDENTITY
-    acc = _value(slots[0])  # starting from the first link saves one product with identity
-    for k in range(1, len(slots)):
-        acc = compose(_value(slots[k]), acc)
+    acc = _value(slots[-1])  # starting from a link saves one product with identity
+    for k in range(len(slots) - 2, -1, -1):
+        acc = compose(acc, _value(slots[k]))
     return acc
 
 
@@ -305,18 +308,37 @@ class TfBuffer:
         time used. Raises `TfLookupError` (unknown frame, loop), `ConnectivityError`,
         `ExtrapolationError` or `InvalidArgumentError`, worded as tf2 words them.
         """
-        target = _frame_arg(target_frame, "target_frame")
-        source = _frame_arg(source_frame, "source_frame")
         t = _time_arg(time_ns)
         with self._lock:
-            if target == source:  # tf2 answers identity even for unknown frames
-                cache = self._frames.get(target)
-                if t == 0 and cache is not None and not cache.static:
-                    t = cache.stamps[-1]
-                return StampedTransform(target, source, t, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
-            self._require(target, "lookupTransform argument target_frame")
-            self._require(source, "lookupTransform argument source_frame")
-            t, value = self._lookup_locked(target, source, t)
+            return self._lookup_one(target_frame, source_frame, t, None)
+
+    def lookup_latest_many(self, pairs: Sequence[Tuple[str, str]],
+                           ) -> List[StampedTransform | TfError]:
+        """`lookup(target, source)` at the latest common time for each (target, source), as
+        a result or the error it raised, under one lock: chains that share links (a robot's
+        links seen from its base) compose each shared link once, not once per lookup."""
+        memo: _Memo = {}
+        out: List[StampedTransform | TfError] = []
+        with self._lock:
+            for target, source in pairs:
+                try:
+                    out.append(self._lookup_one(target, source, 0, memo))
+                except TfError as error:
+                    out.append(error)
+        return out
+
+    def _lookup_one(self, target_frame: str, source_frame: str, t: int,
+                    memo: Optional[_Memo]) -> StampedTransform:
+        target = _frame_arg(target_frame, "target_frame")
+        source = _frame_arg(source_frame, "source_frame")
+        if target == source:  # tf2 answers identity even for unknown frames
+            cache = self._frames.get(target)
+            if t == 0 and cache is not None and not cache.static:
+                t = cache.stamps[-1]
+            return StampedTransform(target, source, t, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+        self._require(target, "lookupTransform argument target_frame")
+        self._require(source, "lookupTransform argument source_frame")
+        t, value = self._lookup_locked(target, source, t, memo)
         return StampedTransform(target, source, t, value[:3], value[3:])  # type: ignore[arg-type]
 
     def can_transform(self, target_frame: str, source_frame: str, time_ns: int = 0) -> bool:
@@ -397,31 +419,51 @@ class TfBuffer:
                           for name, cache in sorted(self._frames.items()))
         return TfLookupError("The tf tree is invalid because it contains a loop.\n" + listing)
 
-    def _lookup_locked(self, target: str, source: str, t: int) -> Tuple[int, Tf7]:
+    def _lookup_locked(self, target: str, source: str, t: int,
+                       memo: Optional[_Memo] = None) -> Tuple[int, Tf7]:
         if t != 0:
             return t, self._walk(target, source, t)
         t, src, tgt = self._latest_chain(target, source)
         # The chain was found with each frame's newest parent. Sample it at t; if a frame's
         # parent at t is another one (a re-parenting inside the window), walk again at t.
-        frames = self._frames
+        top = self._frames[src[-1]].parents[-1] if src else source  # the common ancestor
         try:
-            src_slots = []
-            for frame in src:
-                cache = frames[frame]
-                parent, i, ratio = _locate(cache, t)
-                if parent != cache.parents[-1]:
-                    return t, self._walk(target, source, t)
-                src_slots.append((cache, i, ratio))
-            tgt_slots = []
-            for frame in tgt:
-                cache = frames[frame]
-                parent, i, ratio = _locate(cache, t)
-                if parent != cache.parents[-1]:
-                    return t, self._walk(target, source, t)
-                tgt_slots.append((cache, i, ratio))
+            a = self._up_at(src, t, top, memo)  # top<-source
+            if a is None:
+                return t, self._walk(target, source, t)
+            if not tgt:
+                return t, a
+            b = self._up_at(tgt, t, top, memo)  # top<-target
+            if b is None:
+                return t, self._walk(target, source, t)
         except ExtrapolationError as exc:
             raise exc.with_frames(source, target) from None
-        return t, _combine(src_slots, tgt_slots)
+        return t, compose(invert(b), a)
+
+    def _up_at(self, chain: List[str], t: int, top: str,
+               memo: Optional[_Memo]) -> Optional[Tf7]:
+        """top<-chain[0] at t for the frames of `_latest_chain` (listed bottom-up), or None if
+        a frame had another parent at t. ``memo`` holds top<-frame at t for frames already
+        composed in this batch: the walk up stops at the first one found."""
+        frames = self._frames
+        below: List[Tuple[str, _Slot]] = []
+        acc: Optional[Tf7] = None
+        for frame in chain:
+            if memo is not None:
+                acc = memo.get((top, frame, t))
+                if acc is not None:
+                    break
+            cache = frames[frame]
+            parent, i, ratio = _locate(cache, t)
+            if parent != cache.parents[-1]:
+                return None
+            below.append((frame, (cache, i, ratio)))
+        for frame, slot in reversed(below):
+            value = _value(slot)
+            acc = value if acc is None else compose(acc, value)
+            if memo is not None:
+                memo[(top, frame, t)] = acc
+        return IDENTITY if acc is None else acc
 
     def _latest_chain(self, target: str, source: str) -> Tuple[int, List[str], List[str]]:
         """Walk by each frame's newest parent: (latest common time, source-side frames,

@@ -220,20 +220,12 @@ class LookupRegistry:
 
     def _evaluate(self, todo: Set[_Pair], now_ns: int) -> List[Tuple[LookupKey, LookupResult]]:
         out: List[Tuple[LookupKey, LookupResult]] = []
-        for pair in sorted(todo):  # sorted: deterministic delivery order
-            state = self._pairs.get(pair)
-            if state is None:
+        pairs = [pair for pair in sorted(todo) if pair in self._pairs]  # deterministic order
+        for pair, result in zip(pairs, self._buffer.lookup_latest_many(pairs)):
+            state = self._pairs[pair]
+            if isinstance(result, TfLookupError) and result.frame is not None:
+                state.pending = True  # a frame does not exist (yet)
                 continue
-            result: LookupResult
-            try:
-                result = self._buffer.lookup(pair[0], pair[1])
-            except TfLookupError as exc:
-                if exc.frame is not None:  # a frame does not exist (yet): pending
-                    state.pending = True
-                    continue
-                result = exc
-            except TfError as exc:
-                result = exc
             state.pending = False
             for entry in state.entries.values():
                 if self._same(entry.last_sent, result):

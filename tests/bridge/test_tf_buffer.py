@@ -20,6 +20,7 @@ from bridge.tf import (
     RejectedTransformsError,
     StampedTransform,
     TfBuffer,
+    TfError,
     TfErrorCode,
     TfLookupError,
 )
@@ -463,3 +464,50 @@ def test_concurrent_writer_and_reader_see_whole_batches() -> None:
         stop.set()
         writer.join()
     assert not bad
+
+
+# ---------------------------------------------------------------------------- batches
+
+
+def test_a_batch_of_lookups_gives_what_each_lookup_gives() -> None:
+    """`lookup_latest_many` shares composed links between lookups of one batch (a robot's
+    links from its base): each result, value or error, is the one `lookup` gives alone."""
+    buf = TfBuffer()
+    rng = np.random.default_rng(11)
+
+    def rand_q() -> tuple[float, float, float, float]:
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+
+    buf.set_transforms([tf("world", "base", 0, (1, 2, 3), rand_q())], static=True)
+    # Two arms sharing the base, samples at different times (interpolation and extrapolation
+    # come from their stamps), and a frame of another tree.
+    for stamp in (1 * S, 2 * S):
+        batch = []
+        for arm in ("a", "b"):
+            parent = "base"
+            for k in range(1, 5):
+                child = f"{arm}{k}"
+                if arm == "a" or stamp == 1 * S or k < 3:  # b3, b4 lag behind
+                    batch.append(tf(parent, child, stamp + k * 1000,
+                                    tuple(rng.uniform(-1, 1, 3)), rand_q()))
+                parent = child
+        buf.set_transforms(batch, static=False)
+    buf.set_transforms([tf("elsewhere", "island", 1 * S, (0, 0, 1))], static=False)
+    frames = ["world", "base", "a1", "a2", "a3", "a4", "b1", "b2", "b3", "b4", "island",
+              "missing"]
+    pairs = [(p, c) for p in frames for c in frames]
+    batch_results = buf.lookup_latest_many(pairs)
+    assert len(batch_results) == len(pairs)
+    for (parent, child), got in zip(pairs, batch_results):
+        try:
+            alone = buf.lookup(parent, child)
+        except TfError as error:
+            assert isinstance(got, type(error)) and str(got) == str(error), (parent, child)
+            continue
+        assert isinstance(got, StampedTransform), (parent, child, got)
+        assert (got.parent, got.child, got.stamp_ns) == (alone.parent, alone.child,
+                                                         alone.stamp_ns)
+        np.testing.assert_allclose(got.translation, alone.translation, atol=1e-12)
+        np.testing.assert_allclose(got.rotation, alone.rotation, atol=1e-12)

@@ -14,6 +14,7 @@ from bridge.tf import (
     LookupRegistry,
     StampedTransform,
     TfBuffer,
+    TfError,
 )
 
 S = 1_000_000_000
@@ -36,6 +37,11 @@ class CountingBuffer(TfBuffer):
     def lookup(self, target_frame: str, source_frame: str, time_ns: int = 0) -> StampedTransform:
         self.asked.append((target_frame, source_frame))
         return super().lookup(target_frame, source_frame, time_ns)
+
+    def lookup_latest_many(self, pairs: Sequence[tuple[str, str]],
+                           ) -> list[StampedTransform | TfError]:
+        self.asked.extend(pairs)
+        return super().lookup_latest_many(pairs)
 
 
 @pytest.fixture
