@@ -399,7 +399,7 @@ def test_bad_markers_are_refused_and_the_daemon_serves(client: Connection, peer:
         assert status.body.code != 1 and words in status.body.text, status.body.text
     # The same topic still shows a good marker.
     peer.send(marker={"ns": "good", "id": 1, "type": CUBE, "scale": [0.1] * 3})
-    wait_markers(client, "/test_marker", {("good", 1)})
+    wait_markers(client, "/test_marker", {("good", 1), ("moving", 1)})
 
 
 def test_denied_frame_is_withheld(client: Connection, peer: Peer) -> None:
