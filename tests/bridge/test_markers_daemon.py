@@ -439,3 +439,33 @@ def test_op_errors(client: Connection) -> None:
                                                        "type": "Path", "fixed_frame": "world"})
     removed = client.command("remove_marker_subscriber", {"topic": "/removable"})
     assert removed["devices"] == [made["device"]]
+
+
+def test_pythonic_client_follows_markers(daemon: RunningDaemon, peer: Peer) -> None:
+    import slicer_client
+
+    with slicer_client.connect("127.0.0.1", daemon.port, reconnect=False) as ros:
+        events: list[str] = []
+        markers = ros.markers("/test_markers", "MarkerArray", "world",
+                              callback=lambda kind, *rest: events.append(kind))
+        peer.send(markers=[{"action": DELETEALL},
+                           {"ns": "py", "id": 1, "type": CUBE, "pos": [0.0, 0.0, 0.1],
+                            "scale": [0.2, 0.2, 0.2]},
+                           {"ns": "py", "id": 2, "type": TEXT, "text": "label",
+                            "pos": [0.0, 0.0, 0.5]}])
+        found = markers.wait_for_markers(
+            lambda m: {(i.ns, i.id) for i in m.values()} == {("py", 1), ("py", 2)}
+            and all(i.frame_device in markers.frames for i in m.values()), timeout=scaled(10))
+        cube = markers.find("py", 1)
+        assert cube is not None and cube.kind == "cube" and cube.frame == "base"
+        fixed = markers.points_in_fixed_frame(cube)
+        assert fixed is not None  # base is at (100, 200, 300) mm in world
+        assert rounded(fixed) == box_corners(np.array([0.1, 0.2, 0.4]), np.eye(3),
+                                             np.full(3, 0.2))
+        text = markers.find("py", 2)
+        assert text is not None and text.kind == "text_view_facing"
+        np.testing.assert_allclose(markers.points_in_fixed_frame(text), [[100, 200, 800]])
+        peer.send(markers=[{"ns": "py", "id": 1, "action": DELETE}])
+        markers.wait_for_markers(lambda m: len(m) == 1, timeout=scaled(10))
+        assert markers.find("py", 1) is None and "deleted" in events
+        assert len(found) == 2
