@@ -546,7 +546,7 @@ class MarkerSubscriber(Resource):
         self.markers: Dict[str, MarkerItem] = {}
         self.frames: Dict[str, np.ndarray] = {}
         self.live: Optional[Tuple[str, ...]] = None  # the daemon's last list of live devices
-        self.status = ""  # the daemon's last word on this topic (an error names the marker)
+        self.status = ""  # the daemon's last refusal on this topic (it names the marker)
 
     @property
     def resolved_topic(self) -> str:
@@ -565,14 +565,18 @@ class MarkerSubscriber(Resource):
         role = meta.get(KEY_ROLE)
         events: List[Tuple[Any, ...]] = []
         with self._changed:
-            if role == "marker_topic" and isinstance(message.body, Status):
-                self.status = message.body.text
+            if role == "marker_topic" and isinstance(message.body, String):
                 try:
                     live = tuple(str(d) for d in json.loads(meta.get(KEY_MARKERS, "[]")))
+                    summary = json.loads(message.body.text)
+                    error = str(summary.get("error", "")) if isinstance(summary, dict) else ""
                 except ValueError:
                     self._client.errors.append(f"{message.device_name}: unreadable marker "
                                                f"list {meta.get(KEY_MARKERS)!r}")
                     return
+                if error and error != self.status:
+                    self._client.errors.append(f"{message.device_name}: {error}")
+                self.status = error
                 self.live = live
                 for device in [d for d in self.markers if d not in live]:
                     events.append(("deleted", self.markers.pop(device)))

@@ -19,11 +19,12 @@ stopped with the last marker in it). The model moves as tf moves without being r
 
 Deletion (DELETE, DELETEALL, ``lifetime`` expiry, a marker that can no longer be shown,
 removing the subscriber): its device is forgotten by the hub (no late client gets it),
-and the topic's own device (`NameKey.marker_topic`, ``mks:<topic>``) streams a STATUS whose
+and the topic's own device (`NameKey.marker_topic`, ``mks:<topic>``) streams a STRING whose
 metadata lists the live markers' devices (``ros2.markers``, JSON) and the ones just gone
-(``ros2.deleted``): the client and the Slicer module remove what is not live. The STATUS is
-sent when that set changes, and its code is not OK while the last marker read failed (the
-text says which marker, the field, what was expected and what came).
+(``ros2.deleted``): the client and the Slicer module remove what is not live. It is sent
+when that set changes and when a marker is refused: its text, JSON ``{"markers": n,
+"withheld": n, "error": "..."}``, then names the marker, the field, what was expected and
+what came.
 
 Why the work is where it is: a MarkerArray of 1000 markers at 10-30 Hz is too much to
 convert on the ROS callback or the loop. The callback only queues the message (at most
@@ -72,8 +73,8 @@ from bridge.tf.capability import TfBridges
 from bridge.tf.lookups import LookupKey
 from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
                                ListMarkers, Op, OutOfRangeError, RemoveMarkerSubscriber)
-from protocol.messages import Message, Status, StatusCode
-from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_MARKER_TYPE, KEY_MARKERS,
+from protocol.messages import Message, String
+from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_FORMAT, KEY_MARKER_TYPE, KEY_MARKERS,
                              KEY_PARENT_DEVICE, UNITS_MM, DeviceNameRegistry, NameKey,
                              metadata_for)
 
@@ -81,7 +82,6 @@ __all__ = ["MAX_MARKERS", "MAX_QUEUED", "MarkerBridges"]
 
 log = logging.getLogger(__name__)
 
-_STATUS_NAME = "slicer-ros2-bridge"
 MAX_QUEUED = 64  # messages a topic's worker may be behind; past that the oldest go
 MAX_MARKERS = 10_000  # live markers of one topic; more are refused (STATUS)
 _MAX_IN_FLIGHT = 4  # batches handed to the loop and not applied yet (worker waits)
@@ -476,17 +476,17 @@ class MarkerBridges:
         gone.append(live.device)
 
     def _index(self, sub: _Subscription, gone: list[str], error: str = "") -> None:
-        """The topic's STATUS: which marker devices are live, which just went."""
+        """The topic's STRING: which marker devices are live, which just went (metadata,
+        which holds any length; a STRING body holds 64 KiB), and a JSON summary with the
+        last error. A STRING, not a STATUS: 3D Slicer makes a text node of it, whose
+        changes the Slicer module hands to the client (it makes no node of a STATUS)."""
         metadata = metadata_for(sub.topic_key, ros_type=sub.ros_type, frame=sub.fixed_frame)
+        metadata[KEY_FORMAT] = "json"
         metadata[KEY_MARKERS] = json.dumps([live.device for live in sub.markers.values()])
         metadata[KEY_DELETED] = json.dumps(sorted(set(gone)))
-        text = error or (f"{len(sub.markers)} markers from {sub.topic}"
-                         + (f", {len(sub.withheld)} withheld by the frame policy"
-                            if sub.withheld else ""))
-        code = StatusCode.CONFIG_ERROR if error else StatusCode.OK
-        self._hub.stream(Message(device_name=sub.device,
-                                 body=Status(code=code, error_name=_STATUS_NAME,
-                                             text=text[:4000]),
+        summary = {"markers": len(sub.markers), "withheld": len(sub.withheld),
+                   "error": error[:4000]}
+        self._hub.stream(Message(device_name=sub.device, body=String(json.dumps(summary)),
                                  metadata=metadata))
 
     # ------------------------------------------------------------------ frames
