@@ -77,8 +77,10 @@ __all__ = [
     "KEY_MARKER_TYPE",
     "KEY_MARKERS",
     "KEY_DELETED",
+    "KEY_POINT_COLORS",
     "KEY_POINT_SIZE",
-    "KEY_TEXT",
+    "KEY_POSITION",
+    "KEY_TEXT_HEIGHT",
     "KEY_VISUAL_COUNT",
     "KEY_WARNINGS",
     "KEY_FRAME",
@@ -195,9 +197,14 @@ KEY_DROPPED = "ros2.dropped"  # points left out of a cloud for a NaN/inf coordin
 KEY_MARKER_NS = "ros2.ns"
 KEY_MARKER_ID = "ros2.id"
 KEY_MARKER_TYPE = "ros2.marker_type"
-KEY_TEXT = "ros2.text"  # a TEXT_VIEW_FACING marker's whole text (the POINT name holds 64 bytes)
+# A TEXT_VIEW_FACING marker is a STRING (its text) placed by these: "x y z" mm in the marker's
+# frame, and the text height in mm (scale.z).
+KEY_POSITION = "ros2.position"
+KEY_TEXT_HEIGHT = "ros2.text_height"
 KEY_LINE_WIDTH = "ros2.line_width"  # mm: LINE_STRIP/LINE_LIST scale.x
 KEY_POINT_SIZE = "ros2.point_size"  # mm: "w h" of POINTS (scale.x, scale.y)
+# "1" when a model's RGBA point colours differ (per-point colours): show them directly.
+KEY_POINT_COLORS = "ros2.point_colors"
 # On a marker topic's device (STATUS): JSON lists of the devices of the live markers and of
 # those just deleted (DELETE, DELETEALL, lifetime): the client removes what is not live.
 KEY_MARKERS = "ros2.markers"

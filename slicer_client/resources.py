@@ -18,9 +18,10 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from protocol import commands as c
-from protocol.messages import Message, Point, PolyData, Status, String, Transform
+from protocol.messages import Message, PolyData, Status, String, Transform
 from protocol.naming import (KEY_FRAME, KEY_LINK, KEY_LINK_COUNT, KEY_MARKER_ID, KEY_MARKER_NS,
-                             KEY_MARKER_TYPE, KEY_MARKERS, KEY_PARENT_DEVICE, KEY_ROLE,
+                             KEY_MARKER_TYPE, KEY_MARKERS, KEY_PARENT_DEVICE, KEY_POSITION,
+                             KEY_ROLE,
                              KEY_TOPIC, KEY_VISUAL, KEY_VISUAL_COUNT, KEY_WARNINGS)
 from slicer_client.bridge_state import BridgeSpec
 from slicer_client.matrices import as_numpy, as_rows
@@ -515,7 +516,8 @@ class Robot(Resource):
 @dataclass
 class MarkerItem:
     """One live marker as the client has it: its model (PolyData in mm in its frame, or a
-    POINT for text), its identity and the TRANSFORM device of its frame."""
+    String for text, placed by metadata ros2.position), its identity and the TRANSFORM
+    device of its frame."""
 
     device: str
     ns: str
@@ -585,7 +587,7 @@ class MarkerSubscriber(Resource):
                                                             dtype=np.float64)
                 events.append(("frame", message.device_name,
                                self.frames[message.device_name]))
-            elif role == "marker" and isinstance(message.body, (PolyData, Point)):
+            elif role == "marker" and isinstance(message.body, (PolyData, String)):
                 item = MarkerItem(message.device_name, meta.get(KEY_MARKER_NS, ""),
                                   int(meta.get(KEY_MARKER_ID, "0")),
                                   meta.get(KEY_MARKER_TYPE, ""), message.body, dict(meta),
@@ -610,8 +612,9 @@ class MarkerSubscriber(Resource):
             return None
         if isinstance(item.body, PolyData):
             local = np.asarray(item.body.points, dtype=np.float64).reshape(-1, 3)
-        else:
-            local = np.array([p.position for p in item.body.points], dtype=np.float64)
+        else:  # a text marker: its position is in the metadata
+            local = np.array([[float(v) for v in item.metadata.get(KEY_POSITION,
+                                                                     "0 0 0").split()]])
         return np.asarray(local @ matrix[:3, :3].T + matrix[:3, 3])
 
     def wait_for_markers(self, predicate: Callable[[Dict[str, MarkerItem]], bool],

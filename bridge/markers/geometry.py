@@ -22,8 +22,10 @@ CUBE_LIST/         a box / sphere of size scale at each point, joined in one mes
 SPHERE_LIST
 POINTS             one vertex cell per point; scale.x, scale.y (point size) in metadata
 TRIANGLE_LIST      one triangle per 3 points, points scaled by scale (as RViz does)
-TEXT_VIEW_FACING   a POINT message: the text as the point's name (64 bytes; the whole text
-                   in metadata ros2.text) at the pose's position; diameter = scale.z
+TEXT_VIEW_FACING   a STRING message (the text) with metadata ros2.position ("x y z" mm, the
+                   pose's position) and ros2.text_height (scale.z in mm): SlicerOpenIGTLink
+                   makes no node of a POINT message, so the Slicer module places a markups
+                   point labelled with the text from these
 MESH_RESOURCE      the file (robot mesh loader, mesh roots only), scaled, posed
 Path / Polygon     a polyline through the poses' positions / a closed polyline
 PointStamped       one vertex
@@ -48,7 +50,7 @@ import numpy.typing as npt
 from bridge.robots.errors import RobotError
 from protocol.conversions import metres_to_mm, quaternion_to_rotation
 from protocol.errors import ProtocolError
-from protocol.messages import AttributeKind, Point, PointElement, PolyData, PolyDataAttribute
+from protocol.messages import AttributeKind, PolyData, PolyDataAttribute, String
 
 __all__ = ["ARROW_HEAD_FRACTION", "KINDS", "MAX_MARKER_POINTS", "MAX_MODEL_POINTS",
            "MarkerError", "MarkerModel", "MarkerSpec", "RGBA_ATTRIBUTE", "build_model",
@@ -71,7 +73,7 @@ ARROW_SHAFT_OVER_HEAD = 0.5  # shaft diameter over head diameter (pose form)
 MAX_MARKER_POINTS = 100_000
 MAX_MODEL_POINTS = 1_000_000
 LIST_SPHERE_SUBDIVISIONS = 1  # 42 vertices a sphere in a SPHERE_LIST
-_POINT_NAME_BYTES = 64
+MAX_TEXT_BYTES = 4096  # of a TEXT_VIEW_FACING marker's text (a STRING holds 64 KiB)
 
 
 class MarkerError(ProtocolError):
@@ -136,10 +138,10 @@ class MarkerSpec:
 @dataclass(frozen=True, eq=False)
 class MarkerModel:
     """What the client gets for one marker: a POLYDATA (mm, marker frame) or, for text, a
-    POINT; ``metadata`` holds what the body cannot (line width, point size, the text)."""
+    STRING; ``metadata`` holds what the body cannot (line width, point size, position)."""
 
     kind: str
-    body: Union[PolyData, Point]
+    body: Union[PolyData, String]
     rgba: Rgba
     metadata: dict[str, str]
 
@@ -147,7 +149,7 @@ class MarkerModel:
     def point_count(self) -> int:
         if isinstance(self.body, PolyData):
             return int(len(self.body.points))
-        return len(self.body.points)
+        return 1
 
 
 # ---------------------------------------------------------------------------- checks
@@ -367,16 +369,15 @@ def _triangles(spec: MarkerSpec, rgba: Rgba) -> PolyData:
                      colours=_point_colours(spec, len(pts)), triangles=triangles)
 
 
-def _text(spec: MarkerSpec, rgba: Rgba) -> Point:
+def _text(spec: MarkerSpec, metadata: dict[str, str]) -> String:
+    from protocol.naming import KEY_POSITION, KEY_TEXT_HEIGHT
+
     position = metres_to_mm(_finite(spec.position, "pose.position"))
-    name = spec.text.encode("utf-8", "replace")[:_POINT_NAME_BYTES]
-    name_text = name.decode("utf-8", "ignore").replace("\0", " ")
     height = float(_finite(spec.scale, "scale")[2])
-    u8 = tuple(int(round(c * 255)) for c in rgba)
-    return Point([PointElement(name=name_text, group="ros2_marker",
-                               rgba=(u8[0], u8[1], u8[2], u8[3]),
-                               position=np.asarray(position, dtype=np.float64),
-                               diameter=float(metres_to_mm(max(height, 0.0))))])
+    metadata[KEY_POSITION] = " ".join(f"{float(v):.6g}" for v in position)
+    metadata[KEY_TEXT_HEIGHT] = f"{float(metres_to_mm(max(height, 0.0))):.6g}"
+    text = spec.text.encode("utf-8", "replace")[:MAX_TEXT_BYTES].decode("utf-8", "ignore")
+    return String(text)
 
 
 def _mesh(spec: MarkerSpec, rgba: Rgba, mesh_roots: Optional[tuple[object, ...]],
@@ -414,7 +415,7 @@ def build_model(spec: MarkerSpec, *, mesh_roots: Optional[tuple[object, ...]] = 
                 package_paths: Optional[dict[str, object]] = None) -> MarkerModel:
     """The model of one marker; `MarkerError` says why a marker cannot be shown.
     ``mesh_roots``: folders a MESH_RESOURCE may be read from (None: anywhere)."""
-    from protocol.naming import KEY_LINE_WIDTH, KEY_POINT_SIZE, KEY_TEXT
+    from protocol.naming import KEY_LINE_WIDTH, KEY_POINT_COLORS, KEY_POINT_SIZE
 
     if len(spec.points) > MAX_MARKER_POINTS:
         raise MarkerError("points", f"at most {MAX_MARKER_POINTS} points",
@@ -424,7 +425,7 @@ def build_model(spec: MarkerSpec, *, mesh_roots: Optional[tuple[object, ...]] = 
     kind = spec.kind
     metadata: dict[str, str] = {}
     scale = _finite(spec.scale, "scale")
-    body: Union[PolyData, Point]
+    body: Union[PolyData, String]
     if kind == "arrow":
         body = _arrow(spec, rgba)
     elif kind in ("cube", "sphere", "cylinder"):
@@ -443,10 +444,13 @@ def build_model(spec: MarkerSpec, *, mesh_roots: Optional[tuple[object, ...]] = 
     elif kind == "triangle_list":
         body = _triangles(spec, rgba)
     elif kind == "text_view_facing":
-        body = _text(spec, rgba)
-        metadata[KEY_TEXT] = spec.text
+        body = _text(spec, metadata)
     elif kind == "mesh_resource":
         body, rgba = _mesh(spec, rgba, mesh_roots, package_paths)
     else:
         raise MarkerError("type", "a marker type this bridge shows", repr(kind))
+    if isinstance(body, PolyData) and len(body.points):
+        colours = np.asarray(body.attributes[0].data)
+        if np.any(colours != colours[0]):
+            metadata[KEY_POINT_COLORS] = "1"
     return MarkerModel(kind, body, rgba, metadata)

@@ -19,10 +19,10 @@ from typing import Any, Iterator
 import numpy as np
 import pytest
 
-from protocol.messages import AttributeKind, Message, Point, PolyData, String, Transform
+from protocol.messages import AttributeKind, Message, PolyData, String, Transform
 from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_LINE_WIDTH, KEY_MARKER_ID,
                              KEY_MARKER_NS, KEY_MARKER_TYPE, KEY_MARKERS, KEY_PARENT_DEVICE,
-                             KEY_POINT_SIZE, KEY_TEXT)
+                             KEY_POINT_SIZE, KEY_POSITION, KEY_TEXT_HEIGHT)
 from slicer_client.connection import CommandRefusedError, Connection
 from support import (Child, Processes, RunningDaemon, assert_clean_exit, scaled, start_daemon,
                      wait_until)
@@ -285,14 +285,12 @@ def test_every_marker_type_in_mm_placed_by_tf(client: Connection, peer: Peer,
     assert list(tri.body.polygons) == [3, 0, 1, 2, 3, 3, 4, 5]
     np.testing.assert_allclose(rgba(tri), [RED] * 3 + [BLUE] * 3)
 
-    # TEXT_VIEW_FACING: a POINT named with the text at the pose's position.
+    # TEXT_VIEW_FACING: a STRING with the text, placed by its metadata.
     text = model(client, dev[("", 13)])
-    assert isinstance(text.body, Point)
-    (element,) = text.body.points
-    assert element.name == "hello marker" and text.metadata[KEY_TEXT] == "hello marker"
-    np.testing.assert_allclose(element.position, [100.0, 200.0, 300.0], atol=1e-3)
-    assert element.diameter == pytest.approx(50.0)
-    assert element.rgba == (255, 255, 0, 255)
+    assert isinstance(text.body, String) and text.body.text == "hello marker"
+    assert [float(v) for v in text.metadata[KEY_POSITION].split()] == [100.0, 200.0, 300.0]
+    assert float(text.metadata[KEY_TEXT_HEIGHT]) == pytest.approx(50.0)
+    assert [float(v) for v in text.metadata[KEY_COLOR].split()] == [1.0, 1.0, 0.0, 1.0]
 
     # MESH_RESOURCE inside the mesh root: the STL's vertices x2, lifted 1000 mm.
     p = points(model(client, dev[("mesh", 14)]))
