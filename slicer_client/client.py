@@ -235,16 +235,22 @@ class Client:
         """Show an RViz marker topic (`type` Marker or MarkerArray) or a Path,
         PolygonStamped or PointStamped topic as models placed by tf in `fixed_frame`.
         `callback(kind, ...)`: see `MarkerSubscriber`."""
+        with self._lock:
+            existed = ("create_marker_subscriber", topic) in self._resources
         resource: MarkerSubscriber = self._add(MarkerSubscriber(self, topic, type, fixed_frame,
                                                                 qos=qos))
         if callback is not None:
             resource.add_callback(callback)
-        with self._lock:  # what arrived before the reply named the topic
-            early = [m for m in self._latest.values()
-                     if m.metadata.get(KEY_ROLE, "").startswith("marker")
-                     and resource.owns(m)]
-        for message in early:
-            resource._handle(message)
+        if not existed:
+            # What arrived before the reply named the topic; the topic's list of live
+            # markers last, so models of markers deleted since are dropped again.
+            with self._lock:
+                early = sorted((m for m in self._latest.values()
+                                if m.metadata.get(KEY_ROLE, "").startswith("marker")
+                                and resource.owns(m)),
+                               key=lambda m: m.metadata.get(KEY_ROLE) == "marker_topic")
+            for message in early:
+                resource._handle(message)
         return resource
 
     def resources(self) -> List[Resource]:

@@ -469,3 +469,9 @@ def test_pythonic_client_follows_markers(daemon: RunningDaemon, peer: Peer) -> N
         markers.wait_for_markers(lambda m: len(m) == 1, timeout=scaled(10))
         assert markers.find("py", 1) is None and "deleted" in events
         assert len(found) == 2
+        # The CamelCase facade wraps the same resource.
+        node = ros.GetDefaultROS2Node().CreateAndAddMarkerSubscriberNode(
+            "MarkerArray", "/test_markers", "world")
+        assert node.GetNumberOfMarkers() == 1 and node.GetMarkerDeviceNames() == [
+            markers.find("py", 2).device]
+        assert ros.GetDefaultROS2Node().RemoveAndDeleteMarkerSubscriberNode("/test_markers")
