@@ -73,6 +73,7 @@ from bridge.tf.capability import TfBridges
 from bridge.tf.lookups import LookupKey
 from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
                                ListMarkers, Op, OutOfRangeError, RemoveMarkerSubscriber)
+from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
 from protocol.messages import Message, String
 from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_FORMAT, KEY_MARKER_TYPE, KEY_MARKERS,
                              KEY_PARENT_DEVICE, UNITS_MM, DeviceNameRegistry, NameKey,
@@ -96,6 +97,7 @@ class _Show:
     digest: bytes
     model: MarkerModel
     lifetime_ns: int
+    stamp: tuple[int, int] = (0, 0)
 
 
 @dataclass(frozen=True)
@@ -236,7 +238,8 @@ class _Worker:
                 self.meshed += 1
                 with self._lock:
                     self._models[key] = (digest, model)
-            out.append(_Show(key, spec.frame.lstrip("/"), digest, model, spec.lifetime_ns))
+            out.append(_Show(key, spec.frame.lstrip("/"), digest, model, spec.lifetime_ns,
+                             spec.stamp))
         return out
 
 
@@ -449,8 +452,11 @@ class MarkerBridges:
         metadata[KEY_PARENT_DEVICE] = self._frames[(sub.fixed_frame, frame)].device
         metadata[KEY_COLOR] = " ".join(f"{c:.6g}" for c in model.rgba)
         metadata.update(model.metadata)
+        # Stamped with the marker's header stamp, as topic bridges stamp their messages.
+        stamp = (igtl_timestamp_from_ros(*update.stamp) if update.stamp[0] > 0
+                 else igtl_timestamp_now())
         self._hub.publish_persistent(Message(device_name=live.device, body=model.body,
-                                             metadata=metadata))
+                                             timestamp=stamp, metadata=metadata))
         self._schedule(sub, live)
 
     def _refuse(self, sub: _Subscription, update: _Refused, gone: list[str]) -> None:

@@ -77,7 +77,7 @@ def _marker(msg: Any) -> MarkerEvent:
             text=str(msg.text), mesh_resource=str(msg.mesh_resource),
             use_embedded_materials=bool(msg.mesh_use_embedded_materials),
             lifetime_ns=max(0, int(lifetime.sec) * _NS_PER_S + int(lifetime.nanosec)),
-            frame_locked=bool(msg.frame_locked))
+            frame_locked=bool(msg.frame_locked), stamp=_stamp(msg.header))
     except MarkerError as error:
         return MarkerEvent(ADD, ns, marker_id, error=error)
     if kind == "mesh_resource" and not spec.mesh_resource:
@@ -89,10 +89,14 @@ def _marker(msg: Any) -> MarkerEvent:
     return MarkerEvent(ADD, ns, marker_id, spec)
 
 
-def _single(kind: str, frame: str, points: np.ndarray, rgba: tuple[float, ...]
+def _stamp(header: Any) -> tuple[int, int]:
+    return int(header.stamp.sec), int(header.stamp.nanosec)
+
+
+def _single(kind: str, header: Any, points: np.ndarray, rgba: tuple[float, ...]
             ) -> MarkerEvent:
-    spec = MarkerSpec(kind=kind, frame=frame, points=points,
-                      color=(rgba[0], rgba[1], rgba[2], rgba[3]))
+    spec = MarkerSpec(kind=kind, frame=str(header.frame_id), points=points,
+                      color=(rgba[0], rgba[1], rgba[2], rgba[3]), stamp=_stamp(header))
     return MarkerEvent(ADD, "", 0, spec)
 
 
@@ -104,14 +108,14 @@ def events_of(ros_type: str, msg: Any) -> list[MarkerEvent]:
         return [_marker(m) for m in msg.markers]
     try:
         if ros_type == "nav_msgs/msg/Path":
-            return [_single("path", str(msg.header.frame_id),
+            return [_single("path", msg.header,
                             _xyz([pose.pose.position for pose in msg.poses], "poses"),
                             PATH_RGBA)]
         if ros_type == "geometry_msgs/msg/PolygonStamped":
-            return [_single("polygon", str(msg.header.frame_id),
+            return [_single("polygon", msg.header,
                             _xyz(msg.polygon.points, "polygon.points"), PATH_RGBA)]
         if ros_type == "geometry_msgs/msg/PointStamped":
-            return [_single("point", str(msg.header.frame_id), _xyz([msg.point], "point"),
+            return [_single("point", msg.header, _xyz([msg.point], "point"),
                             POINT_RGBA)]
     except MarkerError as error:
         return [MarkerEvent(ADD, "", 0, error=error)]

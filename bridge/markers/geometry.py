@@ -119,6 +119,7 @@ class MarkerSpec:
     use_embedded_materials: bool = False
     lifetime_ns: int = 0  # 0: forever
     frame_locked: bool = False
+    stamp: tuple[int, int] = (0, 0)  # header.stamp (sec, nanosec): the message's time stamp
 
     def digest(self) -> bytes:
         """What decides the model: equal digests give equal models (a MODIFY that changes
