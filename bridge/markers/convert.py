@@ -8,14 +8,14 @@ gives one "add" of the topic's single model (ns "", id 0).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Optional
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
 from bridge.markers.geometry import (MAX_MARKER_POINTS, MarkerError, MarkerSpec,
                                      kind_of_type)
 
-__all__ = ["ADD", "DELETE", "DELETEALL", "MarkerEvent", "events_of"]
+__all__ = ["ADD", "DELETE", "DELETEALL", "MarkerEvent", "events_of", "marker_event"]
 
 ADD, DELETE, DELETEALL = "add", "delete", "deleteall"
 _ACTIONS = {0: ADD, 1: ADD, 2: DELETE, 3: DELETEALL}  # 1: the deprecated MODIFY
@@ -57,36 +57,57 @@ def _rgba(colors: Any) -> Optional[np.ndarray]:
     return out.reshape(n, 4)
 
 
-def _marker(msg: Any) -> MarkerEvent:
-    ns, marker_id = str(msg.ns), int(msg.id)
-    action = _ACTIONS.get(int(msg.action))
-    if action is None:
+def marker_event(*, ns: str, marker_id: int, marker_type: int, action: int, frame: str,
+                 numbers: Sequence[float], color: Sequence[float],
+                 lifetime: tuple[int, int], frame_locked: bool, points: np.ndarray,
+                 colors: Optional[np.ndarray], text: str, mesh_resource: str,
+                 mesh_file: str, embedded: bool, stamp: tuple[int, int]) -> MarkerEvent:
+    """One Marker's event from its values (``numbers``: position, orientation x y z w,
+    scale); shared by the rclpy path (`events_of`) and the CDR reader."""
+    kind_action = _ACTIONS.get(action)
+    if kind_action is None:
         return MarkerEvent(ADD, ns, marker_id, error=MarkerError(
-            "action", "ADD (0), MODIFY (1), DELETE (2) or DELETEALL (3)", str(msg.action)))
-    if action != ADD:
-        return MarkerEvent(action, ns, marker_id)
+            "action", "ADD (0), MODIFY (1), DELETE (2) or DELETEALL (3)", str(action)))
+    if kind_action != ADD:
+        return MarkerEvent(kind_action, ns, marker_id)
     try:
-        kind = kind_of_type(int(msg.type))
-        p, q, s, c = msg.pose.position, msg.pose.orientation, msg.scale, msg.color
-        lifetime = msg.lifetime
-        spec = MarkerSpec(
-            kind=kind, ns=ns, id=marker_id, frame=str(msg.header.frame_id),
-            position=np.array([p.x, p.y, p.z]), orientation=np.array([q.x, q.y, q.z, q.w]),
-            scale=np.array([s.x, s.y, s.z]), color=(c.r, c.g, c.b, c.a),
-            points=_xyz(msg.points, "points"), colors=_rgba(msg.colors),
-            text=str(msg.text), mesh_resource=str(msg.mesh_resource),
-            use_embedded_materials=bool(msg.mesh_use_embedded_materials),
-            lifetime_ns=max(0, int(lifetime.sec) * _NS_PER_S + int(lifetime.nanosec)),
-            frame_locked=bool(msg.frame_locked), stamp=_stamp(msg.header))
+        kind = kind_of_type(marker_type)
     except MarkerError as error:
         return MarkerEvent(ADD, ns, marker_id, error=error)
-    if kind == "mesh_resource" and not spec.mesh_resource:
-        embedded = getattr(getattr(msg, "mesh_file", None), "filename", "")
+    if kind == "mesh_resource" and not mesh_resource:
         return MarkerEvent(ADD, ns, marker_id, error=MarkerError(
             "mesh_resource", "a mesh URI (package://, file:// or a path inside the mesh "
             "roots; an embedded mesh_file is not read)",
-            f"mesh_file {embedded!r}" if embedded else "an empty string"))
+            f"mesh_file {mesh_file!r}" if mesh_file else "an empty string"))
+    n = np.asarray(numbers, dtype=np.float64)
+    spec = MarkerSpec(
+        kind=kind, ns=ns, id=marker_id, frame=frame, position=n[0:3], orientation=n[3:7],
+        scale=n[7:10], color=(float(color[0]), float(color[1]), float(color[2]),
+                              float(color[3])),
+        points=points, colors=colors, text=text, mesh_resource=mesh_resource,
+        use_embedded_materials=embedded,
+        lifetime_ns=max(0, int(lifetime[0]) * _NS_PER_S + int(lifetime[1])),
+        frame_locked=frame_locked, stamp=stamp)
     return MarkerEvent(ADD, ns, marker_id, spec)
+
+
+def _marker(msg: Any) -> MarkerEvent:
+    ns, marker_id = str(msg.ns), int(msg.id)
+    try:
+        points = _xyz(msg.points, "points")
+        colors = _rgba(msg.colors)
+    except MarkerError as error:
+        return MarkerEvent(ADD, ns, marker_id, error=error)
+    p, q, s, c = msg.pose.position, msg.pose.orientation, msg.scale, msg.color
+    return marker_event(
+        ns=ns, marker_id=marker_id, marker_type=int(msg.type), action=int(msg.action),
+        frame=str(msg.header.frame_id),
+        numbers=(p.x, p.y, p.z, q.x, q.y, q.z, q.w, s.x, s.y, s.z),
+        color=(c.r, c.g, c.b, c.a), lifetime=(msg.lifetime.sec, msg.lifetime.nanosec),
+        frame_locked=bool(msg.frame_locked), points=points, colors=colors,
+        text=str(msg.text), mesh_resource=str(msg.mesh_resource),
+        mesh_file=str(getattr(getattr(msg, "mesh_file", None), "filename", "")),
+        embedded=bool(msg.mesh_use_embedded_materials), stamp=_stamp(msg.header))
 
 
 def _stamp(header: Any) -> tuple[int, int]:
