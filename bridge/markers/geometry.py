@@ -44,6 +44,8 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Optional, Union
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -74,6 +76,10 @@ MAX_MARKER_POINTS = 100_000
 MAX_MODEL_POINTS = 1_000_000
 LIST_SPHERE_SUBDIVISIONS = 1  # 42 vertices a sphere in a SPHERE_LIST
 MAX_TEXT_BYTES = 4096  # of a TEXT_VIEW_FACING marker's text (a STRING holds 64 KiB)
+
+
+# Kinds whose models have one colour (no per-point colours to look for).
+_UNIFORM = frozenset({"arrow", "cube", "sphere", "cylinder", "text_view_facing"})
 
 
 class MarkerError(ProtocolError):
@@ -158,7 +164,9 @@ class MarkerModel:
 
 def _finite(array: npt.ArrayLike, name: str) -> F64:
     values = np.asarray(array, dtype=np.float64)
-    if not np.all(np.isfinite(values)):
+    # A NaN or infinity makes the sum non-finite: one reduction instead of two (a finite
+    # sum that overflowed is looked at element by element).
+    if not math.isfinite(float(values.sum())) and not np.all(np.isfinite(values)):
         bad = np.argwhere(~np.isfinite(values))[0]
         where = f"{name}[{bad[0]}]" if values.ndim > 1 else name
         raise MarkerError(where, "finite numbers", "NaN or infinity")
@@ -166,10 +174,21 @@ def _finite(array: npt.ArrayLike, name: str) -> F64:
 
 
 def _rotation(q: F64) -> F64:
-    q = _finite(q, "pose.orientation")
-    if not np.any(q):
-        return np.eye(3)  # an unset quaternion: RViz assumes identity
-    return quaternion_to_rotation(q)
+    key = tuple(float(v) for v in q)
+    if not all(math.isfinite(v) for v in key):
+        raise MarkerError("pose.orientation", "finite numbers", "NaN or infinity")
+    return _rotation_of(key)
+
+
+@lru_cache(maxsize=4096)
+def _rotation_of(q: tuple[float, ...]) -> F64:
+    """Markers re-sent with the same orientation (most of them) share one matrix."""
+    if not any(q):
+        rotation = np.eye(3)  # an unset quaternion: RViz assumes identity
+    else:
+        rotation = quaternion_to_rotation(np.asarray(q))
+    rotation.setflags(write=False)
+    return rotation
 
 
 def _positive_scale(scale: F64, axes: str = "xyz") -> None:
@@ -180,9 +199,11 @@ def _positive_scale(scale: F64, axes: str = "xyz") -> None:
 
 
 def _colour(color: Rgba, name: str = "color") -> Rgba:
-    c = _finite(color, name)
-    c = np.clip(c, 0.0, 1.0)
-    return (float(c[0]), float(c[1]), float(c[2]), float(c[3]))
+    values = [float(v) for v in color]
+    if not all(math.isfinite(v) for v in values):
+        raise MarkerError(name, "finite numbers", "NaN or infinity")
+    r, g, b, a = (min(1.0, max(0.0, v)) for v in values)
+    return (r, g, b, a)
 
 
 def _point_colours(spec: MarkerSpec, count: int) -> Optional[F32]:
@@ -251,6 +272,26 @@ def _posed(local_m: F64, spec: MarkerSpec) -> F64:
                       + _finite(spec.position, "pose.position"))
 
 
+@lru_cache(maxsize=1024)
+def _scaled_unit(kind: str, scale: tuple[float, float, float]) -> tuple[F64, U32]:
+    """A primitive at its size (metres) and its polygon cells, shared by every marker of
+    that kind and size (read-only)."""
+    v, t = _unit(kind)
+    vertices = v * np.asarray(scale)
+    cells = _cells(t)
+    vertices.setflags(write=False)
+    cells.setflags(write=False)
+    return vertices, cells
+
+
+@lru_cache(maxsize=1024)
+def _uniform_colour(rgba: Rgba, n: int) -> F32:
+    colours = np.empty((n, 4), dtype=np.float32)
+    colours[:] = rgba
+    colours.setflags(write=False)
+    return colours
+
+
 def _z_to(direction: F64) -> F64:
     """A rotation taking +z onto the unit vector ``direction``."""
     z = np.array([0.0, 0.0, 1.0])
@@ -310,8 +351,13 @@ def _arrow(spec: MarkerSpec, rgba: Rgba) -> PolyData:
 def _shape(spec: MarkerSpec, rgba: Rgba) -> PolyData:
     scale = _finite(spec.scale, "scale")
     _positive_scale(scale)
-    v, t = _unit(spec.kind)
-    return _polydata(_posed(v * scale, spec), rgba=rgba, triangles=t)
+    v, cells = _scaled_unit(spec.kind, (float(scale[0]), float(scale[1]), float(scale[2])))
+    # The hot path of a large MarkerArray: shared cells and colours, one matrix product.
+    rotation = _rotation(spec.orientation)
+    position = _finite(spec.position, "pose.position")
+    points = metres_to_mm(v @ rotation.T + position).astype(np.float32)
+    return PolyData(points=points, polygons=cells, attributes=[PolyDataAttribute(
+        RGBA_ATTRIBUTE, AttributeKind.RGBA, _uniform_colour(rgba, len(points)))])
 
 
 def _shape_list(spec: MarkerSpec, rgba: Rgba) -> PolyData:
@@ -450,7 +496,7 @@ def build_model(spec: MarkerSpec, *, mesh_roots: Optional[tuple[object, ...]] = 
         body, rgba = _mesh(spec, rgba, mesh_roots, package_paths)
     else:
         raise MarkerError("type", "a marker type this bridge shows", repr(kind))
-    if isinstance(body, PolyData) and len(body.points):
+    if isinstance(body, PolyData) and len(body.points) and kind not in _UNIFORM:
         colours = np.asarray(body.attributes[0].data)
         if np.any(colours != colours[0]):
             metadata[KEY_POINT_COLORS] = "1"
