@@ -444,7 +444,7 @@ class MarkerBridges:
         live = sub.markers.get(key)
         expires = time.monotonic_ns() + update.lifetime_ns if update.lifetime_ns else 0
         model = update.model
-        body_type = model.body.TYPE
+        body_type = model.type_name
         if live is not None and live.digest == update.digest:
             live.expires_ns = expires  # unchanged: renew the lifetime, send nothing
             self._schedule(sub, live)

@@ -16,7 +16,8 @@ from visualization_msgs.msg import Marker, MarkerArray, UVCoordinate
 from bridge.codecs.cdr import CdrError
 from bridge.markers.cdr import layout_supported, read_marker, read_marker_array
 from bridge.markers.convert import MarkerEvent, events_of
-from bridge.markers.geometry import (MAX_MARKER_POINTS, MarkerError, MarkerSpec, build_model)
+from bridge.markers.geometry import MAX_MARKER_POINTS, MarkerError, MarkerSpec, build_model
+from protocol.messages import PolyData, unpack_body
 
 
 def full_marker(i: int) -> Marker:
@@ -109,5 +110,7 @@ def test_models_bound_and_check_their_input() -> None:
         build_model(MarkerSpec(kind="arrow", points=np.zeros((2, 3)), scale=np.ones(3)))
     # An unset quaternion is identity (as RViz): a cube at the origin, axis-aligned.
     model = build_model(MarkerSpec(kind="cube", orientation=np.zeros(4), scale=np.ones(3)))
-    assert set(map(tuple, np.asarray(model.body.points))) == {
+    body = unpack_body(model.type_name, model.body.pack())  # packed from a template
+    assert isinstance(body, PolyData) and model.point_count == 8
+    assert set(map(tuple, np.asarray(body.points))) == {
         (x, y, z) for x in (-500.0, 500.0) for y in (-500.0, 500.0) for z in (-500.0, 500.0)}
