@@ -258,6 +258,7 @@ def measure(args: argparse.Namespace, mode: str, tmp: str) -> dict[str, Any]:
             "floor_ms": _percentiles([(a - s) / 1e6 for s, a in floor_samples]),
             "daemon_cpu_ms_per_array": round((cpu1 - cpu0) * 1000.0 / max(1, arrays), 2),
             "daemon_dropped": bridge.get("dropped"),
+            "load_average_1min": round(os.getloadavg()[0], 2),
         }
     finally:
         for child in reversed(children):
