@@ -30,8 +30,9 @@ Why the work is where it is: a MarkerArray of 1000 markers at 10-30 Hz is too mu
 convert on the ROS callback or the loop. The callback only queues the message (at most
 `MAX_QUEUED`; past that the oldest goes and ``dropped`` counts it); a worker thread per
 topic reads and meshes; the loop only publishes. A marker re-sent unchanged (RViz
-publishers re-publish whole arrays) costs a digest and no message: its model is neither
-rebuilt nor re-sent; only its lifetime is renewed.
+publishers re-publish whole arrays) costs its reading and a digest, and no message: its
+model is neither rebuilt nor re-sent, nor handed to the loop unless its lifetime must be
+renewed.
 
 Decisions, said plainly:
 * ``header.frame_id`` empty: the marker is in the fixed frame (as RViz does).
@@ -176,9 +177,13 @@ class _Worker:
     def applied(self) -> None:  # loop thread: a batch is done
         self._in_flight.release()
 
-    def forget(self, key: MarkerKey) -> None:  # loop thread: expired, not needed again
+    def forget(self, key: MarkerKey) -> None:  # loop thread: dropped there
         with self._lock:
             self._models.pop(key, None)
+
+    def remember(self, key: MarkerKey, digest: bytes, model: MarkerModel) -> None:
+        with self._lock:
+            self._models[key] = (digest, model)
 
     def stop(self) -> None:
         with self._cond:
@@ -241,7 +246,11 @@ class _Worker:
             with self._lock:
                 known = self._models.get(key)
             if known is not None and known[0] == digest:
-                model = known[1]
+                if not spec.lifetime_ns:
+                    # Unchanged and never expiring: the loop has it live (whatever drops it
+                    # there forgets it here, so a re-send after that goes through).
+                    continue
+                model = known[1]  # unchanged: only its lifetime is renewed
             else:
                 try:
                     model = build_model(spec, mesh_roots=self._mesh_roots,
@@ -451,6 +460,8 @@ class MarkerBridges:
             return
         if live is not None and (live.frame != frame or live.body_type != body_type):
             self._drop(sub, key, gone)  # a new parent or node class: a new device
+            if sub.worker is not None:
+                sub.worker.remember(key, update.digest, model)
             live = None
         if live is None:
             if len(sub.markers) >= MAX_MARKERS:
@@ -495,6 +506,8 @@ class MarkerBridges:
         gone.clear()  # the index just sent said so
 
     def _drop(self, sub: _Subscription, key: MarkerKey, gone: list[str]) -> None:
+        if sub.worker is not None:
+            sub.worker.forget(key)  # a later identical marker is then shown again
         live = sub.markers.pop(key, None)
         if live is None:
             return
@@ -574,8 +587,6 @@ class MarkerBridges:
             if live is None or live.expires_ns != due:
                 continue  # renewed or deleted since: a stale entry
             self._drop(sub, key, gone_by_topic.setdefault(topic, []))
-            if sub.worker is not None:
-                sub.worker.forget(key)
         for topic, gone in gone_by_topic.items():
             sub = self.subscriptions.get(topic)
             if sub is not None and gone:
