@@ -205,6 +205,8 @@ class _Worker:
             except Exception:  # noqa: BLE001 - a bug on one message must not end the topic
                 log.exception("markers on %s: a message could not be read", self._sub.topic)
                 continue
+            if not updates:
+                continue  # nothing changed (an array re-sent as it was): no loop wake-up
             self._in_flight.acquire()
             if self._stopped:
                 return
@@ -326,11 +328,7 @@ class MarkerBridges:
     # ------------------------------------------------------------------ ops
 
     def create(self, request: CreateMarkerSubscriber) -> dict[str, Any]:
-        try:
-            topic = self._ros.resolve_topic(request.topic)
-        except Exception as error:  # rclpy raises several name-validation exceptions
-            raise OutOfRangeError("topic", "a valid ROS topic name",
-                                  f"{request.topic!r} ({error})") from None
+        topic = self._resolve(request.topic)
         ros_type = request.ros_type
         existing = self.subscriptions.get(topic)
         if existing is not None:
@@ -372,25 +370,33 @@ class MarkerBridges:
                  sub.fixed_frame, device)
         return self._describe(sub, existed=False)
 
-    def remove(self, request: RemoveMarkerSubscriber) -> dict[str, Any]:
-        topic = self._ros.resolve_topic(request.topic)
-        sub = self.subscriptions.get(topic)
+    def _resolve(self, topic: str) -> str:
+        try:
+            return self._ros.resolve_topic(topic)
+        except Exception as error:  # rclpy raises several name-validation exceptions
+            raise OutOfRangeError("topic", "a valid ROS topic name",
+                                  f"{topic!r} ({error})") from None
+
+    def _find(self, topic: str) -> _Subscription:
+        resolved = self._resolve(topic)
+        sub = self.subscriptions.get(resolved)
         if sub is None:
-            raise CommandFailedError("topic", "a topic with a marker subscriber", topic,
+            raise CommandFailedError("topic", "a topic with a marker subscriber", resolved,
                                      code=ErrorCode.NOT_FOUND)
+        return sub
+
+    def remove(self, request: RemoveMarkerSubscriber) -> dict[str, Any]:
+        sub = self._find(request.topic)
+        topic = sub.topic
         devices = [live.device for live in sub.markers.values()] + [sub.device]
         self._close(sub)
         return {"topic": topic, "devices": devices}
 
     def list_markers(self, request: ListMarkers) -> dict[str, Any]:
-        topic = self._ros.resolve_topic(request.topic)
-        sub = self.subscriptions.get(topic)
-        if sub is None:
-            raise CommandFailedError("topic", "a topic with a marker subscriber", topic,
-                                     code=ErrorCode.NOT_FOUND)
+        sub = self._find(request.topic)
         now = time.monotonic_ns()
         return {
-            "topic": topic, "device": sub.device,
+            "topic": sub.topic, "device": sub.device,
             "markers": [{"ns": live.key[0], "id": live.key[1], "device": live.device,
                          "type": live.kind, "frame": live.frame, "points": live.points,
                          "frame_device": self._frames[(sub.fixed_frame, live.frame)].device,
