@@ -118,7 +118,12 @@ class _Refused:
     error: MarkerError
 
 
-_Update = Union[_Show, _Gone, _Refused]
+@dataclass(frozen=True, eq=False)
+class _MessageRefused:
+    error: MarkerError  # the whole message (a MarkerArray over the bound)
+
+
+_Update = Union[_Show, _Gone, _Refused, _MessageRefused]
 
 
 @dataclass
@@ -224,7 +229,11 @@ class _Worker:
 
     def _updates(self, msg: Any) -> list[_Update]:
         out: list[_Update] = []
-        for event in self._events(msg):
+        try:
+            events = self._events(msg)
+        except MarkerError as error:
+            return [_MessageRefused(error)]
+        for event in events:
             key = (event.ns, event.id)
             if event.action == DELETE:
                 with self._lock:
@@ -431,6 +440,12 @@ class MarkerBridges:
                             sub.withheld.pop(update.key, None)
                             sub.errors.pop(update.key, None)
                             self._drop(sub, update.key, gone)
+                    elif isinstance(update, _MessageRefused):
+                        sub.last_error = f"message refused: {update.error}"
+                        self._refusals.warning(f"{sub.topic} message", None,
+                                               "markers on %s: %s", sub.topic, sub.last_error)
+                        self._index(sub, gone, error=sub.last_error)
+                        gone.clear()
                     else:
                         self._refuse(sub, update, gone)
                 if added or gone:

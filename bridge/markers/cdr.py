@@ -20,7 +20,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from bridge.codecs.cdr import CdrError
-from bridge.markers.convert import ADD, MarkerEvent, marker_event
+from bridge.markers.convert import ADD, MarkerEvent, check_array_size, marker_event
 from bridge.markers.geometry import MAX_MARKER_POINTS, MarkerError
 
 __all__ = ["MARKER_FIELDS", "layout_supported", "read_marker", "read_marker_array"]
@@ -155,6 +155,8 @@ def read_marker(data: bytes) -> list[MarkerEvent]:
 
 
 def read_marker_array(data: bytes) -> list[MarkerEvent]:
+    """Raises `MarkerError` for an array of more than `MAX_ARRAY_MARKERS` markers."""
     r = _start(data)
     count = r.u32()
+    check_array_size(count)
     return [_marker(r) for _ in range(count)]

@@ -12,10 +12,11 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from bridge.markers.geometry import (MAX_MARKER_POINTS, MarkerError, MarkerSpec,
-                                     kind_of_type)
+from bridge.markers.geometry import (MAX_ARRAY_MARKERS, MAX_MARKER_POINTS, MarkerError,
+                                     MarkerSpec, kind_of_type)
 
-__all__ = ["ADD", "DELETE", "DELETEALL", "MarkerEvent", "events_of", "marker_event"]
+__all__ = ["ADD", "DELETE", "DELETEALL", "MarkerEvent", "check_array_size", "events_of",
+           "marker_event"]
 
 ADD, DELETE, DELETEALL = "add", "delete", "deleteall"
 _ACTIONS = {0: ADD, 1: ADD, 2: DELETE, 3: DELETEALL}  # 1: the deprecated MODIFY
@@ -121,11 +122,19 @@ def _single(kind: str, header: Any, points: np.ndarray, rgba: tuple[float, ...]
     return MarkerEvent(ADD, "", 0, spec)
 
 
+def check_array_size(count: int) -> None:
+    if count > MAX_ARRAY_MARKERS:
+        raise MarkerError("markers", f"a MarkerArray of at most {MAX_ARRAY_MARKERS} markers "
+                          "(the array is not shown)", f"{count} markers")
+
+
 def events_of(ros_type: str, msg: Any) -> list[MarkerEvent]:
-    """The events of one message of a marker subscriber's type (worker thread)."""
+    """The events of one message of a marker subscriber's type (worker thread); raises
+    `MarkerError` for a MarkerArray too large to show."""
     if ros_type == "visualization_msgs/msg/Marker":
         return [_marker(msg)]
     if ros_type == "visualization_msgs/msg/MarkerArray":
+        check_array_size(len(msg.markers))
         return [_marker(m) for m in msg.markers]
     try:
         if ros_type == "nav_msgs/msg/Path":

@@ -54,7 +54,8 @@ from protocol.conversions import metres_to_mm, quaternion_to_rotation
 from protocol.errors import ProtocolError
 from protocol.messages import AttributeKind, PolyData, PolyDataAttribute, RawBody, String
 
-__all__ = ["ARROW_HEAD_FRACTION", "KINDS", "MAX_MARKER_POINTS", "MAX_MODEL_POINTS",
+__all__ = ["ARROW_HEAD_FRACTION", "KINDS", "MAX_ARRAY_MARKERS", "MAX_MARKER_POINTS",
+           "MAX_MODEL_POINTS",
            "MarkerError", "MarkerModel", "MarkerSpec", "RGBA_ATTRIBUTE", "build_model",
            "kind_of_type"]
 
@@ -74,6 +75,7 @@ ARROW_SHAFT_OVER_HEAD = 0.5  # shaft diameter over head diameter (pose form)
 # 100,000 points would be 4.2 million vertices). Past them the marker is refused whole.
 MAX_MARKER_POINTS = 100_000
 MAX_MODEL_POINTS = 1_000_000
+MAX_ARRAY_MARKERS = 20_000  # markers in one MarkerArray; a larger array is refused whole
 LIST_SPHERE_SUBDIVISIONS = 1  # 42 vertices a sphere in a SPHERE_LIST
 MAX_TEXT_BYTES = 4096  # of a TEXT_VIEW_FACING marker's text (a STRING holds 64 KiB)
 

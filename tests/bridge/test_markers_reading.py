@@ -98,6 +98,16 @@ def test_too_many_points_is_refused_by_both_readers() -> None:
         assert f"at most {MAX_MARKER_POINTS} points" in str(event.error)
 
 
+def test_an_array_over_the_bound_is_refused_whole() -> None:
+    from bridge.markers.geometry import MAX_ARRAY_MARKERS
+
+    array = MarkerArray(markers=[Marker()] * (MAX_ARRAY_MARKERS + 1))
+    for read in (lambda: read_marker_array(serialize_message(array)),
+                 lambda: events_of("visualization_msgs/msg/MarkerArray", array)):
+        with pytest.raises(MarkerError, match=f"at most {MAX_ARRAY_MARKERS} markers"):
+            read()
+
+
 def test_models_bound_and_check_their_input() -> None:
     with pytest.raises(MarkerError, match="at most"):
         build_model(MarkerSpec(kind="sphere_list", scale=np.full(3, 0.1),
