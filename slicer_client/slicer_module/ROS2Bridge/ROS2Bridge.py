@@ -629,6 +629,21 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         self.problemsLabel.styleSheet = "color: #b00020"
         form.addRow(self.problemsLabel)
 
+        # Markers: the same calls as the robot controls (QLineEdit, QComboBox, QPushButton).
+        self.markerTopicEdit = qt.QLineEdit()
+        self.markerTopicEdit.text = "/visualization_marker_array"
+        self.markerTypeCombo = qt.QComboBox()
+        for name in ("MarkerArray", "Marker", "Path", "PolygonStamped", "PointStamped"):
+            self.markerTypeCombo.addItem(name)
+        self.markerFrameEdit = qt.QLineEdit()
+        self.markerFrameEdit.text = "world"
+        self.addMarkersButton = qt.QPushButton("Show markers")
+        self.removeMarkersButton = qt.QPushButton("Remove markers")
+        form.addRow("Marker topic:", self.markerTopicEdit)
+        form.addRow("Type:", self.markerTypeCombo)
+        form.addRow("Fixed frame:", self.markerFrameEdit)
+        form.addRow(self.addMarkersButton, self.removeMarkersButton)
+
         self.bridgeList = qt.QListWidget()
         self.refreshButton = qt.QPushButton("Refresh bridges")
         form.addRow("Active bridges:", self.bridgeList)
@@ -640,6 +655,8 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         self.anotherRobotButton.connect("clicked(bool)", self.onAnotherRobot)
         self.removeRobotButton.connect("clicked(bool)", self.onRemoveRobot)
         self.refreshButton.connect("clicked(bool)", self.onRefresh)
+        self.addMarkersButton.connect("clicked(bool)", self.onAddMarkers)
+        self.removeMarkersButton.connect("clicked(bool)", self.onRemoveMarkers)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
                          self.onSceneStartClose)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.EndCloseEvent, self.onSceneEndClose)
@@ -727,6 +744,17 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
             if name:
                 self.logic.removeRobot(name)
             self._refreshRobots()
+
+    def onAddMarkers(self):
+        with slicer.util.tryWithErrorDisplay("Failed to show the markers.", waitCursor=True):
+            self.logic.addMarkers(self.markerTopicEdit.text, self.markerTypeCombo.currentText,
+                                  self.markerFrameEdit.text)
+            self.onRefresh()
+
+    def onRemoveMarkers(self):
+        with slicer.util.tryWithErrorDisplay("Failed to remove the markers.", waitCursor=True):
+            self.logic.removeMarkers(self.markerTopicEdit.text)
+            self.onRefresh()
 
     def onRefresh(self):
         with slicer.util.tryWithErrorDisplay("Failed to list the bridges."):
