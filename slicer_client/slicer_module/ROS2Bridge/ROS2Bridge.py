@@ -404,10 +404,10 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         return markers
 
     def removeMarkers(self, topic):
-        markers = self.requireClient().find("create_marker_subscriber", topic)
-        resolved = markers.resolved_topic if markers is not None else topic
-        if markers is not None:
-            markers.remove()
+        client = self.requireClient()
+        markers = client.find("create_marker_subscriber", topic)
+        resolved = markers.resolved_topic if markers is not None else "/" + topic.lstrip("/")
+        client.remove_bridge("create_marker_subscriber", topic)  # ours or another client's
         for node in list(slicer.util.getNodesByClass("vtkMRMLNode")):
             if node.GetScene() is not None and node.GetAttribute("OpenIGTLink.ros2.role") \
                     in ("marker", "marker_topic") \
