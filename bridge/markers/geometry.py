@@ -45,14 +45,18 @@ from functools import lru_cache
 from typing import Optional, Union
 
 import math
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
 from bridge.robots.errors import RobotError
+from bridge.robots.resources import PackageResolver
 from protocol.conversions import metres_to_mm, quaternion_to_rotation
 from protocol.errors import ProtocolError
 from protocol.messages import AttributeKind, PolyData, PolyDataAttribute, RawBody, String
+from protocol.naming import (KEY_LINE_WIDTH, KEY_POINT_COLORS, KEY_POINT_SIZE, KEY_POSITION,
+                             KEY_TEXT_HEIGHT)
 
 __all__ = ["ARROW_HEAD_FRACTION", "KINDS", "MAX_ARRAY_MARKERS", "MAX_MARKER_POINTS",
            "MAX_MODEL_POINTS",
@@ -444,8 +448,6 @@ def _triangles(spec: MarkerSpec, rgba: Rgba) -> PolyData:
 
 
 def _text(spec: MarkerSpec, metadata: dict[str, str]) -> String:
-    from protocol.naming import KEY_POSITION, KEY_TEXT_HEIGHT
-
     position = metres_to_mm(_finite(spec.position, "pose.position"))
     height = float(_finite(spec.scale, "scale")[2])
     metadata[KEY_POSITION] = " ".join(f"{float(v):.6g}" for v in position)
@@ -456,10 +458,7 @@ def _text(spec: MarkerSpec, metadata: dict[str, str]) -> String:
 
 def _mesh(spec: MarkerSpec, rgba: Rgba, mesh_roots: Optional[tuple[object, ...]],
           package_paths: Optional[dict[str, object]]) -> tuple[PolyData, Rgba]:
-    from pathlib import Path
-
-    from bridge.robots.meshes import DEFAULT_MESH_CACHE
-    from bridge.robots.resources import PackageResolver
+    from bridge.robots.meshes import DEFAULT_MESH_CACHE  # trimesh: loaded with the first mesh
 
     scale = _finite(spec.scale, "scale")
     _positive_scale(scale)
@@ -489,8 +488,6 @@ def build_model(spec: MarkerSpec, *, mesh_roots: Optional[tuple[object, ...]] = 
                 package_paths: Optional[dict[str, object]] = None) -> MarkerModel:
     """The model of one marker; `MarkerError` says why a marker cannot be shown.
     ``mesh_roots``: folders a MESH_RESOURCE may be read from (None: anywhere)."""
-    from protocol.naming import KEY_LINE_WIDTH, KEY_POINT_COLORS, KEY_POINT_SIZE
-
     if len(spec.points) > MAX_MARKER_POINTS:
         raise MarkerError("points", f"at most {MAX_MARKER_POINTS} points",
                           f"{len(spec.points)} points")
