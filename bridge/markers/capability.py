@@ -75,6 +75,7 @@ from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
 from bridge.security import NameRules
 from bridge.tf.capability import TfBridges
+from bridge.tf.errors import TfError
 from bridge.tf.lookups import LookupKey
 from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
                                ListMarkers, Op, OutOfRangeError, RemoveMarkerSubscriber)
@@ -82,7 +83,7 @@ from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
 from protocol.messages import Message, String
 from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_FORMAT, KEY_MARKER_TYPE, KEY_MARKERS,
                              KEY_PARENT_DEVICE, UNITS_MM, DeviceNameRegistry, NameKey,
-                             metadata_for)
+                             NamingError, metadata_for)
 
 __all__ = ["MAX_MARKERS", "MAX_QUEUED", "MarkerBridges"]
 
@@ -490,9 +491,15 @@ class MarkerBridges:
                     "id", f"at most {MAX_MARKERS} live markers on a topic",
                     f"marker {len(sub.markers) + 1}")), gone)
                 return
-            name_key = NameKey.marker(sub.topic, key[0], key[1])
+            try:  # a namespace or frame no device name or tf lookup can hold (NUL)
+                name_key = NameKey.marker(sub.topic, key[0], key[1])
+                self._use_frame(sub.fixed_frame, frame)
+            except (NamingError, TfError) as error:
+                self._refuse(sub, _Refused(key, MarkerError(
+                    "ns/frame", "a namespace and frame id usable as names (no NUL)",
+                    f"{key[0]!r} in frame {frame!r} ({error})")), gone)
+                return
             device = self._names.register(name_key)
-            self._use_frame(sub.fixed_frame, frame)
             live = _Live(key, name_key, device, frame, model.kind, body_type, update.digest,
                          model.point_count)
             sub.markers[key] = live

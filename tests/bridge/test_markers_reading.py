@@ -124,3 +124,39 @@ def test_models_bound_and_check_their_input() -> None:
     assert isinstance(body, PolyData) and model.point_count == 8
     assert set(map(tuple, np.asarray(body.points))) == {
         (x, y, z) for x in (-500.0, 500.0) for y in (-500.0, 500.0) for z in (-500.0, 500.0)}
+
+
+def test_a_namespace_no_device_name_can_hold_is_refused_not_raised() -> None:
+    import asyncio
+    import json
+
+    from bridge.hub import Hub
+    from bridge.markers.capability import MarkerBridges, _Show, _Subscription
+    from protocol.commands import CreateMarkerSubscriber
+    from protocol.naming import DeviceNameRegistry, NameKey
+
+    class Tf:  # the tf capability's two calls, for the loop-side logic alone
+        def stream_lookup(self, *args: object, **kwargs: object) -> object:
+            return object()
+
+        def stop_lookup(self, handle: object) -> None:
+            pass
+
+    async def run() -> None:
+        hub = Hub(asyncio.get_running_loop())
+        markers = MarkerBridges(None, hub, DeviceNameRegistry(), tf=Tf())  # type: ignore[arg-type]
+        request = CreateMarkerSubscriber(topic="/m", type="Marker", fixed_frame="world")
+        sub = _Subscription("/m", "visualization_msgs/msg/Marker", request, "world",
+                            NameKey.marker_topic("/m"), "mks:m", markers)
+        markers.subscriptions["/m"] = sub
+        spec = MarkerSpec(kind="cube", ns="a\x00b", scale=np.ones(3), frame="base")
+        good = MarkerSpec(kind="cube", ns="ok", scale=np.ones(3), frame="base")
+        markers.apply(sub, [_Show(("a\x00b", 0), "base", spec.digest(), build_model(spec), 0),
+                            _Show(("ok", 0), "base", good.digest(), build_model(good), 0)])
+        assert list(sub.markers) == [("ok", 0)]
+        (error,) = sub.errors.values()
+        assert "ns/frame: expected a namespace and frame id usable as names" in error
+        index = hub.latest("mks:m")
+        assert index is not None and len(json.loads(index.metadata["ros2.markers"])) == 1
+
+    asyncio.run(run())
