@@ -475,3 +475,21 @@ def test_pythonic_client_follows_markers(daemon: RunningDaemon, peer: Peer) -> N
         assert node.GetNumberOfMarkers() == 1 and node.GetMarkerDeviceNames() == [
             markers.find("py", 2).device]
         assert ros.GetDefaultROS2Node().RemoveAndDeleteMarkerSubscriberNode("/test_markers")
+
+
+def test_removing_frees_devices_and_a_shared_frame_with_its_last_user(client: Connection,
+                                                                     peer: Peer) -> None:
+    peer.send(polygon={"frame": "world", "points": [[0, 0, 0], [1, 0, 0], [1, 1, 0]]},
+              point={"frame": "world", "point": [0.0, 0.0, 0.0]})
+    polygon = wait_markers(client, "/test_polygon", {("", 0)})[("", 0)]
+    point = wait_markers(client, "/test_point", {("", 0)})[("", 0)]
+    assert polygon["frame_device"] == point["frame_device"]  # one TRANSFORM per frame
+    shared = polygon["frame_device"]
+    removed = client.command("remove_marker_subscriber", {"topic": "/test_polygon"})
+    assert set(removed["devices"]) == {polygon["device"], "mks:test_polygon"}
+    devices = set(client.command("list_bridges")["devices"])
+    assert polygon["device"] not in devices and "mks:test_polygon" not in devices
+    assert shared in devices and point["device"] in devices  # the point still uses it
+    client.command("remove_marker_subscriber", {"topic": "/test_point"})
+    devices = set(client.command("list_bridges")["devices"])
+    assert shared not in devices and point["device"] not in devices
