@@ -36,6 +36,28 @@ RED, GREEN, BLUE = [1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 1.0], [0.0, 0.0, 1.0, 1
 TETRA = [(0.0, 0.0, 0.0), (0.01, 0.0, 0.0), (0.0, 0.02, 0.0), (0.0, 0.0, 0.03)]  # metres
 
 
+# A triangle whose vertices are red, green and blue (PLY vertex colours, metres).
+COLOURED_PLY = """ply
+format ascii 1.0
+element vertex 3
+property float x
+property float y
+property float z
+property uchar red
+property uchar green
+property uchar blue
+property uchar alpha
+element face 1
+property list uchar int vertex_indices
+end_header
+0 0 0 255 0 0 255
+0.1 0 0 0 255 0 255
+0 0.1 0 0 0 255 255
+3 0 1 2
+"""
+PLY_COLOURS = {(0.0, 0.0, 0.0): RED, (100.0, 0.0, 0.0): GREEN, (0.0, 100.0, 0.0): BLUE}
+
+
 def write_stl(path: Path, vertices: list[tuple[float, float, float]]) -> None:
     faces = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
     lines = ["solid tetra"]
@@ -56,12 +78,14 @@ def folders(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     write_stl(inside / "tetra.stl", TETRA)
     write_stl(outside / "tetra.stl", TETRA)
     (inside / "broken.stl").write_text("solid nothing here\n")
+    (inside / "coloured.ply").write_text(COLOURED_PLY)
     return {"inside": inside, "outside": outside, "root": root}
 
 
 @pytest.fixture(scope="module")
 def daemon(module_processes: Processes, folders: dict[str, Path]) -> Iterator[RunningDaemon]:
     running = start_daemon(module_processes, "--robot-dir", str(folders["inside"]),
+                           "--package-path", f"marker_meshes={folders['inside']}",
                            "--deny-frame", "secret*")
     yield running
     assert_clean_exit(running)
@@ -322,6 +346,7 @@ def test_path_polygon_point(client: Connection, peer: Peer) -> None:
 
 def test_markers_move_with_tf(client: Connection, peer: Peer) -> None:
     cube = {"ns": "moving", "id": 1, "type": CUBE, "frame": "moving", "scale": [0.1] * 3}
+    peer.send(marker={"action": DELETEALL})
     peer.send(marker=cube, moving=[0.5, 0.0, 0.0])
     row = wait_markers(client, "/test_marker", {("moving", 1)})[("moving", 1)]
     device = row["frame_device"]
@@ -398,8 +423,9 @@ def test_bad_markers_are_refused_and_the_daemon_serves(client: Connection, peer:
         error = json.loads(status.body.text)["error"]
         assert words in error, error
     # The same topic still shows a good marker.
+    peer.send(marker={"action": DELETEALL})
     peer.send(marker={"ns": "good", "id": 1, "type": CUBE, "scale": [0.1] * 3})
-    wait_markers(client, "/test_marker", {("good", 1), ("moving", 1)})
+    wait_markers(client, "/test_marker", {("good", 1)})
 
 
 def test_denied_frame_is_withheld(client: Connection, peer: Peer) -> None:
@@ -493,3 +519,21 @@ def test_removing_frees_devices_and_a_shared_frame_with_its_last_user(client: Co
     client.command("remove_marker_subscriber", {"topic": "/test_point"})
     devices = set(client.command("list_bridges")["devices"])
     assert shared not in devices and point["device"] not in devices
+
+
+def test_mesh_resource_by_package_uri_with_its_own_colours_or_the_markers(
+        client: Connection, peer: Peer) -> None:
+    uri = "package://marker_meshes/coloured.ply"
+    peer.send(marker={"action": DELETEALL})
+    peer.send(marker={"ns": "ply", "id": 1, "type": MESH, "mesh": uri, "embedded": True,
+                      "color": [0.5, 0.5, 0.5, 1.0]})
+    peer.send(marker={"ns": "ply", "id": 2, "type": MESH, "mesh": uri, "embedded": False,
+                      "color": [0.5, 0.5, 0.5, 1.0], "pos": [0.0, 0.0, 1.0]})
+    rows = wait_markers(client, "/test_marker", {("ply", 1), ("ply", 2)})
+    own = model(client, rows[("ply", 1)]["device"])
+    for point, colour in zip(points(own), rgba(own)):
+        np.testing.assert_allclose(colour, PLY_COLOURS[tuple(np.round(point, 3))], atol=1e-6)
+    assert own.metadata["ros2.point_colors"] == "1"
+    plain = model(client, rows[("ply", 2)]["device"])
+    assert rounded(points(plain)) == {(x, y, 1000.0) for x, y, _ in PLY_COLOURS}
+    np.testing.assert_allclose(rgba(plain), np.full((3, 4), [0.5, 0.5, 0.5, 1.0]))
