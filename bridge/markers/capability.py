@@ -29,7 +29,10 @@ what came.
 Why the work is where it is: a MarkerArray of 1000 markers at 10-30 Hz is too much to
 convert on the ROS callback or the loop. The callback only queues the message (at most
 `MAX_QUEUED`; past that the oldest goes and ``dropped`` counts it); a worker thread per
-topic reads and meshes; the loop only publishes. A marker re-sent unchanged (RViz
+topic reads and meshes; the loop only publishes. A worker that falls behind reads what
+waits in one go and meshes only the newest state of each marker (the end state is the
+same as reading the messages one by one; the states in between are skipped), so it
+catches up. A marker re-sent unchanged (RViz
 publishers re-publish whole arrays) costs its reading and a digest, and no message: its
 model is neither rebuilt nor re-sent, nor handed to the loop unless its lifetime must be
 renewed.
@@ -89,7 +92,7 @@ __all__ = ["MAX_MARKERS", "MAX_QUEUED", "MarkerBridges"]
 
 log = logging.getLogger(__name__)
 
-MAX_QUEUED = 64  # messages a topic's worker may be behind; past that the oldest go
+MAX_QUEUED = 64  # messages waiting for a topic's worker; past that the oldest go
 MAX_MARKERS = 10_000  # live markers of one topic; more are refused (STATUS)
 _MAX_IN_FLIGHT = 4  # batches handed to the loop and not applied yet (worker waits)
 
@@ -205,9 +208,12 @@ class _Worker:
                     self._cond.wait()
                 if self._stopped:
                     return
-                msg = self._queue.popleft()
+                # Everything waiting, read together: a worker that fell behind meshes only
+                # the newest state of each marker (see `_fold`), so it catches up.
+                messages = list(self._queue)
+                self._queue.clear()
             try:
-                updates = self._updates(msg)
+                updates = self._updates(messages)
             except Exception:  # noqa: BLE001 - a bug on one message must not end the topic
                 log.exception("markers on %s: a message could not be read", self._sub.topic)
                 continue
@@ -228,23 +234,42 @@ class _Worker:
                 msg = deserialize_message(msg, sub.message_class)
         return events_of(sub.ros_type, msg)
 
-    def _updates(self, msg: Any) -> list[_Update]:
-        out: list[_Update] = []
-        try:
-            events = self._events(msg)
-        except MarkerError as error:
-            return [_MessageRefused(error)]
-        for event in events:
-            key = (event.ns, event.id)
+    def _fold(self, messages: list[Any]) -> tuple[list[_Update], bool,
+                                                  dict[MarkerKey, MarkerEvent]]:
+        """The messages' events folded into their end state, in order: (messages refused
+        whole, whether a DELETEALL came, the last event of each marker after the last
+        DELETEALL). Applying that end state leaves the loop where applying every message
+        in turn would; only the states in between are skipped."""
+        refused: list[_Update] = []
+        delete_all = False
+        last: dict[MarkerKey, MarkerEvent] = {}
+        for msg in messages:
+            try:
+                events = self._events(msg)
+            except MarkerError as error:
+                refused.append(_MessageRefused(error))
+                continue
+            for event in events:
+                if event.action == DELETEALL:
+                    delete_all = True
+                    last.clear()
+                    continue
+                key = (event.ns, event.id)
+                last.pop(key, None)  # keep the order of the latest events
+                last[key] = event
+        return refused, delete_all, last
+
+    def _updates(self, messages: list[Any]) -> list[_Update]:
+        out, delete_all, events = self._fold(messages)
+        if delete_all:
+            with self._lock:
+                self._models.clear()
+            out.append(_Gone(None))
+        for key, event in events.items():
             if event.action == DELETE:
                 with self._lock:
                     self._models.pop(key, None)
                 out.append(_Gone(key))
-                continue
-            if event.action == DELETEALL:
-                with self._lock:
-                    self._models.clear()
-                out.append(_Gone(None))
                 continue
             assert event.action == ADD
             if event.error is not None or event.spec is None:

@@ -160,3 +160,41 @@ def test_a_namespace_no_device_name_can_hold_is_refused_not_raised() -> None:
         assert index is not None and len(json.loads(index.metadata["ros2.markers"])) == 1
 
     asyncio.run(run())
+
+
+def test_a_worker_behind_folds_what_waits_into_its_end_state() -> None:
+    from bridge.markers.capability import _Gone, _Show, _Worker
+
+    class Sub:  # what the worker uses of its subscription
+        topic = "/m"
+        ros_type = "visualization_msgs/msg/MarkerArray"
+        message_class = MarkerArray
+
+        def hand_over(self, updates: object) -> None:
+            pass
+
+    def cube(marker_id: int, x: float = 0.0, action: int = Marker.ADD) -> Marker:
+        m = Marker(type=Marker.CUBE, id=marker_id, action=action)
+        m.pose.position.x = x
+        m.scale.x = m.scale.y = m.scale.z = 0.1
+        return m
+
+    def raw(*markers: Marker) -> bytes:
+        return bytes(serialize_message(MarkerArray(markers=list(markers))))
+
+    worker = _Worker(Sub(), (), {})  # type: ignore[arg-type]
+    try:
+        # Moved twice then deleted, another added: only the end state is handed on.
+        updates = worker._updates([raw(cube(1), cube(2)), raw(cube(1, 0.5)),
+                                   raw(cube(1, action=Marker.DELETE), cube(3))])
+        assert [(type(u).__name__, getattr(u, "key", None)) for u in updates] == [
+            ("_Show", ("", 2)), ("_Gone", ("", 1)), ("_Show", ("", 3))]
+        # DELETEALL in between: everything before it goes, what follows stays.
+        updates = worker._updates([raw(cube(4)), raw(Marker(action=Marker.DELETEALL),
+                                                     cube(5, 1.0))])
+        assert isinstance(updates[0], _Gone) and updates[0].key is None
+        assert [u.key for u in updates[1:] if isinstance(u, _Show)] == [("", 5)]
+        # The same state again costs nothing: no update at all.
+        assert worker._updates([raw(cube(5, 1.0))]) == []
+    finally:
+        worker.stop()
