@@ -20,6 +20,7 @@ from typing import Awaitable, Callable, Optional
 from bridge.config import DaemonConfig
 from bridge.dispatch import Dispatcher
 from bridge.hub import Hub
+from bridge.markers.capability import MarkerBridges
 from bridge.parameters import ParameterBridges
 from bridge.robots.capability import RobotBridges
 from bridge.ros_node import RosNode, RosOptions
@@ -60,8 +61,14 @@ class Daemon:
                                    package_paths=dict(config.package_paths),
                                    frame_rules=policy.frames,
                                    mesh_roots=tuple(Path(d) for d in policy.robot_dirs))
+        # Markers read meshes only inside the same roots as a client's robot.
+        self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
+                                     frame_rules=policy.frames,
+                                     mesh_roots=tuple(Path(d) for d in policy.robot_dirs),
+                                     package_paths=dict(config.package_paths))
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
-                                                          self.services, self.robots],
+                                                          self.services, self.robots,
+                                                          self.markers],
                                      policy=policy, resolve_frame=self.tf.resolve_frame,
                                      resolve_file=self.robots.file_path)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,

@@ -20,7 +20,13 @@ parameter_client      node ``/rsp``              ``param:rsp``
 parameter_server      node (the daemon's)        ``params:bridge``
 service_client        service ``/spawn``         ``srvc:spawn``
 service_server        service ``/spawn``         ``srv:spawn``
+marker                topic, ns, id              ``mk:markers:shapes:3``
+marker_frame          fixed frame, frame         ``mkf:world>base``
+marker_topic          topic ``/markers``         ``mks:markers``
 ====================  =========================  ============================
+
+A marker's ``ns`` may be empty (``mk:markers::0``); its id is kept last when the name must
+be abbreviated, as a robot visual's index.
 
 * A leading ``/`` is dropped (topics, node names, services and frames are taken as
   absolute: ``/tool`` and ``tool`` are the same); inner ``/`` of namespaces is kept.
@@ -65,6 +71,16 @@ __all__ = [
     "KEY_FORMAT",
     "KEY_LABELS",
     "KEY_LINK_COUNT",
+    "KEY_LINE_WIDTH",
+    "KEY_MARKER_ID",
+    "KEY_MARKER_NS",
+    "KEY_MARKER_TYPE",
+    "KEY_MARKERS",
+    "KEY_DELETED",
+    "KEY_POINT_COLORS",
+    "KEY_POINT_SIZE",
+    "KEY_POSITION",
+    "KEY_TEXT_HEIGHT",
     "KEY_VISUAL_COUNT",
     "KEY_WARNINGS",
     "KEY_FRAME",
@@ -126,6 +142,9 @@ class Role(str, enum.Enum):
     PARAMETER_SERVER = "parameter_server"
     SERVICE_CLIENT = "service_client"
     SERVICE_SERVER = "service_server"
+    MARKER = "marker"
+    MARKER_FRAME = "marker_frame"
+    MARKER_TOPIC = "marker_topic"
 
 
 # Prefix of the readable form, and the names of the parts (also their metadata keys).
@@ -141,6 +160,9 @@ _PREFIX: dict[Role, str] = {
     Role.PARAMETER_SERVER: "params:",
     Role.SERVICE_CLIENT: "srvc:",
     Role.SERVICE_SERVER: "srv:",
+    Role.MARKER: "mk:",
+    Role.MARKER_FRAME: "mkf:",
+    Role.MARKER_TOPIC: "mks:",
 }
 _RESERVED_ROBOT_NAMES = frozenset(p.rstrip(":") for p in _PREFIX.values() if p)
 
@@ -170,10 +192,28 @@ KEY_ENCODING = "ros2.encoding"  # sensor_msgs/Image encoding of the ROS side ("b
 KEY_FORMAT = "ros2.format"  # "text" or "json": how to read a STRING body
 KEY_LABELS = "ros2.labels"  # JSON list of MultiArrayDimension labels
 KEY_DROPPED = "ros2.dropped"  # points left out of a cloud for a NaN/inf coordinate
+# A marker's identity and kind (visualization_msgs/Marker ns, id, and its type as a word:
+# "cube", "line_strip", ..., or "path", "polygon", "point" for the other marker sources).
+KEY_MARKER_NS = "ros2.ns"
+KEY_MARKER_ID = "ros2.id"
+KEY_MARKER_TYPE = "ros2.marker_type"
+# A TEXT_VIEW_FACING marker is a STRING (its text) placed by these: "x y z" mm in the marker's
+# frame, and the text height in mm (scale.z).
+KEY_POSITION = "ros2.position"
+KEY_TEXT_HEIGHT = "ros2.text_height"
+KEY_LINE_WIDTH = "ros2.line_width"  # mm: LINE_STRIP/LINE_LIST scale.x
+KEY_POINT_SIZE = "ros2.point_size"  # mm: "w h" of POINTS (scale.x, scale.y)
+# "1" when a model's RGBA point colours differ (per-point colours): show them directly.
+KEY_POINT_COLORS = "ros2.point_colors"
+# On a marker topic's device (STATUS): JSON lists of the devices of the live markers and of
+# those just deleted (DELETE, DELETEALL, lifetime): the client removes what is not live.
+KEY_MARKERS = "ros2.markers"
+KEY_DELETED = "ros2.deleted"
 METADATA_KEYS: tuple[str, ...] = (
     KEY_TOPIC, KEY_TYPE, KEY_FRAME, KEY_PARENT, KEY_CHILD, KEY_ROBOT, KEY_LINK,
     KEY_VISUAL, KEY_NODE, KEY_SERVICE, KEY_ROLE, KEY_UNITS, KEY_PARENT_DEVICE, KEY_COLOR,
-    KEY_LINK_COUNT, KEY_VISUAL_COUNT, KEY_WARNINGS,
+    KEY_LINK_COUNT, KEY_VISUAL_COUNT, KEY_WARNINGS, KEY_MARKER_NS, KEY_MARKER_ID,
+    KEY_MARKER_TYPE,
 )
 UNITS_MM = "mm"
 
@@ -189,6 +229,9 @@ _PART_KEYS: dict[Role, tuple[str, ...]] = {
     Role.PARAMETER_SERVER: (KEY_NODE,),
     Role.SERVICE_CLIENT: (KEY_SERVICE,),
     Role.SERVICE_SERVER: (KEY_SERVICE,),
+    Role.MARKER: (KEY_TOPIC, KEY_MARKER_NS, KEY_MARKER_ID),
+    Role.MARKER_FRAME: (KEY_PARENT, KEY_CHILD),
+    Role.MARKER_TOPIC: (KEY_TOPIC,),
 }
 # Parts that are absolute ROS graph names: metadata gives them with their leading '/'.
 _GRAPH_NAME_KEYS = frozenset({KEY_TOPIC, KEY_NODE, KEY_SERVICE})
@@ -217,7 +260,9 @@ class NameKey:
             raise NamingError(field="parts", expected=f"{want} name parts for {self.role.value}",
                               got=f"{len(self.parts)}")
         for key, part in zip(_PART_KEYS[self.role], self.parts):
-            if not isinstance(part, str) or not part:
+            if self.role == Role.MARKER and key == KEY_MARKER_NS and isinstance(part, str):
+                pass  # a marker's namespace may be empty (RViz's default)
+            elif not isinstance(part, str) or not part:
                 raise NamingError(field=key, expected="a non-empty string", got=repr(part))
             if "\x00" in part:
                 raise NamingError(field=key, expected="a name without NUL", got=repr(part))
@@ -255,6 +300,22 @@ class NameKey:
         return cls(Role.ROBOT_DESCRIPTION, (_clean(robot, KEY_ROBOT),))
 
     @classmethod
+    def marker(cls, topic: str, ns: str, marker_id: int) -> NameKey:
+        if isinstance(marker_id, bool) or not isinstance(marker_id, int):
+            raise NamingError(field=KEY_MARKER_ID, expected="an integer", got=repr(marker_id))
+        if not isinstance(ns, str):
+            raise NamingError(field=KEY_MARKER_NS, expected="a string", got=repr(ns))
+        return cls(Role.MARKER, (_clean(topic, KEY_TOPIC), ns, str(marker_id)))
+
+    @classmethod
+    def marker_frame(cls, fixed: str, frame: str) -> NameKey:
+        return cls(Role.MARKER_FRAME, (_clean(fixed, KEY_PARENT), _clean(frame, KEY_CHILD)))
+
+    @classmethod
+    def marker_topic(cls, topic: str) -> NameKey:
+        return cls(Role.MARKER_TOPIC, (_clean(topic, KEY_TOPIC),))
+
+    @classmethod
     def parameter_client(cls, node: str) -> NameKey:
         return cls(Role.PARAMETER_CLIENT, (_clean(node, KEY_NODE),))
 
@@ -288,12 +349,15 @@ def _clean(name: str, field: str) -> str:
 
 
 def _readable_body(key: NameKey) -> str:
-    if key.role in (Role.TF_LOOKUP, Role.TF_BROADCASTER):
+    if key.role in (Role.TF_LOOKUP, Role.TF_BROADCASTER, Role.MARKER_FRAME):
         return f"{key.parts[0]}>{key.parts[1]}"
     return ":".join(key.parts)
 
 
 def _is_lossless(key: NameKey) -> bool:
+    if key.role == Role.MARKER:  # ns may be empty; the id is an integer (maybe negative)
+        return (all(_SAFE_PART.match(p) for p in key.parts[:1])
+                and (not key.parts[1] or bool(_SAFE_PART.match(key.parts[1]))))
     if not all(_SAFE_PART.match(p) for p in key.parts):
         return False
     if key.role in (Role.ROBOT_LINK, Role.ROBOT_VISUAL) and key.parts[0] in _RESERVED_ROBOT_NAMES:
@@ -324,6 +388,10 @@ def device_name_for(key: NameKey, hash_length: int = DEFAULT_HASH_LENGTH) -> str
     suffix = ""
     if key.role == Role.ROBOT_VISUAL:
         suffix = ":" + (parts.pop() if key.parts[2].isdigit() else "x")
+    elif key.role == Role.MARKER:
+        suffix = ":" + parts.pop()  # the id, always whole: it tells a topic's markers apart
+        if not parts[1]:
+            parts.pop()  # an empty ns: nothing to abbreviate
     mark = _HASH_SEPARATOR + _digest(key)[:hash_length]
     room = MAX_DEVICE_NAME_BYTES - len(prefix) - len(mark) - len(suffix)
     return f"{prefix}{_abbreviate(key.role, parts, room)}{mark}{suffix}"
@@ -333,10 +401,11 @@ def _abbreviate(role: Role, parts: list[str], room: int) -> str:
     """The readable body of ``parts`` shortened to ``room`` characters, in steps that keep
     it readable: noise suffixes go, then namespaces become initials, then go, then parts
     are cut from their ends (their starts stay)."""
-    if role in (Role.TF_LOOKUP, Role.TF_BROADCASTER):
+    if role in (Role.TF_LOOKUP, Role.TF_BROADCASTER, Role.MARKER_FRAME):
         separator = ">"
     elif role in (Role.SUBSCRIBER, Role.PUBLISHER, Role.PARAMETER_CLIENT,
-                  Role.PARAMETER_SERVER, Role.SERVICE_CLIENT, Role.SERVICE_SERVER):
+                  Role.PARAMETER_SERVER, Role.SERVICE_CLIENT, Role.SERVICE_SERVER,
+                  Role.MARKER_TOPIC):
         separator = ""  # one graph name
     else:
         separator = ":"
@@ -478,6 +547,9 @@ def key_from_metadata(metadata: dict[str, str]) -> NameKey:
     parts = []
     for part_key in _PART_KEYS[role]:
         value = metadata.get(part_key)
+        if role == Role.MARKER and part_key == KEY_MARKER_NS and value is not None:
+            parts.append(value)
+            continue
         if not value:
             raise NamingError(field=part_key, expected=f"a name for role {role.value}",
                               got=repr(value))
@@ -486,4 +558,11 @@ def key_from_metadata(metadata: dict[str, str]) -> NameKey:
         if not parts[2].isdigit():
             raise NamingError(field=KEY_VISUAL, expected="an integer >= 0", got=repr(parts[2]))
         return NameKey.robot_visual(parts[0], parts[1], int(parts[2]))
+    if role == Role.MARKER:
+        try:
+            marker_id = int(parts[2])
+        except ValueError:
+            raise NamingError(field=KEY_MARKER_ID, expected="an integer",
+                              got=repr(parts[2])) from None
+        return NameKey.marker(parts[0], parts[1], marker_id)
     return NameKey(role, tuple(_clean(p, k) for p, k in zip(parts, _PART_KEYS[role])))

@@ -25,13 +25,13 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 import numpy as np
 
 from protocol.messages import Message
-from protocol.naming import KEY_ROBOT
+from protocol.naming import KEY_ROBOT, KEY_ROLE
 from protocol import commands as c
 from slicer_client.bridge_state import REMOVE_OPS, BridgeSpec, BridgeState
 from slicer_client.connection import DEFAULT_HOST, DEFAULT_PORT, CommandRefusedError
 from slicer_client.matrices import as_numpy
-from slicer_client.resources import (ParameterClient, Publisher, Resource, Robot, Service,
-                                     Subscriber, TfBroadcaster, TfLookup)
+from slicer_client.resources import (MarkerSubscriber, ParameterClient, Publisher, Resource,
+                                     Robot, Service, Subscriber, TfBroadcaster, TfLookup)
 from slicer_client.transport import CommandFn, Transport, open_transport
 
 __all__ = ["Client", "connect"]
@@ -69,13 +69,18 @@ class Client:
             if resource is None and message.metadata.get(KEY_ROBOT):
                 resource = self._resources.get(("create_robot",
                                                 message.metadata[KEY_ROBOT]))
+            # Marker devices come and go with the markers: routed by their metadata.
+            markers = [] if resource is not None or not message.metadata.get(
+                KEY_ROLE, "").startswith("marker") else [
+                r for r in self._resources.values()
+                if isinstance(r, MarkerSubscriber) and r.owns(message)]
         if message.type_name == "STATUS" and getattr(message.body, "code", 1) != 1:
             self.errors.append(f"{message.device_name}: {getattr(message.body, 'text', '')}")
-        if resource is not None:
+        for target in ([resource] if resource is not None else markers):
             try:
-                resource._handle(message)
+                target._handle(message)
             except Exception:  # noqa: BLE001 - one bad message must not stop the stream
-                log.exception("handling %s for %r failed", message.type_name, resource)
+                log.exception("handling %s for %r failed", message.type_name, target)
 
     def on_connected(self, command: CommandFn, first: bool) -> None:
         """Re-create everything (in order) on a new connection, then tell the user."""
@@ -224,6 +229,30 @@ class Client:
             raise
         return robot
 
+    def markers(self, topic: str, type: str, fixed_frame: str, *,
+                qos: Optional[Mapping[str, Any]] = None,
+                callback: Optional[Callable[..., None]] = None) -> MarkerSubscriber:
+        """Show an RViz marker topic (`type` Marker or MarkerArray) or a Path,
+        PolygonStamped or PointStamped topic as models placed by tf in `fixed_frame`.
+        `callback(kind, ...)`: see `MarkerSubscriber`."""
+        with self._lock:
+            existed = ("create_marker_subscriber", topic) in self._resources
+        resource: MarkerSubscriber = self._add(MarkerSubscriber(self, topic, type, fixed_frame,
+                                                                qos=qos))
+        if callback is not None:
+            resource.add_callback(callback)
+        if not existed:
+            # What arrived before the reply named the topic; the topic's list of live
+            # markers last, so models of markers deleted since are dropped again.
+            with self._lock:
+                early = sorted((m for m in self._latest.values()
+                                if m.metadata.get(KEY_ROLE, "").startswith("marker")
+                                and resource.owns(m)),
+                               key=lambda m: m.metadata.get(KEY_ROLE) == "marker_topic")
+            for message in early:
+                resource._handle(message)
+        return resource
+
     def resources(self) -> List[Resource]:
         with self._lock:
             return list(self._resources.values())
@@ -294,6 +323,8 @@ class Client:
                                   fixed_frame=a.get("fixed_frame"),
                                   tf_prefix=a.get("tf_prefix", ""),
                                   namespace=a.get("namespace", ""))
+        elif spec.op == "create_marker_subscriber":
+            resource = self.markers(a["topic"], a["type"], a["fixed_frame"], qos=a.get("qos"))
         else:  # a bridge kind without a Pythonic class yet: its spec alone re-creates it
             resource = self._add(Resource(self, spec))
         return resource

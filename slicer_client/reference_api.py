@@ -28,8 +28,9 @@ import numpy as np
 
 from protocol import commands as c
 from slicer_client.matrices import blank_matrix, fill_vtk, is_vtk_matrix, to_vtk
-from slicer_client.resources import (ParameterClient, Publisher, Resource, Robot, Service,
-                                     Subscriber, TfBroadcaster, TfLookup, parameter_to_python)
+from slicer_client.resources import (MarkerSubscriber, ParameterClient, Publisher, Resource,
+                                     Robot, Service, Subscriber, TfBroadcaster, TfLookup,
+                                     parameter_to_python)
 
 
 class FacadeClient(Protocol):
@@ -64,7 +65,12 @@ class FacadeClient(Protocol):
 
     def robot(self, name: str, **options: Any) -> Robot: ...
 
-__all__ = ["ParameterNode", "PublisherNode", "ROS2Node", "RobotNode", "ServiceClientNode",
+    def markers(self, topic: str, type: str, fixed_frame: str, *,
+                qos: Optional[Mapping[str, Any]] = None,
+                callback: Optional[Callable[..., None]] = None) -> MarkerSubscriber: ...
+
+__all__ = ["MarkerSubscriberNode", "ParameterNode", "PublisherNode", "ROS2Node", "RobotNode",
+           "ServiceClientNode",
            "SubscriberNode", "Tf2BroadcasterNode", "Tf2LookupNode", "short_type_name"]
 
 # Slicer's integer event ids: vtkCommand::ModifiedEvent, vtkMRMLTransformNode::
@@ -423,6 +429,33 @@ class RobotNode(_Node):
         return None if entry is None else self._matrix_out(entry.matrix, target)
 
 
+class MarkerSubscriberNode(_Node):
+    """A marker topic (not in the reference, which has no markers): named in its style.
+    ModifiedEvent fires when a marker arrives, changes or is deleted."""
+
+    resource: MarkerSubscriber
+
+    def __init__(self, ros_node: ROS2Node, resource: MarkerSubscriber) -> None:
+        super().__init__(ros_node, resource)
+        resource.add_callback(lambda kind, *args: self.InvokeEvent("ModifiedEvent")
+                              if kind != "frame" else None)
+
+    def GetName(self) -> str:  # noqa: N802
+        return f"ros2:markers:{self.resource.topic}"
+
+    def GetTopic(self) -> str:  # noqa: N802
+        return self.resource.topic
+
+    def GetFixedFrame(self) -> str:  # noqa: N802
+        return self.resource.fixed_frame
+
+    def GetNumberOfMarkers(self) -> int:  # noqa: N802
+        return len(self.resource.markers)
+
+    def GetMarkerDeviceNames(self) -> List[str]:  # noqa: N802
+        return sorted(self.resource.markers)
+
+
 class ServiceClientNode(_Node):
     """A service client; the reference generates one class per service type, here any
     installed service type works."""
@@ -577,6 +610,20 @@ class ROS2Node:
 
     def RemoveAndDeleteRobotNode(self, robotName: str) -> bool:  # noqa: N802,N803
         return self._drop("create_robot", robotName)
+
+    # markers (not in the reference)
+    def CreateAndAddMarkerSubscriberNode(self, className: str, topic: str,  # noqa: N802,N803
+                                         fixedFrame: str) -> MarkerSubscriberNode:  # noqa: N803
+        """`className`: Marker, MarkerArray, Path, PolygonStamped or PointStamped."""
+        markers = self.client.markers(topic, className, fixedFrame)
+        return self._wrap(markers, MarkerSubscriberNode)
+
+    def GetMarkerSubscriberNodeByTopic(self, topic: str  # noqa: N802
+                                       ) -> Optional[MarkerSubscriberNode]:
+        return self._get("create_marker_subscriber", topic)
+
+    def RemoveAndDeleteMarkerSubscriberNode(self, topic: str) -> bool:  # noqa: N802
+        return self._drop("create_marker_subscriber", topic)
 
     # services
     def CreateAndAddServiceClientNode(self, className: str, service: str  # noqa: N802,N803

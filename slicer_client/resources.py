@@ -19,14 +19,17 @@ import numpy as np
 
 from protocol import commands as c
 from protocol.messages import Message, PolyData, Status, String, Transform
-from protocol.naming import (KEY_LINK, KEY_LINK_COUNT, KEY_ROLE, KEY_VISUAL, KEY_VISUAL_COUNT,
-                             KEY_WARNINGS)
+from protocol.naming import (KEY_FRAME, KEY_LINK, KEY_LINK_COUNT, KEY_MARKER_ID, KEY_MARKER_NS,
+                             KEY_MARKER_TYPE, KEY_MARKERS, KEY_PARENT_DEVICE, KEY_POSITION,
+                             KEY_ROLE,
+                             KEY_TOPIC, KEY_VISUAL, KEY_VISUAL_COUNT, KEY_WARNINGS)
 from slicer_client.bridge_state import BridgeSpec
 from slicer_client.matrices import as_numpy, as_rows
 from slicer_client.owner import ResourceOwner
 from slicer_client.values import value_from_message
 
-__all__ = ["ParameterClient", "Publisher", "Resource", "Robot", "RobotLink", "Service",
+__all__ = ["MarkerItem", "MarkerSubscriber", "ParameterClient", "Publisher", "Resource",
+           "Robot", "RobotLink", "Service",
            "Subscriber", "TfBroadcaster", "TfLookup", "parameter_to_python"]
 
 Callback = Callable[..., None]
@@ -508,3 +511,116 @@ class Robot(Resource):
                     return False
             return bool(self._devices)
         self._wait(loaded, timeout, f"robot {self.name} links and meshes")
+
+
+@dataclass
+class MarkerItem:
+    """One live marker as the client has it: its model (PolyData in mm in its frame, or a
+    String for text, placed by metadata ros2.position), its identity and the TRANSFORM
+    device of its frame."""
+
+    device: str
+    ns: str
+    id: int
+    kind: str
+    body: Any
+    metadata: Dict[str, str]
+    frame: str
+    frame_device: str
+
+
+class MarkerSubscriber(Resource):
+    """An RViz marker topic (Marker, MarkerArray) or a Path, PolygonStamped or
+    PointStamped topic: one `MarkerItem` per live marker in `markers` (device -> item), the
+    fixed-frame pose of each of their frames in `frames` (TRANSFORM device -> 4x4 mm).
+    Markers that the daemon deletes (DELETE, DELETEALL, lifetime) leave `markers`.
+    Callbacks get ("marker", item), ("deleted", item) and ("frame", device, matrix)."""
+
+    def __init__(self, client: ResourceOwner, topic: str, type: str, fixed_frame: str, *,
+                 qos: Optional[Mapping[str, Any]] = None) -> None:
+        c.marker_source_type(type)  # fail early on a type the daemon refuses
+        super().__init__(client, BridgeSpec("create_marker_subscriber", _drop_none(
+            {"topic": topic, "type": type, "fixed_frame": fixed_frame,
+             "qos": _qos_dict(qos)})))
+        self.topic = topic
+        self.type = type
+        self.fixed_frame = fixed_frame
+        self.markers: Dict[str, MarkerItem] = {}
+        self.frames: Dict[str, np.ndarray] = {}
+        self.live: Optional[Tuple[str, ...]] = None  # the daemon's last list of live devices
+        self.status = ""  # the daemon's last refusal on this topic (it names the marker)
+
+    @property
+    def resolved_topic(self) -> str:
+        return str(self.info.get("topic", self.topic))
+
+    def owns(self, message: Message) -> bool:
+        """Is `message` (routed by its metadata) this topic's or one of its frames'?"""
+        role = message.metadata.get(KEY_ROLE)
+        if role == "marker_frame":
+            return True  # frames are shared by topics: each keeps the ones it uses
+        return role in ("marker", "marker_topic") and \
+            message.metadata.get(KEY_TOPIC) == self.resolved_topic
+
+    def _handle(self, message: Message) -> None:
+        meta = message.metadata
+        role = meta.get(KEY_ROLE)
+        events: List[Tuple[Any, ...]] = []
+        with self._changed:
+            if role == "marker_topic" and isinstance(message.body, String):
+                try:
+                    live = tuple(str(d) for d in json.loads(meta.get(KEY_MARKERS, "[]")))
+                    summary = json.loads(message.body.text)
+                    error = str(summary.get("error", "")) if isinstance(summary, dict) else ""
+                except ValueError:
+                    self._client.errors.append(f"{message.device_name}: unreadable marker "
+                                               f"list {meta.get(KEY_MARKERS)!r}")
+                    return
+                if error and error != self.status:
+                    self._client.errors.append(f"{message.device_name}: {error}")
+                self.status = error
+                self.live = live
+                for device in [d for d in self.markers if d not in live]:
+                    events.append(("deleted", self.markers.pop(device)))
+            elif role == "marker_frame" and isinstance(message.body, Transform):
+                self.frames[message.device_name] = np.array(message.body.matrix,
+                                                            dtype=np.float64)
+                events.append(("frame", message.device_name,
+                               self.frames[message.device_name]))
+            elif role == "marker" and isinstance(message.body, (PolyData, String)):
+                item = MarkerItem(message.device_name, meta.get(KEY_MARKER_NS, ""),
+                                  int(meta.get(KEY_MARKER_ID, "0")),
+                                  meta.get(KEY_MARKER_TYPE, ""), message.body, dict(meta),
+                                  meta.get(KEY_FRAME, ""), meta.get(KEY_PARENT_DEVICE, ""))
+                self.markers[message.device_name] = item
+                events.append(("marker", item))
+            self._changed.notify_all()
+        for event in events:
+            self._notify(*event)
+
+    def find(self, ns: str, marker_id: int) -> Optional[MarkerItem]:
+        with self._lock:
+            for item in self.markers.values():
+                if item.ns == ns and item.id == marker_id:
+                    return item
+        return None
+
+    def points_in_fixed_frame(self, item: MarkerItem) -> Optional[np.ndarray]:
+        """The model's points (mm) in the fixed frame, or None until its frame is known."""
+        matrix = self.frames.get(item.frame_device)
+        if matrix is None:
+            return None
+        if isinstance(item.body, PolyData):
+            local = np.asarray(item.body.points, dtype=np.float64).reshape(-1, 3)
+        else:  # a text marker: its position is in the metadata
+            local = np.array([[float(v) for v in item.metadata.get(KEY_POSITION,
+                                                                     "0 0 0").split()]])
+        return np.asarray(local @ matrix[:3, :3].T + matrix[:3, 3])
+
+    def wait_for_markers(self, predicate: Callable[[Dict[str, MarkerItem]], bool],
+                         timeout: float = 10.0) -> Dict[str, MarkerItem]:
+        """Block until `predicate(markers)` holds (e.g. ``lambda m: len(m) == 3``)."""
+        self._wait(lambda: bool(predicate(self.markers)), timeout,
+                   f"markers on {self.topic}")
+        with self._lock:
+            return dict(self.markers)

@@ -14,16 +14,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
-from protocol.naming import (KEY_CHILD, KEY_LINK, KEY_NODE, KEY_PARENT, KEY_ROBOT, KEY_ROLE,
-                             KEY_TOPIC, KEY_TYPE, KEY_VISUAL, NameKey, NamingError, Role,
+from protocol.naming import (KEY_CHILD, KEY_LINK, KEY_MARKER_ID, KEY_MARKER_NS,
+                             KEY_MARKER_TYPE, KEY_NODE, KEY_PARENT, KEY_PARENT_DEVICE,
+                             KEY_POINT_COLORS, KEY_POSITION, KEY_ROBOT, KEY_ROLE, KEY_TOPIC,
+                             KEY_TYPE, KEY_VISUAL, NameKey, NamingError, Role,
                              device_name_for)
 
-__all__ = ["ATTRIBUTE_PREFIX", "DEFAULT_COLOUR", "NodePlan", "ROBOTS_FOLDER",
-           "describe_bridges", "metadata_from_attributes", "model_colour", "plan_node",
-           "robot_folder"]
+__all__ = ["ATTRIBUTE_PREFIX", "DEFAULT_COLOUR", "MARKERS_FOLDER", "NodePlan", "ROBOTS_FOLDER",
+           "describe_bridges", "marker_folder", "metadata_from_attributes", "model_colour",
+           "plan_node", "robot_folder", "stale_marker_nodes"]
 
 ATTRIBUTE_PREFIX = "OpenIGTLink."
 ROBOTS_FOLDER = "ROS2 robots"
+MARKERS_FOLDER = "ROS2 markers"
 DEFAULT_COLOUR: Tuple[float, float, float] = (0.7, 0.7, 0.7)
 # Metadata keys a daemon may add for colours (r g b [a], each 0..1).
 _COLOUR_KEYS = ("ros2.color", "ros2.colour", "ros2.rgba")
@@ -40,6 +43,12 @@ class NodePlan:
     folder: Optional[str] = None  # subject-hierarchy folder (one per robot)
     colour: Optional[Rgb] = None
     opacity: float = 1.0
+    # Show the model's "RGBA" point colours as they are (markers with per-point colours).
+    point_colours: bool = False
+    # A text marker (a text node, not transformable): the module shows it as a markups
+    # point labelled with the text, at this position (mm) under `label_parent`.
+    label_position: Optional[Tuple[float, float, float]] = None
+    label_parent: Optional[str] = None
 
 
 def metadata_from_attributes(attributes: Mapping[str, str]) -> Dict[str, str]:
@@ -50,6 +59,25 @@ def metadata_from_attributes(attributes: Mapping[str, str]) -> Dict[str, str]:
 
 def robot_folder(robot: str) -> str:
     return f"robot {robot}"
+
+
+def marker_folder(topic: str) -> str:
+    return f"markers {topic}"
+
+
+def stale_marker_nodes(nodes: Mapping[str, Mapping[str, str]],
+                       live_by_topic: Mapping[str, Sequence[str]]) -> List[str]:
+    """Marker nodes to remove: of `nodes` (node name = device -> its metadata), those of a
+    role "marker" whose topic's latest list of live devices (`live_by_topic`, from the
+    topic's ``ros2.markers``) does not hold them (DELETE, DELETEALL, lifetime expiry)."""
+    stale = []
+    for device, metadata in nodes.items():
+        if metadata.get(KEY_ROLE) != Role.MARKER.value:
+            continue
+        live = live_by_topic.get(metadata.get(KEY_TOPIC, ""))
+        if live is not None and device not in live:
+            stale.append(device)
+    return sorted(stale)
 
 
 def _parse_colour(text: str) -> Optional[Tuple[Rgb, float]]:
@@ -110,6 +138,34 @@ def plan_node(device: str, metadata: Mapping[str, str], *,
     if role == Role.ROBOT_DESCRIPTION.value and robot:
         return NodePlan(device, "robot_description", f"{robot} URDF",
                         folder=robot_folder(robot))
+    if role == Role.MARKER.value and KEY_POSITION in metadata:
+        try:
+            x, y, z = (float(v) for v in metadata[KEY_POSITION].split())
+        except ValueError:
+            x = y = z = 0.0
+        colour, opacity = model_colour(metadata)
+        return NodePlan(device, "marker_text", f"{metadata.get(KEY_TOPIC, '?')} text "
+                        f"{metadata.get(KEY_MARKER_NS, '')}/{metadata.get(KEY_MARKER_ID, '?')}",
+                        folder=marker_folder(metadata.get(KEY_TOPIC, "?")), colour=colour,
+                        opacity=opacity, label_position=(x, y, z),
+                        label_parent=metadata.get(KEY_PARENT_DEVICE) or None)
+    if role == Role.MARKER.value:
+        colour, opacity = model_colour(metadata, rgba_mean)
+        topic = metadata.get(KEY_TOPIC, "?")
+        ns = metadata.get(KEY_MARKER_NS, "")
+        name = (f"{topic} {ns + '/' if ns else ''}{metadata.get(KEY_MARKER_ID, '?')} "
+                f"({metadata.get(KEY_MARKER_TYPE, '?')})")
+        return NodePlan(device, "marker", name,
+                        parent_device=metadata.get(KEY_PARENT_DEVICE) or None,
+                        folder=marker_folder(topic), colour=colour, opacity=opacity,
+                        point_colours=metadata.get(KEY_POINT_COLORS) == "1")
+    if role == Role.MARKER_FRAME.value:
+        return NodePlan(device, "marker_frame",
+                        f"markers {metadata.get(KEY_PARENT, '?')} -> "
+                        f"{metadata.get(KEY_CHILD, '?')}", folder=MARKERS_FOLDER)
+    if role == Role.MARKER_TOPIC.value:
+        return NodePlan(device, "marker_topic", f"markers of {metadata.get(KEY_TOPIC, '?')}",
+                        folder=MARKERS_FOLDER)
     if role == Role.TF_LOOKUP.value:
         return NodePlan(device, "tf_lookup",
                         f"tf {metadata.get(KEY_PARENT, '?')} -> {metadata.get(KEY_CHILD, '?')}",

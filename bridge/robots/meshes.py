@@ -36,6 +36,7 @@ __all__ = [
     "box_mesh",
     "cylinder_mesh",
     "sphere_mesh",
+    "cone_mesh",
     "decimate",
     "vertex_normals",
 ]
@@ -308,11 +309,20 @@ def cylinder_mesh(radius: float, length: float) -> MeshData:
                          f"cylinder r {r:g} m, length {h:g} m")
 
 
-def sphere_mesh(radius: float) -> MeshData:
-    """A sphere centred on the origin (URDF <sphere>)."""
+def sphere_mesh(radius: float, subdivisions: int = SPHERE_SUBDIVISIONS) -> MeshData:
+    """A sphere centred on the origin (URDF <sphere>); fewer ``subdivisions`` for the
+    thousands of spheres of a marker SPHERE_LIST (1: 42 vertices, 80 triangles)."""
     r = _positive(radius, "sphere radius")
-    return _from_trimesh(trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS,
-                                                    radius=r), f"sphere r {r:g} m")
+    return _from_trimesh(trimesh.creation.icosphere(subdivisions=subdivisions, radius=r),
+                         f"sphere r {r:g} m")
+
+
+def cone_mesh(radius: float, length: float) -> MeshData:
+    """A cone along z, base at z=0, apex at z=``length`` (an arrow's head)."""
+    r = _positive(radius, "cone radius")
+    h = _positive(length, "cone length")
+    return _from_trimesh(trimesh.creation.cone(radius=r, height=h, sections=CYLINDER_SECTIONS),
+                         f"cone r {r:g} m, length {h:g} m")
 
 
 # ---------------------------------------------------------------------------- decimation
@@ -462,8 +472,11 @@ class MeshCache:
         if kind == "cylinder":
             return self._get(key, lambda: cylinder_mesh(params[0], params[1]))
         if kind == "sphere":
-            return self._get(key, lambda: sphere_mesh(params[0]))
-        raise MeshError("primitive", "box, cylinder or sphere", kind)
+            return self._get(key, lambda: sphere_mesh(params[0]) if len(params) == 1
+                             else sphere_mesh(params[0], int(params[1])))
+        if kind == "cone":
+            return self._get(key, lambda: cone_mesh(params[0], params[1]))
+        raise MeshError("primitive", "box, cylinder, sphere or cone", kind)
 
     def _get(self, key: tuple[object, ...], make: Any) -> MeshData:
         with self._lock:

@@ -214,3 +214,35 @@ def test_vtk_matrices_when_vtk_is_importable() -> None:
     vtk_matrix = to_vtk(matrix)
     assert vtk_matrix.GetElement(1, 3) == 7.0
     np.testing.assert_allclose(as_numpy(vtk_matrix), matrix)
+
+
+# --- markers --------------------------------------------------------------------------
+
+
+def test_marker_models_go_under_their_frame_transform_in_a_topic_folder() -> None:
+    from slicer_client.scene_plan import MARKERS_FOLDER, stale_marker_nodes
+
+    key = NameKey.marker("/viz", "shapes", 7)
+    meta = metadata_for(key, frame="base", units="mm")
+    meta.update({"ros2.marker_type": "cube", "ros2.parent_device": "mkf:world>base",
+                 "ros2.color": "1 0 0 0.5"})
+    plan = plan_node(device_name_for(key), meta)
+    assert (plan.kind, plan.parent_device, plan.folder) == ("marker", "mkf:world>base",
+                                                            "markers /viz")
+    assert plan.colour == (1.0, 0.0, 0.0) and plan.opacity == 0.5
+    assert plan.display_name == "/viz shapes/7 (cube)" and not plan.point_colours
+    assert plan_node("x", {**meta, "ros2.point_colors": "1"}).point_colours
+    # A text marker is a text node: no transform parent, a labelled point instead.
+    text = plan_node("t", {**meta, "ros2.marker_type": "text_view_facing",
+                           "ros2.position": "10 20 30"})
+    assert (text.kind, text.parent_device, text.label_parent, text.label_position) == (
+        "marker_text", None, "mkf:world>base", (10.0, 20.0, 30.0))
+    frame = plan_node("mkf:world>base", metadata_for(NameKey.marker_frame("world", "base")))
+    assert (frame.kind, frame.folder) == ("marker_frame", MARKERS_FOLDER)
+    # Nodes the topic's latest list no longer holds are removed; other topics' stay.
+    nodes = {"a": {"ros2.role": "marker", "ros2.topic": "/viz"},
+             "b": {"ros2.role": "marker", "ros2.topic": "/viz"},
+             "c": {"ros2.role": "marker", "ros2.topic": "/other"},
+             "d": {"ros2.role": "tf_lookup"}}
+    assert stale_marker_nodes(nodes, {"/viz": ["b"]}) == ["a"]
+    assert stale_marker_nodes(nodes, {"/viz": [], "/other": []}) == ["a", "b", "c"]

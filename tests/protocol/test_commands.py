@@ -139,6 +139,14 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.UnadvertiseService: st.builds(c.UnadvertiseService, service=ros_names),
     c.ServiceRequest: st.builds(c.ServiceRequest, service=ros_names, type=srv_types,
                                 request=json_objects, timeout=st.floats(0.01, 300.0)),
+    # The fixed frame is kept as tf holds it (no leading '/').
+    c.CreateMarkerSubscriber: st.builds(
+        c.CreateMarkerSubscriber, topic=ros_names,
+        type=st.sampled_from(["Marker", "MarkerArray", "nav_msgs/msg/Path",
+                              "geometry_msgs/PolygonStamped", "PointStamped"]),
+        fixed_frame=frames.filter(lambda s: not s.startswith("/")), qos=qos),
+    c.RemoveMarkerSubscriber: st.builds(c.RemoveMarkerSubscriber, topic=ros_names),
+    c.ListMarkers: st.builds(c.ListMarkers, topic=ros_names),
 }
 
 

@@ -260,7 +260,23 @@ ALL_KEYS = [
     NameKey.robot_visual("R", "l", 3), NameKey.robot_description("R"),
     NameKey.parameter_client("/n"), NameKey.parameter_server("/s"),
     NameKey.service_client("/c"), NameKey.service_server("/c"),
+    NameKey.marker("/m", "", 0), NameKey.marker("/m", "ns x", -3),
+    NameKey.marker_frame("world", "base"), NameKey.marker_topic("/m"),
 ]
+
+
+@pytest.mark.parametrize(("key", "name"), [
+    (NameKey.marker("/markers", "shapes", 3), "mk:markers:shapes:3"),
+    (NameKey.marker("/markers", "", 0), "mk:markers::0"),
+    (NameKey.marker("/visualization_marker", "", -12), "mk:visualiz~u2x7:-12"),
+    (NameKey.marker_frame("world", "base_link"), "mkf:world>base_link"),
+    (NameKey.marker_topic("/markers"), "mks:markers"),
+])
+def test_marker_names_are_readable_and_keep_the_id(key: NameKey, name: str) -> None:
+    assert device_name_for(key) == name
+    many = {device_name_for(NameKey.marker("/visualization_marker_array", ns, i))
+            for ns in ("", "a", "b") for i in range(50)}
+    assert len(many) == 150 and all(len(n) <= 20 for n in many)
 
 
 def test_every_role_has_an_example() -> None:

@@ -63,6 +63,11 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "unadvertise_service": ({"service": "/s"}, set()),
     "service_request": ({"service": "/s", "type": "std_srvs/srv/Trigger", "request": {}},
                         set()),
+    "create_marker_subscriber": ({"topic": "/m", "type": "MarkerArray",
+                                  "fixed_frame": "/world"},
+                                 {("topic", "topic", "/m"), ("frame", "fixed_frame", "world")}),
+    "remove_marker_subscriber": ({"topic": "/m"}, set()),
+    "list_markers": ({"topic": "/m"}, {("topic", "topic", "/m")}),
 }
 
 
@@ -100,7 +105,7 @@ def test_each_op_declares_what_it_touches(op: str) -> None:
 def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
     kinds = c.bridge_kinds()
     assert set(kinds) == {"subscriber", "publisher", "parameter_client", "tf_lookup",
-                          "tf_broadcaster", "robot", "served_service"}
+                          "tf_broadcaster", "robot", "served_service", "marker_subscriber"}
     for kind in kinds.values():
         assert kind.create.creates is kind.bridge and kind.remove.removes == kind.bridge.kind
         remove_fields = {f.name for f in fields(kind.remove)}

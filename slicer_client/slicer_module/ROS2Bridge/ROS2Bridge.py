@@ -64,9 +64,9 @@ from slicer_client.client import Client  # noqa: E402
 from slicer_client.connection import CommandTimeoutError, ConnectionClosedError  # noqa: E402
 from slicer_client.connector_codec import (SLICER_TEXT_ENCODING, build_command,  # noqa: E402
                                            message_from_node, outgoing_content, parse_reply)
-from slicer_client.scene_plan import (ROBOTS_FOLDER, describe_bridges,  # noqa: E402
-                                      metadata_from_attributes, plan_node,
-                                      robot_status_lines)
+from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER,  # noqa: E402
+                                      describe_bridges, metadata_from_attributes, plan_node,
+                                      robot_status_lines, stale_marker_nodes)
 
 CONNECTOR_NAME = "ROS2BridgeConnector"
 log = logging.getLogger("ROS2Bridge")
@@ -371,22 +371,105 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         for node in list(slicer.util.getNodesByClass("vtkMRMLNode")):
             if node.GetScene() is None or node.GetAttribute("OpenIGTLink.ros2.robot") != name:
                 continue
-            if self.transport is not None:
-                self.transport.unwatch(node)
-            self._planned.discard(node.GetID())
-            displays = []
-            if node.IsA("vtkMRMLDisplayableNode"):
-                displays = [node.GetNthDisplayNode(i)
-                            for i in range(node.GetNumberOfDisplayNodes())]
-            slicer.mrmlScene.RemoveNode(node)  # display nodes are not removed with it
-            for display in displays:
-                if display is not None:
-                    slicer.mrmlScene.RemoveNode(display)
+            self._removeNode(node)
         sh = slicer.vtkMRMLSubjectHierarchyNode.GetSubjectHierarchyNode(slicer.mrmlScene)
         folder = sh.GetItemByName(f"robot {name}")
         if folder:
             sh.RemoveItem(folder)
         self._saveState()
+
+    def _removeNode(self, node):
+        label = slicer.mrmlScene.GetFirstNode(f"{node.GetName()} label",
+                                              "vtkMRMLMarkupsFiducialNode")
+        if label is not None and node.IsA("vtkMRMLTextNode"):
+            self._removeNode(label)  # a text marker's labelled point goes with it
+        if self.transport is not None:
+            self.transport.unwatch(node)
+        self._planned.discard(node.GetID())
+        displays = []
+        if node.IsA("vtkMRMLDisplayableNode"):
+            displays = [node.GetNthDisplayNode(i) for i in range(node.GetNumberOfDisplayNodes())]
+        slicer.mrmlScene.RemoveNode(node)  # display nodes are not removed with it
+        for display in displays:
+            if display is not None:
+                slicer.mrmlScene.RemoveNode(display)
+
+    # --- markers ------------------------------------------------------------------------
+    def addMarkers(self, topic, type, fixed_frame):
+        """Show a Marker/MarkerArray/Path/PolygonStamped/PointStamped topic as models
+        placed by tf in `fixed_frame` (models under "ROS2 markers")."""
+        markers = self.requireClient().markers(topic, type, fixed_frame)
+        self._saveState()
+        self.updateScene()
+        return markers
+
+    def removeMarkers(self, topic):
+        client = self.requireClient()
+        markers = client.find("create_marker_subscriber", topic)
+        resolved = markers.resolved_topic if markers is not None else "/" + topic.lstrip("/")
+        client.remove_bridge("create_marker_subscriber", topic)  # ours or another client's
+        for node in list(slicer.util.getNodesByClass("vtkMRMLNode")):
+            if node.GetScene() is not None and node.GetAttribute("OpenIGTLink.ros2.role") \
+                    in ("marker", "marker_topic") \
+                    and node.GetAttribute("OpenIGTLink.ros2.topic") == resolved:
+                self._removeNode(node)
+        self._saveState()
+
+    def _removeStaleMarkers(self):
+        """Remove the model nodes of markers the daemon deleted (its topic's list of live
+        markers no longer holds them: DELETE, DELETEALL, lifetime)."""
+        if self.client is None:
+            return
+        live = {r.resolved_topic: r.live for r in self.client.resources()
+                if r.spec.op == "create_marker_subscriber" and r.live is not None}
+        if not live:
+            return
+        nodes = {}
+        by_name = {}
+        for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
+            node = self.connector.GetIncomingMRMLNode(i)
+            if node is None or node.GetAttribute("OpenIGTLink.ros2.role") != "marker":
+                continue
+            attributes = {n: node.GetAttribute(n) for n in node.GetAttributeNames()}
+            nodes[node.GetName()] = metadata_from_attributes(attributes)
+            by_name[node.GetName()] = node
+        for device in stale_marker_nodes(nodes, live):
+            self._removeNode(by_name[device])
+
+    def _placeLabel(self, node, plan):
+        """A text marker (a text node) as a markups point labelled with its text, under
+        its frame's transform; updated each tick, since the text node's content changes."""
+        name = f"{node.GetName()} label"
+        label = slicer.mrmlScene.GetFirstNode(name, "vtkMRMLMarkupsFiducialNode")
+        if label is None:
+            label = slicer.mrmlScene.AddNewNodeByClass("vtkMRMLMarkupsFiducialNode", name)
+            label.SetDescription(plan.display_name)
+        if plan.label_parent is not None:
+            parent = slicer.mrmlScene.GetFirstNode(plan.label_parent,
+                                                   "vtkMRMLLinearTransformNode")
+            if parent is not None and label.GetTransformNodeID() != parent.GetID():
+                label.SetAndObserveTransformNodeID(parent.GetID())
+        x, y, z = plan.label_position
+        text = node.GetText() or ""
+        if label.GetNumberOfControlPoints() == 0:
+            label.AddControlPoint(vtk.vtkVector3d(x, y, z), text)
+        else:
+            label.SetNthControlPointPosition(0, x, y, z)
+            label.SetNthControlPointLabel(0, text)
+        display = label.GetDisplayNode()
+        if display is not None and plan.colour is not None:
+            display.SetSelectedColor(*plan.colour)
+
+    def _updateMarkerLabels(self):
+        for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
+            node = self.connector.GetIncomingMRMLNode(i)
+            if node is None or not node.IsA("vtkMRMLTextNode") \
+                    or node.GetAttribute("OpenIGTLink.ros2.role") != "marker":
+                continue
+            attributes = {n: node.GetAttribute(n) for n in node.GetAttributeNames()}
+            plan = plan_node(node.GetName(), metadata_from_attributes(attributes))
+            if plan.label_position is not None:
+                self._placeLabel(node, plan)
 
     def robotNames(self):
         if self.client is None:
@@ -429,7 +512,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
                 continue  # attributes not there yet: next tick
             plan = plan_node(node.GetName(), metadata, rgba_mean=self._rgbaMean(node),
                              link_devices=link_devices)
-            if plan.parent_device is not None:
+            if plan.parent_device is not None and node.IsA("vtkMRMLTransformableNode"):
                 parent = slicer.mrmlScene.GetFirstNode(plan.parent_device,
                                                        "vtkMRMLLinearTransformNode")
                 if parent is None:
@@ -439,6 +522,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             if self.transport is not None:
                 self.transport.watch(node)
             self._planned.add(node.GetID())
+        self._removeStaleMarkers()
+        self._updateMarkerLabels()
 
     @staticmethod
     def _rgbaMean(node):
@@ -458,12 +543,19 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
                 display = node.GetDisplayNode()
             display.SetColor(*plan.colour)
             display.SetOpacity(plan.opacity)
-            display.SetScalarVisibility(False)
+            if plan.point_colours:  # per-point marker colours, shown as they are (0..1)
+                display.SetActiveScalar("RGBA", vtk.vtkAssignAttribute.POINT_DATA)
+                display.SetScalarRangeFlagFromString("UseDirectMapping")
+                display.SetScalarVisibility(True)
+            else:
+                display.SetScalarVisibility(False)
         if plan.folder:
             sh = slicer.vtkMRMLSubjectHierarchyNode.GetSubjectHierarchyNode(slicer.mrmlScene)
-            top = sh.GetItemByName(ROBOTS_FOLDER) if plan.kind.startswith("robot") else None
-            if plan.kind.startswith("robot") and not top:
-                top = sh.CreateFolderItem(sh.GetSceneItemID(), ROBOTS_FOLDER)
+            top_name = (ROBOTS_FOLDER if plan.kind.startswith("robot") else
+                        MARKERS_FOLDER if plan.kind in ("marker", "marker_text") else None)
+            top = sh.GetItemByName(top_name) if top_name else None
+            if top_name and not top:
+                top = sh.CreateFolderItem(sh.GetSceneItemID(), top_name)
             parent = top or sh.GetSceneItemID()
             folder = sh.GetItemChildWithName(parent, plan.folder)
             if not folder:
@@ -537,6 +629,21 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         self.problemsLabel.styleSheet = "color: #b00020"
         form.addRow(self.problemsLabel)
 
+        # Markers: the same calls as the robot controls (QLineEdit, QComboBox, QPushButton).
+        self.markerTopicEdit = qt.QLineEdit()
+        self.markerTopicEdit.text = "/visualization_marker_array"
+        self.markerTypeCombo = qt.QComboBox()
+        for name in ("MarkerArray", "Marker", "Path", "PolygonStamped", "PointStamped"):
+            self.markerTypeCombo.addItem(name)
+        self.markerFrameEdit = qt.QLineEdit()
+        self.markerFrameEdit.text = "world"
+        self.addMarkersButton = qt.QPushButton("Show markers")
+        self.removeMarkersButton = qt.QPushButton("Remove markers")
+        form.addRow("Marker topic:", self.markerTopicEdit)
+        form.addRow("Type:", self.markerTypeCombo)
+        form.addRow("Fixed frame:", self.markerFrameEdit)
+        form.addRow(self.addMarkersButton, self.removeMarkersButton)
+
         self.bridgeList = qt.QListWidget()
         self.refreshButton = qt.QPushButton("Refresh bridges")
         form.addRow("Active bridges:", self.bridgeList)
@@ -548,6 +655,8 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         self.anotherRobotButton.connect("clicked(bool)", self.onAnotherRobot)
         self.removeRobotButton.connect("clicked(bool)", self.onRemoveRobot)
         self.refreshButton.connect("clicked(bool)", self.onRefresh)
+        self.addMarkersButton.connect("clicked(bool)", self.onAddMarkers)
+        self.removeMarkersButton.connect("clicked(bool)", self.onRemoveMarkers)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
                          self.onSceneStartClose)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.EndCloseEvent, self.onSceneEndClose)
@@ -635,6 +744,17 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
             if name:
                 self.logic.removeRobot(name)
             self._refreshRobots()
+
+    def onAddMarkers(self):
+        with slicer.util.tryWithErrorDisplay("Failed to show the markers.", waitCursor=True):
+            self.logic.addMarkers(self.markerTopicEdit.text, self.markerTypeCombo.currentText,
+                                  self.markerFrameEdit.text)
+            self.onRefresh()
+
+    def onRemoveMarkers(self):
+        with slicer.util.tryWithErrorDisplay("Failed to remove the markers.", waitCursor=True):
+            self.logic.removeMarkers(self.markerTopicEdit.text)
+            self.onRefresh()
 
     def onRefresh(self):
         with slicer.util.tryWithErrorDisplay("Failed to list the bridges."):

@@ -1,0 +1,705 @@
+"""The daemon's marker capability: Marker / MarkerArray / Path / PolygonStamped /
+PointStamped topics as models in Slicer, placed by tf.
+
+    ROS executor thread        marker worker thread (one per topic)      asyncio loop
+    ───────────────────        ────────────────────────────────────      ────────────
+    callback: queue the ─────► read the message (convert.events_of),
+    message (bounded)          mesh each marker whose digest changed ─► apply: publish
+                               (geometry.build_model)  (one call_soon    models, follow
+                                                        per message)     frames, expire
+
+Per marker (``ns``, ``id``) one device (`NameKey.marker`, ``mk:<topic>:<ns>:<id>``): a
+POLYDATA in mm in the marker's frame (its own pose applied), or a POINT for text, sent as
+a persistent message (a client that connects later gets it), with metadata naming its
+namespace, id and type (``ros2.ns``, ``ros2.id``, ``ros2.marker_type``), its colour and
+its parent TRANSFORM device (``ros2.parent_device``). Per distinct frame one TRANSFORM
+(`NameKey.marker_frame`, ``mkf:<fixed>><frame>``) streamed by the tf capability's
+change-driven lookups, shared by every marker of every marker topic in that frame (counted;
+stopped with the last marker in it). The model moves as tf moves without being re-sent.
+
+Deletion (DELETE, DELETEALL, ``lifetime`` expiry, a marker that can no longer be shown,
+removing the subscriber): its device is forgotten by the hub (no late client gets it),
+and the topic's own device (`NameKey.marker_topic`, ``mks:<topic>``) streams a STRING whose
+metadata lists the live markers' devices (``ros2.markers``, JSON) and the ones just gone
+(``ros2.deleted``): the client and the Slicer module remove what is not live. It is sent
+when that set changes and when a marker is refused: its text, JSON ``{"markers": n,
+"withheld": n, "error": "..."}``, then names the marker, the field, what was expected and
+what came.
+
+Why the work is where it is: a MarkerArray of 1000 markers at 10-30 Hz is too much to
+convert on the ROS callback or the loop. The callback only queues the message (at most
+`MAX_QUEUED`; past that the oldest goes and ``dropped`` counts it); a worker thread per
+topic reads and meshes; the loop only publishes. A worker that falls behind reads what
+waits in one go and meshes only the newest state of each marker (the end state is the
+same as reading the messages one by one; the states in between are skipped), so it
+catches up. A marker re-sent unchanged (RViz
+publishers re-publish whole arrays) costs its reading and a digest, and no message: its
+model is neither rebuilt nor re-sent, nor handed to the loop unless its lifetime must be
+renewed.
+
+Decisions, said plainly:
+* ``header.frame_id`` empty: the marker is in the fixed frame (as RViz does).
+* ``frame_locked``: every marker follows its frame as tf moves, locked or not (RViz places
+  an unlocked marker once, at its stamp; here it moves with the frame's latest pose).
+* Lifetime counts from when the daemon received the marker, checked on one loop timer per
+  daemon set to the next expiry (never by polling per message).
+* Frame globs: a marker whose frame the policy denies is withheld (no model, no TRANSFORM;
+  said in the STATUS and in list_markers); the fixed frame is judged at creation.
+* MESH_RESOURCE reads files only inside the mesh roots (--robot-dir, --package-path), worded
+  as for a robot's mesh: a refused file and a missing one get the same answer. An embedded
+  ``mesh_file`` (newer ROS 2) is not read. ``http(s)://`` is never fetched.
+* DELETEALL removes every marker of the topic, whatever its ns (RViz 2 does so).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import heapq
+import json
+import logging
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Optional, Union
+
+from rclpy.serialization import deserialize_message
+
+from bridge.codecs import CodecError, codec_for
+from bridge.dispatch import Handler
+from bridge.hub import Hub
+from bridge.logging_limits import RateLimitedLog
+from bridge.codecs.cdr import CdrError
+from bridge.markers.cdr import layout_supported, read_marker, read_marker_array
+from bridge.markers.convert import ADD, DELETE, DELETEALL, MarkerEvent, events_of
+from bridge.markers.geometry import MarkerError, MarkerModel, build_model
+from bridge.qos import qos_profile
+from bridge.ros_node import RosNode
+from bridge.security import NameRules
+from bridge.tf.capability import TfBridges
+from bridge.tf.errors import TfError
+from bridge.tf.lookups import LookupKey
+from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
+                               ListMarkers, Op, OutOfRangeError, RemoveMarkerSubscriber)
+from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
+from protocol.messages import Message, String
+from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_FORMAT, KEY_MARKER_TYPE, KEY_MARKERS,
+                             KEY_PARENT_DEVICE, UNITS_MM, DeviceNameRegistry, NameKey,
+                             NamingError, metadata_for)
+
+__all__ = ["MAX_MARKERS", "MAX_QUEUED", "MarkerBridges"]
+
+log = logging.getLogger(__name__)
+
+MAX_QUEUED = 64  # messages waiting for a topic's worker; past that the oldest go
+MAX_MARKERS = 10_000  # live markers of one topic; more are refused (STATUS)
+_MAX_IN_FLIGHT = 4  # batches handed to the loop and not applied yet (worker waits)
+
+MarkerKey = tuple[str, int]  # (ns, id)
+MARKER_TYPE = "visualization_msgs/msg/Marker"
+MARKER_ARRAY_TYPE = "visualization_msgs/msg/MarkerArray"
+
+
+@dataclass(frozen=True, eq=False)
+class _Show:
+    key: MarkerKey
+    frame: str
+    digest: bytes
+    model: MarkerModel
+    lifetime_ns: int
+    stamp: tuple[int, int] = (0, 0)
+
+
+@dataclass(frozen=True)
+class _Gone:
+    key: Optional[MarkerKey]  # None: every marker (DELETEALL)
+
+
+@dataclass(frozen=True, eq=False)
+class _Refused:
+    key: MarkerKey
+    error: MarkerError
+
+
+@dataclass(frozen=True, eq=False)
+class _MessageRefused:
+    error: MarkerError  # the whole message (a MarkerArray over the bound)
+
+
+_Update = Union[_Show, _Gone, _Refused, _MessageRefused]
+
+
+@dataclass
+class _Live:
+    key: MarkerKey
+    name_key: NameKey
+    device: str
+    frame: str
+    kind: str
+    body_type: str
+    digest: bytes
+    points: int
+    expires_ns: int = 0  # monotonic; 0: never
+
+
+@dataclass
+class _FrameRef:
+    device: str
+    name_key: NameKey
+    handle: LookupKey
+    users: int = 0
+
+
+class _Worker:
+    """One topic's reader: a bounded queue of messages, one thread that meshes them."""
+
+    def __init__(self, sub: _Subscription, mesh_roots: tuple[Path, ...],
+                 package_paths: Mapping[str, Path]) -> None:
+        self._sub = sub
+        self._mesh_roots = mesh_roots
+        self._package_paths = dict(package_paths)
+        self._queue: deque[Any] = deque()
+        self._cond = threading.Condition()
+        self._in_flight = threading.Semaphore(_MAX_IN_FLIGHT)
+        self._stopped = False
+        # (ns, id) -> (digest, model) of what was last meshed: an unchanged marker is
+        # handed on without meshing; the loop may have expired it and needs the model.
+        self._models: dict[MarkerKey, tuple[bytes, MarkerModel]] = {}
+        self._lock = threading.Lock()
+        self.dropped = 0
+        self.meshed = 0
+        self._thread = threading.Thread(target=self._run, name=f"markers {sub.topic}",
+                                        daemon=True)
+        self._thread.start()
+
+    def put(self, msg: Any) -> None:  # ROS executor thread
+        with self._cond:
+            if self._stopped:
+                return
+            if len(self._queue) >= MAX_QUEUED:
+                self._queue.popleft()
+                self.dropped += 1
+            self._queue.append(msg)
+            self._cond.notify()
+
+    def applied(self) -> None:  # loop thread: a batch is done
+        self._in_flight.release()
+
+    def forget(self, key: MarkerKey) -> None:  # loop thread: dropped there
+        with self._lock:
+            self._models.pop(key, None)
+
+    def remember(self, key: MarkerKey, digest: bytes, model: MarkerModel) -> None:
+        with self._lock:
+            self._models[key] = (digest, model)
+
+    def stop(self) -> None:
+        with self._cond:
+            self._stopped = True
+            self._queue.clear()
+            self._cond.notify()
+        self._in_flight.release()  # a worker waiting on the loop must see the stop
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._queue and not self._stopped:
+                    self._cond.wait()
+                if self._stopped:
+                    return
+                # Everything waiting, read together: a worker that fell behind meshes only
+                # the newest state of each marker (see `_fold`), so it catches up.
+                messages = list(self._queue)
+                self._queue.clear()
+            try:
+                updates = self._updates(messages)
+            except Exception:  # noqa: BLE001 - a bug on one message must not end the topic
+                log.exception("markers on %s: a message could not be read", self._sub.topic)
+                continue
+            if not updates:
+                continue  # nothing changed (an array re-sent as it was): no loop wake-up
+            self._in_flight.acquire()
+            if self._stopped:
+                return
+            self._sub.hand_over(updates)
+
+    def _events(self, msg: Any) -> list[MarkerEvent]:
+        sub = self._sub
+        if isinstance(msg, bytes):  # a raw Marker / MarkerArray subscription
+            try:
+                return (read_marker_array(msg) if sub.ros_type == MARKER_ARRAY_TYPE
+                        else read_marker(msg))
+            except CdrError:  # another encoding: the ordinary way
+                msg = deserialize_message(msg, sub.message_class)
+        return events_of(sub.ros_type, msg)
+
+    def _fold(self, messages: list[Any]) -> tuple[list[_Update], bool,
+                                                  dict[MarkerKey, MarkerEvent]]:
+        """The messages' events folded into their end state, in order: (messages refused
+        whole, whether a DELETEALL came, the last event of each marker after the last
+        DELETEALL). Applying that end state leaves the loop where applying every message
+        in turn would; only the states in between are skipped."""
+        refused: list[_Update] = []
+        delete_all = False
+        last: dict[MarkerKey, MarkerEvent] = {}
+        for msg in messages:
+            try:
+                events = self._events(msg)
+            except MarkerError as error:
+                refused.append(_MessageRefused(error))
+                continue
+            for event in events:
+                if event.action == DELETEALL:
+                    delete_all = True
+                    last.clear()
+                    continue
+                key = (event.ns, event.id)
+                last.pop(key, None)  # keep the order of the latest events
+                last[key] = event
+        return refused, delete_all, last
+
+    def _updates(self, messages: list[Any]) -> list[_Update]:
+        out, delete_all, events = self._fold(messages)
+        if delete_all:
+            with self._lock:
+                self._models.clear()
+            out.append(_Gone(None))
+        for key, event in events.items():
+            if event.action == DELETE:
+                with self._lock:
+                    self._models.pop(key, None)
+                out.append(_Gone(key))
+                continue
+            assert event.action == ADD
+            if event.error is not None or event.spec is None:
+                with self._lock:
+                    self._models.pop(key, None)
+                out.append(_Refused(key, event.error or MarkerError("marker", "a marker",
+                                                                    "nothing")))
+                continue
+            spec = event.spec
+            digest = spec.digest()
+            with self._lock:
+                known = self._models.get(key)
+            if known is not None and known[0] == digest:
+                if not spec.lifetime_ns:
+                    # Unchanged and never expiring: the loop has it live (whatever drops it
+                    # there forgets it here, so a re-send after that goes through).
+                    continue
+                model = known[1]  # unchanged: only its lifetime is renewed
+            else:
+                try:
+                    model = build_model(spec, mesh_roots=self._mesh_roots,
+                                        package_paths=dict(self._package_paths))
+                except MarkerError as error:
+                    with self._lock:
+                        self._models.pop(key, None)
+                    out.append(_Refused(key, error))
+                    continue
+                self.meshed += 1
+                with self._lock:
+                    self._models[key] = (digest, model)
+            out.append(_Show(key, spec.frame.lstrip("/"), digest, model, spec.lifetime_ns,
+                             spec.stamp))
+        return out
+
+
+@dataclass(eq=False)
+class _Subscription:
+    topic: str
+    ros_type: str
+    request: CreateMarkerSubscriber
+    fixed_frame: str
+    topic_key: NameKey
+    device: str
+    owner: MarkerBridges
+    markers: dict[MarkerKey, _Live] = field(default_factory=dict)
+    withheld: dict[MarkerKey, str] = field(default_factory=dict)
+    errors: dict[MarkerKey, str] = field(default_factory=dict)
+    message_class: Any = None
+    raw: bool = False  # taken as CDR bytes (bridge.markers.cdr), not rclpy messages
+    worker: Optional[_Worker] = None
+    subscription: Any = None
+    received: int = 0
+    closed: bool = False
+    last_error: str = ""
+
+    def on_message(self, msg: Any) -> None:  # ROS executor thread: hand off only
+        self.received += 1
+        worker = self.worker
+        if worker is not None:
+            worker.put(msg)
+
+    def hand_over(self, updates: list[_Update]) -> None:  # worker thread
+        self.owner.hub_call(self.owner.apply, self, updates)
+
+
+class MarkerBridges:
+    """Marker subscribers: models per marker, a TRANSFORM per frame, lifetimes."""
+
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: TfBridges,
+                 frame_rules: Optional[NameRules] = None,
+                 mesh_roots: tuple[Path, ...] = (),
+                 package_paths: Optional[Mapping[str, Path]] = None) -> None:
+        self._ros = ros
+        self._hub = hub
+        self._names = names
+        self._tf = tf
+        self._frame_rules = frame_rules or NameRules()
+        self._mesh_roots = tuple(Path(p) for p in mesh_roots)
+        self._package_paths = {k: Path(v) for k, v in (package_paths or {}).items()}
+        self.subscriptions: dict[str, _Subscription] = {}
+        self._frames: dict[tuple[str, str], _FrameRef] = {}
+        self._expiry: list[tuple[int, int, str, MarkerKey]] = []  # (due, seq, topic, key)
+        self._seq = 0
+        self._timer: Optional[asyncio.TimerHandle] = None
+        self._timer_due = 0
+        self._refusals = RateLimitedLog(log)
+
+    def hub_call(self, callback: Any, *args: Any) -> None:
+        self._hub.call_soon(callback, *args)
+
+    # ------------------------------------------------------------------ ops
+
+    def create(self, request: CreateMarkerSubscriber) -> dict[str, Any]:
+        topic = self._resolve(request.topic)
+        ros_type = request.ros_type
+        existing = self.subscriptions.get(topic)
+        if existing is not None:
+            if existing.request == request:  # a reconnecting client re-creates what it had
+                return self._describe(existing, existed=True)
+            raise CommandFailedError("topic", "a topic without a marker subscriber "
+                                     "(remove_marker_subscriber first, or repeat the same "
+                                     "request)", topic, code=ErrorCode.ALREADY_EXISTS)
+        known = self._ros.topic_types(topic)
+        if known and ros_type not in known:
+            raise CommandFailedError("type", f"the type {topic} has in the ROS graph "
+                                     f"({', '.join(known)})", ros_type,
+                                     code=ErrorCode.ALREADY_EXISTS)
+        try:
+            message_class = codec_for(ros_type).message_class
+        except CodecError as error:
+            raise CommandFailedError("type", "a message type installed in the daemon's "
+                                     "environment", f"{request.type!r} ({error})",
+                                     code=ErrorCode.UNKNOWN_ROS_TYPE) from None
+        topic_key = NameKey.marker_topic(topic)
+        device = self._names.register(topic_key)
+        sub = _Subscription(topic, ros_type, request, request.fixed_frame.lstrip("/"),
+                            topic_key, device, self, message_class=message_class)
+        # Markers are read from their bytes when the installed Marker is the one the CDR
+        # reader knows (a 1000-marker array: a few ms instead of ~100 through rclpy).
+        sub.raw = ros_type in (MARKER_TYPE, MARKER_ARRAY_TYPE) and layout_supported(
+            codec_for(MARKER_TYPE).message_class.get_fields_and_field_types())
+        sub.worker = _Worker(sub, self._mesh_roots, self._package_paths)
+        try:
+            sub.subscription = self._ros.stream_node.create_subscription(
+                message_class, topic, sub.on_message, qos_profile(request.qos), raw=sub.raw)
+        except BaseException:
+            sub.worker.stop()
+            self._names.release(topic_key)
+            raise
+        self.subscriptions[topic] = sub
+        self._index(sub, [])
+        log.info("markers from %s (%s) in fixed frame %s: status device %r", topic, ros_type,
+                 sub.fixed_frame, device)
+        return self._describe(sub, existed=False)
+
+    def _resolve(self, topic: str) -> str:
+        try:
+            return self._ros.resolve_topic(topic)
+        except Exception as error:  # rclpy raises several name-validation exceptions
+            raise OutOfRangeError("topic", "a valid ROS topic name",
+                                  f"{topic!r} ({error})") from None
+
+    def _find(self, topic: str) -> _Subscription:
+        resolved = self._resolve(topic)
+        sub = self.subscriptions.get(resolved)
+        if sub is None:
+            raise CommandFailedError("topic", "a topic with a marker subscriber", resolved,
+                                     code=ErrorCode.NOT_FOUND)
+        return sub
+
+    def remove(self, request: RemoveMarkerSubscriber) -> dict[str, Any]:
+        sub = self._find(request.topic)
+        topic = sub.topic
+        devices = [live.device for live in sub.markers.values()] + [sub.device]
+        self._close(sub)
+        return {"topic": topic, "devices": devices}
+
+    def list_markers(self, request: ListMarkers) -> dict[str, Any]:
+        sub = self._find(request.topic)
+        now = time.monotonic_ns()
+        return {
+            "topic": sub.topic, "device": sub.device,
+            "markers": [{"ns": live.key[0], "id": live.key[1], "device": live.device,
+                         "type": live.kind, "frame": live.frame, "points": live.points,
+                         "frame_device": self._frames[(sub.fixed_frame, live.frame)].device,
+                         "expires_in": (round((live.expires_ns - now) / 1e9, 3)
+                                        if live.expires_ns else None)}
+                        for live in sub.markers.values()],
+            "withheld": [{"ns": k[0], "id": k[1], "reason": why}
+                         for k, why in sub.withheld.items()],
+            "errors": [{"ns": k[0], "id": k[1], "error": why} for k, why in sub.errors.items()],
+        }
+
+    # ------------------------------------------------------------------ loop thread
+
+    def apply(self, sub: _Subscription, updates: list[_Update]) -> None:
+        """One message's updates (loop thread), then the index if the live set changed."""
+        try:
+            if sub.closed:
+                return
+            added: list[str] = []
+            gone: list[str] = []
+            with self._hub.batch():
+                for update in updates:
+                    if isinstance(update, _Show):
+                        self._show(sub, update, added, gone)
+                    elif isinstance(update, _Gone):
+                        if update.key is None:  # DELETEALL
+                            for key in list(sub.markers):
+                                self._drop(sub, key, gone)
+                            sub.withheld.clear()
+                            sub.errors.clear()
+                        else:
+                            sub.withheld.pop(update.key, None)
+                            sub.errors.pop(update.key, None)
+                            self._drop(sub, update.key, gone)
+                    elif isinstance(update, _MessageRefused):
+                        sub.last_error = f"message refused: {update.error}"
+                        self._refusals.warning(f"{sub.topic} message", None,
+                                               "markers on %s: %s", sub.topic, sub.last_error)
+                        self._index(sub, gone, error=sub.last_error)
+                        gone.clear()
+                    else:
+                        self._refuse(sub, update, gone)
+                if added or gone:
+                    self._index(sub, gone)
+        finally:
+            worker = sub.worker
+            if worker is not None:
+                worker.applied()
+
+    def _show(self, sub: _Subscription, update: _Show, added: list[str],
+              gone: list[str]) -> None:
+        key = update.key
+        frame = update.frame or sub.fixed_frame
+        rules = self._frame_rules
+        if rules.active and not rules.permits(frame):
+            reason = f"frame {frame!r} refused by the frame policy: expected " \
+                     f"{rules.why_not(frame)}"
+            if sub.withheld.get(key) != reason:
+                sub.withheld[key] = reason
+                self._refusals.warning(f"{sub.topic} {frame}", None, "markers on %s: %s",
+                                       sub.topic, reason)
+            self._drop(sub, key, gone)
+            return
+        sub.withheld.pop(key, None)
+        sub.errors.pop(key, None)
+        live = sub.markers.get(key)
+        expires = time.monotonic_ns() + update.lifetime_ns if update.lifetime_ns else 0
+        model = update.model
+        body_type = model.type_name
+        if live is not None and live.digest == update.digest:
+            live.expires_ns = expires  # unchanged: renew the lifetime, send nothing
+            self._schedule(sub, live)
+            return
+        if live is not None and (live.frame != frame or live.body_type != body_type):
+            self._drop(sub, key, gone)  # a new parent or node class: a new device
+            if sub.worker is not None:
+                sub.worker.remember(key, update.digest, model)
+            live = None
+        if live is None:
+            if len(sub.markers) >= MAX_MARKERS:
+                self._refuse(sub, _Refused(key, MarkerError(
+                    "id", f"at most {MAX_MARKERS} live markers on a topic",
+                    f"marker {len(sub.markers) + 1}")), gone)
+                return
+            try:  # a namespace or frame no device name or tf lookup can hold (NUL)
+                name_key = NameKey.marker(sub.topic, key[0], key[1])
+                self._use_frame(sub.fixed_frame, frame)
+            except (NamingError, TfError) as error:
+                self._refuse(sub, _Refused(key, MarkerError(
+                    "ns/frame", "a namespace and frame id usable as names (no NUL)",
+                    f"{key[0]!r} in frame {frame!r} ({error})")), gone)
+                return
+            device = self._names.register(name_key)
+            live = _Live(key, name_key, device, frame, model.kind, body_type, update.digest,
+                         model.point_count)
+            sub.markers[key] = live
+            added.append(device)
+            if device in gone:
+                gone.remove(device)
+        live.digest, live.kind, live.points = update.digest, model.kind, model.point_count
+        live.expires_ns = expires
+        metadata = metadata_for(live.name_key, frame=frame, units=UNITS_MM)
+        metadata[KEY_MARKER_TYPE] = model.kind
+        metadata[KEY_PARENT_DEVICE] = self._frames[(sub.fixed_frame, frame)].device
+        metadata[KEY_COLOR] = " ".join(f"{c:.6g}" for c in model.rgba)
+        metadata.update(model.metadata)
+        # Stamped with the marker's header stamp, as topic bridges stamp their messages.
+        stamp = (igtl_timestamp_from_ros(*update.stamp) if update.stamp[0] > 0
+                 else igtl_timestamp_now())
+        self._hub.publish_persistent(Message(device_name=live.device, body=model.body,
+                                             timestamp=stamp, metadata=metadata))
+        self._schedule(sub, live)
+
+    def _refuse(self, sub: _Subscription, update: _Refused, gone: list[str]) -> None:
+        key = update.key
+        text = f"marker ns {key[0]!r} id {key[1]}: {update.error}"
+        self._drop(sub, key, gone)
+        if sub.errors.get(key) == text:
+            return
+        sub.errors[key] = text
+        sub.last_error = text
+        self._refusals.warning(f"{sub.topic} {key}", None, "markers on %s: %s", sub.topic,
+                               text)
+        self._index(sub, gone, error=text)
+        gone.clear()  # the index just sent said so
+
+    def _drop(self, sub: _Subscription, key: MarkerKey, gone: list[str]) -> None:
+        if sub.worker is not None:
+            sub.worker.forget(key)  # a later identical marker is then shown again
+        live = sub.markers.pop(key, None)
+        if live is None:
+            return
+        self._hub.forget(live.device)
+        self._names.release(live.name_key)
+        self._release_frame(sub.fixed_frame, live.frame)
+        gone.append(live.device)
+
+    def _index(self, sub: _Subscription, gone: list[str], error: str = "") -> None:
+        """The topic's STRING: which marker devices are live, which just went (metadata,
+        which holds any length; a STRING body holds 64 KiB), and a JSON summary with the
+        last error. A STRING, not a STATUS: 3D Slicer makes a text node of it, whose
+        changes the Slicer module hands to the client (it makes no node of a STATUS)."""
+        metadata = metadata_for(sub.topic_key, ros_type=sub.ros_type, frame=sub.fixed_frame)
+        metadata[KEY_FORMAT] = "json"
+        metadata[KEY_MARKERS] = json.dumps([live.device for live in sub.markers.values()])
+        metadata[KEY_DELETED] = json.dumps(sorted(set(gone)))
+        summary = {"markers": len(sub.markers), "withheld": len(sub.withheld),
+                   "error": error[:4000]}
+        self._hub.stream(Message(device_name=sub.device, body=String(json.dumps(summary)),
+                                 metadata=metadata))
+
+    # ------------------------------------------------------------------ frames
+
+    def _use_frame(self, fixed: str, frame: str) -> None:
+        ref = self._frames.get((fixed, frame))
+        if ref is None:
+            name_key = NameKey.marker_frame(fixed, frame)
+            device = self._names.register(name_key)
+            metadata = metadata_for(name_key, frame=fixed, units=UNITS_MM)
+            handle = self._tf.stream_lookup(fixed, frame, device=device, metadata=metadata)
+            ref = self._frames[(fixed, frame)] = _FrameRef(device, name_key, handle)
+        ref.users += 1
+
+    def _release_frame(self, fixed: str, frame: str) -> None:
+        ref = self._frames.get((fixed, frame))
+        if ref is None:
+            return
+        ref.users -= 1
+        if ref.users <= 0:
+            del self._frames[(fixed, frame)]
+            self._tf.stop_lookup(ref.handle)
+            self._hub.forget(ref.device)
+            self._names.release(ref.name_key)
+
+    # ------------------------------------------------------------------ lifetimes
+
+    def _schedule(self, sub: _Subscription, live: _Live) -> None:
+        if not live.expires_ns:
+            return
+        self._seq += 1
+        heapq.heappush(self._expiry, (live.expires_ns, self._seq, sub.topic, live.key))
+        self._arm()
+
+    def _arm(self) -> None:
+        if not self._expiry:
+            return
+        due = self._expiry[0][0]
+        if self._timer is not None:
+            if self._timer_due <= due:
+                return
+            self._timer.cancel()
+        loop = asyncio.get_running_loop()
+        self._timer = loop.call_later(max(0, due - time.monotonic_ns()) / 1e9, self._expire)
+        self._timer_due = due
+
+    def _expire(self) -> None:
+        self._timer = None
+        now = time.monotonic_ns()
+        gone_by_topic: dict[str, list[str]] = {}
+        while self._expiry and self._expiry[0][0] <= now:
+            due, _, topic, key = heapq.heappop(self._expiry)
+            sub = self.subscriptions.get(topic)
+            if sub is None:
+                continue
+            live = sub.markers.get(key)
+            if live is None or live.expires_ns != due:
+                continue  # renewed or deleted since: a stale entry
+            self._drop(sub, key, gone_by_topic.setdefault(topic, []))
+        for topic, gone in gone_by_topic.items():
+            sub = self.subscriptions.get(topic)
+            if sub is not None and gone:
+                self._index(sub, gone)
+        if len(self._expiry) > 4 * max(16, sum(len(s.markers) for s in
+                                               self.subscriptions.values())):
+            # Renewals leave stale entries behind: rebuild from the live markers.
+            self._expiry = [(live.expires_ns, i, s.topic, live.key)
+                            for i, (s, live) in enumerate(
+                                (s, live) for s in self.subscriptions.values()
+                                for live in s.markers.values()) if live.expires_ns]
+            heapq.heapify(self._expiry)
+        self._arm()
+
+    # ------------------------------------------------------------------ capability
+
+    def _close(self, sub: _Subscription) -> None:
+        sub.closed = True
+        if self.subscriptions.get(sub.topic) is sub:
+            del self.subscriptions[sub.topic]
+        if sub.worker is not None:
+            sub.worker.stop()
+        if sub.subscription is not None:
+            self._ros.destroy(sub.subscription)
+            sub.subscription = None
+        gone: list[str] = []
+        for key in list(sub.markers):
+            self._drop(sub, key, gone)
+        self._hub.forget(sub.device)
+        self._names.release(sub.topic_key)
+
+    def handlers(self) -> dict[type[Op], Handler]:
+        return {
+            CreateMarkerSubscriber: lambda request, _: self.create(request),
+            RemoveMarkerSubscriber: lambda request, _: self.remove(request),
+            ListMarkers: lambda request, _: self.list_markers(request),
+        }
+
+    def _describe(self, sub: _Subscription, existed: Optional[bool] = None
+                  ) -> dict[str, Any]:
+        worker = sub.worker
+        out: dict[str, Any] = {
+            "kind": "marker_subscriber", "topic": sub.topic, "type": sub.ros_type,
+            "fixed_frame": sub.fixed_frame, "device": sub.device,
+            "qos": sub.request.qos.to_dict(), "messages": sub.received,
+            "markers": len(sub.markers), "withheld": len(sub.withheld),
+            "errors": len(sub.errors), "raw": sub.raw,
+            "dropped": worker.dropped if worker is not None else 0,
+            "meshed": worker.meshed if worker is not None else 0}
+        if existed is not None:
+            out["existed"] = existed
+        return out
+
+    def describe(self) -> list[dict[str, Any]]:
+        return [self._describe(sub) for sub in self.subscriptions.values()]
+
+    def close(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        for sub in list(self.subscriptions.values()):
+            self._close(sub)
+

@@ -1,0 +1,115 @@
+"""Marker ops: RViz's visualization_msgs/Marker and MarkerArray, nav_msgs/Path,
+geometry_msgs/PolygonStamped and PointStamped as models placed by tf.
+
+Why an op of its own and not ``create_subscriber`` with a ``fixed_frame`` argument: a plain
+subscriber is one topic -> one device whose message is the codec's conversion of each ROS
+message. A marker topic is one topic -> many devices (one per ``ns``/``id``) that come and
+go, a TRANSFORM per tf frame, a lifetime timer and mesh files: another capability, with its
+own bridge kind (``marker_subscriber``, so quotas, ownership, the YAML section and the
+client's re-sync derive from this declaration as for every other kind), and adding it kept
+"one schema module + one handler table" true. A plain ``create_subscriber`` on the same
+topic still works and gives the message as JSON text.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from protocol.commands.errors import OutOfRangeError, WrongTypeError
+from protocol.commands.fields import Args
+from protocol.commands.op import Bridge, FrameUse, Op, Resource, TopicUse
+from protocol.commands.values import QoS
+from protocol.commands.wire import json_type
+
+__all__ = ["MARKER_SOURCE_TYPES", "CreateMarkerSubscriber", "ListMarkers",
+           "RemoveMarkerSubscriber", "marker_source_type"]
+
+# The types a marker subscriber takes: short name -> ROS type.
+MARKER_SOURCE_TYPES: dict[str, str] = {
+    "Marker": "visualization_msgs/msg/Marker",
+    "MarkerArray": "visualization_msgs/msg/MarkerArray",
+    "Path": "nav_msgs/msg/Path",
+    "PolygonStamped": "geometry_msgs/msg/PolygonStamped",
+    "PointStamped": "geometry_msgs/msg/PointStamped",
+}
+
+
+def marker_source_type(text: object, path: str = "type") -> str:
+    """``"Marker"``, ``"visualization_msgs/msg/Marker"`` (or ``pkg/Type``) -> the ROS type;
+    `OutOfRangeError` naming the five accepted types otherwise."""
+    if not isinstance(text, str):
+        raise WrongTypeError(path, "a string", json_type(text))
+    for short, full in MARKER_SOURCE_TYPES.items():
+        package = full.split("/", 1)[0]
+        if text in (short, full, f"{package}/{short}"):
+            return full
+    raise OutOfRangeError(path, "one of " + ", ".join(MARKER_SOURCE_TYPES) +
+                          " (or its pkg/msg/Type)", repr(text))
+
+
+def _fixed_frame(a: Args) -> str:
+    frame = a.frame("fixed_frame").lstrip("/")
+    if not frame:
+        raise OutOfRangeError(a.path("fixed_frame"), "a non-empty tf frame id", "'/'")
+    return frame
+
+
+@dataclass(frozen=True)
+class CreateMarkerSubscriber(Op, op="create_marker_subscriber", writes=False,
+                             creates=Bridge("marker_subscriber", ("topic",),
+                                            section="marker_subscribers")):
+    """Subscribe to ``topic`` (``type``: Marker, MarkerArray, Path, PolygonStamped or
+    PointStamped): every marker becomes a model (POLYDATA, mm, in its frame) or a text
+    point (POINT), under a TRANSFORM that follows ``fixed_frame`` <- its ``frame_id``.
+
+    It reads the topic and reveals the fixed frame's relation to each marker's frame (the
+    frames are judged by the frame globs marker by marker, when they arrive); MESH_RESOURCE
+    markers read mesh files only inside the mesh roots (as a client's robot)."""
+
+    topic: str
+    type: str
+    fixed_frame: str
+    qos: QoS = QoS()
+
+    @property
+    def ros_type(self) -> str:
+        return marker_source_type(self.type)
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (TopicUse("topic", self.topic, self.ros_type),
+                FrameUse("fixed_frame", self.fixed_frame, client_frame=False))
+
+    @classmethod
+    def from_args(cls, a: Args) -> CreateMarkerSubscriber:
+        type_text = a.req_str("type")
+        marker_source_type(type_text, a.path("type"))
+        sub = a.opt_obj("qos")
+        return cls(topic=a.ros_name("topic"), type=type_text, fixed_frame=_fixed_frame(a),
+                   qos=QoS.from_args(sub) if sub is not None else QoS())
+
+
+@dataclass(frozen=True)
+class RemoveMarkerSubscriber(Op, op="remove_marker_subscriber", writes=False,
+                             removes="marker_subscriber"):
+    topic: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()  # judged by who made the bridge
+
+    @classmethod
+    def from_args(cls, a: Args) -> RemoveMarkerSubscriber:
+        return cls(topic=a.ros_name("topic"))
+
+
+@dataclass(frozen=True)
+class ListMarkers(Op, op="list_markers", writes=False):
+    """The live markers of a marker subscriber: device, ns, id, type, frame, expiry."""
+
+    topic: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (TopicUse("topic", self.topic),)
+
+    @classmethod
+    def from_args(cls, a: Args) -> ListMarkers:
+        return cls(topic=a.ros_name("topic"))
