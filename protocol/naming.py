@@ -69,6 +69,8 @@ __all__ = [
     "KEY_WARNINGS",
     "KEY_FRAME",
     "KEY_LINK",
+    "KEY_MARKER_ID",
+    "KEY_MARKER_NS",
     "KEY_NODE",
     "KEY_PARENT",
     "KEY_PARENT_DEVICE",
@@ -170,6 +172,10 @@ KEY_ENCODING = "ros2.encoding"  # sensor_msgs/Image encoding of the ROS side ("b
 KEY_FORMAT = "ros2.format"  # "text" or "json": how to read a STRING body
 KEY_LABELS = "ros2.labels"  # JSON list of MultiArrayDimension labels
 KEY_DROPPED = "ros2.dropped"  # points left out of a cloud for a NaN/inf coordinate
+# A model sent from Slicer as a visualization_msgs/Marker: its namespace and id (the colour
+# is KEY_COLOR, "r g b a" floats 0..1, as on a robot's visuals).
+KEY_MARKER_NS = "ros2.marker_ns"
+KEY_MARKER_ID = "ros2.marker_id"
 METADATA_KEYS: tuple[str, ...] = (
     KEY_TOPIC, KEY_TYPE, KEY_FRAME, KEY_PARENT, KEY_CHILD, KEY_ROBOT, KEY_LINK,
     KEY_VISUAL, KEY_NODE, KEY_SERVICE, KEY_ROLE, KEY_UNITS, KEY_PARENT_DEVICE, KEY_COLOR,

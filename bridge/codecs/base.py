@@ -187,6 +187,20 @@ class TypeCodec:
             raise self._unexpected("body", exc) from exc
         return self._stamp(msg, stamp, frame_id)
 
+    def from_igtl_all(self, body: Body, *, stamp: Stamp = None, frame_id: str = "",
+                      metadata: Mapping[str, str] | None = None) -> list[Any]:
+        """Like `from_igtl`, for a body that may become several ROS messages (a POINT list
+        published as one PointStamped per point); one message for every other pair."""
+        try:
+            msgs = self._from_igtl_all(body, dict(metadata or {}))
+        except ProtocolError as exc:
+            raise _rename(exc, "body") from None
+        except Exception as exc:  # a safety net: a ROS callback must only see CodecError
+            raise self._unexpected("body", exc) from exc
+        if msgs is None:
+            return [self.from_igtl(body, stamp=stamp, frame_id=frame_id, metadata=metadata)]
+        return [self._stamp(msg, stamp, frame_id) for msg in msgs]
+
     def to_value(self, msg: Any) -> Any:
         """ROS message -> JSON-able "Slicer value"."""
         self._check_message(msg)
@@ -219,6 +233,9 @@ class TypeCodec:
 
     def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         raise NotImplementedError
+
+    def _from_igtl_all(self, body: Body, metadata: dict[str, str]) -> list[Any] | None:
+        return None  # one message per body: `_from_igtl`
 
     def _to_value(self, msg: Any) -> Any:
         raise NotImplementedError
