@@ -11,13 +11,16 @@ subscribers, as the reference's Publish does.
 
 from __future__ import annotations
 
+import json
 import logging
 from dataclasses import dataclass, field
 from typing import Any, Callable, Optional
 
 from rclpy.serialization import deserialize_message
+from std_msgs.msg import String as StringMsg
 
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
+from bridge.codecs.slicer_data import markup_labels
 from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
 from bridge.dispatch import Handler
 from bridge.hub import LARGE_MESSAGE_BYTES, Hub, Replier, approximate_size
@@ -27,11 +30,13 @@ from bridge.outbox import Frame, TemplateFrame
 from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
 from bridge.security import SecurityPolicy
-from protocol.commands import (CommandFailedError, CreatePublisher, CreateSubscriber, ErrorCode,
-                               ForbiddenError, GetLastMessage, Op, OutOfRangeError, Publish, QoS,
-                               RemovePublisher, RemoveSubscriber, WrongTypeError)
+from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
+                               CreateSubscriber, ErrorCode, ForbiddenError, GetLastMessage, Op,
+                               OutOfRangeError, Publish, QoS, RemovePublisher, RemoveSubscriber,
+                               WrongTypeError)
 from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
 from protocol.messages import Message, StatusCode
+from protocol.messages import Point as PointBody
 from protocol.naming import KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
 
 log = logging.getLogger(__name__)
@@ -158,18 +163,23 @@ class SubscriberBridge:
 class PublisherBridge:
     def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QoS,
                  device: str, frame_id: str = "",
-                 guard: Optional[MessageGuard] = None) -> None:
+                 guard: Optional[MessageGuard] = None,
+                 labels_topic: Optional[str] = None) -> None:
         self.topic = topic
         self.codec = codec
         self.qos = qos
         self.device = device
         self.frame_id = frame_id
+        self.labels_topic = labels_topic
         self._guard = guard  # the security policy on what a message writes (tf frames...)
         self._refusals = RateLimitedLog(log)
         self.count = 0
         self._ros = ros
         self._hub = hub
         self._publisher = ros.node.create_publisher(codec.message_class, topic, qos_profile(qos))
+        # Markups labels (POINT names): PoseArray / PointStamped have no field for them.
+        self._labels = (ros.node.create_publisher(StringMsg, labels_topic, qos_profile(qos))
+                        if labels_topic is not None else None)
         hub.route(device, self.on_igtl)
 
     def _stamp_now(self) -> tuple[int, int]:
@@ -189,13 +199,16 @@ class PublisherBridge:
             self._guard.check(msg)
 
     def on_igtl(self, message: Message, client: Replier) -> None:
-        """A client sent data to this publisher's device (loop thread)."""
+        """A client sent data to this publisher's device (loop thread). A body may become
+        several messages (a POINT list as one PointStamped per point): all are checked
+        before any is published."""
         try:
-            msg = self.codec.from_igtl(message.body, stamp=self._stamp_now(),
-                                       frame_id=message.metadata.get(KEY_FRAME, "")
-                                       or self.frame_id,
-                                       metadata=message.metadata)
-            self._check(msg)
+            msgs = self.codec.from_igtl_all(message.body, stamp=self._stamp_now(),
+                                            frame_id=message.metadata.get(KEY_FRAME, "")
+                                            or self.frame_id,
+                                            metadata=message.metadata)
+            for msg in msgs:
+                self._check(msg)
         except ForbiddenError as error:
             self._refusals.warning(self.topic, None, "refused %s for %s from a client: %s",
                                    message.type_name, self.topic, error)
@@ -209,7 +222,11 @@ class PublisherBridge:
             client.send_status(message.device_name, StatusCode.CONFIG_ERROR,
                                f"not published to {self.topic}: {error}")
             return
-        self._publish(msg)
+        if self._labels is not None and isinstance(message.body, PointBody):
+            self._labels.publish(StringMsg(data=json.dumps(markup_labels(message.body),
+                                                           ensure_ascii=False)))
+        for msg in msgs:
+            self._publish(msg)
 
     def _publish(self, msg: Any) -> int:
         self._publisher.publish(msg)
@@ -217,13 +234,19 @@ class PublisherBridge:
         return int(self._publisher.get_subscription_count())
 
     def info(self) -> TopicInfo:
+        extra: dict[str, Any] = {"subscribers": int(self._publisher.get_subscription_count())}
+        if self.frame_id:
+            extra["frame"] = self.frame_id
+        if self.labels_topic is not None:
+            extra["labels_topic"] = self.labels_topic
         return TopicInfo("publisher", self.topic, self.codec.ros_type, self.device,
-                         self.codec.igtl_type, self.qos.to_dict(), None, self.count,
-                         {"subscribers": int(self._publisher.get_subscription_count())})
+                         self.codec.igtl_type, self.qos.to_dict(), None, self.count, extra)
 
     def close(self) -> None:
         self._hub.unroute(self.device)
         self._ros.destroy(self._publisher)
+        if self._labels is not None:
+            self._ros.destroy(self._labels)
 
 
 class TopicBridges:
@@ -309,13 +332,25 @@ class TopicBridges:
         topic = self._resolve(request.topic)
         ros_type = request.ros_type
         codec = self._codec(request.type, ros_type)
-        if self._check_existing(self.publishers.get(topic), topic, ros_type):
-            return _describe(self.publishers[topic].info(), existed=True)
+        labels = (self._resolve(request.labels_topic) if request.labels_topic is not None
+                  else None)
+        existing = self.publishers.get(topic)
+        if self._check_existing(existing, topic, ros_type):
+            assert existing is not None
+            if (existing.frame_id, existing.labels_topic) != (request.frame or "", labels):
+                raise CommandFailedError("frame", f"frame {existing.frame_id!r} and labels "
+                                         f"topic {existing.labels_topic} (the bridge on "
+                                         f"{topic} has them)", f"{request.frame or ''!r} and "
+                                         f"{labels}", code=ErrorCode.ALREADY_EXISTS)
+            return _describe(existing.info(), existed=True)
         self._check_graph(topic, ros_type)
+        if labels is not None:
+            self._check_graph(labels, LABELS_TYPE)
         device = self._names.register(NameKey.publisher(topic))
         bridge = PublisherBridge(self._ros, self._hub, topic=topic, codec=codec,
                                  qos=request.qos, device=device,
-                                 guard=self._policy.message_guard(topic, ros_type))
+                                 frame_id=request.frame or "", labels_topic=labels,
+                                 guard=self._policy.publish_guard(topic, ros_type))
         self.publishers[topic] = bridge
         log.info("publishing %s (%s); clients send to device %r", topic, ros_type, device)
         return _describe(bridge.info(), existed=False)

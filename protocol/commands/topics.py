@@ -11,8 +11,8 @@ from protocol.commands.op import Bridge, FrameUse, Op, Resource, TopicUse
 from protocol.commands.types import resolve_message_type
 from protocol.commands.values import QoS
 
-__all__ = ["LABELS_TYPE", "CreatePublisher", "CreateSubscriber", "GetLastMessage", "Publish", "RemovePublisher",
-           "RemoveSubscriber"]
+__all__ = ["LABELS_TYPE", "CreatePublisher", "CreateSubscriber", "GetLastMessage", "Publish",
+           "RemovePublisher", "RemoveSubscriber"]
 
 
 # The type of a publisher's labels topic (markups labels as a JSON list).
