@@ -553,11 +553,20 @@ class RobotBridges:
         return robot, robot.model
 
     def _joint_states_topic(self, robot: _Robot) -> str:
-        """Where a state publisher of this robot listens: ``joint_states`` in the robot's
-        namespace (robot_state_publisher's relative name), resolved in the daemon's."""
-        namespace = robot.request.namespace.rstrip("/")
-        return resolve_name(self._ros, f"{namespace}/joint_states" if namespace
-                            else "joint_states", "topic")
+        """Where this robot's state publisher listens: robot_state_publisher subscribes
+        the relative ``joint_states``, so in the namespace of the node whose parameter
+        holds the description (``/PSM1/robot_state_publisher`` -> ``/PSM1/joint_states``),
+        of the description topic, or for a file the robot's namespace."""
+        source = robot.source  # names already resolved (absolute)
+        if source.kind == "parameter":
+            base = source.node.rsplit("/", 1)[0]
+        elif source.kind == "topic":
+            base = source.topic.rsplit("/", 1)[0]
+        else:
+            namespace = robot.request.namespace.strip("/")
+            return resolve_name(self._ros, f"{namespace}/joint_states" if namespace
+                                else "joint_states", "topic")
+        return f"{base}/joint_states"
 
     def describe_robot_joints(self, request: DescribeRobotJoints) -> dict[str, Any]:
         robot, model = self._loaded(request.name)

@@ -6,6 +6,8 @@ values in metres are computed here (mm / 1000), independently of the daemon's co
 from __future__ import annotations
 
 import json
+import math
+import sys
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -263,3 +265,78 @@ def test_joint_states_for_a_loaded_robot_with_mimics_and_limits(
     robot.set_joints({"slide": 0.0})  # a refused value published nothing in between
     wait_until(lambda: len(_messages(echo)) > count, timeout=20, what="the next state")
     assert _messages(echo)[count]["position"] == [0.0, 0.0]
+
+
+FOLLOW_URDF = ROBOT_URDF.replace('name="jointy"', 'name="follow"')
+
+
+def test_the_robot_follows_its_joints_through_a_state_publisher(
+        ros: slicer_client.Client, processes: Processes, tmp_path: Path) -> None:
+    """The reference-style facade loads the robot from /follow/robot_state_publisher; its
+    joints set from Slicer go to /follow/joint_states, and the link transform that comes
+    back (state publisher -> tf -> daemon -> client) is the joint's rotation."""
+    urdf = tmp_path / "follow.urdf"
+    urdf.write_text(FOLLOW_URDF)
+    publisher = processes.start("follow-sp", [sys.executable, "-u", "-m",
+                                              "bridge.robots.state_publisher", str(urdf),
+                                              "--namespace", "follow"])
+    publisher.wait_for_output("ready", timeout=30)
+    node = ros.GetDefaultROS2Node().CreateAndAddRobotNode(
+        "follow", "/follow/robot_state_publisher", "robot_description")
+    assert node.GetJointNames() == ["shoulder", "spin", "slide"]
+    assert node.GetJointLimits("slide") == (0.0, 0.04) and node.GetJointLimits("spin") is None
+    assert node.resource.joints()["joint_states_topic"] == "/follow/joint_states"
+    angle = 0.5
+
+    def follows() -> bool:
+        matrix = node.GetLinkTransform("a")
+        if matrix is not None and abs(matrix[1, 0] - math.sin(angle)) < 1e-4:
+            return True
+        node.SetJointPositions({"shoulder": angle})
+        return False
+    wait_until(follows, timeout=30, what="link a rotated by the joint state")
+    matrix = node.GetLinkTransform("a")
+    np.testing.assert_allclose(matrix[:2, :2], [[math.cos(angle), -math.sin(angle)],
+                                                [math.sin(angle), math.cos(angle)]],
+                               atol=1e-4)
+
+
+def test_the_demo_motion_yields_to_joints_set_from_slicer(
+        ros: slicer_client.Client, processes: Processes, tmp_path: Path) -> None:
+    """bridge.robots.demo.joint_motion stops for --yield-s after another publisher's joint
+    state: the gap between the state set from Slicer and the motion's next message, read
+    from their stamps, is at least that long."""
+    urdf = tmp_path / "yield.urdf"
+    urdf.write_text(ROBOT_URDF.replace('name="jointy"', 'name="yielding"'))
+    motion = processes.start("yield-motion", [
+        sys.executable, "-u", "-m", "bridge.robots.demo.joint_motion", str(urdf),
+        "--namespace", "yielding", "--rate", "20", "--yield-s", "2"])
+    motion.wait_for_output("joint motion ready", timeout=30)
+    sp = processes.start("yield-sp", [sys.executable, "-u", "-m",
+                                      "bridge.robots.state_publisher", str(urdf),
+                                      "--namespace", "yielding"])
+    sp.wait_for_output("ready", timeout=30)
+    echo = _echo(processes, "/yielding/joint_states", "sensor_msgs/msg/JointState")
+    robot = ros.robot("yielding", namespace="yielding")
+    assert robot.joints()["joint_states_topic"] == "/yielding/joint_states"
+
+    def ours(m: dict[str, Any]) -> bool:
+        return not m["velocity"]  # the motion also sends velocities; set_joints does not
+
+    _until_received(echo, lambda: None, "the idle motion", count=1)
+    wait_until(lambda: any(ours(m) for m in _messages(echo))
+               or bool(robot.set_joints({"shoulder": 0.25})) and False,
+               timeout=30, what="our joint state on the topic")
+
+    def stamp(m: dict[str, Any]) -> float:
+        return m["header"]["stamp"]["sec"] + m["header"]["stamp"]["nanosec"] * 1e-9
+
+    def resumed() -> list[dict[str, Any]]:
+        got = _messages(echo)
+        last = max(i for i, m in enumerate(got) if ours(m))
+        return [m for m in got[last + 1:] if not ours(m)]
+    wait_until(lambda: bool(resumed()), timeout=30, what="the motion to resume")
+    got = _messages(echo)
+    last_ours = [m for m in got if ours(m)][-1]
+    assert last_ours["position"] == [0.25]
+    assert stamp(resumed()[0]) - stamp(last_ours) >= 2.0 - 0.1
