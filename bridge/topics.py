@@ -11,8 +11,10 @@ subscribers, as the reference's Publish does.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
+import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable, Optional
 
@@ -35,7 +37,7 @@ from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
                                OutOfRangeError, Publish, QoS, RemovePublisher, RemoveSubscriber,
                                WrongTypeError)
 from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
-from protocol.messages import Message, StatusCode
+from protocol.messages import Message, PolyData, StatusCode
 from protocol.messages import Point as PointBody
 from protocol.naming import KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
 
@@ -180,6 +182,11 @@ class PublisherBridge:
         # Markups labels (POINT names): PoseArray / PointStamped have no field for them.
         self._labels = (ros.node.create_publisher(StringMsg, labels_topic, qos_profile(qos))
                         if labels_topic is not None else None)
+        # Models converted off the loop (see on_igtl): one waiting slot, one worker at most.
+        self._heavy_lock = threading.Lock()
+        self._heavy_next: Optional[tuple[Message, Callable[[str, int, str], None]]] = None
+        self._heavy_running = False
+        self._closed = False
         hub.route(device, self.on_igtl)
 
     def _stamp_now(self) -> tuple[int, int]:
@@ -201,7 +208,46 @@ class PublisherBridge:
     def on_igtl(self, message: Message, client: Replier) -> None:
         """A client sent data to this publisher's device (loop thread). A body may become
         several messages (a POINT list as one PointStamped per point): all are checked
-        before any is published."""
+        before any is published. A model (POLYDATA for a Mesh, Marker or Path) is
+        converted in a worker thread, newest first (`_heavy_worker`)."""
+        if self.codec.heavy_polydata and isinstance(message.body, PolyData):
+            try:
+                loop = asyncio.get_running_loop()
+            except RuntimeError:  # called outside the daemon's loop (tests): inline
+                loop = None
+            if loop is not None:
+                self._offload(loop, message, client)
+                return
+        self._convert_and_publish(message, client.send_status)
+
+    def _offload(self, loop: asyncio.AbstractEventLoop, message: Message,
+                 client: Replier) -> None:
+        """Queue a model for the worker: one slot, so a newer model waiting replaces an
+        older one (a model update supersedes it) and memory stays bounded."""
+        def reply(device: str, code: int, text: str) -> None:  # worker -> loop thread
+            loop.call_soon_threadsafe(client.send_status, device, code, text)
+
+        with self._heavy_lock:
+            self._heavy_next = (message, reply)
+            if self._heavy_running:
+                return
+            self._heavy_running = True
+        loop.run_in_executor(None, self._heavy_worker)
+
+    def _heavy_worker(self) -> None:
+        while True:
+            with self._heavy_lock:
+                item, self._heavy_next = self._heavy_next, None
+                if item is None or self._closed:
+                    self._heavy_running = False
+                    return
+            try:
+                self._convert_and_publish(*item)
+            except Exception:  # noqa: BLE001 - a worker must not die silently
+                log.exception("converting a model for %s failed", self.topic)
+
+    def _convert_and_publish(self, message: Message,
+                             reply: Callable[[str, int, str], None]) -> None:
         try:
             msgs = self.codec.from_igtl_all(message.body, stamp=self._stamp_now(),
                                             frame_id=message.metadata.get(KEY_FRAME, "")
@@ -212,21 +258,24 @@ class PublisherBridge:
         except ForbiddenError as error:
             self._refusals.warning(self.topic, None, "refused %s for %s from a client: %s",
                                    message.type_name, self.topic, error)
-            client.send_status(message.device_name, StatusCode.ACCESS_DENIED,
-                               f"not published to {self.topic}: {error}")
+            reply(message.device_name, StatusCode.ACCESS_DENIED,
+                  f"not published to {self.topic}: {error}")
             return
         except CodecError as error:
             # A client can send bad data as fast as it likes: the log says it once a while.
             self._refusals.warning(self.topic, None, "refused %s for %s from a client: %s",
                                    message.type_name, self.topic, error)
-            client.send_status(message.device_name, StatusCode.CONFIG_ERROR,
-                               f"not published to {self.topic}: {error}")
+            reply(message.device_name, StatusCode.CONFIG_ERROR,
+                  f"not published to {self.topic}: {error}")
             return
-        if self._labels is not None and isinstance(message.body, PointBody):
-            self._labels.publish(StringMsg(data=json.dumps(markup_labels(message.body),
-                                                           ensure_ascii=False)))
-        for msg in msgs:
-            self._publish(msg)
+        with self._heavy_lock:  # close() may run meanwhile (a worker thread publishes)
+            if self._closed:
+                return
+            if self._labels is not None and isinstance(message.body, PointBody):
+                self._labels.publish(StringMsg(data=json.dumps(markup_labels(message.body),
+                                                               ensure_ascii=False)))
+            for msg in msgs:
+                self._publish(msg)
 
     def _publish(self, msg: Any) -> int:
         self._publisher.publish(msg)
@@ -244,6 +293,9 @@ class PublisherBridge:
 
     def close(self) -> None:
         self._hub.unroute(self.device)
+        with self._heavy_lock:  # a model being converted is then dropped, not published
+            self._closed = True
+            self._heavy_next = None
         self._ros.destroy(self._publisher)
         if self._labels is not None:
             self._ros.destroy(self._labels)

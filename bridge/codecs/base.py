@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Union
+from typing import Any, ClassVar, Union
 
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import message_to_yaml
@@ -147,6 +147,9 @@ class TypeCodec:
 
     ros_type: str  # "geometry_msgs/msg/PoseStamped"
     igtl_type: str  # "TRANSFORM", "STRING", "IMAGE", "POLYDATA"
+    # A POLYDATA from a client may take this codec up to about a second (a model of
+    # hundreds of thousands of triangles): publisher bridges convert it off the loop.
+    heavy_polydata: ClassVar[bool] = False
 
     @property
     def message_class(self) -> Any:

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -150,6 +150,8 @@ def _ros_points(xyz_m: np.ndarray) -> list[Any]:
 class MeshCodec(TypeCodec):
     """shape_msgs/Mesh <-> POLYDATA (vertices in mm, one triangle per polygon)."""
 
+    heavy_polydata: ClassVar[bool] = True
+
     def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         vertices, triangles = self._arrays(msg)
         return (PolyData(points=metres_to_mm(vertices).astype(np.float32),
@@ -220,6 +222,8 @@ class MarkerCodec(GenericJsonCodec):
     metres) with ns / id / colour from the message's metadata (``ros2.marker_ns``, default
     "slicer"; ``ros2.marker_id``, default 0; ``ros2.color`` "r g b a", default white), scale
     1 and an identity pose. A STRING body and every other direction: the generic JSON."""
+
+    heavy_polydata: ClassVar[bool] = True
 
     def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         if not isinstance(body, PolyData):
@@ -305,6 +309,8 @@ class PathCodec(GenericJsonCodec):
     in order) or a POLYDATA holding one polyline (its points in line order, as Slicer's
     model of a curve). Poses: metres, identity orientation, each with the Path's header.
     A STRING body and every other direction: the generic JSON."""
+
+    heavy_polydata: ClassVar[bool] = True
 
     def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         if isinstance(body, PointBody):

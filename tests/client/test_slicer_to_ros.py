@@ -324,8 +324,17 @@ def test_the_demo_motion_yields_to_joints_set_from_slicer(
         return not m["velocity"]  # the motion also sends velocities; set_joints does not
 
     _until_received(echo, lambda: None, "the idle motion", count=1)
-    wait_until(lambda: any(ours(m) for m in _messages(echo))
-               or bool(robot.set_joints({"shoulder": 0.25})) and False,
+    topic = robot.joints()["joint_states_topic"]
+
+    def set_shoulder(value: float) -> int:
+        return int(ros.command("set_robot_joints", {"name": "yielding", "topic": topic,
+                                                    "positions": {"shoulder": value}})
+                   ["subscribers"])
+    # Until the daemon's JointState publisher has matched all three subscribers (state
+    # publisher, motion, echo): the measured state below then reaches the motion too.
+    wait_until(lambda: set_shoulder(0.2) >= 3, timeout=30, what="three subscribers")
+    set_shoulder(0.25)
+    wait_until(lambda: any(ours(m) and m["position"] == [0.25] for m in _messages(echo)),
                timeout=30, what="our joint state on the topic")
 
     def stamp(m: dict[str, Any]) -> float:
@@ -340,3 +349,27 @@ def test_the_demo_motion_yields_to_joints_set_from_slicer(
     last_ours = [m for m in got if ours(m)][-1]
     assert last_ours["position"] == [0.25]
     assert stamp(resumed()[0]) - stamp(last_ours) >= 2.0 - 0.1
+
+
+def test_models_in_a_burst_arrive_in_order_ending_with_the_newest(
+        ros: slicer_client.Client, processes: Processes) -> None:
+    """Models convert off the daemon's loop with one waiting slot: a burst may skip a
+    superseded model, never reorder them, and always delivers the newest."""
+    echo = _echo(processes, "/s2r_burst", "shape_msgs/msg/Mesh")
+    pub = ros.publisher("/s2r_burst", "shape_msgs/msg/Mesh")
+
+    def model(x_mm: float) -> PolyData:
+        points = POINTS_MM.astype(np.float32)
+        points[0, 0] = x_mm
+        return PolyData(points=points, polygons=POLYGONS)
+    _until_received(echo, lambda: pub.send(model(-1.0)), "the first model")
+    seen_before = len(_messages(echo))
+    for x_mm in (1.0, 2.0, 3.0):
+        pub.send(model(x_mm))
+    wait_until(lambda: any(m["vertices"][0]["x"] == 0.003 for m in _messages(echo)),
+               timeout=30, what="the newest model")
+    firsts = [m["vertices"][0]["x"] for m in _messages(echo)[seen_before:]]
+    firsts = [x for x in firsts if x != -0.001]  # late warm-up copies
+    assert firsts == sorted(firsts) and firsts[-1] == 0.003
+    assert set(firsts) <= {0.001, 0.002, 0.003}
+    assert ros.list_topics() is not None  # and the daemon answers
