@@ -182,24 +182,23 @@ class TypeCodec:
         """OpenIGTLink body -> ROS message; ``stamp``/``frame_id`` fill its header (if it has
         one). ``metadata`` of the message may refine the conversion (image encoding, table
         shape). Raises `CodecError` (wrong body type, shape, NaN, size mismatch)."""
+        msg = self._body_call(self._from_igtl, body, metadata)
+        return self._stamp(msg, stamp, frame_id)
+
+    def _body_call(self, hook: Any, body: Body, metadata: Mapping[str, str] | None) -> Any:
+        """A ``_from_igtl*`` hook, its errors as `CodecError` naming ``body``."""
         try:
-            msg = self._from_igtl(body, dict(metadata or {}))
+            return hook(body, dict(metadata or {}))
         except ProtocolError as exc:
             raise _rename(exc, "body") from None
         except Exception as exc:  # a safety net: a ROS callback must only see CodecError
             raise self._unexpected("body", exc) from exc
-        return self._stamp(msg, stamp, frame_id)
 
     def from_igtl_all(self, body: Body, *, stamp: Stamp = None, frame_id: str = "",
                       metadata: Mapping[str, str] | None = None) -> list[Any]:
         """Like `from_igtl`, for a body that may become several ROS messages (a POINT list
         published as one PointStamped per point); one message for every other pair."""
-        try:
-            msgs = self._from_igtl_all(body, dict(metadata or {}))
-        except ProtocolError as exc:
-            raise _rename(exc, "body") from None
-        except Exception as exc:  # a safety net: a ROS callback must only see CodecError
-            raise self._unexpected("body", exc) from exc
+        msgs = self._body_call(self._from_igtl_all, body, metadata)
         if msgs is None:
             return [self.from_igtl(body, stamp=stamp, frame_id=frame_id, metadata=metadata)]
         return [self._stamp(msg, stamp, frame_id) for msg in msgs]

@@ -11,25 +11,16 @@ import pytest
 from bridge.robots.demo.joint_motion import MotionHold
 from bridge.robots.description import parse_urdf
 from bridge.robots.joints import describe_joints, joint_positions
+from jointy_urdf import JOINTY_URDF
 from protocol.commands import OutOfRangeError
 
-URDF = """<robot name="jointy">
-  <link name="base"/><link name="a"/><link name="b"/><link name="c"/><link name="d"/>
+URDF = JOINTY_URDF.replace("</robot>", """
   <link name="e"/><link name="f"/>
-  <joint name="shoulder" type="revolute"><parent link="base"/><child link="a"/>
-    <axis xyz="0 0 1"/><limit lower="-1.5" upper="1.5" effort="10" velocity="2"/></joint>
-  <joint name="spin" type="continuous"><parent link="a"/><child link="b"/>
-    <axis xyz="0 0 1"/></joint>
-  <joint name="slide" type="prismatic"><parent link="b"/><child link="c"/>
-    <axis xyz="1 0 0"/><limit lower="0" upper="0.04" effort="5" velocity="0.1"/></joint>
-  <joint name="twin" type="prismatic"><parent link="c"/><child link="d"/>
-    <axis xyz="1 0 0"/><limit lower="0" upper="0.02" effort="5" velocity="0.1"/>
-    <mimic joint="slide" multiplier="0.5" offset="0"/></joint>
   <joint name="grandtwin" type="revolute"><parent link="d"/><child link="e"/>
     <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>
     <mimic joint="twin" multiplier="10" offset="0.1"/></joint>
   <joint name="weld" type="fixed"><parent link="e"/><child link="f"/></joint>
-</robot>"""
+</robot>""")
 
 
 @pytest.fixture(scope="module")

@@ -17,6 +17,7 @@ import pytest
 import slicer_client
 from protocol.commands import ErrorCode
 from protocol.messages import PolyData
+from jointy_urdf import JOINTY_URDF
 from support import Child, Processes, RunningDaemon, assert_clean_exit, start_daemon, wait_until
 
 pytestmark = pytest.mark.ros
@@ -27,18 +28,7 @@ POINTS_MM = np.array([[0, 0, 0], [100, 0, 0], [100, 50, 0], [0, 50, 0], [0, 0, 8
 POLYGONS = np.array([4, 0, 1, 2, 3, 3, 0, 1, 4], dtype=np.uint32)
 TRIANGLES = [[0, 1, 2], [0, 2, 3], [0, 1, 4]]
 
-ROBOT_URDF = """<robot name="jointy">
-  <link name="base"/><link name="a"/><link name="b"/><link name="c"/><link name="d"/>
-  <joint name="shoulder" type="revolute"><parent link="base"/><child link="a"/>
-    <axis xyz="0 0 1"/><limit lower="-1.5" upper="1.5" effort="10" velocity="2"/></joint>
-  <joint name="spin" type="continuous"><parent link="a"/><child link="b"/>
-    <axis xyz="0 0 1"/></joint>
-  <joint name="slide" type="prismatic"><parent link="b"/><child link="c"/>
-    <axis xyz="1 0 0"/><limit lower="0" upper="0.04" effort="5" velocity="0.1"/></joint>
-  <joint name="twin" type="prismatic"><parent link="c"/><child link="d"/>
-    <axis xyz="1 0 0"/><limit lower="0" upper="0.02" effort="5" velocity="0.1"/>
-    <mimic joint="slide" multiplier="0.5" offset="0"/></joint>
-</robot>"""
+ROBOT_URDF = JOINTY_URDF
 
 
 @pytest.fixture(scope="module")
@@ -54,13 +44,6 @@ def daemon(module_processes: Processes, robot_dir: Path) -> Iterator[RunningDaem
                            "--robot-dir", str(robot_dir))
     yield running
     assert_clean_exit(running)
-
-
-@pytest.fixture
-def ros(daemon: RunningDaemon) -> Iterator[slicer_client.Client]:
-    client = slicer_client.connect("127.0.0.1", daemon.port)
-    yield client
-    client.close()
 
 
 def _echo(processes: Processes, topic: str, ros_type: str) -> Child:
@@ -84,6 +67,19 @@ def _until_received(child: Child, send: Any, what: str, count: int = 1) -> list[
         return False
     wait_until(received, timeout=30, what=what)
     return _messages(child)
+
+
+def _loaded(robot: Any) -> None:
+    """Wait until the daemon has the robot's URDF (a parameter source may still be
+    'waiting' for the node right after it printed ready)."""
+    def described() -> bool:
+        try:
+            robot.joints(refresh=True)
+        except slicer_client.CommandRefusedError as error:
+            assert error.code == ErrorCode.UNAVAILABLE, error
+            return False
+        return True
+    wait_until(described, timeout=30, what=f"robot {robot.name} loaded")
 
 
 def _xyz(points: list[dict[str, float]]) -> np.ndarray:
@@ -283,6 +279,7 @@ def test_the_robot_follows_its_joints_through_a_state_publisher(
     publisher.wait_for_output("ready", timeout=30)
     node = ros.GetDefaultROS2Node().CreateAndAddRobotNode(
         "follow", "/follow/robot_state_publisher", "robot_description")
+    _loaded(node.resource)
     assert node.GetJointNames() == ["shoulder", "spin", "slide"]
     assert node.GetJointLimits("slide") == (0.0, 0.04) and node.GetJointLimits("spin") is None
     assert node.resource.joints()["joint_states_topic"] == "/follow/joint_states"
@@ -318,6 +315,7 @@ def test_the_demo_motion_yields_to_joints_set_from_slicer(
     sp.wait_for_output("ready", timeout=30)
     echo = _echo(processes, "/yielding/joint_states", "sensor_msgs/msg/JointState")
     robot = ros.robot("yielding", namespace="yielding")
+    _loaded(robot)
     assert robot.joints()["joint_states_topic"] == "/yielding/joint_states"
 
     def ours(m: dict[str, Any]) -> bool:
