@@ -248,13 +248,21 @@ class PublisherBridge:
 
     def _convert_and_publish(self, message: Message,
                              reply: Callable[[str, int, str], None]) -> None:
+        frame_id = message.metadata.get(KEY_FRAME, "") or self.frame_id
         try:
-            msgs = self.codec.from_igtl_all(message.body, stamp=self._stamp_now(),
-                                            frame_id=message.metadata.get(KEY_FRAME, "")
-                                            or self.frame_id,
-                                            metadata=message.metadata)
-            for msg in msgs:
-                self._check(msg)
+            msgs: list[Any] = []
+            raw = (self.codec.from_igtl_raw(message.body, stamp=self._stamp_now(),
+                                            frame_id=frame_id, metadata=message.metadata)
+                   if self.codec.heavy_polydata else None)
+            if raw is not None:  # a model serialized with numpy; the probe has its header
+                data, probe = raw
+                self._check(probe)
+                msgs.append(data)
+            else:
+                msgs = self.codec.from_igtl_all(message.body, stamp=self._stamp_now(),
+                                                frame_id=frame_id, metadata=message.metadata)
+                for msg in msgs:
+                    self._check(msg)
         except ForbiddenError as error:
             self._refusals.warning(self.topic, None, "refused %s for %s from a client: %s",
                                    message.type_name, self.topic, error)

@@ -18,7 +18,7 @@ naming the field.
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Union
 
@@ -203,6 +203,20 @@ class TypeCodec:
             return [self.from_igtl(body, stamp=stamp, frame_id=frame_id, metadata=metadata)]
         return [self._stamp(msg, stamp, frame_id) for msg in msgs]
 
+    def from_igtl_raw(self, body: Body, *, stamp: Stamp = None, frame_id: str = "",
+                      metadata: Mapping[str, str] | None = None
+                      ) -> tuple[bytes, Any] | None:
+        """The serialized (CDR) message `from_igtl` would build, made with numpy without
+        building its bulk as Python objects, and a probe: that message without its bulk
+        (its header, for the security guards). None when this codec has no such path.
+        The bytes equal rclpy's ``serialize_message`` of the `from_igtl` message."""
+        made = self._body_call(self._from_igtl_raw, body, metadata)
+        if made is None:
+            return None
+        probe, finish = made
+        probe = self._stamp(probe, stamp, frame_id)
+        return finish(probe), probe
+
     def to_value(self, msg: Any) -> Any:
         """ROS message -> JSON-able "Slicer value"."""
         self._check_message(msg)
@@ -238,6 +252,10 @@ class TypeCodec:
 
     def _from_igtl_all(self, body: Body, metadata: dict[str, str]) -> list[Any] | None:
         return None  # one message per body: `_from_igtl`
+
+    def _from_igtl_raw(self, body: Body, metadata: dict[str, str]
+                       ) -> tuple[Any, Callable[[Any], bytes]] | None:
+        return None  # (the message without its bulk, its serializer once stamped)
 
     def _to_value(self, msg: Any) -> Any:
         raise NotImplementedError

@@ -25,6 +25,7 @@ from bridge.codecs.base import (
 )
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import numeric_array
+from bridge.codecs.slicer_data import pose_array_from_points
 from protocol.conversions import (
     ConversionError,
     matrix_to_pose,
@@ -237,8 +238,6 @@ class PoseArrayCodec(TypeCodec):
 
     def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         if isinstance(body, PointBody):  # Slicer markups: one pose per point
-            from bridge.codecs.slicer_data import pose_array_from_points
-
             return pose_array_from_points(self.message_class, body)
         return self._build(parse_json_text(string_text(body, self.ros_type)), "text")
 

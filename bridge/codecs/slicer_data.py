@@ -11,10 +11,12 @@ polygons; each polygon of k >= 3 points is cut into a fan (0, i, i+1), which is 
 the convex polygons VTK writes. Triangle strips are refused (Slicer's surface filters
 triangulate; a strip means an unexpected producer), as are polygons of fewer than 3 points.
 
-Bounds (a model with millions of points would stall the daemon's loop while it becomes
-Python objects): `MAX_MESH_VERTICES` / `MAX_MESH_TRIANGLES` for Mesh, `MAX_MARKER_TRIANGLES`
-for a Marker (which repeats 3 points per triangle), `MAX_PATH_POINTS` and
-`MAX_MARKUP_POINTS`. Beyond them, and for NaN/inf coordinates, `CodecError` says what came.
+Bounds: `MAX_MESH_VERTICES` / `MAX_MESH_TRIANGLES` for Mesh, `MAX_MARKER_TRIANGLES` for a
+Marker (which repeats 3 points per triangle), `MAX_PATH_POINTS` and `MAX_MARKUP_POINTS`.
+Beyond them, and for NaN/inf coordinates, `CodecError` says what came. Mesh and Marker also
+come serialized (`from_igtl_raw`: the CDR bytes built with numpy, spliced into rclpy's
+serialization of the rest), which is what the daemon publishes: building a model's million
+Points as rclpy objects takes seconds, its bytes milliseconds.
 
 The way back (ROS -> client) is kept where it is lossless: Mesh -> POLYDATA (triangles, mm;
 float32 on the wire); PoseArray keeps its STRING of 4x4 matrices (geometry.py). Marker and
@@ -26,9 +28,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, Callable, ClassVar
 
 import numpy as np
+from rclpy.serialization import serialize_message
 
 from bridge.codecs.base import Body, TypeCodec, Stamp
 from bridge.codecs.errors import CodecError
@@ -50,14 +53,18 @@ __all__ = [
     "PathCodec",
     "PointStampedCodec",
     "fan_triangles",
+    "mesh_cdr",
+    "splice_points",
     "markup_labels",
     "points_in_metres",
     "pose_array_from_points",
 ]
 
-MAX_MESH_VERTICES = 200_000
-MAX_MESH_TRIANGLES = 400_000
-MAX_MARKER_TRIANGLES = 100_000
+# Within the daemon's 64 MiB message limit (12 bytes a point, 16 a triangle on the wire);
+# the daemon publishes models serialized with numpy (`from_igtl_raw`), in milliseconds.
+MAX_MESH_VERTICES = 1_000_000
+MAX_MESH_TRIANGLES = 2_000_000
+MAX_MARKER_TRIANGLES = 500_000  # 72 bytes a triangle in ROS (3 points)
 MAX_PATH_POINTS = 100_000
 MAX_MARKUP_POINTS = 10_000
 
@@ -126,6 +133,43 @@ def fan_triangles(body: PolyData, limit: int) -> np.ndarray:
     return tris
 
 
+# ---------------------------------------------------------------- serialized (CDR) bulk
+# A model of 300,000 triangles is a million rclpy objects (Points, MeshTriangles): about
+# 2 s to build. Its serialized form is two numpy arrays and a few bytes, built in ms and
+# published as is (rclpy publishes bytes). Little-endian plain CDR (XCDR1), as rclpy's
+# serialize_message writes on x86 and ARM: offsets count from after the 4-byte
+# encapsulation header; a sequence is a uint32 count, then its elements aligned to their
+# primitive size. The tests check the bytes equal serialize_message's.
+
+_ENCAPSULATION = b"\x00\x01\x00\x00"
+
+
+def _u32(value: int) -> bytes:
+    return int(value).to_bytes(4, "little")
+
+
+def _points_sequence(xyz_m: np.ndarray, at: int) -> bytes:
+    """A geometry_msgs/Point sequence whose count starts at absolute offset ``at`` (4-aligned):
+    the count, padding to 8, then x, y, z float64 per point."""
+    pad = -(at + 4 - 4) & 7
+    return b"".join((_u32(len(xyz_m)), b"\x00" * pad,
+                     np.ascontiguousarray(xyz_m, dtype="<f8").tobytes()))
+
+
+def mesh_cdr(vertices_m: np.ndarray, triangles: np.ndarray) -> bytes:
+    """shape_msgs/Mesh serialized: MeshTriangle[] (uint32[3] each), then Point[]."""
+    tris = np.ascontiguousarray(triangles, dtype="<u4").tobytes()
+    head = b"".join((_ENCAPSULATION, _u32(len(triangles)), tris))
+    return head + _points_sequence(vertices_m, len(head))
+
+
+def splice_points(template: bytes, empty_at: int, xyz_m: np.ndarray) -> bytes:
+    """A serialized message whose Point sequence (empty in ``template``, its 0 count at
+    ``empty_at``) becomes ``xyz_m``. Valid when no field after the sequence needs 8-byte
+    alignment (so the tail keeps its alignment: 24 bytes a point, padding 0 or 4)."""
+    return template[:empty_at] + _points_sequence(xyz_m, empty_at) + template[empty_at + 4:]
+
+
 def _colour(metadata: dict[str, str]) -> tuple[float, float, float, float]:
     text = metadata.get(KEY_COLOR)
     if text is None:
@@ -188,6 +232,13 @@ class MeshCodec(TypeCodec):
         vertices = points_in_metres(poly.points, "body.points", MAX_MESH_VERTICES)
         return self._build(vertices, fan_triangles(poly, MAX_MESH_TRIANGLES))
 
+    def _from_igtl_raw(self, body: Body, metadata: dict[str, str]
+                       ) -> tuple[Any, Callable[[Any], bytes]]:
+        poly = _polydata(body, self.ros_type)
+        vertices = points_in_metres(poly.points, "body.points", MAX_MESH_VERTICES)
+        triangles = fan_triangles(poly, MAX_MESH_TRIANGLES)
+        return self.message_class(), lambda _probe: mesh_cdr(vertices, triangles)
+
     def _to_value(self, msg: Any) -> Any:
         vertices, triangles = self._arrays(msg)
         return {"vertices": metres_to_mm(vertices).tolist(), "triangles": triangles.tolist()}
@@ -225,9 +276,8 @@ class MarkerCodec(GenericJsonCodec):
 
     heavy_polydata: ClassVar[bool] = True
 
-    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
-        if not isinstance(body, PolyData):
-            return super()._from_igtl(body, metadata)
+    def _template(self, body: PolyData, metadata: dict[str, str]) -> tuple[Any, np.ndarray]:
+        """The Marker without its points, and the points (metres, 3 per triangle)."""
         vertices = points_in_metres(body.points, "body.points", 3 * MAX_MARKER_TRIANGLES)
         triangles = fan_triangles(body, MAX_MARKER_TRIANGLES)
         msg = self.message_class()
@@ -247,8 +297,45 @@ class MarkerCodec(GenericJsonCodec):
         msg.scale.x = msg.scale.y = msg.scale.z = 1.0
         r, g, b, a = _colour(metadata)
         msg.color.r, msg.color.g, msg.color.b, msg.color.a = r, g, b, a
-        msg.points = _ros_points(vertices[triangles.reshape(-1)])
+        return msg, vertices[triangles.reshape(-1)]
+
+    def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
+        if not isinstance(body, PolyData):
+            return super()._from_igtl(body, metadata)
+        msg, points = self._template(body, metadata)
+        msg.points = _ros_points(points)
         return msg
+
+    def _from_igtl_raw(self, body: Body, metadata: dict[str, str]
+                       ) -> tuple[Any, Callable[[Any], bytes]] | None:
+        if not isinstance(body, PolyData):
+            return None
+        template, points = self._template(body, metadata)
+
+        def finish(probe: Any) -> bytes:
+            return splice_points(serialize_message(probe), _points_count_offset(probe), points)
+        return template, finish
+
+
+def _align(offset: int, size: int) -> int:
+    return offset + (-(offset - 4) & (size - 1))  # alignment counts after the 4-byte header
+
+
+def _string_end(offset: int, text: str) -> int:
+    return _align(offset, 4) + 4 + len(text.encode("utf-8")) + 1
+
+
+def _points_count_offset(marker: Any) -> int:
+    """Where a serialized visualization_msgs/Marker's points count is, walking the fields
+    before it: header (stamp, frame_id), ns, id, type, action, pose, scale, color,
+    lifetime, frame_locked (rosidl order; checked by the tests against rclpy)."""
+    offset = 4 + 8  # encapsulation, header.stamp (int32 sec, uint32 nanosec)
+    offset = _string_end(offset, marker.header.frame_id)
+    offset = _string_end(offset, marker.ns)
+    offset = _align(offset, 4) + 12  # id, type, action
+    offset = _align(offset, 8) + 56 + 24  # pose (7 float64), scale (3 float64)
+    offset = _align(offset, 4) + 16 + 8 + 1  # color (4 float32), lifetime, frame_locked
+    return _align(offset, 4)
 
 
 def markup_labels(body: PointBody) -> list[str]:

@@ -163,3 +163,33 @@ def test_a_line_of_markups_becomes_a_path() -> None:
     path = codec_for("nav_msgs/msg/Path").from_igtl(_markups(), frame_id="ras")
     assert [(p.pose.position.x, p.pose.position.z) for p in path.poses] == [
         (0.01, 0.03), (0.0015, -0.0035)]
+
+
+@pytest.mark.parametrize("frame, ns", [("patient", "liver"), ("", "slicer"), ("p", "a"),
+                                       ("bras_droit_é", "x" * 9)])
+def test_the_serialized_path_gives_the_same_messages(frame: str, ns: str) -> None:
+    """What the daemon publishes (CDR built with numpy) deserializes to the message the
+    object path builds, whatever the string lengths before the bulk (alignment)."""
+    from rclpy.serialization import deserialize_message
+
+    rng = np.random.default_rng(1)
+    points = rng.uniform(-100, 100, (50, 3)).astype(np.float32)
+    body = _wire(PolyData(points=points, polygons=_flat(*[
+        list(rng.choice(50, size=k, replace=False)) for k in (3, 4, 5, 3)])))
+    metadata = {"ros2.marker_ns": ns, "ros2.marker_id": "-7", "ros2.color": "0 1 0 0.5"}
+    for ros_type in ("shape_msgs/msg/Mesh", "visualization_msgs/msg/Marker"):
+        codec = codec_for(ros_type)
+        msg = codec.from_igtl(body, stamp=(11, 12), frame_id=frame, metadata=metadata)
+        made = codec.from_igtl_raw(body, stamp=(11, 12), frame_id=frame, metadata=metadata)
+        assert made is not None
+        data, probe = made
+        assert deserialize_message(data, type(msg)) == msg
+        if hasattr(probe, "header"):  # what the guards judge
+            assert probe.header.frame_id == frame and not probe.points
+
+
+def test_the_serialized_path_refuses_as_the_object_path() -> None:
+    body = PolyData(points=SQUARE_MM, triangle_strips=_flat([0, 1, 2, 3]))
+    with pytest.raises(CodecError, match="strips"):
+        codec_for("shape_msgs/msg/Mesh").from_igtl_raw(body)
+    assert codec_for("nav_msgs/msg/Path").from_igtl_raw(body) is None  # no such path
