@@ -371,3 +371,21 @@ def test_models_in_a_burst_arrive_in_order_ending_with_the_newest(
     assert firsts == sorted(firsts) and firsts[-1] == 0.003
     assert set(firsts) <= {0.001, 0.002, 0.003}
     assert ros.list_topics() is not None  # and the daemon answers
+
+
+def test_the_facade_sends_models_and_markups(ros: slicer_client.Client,
+                                             processes: Processes) -> None:
+    mesh_echo = _echo(processes, "/s2r_facade_mesh", "shape_msgs/msg/Mesh")
+    path_echo = _echo(processes, "/s2r_facade_path", "nav_msgs/msg/Path")
+    node = ros.GetDefaultROS2Node()
+    mesh_pub = node.CreateAndAddPublisherNode("shape_msgs/msg/Mesh", "/s2r_facade_mesh",
+                                              frame="patient")
+    path_pub = node.CreateAndAddPublisherNode("nav_msgs/Path", "/s2r_facade_path",
+                                              frame="ras")
+    mesh = _until_received(mesh_echo, lambda: mesh_pub.SendModel((POINTS_MM, [[0, 1, 4]])),
+                           "the facade's mesh")[0]
+    np.testing.assert_allclose(_xyz(mesh["vertices"]), POINTS_MM / 1000.0, atol=1e-9)
+    path = _until_received(path_echo, lambda: path_pub.SendMarkups(
+        [[0.0, 0.0, 0.0], [500.0, 0.0, 0.0]], ["start", "end"]), "the facade's path")[0]
+    assert [p["pose"]["position"]["x"] for p in path["poses"]] == [0.0, 0.5]
+    assert path["header"]["frame_id"] == "ras"
