@@ -6,6 +6,8 @@ A `TypeCodec` converts one ROS message type both ways:
   form ``to_igtl(msg) -> body``: called from ROS callbacks, so fast and never raising
   anything but `CodecError`;
 * ``from_igtl(body, stamp=, frame_id=, metadata=)``: a message from 3D Slicer to publish;
+  ``from_igtl_all`` when a body may become several (a POINT list as PointStamped each),
+  ``from_igtl_raw`` the serialized message for codecs that build it with numpy (models);
 * ``to_value(msg)`` / ``from_value(value, stamp=, frame_id=)``: the JSON "Slicer value" a
   client reads (``GetLastMessage``) and publishes (``Publish(value)``);
 * ``to_yaml(msg)``: ``ros2 topic echo`` style text (``GetLastMessageYAML``).
