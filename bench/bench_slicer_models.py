@@ -17,30 +17,20 @@ usage: python bench/bench_slicer_models.py [--repeat N]
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
-from typing import Callable
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
 
 import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
 
+from bench_robot_load import median_ms  # noqa: E402
 from bridge.codecs import codec_for  # noqa: E402
 from protocol.messages import Point, PointElement, PolyData, cells_from_array  # noqa: E402
-
-
-def median_ms(fn: Callable[[], object], repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - start) * 1000)
-    return statistics.median(times)
 
 
 def main() -> int:
