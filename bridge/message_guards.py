@@ -13,8 +13,8 @@ from typing import Any, Callable, Optional, Protocol
 
 from protocol.commands import ForbiddenError
 
-__all__ = ["PARAMETER_EVENT_TYPE", "TF_MESSAGE_TYPE", "MessageGuard", "ParameterEventGuard",
-           "TfMessageGuard"]
+__all__ = ["PARAMETER_EVENT_TYPE", "TF_MESSAGE_TYPE", "HeaderFrameGuard", "MessageGuard",
+           "ParameterEventGuard", "TfMessageGuard"]
 
 TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
 PARAMETER_EVENT_TYPE = "rcl_interfaces/msg/ParameterEvent"
@@ -86,3 +86,31 @@ class ParameterEventGuard:
                 if not self.permits(full):
                     raise ForbiddenError(f"value.{name}", "a parameter this daemon exposes: "
                                          + self.why_not(full), full)
+
+
+@dataclass(frozen=True)
+class HeaderFrameGuard:
+    """Client -> ROS on a publisher: the frame a message is stamped in (``header.frame_id``,
+    and each pose's of a nav_msgs/Path) must be one the frame globs allow, whether it came
+    from the publisher's ``frame``, a message's ``ros2.frame`` metadata or a JSON value.
+    ROS -> client streams are not filtered by it (a publisher guard only)."""
+
+    permits: Permits
+    why_not: WhyNot
+
+    def filter(self, msg: Any) -> Optional[Any]:
+        return msg
+
+    def check(self, msg: Any) -> None:
+        header = getattr(msg, "header", None)
+        frames: list[tuple[str, str]] = []
+        if header is not None:
+            frames.append(("header.frame_id", header.frame_id))
+        for i, pose in enumerate(getattr(msg, "poses", ()) or ()):
+            pose_header = getattr(pose, "header", None)
+            if pose_header is not None:
+                frames.append((f"poses[{i}].header.frame_id", pose_header.frame_id))
+        for name, frame in frames:
+            if frame and not self.permits(_frame(frame)):
+                raise ForbiddenError(f"value.{name}", "a tf frame this daemon exposes: "
+                                     + self.why_not(_frame(frame)), _frame(frame))

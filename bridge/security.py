@@ -34,8 +34,8 @@ from fnmatch import fnmatchcase
 from typing import Any, Callable, Optional, Union
 
 from bridge.logging_limits import RateLimitedLog
-from bridge.message_guards import (PARAMETER_EVENT_TYPE, TF_MESSAGE_TYPE, MessageGuard,
-                                   ParameterEventGuard, TfMessageGuard)
+from bridge.message_guards import (PARAMETER_EVENT_TYPE, TF_MESSAGE_TYPE, HeaderFrameGuard,
+                                   MessageGuard, ParameterEventGuard, TfMessageGuard)
 from protocol.commands import (REQUEST_TYPES, FileUse, ForbiddenError, FrameUse,
                                LimitReachedError, Op, OutOfRangeError, ParameterUse, Resource,
                                ServiceUse, TopicUse, resolve_message_type, resolve_service_type)
@@ -310,6 +310,14 @@ class SecurityPolicy:
         if self.parameters.active and ros_type == PARAMETER_EVENT_TYPE:
             return ParameterEventGuard(self.parameters.permits, self.parameters.why_not)
         return None
+
+    def publish_guard(self, topic: str, ros_type: str) -> Optional[MessageGuard]:
+        """The guard a publisher bridge applies to each message a client publishes: the
+        `message_guard` of its type, else (frame globs set) the frame its header names."""
+        guard = self.message_guard(topic, ros_type)
+        if guard is None and self.frames.active:
+            guard = HeaderFrameGuard(self.frames.permits, self.frames.why_not)
+        return guard
 
     def visible_parameters(self, node: str, names: Iterable[str]) -> list[str]:
         """Of `node`'s parameter `names`, those the parameter globs let a client see."""

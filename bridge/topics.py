@@ -11,13 +11,18 @@ subscribers, as the reference's Publish does.
 
 from __future__ import annotations
 
+import asyncio
+import json
 import logging
+import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable, Optional
 
 from rclpy.serialization import deserialize_message
+from std_msgs.msg import String as StringMsg
 
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
+from bridge.codecs.slicer_data import markup_labels
 from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
 from bridge.dispatch import Handler
 from bridge.hub import LARGE_MESSAGE_BYTES, Hub, Replier, approximate_size
@@ -27,11 +32,13 @@ from bridge.outbox import BulkFrame, Frame, TemplateFrame
 from bridge.qos import default_depth, qos_profile
 from bridge.ros_node import RosNode
 from bridge.security import SecurityPolicy
-from protocol.commands import (CommandFailedError, CreatePublisher, CreateSubscriber, ErrorCode,
-                               ForbiddenError, GetLastMessage, Op, OutOfRangeError, Publish, QoS,
-                               RemovePublisher, RemoveSubscriber, WrongTypeError)
+from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
+                               CreateSubscriber, ErrorCode, ForbiddenError, GetLastMessage, Op,
+                               OutOfRangeError, Publish, QoS, RemovePublisher, RemoveSubscriber,
+                               WrongTypeError)
 from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
-from protocol.messages import Message, StatusCode
+from protocol.messages import Message, PolyData, StatusCode
+from protocol.messages import Point as PointBody
 from protocol.naming import KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
 
 log = logging.getLogger(__name__)
@@ -174,18 +181,28 @@ class SubscriberBridge:
 class PublisherBridge:
     def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QoS,
                  device: str, frame_id: str = "",
-                 guard: Optional[MessageGuard] = None) -> None:
+                 guard: Optional[MessageGuard] = None,
+                 labels_topic: Optional[str] = None) -> None:
         self.topic = topic
         self.codec = codec
         self.qos = qos
         self.device = device
         self.frame_id = frame_id
+        self.labels_topic = labels_topic
         self._guard = guard  # the security policy on what a message writes (tf frames...)
         self._refusals = RateLimitedLog(log)
         self.count = 0
         self._ros = ros
         self._hub = hub
         self._publisher = ros.node.create_publisher(codec.message_class, topic, qos_profile(qos))
+        # Markups labels (POINT names): PoseArray / PointStamped have no field for them.
+        self._labels = (ros.node.create_publisher(StringMsg, labels_topic, qos_profile(qos))
+                        if labels_topic is not None else None)
+        # Models converted off the loop (see on_igtl): one waiting slot, one worker at most.
+        self._heavy_lock = threading.Lock()
+        self._heavy_next: Optional[tuple[Message, Callable[[str, int, str], None]]] = None
+        self._heavy_running = False
+        self._closed = False
         hub.route(device, self.on_igtl)
 
     def _stamp_now(self) -> tuple[int, int]:
@@ -205,27 +222,84 @@ class PublisherBridge:
             self._guard.check(msg)
 
     def on_igtl(self, message: Message, client: Replier) -> None:
-        """A client sent data to this publisher's device (loop thread)."""
+        """A client sent data to this publisher's device (loop thread). A body may become
+        several messages (a POINT list as one PointStamped per point): all are checked
+        before any is published. A model (POLYDATA for a Mesh, Marker or Path) is
+        converted in a worker thread, newest first (`_heavy_worker`)."""
+        if self.codec.heavy_polydata and isinstance(message.body, PolyData):
+            try:
+                loop = asyncio.get_running_loop()
+            except RuntimeError:  # called outside the daemon's loop (tests): inline
+                loop = None
+            if loop is not None:
+                self._offload(loop, message, client)
+                return
+        self._convert_and_publish(message, client.send_status)
+
+    def _offload(self, loop: asyncio.AbstractEventLoop, message: Message,
+                 client: Replier) -> None:
+        """Queue a model for the worker: one slot, so a newer model waiting replaces an
+        older one (a model update supersedes it) and memory stays bounded."""
+        def reply(device: str, code: int, text: str) -> None:  # worker -> loop thread
+            loop.call_soon_threadsafe(client.send_status, device, code, text)
+
+        with self._heavy_lock:
+            self._heavy_next = (message, reply)
+            if self._heavy_running:
+                return
+            self._heavy_running = True
+        loop.run_in_executor(None, self._heavy_worker)
+
+    def _heavy_worker(self) -> None:
+        while True:
+            with self._heavy_lock:
+                item, self._heavy_next = self._heavy_next, None
+                if item is None or self._closed:
+                    self._heavy_running = False
+                    return
+            try:
+                self._convert_and_publish(*item)
+            except Exception:  # noqa: BLE001 - a worker must not die silently
+                log.exception("converting a model for %s failed", self.topic)
+
+    def _convert_and_publish(self, message: Message,
+                             reply: Callable[[str, int, str], None]) -> None:
+        frame_id = message.metadata.get(KEY_FRAME, "") or self.frame_id
         try:
-            msg = self.codec.from_igtl(message.body, stamp=self._stamp_now(),
-                                       frame_id=message.metadata.get(KEY_FRAME, "")
-                                       or self.frame_id,
-                                       metadata=message.metadata)
-            self._check(msg)
+            msgs: list[Any] = []
+            raw = (self.codec.from_igtl_raw(message.body, stamp=self._stamp_now(),
+                                            frame_id=frame_id, metadata=message.metadata)
+                   if self.codec.heavy_polydata else None)
+            if raw is not None:  # a model serialized with numpy; the probe has its header
+                data, probe = raw
+                self._check(probe)
+                msgs.append(data)
+            else:
+                msgs = self.codec.from_igtl_all(message.body, stamp=self._stamp_now(),
+                                                frame_id=frame_id, metadata=message.metadata)
+                for msg in msgs:
+                    self._check(msg)
         except ForbiddenError as error:
             self._refusals.warning(self.topic, None, "refused %s for %s from a client: %s",
                                    message.type_name, self.topic, error)
-            client.send_status(message.device_name, StatusCode.ACCESS_DENIED,
-                               f"not published to {self.topic}: {error}")
+            reply(message.device_name, StatusCode.ACCESS_DENIED,
+                  f"not published to {self.topic}: {error}")
             return
         except CodecError as error:
             # A client can send bad data as fast as it likes: the log says it once a while.
             self._refusals.warning(self.topic, None, "refused %s for %s from a client: %s",
                                    message.type_name, self.topic, error)
-            client.send_status(message.device_name, StatusCode.CONFIG_ERROR,
-                               f"not published to {self.topic}: {error}")
+            reply(message.device_name, StatusCode.CONFIG_ERROR,
+                  f"not published to {self.topic}: {error}")
             return
-        self._publish(msg)
+        with self._heavy_lock:  # close() may run meanwhile (a worker thread publishes)
+            if self._closed:
+                return
+            if self._labels is not None and isinstance(message.body, PointBody):
+                self._labels.publish(StringMsg(data=json.dumps(markup_labels(message.body),
+                                                               ensure_ascii=False)))
+            for msg in msgs:
+                self._publish(msg)
 
     def _publish(self, msg: Any) -> int:
         self._publisher.publish(msg)
@@ -233,13 +307,22 @@ class PublisherBridge:
         return int(self._publisher.get_subscription_count())
 
     def info(self) -> TopicInfo:
+        extra: dict[str, Any] = {"subscribers": int(self._publisher.get_subscription_count())}
+        if self.frame_id:
+            extra["frame"] = self.frame_id
+        if self.labels_topic is not None:
+            extra["labels_topic"] = self.labels_topic
         return TopicInfo("publisher", self.topic, self.codec.ros_type, self.device,
-                         self.codec.igtl_type, self.qos.to_dict(), None, self.count,
-                         {"subscribers": int(self._publisher.get_subscription_count())})
+                         self.codec.igtl_type, self.qos.to_dict(), None, self.count, extra)
 
     def close(self) -> None:
         self._hub.unroute(self.device)
+        with self._heavy_lock:  # a model being converted is then dropped, not published
+            self._closed = True
+            self._heavy_next = None
         self._ros.destroy(self._publisher)
+        if self._labels is not None:
+            self._ros.destroy(self._labels)
 
 
 class TopicBridges:
@@ -326,14 +409,25 @@ class TopicBridges:
         topic = self._resolve(request.topic)
         ros_type = request.ros_type
         codec = self._codec(request.type, ros_type)
-        if self._check_existing(self.publishers.get(topic), topic, ros_type):
-            return _describe(self.publishers[topic].info(), existed=True)
+        labels = (self._resolve(request.labels_topic) if request.labels_topic is not None
+                  else None)
+        existing = self.publishers.get(topic)
+        if self._check_existing(existing, topic, ros_type):
+            assert existing is not None
+            if (existing.frame_id, existing.labels_topic) != (request.frame or "", labels):
+                raise CommandFailedError("frame", f"frame {existing.frame_id!r} and labels "
+                                         f"topic {existing.labels_topic} (the bridge on "
+                                         f"{topic} has them)", f"{request.frame or ''!r} and "
+                                         f"{labels}", code=ErrorCode.ALREADY_EXISTS)
+            return _describe(existing.info(), existed=True)
         self._check_graph(topic, ros_type)
+        if labels is not None:
+            self._check_graph(labels, LABELS_TYPE)
         device = self._names.register(NameKey.publisher(topic))
         bridge = PublisherBridge(self._ros, self._hub, topic=topic, codec=codec,
                                  qos=request.qos.with_default_depth(default_depth(codec.bulk)),
-                                 device=device,
-                                 guard=self._policy.message_guard(topic, ros_type))
+                                 device=device, frame_id=request.frame or "", labels_topic=labels,
+                                 guard=self._policy.publish_guard(topic, ros_type))
         self.publishers[topic] = bridge
         log.info("publishing %s (%s); clients send to device %r", topic, ros_type, device)
         return _describe(bridge.info(), existed=False)

@@ -85,6 +85,8 @@ __all__ = [
     "KEY_WARNINGS",
     "KEY_FRAME",
     "KEY_LINK",
+    "KEY_MARKER_ID",
+    "KEY_MARKER_NS",
     "KEY_NODE",
     "KEY_PARENT",
     "KEY_PARENT_DEVICE",
@@ -194,6 +196,7 @@ KEY_LABELS = "ros2.labels"  # JSON list of MultiArrayDimension labels
 KEY_DROPPED = "ros2.dropped"  # points left out of a cloud for a NaN/inf coordinate
 # A marker's identity and kind (visualization_msgs/Marker ns, id, and its type as a word:
 # "cube", "line_strip", ..., or "path", "polygon", "point" for the other marker sources).
+# A model sent from Slicer as a Marker takes its ns and id from the same two keys.
 KEY_MARKER_NS = "ros2.ns"
 KEY_MARKER_ID = "ros2.id"
 KEY_MARKER_TYPE = "ros2.marker_type"

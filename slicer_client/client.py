@@ -181,8 +181,35 @@ class Client:
         return sub
 
     def publisher(self, topic: str, type: str, *,
-                  qos: Optional[Mapping[str, Any]] = None) -> Publisher:
-        return self._add(Publisher(self, topic, type, qos=qos))
+                  qos: Optional[Mapping[str, Any]] = None, frame: Optional[str] = None,
+                  labels_topic: Optional[str] = None) -> Publisher:
+        """A ROS publisher this client feeds (`Publisher.publish` / `send`). ``frame``:
+        the frame id of what it publishes (judged by the daemon's frame globs);
+        ``labels_topic``: where markups labels go."""
+        return self._add(Publisher(self, topic, type, qos=qos, frame=frame,
+                                   labels_topic=labels_topic))
+
+    def publish_model(self, topic: str, model: Any, *, frame: str,
+                      type: str = "shape_msgs/msg/Mesh", ns: Optional[str] = None,
+                      marker_id: Optional[int] = None,
+                      color: Optional[Any] = None) -> Publisher:
+        """Send a model made in Slicer (a `PolyData` in mm, or (points mm, triangles)) to
+        ROS on ``topic`` as a shape_msgs/Mesh (default) or a visualization_msgs/Marker
+        TRIANGLE_LIST, in metres, in ``frame``. Streams: a refusal by the daemon (bad
+        polygons, too large, a denied frame) comes back as a STATUS in `errors`."""
+        pub = self.publisher(topic, type, frame=frame)
+        pub.send_model(model, ns=ns, marker_id=marker_id, color=color)
+        return pub
+
+    def publish_points(self, topic: str, points: Any, labels: Optional[Any] = None, *,
+                       frame: str, type: str = "PoseArray",
+                       labels_topic: Optional[str] = None) -> Publisher:
+        """Send markups points ((N, 3) mm, labels) to ROS on ``topic`` as a PoseArray
+        (default), one PointStamped per point, or a nav_msgs/Path (a line or curve), in
+        metres, in ``frame``; labels go to ``labels_topic`` as a JSON list."""
+        pub = self.publisher(topic, type, frame=frame, labels_topic=labels_topic)
+        pub.send_points(points, labels)
+        return pub
 
     def parameters(self, node: str) -> ParameterClient:
         return self._add(ParameterClient(self, node))
@@ -306,7 +333,8 @@ class Client:
             resource = self.subscribe(a["topic"], a["type"], qos=a.get("qos"),
                                       rate_hz=a.get("rate_hz"))
         elif spec.op == "create_publisher":
-            resource = self.publisher(a["topic"], a["type"], qos=a.get("qos"))
+            resource = self.publisher(a["topic"], a["type"], qos=a.get("qos"),
+                                      frame=a.get("frame"), labels_topic=a.get("labels_topic"))
         elif spec.op == "create_parameter_client":
             params = self.parameters(a["node"])
             for op, args in spec.then:

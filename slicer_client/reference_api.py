@@ -51,7 +51,8 @@ class FacadeClient(Protocol):
                   callback: Optional[Callable[[Any], None]] = None) -> Subscriber: ...
 
     def publisher(self, topic: str, type: str, *,
-                  qos: Optional[Mapping[str, Any]] = None) -> Publisher: ...
+                  qos: Optional[Mapping[str, Any]] = None, frame: Optional[str] = None,
+                  labels_topic: Optional[str] = None) -> Publisher: ...
 
     def parameters(self, node: str) -> ParameterClient: ...
 
@@ -220,6 +221,16 @@ class PublisherNode(_Node):
     def GetBlankMessage(self) -> Any:  # noqa: N802
         """A new value to fill and publish, of the kind this publisher takes."""
         return blank_message(self.GetROSType())
+
+    def SendModel(self, model: Any) -> None:  # noqa: N802
+        """Stream a model (PolyData in mm, or (points, polygons)) to a Mesh or Marker
+        publisher."""
+        self.resource.send_model(model)
+
+    def SendMarkups(self, points: Any, labels: Optional[List[str]] = None) -> None:  # noqa: N802
+        """Stream markups points ((N, 3) mm, labels) to a PoseArray, PointStamped or Path
+        publisher."""
+        self.resource.send_points(points, labels)
 
     def Publish(self, value: Any) -> int:  # noqa: N802
         """Publish; returns the number of ROS subscribers (as the reference)."""
@@ -428,6 +439,24 @@ class RobotNode(_Node):
         entry = self.resource.links.get(link)
         return None if entry is None else self._matrix_out(entry.matrix, target)
 
+    def GetJointNames(self) -> List[str]:  # noqa: N802
+        """The joints a client sets (actuated: moving, not mimic), in URDF order."""
+        return [str(j["name"]) for j in self.resource.joints()["joints"] if j["actuated"]]
+
+    def GetJointLimits(self, joint: str) -> Optional[Tuple[float, float]]:  # noqa: N802
+        """(lower, upper) in radians or metres; None for a continuous joint."""
+        for j in self.resource.joints()["joints"]:
+            if j["name"] == joint:
+                return None if j["lower"] is None else (float(j["lower"]), float(j["upper"]))
+        raise KeyError(f"robot {self.resource.name} has no joint {joint!r}")
+
+    def SetJointPositions(self, positions: Dict[str, float]) -> Dict[str, float]:  # noqa: N802
+        """Publish a sensor_msgs/JointState (radians, metres); the daemon refuses values
+        outside the URDF limits naming the joint and adds the mimic joints."""
+        result = self.resource.set_joints(positions)
+        self.InvokeEvent("ModifiedEvent")
+        return result
+
 
 class MarkerSubscriberNode(_Node):
     """A marker topic (not in the reference, which has no markers): named in its style.
@@ -547,8 +576,13 @@ class ROS2Node:
         sub = self.client.subscribe(topic, short_type_name(className))
         return self._wrap(sub, SubscriberNode)
 
-    def CreateAndAddPublisherNode(self, className: str, topic: str) -> PublisherNode:  # noqa: N802,N803
-        pub = self.client.publisher(topic, short_type_name(className))
+    def CreateAndAddPublisherNode(self, className: str, topic: str,  # noqa: N802,N803
+                                  frame: str = "",
+                                  labelsTopic: str = "") -> PublisherNode:  # noqa: N803
+        """``frame`` / ``labelsTopic``: this bridge's additions for models and markups
+        sent to ROS (not in the reference)."""
+        pub = self.client.publisher(topic, short_type_name(className), frame=frame or None,
+                                    labels_topic=labelsTopic or None)
         return self._wrap(pub, PublisherNode)
 
     def GetSubscriberNodeByTopic(self, topic: str) -> Optional[SubscriberNode]:  # noqa: N802

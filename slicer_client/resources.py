@@ -18,19 +18,20 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from protocol import commands as c
-from protocol.messages import Message, PolyData, Status, String, Transform
-from protocol.naming import (KEY_FRAME, KEY_LINK, KEY_LINK_COUNT, KEY_MARKER_ID, KEY_MARKER_NS,
-                             KEY_MARKER_TYPE, KEY_MARKERS, KEY_PARENT_DEVICE, KEY_POSITION,
-                             KEY_ROLE,
-                             KEY_TOPIC, KEY_VISUAL, KEY_VISUAL_COUNT, KEY_WARNINGS)
+from protocol.messages import (Message, Point, PointElement, PolyData, Status, String, Transform,
+                               cells_from_array)
+from protocol.naming import (KEY_COLOR, KEY_FRAME, KEY_LINK, KEY_LINK_COUNT, KEY_MARKER_ID,
+                             KEY_MARKER_NS, KEY_MARKER_TYPE, KEY_MARKERS, KEY_PARENT_DEVICE,
+                             KEY_POSITION, KEY_ROLE, KEY_TOPIC, KEY_VISUAL, KEY_VISUAL_COUNT,
+                             KEY_WARNINGS)
 from slicer_client.bridge_state import BridgeSpec
 from slicer_client.matrices import as_numpy, as_rows
 from slicer_client.owner import ResourceOwner
 from slicer_client.values import value_from_message
 
 __all__ = ["MarkerItem", "MarkerSubscriber", "ParameterClient", "Publisher", "Resource",
-           "Robot", "RobotLink", "Service",
-           "Subscriber", "TfBroadcaster", "TfLookup", "parameter_to_python"]
+           "Robot", "RobotLink", "Service", "Subscriber", "TfBroadcaster", "TfLookup",
+           "markups_point_body", "model_polydata", "parameter_to_python"]
 
 Callback = Callable[..., None]
 log = logging.getLogger("slicer_client")
@@ -154,14 +155,20 @@ class Subscriber(Resource):
 
 
 class Publisher(Resource):
-    """A ROS publisher fed by this client."""
+    """A ROS publisher fed by this client. ``frame``: the frame id of what it publishes (a
+    model, markups, a curve); ``labels_topic``: where markups labels go (a std_msgs/String
+    JSON list per POINT sent; PoseArray and PointStamped have no field for them)."""
 
     def __init__(self, client: ResourceOwner, topic: str, type: str, *,
-                 qos: Optional[Mapping[str, Any]] = None) -> None:
+                 qos: Optional[Mapping[str, Any]] = None, frame: Optional[str] = None,
+                 labels_topic: Optional[str] = None) -> None:
         super().__init__(client, BridgeSpec("create_publisher", _drop_none(
-            {"topic": topic, "type": type, "qos": _qos_dict(qos)})))
+            {"topic": topic, "type": type, "qos": _qos_dict(qos), "frame": frame,
+             "labels_topic": labels_topic})))
         self.topic = topic
         self.type = type
+        self.frame = frame
+        self.labels_topic = labels_topic
         self.sent = 0
 
     def publish(self, value: Any, timeout: float = 10.0) -> int:
@@ -185,6 +192,51 @@ class Publisher(Resource):
             body = Transform(as_numpy(body))
         self._client.send(Message(self.device, body, metadata=dict(metadata or {})))
         self.sent += 1
+
+
+    def send_model(self, model: Any, *, ns: Optional[str] = None,
+                   marker_id: Optional[int] = None,
+                   color: Optional[Sequence[float]] = None) -> None:
+        """Stream a model (a `PolyData` in mm, or ``(points (N, 3) mm, triangles (M, 3))``)
+        to this publisher: a shape_msgs/Mesh or a visualization_msgs/Marker TRIANGLE_LIST
+        in metres (or a nav_msgs/Path from a polyline). For a Marker: ``ns`` (default
+        "slicer"), ``marker_id`` (default 0) and ``color`` (r, g, b, a in 0..1)."""
+        body = model if isinstance(model, PolyData) else model_polydata(*model)
+        metadata: Dict[str, str] = {}
+        if ns is not None:
+            metadata[KEY_MARKER_NS] = ns
+        if marker_id is not None:
+            metadata[KEY_MARKER_ID] = str(int(marker_id))
+        if color is not None:
+            metadata[KEY_COLOR] = " ".join(f"{float(v):.6g}" for v in color)
+        self.send(body, metadata)
+
+    def send_points(self, points: Any, labels: Optional[Sequence[str]] = None) -> None:
+        """Stream markups points ((N, 3) mm, with optional labels) as one POINT: a
+        PoseArray, one PointStamped per point, or a nav_msgs/Path, in metres; the labels
+        go to ``labels_topic`` if the publisher has one."""
+        self.send(markups_point_body(points, labels))
+
+
+def model_polydata(points_mm: Any, triangles: Any) -> PolyData:
+    """(N, 3) points in mm and (M, k) polygons (point indices) -> a POLYDATA body."""
+    pts = np.asarray(points_mm, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
+        raise ValueError(f"points: expected (N, 3) finite numbers in mm, got shape "
+                         f"{pts.shape}")
+    return PolyData(points=pts.astype(np.float32),
+                    polygons=cells_from_array(np.asarray(triangles, dtype=np.int64)))
+
+
+def markups_point_body(points_mm: Any, labels: Optional[Sequence[str]] = None) -> Point:
+    """(N, 3) positions in mm and their labels -> a POINT body (one element per point)."""
+    pts = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("points: expected finite positions in mm, got NaN or infinity")
+    names = list(labels) if labels is not None else [""] * len(pts)
+    if len(names) != len(pts):
+        raise ValueError(f"labels: expected {len(pts)} (one per point), got {len(names)}")
+    return Point([PointElement(name=str(name), position=p) for name, p in zip(names, pts)])
 
 
 def _json_value(value: Any) -> Any:
@@ -420,6 +472,7 @@ class Robot(Resource):
         # description was not there yet learns its size only then.
         self._expected: Optional[Tuple[int, int]] = None
         self.warnings: List[str] = []  # of the latest load: missing meshes, skipped joints
+        self._joints: Optional[Dict[str, Any]] = None  # describe_robot_joints, once asked
 
     def _warn(self, warnings: Sequence[str]) -> None:
         """Each new warning of a load is logged once and given to the callbacks as
@@ -492,6 +545,27 @@ class Robot(Resource):
 
     def mesh_count(self) -> int:
         return sum(len(link.meshes) for link in self.links.values())
+
+    def joints(self, timeout: float = 10.0, *, refresh: bool = False) -> Dict[str, Any]:
+        """The robot's joints from its URDF (the daemon's `describe_robot_joints` reply:
+        ``joints`` with type, limits, mimic, ``actuated``; ``joint_states_topic``). Kept
+        until `refresh` (a reloaded description may change them)."""
+        if self._joints is None or refresh:
+            self._joints = self._client.command("describe_robot_joints", {"name": self.name},
+                                                timeout=timeout)
+        return self._joints
+
+    def set_joints(self, positions: Mapping[str, float], *, topic: Optional[str] = None,
+                   timeout: float = 10.0) -> Dict[str, float]:
+        """Publish a sensor_msgs/JointState (radians, metres) for the given actuated joints
+        on the robot's joint-states topic (or ``topic``). The daemon checks names and
+        limits from the URDF (an out-of-limit value raises `CommandRefusedError` naming
+        the joint and its limit) and adds the mimic joints; returns what it published."""
+        target = topic or str(self.joints(timeout)["joint_states_topic"])
+        result = self._client.command("set_robot_joints", {
+            "name": self.name, "topic": target,
+            "positions": {str(k): float(v) for k, v in positions.items()}}, timeout=timeout)
+        return {str(k): float(v) for k, v in result.get("positions", {}).items()}
 
     def wait_until_loaded(self, timeout: float = 30.0) -> None:
         """Wait until every link named in the create reply has a transform and every

@@ -6,6 +6,8 @@ A `TypeCodec` converts one ROS message type both ways:
   form ``to_igtl(msg) -> body``: called from ROS callbacks, so fast and never raising
   anything but `CodecError`;
 * ``from_igtl(body, stamp=, frame_id=, metadata=)``: a message from 3D Slicer to publish;
+  ``from_igtl_all`` when a body may become several (a POINT list as PointStamped each),
+  ``from_igtl_raw`` the serialized message for codecs that build it with numpy (models);
 * ``to_value(msg)`` / ``from_value(value, stamp=, frame_id=)``: the JSON "Slicer value" a
   client reads (``GetLastMessage``) and publishes (``Publish(value)``);
 * ``to_yaml(msg)``: ``ros2 topic echo`` style text (``GetLastMessageYAML``).
@@ -18,7 +20,7 @@ naming the field.
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Union
 
@@ -150,6 +152,9 @@ class TypeCodec:
     # Bulk data (images, point clouds): only the newest value matters, so bridges keep a
     # history of one by default (`bridge.qos.default_depth`).
     bulk: ClassVar[bool] = False
+    # A POLYDATA from a client may take this codec up to about a second (a model of
+    # hundreds of thousands of triangles): publisher bridges convert it off the loop.
+    heavy_polydata: ClassVar[bool] = False
 
     @property
     def message_class(self) -> Any:
@@ -182,13 +187,40 @@ class TypeCodec:
         """OpenIGTLink body -> ROS message; ``stamp``/``frame_id`` fill its header (if it has
         one). ``metadata`` of the message may refine the conversion (image encoding, table
         shape). Raises `CodecError` (wrong body type, shape, NaN, size mismatch)."""
+        msg = self._body_call(self._from_igtl, body, metadata)
+        return self._stamp(msg, stamp, frame_id)
+
+    def _body_call(self, hook: Any, body: Body, metadata: Mapping[str, str] | None) -> Any:
+        """A ``_from_igtl*`` hook, its errors as `CodecError` naming ``body``."""
         try:
-            msg = self._from_igtl(body, dict(metadata or {}))
+            return hook(body, dict(metadata or {}))
         except ProtocolError as exc:
             raise _rename(exc, "body") from None
         except Exception as exc:  # a safety net: a ROS callback must only see CodecError
             raise self._unexpected("body", exc) from exc
-        return self._stamp(msg, stamp, frame_id)
+
+    def from_igtl_all(self, body: Body, *, stamp: Stamp = None, frame_id: str = "",
+                      metadata: Mapping[str, str] | None = None) -> list[Any]:
+        """Like `from_igtl`, for a body that may become several ROS messages (a POINT list
+        published as one PointStamped per point); one message for every other pair."""
+        msgs = self._body_call(self._from_igtl_all, body, metadata)
+        if msgs is None:
+            return [self.from_igtl(body, stamp=stamp, frame_id=frame_id, metadata=metadata)]
+        return [self._stamp(msg, stamp, frame_id) for msg in msgs]
+
+    def from_igtl_raw(self, body: Body, *, stamp: Stamp = None, frame_id: str = "",
+                      metadata: Mapping[str, str] | None = None
+                      ) -> tuple[bytes, Any] | None:
+        """The serialized (CDR) message `from_igtl` would build, made with numpy without
+        building its bulk as Python objects, and a probe: that message without its bulk
+        (its header, for the security guards). None when this codec has no such path.
+        The bytes equal rclpy's ``serialize_message`` of the `from_igtl` message."""
+        made = self._body_call(self._from_igtl_raw, body, metadata)
+        if made is None:
+            return None
+        probe, finish = made
+        probe = self._stamp(probe, stamp, frame_id)
+        return finish(probe), probe
 
     def to_value(self, msg: Any) -> Any:
         """ROS message -> JSON-able "Slicer value"."""
@@ -222,6 +254,13 @@ class TypeCodec:
 
     def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
         raise NotImplementedError
+
+    def _from_igtl_all(self, body: Body, metadata: dict[str, str]) -> list[Any] | None:
+        return None  # one message per body: `_from_igtl`
+
+    def _from_igtl_raw(self, body: Body, metadata: dict[str, str]
+                       ) -> tuple[Any, Callable[[Any], bytes]] | None:
+        return None  # (the message without its bulk, its serializer once stamped)
 
     def _to_value(self, msg: Any) -> Any:
         raise NotImplementedError

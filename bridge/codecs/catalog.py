@@ -19,6 +19,7 @@ from bridge.codecs.scalars import (
     StringCodec,
 )
 from bridge.codecs.sensors import JointStateCodec, JoyCodec
+from bridge.codecs.slicer_data import MarkerCodec, MeshCodec, PathCodec, PointStampedCodec
 
 __all__ = ["SPECIFIC_CODECS", "codec_for", "specific_types"]
 
@@ -43,6 +44,11 @@ SPECIFIC_CODECS: dict[str, TypeCodec] = {c.ros_type: c for c in (
     ImageCodec("sensor_msgs/msg/Image", _I),
     PointCloud2Codec("sensor_msgs/msg/PointCloud2", _P),
     PointCloudCodec("sensor_msgs/msg/PointCloud", _P),
+    # Slicer models and markups -> ROS (slicer_data.py).
+    MeshCodec("shape_msgs/msg/Mesh", _P),
+    MarkerCodec("visualization_msgs/msg/Marker", _S),
+    PointStampedCodec("geometry_msgs/msg/PointStamped", _S),
+    PathCodec("nav_msgs/msg/Path", _S),
 )}
 
 

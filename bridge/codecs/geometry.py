@@ -25,6 +25,7 @@ from bridge.codecs.base import (
 )
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import numeric_array
+from bridge.codecs.slicer_data import pose_array_from_points
 from protocol.conversions import (
     ConversionError,
     matrix_to_pose,
@@ -35,6 +36,7 @@ from protocol.conversions import (
     rotation_to_quaternion,
     validate_matrix,
 )
+from protocol.messages import Point as PointBody
 from protocol.messages import Transform
 from protocol.naming import KEY_CHILD, KEY_PARENT, KEY_UNITS, UNITS_MM
 
@@ -201,7 +203,8 @@ class WrenchCodec(TypeCodec):
 @dataclass(frozen=True)
 class PoseArrayCodec(TypeCodec):
     """PoseArray <-> STRING JSON list of 4x4 matrices (mm, rows), the reference's
-    "collection of matrices". Vectorised over the poses with numpy."""
+    "collection of matrices". Vectorised over the poses with numpy. From Slicer, a POINT
+    body (markups) is accepted too: one pose per point, identity orientation."""
 
     def _matrices(self, msg: Any) -> np.ndarray:
         n = len(msg.poses)
@@ -234,6 +237,8 @@ class PoseArrayCodec(TypeCodec):
                                           KEY_SHAPE: f"{len(mats)}x4x4"}
 
     def _from_igtl(self, body: Body, metadata: dict[str, str]) -> Any:
+        if isinstance(body, PointBody):  # Slicer markups: one pose per point
+            return pose_array_from_points(self.message_class, body)
         return self._build(parse_json_text(string_text(body, self.ros_type)), "text")
 
     def _to_value(self, msg: Any) -> Any:

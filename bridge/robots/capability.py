@@ -49,11 +49,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Optional
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String as StringMsg
 
 from bridge.dispatch import Handler
 from bridge.parameters import ParameterBridges, ParameterWatch
 from bridge.robots.errors import RobotError
+from bridge.robots.joints import describe_joints, joint_positions
 from bridge.robots.resources import PackageResolver
 from bridge.ros_node import RosNode
 from bridge.security import NameRules
@@ -61,9 +63,9 @@ from bridge.services import resolve_name
 from bridge.tf.capability import TfBridges
 from bridge.tf.lookups import LookupKey
 from bridge.hub import Hub, Replier
-from protocol.commands import (CommandFailedError, CreateRobot, ErrorCode, ForbiddenError,
-                               ListRobots, Op, OutOfRangeError, ParameterValue, RemoveRobot,
-                               RobotSource)
+from protocol.commands import (CommandFailedError, CreateRobot, DescribeRobotJoints, ErrorCode,
+                               ForbiddenError, ListRobots, Op, OutOfRangeError, ParameterValue,
+                               RemoveRobot, RobotSource, SetRobotJoints)
 from protocol.messages import Message, PolyData, Status, StatusCode
 from protocol.naming import (KEY_CHILD, KEY_COLOR, KEY_LINK_COUNT, KEY_PARENT, KEY_PARENT_DEVICE,
                              KEY_VISUAL_COUNT, KEY_WARNINGS, UNITS_MM,
@@ -80,6 +82,10 @@ _STATUS_NAME = "slicer-ros2-bridge"
 # How long create_robot waits for a latched description on a topic before saying "waiting".
 _TOPIC_WAIT_S = 2.0
 # robot_state_publisher's own profile for robot_description: a late subscriber gets it.
+# As joint_states publishers do (robot_state_publisher subscribes reliable, depth 10).
+_JOINT_STATES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                               reliability=ReliabilityPolicy.RELIABLE,
+                               durability=DurabilityPolicy.VOLATILE)
 _DESCRIPTION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                               reliability=ReliabilityPolicy.RELIABLE,
                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -141,6 +147,10 @@ class _Robot:
     # Meshes only from these folders; None: an operator's URDF file, trusted.
     mesh_roots: Optional[tuple[Path, ...]] = None
     loaded: asyncio.Event = field(default_factory=asyncio.Event)
+    # set_robot_joints: one JointState publisher per robot (its latest topic), so the op
+    # creates at most one ROS entity per robot whatever clients send.
+    joint_publisher: Any = None
+    joint_topic: str = ""
 
 
 class RobotBridges:
@@ -512,6 +522,9 @@ class RobotBridges:
         if robot.subscription is not None:
             self._ros.destroy(robot.subscription)
             robot.subscription = None
+        if robot.joint_publisher is not None:
+            self._ros.destroy(robot.joint_publisher)
+            robot.joint_publisher = None
         if robot.first_description is not None and not robot.first_description.done():
             robot.first_description.cancel()
 
@@ -522,7 +535,63 @@ class RobotBridges:
             CreateRobot: self.create_robot,
             RemoveRobot: lambda request, _: self.remove_robot(request),
             ListRobots: lambda request, _: self.list_robots(request),
+            DescribeRobotJoints: lambda request, _: self.describe_robot_joints(request),
+            SetRobotJoints: lambda request, _: self.set_robot_joints(request),
         }
+
+    # ------------------------------------------------------------------ joints
+
+    def _loaded(self, name: str) -> tuple[_Robot, RobotModel]:
+        robot = self.robots.get(name)
+        if robot is None:
+            raise CommandFailedError("name", "a robot created by create_robot", name,
+                                     code=ErrorCode.NOT_FOUND)
+        if robot.model is None:
+            raise CommandFailedError("name", "a loaded robot", f"robot {name!r} "
+                                     f"({robot.state}: {robot.reason or 'no URDF yet'})",
+                                     code=ErrorCode.UNAVAILABLE)
+        return robot, robot.model
+
+    def _joint_states_topic(self, robot: _Robot) -> str:
+        """Where this robot's state publisher listens: robot_state_publisher subscribes
+        the relative ``joint_states``, so in the namespace of the node whose parameter
+        holds the description (``/PSM1/robot_state_publisher`` -> ``/PSM1/joint_states``),
+        of the description topic, or for a file the robot's namespace."""
+        source = robot.source  # names already resolved (absolute)
+        if source.kind == "parameter":
+            base = source.node.rsplit("/", 1)[0]
+        elif source.kind == "topic":
+            base = source.topic.rsplit("/", 1)[0]
+        else:
+            namespace = robot.request.namespace.strip("/")
+            return resolve_name(self._ros, f"{namespace}/joint_states" if namespace
+                                else "joint_states", "topic")
+        return f"{base}/joint_states"
+
+    def describe_robot_joints(self, request: DescribeRobotJoints) -> dict[str, Any]:
+        robot, model = self._loaded(request.name)
+        return {"name": robot.name, "robot": model.name,
+                "joint_states_topic": self._joint_states_topic(robot),
+                "joints": describe_joints(model.joints)}
+
+    def set_robot_joints(self, request: SetRobotJoints) -> dict[str, Any]:
+        robot, model = self._loaded(request.name)
+        positions = joint_positions(model.joints, request.positions)
+        topic = resolve_name(self._ros, request.topic, "topic")
+        if robot.joint_publisher is None or robot.joint_topic != topic:
+            if robot.joint_publisher is not None:
+                self._ros.destroy(robot.joint_publisher)
+                robot.joint_publisher = None
+            robot.joint_publisher = self._ros.node.create_publisher(
+                JointState, topic, _JOINT_STATES_QOS)
+            robot.joint_topic = topic
+        msg = JointState()
+        msg.header.stamp = self._ros.node.get_clock().now().to_msg()
+        msg.name = list(positions)
+        msg.position = list(positions.values())
+        robot.joint_publisher.publish(msg)
+        return {"name": robot.name, "topic": topic, "positions": positions,
+                "subscribers": int(robot.joint_publisher.get_subscription_count())}
 
     def _summary(self, robot: _Robot) -> dict[str, Any]:
         out: dict[str, Any] = {

@@ -165,6 +165,7 @@ def _banner(daemon: Daemon, robot: dict[str, object]) -> str:
         "Or from Python:",
         f"  import slicer_client; ros = slicer_client.connect('{host}', {port})",
         "  robot = ros.robot('demo'); print(sorted(robot.links))",
+        "  robot.set_joints({'joint_2': 0.8})  # the motion yields for 3 s to set joints",
         "",
         "Stop with Ctrl-C.",
         "",

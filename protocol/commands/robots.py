@@ -4,14 +4,21 @@ transforms."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import cast
+from typing import Any, cast
 
-from protocol.commands.fields import ROBOT_NAME, ROS_NAME, ROS_NAME_DESC, Args
+from protocol.commands.errors import TooLargeError
+from protocol.commands.fields import (MAX_NAME, ROBOT_NAME, ROS_NAME, ROS_NAME_DESC, Args,
+                                      check_float, check_str)
 from protocol.commands.op import (Bridge, FileUse, FrameUse, Op, ParameterUse, Resource,
                                   TopicUse)
 from protocol.commands.values import RobotSource
 
-__all__ = ["CreateRobot", "ListRobots", "RemoveRobot"]
+__all__ = ["JOINT_STATE_TYPE", "MAX_JOINTS", "CreateRobot", "DescribeRobotJoints",
+           "ListRobots", "RemoveRobot", "SetRobotJoints"]
+
+JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
+MAX_JOINTS = 1000  # per set_robot_joints: far above any URDF's joint count
+_ROBOT_DESC = "a robot name of letters, digits and _"
 
 
 @dataclass(frozen=True)
@@ -98,3 +105,60 @@ class ListRobots(Op, op="list_robots", writes=False):
     @classmethod
     def from_args(cls, a: Args) -> ListRobots:
         return cls()
+
+
+@dataclass(frozen=True)
+class DescribeRobotJoints(Op, op="describe_robot_joints", writes=False):
+    """The joints of a loaded robot, from its URDF: type, limits, mimic (leader, multiplier,
+    offset), whether a client sets it (``actuated``: moving and not a mimic), and the
+    joint-states topic its state publisher listens to by default."""
+
+    name: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()  # the URDF the robot already read (judged at create_robot)
+
+    @classmethod
+    def from_args(cls, a: Args) -> DescribeRobotJoints:
+        return cls(name=a.req_str("name", max_len=64, pattern=ROBOT_NAME, desc=_ROBOT_DESC))
+
+
+@dataclass(frozen=True)
+class SetRobotJoints(Op, op="set_robot_joints", writes=True):
+    """Publish one sensor_msgs/JointState for a loaded robot on ``topic`` (relative names
+    resolve in the daemon's namespace; `DescribeRobotJoints` gives the robot's). Names and
+    limits come from the robot's URDF: an unknown, fixed or mimic joint, or a position
+    outside ``[lower, upper]`` is refused naming the joint and its limit (continuous joints
+    are unlimited). Mimic joints are added, computed from their leader
+    (``multiplier * leader + offset``), and must fall in their own limits too. Only the
+    joints given (and their mimics) are in the message: a state publisher keeps the
+    others where they were, as robot_state_publisher does."""
+
+    name: str
+    positions: tuple[tuple[str, float], ...]
+    topic: str = "joint_states"
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (TopicUse("topic", self.topic, JOINT_STATE_TYPE, writes=True),)
+
+    def to_args(self) -> dict[str, Any]:
+        out = super().to_args()
+        out["positions"] = dict(self.positions)
+        return out
+
+    @classmethod
+    def from_args(cls, a: Args) -> SetRobotJoints:
+        raw = a.req_obj_raw("positions")
+        if len(raw) > MAX_JOINTS:
+            raise TooLargeError(a.path("positions"), f"at most {MAX_JOINTS} joints",
+                                str(len(raw)))
+        positions = []
+        for joint, value in raw.items():
+            path = f"{a.path('positions')}.{joint}"
+            check_str(joint, path, MAX_NAME, False, None, "")
+            positions.append((joint, check_float(value, path, float("-inf"), float("inf"),
+                                                 False)))
+        return cls(name=a.req_str("name", max_len=64, pattern=ROBOT_NAME, desc=_ROBOT_DESC),
+                   positions=tuple(positions),
+                   topic=cast(str, a.opt_str("topic", "joint_states", pattern=ROS_NAME,
+                                             desc=ROS_NAME_DESC)))

@@ -5,13 +5,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from protocol.commands.fields import Args
-from protocol.commands.op import Bridge, Op, Resource, TopicUse
+from protocol.commands.errors import OutOfRangeError
+from protocol.commands.fields import ROS_NAME, ROS_NAME_DESC, Args
+from protocol.commands.op import Bridge, FrameUse, Op, Resource, TopicUse
 from protocol.commands.types import resolve_message_type
 from protocol.commands.values import QoS
 
-__all__ = ["CreatePublisher", "CreateSubscriber", "GetLastMessage", "Publish", "RemovePublisher",
-           "RemoveSubscriber"]
+__all__ = ["LABELS_TYPE", "CreatePublisher", "CreateSubscriber", "GetLastMessage", "Publish",
+           "RemovePublisher", "RemoveSubscriber"]
+
+
+# The type of a publisher's labels topic (markups labels as a JSON list).
+LABELS_TYPE = "std_msgs/msg/String"
 
 
 def _qos(a: Args) -> QoS:
@@ -66,14 +71,27 @@ class RemoveSubscriber(Op, op="remove_subscriber", writes=False, removes="subscr
 class CreatePublisher(Op, op="create_publisher", writes=True,
                       creates=Bridge("publisher", ("topic",), section="publishers")):
     """Create a ROS publisher; clients feed it with `Publish` or by sending OpenIGTLink
-    messages under the device name the reply gives."""
+    messages under the device name the reply gives.
+
+    ``frame``: the frame id its messages are in (a model, markups or a curve from Slicer),
+    judged by the frame globs; a message's ``ros2.frame`` metadata may name another, judged
+    alike when it is published. ``labels_topic``: where the labels of markups sent as POINT
+    go (a ``std_msgs/String`` holding a JSON list, one label per point, published just
+    before the points), since PoseArray and PointStamped carry none."""
 
     topic: str
     type: str
     qos: QoS = QoS()
+    frame: str | None = None
+    labels_topic: str | None = None
 
     def resources(self) -> tuple[Resource, ...]:
-        return (TopicUse("topic", self.topic, self.type, writes=True),)
+        uses: list[Resource] = [TopicUse("topic", self.topic, self.type, writes=True)]
+        if self.labels_topic is not None:
+            uses.append(TopicUse("labels_topic", self.labels_topic, LABELS_TYPE, writes=True))
+        if self.frame:  # published as given: --frame-prefix is for tf's own frames
+            uses.append(FrameUse("frame", self.frame, client_frame=False))
+        return tuple(uses)
 
     @property
     def ros_type(self) -> str:
@@ -81,7 +99,13 @@ class CreatePublisher(Op, op="create_publisher", writes=True,
 
     @classmethod
     def from_args(cls, a: Args) -> CreatePublisher:
-        return cls(topic=a.ros_name("topic"), type=_msg_type(a), qos=_qos(a))
+        frame = a.opt_str("frame", None)
+        if frame is not None and ("\x00" in frame or frame.strip() != frame):
+            raise OutOfRangeError(a.path("frame"), "a frame id without NUL or outer spaces",
+                                  repr(frame))
+        labels = a.opt_str("labels_topic", None, pattern=ROS_NAME, desc=ROS_NAME_DESC)
+        return cls(topic=a.ros_name("topic"), type=_msg_type(a), qos=_qos(a),
+                   frame=frame, labels_topic=labels)
 
 
 @dataclass(frozen=True)

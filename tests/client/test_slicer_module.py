@@ -188,7 +188,8 @@ def _fake_slicer(monkeypatch: pytest.MonkeyPatch) -> types.ModuleType:
     slicer.ScriptedLoadableModule, slicer.parameterNodeWrapper, slicer.util = slm, pnw, util
     for name, module in (("slicer", slicer), ("slicer.ScriptedLoadableModule", slm),
                          ("slicer.parameterNodeWrapper", pnw), ("slicer.util", util),
-                         ("qt", types.ModuleType("qt")), ("vtk", types.ModuleType("vtk"))):
+                         ("qt", types.ModuleType("qt")), ("vtk", types.ModuleType("vtk")),
+                         ("ctk", types.ModuleType("ctk"))):
         monkeypatch.setitem(sys.modules, name, module)
     return slicer
 
@@ -251,3 +252,65 @@ def test_connector_transport_reports_a_loss_once(monkeypatch: pytest.MonkeyPatch
     connector.InvokeEvent(_Connector.ConnectedEvent)
     connector.InvokeEvent(_Connector.ConnectedEvent)  # a duplicate changes nothing
     assert seen == [("up", True), ("down",), ("up", False)]
+
+
+class _PointListNode(_Observable):
+    """vtkMRMLMarkupsFiducialNode, only the calls checked in Slicer's vtkMRMLMarkupsNode.h
+    (AddControlPoint(x, y, z, label), RemoveAllControlPoints, GetNthControlPoint*)."""
+
+    PointModifiedEvent = 19001
+
+    def __init__(self, name: str, points=()) -> None:
+        super().__init__()
+        self._name, self._points = name, list(points)
+        self._disabled, self._pending = 0, {}
+
+    def GetID(self): return "vtkMRMLMarkupsFiducialNode" + self._name  # noqa: E704, N802
+    def GetName(self): return self._name  # noqa: E704, N802
+    def IsA(self, name): return name in ("vtkMRMLMarkupsFiducialNode", "vtkMRMLMarkupsNode")  # noqa: E704, E501, N802
+    def GetNumberOfControlPoints(self): return len(self._points)  # noqa: E704, N802
+    def GetNthControlPointLabel(self, i): return self._points[i][1]  # noqa: E704, N802
+    StartModify = _TextNode.StartModify
+    EndModify = _TextNode.EndModify
+    GetCustomModifiedEventPending = _TextNode.GetCustomModifiedEventPending
+
+    def GetNthControlPointPositionWorld(self, i, out):  # noqa: N802
+        out[:] = self._points[i][0]
+        return 1
+
+    def RemoveAllControlPoints(self):  # noqa: N802
+        self._points = []
+        self._pending[self.PointModifiedEvent] = 1
+
+    def AddControlPoint(self, x, y, z, label=""):  # noqa: N802
+        self._points.append(((x, y, z), label))
+        self._pending[self.PointModifiedEvent] = 1
+        return len(self._points) - 1
+
+
+def test_send_to_ros_pushes_markups_once_as_a_point_list(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from slicer_client.send_plan import plan_send
+    module = _load_module(monkeypatch)
+    slicer = sys.modules["slicer"]
+    slicer.vtkMRMLMarkupsNode = _PointListNode
+    slicer.vtkMRMLModelNode = types.SimpleNamespace(MeshModifiedEvent=18001)
+    scene = slicer.mrmlScene
+    scene.AddNewNodeByClass = lambda cls, name: (  # type: ignore[method-assign]
+        scene.nodes.append(_PointListNode(name)) or scene.nodes[-1])
+    connector = _Connector()
+    pushed: list = []
+    connector.RegisterOutgoingMRMLNode = lambda node, devType=None: (  # type: ignore
+        connector.outgoing.append(node) or node.AddObserver(
+            _PointListNode.PointModifiedEvent, lambda n, e: pushed.append(list(n._points)))
+        or 1)
+    connector.PushNode = lambda node: pushed.append(list(node._points))  # type: ignore
+    transport = module.ConnectorTransport(connector)
+    source = _PointListNode("F", [((1.0, 2.0, 3.0), "entry"), ((4.0, 5.0, 6.0), "target")])
+    plan = plan_send("vtkMRMLMarkupsFiducialNode", "/slicer/points")
+    assert module.nodeKind(source) == "vtkMRMLMarkupsFiducialNode"
+    transport.sendNode("pub:slicer/points", plan, source)
+    transport.sendNode("pub:slicer/points", plan, source)  # each send pushes exactly once
+    expected = [((1.0, 2.0, 3.0), "entry"), ((4.0, 5.0, 6.0), "target")]
+    assert pushed == [expected, expected]
+    assert [n.GetName() for n in connector.outgoing] == ["pub:slicer/points"]

@@ -47,6 +47,7 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
         "server_undeclare_parameter": {"name": "p"},
         "call_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
         "advertise_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
+        "set_robot_joints": {"name": "r", "positions": {"j": 0.1}},
     }
     # The declarations say what writes: this list is the expectation they are held to.
     assert set(writes) == {op for op, cls in c.REQUEST_TYPES.items() if cls.writes}

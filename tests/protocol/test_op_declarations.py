@@ -56,6 +56,9 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
                       ("frame", "fixed_frame", "world")}),
     "remove_robot": ({"name": "r"}, set()),
     "list_robots": ({}, set()),
+    "describe_robot_joints": ({"name": "r"}, set()),
+    "set_robot_joints": ({"name": "r", "positions": {"j": 0.5}, "topic": "/PSM1/joint_states"},
+                         {("topic", "topic", "/PSM1/joint_states")}),
     "call_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
                      {("service", "service", "/s")}),
     "advertise_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
@@ -115,7 +118,18 @@ def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
     assert {op for op, cls in c.REQUEST_TYPES.items() if cls.writes} == {
         "create_publisher", "publish", "create_tf_broadcaster", "broadcast_transform",
         "set_parameters", "server_declare_parameter", "server_set_parameter",
-        "server_undeclare_parameter", "call_service", "advertise_service"}
+        "server_undeclare_parameter", "call_service", "advertise_service",
+        "set_robot_joints"}
+
+
+def test_a_publisher_declares_its_frame_and_labels_topic() -> None:
+    request = c.parse_request("create_publisher", c.dumps({
+        "topic": "/m", "type": "shape_msgs/msg/Mesh", "frame": "patient",
+        "labels_topic": "/m/labels"}))
+    assert {judged(use) for use in request.resources()} == {
+        ("topic", "topic", "/m"), ("topic", "labels_topic", "/m/labels"),
+        ("frame", "frame", "patient")}
+    assert all(use.writes for use in request.resources() if isinstance(use, TopicUse))
 
 
 def test_derived_tables_follow_the_declarations() -> None:

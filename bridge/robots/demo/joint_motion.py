@@ -7,10 +7,15 @@ range (continuous joints and joints without limits swing +-pi/2 or +-0.05 m), an
 gets its own period and phase so the arm does not move in lockstep. Mimic joints are left
 to the state publisher. `JointMotion.positions_at` is pure, for tests.
 
+The motion yields (`MotionHold`): it stops publishing while another publisher drives
+``joint_states`` (a client's sliders through ``set_robot_joints``: for ``--yield-s`` seconds
+after the last foreign joint state, 3 s by default) and while something holds it by name
+(`MotionHold.pause` / `resume`, for an in-process user such as an action server).
+
 Command line::
 
     python -m bridge.robots.demo.joint_motion [URDF] [--rate HZ] [--period S]
-        [--namespace NS] [--node-name NAME] [--package-path NAME=DIR ...]
+        [--namespace NS] [--node-name NAME] [--package-path NAME=DIR ...] [--yield-s S]
 
 Without URDF the built-in demo robot is used.
 """
@@ -20,12 +25,16 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import threading
+from collections import deque
 from dataclasses import dataclass
 from typing import Any, Optional
 
 from bridge.robots.description import RobotDescription, parse_urdf
 
-__all__ = ["JointMotion", "create_joint_motion_node", "main"]
+__all__ = ["DEFAULT_YIELD_S", "JointMotion", "MotionHold", "create_joint_motion_node", "main"]
+
+DEFAULT_YIELD_S = 3.0
 
 
 @dataclass(frozen=True)
@@ -73,28 +82,74 @@ class JointMotion:
                 * math.cos(2 * math.pi * t / w.period + w.phase) for w in self._waves}
 
 
+class MotionHold:
+    """Whether the idle motion yields at time ``now`` (seconds, any monotonic clock):
+    while any owner holds it (`pause` / `resume`, counted per owner name) or for
+    ``yield_s`` after `foreign_state` (someone else published a joint state). Thread-safe:
+    a subscription callback and a timer may run in different threads."""
+
+    def __init__(self, yield_s: float = DEFAULT_YIELD_S) -> None:
+        if not yield_s >= 0:
+            raise ValueError(f"yield_s >= 0 expected, got {yield_s}")
+        self.yield_s = yield_s
+        self._owners: set[str] = set()
+        self._until = -math.inf
+        self._lock = threading.Lock()
+
+    def pause(self, owner: str) -> None:
+        with self._lock:
+            self._owners.add(owner)
+
+    def resume(self, owner: str) -> None:
+        with self._lock:
+            self._owners.discard(owner)
+
+    def foreign_state(self, now: float) -> None:
+        with self._lock:
+            self._until = max(self._until, now + self.yield_s)
+
+    def holds(self, now: float) -> bool:
+        with self._lock:
+            return bool(self._owners) or now < self._until
+
+
 def create_joint_motion_node(motion: JointMotion, *, rate_hz: float = 50.0,
                              node_name: str = "demo_joint_motion", namespace: str = "",
-                             context: Any = None) -> Any:
+                             context: Any = None, hold: Optional[MotionHold] = None) -> Any:
     """An rclpy node publishing ``motion`` on ``joint_states`` at ``rate_hz`` (for any
-    executor, e.g. inside the daemon); rclpy must be initialised."""
+    executor, e.g. inside the daemon); rclpy must be initialised. It also listens on
+    ``joint_states``: a message it did not publish (told by its stamp, unique per tick)
+    makes it yield per ``hold`` (default `MotionHold()`; its ``pause``/``resume`` too)."""
     import rclpy
     from sensor_msgs.msg import JointState
 
+    hold = hold if hold is not None else MotionHold()
     node = rclpy.create_node(node_name, namespace=namespace, context=context)
     publisher = node.create_publisher(JointState, "joint_states", 10)
     start = node.get_clock().now()
+    own: deque[tuple[int, int]] = deque(maxlen=256)  # stamps of our recent messages
+
+    def seconds() -> float:
+        return float(node.get_clock().now().nanoseconds) * 1e-9
+
+    def on_state(msg: Any) -> None:  # does almost nothing: notes a foreign publisher
+        if (msg.header.stamp.sec, msg.header.stamp.nanosec) not in own:
+            hold.foreign_state(seconds())
 
     def tick() -> None:
         now = node.get_clock().now()
+        if hold.holds(now.nanoseconds * 1e-9):
+            return
         t = (now - start).nanoseconds * 1e-9
         msg = JointState()
         msg.header.stamp = now.to_msg()
+        own.append((msg.header.stamp.sec, msg.header.stamp.nanosec))
         msg.name = list(motion.joint_names)
         msg.position = list(motion.positions_at(t).values())
         msg.velocity = list(motion.velocities_at(t).values())
         publisher.publish(msg)
 
+    node.create_subscription(JointState, "joint_states", on_state, 10)
     node.create_timer(1.0 / rate_hz, tick)
     return node
 
@@ -109,9 +164,14 @@ def main(argv: Optional[list[str]] = None) -> int:
     parser.add_argument("--period", type=float, default=8.0, help="slowest joint period (s)")
     parser.add_argument("--namespace", default="")
     parser.add_argument("--node-name", default="demo_joint_motion")
+    parser.add_argument("--yield-s", type=float, default=DEFAULT_YIELD_S,
+                        help="stop moving for this long after another publisher's joint "
+                        "state (a client's sliders); 0: never yield")
     args = parser.parse_args(argv)
     if args.rate <= 0:
         parser.error("--rate must be positive")
+    if not args.yield_s >= 0:
+        parser.error("--yield-s must be >= 0")
 
     # ROS imports here: JointMotion itself is usable (and testable) without ROS.
     from bridge.robots._spin import inherited_parent_pid, ros_session, spin_until_signal
@@ -132,7 +192,8 @@ def main(argv: Optional[list[str]] = None) -> int:
 
     with ros_session(parent_pid=inherited_parent_pid()) as session:
         node = create_joint_motion_node(motion, rate_hz=args.rate, node_name=args.node_name,
-                                        namespace=args.namespace)
+                                        namespace=args.namespace,
+                                        hold=MotionHold(args.yield_s))
         spin_until_signal(session, [node], on_ready=lambda: print(
             f"joint motion ready: {len(motion.joint_names)} joints at {args.rate:g} Hz",
             flush=True))

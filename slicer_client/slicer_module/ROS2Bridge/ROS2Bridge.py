@@ -48,6 +48,7 @@ if os.path.isfile(os.path.join(_REPO_ROOT, "slicer_client", "__init__.py")) \
 
 from typing import Annotated  # noqa: E402  (Python 3.9+, as Slicer 5.4+ ships)
 
+import ctk  # noqa: E402
 import numpy as np  # noqa: E402
 import qt  # noqa: E402
 import slicer  # noqa: E402
@@ -64,9 +65,11 @@ from slicer_client.client import Client  # noqa: E402
 from slicer_client.connection import CommandTimeoutError, ConnectionClosedError  # noqa: E402
 from slicer_client.connector_codec import (SLICER_TEXT_ENCODING, build_command,  # noqa: E402
                                            message_from_node, outgoing_content, parse_reply)
+from slicer_client.joint_sliders import joint_sliders, slider_positions  # noqa: E402
 from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER,  # noqa: E402
                                       describe_bridges, metadata_from_attributes, plan_node,
                                       robot_status_lines, stale_marker_nodes)
+from slicer_client.send_plan import KIND_ORDER, SEND_TYPES, plan_send  # noqa: E402
 
 CONNECTOR_NAME = "ROS2BridgeConnector"
 log = logging.getLogger("ROS2Bridge")
@@ -204,6 +207,40 @@ class ConnectorTransport:
         if not pushes_itself:
             self.connector.PushNode(node)
 
+    def sendNode(self, device, plan, node):
+        """Push ``node``'s data to the daemon under ``device`` as ``plan`` says
+        (slicer_client/send_plan.py): a model node with a world-space, triangulated copy
+        of the surface or the curve's polyline (POLYDATA), or a point-list node with the
+        control points' world positions and labels (POINT). One push per call: the
+        connector pushes a registered node on its own modified event when EndModify
+        fires one, else PushNode does it here."""
+        if not self.connected:
+            raise ConnectionClosedError(
+                f"sending to {device!r}: 3D Slicer's connector is not connected to the "
+                f"daemon at {self.address}")
+        out = self._outgoing(plan.outgoing_class, device)
+        if plan.outgoing_class == "vtkMRMLModelNode":
+            event = slicer.vtkMRMLModelNode.MeshModifiedEvent
+        else:
+            event = slicer.vtkMRMLMarkupsNode.PointModifiedEvent
+        was_modifying = out.StartModify()
+        if plan.source == "control_points":
+            out.RemoveAllControlPoints()
+            position = [0.0, 0.0, 0.0]
+            for index in range(node.GetNumberOfControlPoints()):
+                node.GetNthControlPointPositionWorld(index, position)
+                out.AddControlPoint(position[0], position[1], position[2],
+                                    node.GetNthControlPointLabel(index))
+        else:
+            polydata = vtk.vtkPolyData()
+            polydata.DeepCopy(node.GetCurveWorld() if plan.source == "curve"
+                              else _worldSurface(node))
+            out.SetAndObservePolyData(polydata)
+        pushes_itself = not was_modifying and out.GetCustomModifiedEventPending(event) > 0
+        out.EndModify(was_modifying)
+        if not pushes_itself:
+            self.connector.PushNode(out)
+
     def _outgoing(self, class_name, device):
         node = slicer.mrmlScene.GetFirstNode(device, class_name)
         if node is None:
@@ -259,6 +296,29 @@ class ConnectorTransport:
             node.RemoveObserver(tag)
         self._node_observers.clear()
         self._listener = None
+
+
+def _worldSurface(modelNode):
+    """A model's surface in world coordinates (its parent transforms applied), as
+    triangles: the daemon's Mesh/Marker codecs refuse triangle strips."""
+    transform = vtk.vtkGeneralTransform()
+    slicer.vtkMRMLTransformNode.GetTransformBetweenNodes(
+        modelNode.GetParentTransformNode(), None, transform)
+    toWorld = vtk.vtkTransformPolyDataFilter()
+    toWorld.SetTransform(transform)
+    toWorld.SetInputData(modelNode.GetPolyData())
+    triangles = vtk.vtkTriangleFilter()
+    triangles.SetInputConnection(toWorld.GetOutputPort())
+    triangles.Update()
+    return triangles.GetOutput()
+
+
+def nodeKind(node):
+    """The "Send to ROS" kind of a node (send_plan.KIND_ORDER, most specific first)."""
+    for kind in KIND_ORDER:
+        if node.IsA(kind):
+            return kind
+    return node.GetClassName()
 
 
 class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
@@ -471,6 +531,37 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             if plan.label_position is not None:
                 self._placeLabel(node, plan)
 
+    # --- Slicer -> ROS ------------------------------------------------------------------
+    def sendToROS(self, node, topic, frame, rosType=None):
+        """Publish a model or markups node on ``topic`` in ``frame`` (metres in ROS):
+        creates the publisher (the daemon judges the topic and the frame) and pushes the
+        node's data once. Returns the Publisher."""
+        if node is None:
+            raise ValueError("select a model or markups node to send")
+        plan = plan_send(nodeKind(node), topic, rosType or None)
+        client = self.requireClient()
+        publisher = client.publisher(topic, plan.ros_type, frame=frame or None,
+                                     labels_topic=plan.labels_topic)
+        self.transport.sendNode(publisher.device, plan, node)
+        self._saveState()
+        return publisher
+
+    # --- moving a robot -----------------------------------------------------------------
+    def _robot(self, robotName):
+        robot = self.requireClient().find("create_robot", robotName)
+        if robot is None:
+            raise RuntimeError(f"no robot {robotName!r}: load it first")
+        return robot
+
+    def jointSliders(self, robotName):
+        """One slider spec per actuated joint of a loaded robot (mimic joints follow)."""
+        return joint_sliders(self._robot(robotName).joints(refresh=True)["joints"])
+
+    def setJoints(self, robotName, sliders, values):
+        """Publish the joint state the sliders say (display units: degrees, mm); the
+        daemon checks the URDF limits and adds the mimic joints."""
+        return self._robot(robotName).set_joints(slider_positions(sliders, values))
+
     def robotNames(self):
         if self.client is None:
             return []
@@ -648,7 +739,44 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         self.refreshButton = qt.QPushButton("Refresh bridges")
         form.addRow("Active bridges:", self.bridgeList)
         form.addRow(self.refreshButton)
+
+        # Send to ROS: a model (Mesh / Marker) or markups (PoseArray, PointStamped, Path).
+        sendBox = ctk.ctkCollapsibleButton()
+        sendBox.text = "Send to ROS"
+        self.layout.addWidget(sendBox)
+        sendForm = qt.QFormLayout(sendBox)
+        self.sendNodeSelector = slicer.qMRMLNodeComboBox()
+        self.sendNodeSelector.nodeTypes = list(KIND_ORDER)
+        self.sendNodeSelector.addEnabled = False
+        self.sendNodeSelector.removeEnabled = False
+        self.sendNodeSelector.noneEnabled = True
+        self.sendNodeSelector.setMRMLScene(slicer.mrmlScene)
+        self.sendTypeCombo = qt.QComboBox()
+        self.sendTopicEdit = qt.QLineEdit("/slicer/model")
+        self.sendFrameEdit = qt.QLineEdit("world")
+        self.sendButton = qt.QPushButton("Send to ROS")
+        sendForm.addRow("Node:", self.sendNodeSelector)
+        sendForm.addRow("As:", self.sendTypeCombo)
+        sendForm.addRow("Topic:", self.sendTopicEdit)
+        sendForm.addRow("Frame:", self.sendFrameEdit)
+        sendForm.addRow(self.sendButton)
+
+        # Joints: one slider per actuated joint of the robot chosen above.
+        jointsBox = ctk.ctkCollapsibleButton()
+        jointsBox.text = "Robot joints"
+        self.layout.addWidget(jointsBox)
+        jointsLayout = qt.QVBoxLayout(jointsBox)
+        self.showJointsButton = qt.QPushButton("Show joints of the selected robot")
+        jointsLayout.addWidget(self.showJointsButton)
+        self.jointsForm = qt.QFormLayout()
+        jointsLayout.addLayout(self.jointsForm)
+        self._sliders = []  # JointSlider specs of the robot shown
+        self._sliderWidgets = {}  # joint name -> ctkSliderWidget
+        self._slidersRobot = ""
         self.layout.addStretch(1)
+        self.sendNodeSelector.connect("currentNodeChanged(vtkMRMLNode*)", self.onSendNodeChanged)
+        self.sendButton.connect("clicked(bool)", self.onSend)
+        self.showJointsButton.connect("clicked(bool)", self.onShowJoints)
 
         self.connectButton.connect("toggled(bool)", self.onConnectToggled)
         self.loadRobotButton.connect("clicked(bool)", self.onLoadRobot)
@@ -761,6 +889,44 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
             self.bridgeList.clear()
             for line in self.logic.bridgeLines():
                 self.bridgeList.addItem(line)
+
+    def onSendNodeChanged(self, node):
+        self.sendTypeCombo.clear()
+        if node is not None:
+            for rosType in SEND_TYPES.get(nodeKind(node), ()):
+                self.sendTypeCombo.addItem(rosType)
+
+    def onSend(self):
+        with slicer.util.tryWithErrorDisplay("Failed to send to ROS.", waitCursor=True):
+            self.logic.sendToROS(self.sendNodeSelector.currentNode(), self.sendTopicEdit.text,
+                                 self.sendFrameEdit.text, self.sendTypeCombo.currentText)
+            self.onRefresh()
+
+    def onShowJoints(self):
+        with slicer.util.tryWithErrorDisplay("Failed to read the robot's joints.",
+                                             waitCursor=True):
+            name = self.robotCombo.currentText
+            sliders = self.logic.jointSliders(name)
+            while self.jointsForm.rowCount() > 0:
+                self.jointsForm.removeRow(0)
+            self._sliders, self._sliderWidgets, self._slidersRobot = sliders, {}, name
+            for spec in sliders:
+                widget = ctk.ctkSliderWidget()
+                widget.decimals = 1 if spec.unit == "deg" else 2
+                widget.singleStep = 0.5 if spec.unit == "deg" else 0.1
+                widget.minimum, widget.maximum = spec.minimum, spec.maximum
+                widget.value = spec.initial
+                widget.suffix = " deg" if spec.unit == "deg" else " mm"
+                if spec.followers:
+                    widget.toolTip = "Also moves (mimic): " + ", ".join(spec.followers)
+                widget.connect("valueChanged(double)", self.onSliderMoved)
+                self._sliderWidgets[spec.name] = widget
+                self.jointsForm.addRow(spec.name + ":", widget)
+
+    def onSliderMoved(self, _value):
+        with slicer.util.tryWithErrorDisplay("Failed to move the robot."):
+            values = {name: widget.value for name, widget in self._sliderWidgets.items()}
+            self.logic.setJoints(self._slidersRobot, self._sliders, values)
 
     def _refreshRobots(self):
         self.robotCombo.clear()
