@@ -25,6 +25,7 @@ import json
 import math
 import os
 import random
+import select
 import signal
 import socket
 import subprocess
@@ -75,7 +76,9 @@ def marker_publisher() -> int:
         m.pose.position.x, m.pose.position.y, m.pose.position.z = xyz
         m.pose.orientation.w = 1.0
         m.scale.x, m.scale.y, m.scale.z = scale
-        m.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+        # floats: rclpy serializes an int given to a float32 field as 0.0
+        m.color = ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]),
+                            a=float(rgba[3]))
         return m
 
     markers = [
@@ -191,9 +194,14 @@ def collect(port: int, env: dict[str, str], logs: Path) -> tuple[Any, dict[str, 
                         for item in markers.markers.values()]
             points, triangles = organ_model()
             assert listener.stdout is not None
-            ros.publish_model(MODEL_TOPIC, (points, triangles), frame="world",
-                              type="visualization_msgs/msg/Marker", ns="slicer",
-                              color=(0.85, 0.45, 0.45, 1.0))
+            # Volatile, as RViz's markers are: sent again until the listener has matched.
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline:
+                ros.publish_model(MODEL_TOPIC, (points, triangles), frame="world",
+                                  type="visualization_msgs/msg/Marker", ns="slicer",
+                                  color=(0.85, 0.45, 0.45, 1.0))
+                if select.select([listener.stdout], [], [], 1.0)[0]:
+                    break
             line = listener.stdout.readline()
             if not line:
                 raise SystemExit("the listener got no Marker")
