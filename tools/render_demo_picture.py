@@ -30,6 +30,7 @@ sys.path.insert(0, str(REPO))
 
 from protocol.messages import Message, PolyData, Transform  # noqa: E402
 from slicer_client.connection import Connection  # noqa: E402
+from tools.offscreen_png import write_png  # noqa: E402
 
 
 def _free_port() -> int:
@@ -159,19 +160,7 @@ def render(meshes: list[Message], matrices: dict[str, np.ndarray], out: Path,
     caption.GetTextProperty().SetColor(0.15, 0.17, 0.2)
     caption.SetPosition(16, size[1] - 40)
     renderer.AddViewProp(caption)
-    window = vtk.vtkRenderWindow()
-    window.SetOffScreenRendering(1)
-    window.SetMultiSamples(8)
-    window.AddRenderer(renderer)
-    window.SetSize(*size)
-    window.Render()
-    grab = vtk.vtkWindowToImageFilter()
-    grab.SetInput(window)
-    grab.Update()
-    writer = vtk.vtkPNGWriter()
-    writer.SetFileName(str(out))
-    writer.SetInputConnection(grab.GetOutputPort())
-    writer.Write()
+    write_png([renderer], size, out)
 
 
 def main(argv: list[str] | None = None) -> int:

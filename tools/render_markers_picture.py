@@ -40,6 +40,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from tools.offscreen_png import write_png  # noqa: E402
+
 MARKER_TOPIC = "/picture/markers"
 MODEL_TOPIC = "/picture/slicer_model"
 
@@ -314,20 +316,7 @@ def render(received: list[Any], seen: dict[str, Any], out: Path,
         camera.SetFocalPoint(0, 0, 0)
         renderer.ResetCamera()
         camera.Zoom(1.2)
-    window = vtk.vtkRenderWindow()
-    window.SetOffScreenRendering(1)
-    window.SetMultiSamples(8)
-    window.AddRenderer(left)
-    window.AddRenderer(right)
-    window.SetSize(*size)
-    window.Render()
-    grab = vtk.vtkWindowToImageFilter()
-    grab.SetInput(window)
-    grab.Update()
-    writer = vtk.vtkPNGWriter()
-    writer.SetFileName(str(out))
-    writer.SetInputConnection(grab.GetOutputPort())
-    writer.Write()
+    write_png([left, right], size, out)
 
 
 def main(argv: list[str] | None = None) -> int:
