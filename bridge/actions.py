@@ -1,0 +1,717 @@
+"""Action bridges: clients send goals to any installed ROS action, and serve actions.
+
+`send_goal` (Slicer -> ROS): the goal is built from JSON with the generic codec (as service
+requests are) and sent by a cached rclpy `ActionClient`. Every call on an ActionClient runs
+in the executor thread (it keeps its pending requests in plain dicts that the executor
+reads); the loop hands work there with ``executor.create_task`` and gets the outcome back
+with ``hub.call_soon``. The reply comes once the server accepted (or refused) the goal;
+then feedback and the result go to the sending client as STRING messages (`GoalEvent` JSON)
+on the goal's device. Nothing waits on a goal: the loop never blocks.
+
+A server that disappears mid-goal never sends a result: a watchdog on the loop looks at
+each action client with goals in flight, and once its server has been gone for
+`lost_server_s` the goals end with status ``lost``.
+
+`advertise_action` (ROS -> Slicer): an rclpy `ActionServer` whose execute callback is a
+coroutine (the node's SingleThreadedExecutor runs it without blocking other callbacks).
+It hands the goal to the loop, which sends the serving client an `action_goal` COMMAND and
+waits for its RTS_COMMAND; `action_feedback` commands publish feedback meanwhile. A ROS
+cancel request is accepted and passed on as an `action_cancel` COMMAND. The client's
+answer (or an abort after `goal_timeout`, or when the client leaves) ends the goal.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import logging
+import uuid
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional
+
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.action.graph import get_action_names_and_types
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.task import Future as RosFuture
+from unique_identifier_msgs.msg import UUID
+
+from bridge.codecs import CodecError, dict_to_message, message_to_dict
+from bridge.codecs.registry import action_class
+from bridge.dispatch import Handler
+from bridge.hub import Hub, Replier
+from bridge.ros_node import RosNode
+from bridge.services import resolve_name
+from protocol import commands as c
+from protocol.commands import (ActionCancel, ActionFeedback, ActionGoal, AdvertiseAction,
+                               CancelGoal, CommandError, CommandFailedError, ErrorCode,
+                               LimitReachedError, ListActions, Op, Reply, SendGoal,
+                               UnadvertiseAction, WrongTypeError, loads)
+from protocol.messages import Command, Message, RtsCommand, String
+from protocol.naming import (KEY_FORMAT, KEY_GOAL_STATUS, DeviceNameRegistry, NameKey,
+                             metadata_for)
+
+log = logging.getLogger(__name__)
+
+_READY_POLL_S = 0.05
+# A STRING body holds at most 65535 bytes; an event larger than this says so instead.
+_MAX_EVENT_BYTES = 60_000
+# action_msgs/srv/CancelGoal return codes.
+_CANCEL_CODES = {0: "none", 1: "rejected", 2: "unknown_goal", 3: "goal_terminated"}
+
+
+def _action_class(type_name: str, ros_type: str) -> Any:
+    try:
+        return action_class(ros_type)
+    except CodecError as error:
+        raise CommandFailedError("type", "an action type installed in the daemon's environment",
+                                 f"{type_name!r} ({error})",
+                                 code=ErrorCode.UNKNOWN_ROS_TYPE) from None
+
+
+def _from_json(cls: Any, data: dict[str, Any], path: str) -> Any:
+    try:
+        return dict_to_message(cls, data)
+    except CodecError as error:
+        raise WrongTypeError(f"{path}.{error.field}" if error.field else path,
+                             error.expected, error.got) from None
+
+
+def _uuid_msg(goal_hex: str) -> UUID:
+    return UUID(uuid=list(bytes.fromhex(goal_hex)))
+
+
+# ---------------------------------------------------------------------------- records
+
+
+@dataclass
+class CalledAction:
+    """A cached rclpy ActionClient for `send_goal` (one per action and type)."""
+
+    action: str
+    ros_type: str
+    client: ActionClient
+    goals: int = 0  # goals sent through it that have not ended
+    last_used: float = 0.0  # loop time
+    gone_since: Optional[float] = None  # loop time its server was first seen missing
+
+
+@dataclass
+class SentGoal:
+    """A goal a client sent, from `send_goal` until its result (or its loss)."""
+
+    goal_id: str  # 32 hex digits
+    action: str
+    ros_type: str
+    owner: Replier
+    key: NameKey
+    device: str
+    called: CalledAction
+    handle: Any = None  # rclpy ClientGoalHandle, once accepted
+    feedbacks: int = 0
+    done: bool = False
+    timer: Optional[asyncio.TimerHandle] = None
+
+
+@dataclass
+class _ServedGoal:
+    served: ServedAction
+    goal_id: str
+    handle: Any  # rclpy ServerGoalHandle
+    answer: RosFuture
+    command_id: int = 0
+    timer: Optional[asyncio.TimerHandle] = None
+    feedbacks: int = 0
+
+
+@dataclass
+class ServedAction:
+    """A ROS action served by one client (the one that advertised it)."""
+
+    action: str
+    ros_type: str
+    cls: Any
+    owner: Replier
+    key: NameKey
+    device: str
+    goal_timeout: float
+    server: Any = None  # rclpy ActionServer
+    goals: dict[str, _ServedGoal] = field(default_factory=dict)
+    received: int = 0
+    closed: bool = False
+    # Touched only in the executor thread: goals being executed, and a destroy waiting.
+    executing: int = 0
+    destroy_pending: bool = False
+
+
+# ---------------------------------------------------------------------------- capability
+
+
+class ActionBridges:
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
+                 max_action_clients: int = 32, max_goals_per_client: int = 32,
+                 idle_client_s: float = 60.0, lost_server_s: float = 1.0) -> None:
+        self._ros = ros
+        self._hub = hub
+        self._names = names
+        self._group = ReentrantCallbackGroup()
+        self._ids = itertools.count(1)
+        # send_goal's action clients, least recently used first: each is five ROS entities
+        # (three service clients, two subscriptions), so at most `max_action_clients`.
+        self.called: OrderedDict[tuple[str, str], CalledAction] = OrderedDict()
+        self._max_called = max_action_clients
+        self._max_goals = max_goals_per_client
+        self._idle_s = idle_client_s
+        self._lost_s = lost_server_s
+        self.goals: dict[str, SentGoal] = {}
+        self.served: dict[str, ServedAction] = {}
+        self._pending: dict[tuple[Replier, int], _ServedGoal] = {}
+        self._watch: Optional[asyncio.TimerHandle] = None
+        hub.add_reply_listener(self._on_reply)
+        hub.add_closed_listener(self._on_client_closed)
+
+    # --- helpers ---------------------------------------------------------------------------
+    def _in_executor(self, start: Callable[[], RosFuture]) -> asyncio.Future[Any]:
+        """Run `start()` (an rclpy call returning a future) in the executor thread; the
+        returned loop future gets its outcome."""
+        loop = asyncio.get_running_loop()
+        outcome: asyncio.Future[Any] = loop.create_future()
+
+        def begin() -> None:  # executor thread
+            try:
+                ros_future = start()
+            except Exception as error:  # noqa: BLE001 - handed to the loop
+                self._hub.call_soon(_settle_loop, outcome, None, error)
+                return
+            ros_future.add_done_callback(
+                lambda done: self._hub.call_soon(_settle_loop, outcome, done, None))
+
+        self._ros.executor.create_task(begin)
+        return outcome
+
+    def _client_for(self, action: str, ros_type: str, cls: Any) -> CalledAction:
+        now = asyncio.get_running_loop().time()
+        entry = self.called.get((action, ros_type))
+        if entry is not None:
+            self.called.move_to_end((action, ros_type))
+            entry.last_used = now
+            return entry
+        if len(self.called) >= self._max_called:
+            idle = next((k for k, e in self.called.items() if e.goals == 0), None)
+            if idle is None:
+                raise LimitReachedError("action", f"at most {self._max_called} actions with "
+                                        f"goals in flight at once", f"a goal to {action} more")
+            self._drop_client(idle)
+        client = ActionClient(self._ros.node, cls, action, callback_group=self._group)
+        entry = CalledAction(action, ros_type, client, last_used=now)
+        self.called[(action, ros_type)] = entry
+        self._schedule_watch()
+        return entry
+
+    def _drop_client(self, key: tuple[str, str]) -> None:
+        entry = self.called.pop(key)
+        # Destroyed in the executor thread, between two waits (see RosNode.destroy).
+        self._ros.executor.create_task(_destroy_quietly, entry.client, entry.action)
+
+    # --- list_actions ----------------------------------------------------------------------
+    def list_actions(self, request: ListActions, client: Optional[Replier]) -> dict[str, Any]:
+        return {"actions": [{"action": name, "types": list(types)}
+                            for name, types in get_action_names_and_types(self._ros.node)]}
+
+    # --- send_goal -------------------------------------------------------------------------
+    async def send_goal(self, request: SendGoal, client: Optional[Replier]) -> dict[str, Any]:
+        if client is None:
+            raise CommandFailedError("action", "a request from a connected client (it gets "
+                                     "the feedback and the result)", "a start-up command",
+                                     code=ErrorCode.NOT_SUPPORTED)
+        action = resolve_name(self._ros, request.action, "action")
+        ros_type = request.ros_type
+        cls = _action_class(request.type, ros_type)
+        goal = _from_json(cls.Goal, request.goal, "goal")
+        mine = sum(1 for g in self.goals.values() if g.owner is client)
+        if mine >= self._max_goals:
+            raise LimitReachedError("goal", f"at most {self._max_goals} goals in flight per "
+                                    f"client", f"a goal more to {action}")
+        goal_id = request.goal_id or uuid.uuid4().hex
+        if goal_id in self.goals:
+            raise CommandFailedError("goal_id", "a goal id not in use", goal_id,
+                                     code=ErrorCode.ALREADY_EXISTS)
+        entry = self._client_for(action, ros_type, cls)
+        key = NameKey.action_goal(action, goal_id)
+        sent = SentGoal(goal_id, action, ros_type, client, key, self._names.register(key),
+                        entry)
+        # Recorded before the goal leaves: feedback may come before the acceptance does.
+        self.goals[goal_id] = sent
+        entry.goals += 1
+        try:
+            handle = await self._send(sent, goal, request.timeout)
+        except BaseException:
+            self._forget(sent)
+            raise
+        sent.handle = handle
+        result = self._in_executor(handle.get_result_async)
+        result.add_done_callback(lambda done: self._on_result(sent, done))
+        if request.result_timeout is not None:
+            sent.timer = asyncio.get_running_loop().call_later(
+                request.result_timeout, self._result_overdue, sent, request.result_timeout)
+        self._schedule_watch()
+        log.info("goal %s sent to %s (%s) for client %s", goal_id, action, ros_type,
+                 getattr(client, "peer", "?"))
+        return {"action": action, "type": ros_type, "goal_id": goal_id, "device": sent.device,
+                "status": "accepted", "stamp": message_to_dict(handle.stamp)}
+
+    async def _send(self, sent: SentGoal, goal: Any, timeout: float) -> Any:
+        loop = asyncio.get_running_loop()
+        start = loop.time()
+        what = f"the action server of {sent.action}"
+        client = sent.called.client
+        while not client.server_is_ready():
+            if loop.time() - start >= timeout:
+                raise CommandFailedError("action", f"{what} to be available",
+                                         f"no server after {timeout:g} s",
+                                         code=ErrorCode.UNAVAILABLE)
+            await asyncio.sleep(_READY_POLL_S)
+
+        def on_feedback(message: Any) -> None:  # executor thread: hand off only
+            self._hub.call_soon(self._on_feedback, sent, message)
+
+        response = self._in_executor(lambda: client.send_goal_async(
+            goal, feedback_callback=on_feedback, goal_uuid=_uuid_msg(sent.goal_id)))
+        try:
+            handle = await asyncio.wait_for(asyncio.shield(response),
+                                            max(0.0, start + timeout - loop.time()))
+        except asyncio.TimeoutError:
+            # Should the server accept it later, the goal would run unwatched: cancel it.
+            response.add_done_callback(self._cancel_late)
+            raise CommandFailedError("action", f"{what} to accept or reject the goal within "
+                                     f"{timeout:g} s", "no answer",
+                                     code=ErrorCode.TIMEOUT) from None
+        if not handle.accepted:
+            raise CommandFailedError("goal", f"a goal {what} accepts", "a rejected goal",
+                                     code=ErrorCode.REJECTED)
+        return handle
+
+    def _cancel_late(self, response: asyncio.Future[Any]) -> None:
+        if response.cancelled() or response.exception() is not None:
+            return
+        handle = response.result()
+        if handle.accepted:
+            self._in_executor(handle.cancel_goal_async)
+
+    def _event(self, sent: SentGoal, status: str, payload: dict[str, Any]) -> None:
+        """One STRING `GoalEvent` to the goal's client (loop thread)."""
+        body = {"goal_id": sent.goal_id, "action": sent.action, "status": status, **payload}
+        try:
+            text = c.dumps(body)
+        except CommandError as error:
+            text = c.dumps({"goal_id": sent.goal_id, "action": sent.action, "status": status,
+                            "event": payload.get("event", ""), "error": str(error)})
+        if len(text) > _MAX_EVENT_BYTES:
+            text = c.dumps({"goal_id": sent.goal_id, "action": sent.action, "status": status,
+                            "event": payload.get("event", ""),
+                            "error": f"the event is {len(text)} bytes, more than a STRING "
+                                     f"message holds ({_MAX_EVENT_BYTES})"})
+        meta = metadata_for(sent.key, ros_type=sent.ros_type)
+        meta[KEY_GOAL_STATUS] = status
+        meta[KEY_FORMAT] = "json"
+        sent.owner.send_message(Message(device_name=sent.device, body=String(text),
+                                        metadata=meta))
+
+    def _on_feedback(self, sent: SentGoal, message: Any) -> None:
+        if sent.done:
+            return
+        sent.feedbacks += 1
+        try:
+            feedback = message_to_dict(message.feedback)
+        except CodecError as error:
+            log.warning("feedback of goal %s is unreadable (%s)", sent.goal_id, error)
+            return
+        self._event(sent, "executing", {"event": "feedback", "seq": sent.feedbacks,
+                                        "feedback": feedback})
+
+    def _on_result(self, sent: SentGoal, done: asyncio.Future[Any]) -> None:
+        if sent.done:
+            return
+        if done.cancelled() or done.exception() is not None:
+            why = "cancelled" if done.cancelled() else str(done.exception())
+            self._finish(sent, "lost", {"error": f"no result from {sent.action} ({why})"})
+            return
+        response = done.result()
+        status = c.GOAL_STATUSES.get(int(response.status), "unknown")
+        try:
+            result = message_to_dict(response.result)
+        except CodecError as error:
+            self._finish(sent, status, {"error": f"the result is unreadable ({error})"})
+            return
+        self._finish(sent, status, {"result": result})
+
+    def _finish(self, sent: SentGoal, status: str, payload: dict[str, Any]) -> None:
+        self._event(sent, status, {"event": "result", "feedbacks": sent.feedbacks, **payload})
+        log.info("goal %s of %s ended: %s", sent.goal_id, sent.action, status)
+        self._forget(sent)
+
+    def _forget(self, sent: SentGoal) -> None:
+        if sent.done:
+            return
+        sent.done = True
+        if sent.timer is not None:
+            sent.timer.cancel()
+        self.goals.pop(sent.goal_id, None)
+        sent.called.goals -= 1
+        sent.called.last_used = asyncio.get_running_loop().time()
+        self._names.release(sent.key)
+
+    def _result_overdue(self, sent: SentGoal, seconds: float) -> None:
+        if sent.done:
+            return
+        if sent.handle is not None:
+            self._in_executor(sent.handle.cancel_goal_async)
+        self._finish(sent, "timeout", {"error": f"no result within {seconds:g} s "
+                                                f"(result_timeout); the daemon asked "
+                                                f"{sent.action} to cancel the goal"})
+
+    # --- the watchdog: lost servers, idle clients -------------------------------------------
+    def _schedule_watch(self) -> None:
+        if self._watch is None and self.called:
+            interval = min(self._lost_s / 2, self._idle_s)
+            self._watch = asyncio.get_running_loop().call_later(interval, self._look)
+
+    def _look(self) -> None:
+        self._watch = None
+        now = asyncio.get_running_loop().time()
+        for key, entry in list(self.called.items()):
+            if entry.goals == 0:
+                entry.gone_since = None
+                if now - entry.last_used >= self._idle_s:
+                    self._drop_client(key)
+                continue
+            if entry.client.server_is_ready():
+                entry.gone_since = None
+                continue
+            if entry.gone_since is None:
+                entry.gone_since = now
+            elif now - entry.gone_since >= self._lost_s:
+                for sent in [g for g in self.goals.values()
+                             if g.called is entry and g.handle is not None]:
+                    self._finish(sent, "lost", {"error": f"the action server of {entry.action} "
+                                                f"went away before the result (no result)"})
+                if entry.goals == 0:
+                    self._drop_client(key)  # its pending requests go with it
+        self._schedule_watch()
+
+    # --- cancel_goal -----------------------------------------------------------------------
+    async def cancel_goal(self, request: CancelGoal, client: Optional[Replier]
+                          ) -> dict[str, Any]:
+        action = resolve_name(self._ros, request.action, "action")
+        sent = self.goals.get(request.goal_id)
+        if sent is None or sent.action != action or (client is not None
+                                                     and sent.owner is not client):
+            raise CommandFailedError("goal_id", f"a goal of {action} this client sent that has "
+                                     f"not ended", request.goal_id, code=ErrorCode.NOT_FOUND)
+        if sent.handle is None:
+            raise CommandFailedError("goal_id", "a goal the server has accepted",
+                                     "a goal still waiting for its acceptance",
+                                     code=ErrorCode.NOT_FOUND)
+        outcome = self._in_executor(sent.handle.cancel_goal_async)
+        try:
+            response = await asyncio.wait_for(outcome, request.timeout)
+        except asyncio.TimeoutError:
+            raise CommandFailedError("goal_id", f"an answer to the cancel request within "
+                                     f"{request.timeout:g} s", "no answer",
+                                     code=ErrorCode.TIMEOUT) from None
+        code = int(response.return_code)
+        canceling = [bytes(g.goal_id.uuid).hex() for g in response.goals_canceling]
+        return {"action": action, "goal_id": sent.goal_id,
+                "accepted": code == 0 and sent.goal_id in canceling,
+                "return_code": code, "return_name": _CANCEL_CODES.get(code, str(code))}
+
+    # --- advertise_action ------------------------------------------------------------------
+    def advertise_action(self, request: AdvertiseAction, client: Optional[Replier]
+                         ) -> dict[str, Any]:
+        if client is None:
+            raise CommandFailedError("action", "a request from a connected client (it "
+                                     "executes the goals)", "a start-up command",
+                                     code=ErrorCode.NOT_SUPPORTED)
+        action = resolve_name(self._ros, request.action, "action")
+        ros_type = request.ros_type
+        cls = _action_class(request.type, ros_type)
+        existing = self.served.get(action)
+        if existing is not None:
+            if existing.owner is client and existing.ros_type == ros_type:
+                return _describe_served(existing, existed=True)
+            raise CommandFailedError("action", "an action no other client advertises (or the "
+                                     "same type again)", f"{action} ({existing.ros_type})",
+                                     code=ErrorCode.ALREADY_EXISTS)
+        for name, types in get_action_names_and_types(self._ros.node):
+            if name == action:
+                raise CommandFailedError("action", "an action no ROS node serves yet",
+                                         f"{action} ({', '.join(types)})",
+                                         code=ErrorCode.ALREADY_EXISTS)
+        key = NameKey.action_server(action)
+        served = ServedAction(action, ros_type, cls, client, key, self._names.register(key),
+                              request.goal_timeout)
+        served.server = ActionServer(
+            self._ros.node, cls, action, execute_callback=self._execute_for(served),
+            goal_callback=lambda _goal: GoalResponse.ACCEPT,
+            cancel_callback=self._cancel_for(served), callback_group=self._group)
+        self.served[action] = served
+        log.info("serving action %s (%s) for client %s", action, ros_type,
+                 getattr(client, "peer", "?"))
+        return _describe_served(served, existed=False)
+
+    def unadvertise_action(self, request: UnadvertiseAction, client: Optional[Replier]
+                           ) -> dict[str, Any]:
+        action = resolve_name(self._ros, request.action, "action")
+        served = self.served.get(action)
+        if served is None or (client is not None and served.owner is not client):
+            raise CommandFailedError("action", "an action this client advertises", action,
+                                     code=ErrorCode.NOT_FOUND)
+        self._unadvertise(served)
+        return {"action": action, "device": served.device}
+
+    def _execute_for(self, served: ServedAction) -> Any:
+        async def execute(goal_handle: Any) -> Any:
+            # Executor thread. An exception here is logged by rclpy and aborts the goal;
+            # still, never raise: end the goal deliberately.
+            served.executing += 1
+            try:
+                answer = RosFuture(executor=self._ros.executor)
+                goal_id = bytes(goal_handle.goal_id.uuid).hex()
+                if served.closed:
+                    goal_handle.abort()
+                    return served.cls.Result()
+                self._hub.call_soon(self._forward_goal, served, goal_id, goal_handle, answer)
+                outcome = await answer
+                status, result = outcome if outcome is not None else ("aborted", None)
+                if status == "succeeded":
+                    goal_handle.succeed()
+                elif status == "canceled" and goal_handle.is_cancel_requested:
+                    goal_handle.canceled()
+                else:  # aborted, or "canceled" without a cancel request (not a legal end)
+                    goal_handle.abort()
+                return result if result is not None else served.cls.Result()
+            except Exception:
+                log.exception("executing a goal of %s failed; the goal is aborted",
+                              served.action)
+                if goal_handle.is_active:
+                    goal_handle.abort()
+                return served.cls.Result()
+            finally:
+                served.executing -= 1
+                if served.destroy_pending and not served.executing:
+                    self._ros.executor.create_task(self._destroy_if_idle, served)
+        return execute
+
+    def _cancel_for(self, served: ServedAction) -> Any:
+        def cancel(goal_handle: Any) -> CancelResponse:  # executor thread: hand off only
+            self._hub.call_soon(self._forward_cancel, served,
+                                bytes(goal_handle.goal_id.uuid).hex())
+            return CancelResponse.ACCEPT
+        return cancel
+
+    def _forward_goal(self, served: ServedAction, goal_id: str, handle: Any,
+                      answer: RosFuture) -> None:
+        """A ROS goal for a served action (loop thread): ask the client that serves it."""
+        goal = _ServedGoal(served, goal_id, handle, answer)
+        if served.closed:
+            self._settle(goal, None)
+            return
+        served.received += 1
+        try:
+            text = ActionGoal(action=served.action, type=served.ros_type, goal_id=goal_id,
+                              goal=message_to_dict(handle.request),
+                              timeout=served.goal_timeout).to_json()
+        except (CodecError, CommandError) as error:
+            log.warning("cannot forward a goal of %s to its client (%s); it is aborted",
+                        served.action, error)
+            self._settle(goal, None)
+            return
+        goal.command_id = next(self._ids)
+        goal.timer = asyncio.get_running_loop().call_later(
+            served.goal_timeout, self._expire, served.owner, goal.command_id)
+        self._pending[(served.owner, goal.command_id)] = goal
+        served.goals[goal_id] = goal
+        served.owner.send_message(Message(
+            device_name=served.device,
+            body=Command(command_id=goal.command_id, name=ActionGoal.op, text=text),
+            metadata=metadata_for(served.key, ros_type=served.ros_type)))
+
+    def _forward_cancel(self, served: ServedAction, goal_id: str) -> None:
+        goal = served.goals.get(goal_id)
+        if served.closed or goal is None:
+            return
+        text = ActionCancel(action=served.action, goal_id=goal_id).to_json()
+        served.owner.send_message(Message(
+            device_name=served.device,
+            body=Command(command_id=next(self._ids), name=ActionCancel.op, text=text),
+            metadata=metadata_for(served.key, ros_type=served.ros_type)))
+
+    def action_feedback(self, request: ActionFeedback, client: Optional[Replier]
+                        ) -> dict[str, Any]:
+        action = resolve_name(self._ros, request.action, "action")
+        served = self.served.get(action)
+        goal = served.goals.get(request.goal_id) if served is not None else None
+        if served is None or goal is None or (client is not None and served.owner is not client):
+            raise CommandFailedError("goal_id", f"a goal of {action} this client is executing",
+                                     request.goal_id, code=ErrorCode.NOT_FOUND)
+        feedback = _from_json(served.cls.Feedback, request.feedback, "feedback")
+        goal.feedbacks += 1
+        # Published from the executor thread, as everything else on the server is.
+        self._ros.executor.create_task(goal.handle.publish_feedback, feedback)
+        return {"action": action, "goal_id": goal.goal_id, "feedbacks": goal.feedbacks}
+
+    def _on_reply(self, message: Message, client: Replier) -> None:
+        body = message.body
+        if not isinstance(body, RtsCommand):
+            return
+        goal = self._pending.get((client, body.command_id))
+        if goal is None:
+            return  # not ours (a service's), or it came after the timeout
+        self._settle(goal, self._outcome_from(goal.served, body.text))
+
+    def _outcome_from(self, served: ServedAction, text: str) -> Optional[tuple[str, Any]]:
+        """The client's answer -> (status, Result), judged by its JSON; None (abort) with a
+        warning if unusable."""
+        try:
+            data = loads(text)
+            if "ok" in data:  # a Reply envelope
+                reply = Reply.from_json(text)
+                if not reply.ok:
+                    assert reply.error is not None
+                    raise CommandFailedError("ok", "true", f"false ({reply.error.message})")
+                data = reply.result
+            status = data.get("status", "succeeded")
+            if status not in c.SERVED_OUTCOMES:
+                raise CommandFailedError("status", "one of " + "|".join(c.SERVED_OUTCOMES),
+                                         repr(status), code=ErrorCode.OUT_OF_RANGE)
+            raw = data.get("result", {})
+            if not isinstance(raw, dict):
+                raise WrongTypeError("result", "an object with the result fields",
+                                     type(raw).__name__)
+            return status, _from_json(served.cls.Result, raw, "result")
+        except (CommandError, CodecError) as error:
+            log.warning("the answer to a goal of %s is unusable (%s); the goal is aborted",
+                        served.action, error)
+            return None
+
+    def _expire(self, owner: Replier, command_id: int) -> None:
+        goal = self._pending.get((owner, command_id))
+        if goal is None:
+            return
+        log.warning("client %s did not end a goal of %s within %g s; it is aborted",
+                    getattr(owner, "peer", "?"), goal.served.action, goal.served.goal_timeout)
+        self._settle(goal, None)
+
+    def _settle(self, goal: _ServedGoal, outcome: Optional[tuple[str, Any]]) -> None:
+        self._pending.pop((goal.served.owner, goal.command_id), None)
+        goal.served.goals.pop(goal.goal_id, None)
+        if goal.timer is not None:
+            goal.timer.cancel()
+        if not goal.answer.done():
+            goal.answer.set_result(outcome)
+        # The executor resumes a waiting coroutine only when something wakes it.
+        self._ros.executor.wake()
+
+    def _unadvertise(self, served: ServedAction) -> None:
+        served.closed = True
+        self.served.pop(served.action, None)
+        for goal in list(served.goals.values()):
+            self._settle(goal, None)
+        self._names.release(served.key)
+        # Destroyed in the executor thread once no goal is executing (its result is sent
+        # after the coroutine returns).
+        self._ros.executor.create_task(self._destroy_if_idle, served)
+        log.info("no longer serving action %s", served.action)
+
+    def _destroy_if_idle(self, served: ServedAction) -> None:
+        if served.executing:
+            served.destroy_pending = True
+            return
+        served.destroy_pending = False
+        if served.server is not None:
+            _destroy_quietly(served.server, served.action)
+            served.server = None
+
+    def _on_client_closed(self, client: Replier) -> None:
+        for served in [s for s in self.served.values() if s.owner is client]:
+            self._unadvertise(served)
+        # Nobody watches its goals any more: ask their servers to stop them.
+        for sent in [g for g in self.goals.values() if g.owner is client]:
+            if sent.handle is not None:
+                self._in_executor(sent.handle.cancel_goal_async)
+            log.info("goal %s of %s canceled: its client left", sent.goal_id, sent.action)
+            self._forget(sent)
+
+    # --- capability ------------------------------------------------------------------------
+    def handlers(self) -> dict[type[Op], Handler]:
+        return {
+            ListActions: self.list_actions,
+            SendGoal: self.send_goal,
+            CancelGoal: self.cancel_goal,
+            AdvertiseAction: self.advertise_action,
+            UnadvertiseAction: self.unadvertise_action,
+            ActionFeedback: self.action_feedback,
+        }
+
+    def describe(self) -> list[dict[str, Any]]:
+        out = [_describe_served(served) for served in self.served.values()]
+        out += [{"kind": "action_client", "action": e.action, "type": e.ros_type,
+                 "goals": e.goals} for e in self.called.values()]
+        out += [{"kind": "goal", "action": g.action, "goal_id": g.goal_id, "device": g.device,
+                 "feedbacks": g.feedbacks} for g in self.goals.values()]
+        return out
+
+    def close(self) -> None:
+        # The node (with its action clients and servers) is destroyed right after; only
+        # make sure no executing goal waits for a client that is gone.
+        for served in list(self.served.values()):
+            served.closed = True
+            for goal in list(served.goals.values()):
+                if goal.timer is not None:
+                    goal.timer.cancel()
+                if not goal.answer.done():
+                    goal.answer.set_result(None)
+        self._ros.executor.wake()
+        self._pending.clear()
+        self.served.clear()
+        self.goals.clear()
+        self.called.clear()
+        if self._watch is not None:
+            self._watch.cancel()
+            self._watch = None
+
+
+
+def _settle_loop(outcome: asyncio.Future[Any], done: Optional[RosFuture],
+                 error: Optional[BaseException]) -> None:
+    if outcome.done():
+        return
+    if error is not None:
+        outcome.set_exception(CommandFailedError("action", "an rclpy call that works",
+                                                 f"{type(error).__name__}: {error}",
+                                                 code=ErrorCode.ROS_ERROR))
+    elif done is None or done.cancelled():
+        outcome.set_exception(CommandFailedError("action", "an answer", "a cancelled request",
+                                                 code=ErrorCode.ROS_ERROR))
+    elif done.exception() is not None:
+        outcome.set_exception(CommandFailedError("action", "an answer",
+                                                 str(done.exception()),
+                                                 code=ErrorCode.ROS_ERROR))
+    else:
+        outcome.set_result(done.result())
+
+
+def _destroy_quietly(entity: Any, action: str) -> None:
+    try:
+        entity.destroy()
+    except Exception:  # never let cleanup stop the executor
+        log.exception("destroying the action entity of %s failed", action)
+
+
+def _describe_served(served: ServedAction, existed: bool | None = None) -> dict[str, Any]:
+    out: dict[str, Any] = {"kind": "action_server", "action": served.action,
+                           "type": served.ros_type, "device": served.device,
+                           "goals": served.received}
+    if existed is not None:
+        out["existed"] = existed
+    return out
