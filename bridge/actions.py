@@ -150,7 +150,8 @@ class ServedAction:
 class ActionBridges:
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
                  max_action_clients: int = 32, max_goals_per_client: int = 32,
-                 idle_client_s: float = 60.0, lost_server_s: float = 1.0) -> None:
+                 idle_client_s: float = 60.0, lost_server_s: float = 1.0,
+                 linger_s: float = 2.0) -> None:
         self._ros = ros
         self._hub = hub
         self._names = names
@@ -163,6 +164,9 @@ class ActionBridges:
         self._max_goals = max_goals_per_client
         self._idle_s = idle_client_s
         self._lost_s = lost_server_s
+        # An unadvertised server lives this long after its last goal ended, so the ROS
+        # client's get_result request (sent or answered after the end) still gets the result.
+        self._linger_s = linger_s
         self.goals: dict[str, SentGoal] = {}
         self.served: dict[str, ServedAction] = {}
         self._pending: dict[tuple[Replier, int], _ServedGoal] = {}
@@ -499,7 +503,7 @@ class ActionBridges:
             finally:
                 served.executing -= 1
                 if served.destroy_pending and not served.executing:
-                    self._ros.executor.create_task(self._destroy_if_idle, served)
+                    self._hub.call_soon(self._destroy_later, served)
         return execute
 
     def _cancel_for(self, served: ServedAction) -> Any:
@@ -618,10 +622,15 @@ class ActionBridges:
         for goal in list(served.goals.values()):
             self._settle(goal, None)
         self._names.release(served.key)
-        # Destroyed in the executor thread once no goal is executing (its result is sent
-        # after the coroutine returns).
-        self._ros.executor.create_task(self._destroy_if_idle, served)
+        self._destroy_later(served)
         log.info("no longer serving action %s", served.action)
+
+    def _destroy_later(self, served: ServedAction) -> None:
+        """Destroy the server in the executor thread once no goal is executing, and not
+        before the ROS clients had time to fetch the results."""
+        asyncio.get_running_loop().call_later(
+            self._linger_s, lambda: self._ros.executor.create_task(self._destroy_if_idle,
+                                                                   served))
 
     def _destroy_if_idle(self, served: ServedAction) -> None:
         if served.executing:
