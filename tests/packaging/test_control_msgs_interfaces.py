@@ -22,44 +22,82 @@ from bridge.interfaces import INTERFACES_DIR, interface_packages
 PACKAGE = INTERFACES_DIR / "control_msgs"
 
 UPSTREAM_SHA256 = {
-    "action/ExecuteMotionPrimitiveSequence.action": "76f105b8d00272e838051a070bf9a1662d3c1c8e48250486abc7525d530cd117",
-    "action/FollowJointTrajectory.action": "31a124428ee490da22c15cc70a9ac2c89d07bbbba7d3bf370ca7596b229cb9f0",
-    "action/GripperCommand.action": "a2b03986d92e1762e7deda6b2754347ffc53bd23546f2110b7a61e5d8049bebb",
-    "action/JointTrajectory.action": "2b197658996475dfa353e5d0ee0b12ab21dda98a0e5831357782f8a4e010d1d2",
-    "action/ParallelGripperCommand.action": "90e011bd5a1d5f3abc0ca879e7171569d356407a119f1fe9b4ba86c3efbd2b36",
-    "action/PointHead.action": "4e976571d19a7c4cc19f2dad64fa8fe23f07c8c3450406fdee69af00a5c15694",
-    "action/SingleJointPosition.action": "e2151938c8ac5fa5df3f82177bb656c3415360c3ed8ded7efef880350693aa44",
-    "msg/AdmittanceControllerState.msg": "517bfbc04b1724a77e183797fa87c43d44de9d47541011bc61d4ed338e42f54e",
-    "msg/BatteryStateArray.msg": "9d8c501ca0f230ddc06e2cb1747bd764b9f44e45581f5a52c21147115c135db5",
-    "msg/DynamicInterfaceGroupValues.msg": "8f778add4a498a18f87a69150191d26f424d59796e7265c5aa643d34d4cc1fe8",
-    "msg/DynamicInterfaceValues.msg": "3630b5b1769ffce337fc7a41294f72c21195da1e1e1f916ece2b5df84676b022",
-    "msg/DynamicJointState.msg": "07cdcee131617ef68b66712f630c4f8fac585dc069a11d81400536832e3c6cfe",
-    "msg/Float64Values.msg": "6bcd1799ecdbb23b4cf14f1e14edd6b8ba51d090f1b5c9ed4f7b77cd6baeb81f",
-    "msg/GripperCommand.msg": "065fae74397f0a0e6c04646202276de57ac8360990a01bfeba62ced70edd9090",
-    "msg/InterfaceValue.msg": "4eb240f11b44648befe94aec78dc65069ff836acedf88b9b32ea3b93f263bba0",
-    "msg/JointComponentTolerance.msg": "6b09271d0f74e0a3a701f3ddb997b0ad4a588bdd9ab7d7899ddc70063ba924dd",
-    "msg/JointControllerState.msg": "f7947e1b444745d450e812c7a042674b2396c7be71b6b38de32df63f58813bf4",
-    "msg/JointJog.msg": "f0cf969f593fad6a394309e5db349683d191df954bdba7754a1b1f3355a3d818",
-    "msg/JointTolerance.msg": "8208718f17c1b1feb9418c3ed7ca73d029566cbf298ecda819c9e0b78cb379d3",
-    "msg/JointTrajectoryControllerState.msg": "7fb2953ccaae67b77ede3a32ef01376763e4aa133064d67d6929ef2fc16582b4",
-    "msg/Keys.msg": "18e12b83ec2e28c87cc66b2262c62a16aadfdbcba425a10dce66cae416290b19",
-    "msg/MecanumDriveControllerState.msg": "87dfa00289b8293abb7bb833cbbce6b094a89d5c648d5b8f6911ac490bc58afb",
-    "msg/MotionArgument.msg": "2e064be1a63b234603ca43eec93638ba02b65b98d0309f761d6b92b1a64c7195",
-    "msg/MotionPrimitive.msg": "a977e1c9a61babcd100c0c8af28e86bf47241ba13d33c5a57e7c4da0277f0420",
-    "msg/MotionPrimitiveSequence.msg": "64cb1eef8c87766e61910e9d5f0a4ad0727c7b1f0bace580c373ef2f1c0df3f9",
-    "msg/MultiDOFCommand.msg": "48c1108e8a12c827ec291e65cb24dfaabd8271b9af8e0f6dd1a25f64c23d8e7b",
-    "msg/MultiDOFStateStamped.msg": "a5784df7da10cc1852352281561268bd3ff25c4c90b6472064cc70be9fdbba3c",
-    "msg/PidState.msg": "79d5295f2e4e253c4c3dd6d2934819326c5dc0852d6fedf693303e6c8c86e6b5",
-    "msg/SingleDOFState.msg": "df2efdbd3adc16e0185b4180ab90ece48a92bee8bbaa56657a949c53a28b3e2e",
-    "msg/SingleDOFStateStamped.msg": "50bc523a1618f91962ecc66f4b622f736e34a2767626e8d17b3883a03bdbe7f1",
-    "msg/SpeedScalingFactor.msg": "a42814bc2aeb923f9b2ec33a3408756076696bcf80b62c5af87de866d61b8055",
-    "msg/SteeringControllerStatus.msg": "85d3d6529ee124b40019ebd290d6b4952e31eee3b837d8e7de8a4f8149121629",
-    "msg/VDA5050SafetyState.msg": "c81beae81051562da5b5bb41166ca20892dfd0f7a9341575346e6fb57bb73147",
-    "package.xml": "6528e5de12990c994292188620c836d5696b15ec62590e7610f07d92d1c89fa8",
-    "srv/QueryCalibrationState.srv": "75070176d74fd6949a8fd6a1ba3ae6f23d24b165fda89986b3053012c480d3bc",
-    "srv/QueryTrajectoryState.srv": "eb960a93fc4f6be927ee7e59415a830a69a80876ca8fdb4b1e5f177fe4cc03cf",
-    "srv/SetOdometry.srv": "7bca2e47df644bb76ea2137f8163df6aecc9331cb851ac55fa3c019a2def5d98",
-    "LICENSE": "1731298f899c65fa14cbdfe340b2c9c5fe17e9e219749e7fe2434e9374f66956",
+    "action/ExecuteMotionPrimitiveSequence.action":
+        "76f105b8d00272e838051a070bf9a1662d3c1c8e48250486abc7525d530cd117",
+    "action/FollowJointTrajectory.action":
+        "31a124428ee490da22c15cc70a9ac2c89d07bbbba7d3bf370ca7596b229cb9f0",
+    "action/GripperCommand.action":
+        "a2b03986d92e1762e7deda6b2754347ffc53bd23546f2110b7a61e5d8049bebb",
+    "action/JointTrajectory.action":
+        "2b197658996475dfa353e5d0ee0b12ab21dda98a0e5831357782f8a4e010d1d2",
+    "action/ParallelGripperCommand.action":
+        "90e011bd5a1d5f3abc0ca879e7171569d356407a119f1fe9b4ba86c3efbd2b36",
+    "action/PointHead.action":
+        "4e976571d19a7c4cc19f2dad64fa8fe23f07c8c3450406fdee69af00a5c15694",
+    "action/SingleJointPosition.action":
+        "e2151938c8ac5fa5df3f82177bb656c3415360c3ed8ded7efef880350693aa44",
+    "msg/AdmittanceControllerState.msg":
+        "517bfbc04b1724a77e183797fa87c43d44de9d47541011bc61d4ed338e42f54e",
+    "msg/BatteryStateArray.msg":
+        "9d8c501ca0f230ddc06e2cb1747bd764b9f44e45581f5a52c21147115c135db5",
+    "msg/DynamicInterfaceGroupValues.msg":
+        "8f778add4a498a18f87a69150191d26f424d59796e7265c5aa643d34d4cc1fe8",
+    "msg/DynamicInterfaceValues.msg":
+        "3630b5b1769ffce337fc7a41294f72c21195da1e1e1f916ece2b5df84676b022",
+    "msg/DynamicJointState.msg":
+        "07cdcee131617ef68b66712f630c4f8fac585dc069a11d81400536832e3c6cfe",
+    "msg/Float64Values.msg":
+        "6bcd1799ecdbb23b4cf14f1e14edd6b8ba51d090f1b5c9ed4f7b77cd6baeb81f",
+    "msg/GripperCommand.msg":
+        "065fae74397f0a0e6c04646202276de57ac8360990a01bfeba62ced70edd9090",
+    "msg/InterfaceValue.msg":
+        "4eb240f11b44648befe94aec78dc65069ff836acedf88b9b32ea3b93f263bba0",
+    "msg/JointComponentTolerance.msg":
+        "6b09271d0f74e0a3a701f3ddb997b0ad4a588bdd9ab7d7899ddc70063ba924dd",
+    "msg/JointControllerState.msg":
+        "f7947e1b444745d450e812c7a042674b2396c7be71b6b38de32df63f58813bf4",
+    "msg/JointJog.msg":
+        "f0cf969f593fad6a394309e5db349683d191df954bdba7754a1b1f3355a3d818",
+    "msg/JointTolerance.msg":
+        "8208718f17c1b1feb9418c3ed7ca73d029566cbf298ecda819c9e0b78cb379d3",
+    "msg/JointTrajectoryControllerState.msg":
+        "7fb2953ccaae67b77ede3a32ef01376763e4aa133064d67d6929ef2fc16582b4",
+    "msg/Keys.msg":
+        "18e12b83ec2e28c87cc66b2262c62a16aadfdbcba425a10dce66cae416290b19",
+    "msg/MecanumDriveControllerState.msg":
+        "87dfa00289b8293abb7bb833cbbce6b094a89d5c648d5b8f6911ac490bc58afb",
+    "msg/MotionArgument.msg":
+        "2e064be1a63b234603ca43eec93638ba02b65b98d0309f761d6b92b1a64c7195",
+    "msg/MotionPrimitive.msg":
+        "a977e1c9a61babcd100c0c8af28e86bf47241ba13d33c5a57e7c4da0277f0420",
+    "msg/MotionPrimitiveSequence.msg":
+        "64cb1eef8c87766e61910e9d5f0a4ad0727c7b1f0bace580c373ef2f1c0df3f9",
+    "msg/MultiDOFCommand.msg":
+        "48c1108e8a12c827ec291e65cb24dfaabd8271b9af8e0f6dd1a25f64c23d8e7b",
+    "msg/MultiDOFStateStamped.msg":
+        "a5784df7da10cc1852352281561268bd3ff25c4c90b6472064cc70be9fdbba3c",
+    "msg/PidState.msg":
+        "79d5295f2e4e253c4c3dd6d2934819326c5dc0852d6fedf693303e6c8c86e6b5",
+    "msg/SingleDOFState.msg":
+        "df2efdbd3adc16e0185b4180ab90ece48a92bee8bbaa56657a949c53a28b3e2e",
+    "msg/SingleDOFStateStamped.msg":
+        "50bc523a1618f91962ecc66f4b622f736e34a2767626e8d17b3883a03bdbe7f1",
+    "msg/SpeedScalingFactor.msg":
+        "a42814bc2aeb923f9b2ec33a3408756076696bcf80b62c5af87de866d61b8055",
+    "msg/SteeringControllerStatus.msg":
+        "85d3d6529ee124b40019ebd290d6b4952e31eee3b837d8e7de8a4f8149121629",
+    "msg/VDA5050SafetyState.msg":
+        "c81beae81051562da5b5bb41166ca20892dfd0f7a9341575346e6fb57bb73147",
+    "package.xml":
+        "6528e5de12990c994292188620c836d5696b15ec62590e7610f07d92d1c89fa8",
+    "srv/QueryCalibrationState.srv":
+        "75070176d74fd6949a8fd6a1ba3ae6f23d24b165fda89986b3053012c480d3bc",
+    "srv/QueryTrajectoryState.srv":
+        "eb960a93fc4f6be927ee7e59415a830a69a80876ca8fdb4b1e5f177fe4cc03cf",
+    "srv/SetOdometry.srv":
+        "7bca2e47df644bb76ea2137f8163df6aecc9331cb851ac55fa3c019a2def5d98",
+    "LICENSE":
+        "1731298f899c65fa14cbdfe340b2c9c5fe17e9e219749e7fe2434e9374f66956",
 }
 
 # The RIHS01 hashes of the FollowJointTrajectory types built from those files against the

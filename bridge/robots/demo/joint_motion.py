@@ -7,10 +7,15 @@ range (continuous joints and joints without limits swing +-pi/2 or +-0.05 m), an
 gets its own period and phase so the arm does not move in lockstep. Mimic joints are left
 to the state publisher. `JointMotion.positions_at` is pure, for tests.
 
+`MotionHold` is the idle motion's pause/resume hook: anything that moves the joints itself
+(the demo's FollowJointTrajectory controller, `bridge.robots.demo.trajectory`) holds them,
+and releases them to blend back into the idle motion.
+
 Command line::
 
     python -m bridge.robots.demo.joint_motion [URDF] [--rate HZ] [--period S]
         [--namespace NS] [--node-name NAME] [--package-path NAME=DIR ...]
+        [--trajectory-action NAME | --no-trajectory-action]
 
 Without URDF the built-in demo robot is used.
 """
@@ -25,7 +30,9 @@ from typing import Any, Optional
 
 from bridge.robots.description import RobotDescription, parse_urdf
 
-__all__ = ["JointMotion", "create_joint_motion_node", "main"]
+__all__ = ["JointMotion", "MotionHold", "create_joint_motion_node", "main"]
+
+_BLEND_S = 2.0  # from held positions back into the idle motion
 
 
 @dataclass(frozen=True)
@@ -73,27 +80,91 @@ class JointMotion:
                 * math.cos(2 * math.pi * t / w.period + w.phase) for w in self._waves}
 
 
+class MotionHold:
+    """The idle motion's pause/resume hook: while held, the joint motion node publishes the
+    held positions (for the joints given) instead of its idle motion; after `release`, it
+    blends back into the idle motion over `_BLEND_S` seconds."""
+
+    def __init__(self) -> None:
+        self._held: dict[str, float] = {}
+        self._holding = False
+        self._released_at: Optional[float] = None
+
+    @property
+    def holding(self) -> bool:
+        return self._holding
+
+    @property
+    def idle(self) -> bool:
+        """Neither held nor blending back: the idle motion alone."""
+        return not self._holding and self._released_at is None
+
+    def hold(self, positions: dict[str, float]) -> None:
+        """Pause the idle motion: publish `positions` for these joints."""
+        self._held.update(positions)
+        self._holding = True
+        self._released_at = None
+
+    def release(self, now: float) -> None:
+        """Resume the idle motion (blending from the held positions, starting at `now`)."""
+        self._holding = False
+        self._released_at = now
+
+    def apply(self, now: float, idle: dict[str, float]) -> dict[str, float]:
+        """The positions to publish at `now`, given the idle motion's."""
+        if self._holding:
+            return {name: self._held.get(name, value) for name, value in idle.items()}
+        if self._released_at is None or not self._held:
+            return dict(idle)
+        blend = (now - self._released_at) / _BLEND_S
+        if blend >= 1.0:
+            self._held.clear()
+            self._released_at = None
+            return dict(idle)
+        return {name: self._held[name] + blend * (value - self._held[name])
+                if name in self._held else value for name, value in idle.items()}
+
+
 def create_joint_motion_node(motion: JointMotion, *, rate_hz: float = 50.0,
                              node_name: str = "demo_joint_motion", namespace: str = "",
-                             context: Any = None) -> Any:
+                             context: Any = None,
+                             trajectory_action: Optional[str] = None) -> Any:
     """An rclpy node publishing ``motion`` on ``joint_states`` at ``rate_hz`` (for any
-    executor, e.g. inside the daemon); rclpy must be initialised."""
+    executor, e.g. inside the daemon); rclpy must be initialised. With
+    ``trajectory_action``, it also serves FollowJointTrajectory there (see
+    `bridge.robots.demo.trajectory`), pausing the idle motion while a goal runs."""
     import rclpy
     from sensor_msgs.msg import JointState
 
     node = rclpy.create_node(node_name, namespace=namespace, context=context)
     publisher = node.create_publisher(JointState, "joint_states", 10)
     start = node.get_clock().now()
+    hold = MotionHold()
+    last = motion.positions_at(0.0)
+    controller = None
+    if trajectory_action:
+        from bridge.robots.demo.trajectory import create_trajectory_server
+        controller = create_trajectory_server(node, hold, motion.joint_names,
+                                              lambda: dict(last), action=trajectory_action)
 
     def tick() -> None:
         now = node.get_clock().now()
+        now_s = now.nanoseconds * 1e-9
         t = (now - start).nanoseconds * 1e-9
+        if controller is not None:
+            controller.advance(now_s)
+        idle = hold.idle
+        positions = hold.apply(now_s, motion.positions_at(t))
         msg = JointState()
         msg.header.stamp = now.to_msg()
-        msg.name = list(motion.joint_names)
-        msg.position = list(motion.positions_at(t).values())
-        msg.velocity = list(motion.velocities_at(t).values())
+        msg.name = list(positions)
+        msg.position = list(positions.values())
+        # The idle motion's velocities are known; held or blending ones are not given.
+        msg.velocity = list(motion.velocities_at(t).values()) if idle else []
         publisher.publish(msg)
+        last.update(positions)
+        if controller is not None:
+            controller.report(now_s, positions)
 
     node.create_timer(1.0 / rate_hz, tick)
     return node
@@ -109,6 +180,11 @@ def main(argv: Optional[list[str]] = None) -> int:
     parser.add_argument("--period", type=float, default=8.0, help="slowest joint period (s)")
     parser.add_argument("--namespace", default="")
     parser.add_argument("--node-name", default="demo_joint_motion")
+    parser.add_argument("--trajectory-action", default=None, metavar="NAME",
+                        help="serve control_msgs/action/FollowJointTrajectory there (default "
+                             "/joint_trajectory_controller/follow_joint_trajectory)")
+    parser.add_argument("--no-trajectory-action", action="store_true",
+                        help="only the idle motion, no trajectory action")
     args = parser.parse_args(argv)
     if args.rate <= 0:
         parser.error("--rate must be positive")
@@ -130,12 +206,17 @@ def main(argv: Optional[list[str]] = None) -> int:
         print(f"joint_motion: {exc}", file=sys.stderr)
         return 2
 
+    action = None
+    if not args.no_trajectory_action:
+        from bridge.robots.demo.trajectory import DEFAULT_ACTION
+        action = args.trajectory_action or DEFAULT_ACTION
     with ros_session(parent_pid=inherited_parent_pid()) as session:
         node = create_joint_motion_node(motion, rate_hz=args.rate, node_name=args.node_name,
-                                        namespace=args.namespace)
+                                        namespace=args.namespace, trajectory_action=action)
+        served = f", FollowJointTrajectory on {action}" if action else ""
         spin_until_signal(session, [node], on_ready=lambda: print(
-            f"joint motion ready: {len(motion.joint_names)} joints at {args.rate:g} Hz",
-            flush=True))
+            f"joint motion ready: {len(motion.joint_names)} joints at {args.rate:g} Hz"
+            f"{served}", flush=True))
     return 0
 
 
