@@ -292,3 +292,23 @@ def test_serving_errors(ros: Client, server: Child) -> None:
     error = refused(lambda: ros.command("action_goal", {
         "action": "/x", "type": GRIPPER, "goal_id": "0" * 32, "goal": {}}))
     assert error.code == ErrorCode.NOT_SUPPORTED  # the daemon sends it, no client may
+
+
+def test_the_reference_style_facade(ros: Client, server: Child) -> None:
+    node = ros.GetDefaultROS2Node()
+    client = node.CreateAndAddActionClientNode(GRIPPER, "/gripper")
+    assert node.CreateAndAddActionClientNode(GRIPPER, "/gripper") is client
+    assert node.GetActionClientNodeByName("/gripper") is client
+    events: list[str] = []
+    client.AddObserver("ModifiedEvent", lambda caller, event: events.append(event))
+    assert client.GetGoalStatus() == "" and client.GetLastResult() is None
+    goal_id = client.SendGoal(goal(0.25), timeout=scaled(10))
+    assert len(goal_id) == 32
+    assert client.WaitForResult(scaled(10))["position"] == 0.25
+    wait_until(lambda: len(events) == 6, 10, "5 feedback events and the end")
+    assert client.GetGoalStatus() == "succeeded" and client.GetNumberOfFeedbacks() == 5
+    assert client.GetLastFeedback()["position"] == pytest.approx(0.25)
+    assert client.GetLastResult()["reached_goal"] is True
+    assert client.CancelGoal() is False  # it has ended
+    assert node.RemoveAndDeleteActionClientNode("/gripper") is True
+    assert node.GetActionClientNodeByName("/gripper") is None
