@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 import slicer_client
-from bridge.robots.demo.joint_motion import MotionHold
+from bridge.robots.demo.motion_hold import MotionHold
 from bridge.robots.demo.trajectory import DEFAULT_ACTION, InvalidTrajectory, TrajectoryRun
 from protocol.commands import ErrorCode
 from slicer_client.connection import CommandRefusedError

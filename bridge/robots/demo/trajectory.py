@@ -20,7 +20,7 @@ import logging
 from dataclasses import dataclass
 from typing import Any, Mapping, Optional, Sequence
 
-from bridge.robots.demo.joint_motion import MotionHold
+from bridge.robots.demo.motion_hold import MotionHold
 
 __all__ = ["DEFAULT_ACTION", "InvalidTrajectory", "TrajectoryRun", "create_trajectory_server"]
 
