@@ -36,17 +36,17 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.task import Future as RosFuture
 from unique_identifier_msgs.msg import UUID
 
-from bridge.codecs import CodecError, dict_to_message, message_to_dict
+from bridge.codecs import CodecError, message_to_dict
 from bridge.codecs.registry import action_class
 from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
-from bridge.services import resolve_name
+from bridge.services import client_answer, message_from_json, resolve_name
 from protocol import commands as c
 from protocol.commands import (ActionCancel, ActionFeedback, ActionGoal, AdvertiseAction,
                                CancelGoal, CommandError, CommandFailedError, ErrorCode,
-                               LimitReachedError, ListActions, Op, Reply, SendGoal,
-                               UnadvertiseAction, WrongTypeError, loads)
+                               LimitReachedError, ListActions, Op, SendGoal,
+                               UnadvertiseAction, WrongTypeError)
 from protocol.messages import Command, Message, RtsCommand, String
 from protocol.naming import (KEY_FORMAT, KEY_GOAL_STATUS, DeviceNameRegistry, NameKey,
                              metadata_for)
@@ -67,14 +67,6 @@ def _action_class(type_name: str, ros_type: str) -> Any:
         raise CommandFailedError("type", "an action type installed in the daemon's environment",
                                  f"{type_name!r} ({error})",
                                  code=ErrorCode.UNKNOWN_ROS_TYPE) from None
-
-
-def _from_json(cls: Any, data: dict[str, Any], path: str) -> Any:
-    try:
-        return dict_to_message(cls, data)
-    except CodecError as error:
-        raise WrongTypeError(f"{path}.{error.field}" if error.field else path,
-                             error.expected, error.got) from None
 
 
 def _uuid_msg(goal_hex: str) -> UUID:
@@ -231,7 +223,7 @@ class ActionBridges:
         action = resolve_name(self._ros, request.action, "action")
         ros_type = request.ros_type
         cls = _action_class(request.type, ros_type)
-        goal = _from_json(cls.Goal, request.goal, "goal")
+        goal = message_from_json(cls.Goal, request.goal, "goal")
         mine = sum(1 for g in self.goals.values() if g.owner is client)
         if mine >= self._max_goals:
             raise LimitReachedError("goal", f"at most {self._max_goals} goals in flight per "
@@ -558,7 +550,7 @@ class ActionBridges:
         if served is None or goal is None or (client is not None and served.owner is not client):
             raise CommandFailedError("goal_id", f"a goal of {action} this client is executing",
                                      request.goal_id, code=ErrorCode.NOT_FOUND)
-        feedback = _from_json(served.cls.Feedback, request.feedback, "feedback")
+        feedback = message_from_json(served.cls.Feedback, request.feedback, "feedback")
         goal.feedbacks += 1
         # Published from the executor thread, as everything else on the server is.
         self._ros.executor.create_task(goal.handle.publish_feedback, feedback)
@@ -577,13 +569,7 @@ class ActionBridges:
         """The client's answer -> (status, Result), judged by its JSON; None (abort) with a
         warning if unusable."""
         try:
-            data = loads(text)
-            if "ok" in data:  # a Reply envelope
-                reply = Reply.from_json(text)
-                if not reply.ok:
-                    assert reply.error is not None
-                    raise CommandFailedError("ok", "true", f"false ({reply.error.message})")
-                data = reply.result
+            data = client_answer(text)
             status = data.get("status", "succeeded")
             if status not in c.SERVED_OUTCOMES:
                 raise CommandFailedError("status", "one of " + "|".join(c.SERVED_OUTCOMES),
@@ -592,7 +578,7 @@ class ActionBridges:
             if not isinstance(raw, dict):
                 raise WrongTypeError("result", "an object with the result fields",
                                      type(raw).__name__)
-            return status, _from_json(served.cls.Result, raw, "result")
+            return status, message_from_json(served.cls.Result, raw, "result")
         except (CommandError, CodecError) as error:
             log.warning("the answer to a goal of %s is unusable (%s); the goal is aborted",
                         served.action, error)
