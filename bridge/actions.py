@@ -56,6 +56,10 @@ log = logging.getLogger(__name__)
 _READY_POLL_S = 0.05
 # A STRING body holds at most 65535 bytes; an event larger than this says so instead.
 _MAX_EVENT_BYTES = 60_000
+# Cancel requests in flight at once: a server takes service requests from a queue of 10
+# (rmw's default service QoS), so a burst (a client leaving with 32 goals) must not overflow it.
+_MAX_CANCELS_IN_FLIGHT = 8
+_CANCEL_TIMEOUT_S = 10.0
 # action_msgs/srv/CancelGoal return codes.
 _CANCEL_CODES = {0: "none", 1: "rejected", 2: "unknown_goal", 3: "goal_terminated"}
 
@@ -163,6 +167,8 @@ class ActionBridges:
         self.served: dict[str, ServedAction] = {}
         self._pending: dict[tuple[Replier, int], _ServedGoal] = {}
         self._watch: Optional[asyncio.TimerHandle] = None
+        self._cancels: Optional[asyncio.Semaphore] = None  # made on the loop, at first use
+        self._tasks: set[asyncio.Task[Any]] = set()
         hub.add_reply_listener(self._on_reply)
         hub.add_closed_listener(self._on_client_closed)
 
@@ -184,6 +190,25 @@ class ActionBridges:
 
         self._ros.executor.create_task(begin)
         return outcome
+
+    async def _cancel(self, handle: Any, timeout: float = _CANCEL_TIMEOUT_S) -> Any:
+        """Ask a goal's server to cancel it; the response (TimeoutError after `timeout`)."""
+        if self._cancels is None:
+            self._cancels = asyncio.Semaphore(_MAX_CANCELS_IN_FLIGHT)
+        async with self._cancels:
+            return await asyncio.wait_for(self._in_executor(handle.cancel_goal_async), timeout)
+
+    def _cancel_soon(self, handle: Any, why: str) -> None:
+        """Cancel without waiting for the answer (it is logged if it fails)."""
+        async def run() -> None:
+            try:
+                await self._cancel(handle)
+            except (asyncio.TimeoutError, CommandError) as error:
+                log.warning("cancelling goal %s (%s) failed: %s",
+                            bytes(handle.goal_id.uuid).hex(), why, error or "no answer")
+        task = asyncio.ensure_future(run())
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
 
     def _client_for(self, action: str, ros_type: str, cls: Any) -> CalledAction:
         now = asyncio.get_running_loop().time()
@@ -292,7 +317,7 @@ class ActionBridges:
             return
         handle = response.result()
         if handle.accepted:
-            self._in_executor(handle.cancel_goal_async)
+            self._cancel_soon(handle, "accepted after its send_goal timed out")
 
     def _event(self, sent: SentGoal, status: str, payload: dict[str, Any]) -> None:
         """One STRING `GoalEvent` to the goal's client (loop thread)."""
@@ -361,7 +386,7 @@ class ActionBridges:
         if sent.done:
             return
         if sent.handle is not None:
-            self._in_executor(sent.handle.cancel_goal_async)
+            self._cancel_soon(sent.handle, "result_timeout")
         self._finish(sent, "timeout", {"error": f"no result within {seconds:g} s "
                                                 f"(result_timeout); the daemon asked "
                                                 f"{sent.action} to cancel the goal"})
@@ -408,9 +433,8 @@ class ActionBridges:
             raise CommandFailedError("goal_id", "a goal the server has accepted",
                                      "a goal still waiting for its acceptance",
                                      code=ErrorCode.NOT_FOUND)
-        outcome = self._in_executor(sent.handle.cancel_goal_async)
         try:
-            response = await asyncio.wait_for(outcome, request.timeout)
+            response = await self._cancel(sent.handle, request.timeout)
         except asyncio.TimeoutError:
             raise CommandFailedError("goal_id", f"an answer to the cancel request within "
                                      f"{request.timeout:g} s", "no answer",
@@ -633,7 +657,7 @@ class ActionBridges:
         # Nobody watches its goals any more: ask their servers to stop them.
         for sent in [g for g in self.goals.values() if g.owner is client]:
             if sent.handle is not None:
-                self._in_executor(sent.handle.cancel_goal_async)
+                self._cancel_soon(sent.handle, "its client left")
             log.info("goal %s of %s canceled: its client left", sent.goal_id, sent.action)
             self._forget(sent)
 
@@ -667,6 +691,8 @@ class ActionBridges:
                 if not goal.answer.done():
                     goal.answer.set_result(None)
         self._ros.executor.wake()
+        for task in tuple(self._tasks):
+            task.cancel()
         self._pending.clear()
         self.served.clear()
         self.goals.clear()

@@ -56,10 +56,12 @@ def refused(call: Any) -> CommandRefusedError:
     return info.value
 
 
-def slow_server(processes: Processes, action: str = "/slow_gripper") -> Child:
-    """A gripper server that takes 5 s per goal (100 steps of 0.05 s)."""
+def slow_server(processes: Processes, action: str = "/slow_gripper", *,
+                period: float = 0.05, threads: int = 4) -> Child:
+    """A gripper server that takes 100 steps of `period` s per goal."""
     child = processes.python("slow-gripper", "gripper_action_server.py", "--action", action,
-                             "--steps", "100", "--period", "0.05")
+                             "--steps", "100", "--period", str(period), "--threads",
+                             str(threads))
     child.wait_for_output("READY")
     return child
 
@@ -312,3 +314,31 @@ def test_the_reference_style_facade(ros: Client, server: Child) -> None:
     assert client.CancelGoal() is False  # it has ended
     assert node.RemoveAndDeleteActionClientNode("/gripper") is True
     assert node.GetActionClientNodeByName("/gripper") is None
+
+
+def test_goals_in_flight_are_bounded_per_client_and_cancelled_when_it_leaves(
+        daemon: RunningDaemon, processes: Processes) -> None:
+    slow = slow_server(processes, "/bounded", period=0.5, threads=40)
+    greedy = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
+    other = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
+    try:
+        action = greedy.action("/bounded", GRIPPER)
+        handles = [action.send_goal(goal(1.0), timeout=scaled(10)) for _ in range(32)]
+        error = refused(lambda: action.send_goal(goal(1.0), timeout=scaled(10)))
+        assert error.code == ErrorCode.LIMIT_REACHED and error.field == "goal"
+        assert "at most 32 goals in flight per client" in str(error)
+        # Another client has its own count, and cannot cancel this client's goals.
+        mine = other.action("/bounded", GRIPPER).send_goal(goal(0.5), timeout=scaled(10))
+        error = refused(lambda: other.command("cancel_goal", {
+            "action": "/bounded", "goal_id": handles[0].goal_id}))
+        assert error.code == ErrorCode.NOT_FOUND
+        goals = [b for b in greedy.list_bridges()["bridges"] if b["kind"] == "goal"]
+        assert len(goals) == 33 and {g["device"] for g in goals} >= {h.device for h in handles}
+        assert mine.cancel(timeout=scaled(5))
+        assert mine.result(scaled(10)) is not None and mine.status == "canceled"
+    finally:
+        greedy.close()
+        other.close()
+    # The greedy client left: its goals are cancelled, none of them runs to the end.
+    wait_until(lambda: slow.output().count("CANCELED") >= 33, 20, "every goal cancelled")
+    assert "DONE" not in slow.output()

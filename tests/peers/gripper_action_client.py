@@ -34,13 +34,19 @@ def main() -> None:
         seen = 0
         handle_box: list = []
 
+        def cancel_if_due() -> None:
+            # Feedback may come before the acceptance: cancel once both are there.
+            if args.cancel_after and seen >= args.cancel_after and handle_box \
+                    and len(handle_box) == 1:
+                handle_box.append("cancelled")
+                handle_box[0].cancel_goal_async().add_done_callback(
+                    lambda f: print(f"CANCEL {f.result().return_code}", flush=True))
+
         def on_feedback(message) -> None:  # type: ignore[no-untyped-def]
             nonlocal seen
             seen += 1
             print(f"FEEDBACK {message.feedback.position}", flush=True)
-            if args.cancel_after and seen == args.cancel_after and handle_box:
-                handle_box[0].cancel_goal_async().add_done_callback(
-                    lambda f: print(f"CANCEL {f.result().return_code}", flush=True))
+            cancel_if_due()
 
         sent = client.send_goal_async(goal, feedback_callback=on_feedback)
         rclpy.spin_until_future_complete(node, sent, timeout_sec=30.0)
@@ -50,6 +56,7 @@ def main() -> None:
             return
         handle_box.append(handle)
         print("ACCEPTED", flush=True)
+        cancel_if_due()
         result = handle.get_result_async()
         rclpy.spin_until_future_complete(node, result, timeout_sec=60.0)
         response = result.result()

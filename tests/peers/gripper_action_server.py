@@ -3,8 +3,10 @@ would: the gap moves from 0 to the goal's position in STEPS equal steps, one fee
 PERIOD seconds, then the goal succeeds (position reached).
 
 usage: gripper_action_server.py [--action A] [--steps N] [--period S] [--die-after K]
+                                [--threads T]
   * a goal with max_effort < 0 is rejected;
   * a cancel request is accepted; the goal ends canceled at its next step;
+  * --threads T: goals executed at once (each sleeps in its own executor thread);
   * --die-after K: the process exits at once (os._exit, no cleanup: a crash) after sending
     its K-th feedback of any goal.
 Prints READY, then `GOAL <position>`, `FEEDBACK <position>`, `CANCELED`, `DONE <position>`.
@@ -27,6 +29,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=5)
     parser.add_argument("--period", type=float, default=0.1)
     parser.add_argument("--die-after", type=int, default=0)
+    parser.add_argument("--threads", type=int, default=4)
     args = parser.parse_args()
     rclpy.init()
     node = rclpy.create_node("test_gripper_action_server")
@@ -72,7 +75,7 @@ def main() -> None:
     ActionServer(node, GripperCommand, args.action, execute_callback=execute,
                  goal_callback=on_goal, cancel_callback=on_cancel,
                  callback_group=ReentrantCallbackGroup())
-    executor = MultiThreadedExecutor(num_threads=4)
+    executor = MultiThreadedExecutor(num_threads=args.threads)
     executor.add_node(node)
     print("READY", flush=True)
     try:
