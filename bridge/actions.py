@@ -576,8 +576,9 @@ class ActionBridges:
                                      request.goal_id, code=ErrorCode.NOT_FOUND)
         feedback = message_from_json(served.cls.Feedback, request.feedback, "feedback")
         goal.feedbacks += 1
-        # Published from the executor thread, as everything else on the server is.
-        self._ros.executor.create_task(goal.handle.publish_feedback, feedback)
+        # Published now, in order with the client's answer that ends the goal (rcl's publish
+        # is thread-safe; the goal handle's own lock guards against its destruction).
+        goal.handle.publish_feedback(feedback)
         return {"action": action, "goal_id": goal.goal_id, "feedbacks": goal.feedbacks}
 
     def _on_reply(self, message: Message, client: Replier) -> None:
