@@ -230,6 +230,10 @@ class ServedAction:
                                     f"{type(error).__name__}: {error}")
         finally:
             self._cancelled.pop(request.goal_id, None)
-        self._client.send(Message(device_name=self.device, body=RtsCommand(
-            command_id=command_id, name=c.ActionGoal.op, text=reply.to_json()),
-            metadata=reply.metadata()))
+        try:
+            self._client.send(Message(device_name=self.device, body=RtsCommand(
+                command_id=command_id, name=c.ActionGoal.op, text=reply.to_json()),
+                metadata=reply.metadata()))
+        except ConnectionError as error:  # the daemon has aborted the goal already
+            log.info("the end of goal %s of %s was not sent: %s", request.goal_id,
+                     self.name, error)
