@@ -101,6 +101,11 @@ class Client:
                 self.emit(callback, True, "")
 
     def on_disconnected(self, reason: str) -> None:
+        # The daemon cancels the goals of a client that leaves: their events never come.
+        for handle in list(self._goals.values()):
+            handle._on_event({"event": "result", "status": "lost",
+                              "error": f"the connection to the daemon was lost ({reason}); "
+                                       f"the daemon cancels the goals of a client that leaves"})
         for callback in list(self._connection_callbacks):
             self.emit(callback, False, reason)
 

@@ -342,3 +342,30 @@ def test_goals_in_flight_are_bounded_per_client_and_cancelled_when_it_leaves(
     # The greedy client left: its goals are cancelled, none of them runs to the end.
     wait_until(lambda: slow.output().count("CANCELED") >= 33, 20, "every goal cancelled")
     assert "DONE" not in slow.output()
+
+
+def test_a_lost_connection_ends_the_goals_and_a_served_action_comes_back(
+        processes: Processes) -> None:
+    slow_server(processes, "/far")
+    daemon = start_daemon(processes)
+    ros = slicer_client.connect("127.0.0.1", daemon.port, retry_interval=0.2)
+    back = threading.Event()
+    ros.on_connection_change(lambda connected, reason: connected and back.set())
+    try:
+        handle = ros.action("/far", GRIPPER).send_goal(goal(1.0), timeout=scaled(10))
+        ros.serve_action("/back", GRIPPER,
+                         lambda g, fb, cancelled: ("succeeded", {"position": 0.7}))
+        daemon.child.stop()  # the daemon goes away mid-goal
+        with pytest.raises(ActionGoalError) as ended:
+            handle.result(timeout=scaled(10))
+        assert ended.value.status == "lost" and "connection" in str(ended.value)
+        # A new daemon on the same port: the client advertises its action again.
+        again = processes.bridge("run", "--port", str(daemon.port))
+        again.wait_for_output("listening on", timeout=30)
+        assert back.wait(scaled(20))
+        caller = processes.python("caller", "gripper_action_client.py", "/back", "0.7")
+        line = caller.wait_for_output("RESULT ", timeout=30)
+        assert json.loads(line[line.index("RESULT ") + 7:]) == {
+            "status": 4, "position": 0.7, "reached_goal": False}
+    finally:
+        ros.close()
