@@ -86,9 +86,10 @@ def run_server(count: int, period: float) -> None:
         rclpy.try_shutdown()
 
 
-def report(latencies: list[float], cpu: float, count: int) -> None:
-    print("REPORT " + json.dumps({"latencies_ms": latencies, "cpu_s": cpu, "count": count}),
-          flush=True)
+def report(latencies: list[float], cpu: float, count: int, seen: list[int]) -> None:
+    missing = sorted(set(range(count)) - set(seen))
+    print("REPORT " + json.dumps({"latencies_ms": latencies, "cpu_s": cpu, "count": count,
+                                  "missing": missing}), flush=True)
 
 
 def run_floor(count: int) -> None:
@@ -102,16 +103,18 @@ def run_floor(count: int) -> None:
     if not client.wait_for_server(timeout_sec=30):
         raise SystemExit("no action server")
     latencies: list[float] = []
+    seen: list[int] = []
 
     def on_feedback(message: Any) -> None:
         latencies.append((time.time() - message.feedback.position) * 1e3)
+        seen.append(int(message.feedback.effort))
 
     start = cpu_s()
     sent = client.send_goal_async(GripperCommand.Goal(), feedback_callback=on_feedback)
     rclpy.spin_until_future_complete(node, sent, timeout_sec=30)
     result = sent.result().get_result_async()
     rclpy.spin_until_future_complete(node, result, timeout_sec=count * 0.1 + 30)
-    report(latencies, cpu_s() - start, count)
+    report(latencies, cpu_s() - start, count, seen)
     rclpy.try_shutdown()
 
 
@@ -120,15 +123,17 @@ def run_reader(port: int, count: int) -> None:
 
     ros = slicer_client.connect("127.0.0.1", port, reconnect=False)
     latencies: list[float] = []
+    seen: list[int] = []
 
     def on_feedback(fields: dict[str, Any]) -> None:
         latencies.append((time.time() - fields["position"]) * 1e3)
+        seen.append(int(fields["effort"]))
 
     start = cpu_s()
     handle = ros.action(ACTION, "control_msgs/action/GripperCommand").send_goal(
         {}, feedback=on_feedback, timeout=30)
     handle.result(timeout=count * 0.1 + 30)
-    report(latencies, cpu_s() - start, count)
+    report(latencies, cpu_s() - start, count, seen)
     ros.close()
 
 
@@ -244,6 +249,9 @@ def main() -> int:
     added = percentile(reader_report["latencies_ms"], 50) - \
         percentile(floor_report["latencies_ms"], 50)
     print(f"the daemon adds {added:.2f} ms at p50 over the rclpy floor")
+    for name, rep in (("floor", floor_report), ("daemon", reader_report)):
+        if rep["missing"]:
+            print(f"{name}: feedbacks not received: {rep['missing'][:20]}")
     return 0
 
 

