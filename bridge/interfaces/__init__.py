@@ -43,6 +43,8 @@ class BuildStep:
 # Built in this order (a package may depend on one built before it); any other shipped
 # package comes after these, by name.
 BUILD_ORDER = ("tf2_msgs", "control_msgs")
+# What the daemon cannot run without.
+REQUIRED = ("tf2_msgs",)
 
 
 def interface_packages() -> list[Path]:
@@ -67,7 +69,8 @@ def missing_runtime_line() -> str | None:
         return ("rclpy is not installed in this environment: the daemon needs ROS 2 Jazzy. "
                 "Install this package with its dependencies (pip install slicer-ros2-bridge "
                 "brings the ROS 2 wheels), or run it with a sourced ROS 2 Jazzy install.")
-    missing = missing_interfaces()
+    # control_msgs serves the demo arm's trajectory controller only: the daemon runs without.
+    missing = [name for name in missing_interfaces() if name in REQUIRED]
     if missing:
         return (f"{', '.join(missing)} is not installed in this environment (it has no PyPI "
                 f"wheel). Build it into this environment with `pip install "

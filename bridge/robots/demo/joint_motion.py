@@ -163,8 +163,14 @@ def main(argv: Optional[list[str]] = None) -> int:
 
     action = None
     if not args.no_trajectory_action:
+        import importlib.util
+
         from bridge.robots.demo.trajectory import DEFAULT_ACTION
         action = args.trajectory_action or DEFAULT_ACTION
+        if importlib.util.find_spec("control_msgs") is None:
+            print("joint_motion: control_msgs is not installed (slicer-ros2-bridge "
+                  "build-interfaces builds it): no FollowJointTrajectory action", flush=True)
+            action = None
     with ros_session(parent_pid=inherited_parent_pid()) as session:
         node = create_joint_motion_node(motion, rate_hz=args.rate, node_name=args.node_name,
                                         namespace=args.namespace, trajectory_action=action)
