@@ -209,6 +209,10 @@ class GoalSender:
             self._forget(sent)
             raise
         sent.handle = handle
+        if sent.done:  # its client left while the server was accepting: nobody watches it
+            self._cancel_soon(handle, "its client left before the goal was accepted")
+            raise CommandFailedError("action", "a connected client", "a client that left",
+                                     code=ErrorCode.UNAVAILABLE)
         result = self._in_executor(handle.get_result_async)
         result.add_done_callback(lambda done: self._on_result(sent, done))
         if request.result_timeout is not None:
