@@ -18,7 +18,7 @@ from protocol.messages import String
 from protocol.naming import KEY_ACTION, KEY_GOAL_ID, KEY_GOAL_STATUS, KEY_ROLE
 from slicer_client.actions import ActionGoalError
 from slicer_client.client import Client
-from slicer_client.connection import CommandRefusedError
+from slicer_client.connection import CommandRefusedError, Connection
 from support import Child, Processes, RunningDaemon, scaled, start_daemon, wait_until
 
 pytestmark = pytest.mark.ros
@@ -82,18 +82,17 @@ def test_feedback_in_order_then_the_result(ros: Client, server: Child) -> None:
 def test_goal_events_on_the_wire(daemon: RunningDaemon, server: Child) -> None:
     """What a client without the Pythonic layer (3D Slicer) sees: STRING messages on the
     goal's device, JSON, with ros2.* metadata naming the action, goal and status."""
-    connection = daemon.connect()
     events: list[tuple[str, dict[str, str], dict[str, Any]]] = []
     done = threading.Event()
 
-    def on_message(message: Any) -> None:
+    def on_message(message: Any) -> None:  # receive thread
         if isinstance(message.body, String) and message.metadata.get(KEY_GOAL_ID):
             event = json.loads(message.body.text)
             events.append((message.device_name, dict(message.metadata), event))
             if event["event"] == "result":
                 done.set()
 
-    connection._on_message = on_message  # receive thread
+    connection = Connection("127.0.0.1", daemon.port, on_message=on_message)
     try:
         reply = connection.command("send_goal", {"action": "gripper",
                                                  "type": "control_msgs/GripperCommand",
