@@ -83,18 +83,21 @@ class JointMotion:
 def create_joint_motion_node(motion: JointMotion, *, rate_hz: float = 50.0,
                              node_name: str = "demo_joint_motion", namespace: str = "",
                              context: Any = None,
-                             trajectory_action: Optional[str] = None) -> Any:
+                             trajectory_action: Optional[str] = None,
+                             hold: Optional[MotionHold] = None) -> Any:
     """An rclpy node publishing ``motion`` on ``joint_states`` at ``rate_hz`` (for any
     executor, e.g. inside the daemon); rclpy must be initialised. With
     ``trajectory_action``, it also serves FollowJointTrajectory there (see
-    `bridge.robots.demo.trajectory`), pausing the idle motion while a goal runs."""
+    `bridge.robots.demo.trajectory`), pausing the idle motion while a goal runs. `hold`:
+    the idle motion's pause/resume hook, for anything else that moves the joints (one is
+    made if not given)."""
     import rclpy
     from sensor_msgs.msg import JointState
 
     node = rclpy.create_node(node_name, namespace=namespace, context=context)
     publisher = node.create_publisher(JointState, "joint_states", 10)
     start = node.get_clock().now()
-    hold = MotionHold()
+    hold = hold if hold is not None else MotionHold()
     last = motion.positions_at(0.0)
     controller = None
     if trajectory_action:
