@@ -80,8 +80,9 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
                                "(repeatable; others are closed at once and logged)")
     security.add_argument("--read-only", action="store_true", default=False,
                           help="clients can only receive: publishing, tf broadcasts, "
-                               "parameter changes and service calls are refused (FORBIDDEN)")
-    for kind in ("topic", "service", "parameter", "frame"):
+                               "parameter changes, service calls and action goals are refused "
+                               "(FORBIDDEN)")
+    for kind in ("topic", "service", "action", "parameter", "frame"):
         what = {"parameter": "NODE.PARAM", "frame": "PSM1/"}.get(kind, f"/{kind}")
         # Frames: both ends of tf lookups and broadcasters, without a leading / and with
         # --frame-prefix applied.
@@ -159,6 +160,7 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
     cli = {"read_only": args.read_only, "allow": args.allow,
            "allow_topics": args.allow_topic, "deny_topics": args.deny_topic,
            "allow_services": args.allow_service, "deny_services": args.deny_service,
+           "allow_actions": args.allow_action, "deny_actions": args.deny_action,
            "allow_parameters": args.allow_parameter, "deny_parameters": args.deny_parameter,
            "allow_frames": args.allow_frame, "deny_frames": args.deny_frame,
            "max_clients": args.max_clients, "max_bridges_per_client": args.max_bridges_per_client,

@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 from typing import Awaitable, Callable, Optional
 
+from bridge.actions import ActionBridges
 from bridge.config import DaemonConfig
 from bridge.dispatch import Dispatcher
 from bridge.hub import Hub
@@ -56,6 +57,7 @@ class Daemon:
                             frame_rules=policy.frames)
         self.parameters = ParameterBridges(self.ros, self.hub, names, policy=policy)
         self.services = ServiceBridges(self.ros, self.hub, names, policy=policy)
+        self.actions = ActionBridges(self.ros, self.hub, names)
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
                                    parameters=self.parameters,
                                    package_paths=dict(config.package_paths),
@@ -67,8 +69,8 @@ class Daemon:
                                      mesh_roots=tuple(Path(d) for d in policy.robot_dirs),
                                      package_paths=dict(config.package_paths))
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
-                                                          self.services, self.robots,
-                                                          self.markers],
+                                                          self.services, self.actions,
+                                                          self.robots, self.markers],
                                      policy=policy, resolve_frame=self.tf.resolve_frame,
                                      resolve_file=self.robots.file_path)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,

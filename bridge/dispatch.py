@@ -52,7 +52,7 @@ class Capability(Protocol):
 
 
 # Identity fields by what they name: resolved the way the capabilities resolve them.
-_NAME_FIELDS = ("topic", "service", "node")
+_NAME_FIELDS = ("topic", "service", "action", "node")
 _FRAME_FIELDS = ("parent", "child")
 _KINDS = c.bridge_kinds()
 

@@ -6,7 +6,7 @@ request itself (in the dispatcher, `check_request`, before any capability runs).
 bridges from the YAML config go through the same dispatcher, so they are judged alike.
 
 The policy judges resources, never op names: each request declares what it touches
-(`protocol.commands.op`: topics, services, parameters, tf frames, files) and whether it
+(`protocol.commands.op`: topics, services, actions, parameters, tf frames, files) and whether it
 writes, and every declared resource is judged by the rules of its kind. A request class the
 schema does not declare cannot be judged, and is refused (fail closed). Some resources are
 named inside messages rather than requests: a tf topic's transforms, a parameter service's
@@ -36,7 +36,7 @@ from typing import Any, Callable, Optional, Union
 from bridge.logging_limits import RateLimitedLog
 from bridge.message_guards import (PARAMETER_EVENT_TYPE, TF_MESSAGE_TYPE, HeaderFrameGuard,
                                    MessageGuard, ParameterEventGuard, TfMessageGuard)
-from protocol.commands import (REQUEST_TYPES, FileUse, ForbiddenError, FrameUse,
+from protocol.commands import (REQUEST_TYPES, ActionUse, FileUse, ForbiddenError, FrameUse,
                                LimitReachedError, Op, OutOfRangeError, ParameterUse, Resource,
                                ServiceUse, TopicUse, resolve_message_type, resolve_service_type)
 
@@ -68,6 +68,22 @@ PARAMETER_SERVICES: dict[str, tuple[str, Optional[str]]] = {
     "list_parameters": ("rcl_interfaces/srv/ListParameters", None),
 }
 _TF_TOPICS = ("/tf", "/tf_static")
+# An action is made of hidden services and topics under ``<action>/_action/``: whatever
+# names them is judged as a use of the action too (else the action globs could be routed
+# around with call_service or a publisher). Calling send_goal/cancel_goal sends goals;
+# serving any of them or publishing feedback/status serves the action; subscribing watches.
+ACTION_SERVICES = ("send_goal", "cancel_goal", "get_result")
+ACTION_TOPICS = ("feedback", "status")
+_ACTION_PART = "/_action/"
+
+
+def hidden_action(name: str, kinds: tuple[str, ...]) -> Optional[str]:
+    """The action a fully qualified hidden service or topic name belongs to
+    (``/fjt/_action/send_goal`` -> ``/fjt``), or None."""
+    action, part, suffix = name.rpartition(_ACTION_PART)
+    if not part or not action or suffix not in kinds:
+        return None
+    return action
 
 
 def parameter_service(service: str, ros_type: Optional[str]) -> Optional[tuple[str, str]]:
@@ -164,6 +180,7 @@ class SecurityPolicy:
     allowed_networks: tuple[Network, ...] = ()
     topics: NameRules = NameRules()
     services: NameRules = NameRules()
+    actions: NameRules = NameRules()
     parameters: NameRules = NameRules()
     frames: NameRules = NameRules()
     max_clients: int = DEFAULT_MAX_CLIENTS
@@ -222,6 +239,8 @@ class SecurityPolicy:
             self._judge_topic(use, resolve(use.name, use.field))
         elif isinstance(use, ServiceUse):
             self._judge_service(use, resolve(use.name, use.field))
+        elif isinstance(use, ActionUse):
+            self._judge_action(use.field, resolve(use.name, use.field))
         elif isinstance(use, ParameterUse):
             node = (resolve(use.node, use.node_field or use.field) if use.node is not None
                     else own_node)
@@ -240,10 +259,18 @@ class SecurityPolicy:
             raise ForbiddenError("op", "resources this daemon's policy can judge",
                                  type(use).__name__)
 
+    def _judge_action(self, field: str, action: str) -> None:
+        if self.actions.active and not self.actions.permits(action):
+            raise ForbiddenError(field, "an action this daemon exposes: "
+                                 + self.actions.why_not(action), action)
+
     def _judge_topic(self, use: TopicUse, topic: str) -> None:
         if self.topics.active and not self.topics.permits(topic):
             raise ForbiddenError(use.field, "a topic this daemon exposes: "
                                  + self.topics.why_not(topic), topic)
+        action = hidden_action(topic, ACTION_TOPICS)
+        if action is not None:
+            self._judge_action(use.field, action)
         ros_type = _resolved(resolve_message_type, use.type)
         # A tf topic carries frames: only a TFMessage can be judged transform by transform
         # (the bridge's MessageGuard does it); another type on /tf cannot be judged.
@@ -256,6 +283,9 @@ class SecurityPolicy:
         if self.services.active and not self.services.permits(service):
             raise ForbiddenError(use.field, "a service this daemon exposes: "
                                  + self.services.why_not(service), service)
+        action = hidden_action(service, ACTION_SERVICES)
+        if action is not None:
+            self._judge_action(use.field, action)
         ros_type = _resolved(resolve_service_type, use.type)
         found = parameter_service(service, ros_type)
         if found is None or not self.parameters.active:
@@ -353,7 +383,7 @@ class SecurityPolicy:
         networks = tuple(parse_network(text, f"{where}.allow")
                          for text in _globs(settings, "allow", where))
         policy = replace(policy, allowed_networks=networks)
-        for kind in ("topics", "services", "parameters", "frames"):
+        for kind in ("topics", "services", "actions", "parameters", "frames"):
             rules = NameRules(allow=_globs(settings, f"allow_{kind}", where),
                               deny=_globs(settings, f"deny_{kind}", where))
             policy = replace(policy, **{kind: rules})
@@ -372,7 +402,7 @@ class SecurityPolicy:
                  f"at most {self.max_clients} clients",
                  f"{self.max_bridges_per_client} bridges per client, "
                  f"{self.max_bridges} from all clients"]
-        for kind in ("topics", "services", "parameters", "frames"):
+        for kind in ("topics", "services", "actions", "parameters", "frames"):
             rules: NameRules = getattr(self, kind)
             if rules.active:
                 parts.append(f"{kind} allow={list(rules.allow)} deny={list(rules.deny)}")
@@ -384,6 +414,7 @@ class SecurityPolicy:
 SECURITY_KEYS: tuple[str, ...] = (
     "read_only", "allow",
     "allow_topics", "deny_topics", "allow_services", "deny_services",
+    "allow_actions", "deny_actions",
     "allow_parameters", "deny_parameters", "allow_frames", "deny_frames",
     "max_clients", "max_bridges_per_client", "max_bridges", "max_message_bytes",
     "max_send_buffer_bytes",

@@ -10,7 +10,8 @@ callback group); the coroutine hands the request to the loop, which sends the ad
 client a `service_request` COMMAND and waits for its RTS_COMMAND. The client's answer (or a
 default response after the timeout) completes an rclpy future and wakes the executor.
 
-`call_ros_service` and `resolve_name` are shared with the parameter bridges.
+`call_ros_service` and `resolve_name` are shared with the parameter bridges;
+`message_from_json` and `client_answer` with the action bridges.
 """
 
 from __future__ import annotations
@@ -112,6 +113,30 @@ def _transfer(ros_future: RosFuture, outcome: asyncio.Future[Any]) -> None:
         outcome.set_result(ros_future.result())
 
 
+def message_from_json(cls: Any, data: dict[str, Any], path: str) -> Any:
+    """A message of `cls` from a client's JSON fields; `WrongTypeError` naming the field
+    under `path` (``request.data``)."""
+    try:
+        return dict_to_message(cls, data)
+    except CodecError as error:
+        raise WrongTypeError(f"{path}.{error.field}" if error.field else path,
+                             error.expected, error.got) from None
+
+
+def client_answer(text: str) -> dict[str, Any]:
+    """The payload of a client's RTS_COMMAND answer to a COMMAND the daemon sent: an
+    ordinary `Reply` (its result) or the bare object, judged by its JSON (3D Slicer's Status
+    metadata is junk). A refusal (``ok: false``) raises `CommandFailedError`."""
+    data = loads(text)
+    if "ok" in data:  # a Reply envelope
+        reply = Reply.from_json(text)
+        if not reply.ok:
+            assert reply.error is not None
+            raise CommandFailedError("ok", "true", f"false ({reply.error.message})")
+        data = reply.result
+    return data
+
+
 def _service_class(type_name: str, ros_type: str) -> Any:
     try:
         return service_class(ros_type)
@@ -202,11 +227,7 @@ class ServiceBridges:
         service = resolve_name(self._ros, request.service, "service")
         ros_type = request.ros_type
         srv = _service_class(request.type, ros_type)
-        try:
-            ros_request = dict_to_message(srv.Request, request.request)
-        except CodecError as error:
-            raise WrongTypeError(f"request.{error.field}" if error.field else "request",
-                                 error.expected, error.got) from None
+        ros_request = message_from_json(srv.Request, request.request, "request")
         entry = self._client_for(service, ros_type, srv)
         entry.in_flight += 1
         try:
@@ -367,14 +388,7 @@ class ServiceBridges:
         """The client's answer -> a Response, judged by its JSON (3D Slicer's Status
         metadata is junk); None (a default response) with a warning if unusable."""
         try:
-            data = loads(text)
-            if "ok" in data:  # a Reply envelope
-                reply = Reply.from_json(text)
-                if not reply.ok:
-                    assert reply.error is not None
-                    raise CommandFailedError("ok", "true", f"false ({reply.error.message})")
-                data = reply.result
-            raw = data.get("response")
+            raw = client_answer(text).get("response")
             if not isinstance(raw, dict):
                 raise WrongTypeError("response", "an object with the response fields",
                                      type(raw).__name__ if raw is not None else "nothing")

@@ -23,10 +23,14 @@ service_server        service ``/spawn``         ``srv:spawn``
 marker                topic, ns, id              ``mk:markers:shapes:3``
 marker_frame          fixed frame, frame         ``mkf:world>base``
 marker_topic          topic ``/markers``         ``mks:markers``
+action_server         action ``/fjt``            ``act:fjt``
+action_goal           action, goal UUID (hex)    ``goal:fjt:3f2~k2xq``
 ====================  =========================  ============================
 
 A marker's ``ns`` may be empty (``mk:markers::0``); its id is kept last when the name must
-be abbreviated, as a robot visual's index.
+be abbreviated, as a robot visual's index. An action goal's UUID never fits: its device is
+always the abbreviated form (the action, the UUID's first hex digits, a hash), unique per
+goal; ``ros2.goal_id`` has the whole UUID.
 
 * A leading ``/`` is dropped (topics, node names, services and frames are taken as
   absolute: ``/tool`` and ``tool`` are the same); inner ``/`` of namespaces is kept.
@@ -64,6 +68,7 @@ from protocol.errors import ProtocolError
 
 __all__ = [
     "DEFAULT_HASH_LENGTH",
+    "KEY_ACTION",
     "KEY_CHILD",
     "KEY_COLOR",
     "KEY_DROPPED",
@@ -84,6 +89,8 @@ __all__ = [
     "KEY_VISUAL_COUNT",
     "KEY_WARNINGS",
     "KEY_FRAME",
+    "KEY_GOAL_ID",
+    "KEY_GOAL_STATUS",
     "KEY_LINK",
     "KEY_MARKER_ID",
     "KEY_MARKER_NS",
@@ -147,6 +154,8 @@ class Role(str, enum.Enum):
     MARKER = "marker"
     MARKER_FRAME = "marker_frame"
     MARKER_TOPIC = "marker_topic"
+    ACTION_SERVER = "action_server"
+    ACTION_GOAL = "action_goal"
 
 
 # Prefix of the readable form, and the names of the parts (also their metadata keys).
@@ -165,6 +174,8 @@ _PREFIX: dict[Role, str] = {
     Role.MARKER: "mk:",
     Role.MARKER_FRAME: "mkf:",
     Role.MARKER_TOPIC: "mks:",
+    Role.ACTION_SERVER: "act:",
+    Role.ACTION_GOAL: "goal:",
 }
 _RESERVED_ROBOT_NAMES = frozenset(p.rstrip(":") for p in _PREFIX.values() if p)
 
@@ -179,6 +190,9 @@ KEY_VISUAL = "ros2.visual"
 KEY_NODE = "ros2.node"
 KEY_SERVICE = "ros2.service"
 KEY_ROLE = "ros2.role"
+KEY_ACTION = "ros2.action"
+KEY_GOAL_ID = "ros2.goal_id"  # a goal's UUID, 32 lower-case hex digits
+KEY_GOAL_STATUS = "ros2.status"  # a goal event's status (accepted, executing, succeeded...)
 KEY_UNITS = "ros2.units"
 # A robot visual's model: the device of the link TRANSFORM it goes under, and its colour
 # ("r g b a", floats 0..1), so a Slicer script can parent and colour it from attributes.
@@ -216,7 +230,7 @@ METADATA_KEYS: tuple[str, ...] = (
     KEY_TOPIC, KEY_TYPE, KEY_FRAME, KEY_PARENT, KEY_CHILD, KEY_ROBOT, KEY_LINK,
     KEY_VISUAL, KEY_NODE, KEY_SERVICE, KEY_ROLE, KEY_UNITS, KEY_PARENT_DEVICE, KEY_COLOR,
     KEY_LINK_COUNT, KEY_VISUAL_COUNT, KEY_WARNINGS, KEY_MARKER_NS, KEY_MARKER_ID,
-    KEY_MARKER_TYPE,
+    KEY_MARKER_TYPE, KEY_ACTION, KEY_GOAL_ID, KEY_GOAL_STATUS,
 )
 UNITS_MM = "mm"
 
@@ -235,9 +249,11 @@ _PART_KEYS: dict[Role, tuple[str, ...]] = {
     Role.MARKER: (KEY_TOPIC, KEY_MARKER_NS, KEY_MARKER_ID),
     Role.MARKER_FRAME: (KEY_PARENT, KEY_CHILD),
     Role.MARKER_TOPIC: (KEY_TOPIC,),
+    Role.ACTION_SERVER: (KEY_ACTION,),
+    Role.ACTION_GOAL: (KEY_ACTION, KEY_GOAL_ID),
 }
 # Parts that are absolute ROS graph names: metadata gives them with their leading '/'.
-_GRAPH_NAME_KEYS = frozenset({KEY_TOPIC, KEY_NODE, KEY_SERVICE})
+_GRAPH_NAME_KEYS = frozenset({KEY_TOPIC, KEY_NODE, KEY_SERVICE, KEY_ACTION})
 
 
 def _strip(name: str) -> str:
@@ -334,6 +350,14 @@ class NameKey:
     def service_server(cls, service: str) -> NameKey:
         return cls(Role.SERVICE_SERVER, (_clean(service, KEY_SERVICE),))
 
+    @classmethod
+    def action_server(cls, action: str) -> NameKey:
+        return cls(Role.ACTION_SERVER, (_clean(action, KEY_ACTION),))
+
+    @classmethod
+    def action_goal(cls, action: str, goal_id: str) -> NameKey:
+        return cls(Role.ACTION_GOAL, (_clean(action, KEY_ACTION), _clean(goal_id, KEY_GOAL_ID)))
+
     def named_parts(self) -> dict[str, str]:
         """The parts keyed by metadata key; graph names get back their leading ``/``."""
         out: dict[str, str] = {}
@@ -408,7 +432,7 @@ def _abbreviate(role: Role, parts: list[str], room: int) -> str:
         separator = ">"
     elif role in (Role.SUBSCRIBER, Role.PUBLISHER, Role.PARAMETER_CLIENT,
                   Role.PARAMETER_SERVER, Role.SERVICE_CLIENT, Role.SERVICE_SERVER,
-                  Role.MARKER_TOPIC):
+                  Role.MARKER_TOPIC, Role.ACTION_SERVER):
         separator = ""  # one graph name
     else:
         separator = ":"

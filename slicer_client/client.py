@@ -24,9 +24,10 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
-from protocol.messages import Message
+from protocol.messages import Command, Message
 from protocol.naming import KEY_ROBOT, KEY_ROLE
 from protocol import commands as c
+from slicer_client.actions import Action, Execute, GoalHandle, ServedAction, route_goal_event
 from slicer_client.bridge_state import REMOVE_OPS, BridgeSpec, BridgeState
 from slicer_client.connection import DEFAULT_HOST, DEFAULT_PORT, CommandRefusedError
 from slicer_client.matrices import as_numpy
@@ -59,10 +60,18 @@ class Client:
         self.errors: List[str] = []  # STATUS errors and unreadable messages, newest last
         self.daemon_info: Dict[str, Any] = {}
         self._facade: Any = None
+        # Actions: goals waiting for their events (by goal id), actions this client serves.
+        self._goals: Dict[str, GoalHandle] = {}
+        self._served_actions: Dict[str, ServedAction] = {}
         transport.set_listener(self)
 
     # --- transport listener (receive / reconnect threads) -------------------------------
     def on_message(self, message: Message) -> None:
+        if isinstance(message.body, Command):
+            self._on_daemon_command(message)
+            return
+        if route_goal_event(self._goals, message):
+            return
         with self._lock:
             self._latest[message.device_name] = message
             resource = self._by_device.get(message.device_name)
@@ -90,11 +99,18 @@ class Client:
             self._by_device.clear()
         for resource in resources:
             self._apply(resource, command)
+        for served in list(self._served_actions.values()):
+            served.advertise(command)
         if not first:
             for callback in list(self._connection_callbacks):
                 self.emit(callback, True, "")
 
     def on_disconnected(self, reason: str) -> None:
+        # The daemon cancels the goals of a client that leaves: their events never come.
+        for handle in list(self._goals.values()):
+            handle._on_event({"event": "result", "status": "lost",
+                              "error": f"the connection to the daemon was lost ({reason}); "
+                                       f"the daemon cancels the goals of a client that leaves"})
         for callback in list(self._connection_callbacks):
             self.emit(callback, False, reason)
 
@@ -227,6 +243,40 @@ class Client:
 
     def service(self, service: str, type: str) -> Service:
         return Service(self, service, type)
+
+    def action(self, name: str, type: str) -> Action:
+        """A ROS action to send goals to: ``ros.action(name, type).send_goal(goal,
+        feedback=cb)`` returns a `GoalHandle` (``result(timeout)``, ``cancel()``)."""
+        return Action(self, name, type, self._goals)
+
+    def serve_action(self, name: str, type: str, execute: Execute, *,
+                     goal_timeout: float = 300.0) -> ServedAction:
+        """Serve a ROS action from this client: `execute(goal, feedback, cancelled)` runs
+        for each goal in a worker thread and returns ``(status, result)`` (see
+        slicer_client/actions.py). The daemon aborts a goal not ended in `goal_timeout` s."""
+        served = ServedAction(self, name, type, execute, goal_timeout=goal_timeout)
+        served.advertise(self.command)
+        with self._lock:
+            self._served_actions[served.device] = served
+        return served
+
+    def stop_serving_action(self, served: ServedAction) -> None:
+        with self._lock:
+            self._served_actions.pop(served.device, None)
+        served.unadvertise()
+
+    def _on_daemon_command(self, message: Message) -> None:
+        """A COMMAND the daemon sends (receive thread): a goal or cancel of a served action."""
+        with self._lock:
+            served = self._served_actions.get(message.device_name)
+        if served is None:
+            log.warning("a %s COMMAND for %r, which this client does not serve",
+                        getattr(message.body, "name", "?"), message.device_name)
+            return
+        try:
+            served._on_command(message)
+        except Exception:  # noqa: BLE001 - a bad command must not stop the receive thread
+            log.exception("handling a command for %r failed", message.device_name)
 
     def robot(self, name: str, *, node: str = "/robot_state_publisher",
               parameter: str = "robot_description", fixed_frame: Optional[str] = None,

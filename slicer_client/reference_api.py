@@ -27,6 +27,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Protocol, Tuple
 import numpy as np
 
 from protocol import commands as c
+from slicer_client.actions import Action, GoalHandle
 from slicer_client.matrices import blank_matrix, fill_vtk, is_vtk_matrix, to_vtk
 from slicer_client.resources import (MarkerSubscriber, ParameterClient, Publisher, Resource,
                                      Robot, Service, Subscriber, TfBroadcaster, TfLookup,
@@ -70,9 +71,11 @@ class FacadeClient(Protocol):
                 qos: Optional[Mapping[str, Any]] = None,
                 callback: Optional[Callable[..., None]] = None) -> MarkerSubscriber: ...
 
-__all__ = ["MarkerSubscriberNode", "ParameterNode", "PublisherNode", "ROS2Node", "RobotNode",
-           "ServiceClientNode",
-           "SubscriberNode", "Tf2BroadcasterNode", "Tf2LookupNode", "short_type_name"]
+    def action(self, name: str, type: str) -> Action: ...
+
+__all__ = ["ActionClientNode", "MarkerSubscriberNode", "ParameterNode", "PublisherNode",
+           "ROS2Node", "RobotNode", "ServiceClientNode", "SubscriberNode", "Tf2BroadcasterNode",
+           "Tf2LookupNode", "short_type_name"]
 
 # Slicer's integer event ids: vtkCommand::ModifiedEvent, vtkMRMLTransformNode::
 # TransformModifiedEvent, and the reference's vtkMRMLROS2ParameterNode::ParameterModifiedEvent
@@ -516,6 +519,81 @@ class ServiceClientNode(_Node):
         return self._last
 
 
+class ActionClientNode(_Node):
+    """An action client in the reference's style (the reference has none; named like its
+    service client node): `SendGoal` returns the goal id at once, feedback and the result
+    arrive as ModifiedEvent, read with `GetLastFeedback` / `GetLastResult`."""
+
+    resource: Action
+
+    def __init__(self, ros_node: ROS2Node, resource: Action) -> None:
+        super().__init__(ros_node, resource)
+        self._goal: Optional[GoalHandle] = None
+
+    def GetName(self) -> str:  # noqa: N802
+        return f"ros2:action:{self.resource.name}"
+
+    def GetAction(self) -> str:  # noqa: N802
+        return self.resource.name
+
+    GetTopic = GetAction
+
+    def GetROSType(self) -> str:  # noqa: N802
+        return self.resource.type
+
+    def SendGoal(self, goal: Optional[Dict[str, Any]] = None,  # noqa: N802
+                 timeout: float = 4.0) -> str:
+        """Send a goal (the latest one is the one the getters read); returns its id."""
+        self._goal = self.resource.send_goal(
+            goal, feedback=lambda fields: self.InvokeEvent("ModifiedEvent"), timeout=timeout)
+        # Observers hear of the end as of each feedback (a thread waits for it).
+        _wait_then(self._goal, lambda: self.InvokeEvent("ModifiedEvent")).start()
+        return self._goal.goal_id
+
+    def CancelGoal(self, timeout: float = 4.0) -> bool:  # noqa: N802
+        return self._goal is not None and not self._goal.done and self._goal.cancel(timeout)
+
+    def GetGoalStatus(self) -> str:  # noqa: N802
+        """"sending", "accepted", "executing", then how it ended: "succeeded",
+        "canceled", "aborted", "lost", "timeout"; "" before any goal."""
+        return "" if self._goal is None else self._goal.status
+
+    def GetNumberOfFeedbacks(self) -> int:  # noqa: N802
+        return 0 if self._goal is None else len(self._goal.feedback)
+
+    def GetLastFeedback(self) -> Optional[Dict[str, Any]]:  # noqa: N802
+        if self._goal is None or not self._goal.feedback:
+            return None
+        return dict(self._goal.feedback[-1])
+
+    def GetLastResult(self) -> Optional[Dict[str, Any]]:  # noqa: N802
+        """The result of the latest goal once it ended (None before, or if it ended
+        without one: see GetGoalStatus)."""
+        if self._goal is None or not self._goal.done:
+            return None
+        try:
+            return self._goal.result(0)
+        except Exception:  # noqa: BLE001 - no result: the status says why
+            return None
+
+    def WaitForResult(self, timeout: float = 10.0) -> Dict[str, Any]:  # noqa: N802
+        if self._goal is None:
+            raise RuntimeError(f"no goal sent to {self.resource.name} yet")
+        return self._goal.result(timeout)
+
+
+def _wait_then(goal: GoalHandle, then: Callable[[], None]) -> Any:
+    import threading
+
+    def run() -> None:
+        try:
+            goal.result(None)
+        except Exception:  # noqa: BLE001 - an end without a result is an end too
+            pass
+        then()
+    return threading.Thread(target=run, name=f"goal {goal.goal_id}", daemon=True)
+
+
 def _transform_node_matrix(node: Any) -> Any:
     import vtk  # only Slicer transform nodes get here, so vtk is there
     matrix = vtk.vtkMatrix4x4()
@@ -531,6 +609,7 @@ class ROS2Node:
         self.matrix_type = "numpy"  # or "vtk"
         self._nodes: Dict[Tuple[str, ...], _Node] = {}
         self._services: Dict[str, ServiceClientNode] = {}
+        self._actions: Dict[str, ActionClientNode] = {}
 
     def _wrap(self, resource: Resource, cls: Any) -> Any:
         node = self._nodes.get(resource.spec.key)
@@ -674,4 +753,20 @@ class ROS2Node:
     def RemoveAndDeleteServiceClientNode(self, service: str) -> bool:  # noqa: N802
         return self._services.pop(service, None) is not None
 
+    # actions (the reference has none: named like its service client nodes)
+    def CreateAndAddActionClientNode(self, className: str, action: str  # noqa: N802,N803
+                                     ) -> ActionClientNode:
+        node = self._actions.get(action)
+        if node is None:
+            node = ActionClientNode(self, self.client.action(action, className))
+            self._actions[action] = node
+        return node
 
+    def GetActionClientNodeByName(self, action: str) -> Optional[ActionClientNode]:  # noqa: N802
+        return self._actions.get(action)
+
+    def RemoveAndDeleteActionClientNode(self, action: str) -> bool:  # noqa: N802
+        node = self._actions.pop(action, None)
+        if node is not None:
+            node.RemoveAllObservers()
+        return node is not None

@@ -6,8 +6,8 @@ What it does, printing each step:
      cmake wheel from PyPI in its place);
   2. creates `.venv` and installs the project with its pinned dependencies (ROS 2 Jazzy from
      PyPI wheels, test tools, interface build tools);
-  3. builds the `tf2_msgs` interface package (bridge/interfaces/tf2_msgs) into the venv,
-     because tf2_msgs has no PyPI wheel.
+  3. builds the `tf2_msgs` and `control_msgs` interface packages (bridge/interfaces/) into
+     the venv, because they have no PyPI wheel.
 
 It needs no root and writes nothing outside the repository (pip's cache and temporary files
 go to `.cache/`). A second run that finds a stamp matching the inputs returns in a moment.
@@ -170,6 +170,7 @@ def verify() -> None:
     say("checking the environment: rclpy, tf2_msgs, geometry_msgs, pyigtl, yourdfpy")
     probe = ("import rclpy, pyigtl, yourdfpy, trimesh, numpy; "
              "from tf2_msgs.msg import TFMessage, TF2Error; "
+             "from control_msgs.action import FollowJointTrajectory; "
              "from geometry_msgs.msg import TransformStamped; "
              "TFMessage(transforms=[TransformStamped()]); print('ok')")
     run([str(venv_python()), "-c", probe])

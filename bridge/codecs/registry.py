@@ -20,7 +20,8 @@ from typing import Any
 from bridge.codecs.errors import CodecError
 from protocol.commands import REFERENCE_TYPE_NAMES, OutOfRangeError, resolve_message_type
 
-__all__ = ["REFERENCE_SHORT_NAMES", "installed_types", "message_class", "resolve_type",
+__all__ = ["REFERENCE_SHORT_NAMES", "action_class", "installed_types", "message_class",
+           "resolve_type",
            "ros_type_of",
            "service_class"]
 
@@ -70,6 +71,28 @@ def service_class(ros_type: str) -> Any:
     cls = getattr(module, name, None)
     if cls is None or not hasattr(cls, "Request") or not hasattr(cls, "Response"):
         raise _unknown(ros_type, f"a service of package {pkg!r} ({name!r} is not one)")
+    return cls
+
+
+_ACTION = re.compile(rf"^({_IDENT})/action/({_IDENT})$")
+
+
+@cache
+def action_class(ros_type: str) -> Any:
+    """The rclpy action class of a canonical ``pkg/action/Type``; `CodecError` if not
+    installed."""
+    m = _ACTION.match(ros_type)
+    if m is None:
+        raise _unknown(ros_type, "an action type 'pkg/action/Type'")
+    pkg, name = m.groups()
+    try:
+        module = importlib.import_module(f"{pkg}.action")
+    except ImportError:
+        raise _unknown(ros_type, f"an installed interface package with actions ({pkg!r} "
+                       f"has none here)") from None
+    cls = getattr(module, name, None)
+    if cls is None or not all(hasattr(cls, part) for part in ("Goal", "Result", "Feedback")):
+        raise _unknown(ros_type, f"an action of package {pkg!r} ({name!r} is not one)")
     return cls
 
 

@@ -1,6 +1,8 @@
 """ROS interface packages the daemon needs that have no PyPI wheel, and how to build them.
 
-`tf2_msgs` (TFMessage, TF2Error) ships here as its upstream definitions. A ROS 2 install
+`tf2_msgs` (TFMessage, TF2Error) and `control_msgs` (FollowJointTrajectory and the rest of
+ros2_control's interfaces, for the demo arm's trajectory action) ship here as their upstream
+definitions (control_msgs/README.md says which release). A ROS 2 install
 from apt has it already; an environment made of PyPI wheels gets it built into itself
 with CMake and the ROS interface generators (the `interfaces` extra), by `make setup`
 (tools/setup_env.py) in a clone, or by `slicer-ros2-bridge build-interfaces` after
@@ -38,9 +40,18 @@ class BuildStep:
     log: Path
 
 
+# Built in this order (a package may depend on one built before it); any other shipped
+# package comes after these, by name.
+BUILD_ORDER = ("tf2_msgs", "control_msgs")
+# What the daemon cannot run without.
+REQUIRED = ("tf2_msgs",)
+
+
 def interface_packages() -> list[Path]:
-    """The interface package folders shipped here (each has a package.xml)."""
-    return sorted(p for p in INTERFACES_DIR.iterdir() if (p / "package.xml").is_file())
+    """The interface package folders shipped here (each has a package.xml), in build order."""
+    found = [p for p in INTERFACES_DIR.iterdir() if (p / "package.xml").is_file()]
+    rank = {name: i for i, name in enumerate(BUILD_ORDER)}
+    return sorted(found, key=lambda p: (rank.get(p.name, len(rank)), p.name))
 
 
 def missing_interfaces() -> list[str]:
@@ -58,7 +69,8 @@ def missing_runtime_line() -> str | None:
         return ("rclpy is not installed in this environment: the daemon needs ROS 2 Jazzy. "
                 "Install this package with its dependencies (pip install slicer-ros2-bridge "
                 "brings the ROS 2 wheels), or run it with a sourced ROS 2 Jazzy install.")
-    missing = missing_interfaces()
+    # control_msgs serves the demo arm's trajectory controller only: the daemon runs without.
+    missing = [name for name in missing_interfaces() if name in REQUIRED]
     if missing:
         return (f"{', '.join(missing)} is not installed in this environment (it has no PyPI "
                 f"wheel). Build it into this environment with `pip install "

@@ -5,7 +5,10 @@ What runs (all stopped by one Ctrl-C):
 - the daemon (`bridge.daemon.run_daemon`), with the demo package on its package path;
 - ``python -m bridge.robots.state_publisher <demo urdf>`` (``/robot_state_publisher``:
   robot_description, /tf from joint_states, /tf_static);
-- ``python -m bridge.robots.demo.joint_motion`` (joint_states, every joint swinging);
+- ``python -m bridge.robots.demo.joint_motion`` (joint_states, every joint swinging, and a
+  control_msgs/action/FollowJointTrajectory server on
+  ``/joint_trajectory_controller/follow_joint_trajectory`` that moves the joints, pausing
+  the swinging while a goal runs: `bridge.robots.demo.trajectory`);
 - the robot ``demo``, created in the daemon from ``/robot_state_publisher``'s
   ``robot_description`` parameter, as a user would with ``create_robot``.
 
@@ -156,7 +159,9 @@ def _banner(daemon: Daemon, robot: dict[str, object]) -> str:
         "slicer-ros2-bridge demo is running",
         f"  OpenIGTLink server  {host}:{port} (any number of clients)",
         f"  ROS 2               node {daemon.ros.fully_qualified_name}, ROS_DOMAIN_ID={domain};",
-        "                      /robot_state_publisher and a joint motion node",
+        "                      /robot_state_publisher and a joint motion node; move the arm",
+        "                      with FollowJointTrajectory goals on",
+        "                      /joint_trajectory_controller/follow_joint_trajectory",
         f"  {robot_line}",
         "",
         "Connect 3D Slicer: module OpenIGTLinkIF > '+' (new connector) > Type: Client,",

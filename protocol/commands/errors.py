@@ -35,6 +35,7 @@ class ErrorCode(IntEnum):
     NOT_SUPPORTED = 27
     FORBIDDEN = 28
     LIMIT_REACHED = 29
+    REJECTED = 30  # an action server refused the goal
     INTERNAL = 99
 
 

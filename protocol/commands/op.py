@@ -13,7 +13,7 @@ fields, everything the rest of the daemon derives from it.
 * ``writes``: whether it changes the ROS graph or its state (``--read-only`` refuses it);
 * ``creates`` / ``removes`` / ``follows``: the bridge it creates (its kind, the fields that
   identify one, its section in the YAML config), removes, or restores state of;
-* ``resources()``: what it touches (topics, services, parameters, tf frames, files); the
+* ``resources()``: what it touches (topics, services, actions, parameters, tf frames, files); the
   security policy judges these, never op names.
 
 A class that leaves out ``op`` or ``writes``, or does not define ``resources`` itself,
@@ -33,7 +33,7 @@ from protocol.commands.errors import WrongTypeError
 from protocol.commands.fields import Args
 from protocol.commands.wire import MAX_OP_NAME_BYTES, SCHEMA_VERSION, dumps, json_type, loads
 
-__all__ = ["REQUEST_TYPES", "Bridge", "BridgeKind", "FileUse", "FrameUse", "Op",
+__all__ = ["REQUEST_TYPES", "ActionUse", "Bridge", "BridgeKind", "FileUse", "FrameUse", "Op",
            "ParameterUse", "Request", "Resource", "ServiceUse", "TopicUse", "bridge_kinds",
            "encode_request", "parse_request"]
 
@@ -94,7 +94,20 @@ class FileUse:
     path: str
 
 
-Resource = Union[TopicUse, ServiceUse, ParameterUse, FrameUse, FileUse]
+@dataclass(frozen=True)
+class ActionUse:
+    """A ROS action the op sends goals to or cancels (``writes``), lists or watches, or
+    offers (``serves``). Its hidden services and topics (``<action>/_action/...``) are
+    judged by the same rules when a topic or service op names them."""
+
+    field: str
+    name: str
+    type: Optional[str] = None
+    writes: bool = False
+    serves: bool = False
+
+
+Resource = Union[TopicUse, ServiceUse, ParameterUse, FrameUse, FileUse, ActionUse]
 
 
 # ---------------------------------------------------------------------------- bridges

@@ -4,7 +4,8 @@ Accepted spellings of a message type: ``pkg/msg/Type`` (canonical), ``pkg/Type``
 ``pkg.msg.Type``, a short name of the reference SlicerROS2 (``PoseStamped``, ``Int``), a
 reference node class name (``vtkMRMLROS2SubscriberStringNode``), and, where the caller can
 look installed packages up (the daemon, `bridge.codecs.registry`), any other bare message
-name found in exactly one package. Services: ``pkg/srv/Type`` or ``pkg/Type``.
+name found in exactly one package. Services: ``pkg/srv/Type`` or ``pkg/Type``; actions:
+``pkg/action/Type`` or ``pkg/Type``.
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ from typing import Callable, Optional, Sequence
 
 from protocol.commands.errors import OutOfRangeError
 
-__all__ = ["REFERENCE_TYPE_NAMES", "PackagesOf", "resolve_message_type",
-           "resolve_service_type"]
+__all__ = ["REFERENCE_TYPE_NAMES", "PackagesOf", "resolve_action_type",
+           "resolve_message_type", "resolve_service_type"]
 
 # A bare message name -> the installed packages that define it.
 PackagesOf = Callable[[str], Sequence[str]]
@@ -61,6 +62,7 @@ _NAME = r"[A-Z][A-Za-z0-9]*"
 _SPELLINGS = (re.compile(rf"({_PKG})/msg/({_NAME})\Z"), re.compile(rf"({_PKG})/({_NAME})\Z"),
               re.compile(rf"({_PKG})\.msg\.({_NAME})\Z"))
 _SERVICE = re.compile(rf"({_PKG})/(?:srv/)?({_NAME})\Z")
+_ACTION = re.compile(rf"({_PKG})/(?:action/)?({_NAME})\Z")
 _BARE = re.compile(rf"{_NAME}\Z")
 _CLASS_NAME = re.compile(r"vtkMRMLROS2(?:Subscriber|Publisher)([A-Za-z0-9]+)Node\Z")
 _EXPECTED = "pkg/msg/Type, pkg/Type, or a short name such as String or PoseStamped"
@@ -97,3 +99,11 @@ def resolve_service_type(text: str, field: str = "type") -> str:
     if full:
         return f"{full.group(1)}/srv/{full.group(2)}"
     raise OutOfRangeError(field, "a service type pkg/srv/Type", repr(text))
+
+
+def resolve_action_type(text: str, field: str = "type") -> str:
+    """``pkg/action/Type`` or ``pkg/Type`` -> ``pkg/action/Type``."""
+    full = _ACTION.match(text.strip()) if isinstance(text, str) else None
+    if full:
+        return f"{full.group(1)}/action/{full.group(2)}"
+    raise OutOfRangeError(field, "an action type pkg/action/Type", repr(text))

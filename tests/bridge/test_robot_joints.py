@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from bridge.robots.demo.joint_motion import MotionHold
+from bridge.robots.demo.motion_hold import MotionHold
 from bridge.robots.description import parse_urdf
 from bridge.robots.joints import describe_joints, joint_positions
 from jointy_urdf import JOINTY_URDF
@@ -81,14 +81,14 @@ def test_values_at_a_limit_within_rounding_are_clamped(joints) -> None:
 
 def test_motion_hold_yields_after_a_foreign_state_and_while_paused() -> None:
     hold = MotionHold(yield_s=3.0)
-    assert not hold.holds(100.0)
+    assert not hold.yields(100.0)
     hold.foreign_state(100.0)
-    assert hold.holds(102.9) and not hold.holds(103.0)
+    assert hold.yields(102.9) and not hold.yields(103.0)
     hold.pause("goal")
     hold.pause("sliders")
     hold.resume("goal")
-    assert hold.holds(500.0)
+    assert hold.yields(500.0)
     hold.resume("sliders")
-    assert not hold.holds(500.0)
+    assert not hold.yields(500.0)
     with pytest.raises(ValueError):
         MotionHold(yield_s=-1)

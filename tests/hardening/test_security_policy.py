@@ -48,6 +48,10 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
         "call_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
         "advertise_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
         "set_robot_joints": {"name": "r", "positions": {"j": 0.1}},
+        "send_goal": {"action": "/a", "type": "control_msgs/action/GripperCommand"},
+        "cancel_goal": {"action": "/a", "goal_id": "0" * 32},
+        "advertise_action": {"action": "/a", "type": "control_msgs/action/GripperCommand"},
+        "action_feedback": {"action": "/a", "goal_id": "0" * 32, "feedback": {}},
     }
     # The declarations say what writes: this list is the expectation they are held to.
     assert set(writes) == {op for op, cls in c.REQUEST_TYPES.items() if cls.writes}
@@ -59,8 +63,12 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
     for op, args in {"create_subscriber": {"topic": "/t", "type": "String"},
                      "create_tf_lookup": {"parent": "a", "child": "b"},
                      "get_parameters": {"node": "/n", "names": ["p"]},
+                     "list_actions": {},
                      "hello": {}}.items():
         check(policy, op, args)
+    # Watching an action: its goal status topic.
+    check(policy, "create_subscriber", {"topic": "/a/_action/status",
+                                        "type": "action_msgs/msg/GoalStatusArray"})
 
 
 def test_relative_names_are_judged_fully_qualified() -> None:
@@ -113,7 +121,7 @@ def test_read_only_clients_remove_nothing() -> None:
     for op in removals:
         identity = c.bridge_kinds()[c.REQUEST_TYPES[op].removes].bridge.identity
         args = {name: {"topic": "/t", "service": "/s", "node": "/n", "parent": "a",
-                       "child": "b", "name": "r"}[name] for name in identity}
+                       "child": "b", "name": "r", "action": "/a"}[name] for name in identity}
         with pytest.raises(ForbiddenError) as refused:
             check(policy, op, args)
         assert refused.value.field == "op" and "remove nothing" in str(refused.value)
@@ -191,6 +199,53 @@ def test_quota_counts_live_bridges_per_client() -> None:
     assert not quota.reserve(a, "hello")  # not a creation: nothing to count
     quota.forget(a)
     assert quota.count(a) == 0
+
+
+GRIPPER = "control_msgs/action/GripperCommand"
+
+
+@pytest.mark.parametrize("op,args", [
+    ("send_goal", {"action": "/arm/fjt", "type": GRIPPER}),
+    ("cancel_goal", {"action": "arm/fjt", "goal_id": "0" * 32}),  # relative: /lab/arm/fjt
+    ("advertise_action", {"action": "/arm/fjt", "type": GRIPPER}),
+    ("action_feedback", {"action": "/arm/fjt", "goal_id": "0" * 32}),
+    # The hidden services and topics an action is made of are the action too.
+    ("call_service", {"service": "/arm/fjt/_action/send_goal",
+                      "type": "std_srvs/srv/Trigger"}),
+    ("call_service", {"service": "/arm/fjt/_action/cancel_goal",
+                      "type": "action_msgs/srv/CancelGoal"}),
+    ("advertise_service", {"service": "/arm/fjt/_action/get_result",
+                           "type": "std_srvs/srv/Trigger"}),
+    ("create_subscriber", {"topic": "/arm/fjt/_action/feedback", "type": "String"}),
+    ("create_publisher", {"topic": "/arm/fjt/_action/status",
+                          "type": "action_msgs/msg/GoalStatusArray"}),
+    ("get_last_message", {"topic": "/arm/fjt/_action/status"}),
+    ("publish", {"topic": "/arm/fjt/_action/feedback", "value": {}}),
+])
+def test_action_globs_judge_every_route_to_an_action(op: str, args: dict) -> None:
+    for policy in (SecurityPolicy(actions=NameRules(deny=("/*/fjt",))),
+                   SecurityPolicy(actions=NameRules(allow=("/safe/*",)))):
+        with pytest.raises(ForbiddenError) as refused:
+            check(policy, op, args)
+        assert refused.value.got in ("/arm/fjt", "/lab/arm/fjt"), refused.value
+        assert "action" in str(refused.value)
+    check(SecurityPolicy(actions=NameRules(deny=("/other/*",))), op, args)
+
+
+def test_action_globs_leave_look_alike_names_alone() -> None:
+    policy = SecurityPolicy(actions=NameRules(deny=("/arm/*",)))
+    check(policy, "call_service", {"service": "/arm/_action", "type": "std_srvs/srv/Trigger"})
+    check(policy, "create_subscriber", {"topic": "/arm/_action/other", "type": "String"})
+    check(policy, "list_actions", {})
+
+
+def test_action_options_merge(tmp_path: Path) -> None:
+    path = tmp_path / "bridge.yaml"
+    path.write_text("security:\n  deny_actions: ['/arm/*']\n")
+    policy, _ = build_security(load_config_file(path).security,
+                               {"allow_actions": ["/arm/*", "/demo/*"]})
+    assert policy.actions == NameRules(allow=("/arm/*", "/demo/*"), deny=("/arm/*",))
+    assert "actions allow=" in policy.describe()
 
 
 def test_command_line_and_config_file_merge(tmp_path: Path) -> None:

@@ -387,3 +387,63 @@ def test_the_daemon_serves_every_client_op_the_schema_declares(frames_daemon: Ru
         error = refusal(client, "service_request", {"service": "/s", "type": "std_srvs/Trigger",
                                                     "request": {}})
         assert error.code == ErrorCode.NOT_SUPPORTED  # the daemon's to send, not to serve
+
+
+# ---------------------------------------------------------------------------- actions
+
+GRIPPER = "control_msgs/action/GripperCommand"
+
+
+def test_an_action_guard_holds_on_every_route(processes: Processes) -> None:
+    """--deny-action: the action op, its hidden services and its topics are all refused,
+    and the real server never sees a goal."""
+    server = processes.python("gripper", "gripper_action_server.py", "--action", "/arm/grip")
+    server.wait_for_output("READY")
+    daemon = start_daemon(processes, "--deny-action", "/arm/*")
+    client = daemon.connect()
+    try:
+        wait_until(lambda: any(a["action"] == "/arm/grip" for a in
+                               client.command("list_actions")["actions"]), 20,
+                   "the action listed (listing is not refused)")
+        goal = {"command": {"position": 1.0, "max_effort": 1.0}}
+        routes = [
+            ("send_goal", {"action": "/arm/grip", "type": GRIPPER, "goal": goal}),
+            ("cancel_goal", {"action": "/arm/grip", "goal_id": "0" * 32}),
+            ("advertise_action", {"action": "/arm/other", "type": GRIPPER}),
+            ("call_service", {"service": "/arm/grip/_action/cancel_goal",
+                              "type": "action_msgs/srv/CancelGoal", "request": {}}),
+            ("advertise_service", {"service": "/arm/grip2/_action/get_result",
+                                   "type": "std_srvs/srv/Trigger"}),
+            ("create_subscriber", {"topic": "/arm/grip/_action/status",
+                                   "type": "action_msgs/msg/GoalStatusArray"}),
+            ("create_publisher", {"topic": "/arm/grip/_action/status",
+                                  "type": "action_msgs/msg/GoalStatusArray"}),
+        ]
+        for op, args in routes:
+            error = refusal(client, op, args)
+            assert error.code == ErrorCode.FORBIDDEN, (op, error)
+            assert "/arm/*" in str(error), (op, error)
+    finally:
+        client.close()
+    assert "GOAL" not in server.output() and "CANCEL" not in server.output()
+
+
+def test_read_only_clients_list_and_watch_actions_but_send_nothing(processes: Processes
+                                                                   ) -> None:
+    server = processes.python("gripper", "gripper_action_server.py", "--action", "/grip")
+    server.wait_for_output("READY")
+    daemon = start_daemon(processes, "--read-only")
+    client = daemon.connect()
+    try:
+        wait_until(lambda: any(a["action"] == "/grip" for a in
+                               client.command("list_actions")["actions"]), 20, "/grip listed")
+        client.command("create_subscriber", {"topic": "/grip/_action/status",
+                                             "type": "action_msgs/msg/GoalStatusArray"})
+        for op, args in [("send_goal", {"action": "/grip", "type": GRIPPER}),
+                         ("cancel_goal", {"action": "/grip", "goal_id": "0" * 32}),
+                         ("advertise_action", {"action": "/mine", "type": GRIPPER})]:
+            error = refusal(client, op, args)
+            assert error.code == ErrorCode.FORBIDDEN and "read-only" in str(error), op
+    finally:
+        client.close()
+    assert "GOAL" not in server.output()

@@ -91,6 +91,10 @@ robot_sources = st.one_of(
 robot_names = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,15}", fullmatch=True)
 names_tuples = st.lists(param_names, max_size=5).map(tuple)
 
+action_types = st.sampled_from(["control_msgs/action/FollowJointTrajectory",
+                                "control_msgs/GripperCommand"])
+goal_ids = st.uuids().map(lambda u: u.hex)
+
 STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.Hello: st.builds(c.Hello, client=st.none() | st.text(min_size=1, max_size=30)),
     c.ListBridges: st.just(c.ListBridges()),
@@ -154,6 +158,21 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
         fixed_frame=frames.filter(lambda s: not s.startswith("/")), qos=qos),
     c.RemoveMarkerSubscriber: st.builds(c.RemoveMarkerSubscriber, topic=ros_names),
     c.ListMarkers: st.builds(c.ListMarkers, topic=ros_names),
+    c.ListActions: st.just(c.ListActions()),
+    c.SendGoal: st.builds(c.SendGoal, action=ros_names, type=action_types, goal=json_objects,
+                          timeout=st.floats(0.01, 300.0),
+                          result_timeout=st.none() | st.floats(0.01, 86_400.0),
+                          goal_id=st.none() | goal_ids),
+    c.CancelGoal: st.builds(c.CancelGoal, action=ros_names, goal_id=goal_ids,
+                            timeout=st.floats(0.01, 300.0)),
+    c.AdvertiseAction: st.builds(c.AdvertiseAction, action=ros_names, type=action_types,
+                                 goal_timeout=st.floats(0.01, 86_400.0)),
+    c.UnadvertiseAction: st.builds(c.UnadvertiseAction, action=ros_names),
+    c.ActionFeedback: st.builds(c.ActionFeedback, action=ros_names, goal_id=goal_ids,
+                                feedback=json_objects),
+    c.ActionGoal: st.builds(c.ActionGoal, action=ros_names, type=action_types, goal_id=goal_ids,
+                            goal=json_objects, timeout=st.floats(0.01, 86_400.0)),
+    c.ActionCancel: st.builds(c.ActionCancel, action=ros_names, goal_id=goal_ids),
 }
 
 
@@ -480,7 +499,7 @@ def test_error_codes_are_stable() -> None:
         "MISSING_FIELD": 5, "UNKNOWN_FIELD": 6, "WRONG_TYPE": 7, "OUT_OF_RANGE": 8,
         "NOT_FOUND": 20, "ALREADY_EXISTS": 21, "UNKNOWN_ROS_TYPE": 22, "ROS_ERROR": 23,
         "TIMEOUT": 24, "UNAVAILABLE": 25, "TRANSFORM_UNAVAILABLE": 26, "NOT_SUPPORTED": 27,
-        "FORBIDDEN": 28, "LIMIT_REACHED": 29, "INTERNAL": 99,
+        "FORBIDDEN": 28, "LIMIT_REACHED": 29, "REJECTED": 30, "INTERNAL": 99,
     }
     assert {e.name: int(e) for e in ErrorCode} == expected
 

@@ -47,6 +47,7 @@ from protocol.naming import (
         (NameKey.parameter_server("/slicer"), "params:slicer"),
         (NameKey.service_client("/spawn"), "srvc:spawn"),
         (NameKey.service_server("/spawn"), "srv:spawn"),
+        (NameKey.action_server("/fjt"), "act:fjt"),
     ],
 )
 def test_short_names_stay_readable(key: NameKey, name: str) -> None:
@@ -262,6 +263,7 @@ ALL_KEYS = [
     NameKey.service_client("/c"), NameKey.service_server("/c"),
     NameKey.marker("/m", "", 0), NameKey.marker("/m", "ns x", -3),
     NameKey.marker_frame("world", "base"), NameKey.marker_topic("/m"),
+    NameKey.action_server("/a"), NameKey.action_goal("/a", "0123456789abcdef0123456789abcdef"),
 ]
 
 
@@ -277,6 +279,20 @@ def test_marker_names_are_readable_and_keep_the_id(key: NameKey, name: str) -> N
     many = {device_name_for(NameKey.marker("/visualization_marker_array", ns, i))
             for ns in ("", "a", "b") for i in range(50)}
     assert len(many) == 150 and all(len(n) <= 20 for n in many)
+
+
+
+def test_goal_devices_are_short_readable_and_one_per_goal() -> None:
+    first = NameKey.action_goal("/arm/follow_joint_trajectory", "3f2a" + "0" * 28)
+    second = NameKey.action_goal("/arm/follow_joint_trajectory", "3f2a" + "1" * 28)
+    names = [device_name_for(first), device_name_for(second)]
+    assert all(n.startswith("goal:follow") and ":3f2" in n for n in names), names
+    assert all(len(n.encode()) <= 20 and is_hashed_name(n) for n in names)
+    assert names[0] != names[1]
+    meta = metadata_for(first)
+    assert meta["ros2.action"] == "/arm/follow_joint_trajectory"
+    assert meta["ros2.goal_id"] == "3f2a" + "0" * 28 and meta["ros2.role"] == "action_goal"
+    assert key_from_metadata(meta) == first
 
 
 def test_every_role_has_an_example() -> None:

@@ -10,8 +10,8 @@ from typing import Any
 import pytest
 
 from protocol import commands as c
-from protocol.commands import (Bridge, FileUse, FrameUse, Op, ParameterUse, Resource,
-                               ServiceUse, TopicUse)
+from protocol.commands import (ActionUse, Bridge, FileUse, FrameUse, Op, ParameterUse,
+                               Resource, ServiceUse, TopicUse)
 
 IDENTITY = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
 VALUE = {"type": "integer", "value": 1}
@@ -71,6 +71,18 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
                                  {("topic", "topic", "/m"), ("frame", "fixed_frame", "world")}),
     "remove_marker_subscriber": ({"topic": "/m"}, set()),
     "list_markers": ({"topic": "/m"}, {("topic", "topic", "/m")}),
+    "list_actions": ({}, set()),
+    "send_goal": ({"action": "/a", "type": "control_msgs/action/GripperCommand"},
+                  {("action", "action", "/a")}),
+    "cancel_goal": ({"action": "/a", "goal_id": "0" * 32}, {("action", "action", "/a")}),
+    "advertise_action": ({"action": "/a", "type": "control_msgs/GripperCommand"},
+                         {("action", "action", "/a")}),
+    "unadvertise_action": ({"action": "/a"}, set()),
+    "action_feedback": ({"action": "/a", "goal_id": "0" * 32, "feedback": {}},
+                        {("action", "action", "/a")}),
+    "action_goal": ({"action": "/a", "type": "control_msgs/GripperCommand",
+                     "goal_id": "0" * 32, "goal": {}}, set()),
+    "action_cancel": ({"action": "/a", "goal_id": "0" * 32}, set()),
 }
 
 
@@ -83,6 +95,8 @@ def judged(use: Resource) -> tuple[str, str, str]:
         return "parameter", use.field, f"{use.node or 'OWN'}.{','.join(use.names)}"
     if isinstance(use, FrameUse):
         return "frame", use.field, use.frame
+    if isinstance(use, ActionUse):
+        return "action", use.field, use.name
     assert isinstance(use, FileUse)
     return "file", use.field, use.path
 
@@ -108,7 +122,8 @@ def test_each_op_declares_what_it_touches(op: str) -> None:
 def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
     kinds = c.bridge_kinds()
     assert set(kinds) == {"subscriber", "publisher", "parameter_client", "tf_lookup",
-                          "tf_broadcaster", "robot", "served_service", "marker_subscriber"}
+                          "tf_broadcaster", "robot", "served_service", "marker_subscriber",
+                          "served_action"}
     for kind in kinds.values():
         assert kind.create.creates is kind.bridge and kind.remove.removes == kind.bridge.kind
         remove_fields = {f.name for f in fields(kind.remove)}
@@ -119,7 +134,7 @@ def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
         "create_publisher", "publish", "create_tf_broadcaster", "broadcast_transform",
         "set_parameters", "server_declare_parameter", "server_set_parameter",
         "server_undeclare_parameter", "call_service", "advertise_service",
-        "set_robot_joints"}
+        "set_robot_joints", "send_goal", "cancel_goal", "advertise_action", "action_feedback"}
 
 
 def test_a_publisher_declares_its_frame_and_labels_topic() -> None:
@@ -188,3 +203,24 @@ def test_a_create_op_without_its_remove_op_fails_the_pairing() -> None:
             c.bridge_kinds()
     finally:
         del c.REQUEST_TYPES["test_create_orphan"]
+
+
+def test_action_ops_parse_types_goal_ids_and_limits() -> None:
+    goal = c.SendGoal.from_json(c.dumps({
+        "action": "fjt", "type": "control_msgs/FollowJointTrajectory",
+        "goal_id": "0123ABCD-0123-4567-89ab-0123456789AB", "result_timeout": 2}))
+    assert goal.ros_type == "control_msgs/action/FollowJointTrajectory"
+    assert goal.goal_id == "0123abcd0123456789ab0123456789ab" and goal.result_timeout == 2.0
+    assert goal.goal == {} and goal.timeout == 4.0
+    for args, field, code in [
+            ({"action": "/a", "type": "control_msgs/msg/X"}, "type", c.ErrorCode.OUT_OF_RANGE),
+            ({"action": "/a", "type": "p/A", "goal": []}, "goal", c.ErrorCode.WRONG_TYPE),
+            ({"action": "/a", "type": "p/A", "goal_id": "xyz"}, "goal_id",
+             c.ErrorCode.OUT_OF_RANGE),
+            ({"action": "/a", "type": "p/A", "timeout": 0}, "timeout", c.ErrorCode.OUT_OF_RANGE),
+            ({"action": "a b", "type": "p/A"}, "action", c.ErrorCode.OUT_OF_RANGE)]:
+        with pytest.raises(c.CommandError) as error:
+            c.SendGoal.from_json(c.dumps(args))
+        assert (error.value.field, error.value.error_code) == (field, code), args
+    assert c.resolve_action_type("pkg/action/Name") == "pkg/action/Name"
+    assert c.goal_id_text("A" * 32) == "a" * 32

@@ -7,15 +7,17 @@ range (continuous joints and joints without limits swing +-pi/2 or +-0.05 m), an
 gets its own period and phase so the arm does not move in lockstep. Mimic joints are left
 to the state publisher. `JointMotion.positions_at` is pure, for tests.
 
-The motion yields (`MotionHold`): it stops publishing while another publisher drives
-``joint_states`` (a client's sliders through ``set_robot_joints``: for ``--yield-s`` seconds
-after the last foreign joint state, 3 s by default) and while something holds it by name
-(`MotionHold.pause` / `resume`, for an in-process user such as an action server).
+`MotionHold` (`bridge.robots.demo.motion_hold`) holds it: anything that moves the joints
+itself (the demo's FollowJointTrajectory controller, `bridge.robots.demo.trajectory`) holds
+them and releases them to blend back into the idle motion; and it yields to another
+publisher of ``joint_states`` (a client's sliders through ``set_robot_joints``): nothing for
+``--yield-s`` seconds after the last foreign joint state, 3 s by default.
 
 Command line::
 
     python -m bridge.robots.demo.joint_motion [URDF] [--rate HZ] [--period S]
-        [--namespace NS] [--node-name NAME] [--package-path NAME=DIR ...] [--yield-s S]
+        [--namespace NS] [--node-name NAME] [--package-path NAME=DIR ...]
+        [--trajectory-action NAME | --no-trajectory-action] [--yield-s S]
 
 Without URDF the built-in demo robot is used.
 """
@@ -25,16 +27,15 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import threading
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, Optional
 
 from bridge.robots.description import RobotDescription, parse_urdf
 
-__all__ = ["DEFAULT_YIELD_S", "JointMotion", "MotionHold", "create_joint_motion_node", "main"]
+from bridge.robots.demo.motion_hold import DEFAULT_YIELD_S, MotionHold
 
-DEFAULT_YIELD_S = 3.0
+__all__ = ["JointMotion", "MotionHold", "create_joint_motion_node", "main"]
 
 
 @dataclass(frozen=True)
@@ -82,72 +83,58 @@ class JointMotion:
                 * math.cos(2 * math.pi * t / w.period + w.phase) for w in self._waves}
 
 
-class MotionHold:
-    """Whether the idle motion yields at time ``now`` (seconds, any monotonic clock):
-    while any owner holds it (`pause` / `resume`, counted per owner name) or for
-    ``yield_s`` after `foreign_state` (someone else published a joint state). Thread-safe:
-    a subscription callback and a timer may run in different threads."""
-
-    def __init__(self, yield_s: float = DEFAULT_YIELD_S) -> None:
-        if not yield_s >= 0:
-            raise ValueError(f"yield_s >= 0 expected, got {yield_s}")
-        self.yield_s = yield_s
-        self._owners: set[str] = set()
-        self._until = -math.inf
-        self._lock = threading.Lock()
-
-    def pause(self, owner: str) -> None:
-        with self._lock:
-            self._owners.add(owner)
-
-    def resume(self, owner: str) -> None:
-        with self._lock:
-            self._owners.discard(owner)
-
-    def foreign_state(self, now: float) -> None:
-        with self._lock:
-            self._until = max(self._until, now + self.yield_s)
-
-    def holds(self, now: float) -> bool:
-        with self._lock:
-            return bool(self._owners) or now < self._until
-
-
 def create_joint_motion_node(motion: JointMotion, *, rate_hz: float = 50.0,
                              node_name: str = "demo_joint_motion", namespace: str = "",
-                             context: Any = None, hold: Optional[MotionHold] = None) -> Any:
+                             context: Any = None,
+                             trajectory_action: Optional[str] = None,
+                             hold: Optional[MotionHold] = None) -> Any:
     """An rclpy node publishing ``motion`` on ``joint_states`` at ``rate_hz`` (for any
-    executor, e.g. inside the daemon); rclpy must be initialised. It also listens on
-    ``joint_states``: a message it did not publish (told by its stamp, unique per tick)
-    makes it yield per ``hold`` (default `MotionHold()`; its ``pause``/``resume`` too)."""
+    executor, e.g. inside the daemon); rclpy must be initialised. With
+    ``trajectory_action``, it also serves FollowJointTrajectory there (see
+    `bridge.robots.demo.trajectory`), pausing the idle motion while a goal runs. It also
+    listens on ``joint_states``: a message it did not publish (told by its stamp, unique
+    per tick) makes it yield per `hold` (made if not given; see `MotionHold`)."""
     import rclpy
     from sensor_msgs.msg import JointState
 
-    hold = hold if hold is not None else MotionHold()
     node = rclpy.create_node(node_name, namespace=namespace, context=context)
     publisher = node.create_publisher(JointState, "joint_states", 10)
     start = node.get_clock().now()
-    own: deque[tuple[int, int]] = deque(maxlen=256)  # stamps of our recent messages
+    hold = hold if hold is not None else MotionHold()
+    last = motion.positions_at(0.0)
+    controller = None
+    if trajectory_action:
+        from bridge.robots.demo.trajectory import create_trajectory_server
+        controller = create_trajectory_server(node, hold, motion.joint_names,
+                                              lambda: dict(last), action=trajectory_action)
 
-    def seconds() -> float:
-        return float(node.get_clock().now().nanoseconds) * 1e-9
+    own: deque[tuple[int, int]] = deque(maxlen=256)  # stamps of our recent messages
 
     def on_state(msg: Any) -> None:  # does almost nothing: notes a foreign publisher
         if (msg.header.stamp.sec, msg.header.stamp.nanosec) not in own:
-            hold.foreign_state(seconds())
+            hold.foreign_state(node.get_clock().now().nanoseconds * 1e-9)
 
     def tick() -> None:
         now = node.get_clock().now()
-        if hold.holds(now.nanoseconds * 1e-9):
+        now_s = now.nanoseconds * 1e-9
+        if hold.yields(now_s):
             return
         t = (now - start).nanoseconds * 1e-9
+        if controller is not None:
+            controller.advance(now_s)
+        idle = hold.idle
+        positions = hold.apply(now_s, motion.positions_at(t))
         msg = JointState()
         msg.header.stamp = now.to_msg()
         own.append((msg.header.stamp.sec, msg.header.stamp.nanosec))
-        msg.name = list(motion.joint_names)
-        msg.position = list(motion.positions_at(t).values())
-        msg.velocity = list(motion.velocities_at(t).values())
+        msg.name = list(positions)
+        msg.position = list(positions.values())
+        # The idle motion's velocities are known; held or blending ones are not given.
+        msg.velocity = list(motion.velocities_at(t).values()) if idle else []
         publisher.publish(msg)
+        last.update(positions)
+        if controller is not None:
+            controller.report(now_s, positions)
 
     node.create_subscription(JointState, "joint_states", on_state, 10)
     node.create_timer(1.0 / rate_hz, tick)
@@ -164,6 +151,11 @@ def main(argv: Optional[list[str]] = None) -> int:
     parser.add_argument("--period", type=float, default=8.0, help="slowest joint period (s)")
     parser.add_argument("--namespace", default="")
     parser.add_argument("--node-name", default="demo_joint_motion")
+    parser.add_argument("--trajectory-action", default=None, metavar="NAME",
+                        help="serve control_msgs/action/FollowJointTrajectory there (default "
+                             "/joint_trajectory_controller/follow_joint_trajectory)")
+    parser.add_argument("--no-trajectory-action", action="store_true",
+                        help="only the idle motion, no trajectory action")
     parser.add_argument("--yield-s", type=float, default=DEFAULT_YIELD_S,
                         help="stop moving for this long after another publisher's joint "
                         "state (a client's sliders); 0: never yield")
@@ -190,13 +182,24 @@ def main(argv: Optional[list[str]] = None) -> int:
         print(f"joint_motion: {exc}", file=sys.stderr)
         return 2
 
+    action = None
+    if not args.no_trajectory_action:
+        import importlib.util
+
+        from bridge.robots.demo.trajectory import DEFAULT_ACTION
+        action = args.trajectory_action or DEFAULT_ACTION
+        if importlib.util.find_spec("control_msgs") is None:
+            print("joint_motion: control_msgs is not installed (slicer-ros2-bridge "
+                  "build-interfaces builds it): no FollowJointTrajectory action", flush=True)
+            action = None
     with ros_session(parent_pid=inherited_parent_pid()) as session:
         node = create_joint_motion_node(motion, rate_hz=args.rate, node_name=args.node_name,
-                                        namespace=args.namespace,
+                                        namespace=args.namespace, trajectory_action=action,
                                         hold=MotionHold(args.yield_s))
+        served = f", FollowJointTrajectory on {action}" if action else ""
         spin_until_signal(session, [node], on_ready=lambda: print(
-            f"joint motion ready: {len(motion.joint_names)} joints at {args.rate:g} Hz",
-            flush=True))
+            f"joint motion ready: {len(motion.joint_names)} joints at {args.rate:g} Hz"
+            f"{served}", flush=True))
     return 0
 
 

@@ -1,0 +1,325 @@
+"""Actions a client serves to ROS (`advertise_action`).
+
+An rclpy `ActionServer` whose execute callback is a coroutine (the node's
+SingleThreadedExecutor runs it without blocking other callbacks). It hands the goal to the
+loop, which sends the serving client an `action_goal` COMMAND and waits for its
+RTS_COMMAND; `action_feedback` commands publish feedback meanwhile. A ROS cancel request is
+accepted and passed on as an `action_cancel` COMMAND. The client's answer (or an abort
+after `goal_timeout`, or when the client leaves) ends the goal.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import logging
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.graph import get_action_names_and_types
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.task import Future as RosFuture
+
+from bridge.actions.common import action_class_of, destroy_quietly
+from bridge.codecs import CodecError, message_to_dict
+from bridge.hub import Hub, Replier
+from bridge.ros_node import RosNode
+from bridge.services import client_answer, message_from_json, resolve_name
+from protocol import commands as c
+from protocol.commands import (ActionCancel, ActionFeedback, ActionGoal, AdvertiseAction,
+                               CommandError, CommandFailedError, ErrorCode, UnadvertiseAction,
+                               WrongTypeError)
+from protocol.messages import Command, Message, RtsCommand
+from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
+
+__all__ = ["ServedAction", "ServedActions"]
+
+log = logging.getLogger("bridge.actions")
+
+
+@dataclass
+class _ServedGoal:
+    served: ServedAction
+    goal_id: str
+    handle: Any  # rclpy ServerGoalHandle
+    answer: RosFuture
+    command_id: int = 0
+    timer: Optional[asyncio.TimerHandle] = None
+    feedbacks: int = 0
+
+
+@dataclass
+class ServedAction:
+    """A ROS action served by one client (the one that advertised it)."""
+
+    action: str
+    ros_type: str
+    cls: Any
+    owner: Replier
+    key: NameKey
+    device: str
+    goal_timeout: float
+    server: Any = None  # rclpy ActionServer
+    goals: dict[str, _ServedGoal] = field(default_factory=dict)
+    received: int = 0
+    closed: bool = False
+    # Touched only in the executor thread: goals being executed, and a destroy waiting.
+    executing: int = 0
+    destroy_pending: bool = False
+
+
+class ServedActions:
+    """`advertise_action`, `unadvertise_action`, `action_feedback`: actions clients serve."""
+
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
+                 linger_s: float) -> None:
+        self._ros = ros
+        self._hub = hub
+        self._names = names
+        self._group = ReentrantCallbackGroup()
+        self._ids = itertools.count(1)
+        # An unadvertised server lives this long after its last goal ended, so the ROS
+        # client's get_result request (sent or answered after the end) still gets the result.
+        self._linger_s = linger_s
+        self.served: dict[str, ServedAction] = {}
+        self._pending: dict[tuple[Replier, int], _ServedGoal] = {}
+        hub.add_reply_listener(self._on_reply)
+        hub.add_closed_listener(self._on_client_closed)
+
+    # --- advertise_action ------------------------------------------------------------------
+    def advertise_action(self, request: AdvertiseAction, client: Optional[Replier]
+                         ) -> dict[str, Any]:
+        if client is None:
+            raise CommandFailedError("action", "a request from a connected client (it "
+                                     "executes the goals)", "a start-up command",
+                                     code=ErrorCode.NOT_SUPPORTED)
+        action = resolve_name(self._ros, request.action, "action")
+        ros_type = request.ros_type
+        cls = action_class_of(request.type, ros_type)
+        existing = self.served.get(action)
+        if existing is not None:
+            if existing.owner is client and existing.ros_type == ros_type:
+                return _describe_served(existing, existed=True)
+            raise CommandFailedError("action", "an action no other client advertises (or the "
+                                     "same type again)", f"{action} ({existing.ros_type})",
+                                     code=ErrorCode.ALREADY_EXISTS)
+        for name, types in get_action_names_and_types(self._ros.node):
+            if name == action:
+                raise CommandFailedError("action", "an action no ROS node serves yet",
+                                         f"{action} ({', '.join(types)})",
+                                         code=ErrorCode.ALREADY_EXISTS)
+        key = NameKey.action_server(action)
+        served = ServedAction(action, ros_type, cls, client, key, self._names.register(key),
+                              request.goal_timeout)
+        served.server = ActionServer(
+            self._ros.node, cls, action, execute_callback=self._execute_for(served),
+            goal_callback=lambda _goal: GoalResponse.ACCEPT,
+            cancel_callback=self._cancel_for(served), callback_group=self._group)
+        self.served[action] = served
+        log.info("serving action %s (%s) for client %s", action, ros_type,
+                 getattr(client, "peer", "?"))
+        return _describe_served(served, existed=False)
+
+    def unadvertise_action(self, request: UnadvertiseAction, client: Optional[Replier]
+                           ) -> dict[str, Any]:
+        action = resolve_name(self._ros, request.action, "action")
+        served = self.served.get(action)
+        if served is None or (client is not None and served.owner is not client):
+            raise CommandFailedError("action", "an action this client advertises", action,
+                                     code=ErrorCode.NOT_FOUND)
+        self._unadvertise(served)
+        return {"action": action, "device": served.device}
+
+    def _execute_for(self, served: ServedAction) -> Any:
+        async def execute(goal_handle: Any) -> Any:
+            # Executor thread. An exception here is logged by rclpy and aborts the goal;
+            # still, never raise: end the goal deliberately.
+            served.executing += 1
+            try:
+                answer = RosFuture(executor=self._ros.executor)
+                goal_id = bytes(goal_handle.goal_id.uuid).hex()
+                if served.closed:
+                    goal_handle.abort()
+                    return served.cls.Result()
+                self._hub.call_soon(self._forward_goal, served, goal_id, goal_handle, answer)
+                outcome = await answer
+                status, result = outcome if outcome is not None else ("aborted", None)
+                if status == "succeeded":
+                    goal_handle.succeed()
+                elif status == "canceled" and goal_handle.is_cancel_requested:
+                    goal_handle.canceled()
+                else:  # aborted, or "canceled" without a cancel request (not a legal end)
+                    goal_handle.abort()
+                return result if result is not None else served.cls.Result()
+            except Exception:
+                log.exception("executing a goal of %s failed; the goal is aborted",
+                              served.action)
+                if goal_handle.is_active:
+                    goal_handle.abort()
+                return served.cls.Result()
+            finally:
+                served.executing -= 1
+                if served.destroy_pending and not served.executing:
+                    self._hub.call_soon(self._destroy_later, served)
+        return execute
+
+    def _cancel_for(self, served: ServedAction) -> Any:
+        def cancel(goal_handle: Any) -> CancelResponse:  # executor thread: hand off only
+            self._hub.call_soon(self._forward_cancel, served,
+                                bytes(goal_handle.goal_id.uuid).hex())
+            return CancelResponse.ACCEPT
+        return cancel
+
+    def _forward_goal(self, served: ServedAction, goal_id: str, handle: Any,
+                      answer: RosFuture) -> None:
+        """A ROS goal for a served action (loop thread): ask the client that serves it."""
+        goal = _ServedGoal(served, goal_id, handle, answer)
+        if served.closed:
+            self._settle(goal, None)
+            return
+        served.received += 1
+        try:
+            text = ActionGoal(action=served.action, type=served.ros_type, goal_id=goal_id,
+                              goal=message_to_dict(handle.request),
+                              timeout=served.goal_timeout).to_json()
+        except (CodecError, CommandError) as error:
+            log.warning("cannot forward a goal of %s to its client (%s); it is aborted",
+                        served.action, error)
+            self._settle(goal, None)
+            return
+        goal.command_id = next(self._ids)
+        goal.timer = asyncio.get_running_loop().call_later(
+            served.goal_timeout, self._expire, served.owner, goal.command_id)
+        self._pending[(served.owner, goal.command_id)] = goal
+        served.goals[goal_id] = goal
+        served.owner.send_message(Message(
+            device_name=served.device,
+            body=Command(command_id=goal.command_id, name=ActionGoal.op, text=text),
+            metadata=metadata_for(served.key, ros_type=served.ros_type)))
+
+    def _forward_cancel(self, served: ServedAction, goal_id: str) -> None:
+        goal = served.goals.get(goal_id)
+        if served.closed or goal is None:
+            return
+        text = ActionCancel(action=served.action, goal_id=goal_id).to_json()
+        served.owner.send_message(Message(
+            device_name=served.device,
+            body=Command(command_id=next(self._ids), name=ActionCancel.op, text=text),
+            metadata=metadata_for(served.key, ros_type=served.ros_type)))
+
+    def action_feedback(self, request: ActionFeedback, client: Optional[Replier]
+                        ) -> dict[str, Any]:
+        action = resolve_name(self._ros, request.action, "action")
+        served = self.served.get(action)
+        goal = served.goals.get(request.goal_id) if served is not None else None
+        if served is None or goal is None or (client is not None and served.owner is not client):
+            raise CommandFailedError("goal_id", f"a goal of {action} this client is executing",
+                                     request.goal_id, code=ErrorCode.NOT_FOUND)
+        feedback = message_from_json(served.cls.Feedback, request.feedback, "feedback")
+        goal.feedbacks += 1
+        # Published now, in order with the client's answer that ends the goal (rcl's publish
+        # is thread-safe; the goal handle's own lock guards against its destruction).
+        goal.handle.publish_feedback(feedback)
+        return {"action": action, "goal_id": goal.goal_id, "feedbacks": goal.feedbacks}
+
+    def _on_reply(self, message: Message, client: Replier) -> None:
+        body = message.body
+        if not isinstance(body, RtsCommand):
+            return
+        goal = self._pending.get((client, body.command_id))
+        if goal is None:
+            return  # not ours (a service's), or it came after the timeout
+        self._settle(goal, self._outcome_from(goal.served, body.text))
+
+    def _outcome_from(self, served: ServedAction, text: str) -> Optional[tuple[str, Any]]:
+        """The client's answer -> (status, Result), judged by its JSON; None (abort) with a
+        warning if unusable."""
+        try:
+            data = client_answer(text)
+            status = data.get("status", "succeeded")
+            if status not in c.SERVED_OUTCOMES:
+                raise CommandFailedError("status", "one of " + "|".join(c.SERVED_OUTCOMES),
+                                         repr(status), code=ErrorCode.OUT_OF_RANGE)
+            raw = data.get("result", {})
+            if not isinstance(raw, dict):
+                raise WrongTypeError("result", "an object with the result fields",
+                                     type(raw).__name__)
+            return status, message_from_json(served.cls.Result, raw, "result")
+        except (CommandError, CodecError) as error:
+            log.warning("the answer to a goal of %s is unusable (%s); the goal is aborted",
+                        served.action, error)
+            return None
+
+    def _expire(self, owner: Replier, command_id: int) -> None:
+        goal = self._pending.get((owner, command_id))
+        if goal is None:
+            return
+        log.warning("client %s did not end a goal of %s within %g s; it is aborted",
+                    getattr(owner, "peer", "?"), goal.served.action, goal.served.goal_timeout)
+        self._settle(goal, None)
+
+    def _settle(self, goal: _ServedGoal, outcome: Optional[tuple[str, Any]]) -> None:
+        self._pending.pop((goal.served.owner, goal.command_id), None)
+        goal.served.goals.pop(goal.goal_id, None)
+        if goal.timer is not None:
+            goal.timer.cancel()
+        if not goal.answer.done():
+            goal.answer.set_result(outcome)
+        # The executor resumes a waiting coroutine only when something wakes it.
+        self._ros.executor.wake()
+
+    def _unadvertise(self, served: ServedAction) -> None:
+        served.closed = True
+        self.served.pop(served.action, None)
+        for goal in list(served.goals.values()):
+            self._settle(goal, None)
+        self._names.release(served.key)
+        self._destroy_later(served)
+        log.info("no longer serving action %s", served.action)
+
+    def _destroy_later(self, served: ServedAction) -> None:
+        """Destroy the server in the executor thread once no goal is executing, and not
+        before the ROS clients had time to fetch the results."""
+        asyncio.get_running_loop().call_later(
+            self._linger_s, lambda: self._ros.executor.create_task(self._destroy_if_idle,
+                                                                   served))
+
+    def _destroy_if_idle(self, served: ServedAction) -> None:
+        if served.executing:
+            served.destroy_pending = True
+            return
+        served.destroy_pending = False
+        if served.server is not None:
+            destroy_quietly(served.server, served.action)
+            served.server = None
+
+    def _on_client_closed(self, client: Replier) -> None:
+        for served in [s for s in self.served.values() if s.owner is client]:
+            self._unadvertise(served)
+
+    def describe(self) -> list[dict[str, Any]]:
+        return [_describe_served(served) for served in self.served.values()]
+
+    def close(self) -> None:
+        # The node (with its action servers) is destroyed right after; only make sure no
+        # executing goal waits for a client that is gone.
+        for served in list(self.served.values()):
+            served.closed = True
+            for goal in list(served.goals.values()):
+                if goal.timer is not None:
+                    goal.timer.cancel()
+                if not goal.answer.done():
+                    goal.answer.set_result(None)
+        self._ros.executor.wake()
+        self._pending.clear()
+        self.served.clear()
+
+
+def _describe_served(served: ServedAction, existed: bool | None = None) -> dict[str, Any]:
+    out: dict[str, Any] = {"kind": "action_server", "action": served.action,
+                           "type": served.ros_type, "device": served.device,
+                           "goals": served.received}
+    if existed is not None:
+        out["existed"] = existed
+    return out

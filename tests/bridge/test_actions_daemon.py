@@ -1,0 +1,370 @@
+"""ROS 2 actions through the real daemon: goals sent to a real rclpy action server in another
+process (feedback order, result, cancel mid-goal, two goals at once, a server that dies
+mid-goal, an absent server, a rejected goal, a result timeout), and an action a TCP client
+serves, driven by a real rclpy ActionClient in another process.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from typing import Any, Iterator
+
+import pytest
+
+import slicer_client
+from protocol.commands import ErrorCode
+from protocol.messages import String
+from protocol.naming import KEY_ACTION, KEY_GOAL_ID, KEY_GOAL_STATUS, KEY_ROLE
+from slicer_client.actions import ActionGoalError
+from slicer_client.client import Client
+from slicer_client.connection import CommandRefusedError, Connection
+from support import Child, Processes, RunningDaemon, scaled, start_daemon, wait_until
+
+pytestmark = pytest.mark.ros
+
+GRIPPER = "control_msgs/action/GripperCommand"
+
+
+def goal(position: float, effort: float = 2.0) -> dict[str, Any]:
+    return {"command": {"position": position, "max_effort": effort}}
+
+
+@pytest.fixture(scope="module")
+def daemon(module_processes: Processes) -> RunningDaemon:
+    return start_daemon(module_processes)
+
+
+@pytest.fixture(scope="module")
+def server(module_processes: Processes) -> Child:
+    child = module_processes.python("gripper", "gripper_action_server.py", "--steps", "5",
+                                    "--period", "0.1")
+    child.wait_for_output("READY")
+    return child
+
+
+@pytest.fixture
+def ros(daemon: RunningDaemon) -> Iterator[Client]:
+    client = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
+    yield client
+    client.close()
+
+
+def refused(call: Any) -> CommandRefusedError:
+    with pytest.raises(CommandRefusedError) as info:
+        call()
+    return info.value
+
+
+def slow_server(processes: Processes, action: str = "/slow_gripper", *,
+                period: float = 0.05, threads: int = 4) -> Child:
+    """A gripper server that takes 100 steps of `period` s per goal."""
+    child = processes.python("slow-gripper", "gripper_action_server.py", "--action", action,
+                             "--steps", "100", "--period", str(period), "--threads",
+                             str(threads))
+    child.wait_for_output("READY")
+    return child
+
+
+def test_feedback_in_order_then_the_result(ros: Client, server: Child) -> None:
+    seen: list[float] = []
+    gripper = ros.action("/gripper", GRIPPER)
+    handle = gripper.send_goal(goal(0.5), feedback=lambda fb: seen.append(fb["position"]),
+                               timeout=scaled(10))
+    result = handle.result(timeout=scaled(10))
+    assert handle.status == "succeeded"
+    assert result == {"position": 0.5, "effort": 2.0, "stalled": False, "reached_goal": True}
+    assert [round(p, 6) for p in seen] == [0.1, 0.2, 0.3, 0.4, 0.5]
+    assert [round(f["position"], 6) for f in handle.feedback] == [0.1, 0.2, 0.3, 0.4, 0.5]
+    assert handle.done and handle.device.startswith("goal:grippe")
+
+
+def test_goal_events_on_the_wire(daemon: RunningDaemon, server: Child) -> None:
+    """What a client without the Pythonic layer (3D Slicer) sees: STRING messages on the
+    goal's device, JSON, with ros2.* metadata naming the action, goal and status."""
+    events: list[tuple[str, dict[str, str], dict[str, Any]]] = []
+    done = threading.Event()
+
+    def on_message(message: Any) -> None:  # receive thread
+        if isinstance(message.body, String) and message.metadata.get(KEY_GOAL_ID):
+            event = json.loads(message.body.text)
+            events.append((message.device_name, dict(message.metadata), event))
+            if event["event"] == "result":
+                done.set()
+
+    connection = Connection("127.0.0.1", daemon.port, on_message=on_message)
+    try:
+        reply = connection.command("send_goal", {"action": "gripper",
+                                                 "type": "control_msgs/GripperCommand",
+                                                 "goal": goal(1.0), "timeout": scaled(10),
+                                                 "goal_id": "0123456789abcdef0123456789ABCDEF"})
+        assert reply["goal_id"] == "0123456789abcdef0123456789abcdef"
+        assert reply["status"] == "accepted" and reply["action"] == "/gripper"
+        assert done.wait(scaled(10))
+    finally:
+        connection.close()
+    devices = {device for device, _, _ in events}
+    assert devices == {reply["device"]}
+    kinds = [event["event"] for _, _, event in events]
+    assert kinds == ["feedback"] * 5 + ["result"]
+    assert [event["seq"] for _, _, event in events[:5]] == [1, 2, 3, 4, 5]
+    _, meta, last = events[-1]
+    assert meta[KEY_ROLE] == "action_goal" and meta[KEY_ACTION] == "/gripper"
+    assert meta[KEY_GOAL_ID] == reply["goal_id"] and meta[KEY_GOAL_STATUS] == "succeeded"
+    assert last["result"]["position"] == 1.0 and last["feedbacks"] == 5
+    assert events[0][1][KEY_GOAL_STATUS] == "executing"
+
+
+def test_cancel_mid_goal(ros: Client, processes: Processes) -> None:
+    slow = slow_server(processes)
+    first = threading.Event()
+    handle = ros.action("/slow_gripper", GRIPPER).send_goal(
+        goal(1.0), feedback=lambda fb: first.set(), timeout=scaled(10))
+    assert first.wait(scaled(10))
+    assert handle.cancel(timeout=scaled(5)) is True
+    result = handle.result(timeout=scaled(10))
+    assert handle.status == "canceled"
+    assert 0.0 < result["position"] < 1.0 and not result["reached_goal"]
+    slow.wait_for_output("CANCELED")
+    # The goal is gone: cancelling it again names it.
+    error = refused(lambda: handle.cancel())
+    assert error.code == ErrorCode.NOT_FOUND and error.field == "goal_id"
+
+
+def test_two_goals_at_once(ros: Client, server: Child) -> None:
+    gripper = ros.action("/gripper", GRIPPER)
+    a = gripper.send_goal(goal(1.0), timeout=scaled(10))
+    b = gripper.send_goal(goal(-2.0), timeout=scaled(10))
+    assert a.goal_id != b.goal_id and a.device != b.device
+    assert a.result(scaled(10))["position"] == 1.0
+    assert b.result(scaled(10))["position"] == -2.0
+    # Each goal got its own feedback, and only its own.
+    assert [round(f["position"], 6) for f in a.feedback] == [0.2, 0.4, 0.6, 0.8, 1.0]
+    assert [round(f["position"], 6) for f in b.feedback] == [-0.4, -0.8, -1.2, -1.6, -2.0]
+
+
+def test_a_server_that_dies_mid_goal_ends_the_goal_lost(ros: Client, processes: Processes
+                                                        ) -> None:
+    dying = processes.python("dying", "gripper_action_server.py", "--action", "/dying",
+                             "--steps", "100", "--period", "0.05", "--die-after", "2")
+    dying.wait_for_output("READY")
+    handle = ros.action("/dying", GRIPPER).send_goal(goal(1.0), timeout=scaled(10))
+    dying.wait_for_output("FEEDBACK")
+    # DDS notices a crashed participant only when its lease runs out (Fast DDS: 20 s):
+    # the wait is bounded by that, not by luck.
+    with pytest.raises(ActionGoalError) as ended:
+        handle.result(timeout=scaled(40))
+    assert ended.value.status == "lost"
+    assert "went away" in str(ended.value)
+
+
+def test_absent_server_is_unavailable(ros: Client) -> None:
+    error = refused(lambda: ros.action("/nobody", GRIPPER).send_goal(goal(1.0), timeout=0.5))
+    assert error.code == ErrorCode.UNAVAILABLE and error.field == "action"
+    assert "no server after 0.5 s" in str(error)
+
+
+def test_rejected_goal(ros: Client, server: Child) -> None:
+    error = refused(lambda: ros.action("/gripper", GRIPPER).send_goal(goal(1.0, effort=-1),
+                                                                      timeout=scaled(10)))
+    assert error.code == ErrorCode.REJECTED and error.field == "goal"
+    assert "rejected" in str(error)
+    server.wait_for_output("REJECTED")
+
+
+def test_result_timeout_cancels_the_goal(ros: Client, processes: Processes) -> None:
+    slow = slow_server(processes)
+    handle = ros.action("/slow_gripper", GRIPPER).send_goal(
+        goal(1.0), timeout=scaled(10), result_timeout=0.5)
+    with pytest.raises(ActionGoalError) as ended:
+        handle.result(timeout=scaled(10))
+    assert ended.value.status == "timeout" and "result_timeout" in str(ended.value)
+    slow.wait_for_output("CANCELED")  # the daemon asked the server to stop
+
+
+def test_a_client_side_wait_that_ends_first_raises_timeout(ros: Client, server: Child) -> None:
+    handle = ros.action("/gripper", GRIPPER).send_goal(goal(1.0), timeout=scaled(10))
+    with pytest.raises(TimeoutError):
+        handle.result(timeout=0.01)
+    assert handle.result(timeout=scaled(10))["reached_goal"] is True
+
+
+def test_bad_goals_are_named(ros: Client, server: Child) -> None:
+    error = refused(lambda: ros.command("send_goal", {
+        "action": "/gripper", "type": GRIPPER, "goal": {"command": {"position": "far"}}}))
+    assert error.code == ErrorCode.WRONG_TYPE and error.field.startswith("goal.command")
+    error = refused(lambda: ros.command("send_goal", {"action": "/gripper",
+                                                      "type": "control_msgs/action/Nope"}))
+    assert error.code == ErrorCode.UNKNOWN_ROS_TYPE and error.field == "type"
+    error = refused(lambda: ros.command("send_goal", {"action": "/gripper", "type": GRIPPER,
+                                                      "goal_id": "not-a-uuid"}))
+    assert error.code == ErrorCode.OUT_OF_RANGE and error.field == "goal_id"
+    error = refused(lambda: ros.command("cancel_goal", {
+        "action": "/gripper", "goal_id": "0" * 32}))
+    assert error.code == ErrorCode.NOT_FOUND
+
+
+def test_list_actions(ros: Client, server: Child) -> None:
+    def listed() -> bool:
+        actions = ros.command("list_actions")["actions"]
+        return {"action": "/gripper", "types": [GRIPPER]} in actions
+    wait_until(listed, 20, "/gripper in list_actions")
+
+
+# ---------------------------------------------------------------------------- served
+
+
+def test_an_action_served_by_the_client(ros: Client, processes: Processes) -> None:
+    seen: list[dict[str, Any]] = []
+
+    def execute(request: dict[str, Any], feedback: Any, cancelled: Any) -> tuple[str, Any]:
+        seen.append(request)
+        target = request["command"]["position"]
+        for step in (1, 2, 3):
+            feedback({"position": target * step / 3})
+        return "succeeded", {"position": target, "reached_goal": True}
+
+    served = ros.serve_action("/served_gripper", GRIPPER, execute)
+    assert served.device == "act:served_gripper"
+    caller = processes.python("caller", "gripper_action_client.py", "/served_gripper", "0.3")
+    line = caller.wait_for_output("RESULT ", timeout=30)
+    result = json.loads(line[line.index("RESULT ") + 7:])
+    assert result == {"status": 4, "position": 0.3, "reached_goal": True}  # SUCCEEDED
+    feedback = [float(x.split()[1]) for x in caller.output().splitlines()
+                if x.startswith("FEEDBACK ")]
+    assert [round(f, 6) for f in feedback] == [0.1, 0.2, 0.3]
+    assert seen == [{"command": {"position": 0.3, "max_effort": 1.0}}]
+    bridges = ros.list_bridges()["bridges"]
+    assert {"kind": "action_server", "action": "/served_gripper", "type": GRIPPER,
+            "device": "act:served_gripper", "goals": 1} in bridges
+
+
+def test_a_served_goal_is_cancelled_by_its_ros_client(ros: Client, processes: Processes
+                                                      ) -> None:
+    cancelled_seen = threading.Event()
+
+    def execute(request: dict[str, Any], feedback: Any, cancelled: Any) -> tuple[str, Any]:
+        feedback({"position": 0.1})
+        wait_until(cancelled, 30, "the cancel request")
+        cancelled_seen.set()
+        return "canceled", {"position": 0.1}
+
+    ros.serve_action("/cancel_me", GRIPPER, execute)
+    caller = processes.python("caller", "gripper_action_client.py", "/cancel_me", "0.3",
+                              "--cancel-after", "1")
+    assert caller.wait_for_output("CANCEL ", timeout=30).endswith("CANCEL 0")
+    line = caller.wait_for_output("RESULT ", timeout=30)
+    assert json.loads(line[line.index("RESULT ") + 7:])["status"] == 5  # CANCELED
+    assert cancelled_seen.is_set()
+
+
+def test_a_served_goal_aborts_when_its_client_leaves(daemon: RunningDaemon,
+                                                     processes: Processes) -> None:
+    leaving = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
+    started, release = threading.Event(), threading.Event()
+
+    def execute(request: dict[str, Any], feedback: Any, cancelled: Any) -> tuple[str, Any]:
+        started.set()
+        release.wait(scaled(30))  # the client leaves before
+        return "succeeded", {}
+
+    leaving.serve_action("/left_behind", GRIPPER, execute)
+    caller = processes.python("caller", "gripper_action_client.py", "/left_behind", "0.3")
+    assert started.wait(scaled(20))
+    leaving.close()
+    try:
+        line = caller.wait_for_output("RESULT ", timeout=30)
+    finally:
+        release.set()
+    assert json.loads(line[line.index("RESULT ") + 7:])["status"] == 6  # ABORTED
+
+
+def test_serving_errors(ros: Client, server: Child) -> None:
+    wait_until(lambda: any(a["action"] == "/gripper"
+                           for a in ros.command("list_actions")["actions"]), 20, "discovery")
+    error = refused(lambda: ros.command("advertise_action", {"action": "/gripper",
+                                                             "type": GRIPPER}))
+    assert error.code == ErrorCode.ALREADY_EXISTS
+    error = refused(lambda: ros.command("action_feedback", {
+        "action": "/gripper", "goal_id": "0" * 32, "feedback": {}}))
+    assert error.code == ErrorCode.NOT_FOUND
+    error = refused(lambda: ros.command("unadvertise_action", {"action": "/gripper"}))
+    assert error.code == ErrorCode.NOT_FOUND
+    error = refused(lambda: ros.command("action_goal", {
+        "action": "/x", "type": GRIPPER, "goal_id": "0" * 32, "goal": {}}))
+    assert error.code == ErrorCode.NOT_SUPPORTED  # the daemon sends it, no client may
+
+
+def test_the_reference_style_facade(ros: Client, server: Child) -> None:
+    node = ros.GetDefaultROS2Node()
+    client = node.CreateAndAddActionClientNode(GRIPPER, "/gripper")
+    assert node.CreateAndAddActionClientNode(GRIPPER, "/gripper") is client
+    assert node.GetActionClientNodeByName("/gripper") is client
+    events: list[str] = []
+    client.AddObserver("ModifiedEvent", lambda caller, event: events.append(event))
+    assert client.GetGoalStatus() == "" and client.GetLastResult() is None
+    goal_id = client.SendGoal(goal(0.25), timeout=scaled(10))
+    assert len(goal_id) == 32
+    assert client.WaitForResult(scaled(10))["position"] == 0.25
+    wait_until(lambda: len(events) == 6, 10, "5 feedback events and the end")
+    assert client.GetGoalStatus() == "succeeded" and client.GetNumberOfFeedbacks() == 5
+    assert client.GetLastFeedback()["position"] == pytest.approx(0.25)
+    assert client.GetLastResult()["reached_goal"] is True
+    assert client.CancelGoal() is False  # it has ended
+    assert node.RemoveAndDeleteActionClientNode("/gripper") is True
+    assert node.GetActionClientNodeByName("/gripper") is None
+
+
+def test_goals_in_flight_are_bounded_per_client_and_cancelled_when_it_leaves(
+        daemon: RunningDaemon, processes: Processes) -> None:
+    slow = slow_server(processes, "/bounded", period=0.5, threads=40)
+    greedy = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
+    other = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
+    try:
+        action = greedy.action("/bounded", GRIPPER)
+        handles = [action.send_goal(goal(1.0), timeout=scaled(10)) for _ in range(32)]
+        error = refused(lambda: action.send_goal(goal(1.0), timeout=scaled(10)))
+        assert error.code == ErrorCode.LIMIT_REACHED and error.field == "goal"
+        assert "at most 32 goals in flight per client" in str(error)
+        # Another client has its own count, and cannot cancel this client's goals.
+        mine = other.action("/bounded", GRIPPER).send_goal(goal(0.5), timeout=scaled(10))
+        error = refused(lambda: other.command("cancel_goal", {
+            "action": "/bounded", "goal_id": handles[0].goal_id}))
+        assert error.code == ErrorCode.NOT_FOUND
+        goals = [b for b in greedy.list_bridges()["bridges"] if b["kind"] == "goal"]
+        assert len(goals) == 33 and {g["device"] for g in goals} >= {h.device for h in handles}
+        assert mine.cancel(timeout=scaled(5))
+        assert mine.result(scaled(10)) is not None and mine.status == "canceled"
+    finally:
+        greedy.close()
+        other.close()
+    # The greedy client left: its goals are cancelled, none of them runs to the end.
+    wait_until(lambda: slow.output().count("CANCELED") >= 33, 20, "every goal cancelled")
+    assert "DONE" not in slow.output()
+
+
+def test_a_lost_connection_ends_the_goals_and_a_served_action_comes_back(
+        processes: Processes) -> None:
+    slow_server(processes, "/far")
+    daemon = start_daemon(processes)
+    ros = slicer_client.connect("127.0.0.1", daemon.port, retry_interval=0.2)
+    back = threading.Event()
+    ros.on_connection_change(lambda connected, reason: connected and back.set())
+    try:
+        handle = ros.action("/far", GRIPPER).send_goal(goal(1.0), timeout=scaled(10))
+        ros.serve_action("/back", GRIPPER,
+                         lambda g, fb, cancelled: ("succeeded", {"position": 0.7}))
+        daemon.child.stop()  # the daemon goes away mid-goal
+        with pytest.raises(ActionGoalError) as ended:
+            handle.result(timeout=scaled(10))
+        assert ended.value.status == "lost" and "connection" in str(ended.value)
+        # A new daemon on the same port: the client advertises its action again.
+        again = processes.bridge("run", "--port", str(daemon.port))
+        again.wait_for_output("listening on", timeout=30)
+        assert back.wait(scaled(20))
+        caller = processes.python("caller", "gripper_action_client.py", "/back", "0.7")
+        line = caller.wait_for_output("RESULT ", timeout=30)
+        assert json.loads(line[line.index("RESULT ") + 7:]) == {
+            "status": 4, "position": 0.7, "reached_goal": False}
+    finally:
+        ros.close()
