@@ -24,3 +24,13 @@ def test_protocol_is_mypy_strict_clean() -> None:
     result = run_tool("mypy")
     assert result.returncode == 0, result.stdout + result.stderr
     assert "Success" in result.stdout
+
+
+def test_the_daemon_starts_without_the_mesh_libraries() -> None:
+    """yourdfpy and trimesh (about 80 MB of RSS) load with the first robot or marker mesh,
+    not at start: a daemon that only streams topics stays small."""
+    code = ("import sys; import bridge.daemon; "
+            "print(sorted(m for m in ('trimesh', 'yourdfpy') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True,
+                         text=True, timeout=120, check=True)
+    assert out.stdout.strip() == "[]", out.stderr

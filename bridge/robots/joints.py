@@ -17,10 +17,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from bridge.robots.description import JointSpec
 from protocol.commands import OutOfRangeError
+
+if TYPE_CHECKING:  # bridge.robots.description loads yourdfpy and trimesh (about 80 MB)
+    from bridge.robots.description import JointSpec
 
 __all__ = ["LIMIT_TOLERANCE", "describe_joints", "joint_positions"]
 
