@@ -2,7 +2,10 @@
 
 Bridges are daemon-wide, as with an OpenIGTLink server in 3D Slicer: every client receives
 every streamed device, and a client that connects gets the current state at once (the
-newest value of each streamed device, and every persistent one-shot such as a robot mesh).
+newest value of each streamed device, and every persistent one-shot such as a robot mesh),
+except what a late ROS subscriber would not get either: the newest image or point cloud of
+a volatile topic is not kept once sent (`keep_latest`), as it may be tens of MB and the next
+one is on its way.
 
 Threads: the asyncio loop owns the clients and their buffers. ROS callbacks run in an
 executor thread and hand values over through a `StreamChannel` (`post_frame`):
@@ -91,6 +94,7 @@ class Hub:
         self.clients: set[Subscriber] = set()
         self._client_tuple: tuple[Subscriber, ...] = ()  # what other threads iterate
         self._latest: dict[str, Frame] = {}
+        self._not_kept: set[str] = set()  # devices whose newest value is not kept
         self._persistent: dict[str, Frame] = {}
         self._inbound: dict[str, InboundHandler] = {}
         self._reply_listeners: list[ReplyListener] = []
@@ -146,7 +150,8 @@ class Hub:
                     self._held[device] = frame
                     return
                 self._last_sent[device] = now
-        self._latest[device] = frame
+        if device not in self._not_kept:
+            self._latest[device] = frame
         self.streamed += 1
         for client in tuple(self.clients):
             client.send_stream(device, frame)
@@ -181,6 +186,14 @@ class Hub:
         for client in tuple(self.clients):
             client.send_once(frame)
 
+    def keep_latest(self, device: str, keep: bool) -> None:
+        """Whether clients that connect later get ``device``'s newest value (default)."""
+        if keep:
+            self._not_kept.discard(device)
+        else:
+            self._not_kept.add(device)
+            self._latest.pop(device, None)
+
     def set_rate_cap(self, device: str, max_hz: float | None) -> None:
         if max_hz:
             self._min_interval[device] = 1.0 / max_hz
@@ -196,6 +209,7 @@ class Hub:
             self._incoming_large.pop(device, None)
             self._latest.pop(device, None)
         self._persistent.pop(device, None)
+        self._not_kept.discard(device)
         self._held.pop(device, None)
         self._min_interval.pop(device, None)
         self._last_sent.pop(device, None)

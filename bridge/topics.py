@@ -97,6 +97,9 @@ class SubscriberBridge:
         self._bad = RateLimitedLog(log)  # a stream of bad messages: one line per interval
         self._channel = hub.open_channel(device)
         hub.set_rate_cap(device, max_rate_hz)
+        # A volatile image or cloud is not kept for clients that connect later (a late ROS
+        # subscriber would not get it either): 20 MB clouds would stay in memory for good.
+        hub.keep_latest(device, not codec.bulk or qos.durability == "transient_local")
         # A filtered stream needs the message itself: only unfiltered poses go raw.
         self._fast = (RawPoseStream(codec, device, metadata)
                       if has_fast_path(codec.ros_type) and message_filter is None else None)

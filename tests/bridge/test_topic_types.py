@@ -385,3 +385,14 @@ def test_bulk_types_keep_one_message_and_a_large_last_message_is_not_kept(
     assert refused.value.field == "topic"
     assert "at most 8388608 bytes" in str(refused.value)
     assert "9600" in str(refused.value)  # the size it had (9,600,0xx bytes serialized)
+    # Nor does the daemon keep the image for clients that connect later (a late ROS
+    # subscriber of a volatile topic gets nothing either); a small stream's value it keeps.
+    small_device = small["device"]
+    processes.python("talker", "publish_json.py", string_topic, "std_msgs/msg/String",
+                     json.dumps({"data": "kept"}))
+    client.wait_for(small_device, timeout=scaled(30))
+    with Connection("127.0.0.1", daemon.port) as late:
+        late.command("list_bridges")  # sent after what the daemon gives a client at attach
+        assert late.latest(created["device"]) is None
+        kept = late.latest(small_device)
+        assert kept is not None and kept.body.text == "kept"
