@@ -32,7 +32,9 @@ convert on the ROS callback or the loop. The callback only queues the message (a
 topic reads and meshes; the loop only publishes. A worker that falls behind reads what
 waits in one go and meshes only the newest state of each marker (the end state is the
 same as reading the messages one by one; the states in between are skipped), so it
-catches up. A marker re-sent unchanged (RViz
+catches up; while the loop is behind it keeps reading into that end state, so the queue
+stays short and a DELETE is not lost with an old message (only a worker that cannot even
+read as fast as messages come loses the oldest, counted). A marker re-sent unchanged (RViz
 publishers re-publish whole arrays) costs its reading and a digest, and no message: its
 model is neither rebuilt nor re-sent, nor handed to the loop unless its lifetime must be
 renewed.
@@ -94,6 +96,7 @@ log = logging.getLogger(__name__)
 
 MAX_QUEUED = 64  # messages waiting for a topic's worker; past that the oldest go
 MAX_MARKERS = 10_000  # live markers of one topic; more are refused (STATUS)
+_MAX_REFUSALS_KEPT = 16  # whole-message refusals folded while the loop is behind
 _MAX_IN_FLIGHT = 4  # batches handed to the loop and not applied yet (worker waits)
 
 MarkerKey = tuple[str, int]  # (ns, id)
@@ -151,6 +154,15 @@ class _FrameRef:
     users: int = 0
 
 
+@dataclass
+class _Folded:
+    """Messages read but not handed to the loop yet, as their end state (`_Worker._fold`)."""
+
+    refused: list[_Update] = field(default_factory=list)
+    delete_all: bool = False
+    last: dict[MarkerKey, MarkerEvent] = field(default_factory=dict)
+
+
 class _Worker:
     """One topic's reader: a bounded queue of messages, one thread that meshes them."""
 
@@ -161,7 +173,7 @@ class _Worker:
         self._package_paths = dict(package_paths)
         self._queue: deque[Any] = deque()
         self._cond = threading.Condition()
-        self._in_flight = threading.Semaphore(_MAX_IN_FLIGHT)
+        self._in_flight = 0  # batches handed to the loop, not applied yet (under _cond)
         self._stopped = False
         # (ns, id) -> (digest, model) of what was last meshed: an unchanged marker is
         # handed on without meshing; the loop may have expired it and needs the model.
@@ -184,7 +196,9 @@ class _Worker:
             self._cond.notify()
 
     def applied(self) -> None:  # loop thread: a batch is done
-        self._in_flight.release()
+        with self._cond:
+            self._in_flight -= 1
+            self._cond.notify()
 
     def forget(self, key: MarkerKey) -> None:  # loop thread: dropped there
         with self._lock:
@@ -199,29 +213,40 @@ class _Worker:
             self._stopped = True
             self._queue.clear()
             self._cond.notify()
-        self._in_flight.release()  # a worker waiting on the loop must see the stop
 
     def _run(self) -> None:
+        # While the loop is behind (`_MAX_IN_FLIGHT` batches not applied), the worker keeps
+        # reading what arrives into one folded end state (`_fold`), so the queue of raw
+        # messages stays short and no DELETE is dropped with an old message; the folded
+        # state is meshed and handed over once the loop takes batches again.
+        folded: Optional[_Folded] = None
         while True:
             with self._cond:
-                while not self._queue and not self._stopped:
+                while not self._stopped and not self._queue and not (
+                        folded is not None and self._in_flight < _MAX_IN_FLIGHT):
                     self._cond.wait()
                 if self._stopped:
                     return
-                # Everything waiting, read together: a worker that fell behind meshes only
-                # the newest state of each marker (see `_fold`), so it catches up.
                 messages = list(self._queue)
                 self._queue.clear()
+                can_hand_over = self._in_flight < _MAX_IN_FLIGHT
             try:
-                updates = self._updates(messages)
+                if messages:
+                    folded = self._fold(messages, folded)
+                if folded is None or not can_hand_over:
+                    continue
+                updates = self._updates(folded)
+                folded = None
             except Exception:  # noqa: BLE001 - a bug on one message must not end the topic
                 log.exception("markers on %s: a message could not be read", self._sub.topic)
+                folded = None
                 continue
             if not updates:
                 continue  # nothing changed (an array re-sent as it was): no loop wake-up
-            self._in_flight.acquire()
-            if self._stopped:
-                return
+            with self._cond:
+                if self._stopped:
+                    return
+                self._in_flight += 1
             self._sub.hand_over(updates)
 
     def _events(self, msg: Any) -> list[MarkerEvent]:
@@ -234,33 +259,32 @@ class _Worker:
                 msg = deserialize_message(msg, sub.message_class)
         return events_of(sub.ros_type, msg)
 
-    def _fold(self, messages: list[Any]) -> tuple[list[_Update], bool,
-                                                  dict[MarkerKey, MarkerEvent]]:
-        """The messages' events folded into their end state, in order: (messages refused
-        whole, whether a DELETEALL came, the last event of each marker after the last
-        DELETEALL). Applying that end state leaves the loop where applying every message
-        in turn would; only the states in between are skipped."""
-        refused: list[_Update] = []
-        delete_all = False
-        last: dict[MarkerKey, MarkerEvent] = {}
+    def _fold(self, messages: list[Any], into: Optional[_Folded] = None) -> _Folded:
+        """The messages' events folded into their end state, in order, after ``into``
+        (what was folded before): messages refused whole, whether a DELETEALL came, the last
+        event of each marker after the last DELETEALL. Applying that end state leaves the
+        loop where applying every message in turn would; only the states in between are
+        skipped."""
+        folded = into if into is not None else _Folded()
         for msg in messages:
             try:
                 events = self._events(msg)
             except MarkerError as error:
-                refused.append(_MessageRefused(error))
+                folded.refused.append(_MessageRefused(error))
+                del folded.refused[:-_MAX_REFUSALS_KEPT]  # the newest say enough
                 continue
             for event in events:
                 if event.action == DELETEALL:
-                    delete_all = True
-                    last.clear()
+                    folded.delete_all = True
+                    folded.last.clear()
                     continue
                 key = (event.ns, event.id)
-                last.pop(key, None)  # keep the order of the latest events
-                last[key] = event
-        return refused, delete_all, last
+                folded.last.pop(key, None)  # keep the order of the latest events
+                folded.last[key] = event
+        return folded
 
-    def _updates(self, messages: list[Any]) -> list[_Update]:
-        out, delete_all, events = self._fold(messages)
+    def _updates(self, folded: _Folded) -> list[_Update]:
+        out, delete_all, events = list(folded.refused), folded.delete_all, folded.last
         if delete_all:
             with self._lock:
                 self._models.clear()

@@ -185,16 +185,85 @@ def test_a_worker_behind_folds_what_waits_into_its_end_state() -> None:
     worker = _Worker(Sub(), (), {})  # type: ignore[arg-type]
     try:
         # Moved twice then deleted, another added: only the end state is handed on.
-        updates = worker._updates([raw(cube(1), cube(2)), raw(cube(1, 0.5)),
-                                   raw(cube(1, action=Marker.DELETE), cube(3))])
+        updates = worker._updates(worker._fold([raw(cube(1), cube(2)), raw(cube(1, 0.5)),
+                                                raw(cube(1, action=Marker.DELETE), cube(3))]))
         assert [(type(u).__name__, getattr(u, "key", None)) for u in updates] == [
             ("_Show", ("", 2)), ("_Gone", ("", 1)), ("_Show", ("", 3))]
         # DELETEALL in between: everything before it goes, what follows stays.
-        updates = worker._updates([raw(cube(4)), raw(Marker(action=Marker.DELETEALL),
-                                                     cube(5, 1.0))])
+        updates = worker._updates(worker._fold([raw(cube(4)), raw(
+            Marker(action=Marker.DELETEALL), cube(5, 1.0))]))
         assert isinstance(updates[0], _Gone) and updates[0].key is None
         assert [u.key for u in updates[1:] if isinstance(u, _Show)] == [("", 5)]
         # The same state again costs nothing: no update at all.
-        assert worker._updates([raw(cube(5, 1.0))]) == []
+        assert worker._updates(worker._fold([raw(cube(5, 1.0))])) == []
+        # Folded in two goes (the loop was behind in between): the same end state as one.
+        early = worker._fold([raw(cube(6)), raw(cube(7))])
+        updates = worker._updates(worker._fold([raw(cube(6, action=Marker.DELETE))], early))
+        assert [(type(u).__name__, getattr(u, "key", None)) for u in updates] == [
+            ("_Show", ("", 7)), ("_Gone", ("", 6))]
+    finally:
+        worker.stop()
+
+
+def test_a_delete_is_not_lost_while_the_loop_is_behind() -> None:
+    """The loop stops taking batches (its `_MAX_IN_FLIGHT` are not applied): the worker
+    keeps reading what arrives into its end state, so a DELETE followed by hundreds of
+    messages still reaches the loop once it takes batches again."""
+    import threading
+    import time
+
+    from bridge.markers.capability import _MAX_IN_FLIGHT, _Gone, _Show, _Worker
+    from support import scaled
+
+    handed: list[list[object]] = []
+    arrived = threading.Condition()
+
+    class Sub:
+        topic = "/m"
+        ros_type = "visualization_msgs/msg/MarkerArray"
+        message_class = MarkerArray
+
+        def hand_over(self, updates: list[object]) -> None:
+            with arrived:
+                handed.append(updates)
+                arrived.notify_all()
+
+    def cube(marker_id: int, x: float = 0.0, action: int = Marker.ADD) -> bytes:
+        m = Marker(type=Marker.CUBE, id=marker_id, action=action)
+        m.pose.position.x = x
+        m.scale.x = m.scale.y = m.scale.z = 0.1
+        return bytes(serialize_message(MarkerArray(markers=[m])))
+
+    def wait_for(predicate: object, what: str) -> None:
+        with arrived:
+            assert arrived.wait_for(predicate, scaled(30)), what  # type: ignore[arg-type]
+
+    def drained() -> None:  # the worker read all that waits (not a timing guess)
+        deadline = time.monotonic() + scaled(30)
+        while worker._queue and time.monotonic() < deadline:
+            time.sleep(0.001)
+        assert not worker._queue
+
+    worker = _Worker(Sub(), (), {})  # type: ignore[arg-type]
+    try:
+        for i in range(_MAX_IN_FLIGHT):  # the loop takes these and applies none
+            worker.put(cube(100 + i))
+            wait_for(lambda i=i: len(handed) == i + 1, "a batch per message while not behind")
+        worker.put(cube(9))
+        worker.put(cube(9, action=Marker.DELETE))
+        for chunk in range(10):  # 300 more, far over the 64 a queue holds
+            drained()
+            for n in range(30):
+                worker.put(cube(10, x=0.001 * (30 * chunk + n)))
+        drained()
+        assert worker.dropped == 0 and len(handed) == _MAX_IN_FLIGHT
+        for _ in range(_MAX_IN_FLIGHT):
+            worker.applied()
+        wait_for(lambda: len(handed) == _MAX_IN_FLIGHT + 1, "the folded end state")
+        last = handed[-1]
+        assert [(type(u).__name__, getattr(u, "key", None)) for u in last] == [
+            ("_Gone", ("", 9)), ("_Show", ("", 10))]
+        shown = last[1]
+        assert isinstance(shown, _Show) and isinstance(last[0], _Gone)
     finally:
         worker.stop()
