@@ -21,7 +21,7 @@ import itertools
 import logging
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any, Optional
+from typing import Any, Iterable, Optional
 
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.client import Client
@@ -56,6 +56,35 @@ def resolve_name(ros: RosNode, name: str, field: str) -> str:
         return ros.resolve_topic(name)
     except Exception as error:  # rclpy raises several name-validation exceptions
         raise OutOfRangeError(field, "a valid ROS name", f"{name!r} ({error})") from None
+
+
+def connected_client(client: Optional[Replier], field: str, why: str) -> Replier:
+    """The client a request came from; NOT_SUPPORTED for a start-up command (no client
+    to ``why``: answer the calls, get the feedback...)."""
+    if client is None:
+        raise CommandFailedError(field, f"a request from a connected client (it {why})",
+                                 "a start-up command", code=ErrorCode.NOT_SUPPORTED)
+    return client
+
+
+def already_served(kind: str, name: str, ros_type: str, client: Replier,
+                   owner: Optional[Replier], owner_type: str,
+                   graph: Iterable[tuple[str, list[str]]]) -> bool:
+    """Whether `client` already serves the ``kind`` (service, action) `name` as `ros_type`
+    (advertising again is idempotent); ALREADY_EXISTS if another client (`owner`, serving
+    it as `owner_type`) or a ROS node in `graph` ((name, types) pairs) serves it."""
+    if owner is not None:
+        if owner is client and owner_type == ros_type:
+            return True
+        raise CommandFailedError(kind, f"a {kind} no other client advertises (or the same "
+                                 "type again)", f"{name} ({owner_type})",
+                                 code=ErrorCode.ALREADY_EXISTS)
+    for found, types in graph:
+        if found == name:
+            raise CommandFailedError(kind, f"a {kind} no ROS node serves yet",
+                                     f"{name} ({', '.join(types)})",
+                                     code=ErrorCode.ALREADY_EXISTS)
+    return False
 
 
 async def wait_until_ready(client: Client, wait_s: float) -> bool:
@@ -289,25 +318,17 @@ class ServiceBridges:
     # --- advertise_service -----------------------------------------------------------------
     def advertise_service(self, request: AdvertiseService,
                           client: Optional[Replier]) -> dict[str, Any]:
-        if client is None:
-            raise CommandFailedError("service", "a request from a connected client (it answers "
-                                     "the calls)", "a start-up command",
-                                     code=ErrorCode.NOT_SUPPORTED)
+        client = connected_client(client, "service", "answers the calls")
         service = resolve_name(self._ros, request.service, "service")
         ros_type = request.ros_type
         srv = _service_class(request.type, ros_type)
         existing = self.served.get(service)
-        if existing is not None:
-            if existing.owner is client and existing.ros_type == ros_type:
-                return _describe_served(existing, existed=True)
-            raise CommandFailedError("service", "a service no other client advertises (or the "
-                                     "same type again)", f"{service} ({existing.ros_type})",
-                                     code=ErrorCode.ALREADY_EXISTS)
-        for name, types in self._ros.node.get_service_names_and_types():
-            if name == service:
-                raise CommandFailedError("service", "a service no ROS node serves yet",
-                                         f"{service} ({', '.join(types)})",
-                                         code=ErrorCode.ALREADY_EXISTS)
+        if already_served("service", service, ros_type, client,
+                          existing.owner if existing else None,
+                          existing.ros_type if existing else "",
+                          self._ros.node.get_service_names_and_types()):
+            assert existing is not None
+            return _describe_served(existing, existed=True)
         key = NameKey.service_server(service)
         served = ServedService(service, ros_type, srv, client, key, self._names.register(key))
         served.handle = self._ros.node.create_service(srv, service, self._callback_for(served),

@@ -33,7 +33,7 @@ from bridge.actions.common import action_class_of, destroy_quietly
 from bridge.codecs import CodecError, message_to_dict
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
-from bridge.services import message_from_json, resolve_name
+from bridge.services import connected_client, message_from_json, resolve_name
 from protocol import commands as c
 from protocol.commands import (CancelGoal, CommandError, CommandFailedError, ErrorCode,
                                LimitReachedError, SendGoal)
@@ -180,10 +180,7 @@ class GoalSender:
 
     # --- send_goal -------------------------------------------------------------------------
     async def send_goal(self, request: SendGoal, client: Optional[Replier]) -> dict[str, Any]:
-        if client is None:
-            raise CommandFailedError("action", "a request from a connected client (it gets "
-                                     "the feedback and the result)", "a start-up command",
-                                     code=ErrorCode.NOT_SUPPORTED)
+        client = connected_client(client, "action", "gets the feedback and the result")
         action = resolve_name(self._ros, request.action, "action")
         ros_type = request.ros_type
         cls = action_class_of(request.type, ros_type)

@@ -25,7 +25,8 @@ from bridge.actions.common import action_class_of, destroy_quietly
 from bridge.codecs import CodecError, message_to_dict
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
-from bridge.services import client_answer, message_from_json, resolve_name
+from bridge.services import (already_served, client_answer, connected_client,
+                             message_from_json, resolve_name)
 from protocol import commands as c
 from protocol.commands import (ActionCancel, ActionFeedback, ActionGoal, AdvertiseAction,
                                CommandError, CommandFailedError, ErrorCode, UnadvertiseAction,
@@ -90,25 +91,17 @@ class ServedActions:
     # --- advertise_action ------------------------------------------------------------------
     def advertise_action(self, request: AdvertiseAction, client: Optional[Replier]
                          ) -> dict[str, Any]:
-        if client is None:
-            raise CommandFailedError("action", "a request from a connected client (it "
-                                     "executes the goals)", "a start-up command",
-                                     code=ErrorCode.NOT_SUPPORTED)
+        client = connected_client(client, "action", "executes the goals")
         action = resolve_name(self._ros, request.action, "action")
         ros_type = request.ros_type
         cls = action_class_of(request.type, ros_type)
         existing = self.served.get(action)
-        if existing is not None:
-            if existing.owner is client and existing.ros_type == ros_type:
-                return _describe_served(existing, existed=True)
-            raise CommandFailedError("action", "an action no other client advertises (or the "
-                                     "same type again)", f"{action} ({existing.ros_type})",
-                                     code=ErrorCode.ALREADY_EXISTS)
-        for name, types in get_action_names_and_types(self._ros.node):
-            if name == action:
-                raise CommandFailedError("action", "an action no ROS node serves yet",
-                                         f"{action} ({', '.join(types)})",
-                                         code=ErrorCode.ALREADY_EXISTS)
+        if already_served("action", action, ros_type, client,
+                          existing.owner if existing else None,
+                          existing.ros_type if existing else "",
+                          get_action_names_and_types(self._ros.node)):
+            assert existing is not None
+            return _describe_served(existing, existed=True)
         key = NameKey.action_server(action)
         served = ServedAction(action, ros_type, cls, client, key, self._names.register(key),
                               request.goal_timeout)
