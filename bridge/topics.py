@@ -144,7 +144,12 @@ class SubscriberBridge:
             self._hub.post_frame(self._channel, TemplateFrame(template, content, timestamp,
                                                               values, transform_body))
             return
-        msg = deserialize_message(data, self.codec.message_class)
+        try:
+            msg = deserialize_message(data, self.codec.message_class)
+        except Exception as error:  # noqa: BLE001 - bytes rclpy cannot read: one line, go on
+            self._bad.warning("deserialize", None, "cannot read a %s from %s (%d bytes), not "
+                              "sent: %s", self.codec.ros_type, self.topic, len(data), error)
+            return
         if self._filter is not None:
             msg = self._filter(msg)
             if msg is None:

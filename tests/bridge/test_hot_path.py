@@ -527,3 +527,31 @@ def test_a_removed_lookup_never_comes_back_while_tf_keeps_arriving() -> None:
         stop.set()
         served.close()
         ros.stop()
+
+
+@pytest.mark.ros
+def test_bytes_rclpy_cannot_read_are_dropped_with_a_warning(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A subscriber takes every type serialized: bytes that do not deserialize must cost
+    one warning, not an exception in the streams thread (which would pause every stream)."""
+    from bridge.codecs import codec_for
+    from bridge.ros_node import RosNode, RosOptions
+    from bridge.topics import SubscriberBridge
+    from protocol.commands import QoS
+
+    served = _Served(direct_writes=True)
+    ros = RosNode(RosOptions(node_name="hot_path_bad_bytes"))
+    try:
+        bridge = SubscriberBridge(ros, served.hub, topic="/hot_path_bad_bytes",
+                                  codec=codec_for("sensor_msgs/msg/Image"), qos=QoS(),
+                                  device="bad", metadata={})
+        with caplog.at_level("WARNING", logger="bridge.topics"):
+            bridge._on_raw(b"\x00\x01\x00\x00\xff")  # a CDR header, then nothing usable
+        assert bridge.count == 0 and bridge.last_message is None
+        assert "bad" not in served.call(_devices(served.hub))
+        assert any("cannot read a sensor_msgs/msg/Image from /hot_path_bad_bytes" in r.message
+                   for r in caplog.records)
+        bridge.close()
+    finally:
+        ros.stop()
+        served.close()
