@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Optional
 
 from rclpy.action import ActionClient
+from rclpy.action.client import ClientGoalHandle
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.qos import QoSProfile
 from rclpy.task import Future as RosFuture
@@ -63,12 +64,18 @@ def _uuid_msg(goal_hex: str) -> UUID:
     return UUID(uuid=list(bytes.fromhex(goal_hex)))
 
 
+def _accepted(cls: Any) -> Any:
+    """A SendGoal response saying accepted: what a goal handle made from an id needs."""
+    return cls.Impl.SendGoalService.Response(accepted=True)
+
+
 @dataclass
 class CalledAction:
     """A cached rclpy ActionClient for `send_goal` (one per action and type)."""
 
     action: str
     ros_type: str
+    cls: Any  # the action class
     client: ActionClient
     goals: int = 0  # goals sent through it that have not ended
     last_used: float = 0.0  # loop time
@@ -168,7 +175,7 @@ class GoalSender:
             self._drop_client(idle)
         client = ActionClient(self._ros.node, cls, action, callback_group=self._group,
                               feedback_sub_qos_profile=QoSProfile(depth=_FEEDBACK_DEPTH))
-        entry = CalledAction(action, ros_type, client, last_used=now)
+        entry = CalledAction(action, ros_type, cls, client, last_used=now)
         self.called[(action, ros_type)] = entry
         self._schedule_watch()
         return entry
@@ -242,10 +249,17 @@ class GoalSender:
             handle = await asyncio.wait_for(asyncio.shield(response),
                                             max(0.0, start + timeout - loop.time()))
         except asyncio.TimeoutError:
-            # Should the server accept it later, the goal would run unwatched: cancel it.
+            # The server may have accepted it and only its answer be lost (Fast DDS drops a
+            # response to a reader it has not matched yet), or accept it later: either way
+            # the goal would run unwatched, so it is cancelled by its id, and again if an
+            # acceptance comes late.
+            self._cancel_soon(ClientGoalHandle(client, _uuid_msg(sent.goal_id),
+                                               _accepted(sent.called.cls)),
+                              "its send_goal timed out")
             response.add_done_callback(self._cancel_late)
             raise CommandFailedError("action", f"{what} to accept or reject the goal within "
-                                     f"{timeout:g} s", "no answer",
+                                     f"{timeout:g} s", "no answer; the daemon asked the "
+                                     f"server to cancel goal {sent.goal_id} in case it runs",
                                      code=ErrorCode.TIMEOUT) from None
         if not handle.accepted:
             raise CommandFailedError("goal", f"a goal {what} accepts", "a rejected goal",

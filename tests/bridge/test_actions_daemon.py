@@ -182,6 +182,25 @@ def test_result_timeout_cancels_the_goal(ros: Client, processes: Processes) -> N
     slow.wait_for_output("CANCELED")  # the daemon asked the server to stop
 
 
+def test_a_goal_the_server_answers_too_late_is_cancelled(ros: Client,
+                                                         processes: Processes) -> None:
+    """No answer within `timeout` is a TIMEOUT, and the goal must not run unwatched: the
+    daemon cancels it by its id (for a response that was lost) and again when the late
+    acceptance comes."""
+    late = processes.python("late-gripper", "gripper_action_server.py", "--action",
+                            "/late_gripper", "--steps", "100", "--period", "0.05",
+                            "--accept-delay", "2")
+    late.wait_for_output("READY")
+    gripper = ros.action("/late_gripper", GRIPPER)
+    # A goal it rejects (at once) first: the server is known, the next timeout is its answer's.
+    assert refused(lambda: gripper.send_goal(goal(1.0, effort=-1.0), timeout=scaled(10))
+                   ).code == ErrorCode.REJECTED
+    error = refused(lambda: gripper.send_goal(goal(1.0), timeout=0.5))
+    assert error.code == ErrorCode.TIMEOUT and "cancel goal" in str(error)
+    late.wait_for_output("GOAL 1.0")
+    late.wait_for_output("CANCELED")
+
+
 def test_a_client_side_wait_that_ends_first_raises_timeout(ros: Client, server: Child) -> None:
     handle = ros.action("/gripper", GRIPPER).send_goal(goal(1.0), timeout=scaled(10))
     with pytest.raises(TimeoutError):

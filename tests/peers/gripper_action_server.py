@@ -3,9 +3,10 @@ would: the gap moves from 0 to the goal's position in STEPS equal steps, one fee
 PERIOD seconds, then the goal succeeds (position reached).
 
 usage: gripper_action_server.py [--action A] [--steps N] [--period S] [--die-after K]
-                                [--threads T]
+                                [--threads T] [--accept-delay S]
   * a goal with max_effort < 0 is rejected;
   * a cancel request is accepted; the goal ends canceled at its next step;
+  * --accept-delay S: a goal is accepted S seconds after it came (a server slow to answer);
   * --threads T: goals executed at once (each sleeps in its own executor thread);
   * --die-after K: the process exits at once (os._exit, no cleanup: a crash) after sending
     its K-th feedback of any goal.
@@ -30,6 +31,7 @@ def main() -> None:
     parser.add_argument("--period", type=float, default=0.1)
     parser.add_argument("--die-after", type=int, default=0)
     parser.add_argument("--threads", type=int, default=4)
+    parser.add_argument("--accept-delay", type=float, default=0.0)
     args = parser.parse_args()
     rclpy.init()
     node = rclpy.create_node("test_gripper_action_server")
@@ -39,6 +41,7 @@ def main() -> None:
         if goal.command.max_effort < 0:
             print("REJECTED", flush=True)
             return GoalResponse.REJECT
+        time.sleep(args.accept_delay)  # a slow server, in its own executor thread
         return GoalResponse.ACCEPT
 
     def on_cancel(goal_handle: object) -> CancelResponse:
