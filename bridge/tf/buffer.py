@@ -57,7 +57,7 @@ from protocol.conversions import matrix_to_pose, pose_to_matrix
 __all__ = ["StampedTransform", "FrameInfo", "TfBuffer"]
 
 _NS_PER_S = 1_000_000_000
-_INF = math.inf
+_NO_STAMP = 1 << 63  # above any stamp (int64 ns): no dynamic frame seen yet
 # tf2's tolerance on |q|^2 (QUATERNION_NORMALIZATION_TOLERANCE in buffer_core.cpp).
 _QUATERNION_TOLERANCE = 1e-2
 
@@ -91,7 +91,7 @@ class StampedTransform:
 
     def as_tuple(self) -> Tf7:
         """(tx, ty, tz, qx, qy, qz, qw), the form `bridge.tf.math` works on."""
-        return self.translation + self.rotation  # type: ignore[return-value]
+        return self.translation + self.rotation
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,13 +122,21 @@ class _FrameCache:
     static frame holds exactly one sample with stamp 0.
     """
 
-    __slots__ = ("static", "stamps", "parents", "values")
+    __slots__ = ("static", "window_ns", "stamps", "parents", "values")
 
-    def __init__(self, static: bool) -> None:
+    def __init__(self, static: bool, window_ns: int) -> None:
         self.static = static
+        self.window_ns = window_ns
         self.stamps: List[int] = []
         self.parents: List[str] = []
         self.values: List[Tf7] = []
+
+    def first(self) -> int:
+        """The index of the oldest live sample: the lists may still hold a few older ones
+        (`TfBuffer._insert` drops them in chunks), which count for nothing."""
+        stamps = self.stamps
+        oldest = stamps[-1] - self.window_ns
+        return 0 if stamps[0] >= oldest else bisect_left(stamps, oldest)
 
 
 # One link of a chain at a given time: the frame's cache, the older sample's index and the
@@ -151,8 +159,11 @@ def _locate(cache: _FrameCache, t: int) -> Tuple[str, int, float]:
         raise ExtrapolationError("single", t, last)
     if t > last:
         raise ExtrapolationError("future", t, last)
-    if t < stamps[0]:
-        raise ExtrapolationError("past", t, stamps[0])
+    first = cache.first()
+    if t < stamps[first]:
+        raise ExtrapolationError("past", t, stamps[first])
+    if n - first == 1:
+        raise ExtrapolationError("single", t, last)
     i = bisect_right(stamps, t) - 1  # stamps[i] <= t < stamps[i + 1]
     parents = cache.parents
     s0 = stamps[i]
@@ -262,7 +273,7 @@ class TfBuffer:
         cache = self._frames.get(child)
         if cache is None or cache.static != static:
             # tf2 also replaces the whole cache when a frame switches static <-> dynamic.
-            cache = self._frames[child] = _FrameCache(static)
+            cache = self._frames[child] = _FrameCache(static, self._cache_ns)
             self._graph_version += 1
         stamps, parents, values = cache.stamps, cache.parents, cache.values
         if static:
@@ -278,9 +289,10 @@ class TfBuffer:
             stamps.append(stamp)
             parents.append(parent)
             values.append(value)
-            oldest_kept = stamp - self._cache_ns
-            if stamps[0] < oldest_kept:
-                k = bisect_left(stamps, oldest_kept)
+            # Samples older than the window are dropped a quarter window at a time: one at a
+            # time moves the whole list on every insert (10,000 per link at 1 kHz).
+            if stamps[0] < stamp - self._cache_ns - (self._cache_ns >> 2):
+                k = bisect_left(stamps, stamp - self._cache_ns)
                 del stamps[:k], parents[:k], values[:k]
             return True
         if stamp < stamps[-1] - self._cache_ns:
@@ -339,7 +351,7 @@ class TfBuffer:
         self._require(target, "lookupTransform argument target_frame")
         self._require(source, "lookupTransform argument source_frame")
         t, value = self._lookup_locked(target, source, t, memo)
-        return StampedTransform(target, source, t, value[:3], value[3:])  # type: ignore[arg-type]
+        return StampedTransform(target, source, t, value[:3], value[3:])
 
     def can_transform(self, target_frame: str, source_frame: str, time_ns: int = 0) -> bool:
         """Whether `lookup` with the same arguments would succeed."""
@@ -380,8 +392,9 @@ class TfBuffer:
             out = []
             for name in sorted(self._frames):
                 c = self._frames[name]
-                out.append(FrameInfo(name, c.parents[-1], c.static, c.stamps[-1], c.stamps[0],
-                                     len(c.stamps)))
+                first = c.first()
+                out.append(FrameInfo(name, c.parents[-1], c.static, c.stamps[-1],
+                                     c.stamps[first], len(c.stamps) - first))
             return out
 
     def all_frames_as_yaml(self, current_time_ns: int = 0) -> str:
@@ -469,16 +482,16 @@ class TfBuffer:
         """Walk by each frame's newest parent: (latest common time, source-side frames,
         target-side frames), the frame lists naming the links below the common ancestor."""
         frames = self._frames
-        seen: dict[str, Tuple[float, int]] = {}  # frame -> (min stamp below it, links below)
+        seen: dict[str, Tuple[int, int]] = {}  # frame -> (min stamp below it, links below)
         src: List[str] = []
-        low = _INF
+        low = _NO_STAMP
         frame = source
         while True:
             if frame in seen:
                 raise self._loop_error()
             seen[frame] = (low, len(src))
             if frame == target:  # target is an ancestor of source
-                return (0 if low == _INF else int(low)), src, []
+                return (0 if low == _NO_STAMP else low), src, []
             cache = frames.get(frame)
             if cache is None:  # a root
                 break
@@ -487,7 +500,7 @@ class TfBuffer:
             src.append(frame)
             frame = cache.parents[-1]
         tgt: List[str] = []
-        low = _INF
+        low = _NO_STAMP
         frame = target
         limit = len(frames)
         while frame not in seen:
@@ -502,7 +515,7 @@ class TfBuffer:
             frame = cache.parents[-1]
         src_low, below = seen[frame]
         low = min(low, src_low)
-        return (0 if low == _INF else int(low)), src[:below], tgt
+        return (0 if low == _NO_STAMP else low), src[:below], tgt
 
     def _walk(self, target: str, source: str, t: int) -> Tf7:
         """target<-source at time t, following each frame's parent *at t* (tf2's walk)."""
@@ -565,7 +578,7 @@ def _time_arg(time_ns: object) -> int:
         try:
             if isinstance(time_ns, bool):
                 raise TypeError
-            time_ns = operator.index(time_ns)  # numpy integers
+            time_ns = operator.index(time_ns)  # type: ignore[arg-type]  # numpy integers
         except TypeError:
             raise InvalidArgumentError("time_ns", "an integer number of nanoseconds",
                                        type(time_ns).__name__) from None

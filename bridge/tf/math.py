@@ -155,7 +155,7 @@ def invert(a: Tf7) -> Tf7:
 def interpolate(a: Tf7, b: Tf7, ratio: float) -> Tf7:
     """Linear interpolation of the translation and slerp of the rotation (tf2's rule)."""
     r0 = 1.0 - ratio
-    qx, qy, qz, qw = quat_slerp(a[3:], b[3:], ratio)  # type: ignore[arg-type]
+    qx, qy, qz, qw = quat_slerp(a[3:], b[3:], ratio)
     return (
         r0 * a[0] + ratio * b[0],
         r0 * a[1] + ratio * b[1],

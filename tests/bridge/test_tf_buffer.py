@@ -295,6 +295,20 @@ def test_cache_is_pruned_to_cache_time_behind_newest() -> None:
     assert buf.frame_info()[0].samples == 3
 
 
+def test_samples_dropped_in_chunks_are_gone_at_once() -> None:
+    """The lists shed old samples a quarter window at a time; until then a sample older
+    than the window is invisible to lookups and to frame_info, as tf2's pruned one is."""
+    buf = TfBuffer(cache_time_s=1.0)
+    for k in range(21):  # 0 .. 2.0 s, one sample each 0.1 s, one message each
+        buf.set_transforms([tf("w", "b", k * S // 10, (k, 0, 0))], static=False)
+    (info,) = buf.frame_info()
+    assert (info.oldest_ns, info.most_recent_ns, info.samples) == (S, 2 * S, 11)
+    assert buf.lookup("w", "b", S).translation == pytest.approx((10, 0, 0))
+    assert buf.lookup("w", "b", 15 * S // 10).translation == pytest.approx((15, 0, 0))
+    with pytest.raises(ExtrapolationError, match="into the past"):
+        buf.lookup("w", "b", 95 * S // 100)  # 0.9 s is still held, not live
+
+
 def test_out_of_order_samples_are_inserted_in_order() -> None:
     buf = TfBuffer()
     assert buf.set_transforms([tf("w", "b", 3 * S, (3, 0, 0)), tf("w", "b", 1 * S, (1, 0, 0))],
