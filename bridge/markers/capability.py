@@ -41,8 +41,13 @@ renewed.
 
 Decisions, said plainly:
 * ``header.frame_id`` empty: the marker is in the fixed frame (as RViz does).
-* ``frame_locked``: every marker follows its frame as tf moves, locked or not (RViz places
-  an unlocked marker once, at its stamp; here it moves with the frame's latest pose).
+* ``frame_locked`` true: the model follows its frame as tf moves (its parent TRANSFORM is
+  the frame's). False (RViz's default, and every Path, polygon and point): the marker is
+  placed once, as RViz does, by the fixed<-frame transform at its ``header.stamp``
+  (the latest one for stamp 0, or when tf has nothing at the stamp yet), and stays there:
+  its model comes in the fixed frame. A re-sent marker is placed again at its new stamp.
+  A frame tf does not know yet cannot be placed: such a marker follows its frame (it
+  appears when the frame does). The frame policy judges the marker's own frame either way.
 * Lifetime counts from when the daemon received the marker, checked on one loop timer per
   daemon set to the next expiry (never by polling per message).
 * Frame globs: a marker whose frame the policy denies is withheld (no model, no TRANSFORM;
@@ -59,13 +64,15 @@ import asyncio
 import heapq
 import json
 import logging
+import math
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Mapping, Optional, Union
+from typing import Any, Callable, Mapping, Optional, Union
 
+import numpy as np
 from rclpy.serialization import deserialize_message
 
 from bridge.codecs import CodecError, codec_for
@@ -75,12 +82,14 @@ from bridge.logging_limits import RateLimitedLog
 from bridge.codecs.cdr import CdrError
 from bridge.markers.cdr import layout_supported, read_marker, read_marker_array
 from bridge.markers.convert import ADD, DELETE, DELETEALL, MarkerEvent, events_of
-from bridge.markers.geometry import MarkerError, MarkerModel, build_model
+from bridge.markers.geometry import MarkerError, MarkerModel, MarkerSpec, build_model
 from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
 from bridge.security import NameRules
+from bridge.tf.buffer import TfBuffer
 from bridge.tf.capability import TfBridges
-from bridge.tf.errors import TfError
+from bridge.tf.errors import ExtrapolationError, TfError
+from bridge.tf.math import Tf7, compose, quat_normalize
 from bridge.tf.lookups import LookupKey
 from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
                                ListMarkers, Op, OutOfRangeError, RemoveMarkerSubscriber)
@@ -90,7 +99,7 @@ from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_FORMAT, KEY_MARKER_TYPE
                              KEY_PARENT_DEVICE, UNITS_MM, DeviceNameRegistry, NameKey,
                              NamingError, metadata_for)
 
-__all__ = ["MAX_MARKERS", "MAX_QUEUED", "MarkerBridges"]
+__all__ = ["MAX_MARKERS", "MAX_QUEUED", "MarkerBridges", "place_unlocked"]
 
 log = logging.getLogger(__name__)
 
@@ -104,10 +113,51 @@ MARKER_TYPE = "visualization_msgs/msg/Marker"
 MARKER_ARRAY_TYPE = "visualization_msgs/msg/MarkerArray"
 
 
+def place_unlocked(spec: MarkerSpec, fixed_frame: str, buffer: TfBuffer,
+                   resolve: Callable[[str], str],
+                   memo: Optional[dict[tuple[str, int], Optional[Tf7]]] = None,
+                   ) -> Optional[MarkerSpec]:
+    """An unlocked marker placed in ``fixed_frame`` by the fixed<-frame transform at its
+    stamp (the latest for stamp 0, or where tf has nothing at the stamp), or None where it
+    is not moved: already in the fixed frame, a pose build_model refuses anyway, or a frame
+    tf cannot reach yet. ``resolve`` maps frame ids to the buffer's (frame_prefix); ``memo``
+    keeps the transforms looked up for one batch (an array's markers share a frame)."""
+    frame = spec.frame.lstrip("/")
+    if not frame or frame == fixed_frame:
+        return None
+    orientation = tuple(float(v) for v in spec.orientation)
+    position = tuple(float(v) for v in spec.position)
+    if not all(math.isfinite(v) for v in orientation + position):
+        return None
+    stamp_ns = max(spec.stamp[0] * 1_000_000_000 + spec.stamp[1], 0)
+    memo = {} if memo is None else memo
+    if (frame, stamp_ns) not in memo:
+        memo[(frame, stamp_ns)] = _fixed_from(buffer, resolve(fixed_frame), resolve(frame),
+                                              stamp_ns)
+    where = memo[(frame, stamp_ns)]
+    if where is None:
+        return None
+    quat = quat_normalize(orientation) if any(orientation) else (0.0, 0.0, 0.0, 1.0)
+    pose = compose(where, position + quat)
+    return replace(spec, frame=fixed_frame, position=np.array(pose[:3]),
+                   orientation=np.array(pose[3:]))
+
+
+def _fixed_from(buffer: TfBuffer, fixed: str, frame: str, stamp_ns: int) -> Optional[Tf7]:
+    try:
+        try:
+            return buffer.lookup(fixed, frame, stamp_ns).as_tuple()
+        except ExtrapolationError:  # tf not there yet at the stamp (or gone): the latest
+            return buffer.lookup(fixed, frame, 0).as_tuple()
+    except TfError:
+        return None
+
+
 @dataclass(frozen=True, eq=False)
 class _Show:
     key: MarkerKey
-    frame: str
+    frame: str  # the marker's header frame ("": the fixed frame): the frame policy's
+    parent: str  # the frame its model's coordinates are in (the fixed frame once placed)
     digest: bytes
     model: MarkerModel
     lifetime_ns: int
@@ -138,7 +188,8 @@ class _Live:
     key: MarkerKey
     name_key: NameKey
     device: str
-    frame: str
+    frame: str  # its header frame
+    parent: str  # the frame of its model's coordinates (the fixed frame once placed)
     kind: str
     body_type: str
     digest: bytes
@@ -285,6 +336,7 @@ class _Worker:
 
     def _updates(self, folded: _Folded) -> list[_Update]:
         out, delete_all, events = list(folded.refused), folded.delete_all, folded.last
+        placements: dict[tuple[str, int], Optional[Tf7]] = {}  # (frame, stamp) -> fixed<-frame
         if delete_all:
             with self._lock:
                 self._models.clear()
@@ -303,6 +355,11 @@ class _Worker:
                                                                     "nothing")))
                 continue
             spec = event.spec
+            frame = spec.frame.lstrip("/")
+            placed = (None if spec.frame_locked or not frame
+                      else self._sub.owner.placed(self._sub, spec, placements))
+            if placed is not None:
+                spec = placed
             digest = spec.digest()
             with self._lock:
                 known = self._models.get(key)
@@ -324,8 +381,8 @@ class _Worker:
                 self.meshed += 1
                 with self._lock:
                     self._models[key] = (digest, model)
-            out.append(_Show(key, spec.frame.lstrip("/"), digest, model, spec.lifetime_ns,
-                             spec.stamp))
+            out.append(_Show(key, frame, spec.frame.lstrip("/"), digest, model,
+                             spec.lifetime_ns, spec.stamp))
         return out
 
 
@@ -383,6 +440,12 @@ class MarkerBridges:
 
     def hub_call(self, callback: Any, *args: Any) -> None:
         self._hub.call_soon(callback, *args)
+
+    def placed(self, sub: _Subscription, spec: MarkerSpec,
+               memo: dict[tuple[str, int], Optional[Tf7]]) -> Optional[MarkerSpec]:
+        """`place_unlocked` in this daemon's tf buffer (worker thread: it is thread-safe)."""
+        return place_unlocked(spec, sub.fixed_frame, self._tf.buffer, self._tf.resolve_frame,
+                              memo)
 
     # ------------------------------------------------------------------ ops
 
@@ -458,7 +521,8 @@ class MarkerBridges:
             "topic": sub.topic, "device": sub.device,
             "markers": [{"ns": live.key[0], "id": live.key[1], "device": live.device,
                          "type": live.kind, "frame": live.frame, "points": live.points,
-                         "frame_device": self._frames[(sub.fixed_frame, live.frame)].device,
+                         "placed": live.parent != live.frame,
+                         "frame_device": self._frames[(sub.fixed_frame, live.parent)].device,
                          "expires_in": (round((live.expires_ns - now) / 1e9, 3)
                                         if live.expires_ns else None)}
                         for live in sub.markers.values()],
@@ -509,6 +573,7 @@ class MarkerBridges:
               gone: list[str]) -> None:
         key = update.key
         frame = update.frame or sub.fixed_frame
+        parent = update.parent or sub.fixed_frame
         rules = self._frame_rules
         if rules.active and not rules.permits(frame):
             reason = f"frame {frame!r} refused by the frame policy: expected " \
@@ -529,7 +594,7 @@ class MarkerBridges:
             live.expires_ns = expires  # unchanged: renew the lifetime, send nothing
             self._schedule(sub, live)
             return
-        if live is not None and (live.frame != frame or live.body_type != body_type):
+        if live is not None and (live.parent != parent or live.body_type != body_type):
             self._drop(sub, key, gone)  # a new parent or node class: a new device
             if sub.worker is not None:
                 sub.worker.remember(key, update.digest, model)
@@ -542,24 +607,25 @@ class MarkerBridges:
                 return
             try:  # a namespace or frame no device name or tf lookup can hold (NUL)
                 name_key = NameKey.marker(sub.topic, key[0], key[1])
-                self._use_frame(sub.fixed_frame, frame)
+                self._use_frame(sub.fixed_frame, parent)
             except (NamingError, TfError) as error:
                 self._refuse(sub, _Refused(key, MarkerError(
                     "ns/frame", "a namespace and frame id usable as names (no NUL)",
                     f"{key[0]!r} in frame {frame!r} ({error})")), gone)
                 return
             device = self._names.register(name_key)
-            live = _Live(key, name_key, device, frame, model.kind, body_type, update.digest,
-                         model.point_count)
+            live = _Live(key, name_key, device, frame, parent, model.kind, body_type,
+                         update.digest, model.point_count)
             sub.markers[key] = live
             added.append(device)
             if device in gone:
                 gone.remove(device)
-        live.digest, live.kind, live.points = update.digest, model.kind, model.point_count
+        live.frame, live.digest, live.kind, live.points = (frame, update.digest, model.kind,
+                                                           model.point_count)
         live.expires_ns = expires
-        metadata = metadata_for(live.name_key, frame=frame, units=UNITS_MM)
+        metadata = metadata_for(live.name_key, frame=parent, units=UNITS_MM)
         metadata[KEY_MARKER_TYPE] = model.kind
-        metadata[KEY_PARENT_DEVICE] = self._frames[(sub.fixed_frame, frame)].device
+        metadata[KEY_PARENT_DEVICE] = self._frames[(sub.fixed_frame, parent)].device
         metadata[KEY_COLOR] = " ".join(f"{c:.6g}" for c in model.rgba)
         metadata.update(model.metadata)
         # Stamped with the marker's header stamp, as topic bridges stamp their messages.
@@ -590,7 +656,7 @@ class MarkerBridges:
             return
         self._hub.forget(live.device)
         self._names.release(live.name_key)
-        self._release_frame(sub.fixed_frame, live.frame)
+        self._release_frame(sub.fixed_frame, live.parent)
         gone.append(live.device)
 
     def _index(self, sub: _Subscription, gone: list[str], error: str = "") -> None:

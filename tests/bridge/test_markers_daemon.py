@@ -217,7 +217,8 @@ def test_every_marker_type_in_mm_placed_by_tf(client: Connection, peer: Peer,
     mesh = {"ns": "mesh", "id": 14, "type": MESH, "pos": [0.0, 0.0, 1.0],
             "scale": [2.0, 2.0, 2.0], "mesh": f"file://{folders['inside']}/tetra.stl",
             "color": BLUE}
-    peer.send(markers=SHAPES + [mesh])
+    # frame_locked: each model stays in its frame, under the frame's TRANSFORM.
+    peer.send(markers=[dict(m, locked=True) for m in SHAPES + [mesh]])
     want = {(m["ns"], m["id"]) for m in SHAPES + [mesh]}
     rows = wait_markers(client, "/test_markers", want)
     dev = {key: row["device"] for key, row in rows.items()}
@@ -322,15 +323,25 @@ def test_every_marker_type_in_mm_placed_by_tf(client: Connection, peer: Peer,
     assert rounded(p) == expected
 
 
+def tf_known(client: Connection, parent: str, child: str) -> None:
+    client.command("lookup_transform", {"parent": parent, "child": child,
+                                        "timeout": scaled(10)})
+
+
 def test_path_polygon_point(client: Connection, peer: Peer) -> None:
+    tf_known(client, "world", "base")
     peer.send(path={"frame": "base", "points": [[0, 0, 0], [1, 0, 0], [1, 2, 0]]},
               polygon={"frame": "world", "points": [[0, 0, 0], [1, 0, 0], [1, 1, 0],
                                                      [0, 1, 0]]},
               point={"frame": "", "point": [1.0, 2.0, 3.0]})
     path = wait_markers(client, "/test_path", {("", 0)})[("", 0)]
-    assert path["type"] == "path" and path["frame"] == "base"
+    # A Path has no frame_locked: placed once in the fixed frame, as RViz shows it (base is
+    # at (100, 200, 300) mm in world).
+    assert path["type"] == "path" and path["frame"] == "base" and path["placed"] is True
+    assert path["frame_device"] == "mkf:world>world"
     body = model(client, path["device"])
-    np.testing.assert_allclose(points(body), [[0, 0, 0], [1000, 0, 0], [1000, 2000, 0]])
+    np.testing.assert_allclose(points(body), [[100, 200, 300], [1100, 200, 300],
+                                              [1100, 2200, 300]], atol=1e-3)
     assert list(body.body.lines) == [3, 0, 1, 2]
     polygon = wait_markers(client, "/test_polygon", {("", 0)})[("", 0)]
     assert list(model(client, polygon["device"]).body.lines) == [5, 0, 1, 2, 3, 0]
@@ -345,7 +356,8 @@ def test_path_polygon_point(client: Connection, peer: Peer) -> None:
 
 
 def test_markers_move_with_tf(client: Connection, peer: Peer) -> None:
-    cube = {"ns": "moving", "id": 1, "type": CUBE, "frame": "moving", "scale": [0.1] * 3}
+    cube = {"ns": "moving", "id": 1, "type": CUBE, "frame": "moving", "scale": [0.1] * 3,
+            "locked": True}
     peer.send(marker={"action": DELETEALL})
     peer.send(marker=cube, moving=[0.5, 0.0, 0.0])
     row = wait_markers(client, "/test_marker", {("moving", 1)})[("moving", 1)]
@@ -360,6 +372,36 @@ def test_markers_move_with_tf(client: Connection, peer: Peer) -> None:
     client.wait_for(device, at([0.0, 1000.0, 0.0]), timeout=scaled(10))
     # The model itself was not re-sent: the same message object is the latest.
     assert client.latest(row["device"]) is before
+
+
+def test_an_unlocked_marker_is_placed_once_and_stays(client: Connection, peer: Peer) -> None:
+    """frame_locked false (RViz's default): placed by tf when it comes, then it stays where
+    it was put while its frame moves on; the locked twin follows."""
+    locked = {"ns": "twin", "id": 1, "type": CUBE, "frame": "moving", "scale": [0.1] * 3,
+              "pos": [0.0, 0.0, 0.1], "locked": True}
+    unlocked = dict(locked, id=2, locked=False)
+    peer.send(marker={"action": DELETEALL})
+    peer.send(moving=[0.5, 0.0, 0.0])
+    peer.send(marker=locked)
+    row = wait_markers(client, "/test_marker", {("twin", 1)})[("twin", 1)]
+
+    def at(xyz: list[float]) -> Any:
+        return lambda m: isinstance(m.body, Transform) and np.allclose(
+            np.asarray(m.body.matrix)[:3, 3], xyz, atol=1e-3)
+    client.wait_for(row["frame_device"], at([500.0, 0.0, 0.0]), timeout=scaled(10))
+    peer.send(markers=[], marker=unlocked)  # "moving" is at (0.5, 0, 0) now
+    rows = wait_markers(client, "/test_marker", {("twin", 1), ("twin", 2)})
+    placed = rows[("twin", 2)]
+    assert placed["placed"] is True and placed["frame"] == "moving"
+    assert placed["frame_device"] == "mkf:world>world"
+    body = model(client, placed["device"])
+    assert body.metadata[KEY_PARENT_DEVICE] == "mkf:world>world"
+    corners = box_corners(np.array([0.5, 0.0, 0.1]), np.eye(3), np.full(3, 0.1))
+    assert rounded(points(body)) == corners
+    peer.send(moving=[0.0, 1.0, 0.0])
+    client.wait_for(row["frame_device"], at([0.0, 1000.0, 0.0]), timeout=scaled(10))
+    assert client.latest(placed["device"]) is body  # not moved, not re-sent
+    assert rounded(points(client.latest(placed["device"]))) == corners
 
 
 def test_delete_deleteall_and_lifetime(client: Connection, peer: Peer,
@@ -476,9 +518,9 @@ def test_pythonic_client_follows_markers(daemon: RunningDaemon, peer: Peer) -> N
                               callback=lambda kind, *rest: events.append(kind))
         peer.send(markers=[{"action": DELETEALL},
                            {"ns": "py", "id": 1, "type": CUBE, "pos": [0.0, 0.0, 0.1],
-                            "scale": [0.2, 0.2, 0.2]},
+                            "scale": [0.2, 0.2, 0.2], "locked": True},
                            {"ns": "py", "id": 2, "type": TEXT, "text": "label",
-                            "pos": [0.0, 0.0, 0.5]}])
+                            "pos": [0.0, 0.0, 0.5], "locked": True}])
         found = markers.wait_for_markers(
             lambda m: {(i.ns, i.id) for i in m.values()} == {("py", 1), ("py", 2)}
             and all(i.frame_device in markers.frames for i in m.values()), timeout=scaled(10))
@@ -505,6 +547,10 @@ def test_pythonic_client_follows_markers(daemon: RunningDaemon, peer: Peer) -> N
 
 def test_removing_frees_devices_and_a_shared_frame_with_its_last_user(client: Connection,
                                                                      peer: Peer) -> None:
+    # The fixed frame's TRANSFORM also parents every placed marker: none may be left.
+    client.command("remove_marker_subscriber", {"topic": "/test_path"})
+    peer.send(marker={"action": DELETEALL})  # (/test_markers is gone by now, or unused)
+    wait_markers(client, "/test_marker", set())
     peer.send(polygon={"frame": "world", "points": [[0, 0, 0], [1, 0, 0], [1, 1, 0]]},
               point={"frame": "world", "point": [0.0, 0.0, 0.0]})
     polygon = wait_markers(client, "/test_polygon", {("", 0)})[("", 0)]
@@ -526,9 +572,9 @@ def test_mesh_resource_by_package_uri_with_its_own_colours_or_the_markers(
     uri = "package://marker_meshes/coloured.ply"
     peer.send(marker={"action": DELETEALL})
     peer.send(marker={"ns": "ply", "id": 1, "type": MESH, "mesh": uri, "embedded": True,
-                      "color": [0.5, 0.5, 0.5, 1.0]})
+                      "color": [0.5, 0.5, 0.5, 1.0], "locked": True})
     peer.send(marker={"ns": "ply", "id": 2, "type": MESH, "mesh": uri, "embedded": False,
-                      "color": [0.5, 0.5, 0.5, 1.0], "pos": [0.0, 0.0, 1.0]})
+                      "color": [0.5, 0.5, 0.5, 1.0], "pos": [0.0, 0.0, 1.0], "locked": True})
     rows = wait_markers(client, "/test_marker", {("ply", 1), ("ply", 2)})
     own = model(client, rows[("ply", 1)]["device"])
     for point, colour in zip(points(own), rgba(own)):

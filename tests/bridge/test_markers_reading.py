@@ -151,8 +151,10 @@ def test_a_namespace_no_device_name_can_hold_is_refused_not_raised() -> None:
         markers.subscriptions["/m"] = sub
         spec = MarkerSpec(kind="cube", ns="a\x00b", scale=np.ones(3), frame="base")
         good = MarkerSpec(kind="cube", ns="ok", scale=np.ones(3), frame="base")
-        markers.apply(sub, [_Show(("a\x00b", 0), "base", spec.digest(), build_model(spec), 0),
-                            _Show(("ok", 0), "base", good.digest(), build_model(good), 0)])
+        markers.apply(sub, [_Show(("a\x00b", 0), "base", "base", spec.digest(),
+                                  build_model(spec), 0),
+                            _Show(("ok", 0), "base", "base", good.digest(), build_model(good),
+                                  0)])
         assert list(sub.markers) == [("ok", 0)]
         (error,) = sub.errors.values()
         assert "ns/frame: expected a namespace and frame id usable as names" in error
@@ -267,3 +269,36 @@ def test_a_delete_is_not_lost_while_the_loop_is_behind() -> None:
         assert isinstance(shown, _Show) and isinstance(last[0], _Gone)
     finally:
         worker.stop()
+
+
+def test_an_unlocked_marker_is_placed_by_tf_at_its_stamp() -> None:
+    """place_unlocked against a real TfBuffer; the expected poses are worked out by hand:
+    tool is at x=0.1 m at 1 s and x=0.3 m at 2 s, turned 90 degrees about z."""
+    from bridge.markers.capability import place_unlocked
+    from bridge.tf.buffer import StampedTransform, TfBuffer
+
+    s = 1_000_000_000
+    z90 = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))
+    buffer = TfBuffer()
+    buffer.set_transforms([StampedTransform("world", "tool", 1 * s, (0.1, 0.0, 0.0), z90)],
+                          static=False)
+    buffer.set_transforms([StampedTransform("world", "tool", 2 * s, (0.3, 0.0, 0.0), z90)],
+                          static=False)
+
+    def marker(stamp: tuple[int, int], frame: str = "tool") -> MarkerSpec:
+        return MarkerSpec("cube", frame=frame, position=np.array([0.1, 0.0, 0.05]),
+                          orientation=np.array([0.0, 0.0, 0.0, 0.0]), stamp=stamp)
+
+    def placed_at(stamp: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        spec = place_unlocked(marker(stamp), "world", buffer, str)
+        assert spec is not None and spec.frame == "world"
+        return spec.position, spec.orientation
+
+    # At 1.5 s tool is at x=0.2; the marker's +x (0.1 m) points along world +y.
+    position, orientation = placed_at((1, 500_000_000))
+    np.testing.assert_allclose(position, [0.2, 0.1, 0.05], atol=1e-12)
+    np.testing.assert_allclose(orientation, z90, atol=1e-12)  # unset quaternion: identity
+    np.testing.assert_allclose(placed_at((0, 0))[0], [0.3, 0.1, 0.05], atol=1e-12)  # latest
+    np.testing.assert_allclose(placed_at((9, 0))[0], [0.3, 0.1, 0.05], atol=1e-12)  # future
+    assert place_unlocked(marker((1, 0), frame="world"), "world", buffer, str) is None
+    assert place_unlocked(marker((1, 0), frame="elsewhere"), "world", buffer, str) is None

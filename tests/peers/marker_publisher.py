@@ -16,7 +16,7 @@ a marker's lifetime is not renewed by repeats.
 A marker: {"ns", "id", "type" (int), "action" (int, default ADD), "frame",
 "pos": [x, y, z], "quat": [x, y, z, w], "scale": [x, y, z], "color": [r, g, b, a],
 "points": [[x, y, z], ...], "colors": [[r, g, b, a], ...], "text", "mesh",
-"lifetime" (s), "embedded" (bool)}. Path/polygon: {"frame", "points"}; point:
+"lifetime" (s), "embedded" (bool), "locked" (bool: frame_locked)}. Path/polygon: {"frame", "points"}; point:
 {"frame", "point"}.
 """
 
@@ -58,6 +58,7 @@ def marker(spec: dict) -> Marker:
     m.text = spec.get("text", "")
     m.mesh_resource = spec.get("mesh", "")
     m.mesh_use_embedded_materials = bool(spec.get("embedded", False))
+    m.frame_locked = bool(spec.get("locked", False))
     life = float(spec.get("lifetime", 0.0))
     m.lifetime = Duration(sec=int(life), nanosec=int(round((life - int(life)) * 1e9)))
     return m
