@@ -16,8 +16,8 @@ a marker's lifetime is not renewed by repeats.
 A marker: {"ns", "id", "type" (int), "action" (int, default ADD), "frame",
 "pos": [x, y, z], "quat": [x, y, z, w], "scale": [x, y, z], "color": [r, g, b, a],
 "points": [[x, y, z], ...], "colors": [[r, g, b, a], ...], "text", "mesh",
-"lifetime" (s), "embedded" (bool), "locked" (bool: frame_locked)}. Path/polygon: {"frame", "points"}; point:
-{"frame", "point"}.
+"lifetime" (s), "embedded" (bool), "locked" (bool: frame_locked)}.
+Path/polygon: {"frame", "points"}; point: {"frame", "point"}.
 """
 
 import json
