@@ -12,7 +12,10 @@ client serves to ROS.
             if cancelled(): return "canceled", {}
             feedback({"position": step / 4})
         return "succeeded", {"position": 1.0, "reached_goal": True}
-    ros.serve_action("/my_gripper", "control_msgs/action/GripperCommand", execute)
+    ros.serve_action("/my_gripper", "control_msgs/action/GripperCommand", execute,
+                     accept=lambda goal: goal["command"]["position"] <= 0.08)
+    # accept (optional): called first for each goal; False (or (False, "why")) rejects it,
+    # and the ROS client gets REJECTED, as from an rclpy server's goal callback.
 
 The daemon sends a goal's feedback and result as STRING messages (JSON) on the goal's own
 device; the client routes them by their ``ros2.goal_id`` metadata, so feedback that comes
@@ -25,14 +28,14 @@ import json
 import logging
 import threading
 import uuid
-from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple, Union
 
 from protocol import commands as c
 from protocol.messages import Command, Message, RtsCommand, String
 from protocol.naming import KEY_GOAL_ID
 from slicer_client.owner import ResourceOwner
 
-__all__ = ["Action", "ActionGoalError", "GoalHandle", "ServedAction", "TERMINAL_STATUSES"]
+__all__ = ["Accept", "Action", "ActionGoalError", "GoalHandle", "ServedAction", "TERMINAL_STATUSES"]
 
 log = logging.getLogger("slicer_client")
 
@@ -42,6 +45,8 @@ FeedbackCallback = Callable[[Dict[str, Any]], None]
 # execute(goal, feedback, cancelled) -> (status, result) with status one of SERVED_OUTCOMES
 Execute = Callable[[Dict[str, Any], Callable[[Mapping[str, Any]], None], Callable[[], bool]],
                    Tuple[str, Mapping[str, Any]]]
+# accept(goal) -> True to execute it, or False / (False, reason) to reject it
+Accept = Callable[[Dict[str, Any]], Union[bool, Tuple[bool, str]]]
 
 
 class ActionGoalError(Exception):
@@ -180,20 +185,22 @@ class ServedAction:
     (see the module); advertised again after a reconnect."""
 
     def __init__(self, client: ResourceOwner, name: str, type: str, execute: Execute, *,
-                 goal_timeout: float = 300.0) -> None:
+                 goal_timeout: float = 300.0, accept: Optional[Accept] = None) -> None:
         c.resolve_action_type(type)
         self._client = client
         self.name = name
         self.type = type
         self.goal_timeout = goal_timeout
         self._execute = execute
+        self._accept = accept
         self._cancelled: Dict[str, threading.Event] = {}
         self.goals = 0
         self.device = ""
 
     def advertise(self, command: Callable[..., Dict[str, Any]]) -> None:
         reply = command("advertise_action", {"action": self.name, "type": self.type,
-                                             "goal_timeout": self.goal_timeout})
+                                             "goal_timeout": self.goal_timeout,
+                                             "decides": self._accept is not None})
         self.device = str(reply.get("device", ""))
 
     def unadvertise(self) -> None:
@@ -207,6 +214,11 @@ class ServedAction:
             flag = self._cancelled.get(cancel.goal_id)
             if flag is not None:
                 flag.set()
+            return
+        if body.name == c.ActionDecide.op:
+            threading.Thread(target=self._decide,
+                             args=(body.command_id, c.ActionDecide.from_json(body.text)),
+                             name=f"action {self.name} accept", daemon=True).start()
             return
         request = c.ActionGoal.from_json(body.text)
         self._cancelled[request.goal_id] = threading.Event()
@@ -230,10 +242,23 @@ class ServedAction:
                                     f"{type(error).__name__}: {error}")
         finally:
             self._cancelled.pop(request.goal_id, None)
+        self._answer(command_id, reply, f"the end of goal {request.goal_id}")
+
+    def _decide(self, command_id: int, request: c.ActionDecide) -> None:
+        accept = self._accept
+        try:
+            verdict = accept(dict(request.goal)) if accept is not None else True
+            accepted, reason = verdict if isinstance(verdict, tuple) else (verdict, "")
+            answer = {"accept": bool(accepted), "reason": str(reason)}
+        except Exception as error:  # noqa: BLE001 - the goal is rejected, the client goes on
+            log.exception("deciding on a goal of %s failed", self.name)
+            answer = {"accept": False, "reason": f"{type(error).__name__}: {error}"}
+        self._answer(command_id, c.Reply.success(c.ActionDecide.op, answer), "a verdict")
+
+    def _answer(self, command_id: int, reply: c.Reply, what: str) -> None:
         try:
             self._client.send(Message(device_name=self.device, body=RtsCommand(
-                command_id=command_id, name=c.ActionGoal.op, text=reply.to_json()),
+                command_id=command_id, name=reply.op, text=reply.to_json()),
                 metadata=reply.metadata()))
-        except ConnectionError as error:  # the daemon has aborted the goal already
-            log.info("the end of goal %s of %s was not sent: %s", request.goal_id,
-                     self.name, error)
+        except ConnectionError as error:  # the daemon has ended the goal already
+            log.info("%s of %s was not sent: %s", what, self.name, error)

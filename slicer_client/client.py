@@ -27,7 +27,8 @@ import numpy as np
 from protocol.messages import Command, Message
 from protocol.naming import KEY_ROBOT, KEY_ROLE
 from protocol import commands as c
-from slicer_client.actions import Action, Execute, GoalHandle, ServedAction, route_goal_event
+from slicer_client.actions import (Accept, Action, Execute, GoalHandle, ServedAction,
+                                   route_goal_event)
 from slicer_client.bridge_state import REMOVE_OPS, BridgeSpec, BridgeState
 from slicer_client.connection import DEFAULT_HOST, DEFAULT_PORT, CommandRefusedError
 from slicer_client.matrices import as_numpy
@@ -250,11 +251,15 @@ class Client:
         return Action(self, name, type, self._goals)
 
     def serve_action(self, name: str, type: str, execute: Execute, *,
-                     goal_timeout: float = 300.0) -> ServedAction:
+                     goal_timeout: float = 300.0, accept: Optional[Accept] = None
+                     ) -> ServedAction:
         """Serve a ROS action from this client: `execute(goal, feedback, cancelled)` runs
         for each goal in a worker thread and returns ``(status, result)`` (see
-        slicer_client/actions.py). The daemon aborts a goal not ended in `goal_timeout` s."""
-        served = ServedAction(self, name, type, execute, goal_timeout=goal_timeout)
+        slicer_client/actions.py). The daemon aborts a goal not ended in `goal_timeout` s.
+        `accept(goal)`, if given, decides first: False or ``(False, reason)`` rejects the
+        goal (the ROS client gets REJECTED); it must answer within 10 s."""
+        served = ServedAction(self, name, type, execute, goal_timeout=goal_timeout,
+                              accept=accept)
         served.advertise(self.command)
         with self._lock:
             self._served_actions[served.device] = served

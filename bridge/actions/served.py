@@ -6,6 +6,10 @@ loop, which sends the serving client an `action_goal` COMMAND and waits for its
 RTS_COMMAND; `action_feedback` commands publish feedback meanwhile. A ROS cancel request is
 accepted and passed on as an `action_cancel` COMMAND. The client's answer (or an abort
 after `goal_timeout`, or when the client leaves) ends the goal.
+
+Advertised with ``decides``, the server's goal callback is a coroutine too: it puts the goal
+to the client as an `action_decide` COMMAND and answers ROS with the client's verdict
+(rejected when the client refuses, does not answer within `DECISION_TIMEOUT_S`, or leaves).
 """
 
 from __future__ import annotations
@@ -28,15 +32,20 @@ from bridge.ros_node import RosNode
 from bridge.services import (already_served, client_answer, connected_client,
                              message_from_json, resolve_name)
 from protocol import commands as c
-from protocol.commands import (ActionCancel, ActionFeedback, ActionGoal, AdvertiseAction,
+from protocol.commands import (ActionCancel, ActionDecide, ActionFeedback, ActionGoal,
+                               AdvertiseAction,
                                CommandError, CommandFailedError, ErrorCode, UnadvertiseAction,
                                WrongTypeError)
 from protocol.messages import Command, Message, RtsCommand
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
 
-__all__ = ["ServedAction", "ServedActions"]
+__all__ = ["DECISION_TIMEOUT_S", "ServedAction", "ServedActions"]
 
 log = logging.getLogger("bridge.actions")
+
+# How long a deciding client may take to accept or reject a goal (ROS clients wait for
+# the goal response with their own, usually short, timeouts).
+DECISION_TIMEOUT_S = 10.0
 
 
 @dataclass
@@ -51,6 +60,13 @@ class _ServedGoal:
 
 
 @dataclass
+class _Decision:
+    served: ServedAction
+    answer: RosFuture  # True: accepted
+    timer: Optional[asyncio.TimerHandle] = None
+
+
+@dataclass
 class ServedAction:
     """A ROS action served by one client (the one that advertised it)."""
 
@@ -61,6 +77,7 @@ class ServedAction:
     key: NameKey
     device: str
     goal_timeout: float
+    decides: bool = False
     server: Any = None  # rclpy ActionServer
     goals: dict[str, _ServedGoal] = field(default_factory=dict)
     received: int = 0
@@ -85,6 +102,7 @@ class ServedActions:
         self._linger_s = linger_s
         self.served: dict[str, ServedAction] = {}
         self._pending: dict[tuple[Replier, int], _ServedGoal] = {}
+        self._deciding: dict[tuple[Replier, int], _Decision] = {}
         hub.add_reply_listener(self._on_reply)
         hub.add_closed_listener(self._on_client_closed)
 
@@ -104,10 +122,11 @@ class ServedActions:
             return _describe_served(existing, existed=True)
         key = NameKey.action_server(action)
         served = ServedAction(action, ros_type, cls, client, key, self._names.register(key),
-                              request.goal_timeout)
+                              request.goal_timeout, request.decides)
         served.server = ActionServer(
             self._ros.node, cls, action, execute_callback=self._execute_for(served),
-            goal_callback=lambda _goal: GoalResponse.ACCEPT,
+            goal_callback=(self._decide_for(served) if served.decides
+                           else lambda _goal: GoalResponse.ACCEPT),
             cancel_callback=self._cancel_for(served), callback_group=self._group)
         self.served[action] = served
         log.info("serving action %s (%s) for client %s", action, ros_type,
@@ -156,6 +175,81 @@ class ServedActions:
                 if served.destroy_pending and not served.executing:
                     self._hub.call_soon(self._destroy_later, served)
         return execute
+
+    def _decide_for(self, served: ServedAction) -> Any:
+        async def decide(goal: Any) -> GoalResponse:
+            # Executor thread: hand the goal to the loop, wait for the client's verdict.
+            served.executing += 1
+            try:
+                if served.closed:
+                    return GoalResponse.REJECT
+                answer = RosFuture(executor=self._ros.executor)
+                self._hub.call_soon(self._forward_decision, served, goal, answer)
+                accepted = await answer
+                return GoalResponse.ACCEPT if accepted else GoalResponse.REJECT
+            except Exception:
+                log.exception("deciding on a goal of %s failed; it is rejected",
+                              served.action)
+                return GoalResponse.REJECT
+            finally:
+                served.executing -= 1
+                if served.destroy_pending and not served.executing:
+                    self._hub.call_soon(self._destroy_later, served)
+        return decide
+
+    def _forward_decision(self, served: ServedAction, goal: Any, answer: RosFuture) -> None:
+        """Put a goal to its deciding client (loop thread)."""
+        decision = _Decision(served, answer)
+        if served.closed:
+            self._decided(decision, False)
+            return
+        try:
+            text = ActionDecide(action=served.action, type=served.ros_type,
+                                goal=message_to_dict(goal), timeout=DECISION_TIMEOUT_S).to_json()
+        except (CodecError, CommandError) as error:
+            log.warning("cannot put a goal of %s to its client (%s); it is rejected",
+                        served.action, error)
+            self._decided(decision, False)
+            return
+        command_id = next(self._ids)
+        decision.timer = asyncio.get_running_loop().call_later(
+            DECISION_TIMEOUT_S, self._decision_overdue, served.owner, command_id)
+        self._deciding[(served.owner, command_id)] = decision
+        served.owner.send_message(Message(
+            device_name=served.device,
+            body=Command(command_id=command_id, name=ActionDecide.op, text=text),
+            metadata=metadata_for(served.key, ros_type=served.ros_type)))
+
+    def _decision_overdue(self, owner: Replier, command_id: int) -> None:
+        decision = self._deciding.pop((owner, command_id), None)
+        if decision is not None:
+            log.warning("client %s did not accept or reject a goal of %s within %g s; it is "
+                        "rejected", getattr(owner, "peer", "?"), decision.served.action,
+                        DECISION_TIMEOUT_S)
+            self._decided(decision, False)
+
+    def _verdict(self, served: ServedAction, text: str) -> bool:
+        """The client's answer to `action_decide` -> accepted; unusable answers reject."""
+        try:
+            data = client_answer(text)
+            accept = data.get("accept")
+            if not isinstance(accept, bool):
+                raise WrongTypeError("accept", "true or false", repr(accept)[:40])
+        except CommandError as error:
+            log.warning("the answer to a goal of %s is unusable (%s); the goal is rejected",
+                        served.action, error)
+            return False
+        if not accept:
+            log.info("the client serving %s rejected a goal: %s", served.action,
+                     str(data.get("reason", ""))[:200] or "no reason given")
+        return accept
+
+    def _decided(self, decision: _Decision, accepted: bool) -> None:
+        if decision.timer is not None:
+            decision.timer.cancel()
+        if not decision.answer.done():
+            decision.answer.set_result(accepted)
+        self._ros.executor.wake()
 
     def _cancel_for(self, served: ServedAction) -> Any:
         def cancel(goal_handle: Any) -> CancelResponse:  # executor thread: hand off only
@@ -220,6 +314,10 @@ class ServedActions:
         body = message.body
         if not isinstance(body, RtsCommand):
             return
+        decision = self._deciding.pop((client, body.command_id), None)
+        if decision is not None:
+            self._decided(decision, self._verdict(decision.served, body.text))
+            return
         goal = self._pending.get((client, body.command_id))
         if goal is None:
             return  # not ours (a service's), or it came after the timeout
@@ -267,6 +365,10 @@ class ServedActions:
         self.served.pop(served.action, None)
         for goal in list(served.goals.values()):
             self._settle(goal, None)
+        for key, decision in list(self._deciding.items()):
+            if decision.served is served:
+                del self._deciding[key]
+                self._decided(decision, False)
         self._names.release(served.key)
         self._destroy_later(served)
         log.info("no longer serving action %s", served.action)
@@ -304,15 +406,21 @@ class ServedActions:
                     goal.timer.cancel()
                 if not goal.answer.done():
                     goal.answer.set_result(None)
+        for decision in self._deciding.values():
+            if decision.timer is not None:
+                decision.timer.cancel()
+            if not decision.answer.done():
+                decision.answer.set_result(False)
         self._ros.executor.wake()
         self._pending.clear()
+        self._deciding.clear()
         self.served.clear()
 
 
 def _describe_served(served: ServedAction, existed: bool | None = None) -> dict[str, Any]:
     out: dict[str, Any] = {"kind": "action_server", "action": served.action,
                            "type": served.ros_type, "device": served.device,
-                           "goals": served.received}
+                           "goals": served.received, "decides": served.decides}
     if existed is not None:
         out["existed"] = existed
     return out

@@ -8,7 +8,10 @@ sent to the client that sent the goal; `cancel_goal` asks the server to cancel i
 Serving (ROS -> Slicer): after `advertise_action`, each goal a ROS node sends reaches the
 client as an `action_goal` COMMAND; the client streams `action_feedback` and answers the
 COMMAND with ``{"status": "succeeded"|"aborted"|"canceled", "result": {...}}``. A ROS
-client's cancel request reaches it as an `action_cancel` COMMAND.
+client's cancel request reaches it as an `action_cancel` COMMAND. A client that advertised
+with ``decides`` is asked first, by an `action_decide` COMMAND, whether to accept the goal
+(answer ``{"accept": true|false, "reason": "..."}``): a refused goal is REJECTED to ROS,
+as an rclpy server's goal callback would, and never executed.
 """
 
 from __future__ import annotations
@@ -24,8 +27,8 @@ from protocol.commands.op import ActionUse, Bridge, Op, Resource
 from protocol.commands.types import resolve_action_type
 from protocol.commands.wire import json_type
 
-__all__ = ["GOAL_STATUSES", "SERVED_OUTCOMES", "ActionCancel", "ActionFeedback", "ActionGoal",
-           "AdvertiseAction", "CancelGoal", "ListActions", "SendGoal", "UnadvertiseAction",
+__all__ = ["GOAL_STATUSES", "SERVED_OUTCOMES", "ActionCancel", "ActionDecide", "ActionFeedback",
+           "ActionGoal", "AdvertiseAction", "CancelGoal", "ListActions", "SendGoal", "UnadvertiseAction",
            "goal_id_text"]
 
 # action_msgs/msg/GoalStatus codes -> the names replies and goal events use.
@@ -135,11 +138,14 @@ class CancelGoal(Op, op="cancel_goal", writes=True):
 class AdvertiseAction(Op, op="advertise_action", writes=True,
                       creates=Bridge("served_action", ("action",), per_connection=True)):
     """Offer a ROS action served by this client: each goal reaches it as an `ActionGoal`
-    COMMAND. ``goal_timeout``: how long a goal may run before the daemon aborts it."""
+    COMMAND. ``goal_timeout``: how long a goal may run before the daemon aborts it.
+    ``decides``: each goal is first put to the client (`ActionDecide`), which accepts or
+    rejects it; otherwise every goal is accepted."""
 
     action: str
     type: str
     goal_timeout: float = 300.0
+    decides: bool = False
 
     def resources(self) -> tuple[Resource, ...]:
         return (ActionUse("action", self.action, self.type, writes=True, serves=True),)
@@ -152,7 +158,8 @@ class AdvertiseAction(Op, op="advertise_action", writes=True,
     def from_args(cls, a: Args) -> AdvertiseAction:
         return cls(action=a.ros_name("action"), type=_action_type(a),
                    goal_timeout=cast(float, a.opt_float("goal_timeout", 300.0, low=0.0,
-                                                        high=86_400.0, low_open=True)))
+                                                        high=86_400.0, low_open=True)),
+                   decides=a.opt_bool("decides", False))
 
 
 @dataclass(frozen=True)
@@ -206,6 +213,29 @@ class ActionGoal(Op, op="action_goal", writes=False, to_client=True):
                    goal_id=goal_id_text(a.req_str("goal_id", max_len=64), a.path("goal_id")),
                    goal=a.req_obj_raw("goal"),
                    timeout=cast(float, a.opt_float("timeout", 300.0, low=0.0, high=86_400.0,
+                                                   low_open=True)))
+
+
+@dataclass(frozen=True)
+class ActionDecide(Op, op="action_decide", writes=False, to_client=True):
+    """Sent by the daemon to a client that advertised ``action`` with ``decides``: a ROS
+    client sent this goal; answer ``{"accept": bool, "reason": str}`` within ``timeout``
+    seconds (no answer in time: the goal is rejected). An accepted goal then comes as an
+    `ActionGoal`."""
+
+    action: str
+    type: str
+    goal: dict[str, Any] = field(default_factory=dict)
+    timeout: float = 10.0
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()  # the daemon sends it; no client may
+
+    @classmethod
+    def from_args(cls, a: Args) -> ActionDecide:
+        return cls(action=a.ros_name("action"), type=_action_type(a),
+                   goal=a.req_obj_raw("goal"),
+                   timeout=cast(float, a.opt_float("timeout", 10.0, low=0.0, high=3_600.0,
                                                    low_open=True)))
 
 

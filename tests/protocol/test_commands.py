@@ -166,13 +166,15 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.CancelGoal: st.builds(c.CancelGoal, action=ros_names, goal_id=goal_ids,
                             timeout=st.floats(0.01, 300.0)),
     c.AdvertiseAction: st.builds(c.AdvertiseAction, action=ros_names, type=action_types,
-                                 goal_timeout=st.floats(0.01, 86_400.0)),
+                                 goal_timeout=st.floats(0.01, 86_400.0), decides=st.booleans()),
     c.UnadvertiseAction: st.builds(c.UnadvertiseAction, action=ros_names),
     c.ActionFeedback: st.builds(c.ActionFeedback, action=ros_names, goal_id=goal_ids,
                                 feedback=json_objects),
     c.ActionGoal: st.builds(c.ActionGoal, action=ros_names, type=action_types, goal_id=goal_ids,
                             goal=json_objects, timeout=st.floats(0.01, 86_400.0)),
     c.ActionCancel: st.builds(c.ActionCancel, action=ros_names, goal_id=goal_ids),
+    c.ActionDecide: st.builds(c.ActionDecide, action=ros_names, type=action_types,
+                              goal=json_objects, timeout=st.floats(0.01, 3_600.0)),
 }
 
 

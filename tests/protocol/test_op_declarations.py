@@ -83,6 +83,8 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "action_goal": ({"action": "/a", "type": "control_msgs/GripperCommand",
                      "goal_id": "0" * 32, "goal": {}}, set()),
     "action_cancel": ({"action": "/a", "goal_id": "0" * 32}, set()),
+    "action_decide": ({"action": "/a", "type": "control_msgs/GripperCommand", "goal": {}},
+                      set()),
 }
 
 
