@@ -27,9 +27,9 @@ from protocol.commands.op import ActionUse, Bridge, Op, Resource
 from protocol.commands.types import resolve_action_type
 from protocol.commands.wire import json_type
 
-__all__ = ["GOAL_STATUSES", "SERVED_OUTCOMES", "ActionCancel", "ActionDecide", "ActionFeedback",
-           "ActionGoal", "AdvertiseAction", "CancelGoal", "ListActions", "SendGoal", "UnadvertiseAction",
-           "goal_id_text"]
+__all__ = ["GOAL_STATUSES", "SERVED_OUTCOMES", "ActionCancel", "ActionDecide",
+           "ActionFeedback", "ActionGoal", "AdvertiseAction", "CancelGoal", "ListActions",
+           "SendGoal", "UnadvertiseAction", "goal_id_text"]
 
 # action_msgs/msg/GoalStatus codes -> the names replies and goal events use.
 GOAL_STATUSES: dict[int, str] = {0: "unknown", 1: "accepted", 2: "executing", 3: "canceling",
