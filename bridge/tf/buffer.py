@@ -34,30 +34,36 @@ from __future__ import annotations
 
 import math
 import operator
+import os
 import threading
-from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
-from typing import Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Iterable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
 
 from bridge.tf.errors import (
-    ConnectivityError,
-    ExtrapolationError,
     InvalidArgumentError,
     RejectedTransformsError,
     TfError,
-    TfLookupError,
     display_time,
 )
-from bridge.tf.math import IDENTITY, Tf7, compose, interpolate, invert
+from bridge.tf.math import Tf7
+from bridge.tf.store import FrameStore
 from protocol.conversions import matrix_to_pose, pose_to_matrix
 
-__all__ = ["StampedTransform", "FrameInfo", "TfBuffer"]
+try:  # built by setup.py where a C compiler is found (optional: see `COMPILED`)
+    from bridge.tf._compiled_store import CompiledFrameStore
+except ImportError:
+    CompiledFrameStore = None  # type: ignore[assignment,misc]
+
+__all__ = ["StampedTransform", "FrameInfo", "TfBuffer", "COMPILED"]
 
 _NS_PER_S = 1_000_000_000
-_NO_STAMP = 1 << 63  # above any stamp (int64 ns): no dynamic frame seen yet
+_STAMP_LIMIT = 1 << 63  # tf2's times are int64 ns; so are the compiled store's
+# Set to 1 to run every TfBuffer on the pure Python store (to compare, or to rule it out).
+PURE_PYTHON_ENV = "SLICER_BRIDGE_PURE_PYTHON_TF"
+COMPILED = CompiledFrameStore is not None and os.environ.get(PURE_PYTHON_ENV, "") != "1"
 # tf2's tolerance on |q|^2 (QUATERNION_NORMALIZATION_TOLERANCE in buffer_core.cpp).
 _QUATERNION_TOLERANCE = 1e-2
 
@@ -115,89 +121,6 @@ class FrameInfo:
         return self.samples / max(self.buffer_length_s, 1e-4)
 
 
-class _FrameCache:
-    """The samples of one child frame, oldest first, in three parallel lists.
-
-    Parallel lists (not a list of records) so `bisect` runs on the plain int stamps. A
-    static frame holds exactly one sample with stamp 0.
-    """
-
-    __slots__ = ("static", "window_ns", "stamps", "parents", "values")
-
-    def __init__(self, static: bool, window_ns: int) -> None:
-        self.static = static
-        self.window_ns = window_ns
-        self.stamps: List[int] = []
-        self.parents: List[str] = []
-        self.values: List[Tf7] = []
-
-    def first(self) -> int:
-        """The index of the oldest live sample: the lists may still hold a few older ones
-        (`TfBuffer._insert` drops them in chunks), which count for nothing."""
-        stamps = self.stamps
-        oldest = stamps[-1] - self.window_ns
-        return 0 if stamps[0] >= oldest else bisect_left(stamps, oldest)
-
-
-# One link of a chain at a given time: the frame's cache, the older sample's index and the
-# interpolation ratio towards the next sample (0.0: the sample itself).
-_Slot = Tuple[_FrameCache, int, float]
-# top<-frame at time t, keyed (top, frame, t): what one batch of lookups has composed.
-_Memo = Dict[Tuple[str, str, int], Tf7]
-
-
-def _locate(cache: _FrameCache, t: int) -> Tuple[str, int, float]:
-    """(parent, index, ratio) of ``cache`` at time ``t`` (0: newest), or ExtrapolationError."""
-    if cache.static:
-        return cache.parents[0], 0, 0.0
-    stamps = cache.stamps
-    n = len(stamps)
-    last = stamps[-1]
-    if t == last or t == 0:
-        return cache.parents[-1], n - 1, 0.0
-    if n == 1:
-        raise ExtrapolationError("single", t, last)
-    if t > last:
-        raise ExtrapolationError("future", t, last)
-    first = cache.first()
-    if t < stamps[first]:
-        raise ExtrapolationError("past", t, stamps[first])
-    if n - first == 1:
-        raise ExtrapolationError("single", t, last)
-    i = bisect_right(stamps, t) - 1  # stamps[i] <= t < stamps[i + 1]
-    parents = cache.parents
-    s0 = stamps[i]
-    if s0 == t or parents[i] != parents[i + 1]:
-        return parents[i], i, 0.0
-    return parents[i], i, (t - s0) / (stamps[i + 1] - s0)
-
-
-def _value(slot: _Slot) -> Tf7:
-    cache, i, ratio = slot
-    if ratio == 0.0:
-        return cache.values[i]
-    return interpolate(cache.values[i], cache.values[i + 1], ratio)
-
-
-def _up(slots: Sequence[_Slot]) -> Tf7:
-    """top<-bottom for the links of one side, listed bottom-up; composed top-down, as
-    `TfBuffer._up_at` does, so both give the same bits."""
-    if not slots:
-        return IDENTITY
-    acc = _value(slots[-1])  # starting from a link saves one product with identity
-    for k in range(len(slots) - 2, -1, -1):
-        acc = compose(acc, _value(slots[k]))
-    return acc
-
-
-def _combine(source_slots: Sequence[_Slot], target_slots: Sequence[_Slot]) -> Tf7:
-    """target<-source from the links source->common and target->common."""
-    a = _up(source_slots)  # common<-source
-    if not target_slots:
-        return a
-    return compose(invert(_up(target_slots)), a)  # target<-common after common<-source
-
-
 def _strip(frame: str) -> str:
     return frame[1:] if frame.startswith("/") else frame
 
@@ -206,19 +129,19 @@ class TfBuffer:
     """tf2's buffer for the daemon: `set_transforms` from ROS, `lookup` for clients.
 
     ``cache_time_s`` is how far behind each frame's newest sample older samples are kept
-    (tf2's default is 10 s). Thread-safe: see the module docstring.
+    (tf2's default is 10 s). ``compiled``: True to require the compiled store, False for
+    the pure Python one, None (the default) for the compiled one where it was built (see
+    `COMPILED`). Thread-safe: see the module docstring.
     """
 
-    def __init__(self, cache_time_s: float = 10.0) -> None:
+    def __init__(self, cache_time_s: float = 10.0, *, compiled: Optional[bool] = None) -> None:
         if not (isinstance(cache_time_s, (int, float)) and math.isfinite(cache_time_s)
                 and cache_time_s > 0):
             raise InvalidArgumentError("cache_time_s", "a finite number of seconds > 0",
                                        repr(cache_time_s))
         self._cache_ns = int(cache_time_s * _NS_PER_S)
         self._lock = threading.Lock()
-        self._frames: dict[str, _FrameCache] = {}  # child frame -> its samples
-        self._known: dict[str, None] = {}  # every frame id seen, children and parents
-        self._graph_version = 0
+        self._store: _Store = _make_store(self._cache_ns, compiled)
 
     # ------------------------------------------------------------------ writing
 
@@ -227,11 +150,16 @@ class TfBuffer:
         return self._cache_ns / _NS_PER_S
 
     @property
+    def compiled(self) -> bool:
+        """Whether this buffer runs on the compiled store (`COMPILED`)."""
+        return not isinstance(self._store, FrameStore)
+
+    @property
     def graph_version(self) -> int:
         """Bumped whenever the tree's shape may change: a new frame, a frame's newest parent
         changes, a frame switches between static and dynamic. `LookupRegistry` re-derives
         which frames each lookup traverses when it moves."""
-        return self._graph_version
+        return self._store.graph_version
 
     def set_transforms(self, transforms: Iterable[StampedTransform], *, static: bool) -> set[str]:
         """Store one batch (a whole TFMessage); return the child frames whose data changed.
@@ -245,14 +173,51 @@ class TfBuffer:
         changed: set[str] = set()
         rejected: list[InvalidArgumentError] = []
         with self._lock:
+            insert = self._store.insert
             for index, tr in enumerate(transforms):
                 try:
                     parent, child, stamp, value = _check(tr, index, static)
                 except InvalidArgumentError as exc:
                     rejected.append(exc)
                     continue
-                if self._insert(parent, child, stamp, value, static):
+                if insert(parent, child, stamp, value, static):
                     changed.add(child)
+        if rejected:
+            raise RejectedTransformsError(rejected, changed)
+        return changed
+
+    def set_transforms_cdr(self, data: bytes, *, static: bool) -> Optional[set[str]]:
+        """`set_transforms` of a serialized ``tf2_msgs/TFMessage`` (a raw subscription's
+        bytes), with the same results and errors, read and stored in one call by the
+        compiled store. None (nothing stored) when this buffer does not read those bytes:
+        on the pure Python store, or bytes that are not little-endian plain CDR. The caller
+        then reads the message itself and calls `set_transforms`.
+
+        A transform the compiled store refuses is judged again by `_check`, the one place
+        that words the reasons.
+        """
+        insert_cdr = getattr(self._store, "insert_cdr", None)
+        if insert_cdr is None:
+            return None
+        with self._lock:
+            stored = insert_cdr(data, static)
+        if stored is None:
+            return None
+        changed, refused = stored
+        if not refused:
+            return changed
+        rejected: list[InvalidArgumentError] = []
+        for index, raw in refused:
+            try:
+                checked = _check(_from_raw(raw), index, static)
+            except InvalidArgumentError as exc:
+                rejected.append(exc)
+                continue
+            # The two checks agree (tests hold them together); if they ever did not, the
+            # sample would be kept, not lost.
+            with self._lock:
+                if self._store.insert(*checked, static):
+                    changed.add(checked[1])
         if rejected:
             raise RejectedTransformsError(rejected, changed)
         return changed
@@ -260,56 +225,7 @@ class TfBuffer:
     def clear(self) -> None:
         """Forget every frame (for example after a ROS time jump backwards)."""
         with self._lock:
-            self._frames.clear()
-            self._known.clear()
-            self._graph_version += 1
-
-    def _insert(self, parent: str, child: str, stamp: int, value: Tf7, static: bool) -> bool:
-        known = self._known
-        if child not in known or parent not in known:
-            known[child] = None
-            known[parent] = None
-            self._graph_version += 1
-        cache = self._frames.get(child)
-        if cache is None or cache.static != static:
-            # tf2 also replaces the whole cache when a frame switches static <-> dynamic.
-            cache = self._frames[child] = _FrameCache(static, self._cache_ns)
-            self._graph_version += 1
-        stamps, parents, values = cache.stamps, cache.parents, cache.values
-        if static:
-            if parents and parents[0] == parent and values[0] == value:
-                return False  # /tf_static is latched: repeats are common and change nothing
-            if parents and parents[0] != parent:
-                self._graph_version += 1
-            cache.stamps, cache.parents, cache.values = [0], [parent], [value]
-            return True
-        if not stamps or stamp > stamps[-1]:  # the usual case: a newer sample
-            if parents and parents[-1] != parent:
-                self._graph_version += 1
-            stamps.append(stamp)
-            parents.append(parent)
-            values.append(value)
-            # Samples older than the window are dropped a quarter window at a time: one at a
-            # time moves the whole list on every insert (10,000 per link at 1 kHz).
-            if stamps[0] < stamp - self._cache_ns - (self._cache_ns >> 2):
-                k = bisect_left(stamps, stamp - self._cache_ns)
-                del stamps[:k], parents[:k], values[:k]
-            return True
-        if stamp < stamps[-1] - self._cache_ns:
-            return False  # older than the window: tf2 ignores it too (TF_OLD_DATA)
-        i = bisect_left(stamps, stamp)  # out of order: keep the list sorted
-        if stamps[i] == stamp:
-            if parents[i] == parent and values[i] == value:
-                return False
-            if i == len(stamps) - 1 and parents[i] != parent:
-                self._graph_version += 1
-            parents[i] = parent
-            values[i] = value
-            return True
-        stamps.insert(i, stamp)
-        parents.insert(i, parent)
-        values.insert(i, value)
-        return True
+            self._store.clear()
 
     # ------------------------------------------------------------------ reading
 
@@ -321,37 +237,41 @@ class TfBuffer:
         `ExtrapolationError` or `InvalidArgumentError`, worded as tf2 words them.
         """
         t = _time_arg(time_ns)
+        target = _frame_arg(target_frame, "target_frame")
+        source = _frame_arg(source_frame, "source_frame")
         with self._lock:
-            return self._lookup_one(target_frame, source_frame, t, None)
+            t, value = self._store.lookup(target, source, t)
+        return StampedTransform(target, source, t, value[:3], value[3:])
 
     def lookup_latest_many(self, pairs: Sequence[Tuple[str, str]],
                            ) -> List[StampedTransform | TfError]:
         """`lookup(target, source)` at the latest common time for each (target, source), as
         a result or the error it raised, under one lock: chains that share links (a robot's
         links seen from its base) compose each shared link once, not once per lookup."""
-        memo: _Memo = {}
+        checked: List[Tuple[str, str]] = []
         out: List[StampedTransform | TfError] = []
+        errors: dict[int, TfError] = {}
+        for index, (target, source) in enumerate(pairs):
+            try:
+                checked.append((_frame_arg(target, "target_frame"),
+                                _frame_arg(source, "source_frame")))
+            except InvalidArgumentError as error:
+                errors[index] = error
         with self._lock:
-            for target, source in pairs:
-                try:
-                    out.append(self._lookup_one(target, source, 0, memo))
-                except TfError as error:
-                    out.append(error)
+            results = self._store.latest_many(checked)
+        it = iter(zip(checked, results))
+        for index in range(len(checked) + len(errors)):
+            error = errors.get(index)
+            if error is not None:
+                out.append(error)
+                continue
+            (target, source), result = next(it)
+            if isinstance(result, TfError):
+                out.append(result)
+            else:
+                t, value = result
+                out.append(StampedTransform(target, source, t, value[:3], value[3:]))
         return out
-
-    def _lookup_one(self, target_frame: str, source_frame: str, t: int,
-                    memo: Optional[_Memo]) -> StampedTransform:
-        target = _frame_arg(target_frame, "target_frame")
-        source = _frame_arg(source_frame, "source_frame")
-        if target == source:  # tf2 answers identity even for unknown frames
-            cache = self._frames.get(target)
-            if t == 0 and cache is not None and not cache.static:
-                t = cache.stamps[-1]
-            return StampedTransform(target, source, t, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
-        self._require(target, "lookupTransform argument target_frame")
-        self._require(source, "lookupTransform argument source_frame")
-        t, value = self._lookup_locked(target, source, t, memo)
-        return StampedTransform(target, source, t, value[:3], value[3:])
 
     def can_transform(self, target_frame: str, source_frame: str, time_ns: int = 0) -> bool:
         """Whether `lookup` with the same arguments would succeed."""
@@ -369,33 +289,23 @@ class TfBuffer:
         """
         target = _frame_arg(target_frame, "target_frame")
         source = _frame_arg(source_frame, "source_frame")
-        if target == source:
-            return frozenset()
         with self._lock:
-            self._require(target, "lookupTransform argument target_frame")
-            self._require(source, "lookupTransform argument source_frame")
-            _, src, tgt = self._latest_chain(target, source)
-        return frozenset(src).union(tgt)
+            return self._store.chain_frames(target, source)
 
     def frames(self) -> list[str]:
         """Every frame id known, children and parents alike (tf2's getAllFrameNames), sorted."""
         with self._lock:
-            return sorted(self._known)
+            return sorted(self._store.known())
 
     def has_frame(self, frame: str) -> bool:
         with self._lock:
-            return _strip(frame) in self._known
+            return self._store.has_frame(_strip(frame))
 
     def frame_info(self) -> list[FrameInfo]:
         """One `FrameInfo` per child frame, sorted by frame id."""
         with self._lock:
-            out = []
-            for name in sorted(self._frames):
-                c = self._frames[name]
-                first = c.first()
-                out.append(FrameInfo(name, c.parents[-1], c.static, c.stamps[-1],
-                                     c.stamps[first], len(c.stamps) - first))
-            return out
+            rows = self._store.frame_rows()
+        return [FrameInfo(*row) for row in rows]
 
     def all_frames_as_yaml(self, current_time_ns: int = 0) -> str:
         """A YAML description of every child frame, like tf2's ``allFramesAsYAML``.
@@ -421,144 +331,28 @@ class TfBuffer:
             lines.append(f"  buffer_length: {info.buffer_length_s:.3f}")
         return "\n".join(lines) + "\n"
 
-    # ------------------------------------------------------------------ internals (locked)
 
-    def _require(self, frame: str, argument: str) -> None:
-        if frame not in self._known:
-            raise TfLookupError.unknown_frame(frame, argument)
+# ---------------------------------------------------------------------- stores
 
-    def _loop_error(self) -> TfLookupError:
-        listing = "".join(f"Frame {name} exists with parent {cache.parents[-1]}.\n"
-                          for name, cache in sorted(self._frames.items()))
-        return TfLookupError("The tf tree is invalid because it contains a loop.\n" + listing)
+_Store = Union[FrameStore, "CompiledFrameStore"]
 
-    def _lookup_locked(self, target: str, source: str, t: int,
-                       memo: Optional[_Memo] = None) -> Tuple[int, Tf7]:
-        if t != 0:
-            return t, self._walk(target, source, t)
-        t, src, tgt = self._latest_chain(target, source)
-        # The chain was found with each frame's newest parent. Sample it at t; if a frame's
-        # parent at t is another one (a re-parenting inside the window), walk again at t.
-        top = self._frames[src[-1]].parents[-1] if src else source  # the common ancestor
-        try:
-            a = self._up_at(src, t, top, memo)  # top<-source
-            if a is None:
-                return t, self._walk(target, source, t)
-            if not tgt:
-                return t, a
-            b = self._up_at(tgt, t, top, memo)  # top<-target
-            if b is None:
-                return t, self._walk(target, source, t)
-        except ExtrapolationError as exc:
-            raise exc.with_frames(source, target) from None
-        return t, compose(invert(b), a)
 
-    def _up_at(self, chain: List[str], t: int, top: str,
-               memo: Optional[_Memo]) -> Optional[Tf7]:
-        """top<-chain[0] at t for the frames of `_latest_chain` (listed bottom-up), or None if
-        a frame had another parent at t. ``memo`` holds top<-frame at t for frames already
-        composed in this batch: the walk up stops at the first one found."""
-        frames = self._frames
-        below: List[Tuple[str, _Slot]] = []
-        acc: Optional[Tf7] = None
-        for frame in chain:
-            if memo is not None:
-                acc = memo.get((top, frame, t))
-                if acc is not None:
-                    break
-            cache = frames[frame]
-            parent, i, ratio = _locate(cache, t)
-            if parent != cache.parents[-1]:
-                return None
-            below.append((frame, (cache, i, ratio)))
-        for frame, slot in reversed(below):
-            value = _value(slot)
-            acc = value if acc is None else compose(acc, value)
-            if memo is not None:
-                memo[(top, frame, t)] = acc
-        return IDENTITY if acc is None else acc
+def _make_store(window_ns: int, compiled: Optional[bool]) -> _Store:
+    if compiled is None:
+        compiled = COMPILED
+    if not compiled:
+        return FrameStore(window_ns)
+    if CompiledFrameStore is None:
+        raise InvalidArgumentError("compiled", "False or None: the compiled store was not built",
+                                   "True")
+    return CompiledFrameStore(window_ns)
 
-    def _latest_chain(self, target: str, source: str) -> Tuple[int, List[str], List[str]]:
-        """Walk by each frame's newest parent: (latest common time, source-side frames,
-        target-side frames), the frame lists naming the links below the common ancestor."""
-        frames = self._frames
-        seen: dict[str, Tuple[int, int]] = {}  # frame -> (min stamp below it, links below)
-        src: List[str] = []
-        low = _NO_STAMP
-        frame = source
-        while True:
-            if frame in seen:
-                raise self._loop_error()
-            seen[frame] = (low, len(src))
-            if frame == target:  # target is an ancestor of source
-                return (0 if low == _NO_STAMP else low), src, []
-            cache = frames.get(frame)
-            if cache is None:  # a root
-                break
-            if not cache.static and cache.stamps[-1] < low:
-                low = cache.stamps[-1]
-            src.append(frame)
-            frame = cache.parents[-1]
-        tgt: List[str] = []
-        low = _NO_STAMP
-        frame = target
-        limit = len(frames)
-        while frame not in seen:
-            cache = frames.get(frame)
-            if cache is None:
-                raise ConnectivityError(target, source)
-            if not cache.static and cache.stamps[-1] < low:
-                low = cache.stamps[-1]
-            tgt.append(frame)
-            if len(tgt) > limit:
-                raise self._loop_error()
-            frame = cache.parents[-1]
-        src_low, below = seen[frame]
-        low = min(low, src_low)
-        return (0 if low == _NO_STAMP else low), src[:below], tgt
 
-    def _walk(self, target: str, source: str, t: int) -> Tf7:
-        """target<-source at time t, following each frame's parent *at t* (tf2's walk)."""
-        frames = self._frames
-        seen: dict[str, int] = {}  # frame on the source side -> links below it
-        src: List[_Slot] = []
-        src_error: Optional[ExtrapolationError] = None
-        frame = source
-        while True:
-            if frame in seen:
-                raise self._loop_error()
-            seen[frame] = len(src)
-            if frame == target:
-                break
-            cache = frames.get(frame)
-            if cache is None:
-                break
-            try:
-                parent, i, ratio = _locate(cache, t)
-            except ExtrapolationError as exc:
-                # Not fatal yet: the target side may meet the chain below this link.
-                src_error = exc
-                break
-            src.append((cache, i, ratio))
-            frame = parent
-        tgt: List[_Slot] = []
-        frame = target
-        limit = len(frames)
-        while frame not in seen:
-            cache = frames.get(frame)
-            if cache is None:
-                if src_error is not None:
-                    raise src_error.with_frames(source, target)
-                raise ConnectivityError(target, source)
-            try:
-                parent, i, ratio = _locate(cache, t)
-            except ExtrapolationError as exc:
-                raise exc.with_frames(source, target) from None
-            tgt.append((cache, i, ratio))
-            if len(tgt) > limit:
-                raise self._loop_error()
-            frame = parent
-        return _combine(src[: seen[frame]], tgt)
+def _from_raw(raw: Tuple[int, int, str, str, float, float, float, float, float, float, float],
+              ) -> StampedTransform:
+    """A transform as read from CDR (sec, nanosec, frame, child, tx..qw)."""
+    sec, nanosec, frame, child, tx, ty, tz, x, y, z, w = raw
+    return StampedTransform(frame, child, sec * _NS_PER_S + nanosec, (tx, ty, tz), (x, y, z, w))
 
 
 # ---------------------------------------------------------------------- validation
@@ -582,9 +376,9 @@ def _time_arg(time_ns: object) -> int:
         except TypeError:
             raise InvalidArgumentError("time_ns", "an integer number of nanoseconds",
                                        type(time_ns).__name__) from None
-    if time_ns < 0:
-        raise InvalidArgumentError("time_ns", "a time >= 0 (0: the latest common time)",
-                                   str(time_ns))
+    if not 0 <= time_ns < _STAMP_LIMIT:
+        raise InvalidArgumentError("time_ns", "a time >= 0 and < 2**63 ns (0: the latest "
+                                   "common time)", str(time_ns))
     return time_ns
 
 
@@ -615,8 +409,9 @@ def _check(tr: StampedTransform, index: int, static: bool) -> Tuple[str, str, in
             except TypeError:
                 raise InvalidArgumentError(f"{where}.stamp_ns", "an integer (ns)",
                                            type(stamp).__name__) from None
-        if stamp < 0:
-            raise InvalidArgumentError(f"{where}.stamp_ns", "a time >= 0", str(stamp))
+        if not 0 <= stamp < _STAMP_LIMIT:
+            raise InvalidArgumentError(f"{where}.stamp_ns", "a time >= 0 and < 2**63 ns",
+                                       str(stamp))
     try:
         tx, ty, tz = tr.translation
         qx, qy, qz, qw = tr.rotation

@@ -22,3 +22,15 @@ def client(daemon: RunningDaemon) -> Iterator[Connection]:
     connection = daemon.connect()
     yield connection
     connection.close()
+
+
+@pytest.fixture(params=["compiled", "pure Python"])
+def tf_store(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Runs a tf test once on each store `TfBuffer` can use (`TfBuffer()` then takes it):
+    the compiled one (skipped where it was not built) and the pure Python fallback."""
+    from bridge.tf import buffer
+
+    if request.param == "compiled" and buffer.CompiledFrameStore is None:
+        pytest.skip("the compiled tf store was not built (no C compiler or Cython at install)")
+    monkeypatch.setattr(buffer, "COMPILED", request.param == "compiled")
+    return str(request.param)

@@ -30,6 +30,9 @@ from protocol.conversions import pose_to_matrix
 S = 1_000_000_000  # ns per second
 IDQ = (0.0, 0.0, 0.0, 1.0)
 
+# Every test here runs on both tf stores (tests/bridge/conftest.py).
+pytestmark = pytest.mark.usefixtures("tf_store")
+
 
 def qaxis(axis: Sequence[float], angle: float) -> tuple[float, float, float, float]:
     n = math.sqrt(sum(a * a for a in axis))

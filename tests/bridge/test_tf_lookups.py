@@ -21,6 +21,9 @@ S = 1_000_000_000
 MS = 1_000_000
 IDQ = (0.0, 0.0, 0.0, 1.0)
 
+# Every test here runs on both tf stores (tests/bridge/conftest.py).
+pytestmark = pytest.mark.usefixtures("tf_store")
+
 
 def tf(parent: str, child: str, stamp: int, t: Sequence[float],
        q: Sequence[float] = IDQ) -> StampedTransform:
