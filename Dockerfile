@@ -26,7 +26,11 @@ RUN apt-get update \
 RUN python3 -m venv --system-site-packages /opt/bridge
 ENV PATH=/opt/bridge/bin:$PATH
 
-COPY pyproject.toml README.md /src/
+# setup.py builds the compiled tf store (Cython, fetched by pip as a build requirement; the
+# image's compiler) and installs the ROS package files it lists.
+COPY pyproject.toml setup.py package.xml README.md /src/
+COPY resource /src/resource
+COPY ros2_executables /src/ros2_executables
 COPY protocol /src/protocol
 COPY bridge /src/bridge
 COPY slicer_client /src/slicer_client

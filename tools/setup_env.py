@@ -39,8 +39,10 @@ STAMP = VENV / ".slicer-ros2-bridge-setup"
 CMAKE_WHEEL = "cmake==3.31.6"
 # The ROS wheels are built for these CPython versions only.
 SUPPORTED_PYTHONS = ((3, 10), (3, 11), (3, 12), (3, 13))
-# Inputs whose change means the environment must be rebuilt.
-STAMP_INPUTS = ("pyproject.toml", "tools/setup_env.py")
+# Inputs whose change means the environment must be rebuilt (the install builds the compiled
+# tf store from its .pyx, so an edit of it is one).
+STAMP_INPUTS = ("pyproject.toml", "setup.py", "tools/setup_env.py",
+                "bridge/tf/_compiled_store.pyx")
 
 
 class SetupError(Exception):

@@ -359,6 +359,8 @@ def _from_raw(raw: Tuple[int, int, str, str, float, float, float, float, float, 
 
 
 def _frame_arg(frame: object, argument: str) -> str:
+    if type(frame) is str and frame and frame[0] != "/":
+        return frame  # the usual case, on every lookup of every batch
     if not isinstance(frame, str):
         raise InvalidArgumentError(argument, "a frame id (str)", type(frame).__name__)
     stripped = _strip(frame)

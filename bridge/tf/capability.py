@@ -287,11 +287,24 @@ class TfBridges:
 
     def _on_tf(self, data: bytes) -> None:
         self.received["tf"] += 1
-        self._store(tf_cdr_to_transforms(data), static=False)
+        self._store_cdr(data, static=False)
 
     def _on_tf_static(self, data: bytes) -> None:
         self.received["tf_static"] += 1
-        self._store(tf_cdr_to_transforms(data), static=True)
+        self._store_cdr(data, static=True)
+
+    def _store_cdr(self, data: bytes, *, static: bool) -> None:
+        """Store one serialized TFMessage: read and stored in one call by the compiled
+        store, else read here and stored as `StampedTransform`s."""
+        try:
+            changed = self.buffer.set_transforms_cdr(data, static=static)
+        except RejectedTransformsError as error:
+            self._warn_rejected(error, static)
+            changed = error.changed
+        if changed is None:
+            self._store(tf_cdr_to_transforms(data), static=static)
+        else:
+            self._deliver(changed)
 
     def _store(self, transforms: list[StampedTransform], *, static: bool) -> None:
         """Store one batch and deliver the lookups it changed (any thread)."""
@@ -300,6 +313,9 @@ class TfBridges:
         except RejectedTransformsError as error:
             self._warn_rejected(error, static)
             changed = error.changed
+        self._deliver(changed)
+
+    def _deliver(self, changed: set[str]) -> None:
         if not changed:
             return
         with self._deliver_lock:

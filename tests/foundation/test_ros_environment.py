@@ -77,3 +77,18 @@ def test_cli_help_lists_the_commands() -> None:
     assert result.returncode == 0, result.stderr
     assert "usage: slicer-ros2-bridge" in result.stdout
     assert "run" in result.stdout
+
+
+def test_the_install_built_the_compiled_tf_store() -> None:
+    """`make setup` (pip install -e) builds bridge/tf/_compiled_store.pyx wherever a C
+    compiler is found; the daemon then runs it, not the pure Python fallback."""
+    import shutil
+    import sysconfig
+
+    from bridge.tf import buffer
+
+    if shutil.which(sysconfig.get_config_var("CC").split()[0] or "cc") is None:
+        pytest.skip("no C compiler here: the pure Python tf store is the one installed")
+    assert buffer.CompiledFrameStore is not None, (
+        "the compiled tf store was not built: see .cache/pip-install.log")
+    assert buffer.TfBuffer().compiled or os.environ.get(buffer.PURE_PYTHON_ENV) == "1"
