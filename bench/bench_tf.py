@@ -12,7 +12,11 @@ Measured in the same run, on the same data:
 - composing one link with the tuple tf-math, with numpy (3x3 R, t) and with 4x4 matrices
   built by pose_to_matrix (why bridge/tf/math.py uses tuples);
 - set_transforms for a 7-link robot update (one /tf message), and the registry's updates()
-  call that follows it.
+  call that follows it;
+- the daemon's work per /tf message of that robot on each tf store, the compiled one
+  (bridge/tf/_compiled_store.pyx: the CDR read and stored in one call) and the pure Python
+  fallback (bridge/tf/store.py: read by bridge/codecs/cdr.py, then set_transforms): the
+  serialized TFMessage in, the 7 registered lookups' results out.
 Each figure is the best of several repeats (the machine is shared; the best is the least
 disturbed), in microseconds per call.
 """
@@ -218,6 +222,70 @@ def main() -> None:
     print(f"{'  (building the 7 StampedTransforms)':38s} {make_us:9.1f}")
     print(f"{'set_transforms + registry.updates (10)':38s} {reg_us:9.1f} "
           f"{1e6 / reg_us:10.0f} (updates/s)")
+    per_message(robot, number, repeat)
+
+
+def _feeder(buf: TfBuffer, messages: List[bytes]) -> Callable[[], set[str]]:
+    """Stores the next message on each call, as the daemon does; returns the changed frames."""
+    from bridge.tf.capability import tf_cdr_to_transforms
+
+    it = iter(messages)
+
+    def store() -> set[str]:
+        data = next(it)
+        changed = buf.set_transforms_cdr(data, static=False)
+        if changed is None:  # the pure Python store: read here, as the daemon does
+            changed = buf.set_transforms(tf_cdr_to_transforms(data), static=False)
+        return changed
+    return store
+
+
+def _store_costs(messages: List[bytes], compiled: bool, number: int) -> Tuple[float, float]:
+    """(read+store, read+store+evaluate) in us per message, on fresh buffers."""
+    store_us = best_us(_feeder(TfBuffer(compiled=compiled), messages), number, 3)
+    buf = TfBuffer(compiled=compiled)
+    reg = LookupRegistry(buf)
+    for i in range(1, 8):
+        reg.add("base", f"link{i}")
+    store = _feeder(buf, messages)
+    now = [0]
+
+    def update() -> int:
+        now[0] += STEP
+        return len(reg.updates(store(), now[0]))
+
+    assert update() == 7  # every lookup moved: 7 results per message
+    return store_us, best_us(update, number, 3)
+
+
+def per_message(robot: Dict[str, str], number: int, repeat: int) -> None:
+    """The daemon's tf work per /tf message (CDR in, 7 lookup results out) on each store."""
+    from geometry_msgs.msg import TransformStamped
+    from rclpy.serialization import serialize_message
+    from tf2_msgs.msg import TFMessage
+
+    from bridge.tf import buffer as buffer_module
+
+    messages = []
+    for k in range(number * repeat + 10):
+        msg = TFMessage()
+        for child, parent in robot.items():
+            ts = TransformStamped()
+            ts.header.stamp.sec, ts.header.stamp.nanosec = divmod((k + 1) * STEP, S)
+            ts.header.frame_id, ts.child_frame_id = parent, child
+            ts.transform.translation.x = 0.1
+            (ts.transform.rotation.x, ts.transform.rotation.y, ts.transform.rotation.z,
+             ts.transform.rotation.w) = quat((0, 0, 1), 0.001 * k)
+            msg.transforms.append(ts)
+        messages.append(serialize_message(msg))
+    stores = [("pure Python", False)]
+    if buffer_module.CompiledFrameStore is not None:
+        stores.insert(0, ("compiled", True))
+    print("per /tf message of the 7-link robot, CDR in -> 7 lookup results out (us):")
+    for name, compiled in stores:
+        store_us, update_us = _store_costs(messages, compiled, number // 2)
+        print(f"  {name + ' store':36s} read+store {store_us:6.1f}   "
+              f"read+store+evaluate {update_us:6.1f}")
 
 
 if __name__ == "__main__":

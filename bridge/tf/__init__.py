@@ -1,7 +1,9 @@
 """The daemon's tf2 core, plain Python (no rclpy): a buffer of transforms and lookups on it.
 
 - `TfBuffer` (buffer.py): fed by the daemon's /tf and /tf_static subscriptions, answers
-  tf2-style lookups with tf2's error wording and codes.
+  tf2-style lookups with tf2's error wording and codes. Its samples live in a store:
+  store.py (pure Python, the reference) or _compiled_store.pyx (the same in C through
+  Cython, used where it was built; tests hold the two to the same bits).
 - `LookupRegistry` (lookups.py): the lookups clients registered; tells the daemon which
   results changed after each batch, with per-lookup rate caps.
 - math.py: quaternion / rigid-transform algebra on float tuples; errors.py: the error tree.

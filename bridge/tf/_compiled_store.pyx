@@ -131,10 +131,6 @@ cdef inline void interpolate(const double *a, const double *b, double ratio,
     out[6] = w / n
 
 
-cdef inline tuple as_tuple(const double *v):
-    return (v[0], v[1], v[2], v[3], v[4], v[5], v[6])
-
-
 cdef inline void set_identity(double *v) noexcept nogil:
     v[0] = 0.0
     v[1] = 0.0
@@ -515,7 +511,7 @@ cdef class CompiledFrameStore:
     def lookup(self, str target, str source, long long t):
         cdef double v[7]
         cdef int64_t used = self._lookup(target, source, t, False, v)
-        return used, as_tuple(v)
+        return used, (v[0], v[1], v[2]), (v[3], v[4], v[5], v[6])
 
     def latest_many(self, pairs):
         cdef list out = []
@@ -528,7 +524,7 @@ cdef class CompiledFrameStore:
             except TfError as error:
                 out.append(error)
                 continue
-            out.append((used, as_tuple(v)))
+            out.append((used, (v[0], v[1], v[2]), (v[3], v[4], v[5], v[6])))
         return out
 
     def chain_frames(self, str target, str source):

@@ -158,8 +158,17 @@ def _igtl_timestamp(stamp_ns: int) -> int:
     # "unset", so such a result carries the time the daemon computed it instead.
     if stamp_ns <= 0:
         return igtl_timestamp_now()
+    global _last_stamp
+    last = _last_stamp  # one read: another thread may replace it meanwhile
+    if stamp_ns == last[0]:  # the lookups of one /tf message share their stamp
+        return last[1]
     sec, nanosec = divmod(stamp_ns, _NS_PER_S)
-    return igtl_timestamp_from_ros(sec, nanosec)
+    timestamp = igtl_timestamp_from_ros(sec, nanosec)
+    _last_stamp = (stamp_ns, timestamp)
+    return timestamp
+
+
+_last_stamp = (-1, 0)  # (stamp_ns, its IGTL time stamp): this pure function's last answer
 
 
 # OpenIGTLink STATUS for a lookup that fails: the code says what a client can expect

@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass, field
-from typing import Dict, Iterable, List, Optional, Set, Tuple, Union
+from typing import Dict, Iterable, List, NamedTuple, Optional, Set, Tuple, Union
 
 from bridge.tf.buffer import StampedTransform, TfBuffer
 from bridge.tf.errors import InvalidArgumentError, TfError, TfLookupError
@@ -45,10 +45,12 @@ LookupResult = Union[StampedTransform, TfError]
 _Pair = Tuple[str, str]  # (parent, child): lookups of the same pair share one evaluation
 
 
-@dataclass(frozen=True, slots=True)
-class LookupKey:
+class LookupKey(NamedTuple):
     """One registered lookup: parent<-child (tf2's target<-source), and a ``tag`` the daemon
-    chooses to tell apart several registrations of the same pair (one per client, say)."""
+    chooses to tell apart several registrations of the same pair (one per client, say).
+
+    A named tuple: it is a dict key hashed several times per result on the hot path, and a
+    tuple's hash is native where a frozen dataclass's runs in Python."""
 
     parent: str
     child: str

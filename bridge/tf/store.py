@@ -18,14 +18,16 @@ from typing import Dict, List, Optional, Sequence, Tuple, Union
 from bridge.tf.errors import ConnectivityError, ExtrapolationError, TfError, TfLookupError
 from bridge.tf.math import IDENTITY, Tf7, compose, interpolate, invert
 
-__all__ = ["FrameStore", "FrameRow", "LatestResult", "NO_STAMP"]
+__all__ = ["FrameStore", "FrameRow", "LatestResult", "NO_STAMP", "Result"]
 
 NO_STAMP = 1 << 63  # above any stamp (int64 ns): no dynamic frame seen yet
 
 # (frame, parent, static, newest stamp, oldest live stamp, live samples): `TfBuffer.frame_info`.
 FrameRow = Tuple[str, str, bool, int, int, int]
-# One result of `FrameStore.latest_many`: (time used, target<-source), or the error.
-LatestResult = Union[Tuple[int, Tf7], TfError]
+# target<-source as (time used, translation, rotation): `StampedTransform`'s last fields.
+Result = Tuple[int, Tuple[float, float, float], Tuple[float, float, float, float]]
+# One result of `FrameStore.latest_many`, or the error it raised.
+LatestResult = Union[Result, TfError]
 
 
 class _FrameCache:
@@ -194,9 +196,10 @@ class FrameStore:
                         len(c.stamps) - first))
         return out
 
-    def lookup(self, target: str, source: str, t: int) -> Tuple[int, Tf7]:
-        """(time used, target<-source) at ``t`` (0: the latest common time), or a TfError."""
-        return self._lookup(target, source, t, None)
+    def lookup(self, target: str, source: str, t: int) -> Result:
+        """target<-source at ``t`` (0: the latest common time), or a TfError."""
+        t, value = self._lookup(target, source, t, None)
+        return t, value[:3], value[3:]  # type: ignore[return-value]
 
     def latest_many(self, pairs: Sequence[Tuple[str, str]]) -> List[LatestResult]:
         """`lookup(target, source, 0)` for each pair, a result or the error it raised; links
@@ -205,9 +208,11 @@ class FrameStore:
         out: List[LatestResult] = []
         for target, source in pairs:
             try:
-                out.append(self._lookup(target, source, 0, memo))
+                t, value = self._lookup(target, source, 0, memo)
             except TfError as error:
                 out.append(error)
+                continue
+            out.append((t, value[:3], value[3:]))  # type: ignore[arg-type]
         return out
 
     def chain_frames(self, target: str, source: str) -> frozenset[str]:
