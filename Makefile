@@ -44,4 +44,5 @@ lint: setup
 	$(BIN)/python -m mypy
 
 clean:
-	rm -rf $(VENV) build dist .cache .pytest_cache .hypothesis
+	rm -rf $(VENV) build dist .cache .pytest_cache .hypothesis bridge/tf/_compiled_store.c \
+		bridge/tf/_compiled_store.*.so

@@ -32,8 +32,8 @@ results; the store holds the samples and walks the tree. Two stores give the sam
 to the bit: the compiled one (``_compiled_store.pyx``, built by ``make setup`` where a C
 compiler is found), used by default, and the pure Python one (``store.py``), the reference
 and the fallback. Set ``SLICER_BRIDGE_PURE_PYTHON_TF=1`` to run the pure Python one. Per /tf
-message of a 7-link robot with 7 lookups, reading, storing and evaluating cost a few
-microseconds in the compiled store and about 40 in the Python one (bench/bench_tf.py).
+message of a 7-link robot with 7 lookups, reading and storing cost 2 us on the compiled store
+and 20 us on the Python one; with the evaluation, 12 us and 53 us (bench/bench_tf.py).
 """
 
 from __future__ import annotations
