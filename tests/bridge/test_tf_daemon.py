@@ -21,7 +21,8 @@ import pytest
 from protocol.conversions import ros_time_from_igtl
 from protocol.messages import Message, Status, StatusCode, Transform
 from slicer_client.connection import CommandRefusedError, Connection
-from support import Child, Processes, RunningDaemon, scaled, start_daemon, wait_until
+from support import (Child, Processes, RunningDaemon, pick_free_port, scaled, start_daemon,
+                     wait_until)
 
 _prefixes = itertools.count()
 HALF = math.sqrt(0.5)
@@ -464,3 +465,30 @@ def test_frame_prefix_maps_relative_frames_and_leaves_absolute_ones() -> None:
     finally:
         ros.stop()
         loop.close()
+
+
+@pytest.mark.parametrize("pure_python", [False, True], ids=["compiled store", "Python store"])
+def test_a_daemon_serves_lookups_on_either_tf_store(processes: Processes,
+                                                    pure_python: bool) -> None:
+    """The daemon reads /tf on whichever store its TfBuffer runs: the compiled one reads the
+    CDR itself, the pure Python one (where the compiled store was not built) lets the
+    capability read it. Both stream the same composed lookup."""
+    from bridge.tf.buffer import CompiledFrameStore
+
+    if not pure_python and CompiledFrameStore is None:
+        pytest.skip("the compiled tf store was not built (no C compiler or Cython at install)")
+    env = {"SLICER_BRIDGE_PURE_PYTHON_TF": "1" if pure_python else "0"}
+    port = pick_free_port()
+    daemon = processes.bridge("run", "--port", str(port), env=env)
+    daemon.wait_for_output("listening on", timeout=30)
+    expected = "pure Python" if pure_python else "compiled"
+    assert f"tf buffer on the {expected} store" in daemon.output()
+    p = fresh("store")
+    with Connection("127.0.0.1", port) as client:
+        device = client.command("create_tf_lookup",
+                                {"parent": p + "world", "child": p + "tool"})["device"]
+        processes.python("chain", "tf_chain_publisher.py", p, "--rate", "50")
+        message = client.wait_for(device, is_matrix(WORLD_TOOL), timeout=20)
+        assert message.metadata["ros2.child"] == p + "tool"
+        one = client.command("lookup_transform", {"parent": p + "world", "child": p + "tool"})
+        np.testing.assert_allclose(one["matrix"], WORLD_TOOL, atol=1e-6)
