@@ -236,20 +236,10 @@ cdef class CompiledFrameStore:
     cdef public long long graph_version
 
     def __cinit__(self, long long window_ns):
+        # C fields start at 0 / NULL (the allocation is zeroed).
         self._window_ns = window_ns
         self._names = []
         self._ids = {}
-        self._frames = NULL
-        self._src = NULL
-        self._tgt = NULL
-        self._chain_src = NULL
-        self._chain_tgt = NULL
-        self._count = 0
-        self._capacity = 0
-        self._cached = 0
-        self._epoch = 0
-        self._memo_epoch = 0
-        self.graph_version = 0
 
     def __dealloc__(self):
         self._free_frames()
@@ -276,31 +266,19 @@ cdef class CompiledFrameStore:
         """The frame id of ``name``, made if new (with room in every scratch array)."""
         cdef object found = self._ids.get(name)
         cdef Py_ssize_t fid, capacity
-        cdef void *grown
         if found is not None:
             return <Py_ssize_t>found
         if self._count == self._capacity:
             capacity = self._capacity * 2 if self._capacity else 16
-            grown = PyMem_Realloc(self._frames, capacity * sizeof(Frame))
-            if grown == NULL:
-                raise MemoryError()
-            self._frames = <Frame *>grown
-            grown = PyMem_Realloc(self._src, (capacity + 1) * sizeof(Slot))
-            if grown == NULL:
-                raise MemoryError()
-            self._src = <Slot *>grown
-            grown = PyMem_Realloc(self._tgt, (capacity + 1) * sizeof(Slot))
-            if grown == NULL:
-                raise MemoryError()
-            self._tgt = <Slot *>grown
-            grown = PyMem_Realloc(self._chain_src, (capacity + 1) * sizeof(Py_ssize_t))
-            if grown == NULL:
-                raise MemoryError()
-            self._chain_src = <Py_ssize_t *>grown
-            grown = PyMem_Realloc(self._chain_tgt, (capacity + 1) * sizeof(Py_ssize_t))
-            if grown == NULL:
-                raise MemoryError()
-            self._chain_tgt = <Py_ssize_t *>grown
+            self._frames = <Frame *>grow(self._frames, capacity * sizeof(Frame))
+            # The walks' scratch: a chain may hold every frame, and one more before the loop
+            # check fires.
+            self._src = <Slot *>grow(self._src, (capacity + 1) * sizeof(Slot))
+            self._tgt = <Slot *>grow(self._tgt, (capacity + 1) * sizeof(Slot))
+            self._chain_src = <Py_ssize_t *>grow(self._chain_src,
+                                                 (capacity + 1) * sizeof(Py_ssize_t))
+            self._chain_tgt = <Py_ssize_t *>grow(self._chain_tgt,
+                                                 (capacity + 1) * sizeof(Py_ssize_t))
             self._capacity = capacity
         fid = self._count
         self._frames[fid].cached = False
@@ -393,7 +371,6 @@ cdef class CompiledFrameStore:
         """Room for ``needed`` samples from f.start on, moving the kept ones to the front
         (dropping the chunk for good) when that makes the room."""
         cdef Py_ssize_t kept = f.end - f.start, cap
-        cdef void *grown
         if f.start + needed <= f.cap:
             return 0
         if f.start and needed <= f.cap:
@@ -406,10 +383,7 @@ cdef class CompiledFrameStore:
             memmove(f.samples, &f.samples[f.start], kept * sizeof(Sample))
             f.start = 0
             f.end = kept
-        grown = PyMem_Realloc(f.samples, cap * sizeof(Sample))
-        if grown == NULL:
-            raise MemoryError()
-        f.samples = <Sample *>grown
+        f.samples = <Sample *>grow(f.samples, cap * sizeof(Sample))
         f.cap = cap
         return 0
 
@@ -806,6 +780,14 @@ cdef class CompiledFrameStore:
 
 
 # ---------------------------------------------------------------------- helpers
+
+cdef void *grow(void *p, size_t size) except NULL:
+    """PyMem_Realloc, raising MemoryError (p is left as it was) instead of returning NULL."""
+    cdef void *grown = PyMem_Realloc(p, size)
+    if grown == NULL:
+        raise MemoryError()
+    return grown
+
 
 cdef inline bint same7(const double *a, const double *b) noexcept nogil:
     cdef int k
