@@ -12,7 +12,10 @@ time of each message's last byte; and the baselines:
 * the rclpy floor: a plain rclpy subscriber (``rclpy.spin``, default executor) in its own
   process; its latency is the ROS hop alone, its CPU what one plain subscriber costs;
 * the naive relay (bench/naive_relay.py): pyigtl's server + rclpy, what a Python user would
-  write. pyigtl's server serves one client at a time, so it has no multi-client figures.
+  write. pyigtl's server serves one client at a time, so it has no multi-client figures;
+* for the tf phase, the fan-out floor (bench/bench_fanout_floor.py, run right after it): a
+  bare EventsExecutor subscriber of the same /tf writing the same bytes to 8 clients, with
+  no tf work. The daemon's figure minus it is what its tf work costs.
 
 Each relay runs alone while it is measured. Every pose subscriber (floor, daemon, naive
 relay) keeps the last 5,000 messages (peers.POSE_DEPTH). CPU is the relay process's user +
@@ -28,6 +31,7 @@ import argparse
 import json
 import os
 import random
+import re
 import socket
 import subprocess
 import sys
@@ -300,6 +304,7 @@ class Results:
     clients: dict[int, Figure] = field(default_factory=dict)
     burst: dict[str, Figure] = field(default_factory=dict)
     tf: Optional[Figure] = None
+    tf_floor: float = float("nan")  # bench_fanout_floor.py's CPU share, 8 clients
     image: dict[str, Figure] = field(default_factory=dict)
     rss: dict[str, float] = field(default_factory=dict)
 
@@ -377,6 +382,21 @@ def tf_phase(args: argparse.Namespace, results: Results) -> None:
         stop_all(readers)
         relay.stop()
         publisher.stop()
+    results.tf_floor = fanout_floor(args.seconds)
+    print(f"  {'fan-out floor, 8 clients':<34} CPU {results.tf_floor * 100:5.1f}% of a core "
+          f"(bench_fanout_floor.py: the same bytes, no tf work)  (load {load()})", flush=True)
+
+
+def fanout_floor(seconds: float) -> float:
+    """bench_fanout_floor.py for 8 clients, in its own processes: the tf phase's baseline
+    (an EventsExecutor subscriber of the same /tf writing the same bytes, no tf work)."""
+    out = subprocess.run([sys.executable, str(REPO / "bench" / "bench_fanout_floor.py"),
+                          "--clients", "8", "--seconds", str(seconds)],
+                         capture_output=True, text=True, timeout=seconds * 20 + 120, cwd=REPO)
+    found = re.search(r"\(([\d.]+)% of a core", out.stdout)
+    if out.returncode != 0 or found is None:
+        raise RuntimeError(f"bench_fanout_floor.py failed: {out.stdout[-500:]}{out.stderr[-2000:]}")
+    return float(found.group(1)) / 100
 
 
 def image_phase(args: argparse.Namespace, results: Results) -> None:
@@ -470,9 +490,11 @@ def table(results: Results, args: argparse.Namespace) -> str:
     rows.append(_row("… lag, p50 of the first → last second (ms)", burst, lag))
     rows.append(_row("… process CPU", burst, lambda f: pct(f.cpu)))
     if results.tf is not None:
-        rows.append(_row(f"tf of a {LINKS}-link robot at {rate}, {LINKS} streamed lookups → 8 "
-                         "clients: CPU; p50 / p99 (ms)", (Figure(), results.tf),
-                         lambda f: f"{pct(f.cpu)}; {ms(f.p50)} / {ms(f.p99)}") + " |")
+        tf = results.tf
+        rows.append(f"| tf of a {LINKS}-link robot at {rate}, {LINKS} streamed lookups → 8 "
+                    f"clients: CPU; p50 / p99 (ms) | {pct(results.tf_floor)} (fan-out floor: "
+                    f"the same bytes, no tf work) | {pct(tf.cpu)}; {ms(tf.p50)} / "
+                    f"{ms(tf.p99)} | |")
     if results.image:
         nan = float("nan")
         image = (Figure(), results.image.get("bridge", Figure()),

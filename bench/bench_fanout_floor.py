@@ -1,6 +1,6 @@
 """What a tf fan-out costs before any tf work: the floor under bench_daemon.py's tf figure.
 
-Run: .venv/bin/python bench/bench_fanout_floor.py [--seconds 5]
+Run: .venv/bin/python bench/bench_fanout_floor.py [--seconds 5] [--clients 0 1 8]
 
 A bare subscriber, written as the daemon's streams thread is (rclpy's EventsExecutor, the
 TFMessage taken raw, spin_once in a loop), receives bench/peers.py's /tf publisher (7
@@ -12,7 +12,8 @@ process. Printed per message: the spinning thread's CPU and the whole process's 
 DDS's receive threads included), in microseconds; at 1 kHz, 100 us is 10% of a core.
 
 The daemon's own figure for the same load (bench_daemon.py, "tf of a 7-link robot ... -> 8
-clients") minus this floor is what its tf work (parse, store, evaluate, encode) costs.
+clients") minus this floor is what its tf work (parse, store, evaluate, encode) costs;
+bench_daemon.py runs this floor for 8 clients right after that phase and prints it beside.
 """
 
 from __future__ import annotations
@@ -152,13 +153,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=5.0)
+    parser.add_argument("--clients", type=int, nargs="+", default=[0, 1, 8],
+                        help="the client counts to measure, one run each (default 0 1 8)")
     args = parser.parse_args()
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(100, 200)))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     payload = update_bytes()
     print(f"/tf at 1 kHz, 7 transforms; per client per message {len(payload)} bytes "
           f"(7 TRANSFORMs, header v2); load {os.getloadavg()[0]:.2f}")
-    for clients in (0, 1, 8):
+    for clients in args.clients:
         messages, thread_us, process_us = measure(clients, args.seconds, payload)
         print(f"  {clients} clients: {messages} messages; spinning thread {thread_us:6.1f} us"
               f"/msg, process {process_us:6.1f} us/msg ({process_us / 10:.1f}% of a core "
