@@ -205,3 +205,32 @@ def test_the_pure_python_store_leaves_cdr_to_the_caller() -> None:
     good = _cdr([StampedTransform("w", "b", S, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))])
     assert py.set_transforms_cdr(good, static=False) is None
     assert py.frames() == []
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.lists(transforms, min_size=1, max_size=4),
+       st.lists(st.tuples(st.integers(0, 10_000), st.integers(0, 255)), max_size=4),
+       st.integers(0, 10_000))
+def test_damaged_cdr_is_read_as_the_python_reader_reads_it(raw: list, flips: list,
+                                                           cut: int) -> None:
+    """Bytes changed or cut anywhere: where codecs/cdr.py's reader refuses them, the compiled
+    store stores nothing (None, and the daemon reads them the ordinary way); where it reads
+    them, both stores end up with the same frames."""
+    from bridge.codecs.cdr import CdrError, read_tf_message
+    from bridge.tf.capability import tf_cdr_to_transforms
+
+    data = bytearray(_cdr([_stamped(*r) for r in raw]))
+    for position, value in flips:
+        data[position % len(data)] = value
+    data = bytes(data[:max(0, len(data) - cut % (len(data) + 1))])
+    compiled = TfBuffer(WINDOW_S, compiled=True)
+    try:
+        read_tf_message(data)
+    except CdrError:
+        assert compiled.set_transforms_cdr(data, static=False) is None
+        assert compiled.frames() == []
+        return
+    py = TfBuffer(WINDOW_S, compiled=False)
+    assert (_outcome(compiled.set_transforms_cdr, data, static=False)
+            == _outcome(py.set_transforms, tf_cdr_to_transforms(data), static=False))
+    assert py.frame_info() == compiled.frame_info()
