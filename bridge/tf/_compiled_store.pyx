@@ -25,6 +25,9 @@ import sys
 
 from bridge.tf.errors import ConnectivityError, ExtrapolationError, TfError, TfLookupError
 
+# The store interface this module implements (buffer.STORE_INTERFACE): bump both together.
+INTERFACE = 2
+
 # CDR's doubles are read as the machine's: on a big-endian machine `insert_cdr` declines.
 cdef bint LITTLE_ENDIAN = sys.byteorder == "little"
 

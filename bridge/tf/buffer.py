@@ -58,10 +58,15 @@ from bridge.tf.math import Tf7
 from bridge.tf.store import FrameStore
 from protocol.conversions import matrix_to_pose, pose_to_matrix
 
+# The store interface this module expects; the compiled module states the one it was built
+# for, so a module left from an older build (a pull without `make setup`) is not used.
+STORE_INTERFACE = 2
 try:  # built by setup.py where a C compiler is found (optional: see `COMPILED`)
-    from bridge.tf._compiled_store import CompiledFrameStore
+    from bridge.tf import _compiled_store
 except ImportError:
-    CompiledFrameStore = None  # type: ignore[assignment,misc]
+    _compiled_store = None  # type: ignore[assignment]
+CompiledFrameStore = (_compiled_store.CompiledFrameStore
+                      if getattr(_compiled_store, "INTERFACE", None) == STORE_INTERFACE else None)
 
 __all__ = ["StampedTransform", "FrameInfo", "TfBuffer", "COMPILED"]
 
