@@ -259,8 +259,8 @@ class TfBridges:
         self._prefix = frame_prefix.lstrip("/")
         self.buffer = TfBuffer(cache_time_s)
         log.info("tf buffer on the %s", "compiled store" if self.buffer.compiled else
-                 "pure Python store (bridge/tf/_compiled_store.pyx was not built, or "
-                 "SLICER_BRIDGE_PURE_PYTHON_TF=1)")
+                 "pure Python store (the compiled one is not built here, is from an older "
+                 "build, or SLICER_BRIDGE_PURE_PYTHON_TF=1)")
         self.registry = LookupRegistry(self.buffer)
         self.lookups: dict[tuple[str, str], _Lookup] = {}
         self.broadcasters: dict[tuple[str, str], _Broadcaster] = {}
