@@ -92,6 +92,7 @@ class Daemon:
         log.info("listening on %s:%d (OpenIGTLink); ROS node %s", self.config.host,
                  self.server.port, self.ros.fully_qualified_name)
         log.info("security: %s", self.config.security.describe())
+        log.info("tf buffer on the %s", self.tf.store_in_use())
 
     async def stop(self) -> None:
         await self.server.close()

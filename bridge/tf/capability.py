@@ -258,9 +258,6 @@ class TfBridges:
         self._names = names
         self._prefix = frame_prefix.lstrip("/")
         self.buffer = TfBuffer(cache_time_s)
-        log.info("tf buffer on the %s", "compiled store" if self.buffer.compiled else
-                 "pure Python store (the compiled one is not built here, is from an older "
-                 "build, or SLICER_BRIDGE_PURE_PYTHON_TF=1)")
         self.registry = LookupRegistry(self.buffer)
         self.lookups: dict[tuple[str, str], _Lookup] = {}
         self.broadcasters: dict[tuple[str, str], _Broadcaster] = {}
@@ -294,6 +291,13 @@ class TfBridges:
             node.create_subscription(TFMessage, self._tf_static_topic, self._on_tf_static,
                                      TF_STATIC_SUBSCRIBER_QOS, raw=True),
         ]
+
+    def store_in_use(self) -> str:
+        """Which store the buffer runs on, for the daemon's start-up log."""
+        if self.buffer.compiled:
+            return "compiled store"
+        return ("pure Python store (the compiled one is not built here, is from an older "
+                "build, or SLICER_BRIDGE_PURE_PYTHON_TF=1)")
 
     # ------------------------------------------------------------------ ROS thread
 

@@ -480,7 +480,7 @@ def test_a_daemon_serves_lookups_on_either_tf_store(processes: Processes,
     env = {"SLICER_BRIDGE_PURE_PYTHON_TF": "1" if pure_python else "0"}
     port = pick_free_port()
     daemon = processes.bridge("run", "--port", str(port), env=env)
-    daemon.wait_for_output("listening on", timeout=30)
+    daemon.wait_for_output("tf buffer on the", timeout=30)  # logged after "listening on"
     expected = "pure Python" if pure_python else "compiled"
     assert f"tf buffer on the {expected} store" in daemon.output()
     p = fresh("store")
