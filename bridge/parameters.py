@@ -56,6 +56,9 @@ log = logging.getLogger(__name__)
 
 _STATUS_NAME = "slicer-ros2-bridge"
 _MAX_STRING_BYTES = 0xFFFF  # an OpenIGTLink STRING's limit
+# A read of another node's parameters unanswered this long is sent again (see
+# services.call_ros_service): well above a loaded node's answer time, well below the timeout.
+_RESEND_READS_S = 1.0
 
 # ---------------------------------------------------------------------------- conversion
 
@@ -163,6 +166,7 @@ class ParameterWatch:
     ready: Optional[bool] = None  # None until the first check
     value: Optional[ParameterValue] = None  # the last value reported
     touched: int = 0  # serial of the last event that set `value`
+    unanswered: str = ""  # why the last fetch got no answer ("" once one is answered)
 
 
 class ParameterBridges:
@@ -299,12 +303,13 @@ class ParameterBridges:
 
     async def _call(self, client: ParameterClient, ros_client: Client, request: Any) -> Any:
         # Discovery of a node that just appeared can take seconds: it may use the whole
-        # timeout before the call is UNAVAILABLE.
-        return await call_ros_service(self._hub, ros_client, request,
-                                      timeout=self._request_timeout_s,
-                                      ready_wait=self._request_timeout_s,
-                                      what=f"the parameter services of {client.node}",
-                                      field="node")
+        # timeout before the call is UNAVAILABLE. Reads are sent again until answered (a
+        # request or answer can be lost while the endpoints match); a set is sent once.
+        return await call_ros_service(
+            self._hub, ros_client, request, timeout=self._request_timeout_s,
+            ready_wait=self._request_timeout_s, what=f"the parameter services of {client.node}",
+            field="node",
+            resend_every=None if ros_client is client.set_client else _RESEND_READS_S)
 
     async def _get(self, client: ParameterClient,
                    names: tuple[str, ...]) -> dict[str, ParameterValue]:
@@ -328,9 +333,10 @@ class ParameterBridges:
         """Fetch parameter ``name`` of ``node`` (a fully qualified node name) and keep
         ``on_change(value)`` (loop thread) told of every later value: parameter events, and
         a fetch whenever the node (re)appears. Returns the watch and the value now, or None
-        if the node is not there yet (then ``on_change`` gets it when it appears). The
-        node's readiness is judged as for parameter clients (`ready_wait_s` at first, then
-        the periodic check). A failed fetch of a node that is there raises `CommandError`.
+        if the node is not there yet or does not answer (then ``on_change`` gets it when it
+        does; ``watch.unanswered`` says why). The node's readiness is judged as for
+        parameter clients (`ready_wait_s` at first, then the periodic check). Any other
+        failed fetch (a value that cannot be read) raises `CommandError`.
         """
         watch = ParameterWatch(node, name, on_change,
                                self._ros.node.create_client(GetParametersSrv,
@@ -341,7 +347,14 @@ class ParameterBridges:
             ready = await wait_until_ready(watch.get_client, self._ready_wait_s)
             if watch not in self.watches:  # unwatched meanwhile
                 return watch, None
-            value = await self._fetch_watched(watch) if ready else None
+            value = None
+            if ready:
+                try:
+                    value = await self._fetch_watched(watch)
+                except CommandError as error:
+                    if not self._fetch_failed(watch, error):
+                        raise
+                    ready = False
         except BaseException:
             self.unwatch_parameter(watch)
             raise
@@ -361,26 +374,36 @@ class ParameterBridges:
         reply = await call_ros_service(
             self._hub, watch.get_client, GetParametersSrv.Request(names=[watch.name]),
             timeout=self._request_timeout_s, ready_wait=self._request_timeout_s,
-            what=f"the parameter services of {watch.node}", field="source.node")
+            what=f"the parameter services of {watch.node}", field="source.node",
+            resend_every=_RESEND_READS_S)
         value = (from_ros_value(reply.values[0], "source.parameter") if reply.values
                  else ParameterValue("not_set"))
         if watch.touched > started and watch.value is not None:
             return watch.value  # an event during the fetch is newer than the reply
         watch.value = value
+        watch.unanswered = ""
         return value
 
     async def _refetch_watched(self, watch: ParameterWatch) -> None:
         try:
             value = await self._fetch_watched(watch)
         except CommandError as error:
-            retry = error.error_code in (ErrorCode.TIMEOUT, ErrorCode.UNAVAILABLE)
-            log.warning("could not fetch %s of %s%s: %s", watch.name, watch.node,
-                        " (tried again while the node is up)" if retry else "", error)
-            if retry:  # seen as gone: the next readiness check that finds the node refetches
+            if self._fetch_failed(watch, error):
                 watch.ready = False
             return
         if watch in self.watches:
             watch.on_change(value)
+
+    @staticmethod
+    def _fetch_failed(watch: ParameterWatch, error: CommandError) -> bool:
+        """Log a failed fetch; True if it is worth another try (the node did not answer:
+        the next readiness check that finds it up fetches again)."""
+        retry = error.error_code in (ErrorCode.TIMEOUT, ErrorCode.UNAVAILABLE)
+        log.warning("could not fetch %s of %s%s: %s", watch.name, watch.node,
+                    " (tried again while the node is up)" if retry else "", error)
+        if retry:
+            watch.unanswered = str(error)
+        return retry
 
     def _on_watched_event(self, event: ParameterEvent) -> None:
         for watch in tuple(self.watches):

@@ -262,8 +262,9 @@ class RobotBridges:
                 source.node, source.parameter,
                 lambda v: self._on_parameter(robot, v))
             if value is None:
-                robot.reason = (f"parameter {source.parameter} of {source.node}: node not "
-                                f"available yet")
+                robot.reason = (f"parameter {source.parameter} of {source.node}: "
+                                + (f"{robot.watch.unanswered}; asked again while the node is up"
+                                   if robot.watch.unanswered else "node not available yet"))
                 return None
             return self._text_of(robot, value, initial=True)
         # topic

@@ -104,6 +104,19 @@ def test_every_type_with_its_type(processes: Processes, client: Connection) -> N
     assert (error.code, error.field) == (ErrorCode.NOT_FOUND, "node")
 
 
+def test_a_lost_read_is_sent_again(processes: Processes, client: Connection) -> None:
+    """A read whose request or answer is lost (as while DDS still matches a new node's
+    endpoints) is sent again within the timeout, and the answer to that one comes back."""
+    name = fresh_node("forgetful")
+    node = start_param_node(processes, name, "--lose-first-get")
+    wait_ready(client, client.command("create_parameter_client", {"node": name})["device"])
+    values = client.command("get_parameters", {"node": name, "names": ["count", "label"]})
+    assert values["values"] == {"count": {"type": "integer", "value": 3},
+                                "label": {"type": "string", "value": f"/{name}"}}
+    assert node.wait_for_output("LOST ").endswith('LOST ["count", "label"]')
+    assert node.wait_for_output("ANSWERED ").endswith('ANSWERED ["count", "label"]')
+
+
 def test_set_from_the_client(processes: Processes, client: Connection) -> None:
     name = fresh_node("set")
     peer = start_param_node(processes, name)

@@ -137,6 +137,12 @@ def robot_summary(client: Connection, name: str) -> dict[str, Any]:
     return summary
 
 
+def wait_discovered(client: Connection, service: str) -> None:
+    """Until the daemon's graph lists `service` (a node just started is seen in time)."""
+    wait_until(lambda: service in {s["service"] for s in client.command("list_services")[
+        "services"]}, LOAD_TIMEOUT, f"the daemon to discover {service}")
+
+
 def daemon_devices(client: Connection) -> set[str]:
     return set(client.command("list_bridges")["devices"])
 
@@ -476,24 +482,54 @@ def test_a_robot_waits_for_its_node_and_loads_when_it_appears(
         client.command("remove_robot", {"name": "late"})
 
 
-def test_a_robot_whose_node_answers_late_loads_on_a_later_try(
-        processes: Processes, client: Connection) -> None:
-    """The node is seen at once but answers nothing for 7 s (more than the 4 s request
-    timeout): the first fetch fails, a later one loads the robot."""
+def test_a_robot_whose_node_answers_late_waits_and_loads_on_a_later_try(
+        processes: Processes, client: Connection, tmp_path: Path) -> None:
+    """The node is discovered but answers nothing (until told to) for more than the 4 s
+    request timeout: create_robot says "waiting" with the reason, and a later fetch loads
+    the robot once the node answers."""
+    go = tmp_path / "answer-now"
+    node = processes.python("slow", "param_node.py", "robot_state_publisher",
+                            "--namespace", "slow_ns", "--description", two_link_urdf(),
+                            "--busy-until", str(go))
+    node.wait_for_output("READY", timeout=30)
+    wait_discovered(client, "/slow_ns/robot_state_publisher/get_parameters")
     result = client.command("create_robot", {"name": "slow", "namespace": "slow_ns"},
                             timeout=LOAD_TIMEOUT)
     try:
-        assert result["state"] == "waiting"
-        node = processes.python("slow", "param_node.py", "robot_state_publisher",
-                                "--namespace", "slow_ns", "--description", two_link_urdf(),
-                                "--busy-at-start", "7")
-        node.wait_for_output("READY", timeout=30)
+        assert result["state"] == "waiting" and result["links"] == []
+        assert result["reason"] == (
+            "parameter robot_description of /slow_ns/robot_state_publisher: source.node: "
+            "expected a response from the parameter services of /slow_ns/robot_state_publisher"
+            " within 4 s, got no response; asked again while the node is up")
+        assert robot_summary(client, "slow")["state"] == "waiting"
+        go.touch()
+        node.wait_for_output("NOT BUSY")
         arm = client.wait_for("slow:arm:0", is_mesh, timeout=LOAD_TIMEOUT)
-        assert "NOT BUSY" in node.output()  # it loaded after the busy time, not before
         assert len(arm.body.points) == 8  # the arm's box
         assert robot_summary(client, "slow")["state"] == "loaded"
     finally:
         client.command("remove_robot", {"name": "slow"})
+
+
+def test_a_robot_whose_first_description_read_is_lost_loads_at_once(
+        processes: Processes, client: Connection) -> None:
+    """The node's first get_parameters is never answered (as when a request or its answer
+    is lost while DDS still matches the endpoints): the read is sent again, and the robot
+    loads in the same create_robot."""
+    node = processes.python("forgetful", "param_node.py", "robot_state_publisher",
+                            "--namespace", "forgetful_ns", "--description", two_link_urdf(),
+                            "--lose-first-get")
+    node.wait_for_output("READY", timeout=30)
+    wait_discovered(client, "/forgetful_ns/robot_state_publisher/get_parameters")
+    result = client.command("create_robot", {"name": "forgetful", "namespace": "forgetful_ns"},
+                            timeout=LOAD_TIMEOUT)
+    try:
+        assert result["state"] == "loaded", result
+        assert [link["link"] for link in result["links"]] == ["base", "arm", "tool"]
+        assert node.wait_for_output("LOST ").endswith('LOST ["robot_description"]')
+        assert node.wait_for_output("ANSWERED ").endswith('ANSWERED ["robot_description"]')
+    finally:
+        client.command("remove_robot", {"name": "forgetful"})
 
 
 def test_device_names_are_the_registry_s(omni: dict[str, Any]) -> None:
