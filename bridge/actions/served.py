@@ -85,6 +85,7 @@ class ServedAction:
     # Touched only in the executor thread: goals being executed, and a destroy waiting.
     executing: int = 0
     destroy_pending: bool = False
+    linger: Optional[asyncio.TimerHandle] = None  # loop thread: the destroy's countdown
 
 
 class ServedActions:
@@ -98,9 +99,13 @@ class ServedActions:
         self._group = ReentrantCallbackGroup()
         self._ids = itertools.count(1)
         # An unadvertised server lives this long after its last goal ended, so the ROS
-        # client's get_result request (sent or answered after the end) still gets the result.
+        # client's get_result request (sent or answered after the end) still gets the result,
+        # and the status topic (transient local) reaches a ROS client that matches late.
         self._linger_s = linger_s
         self.served: dict[str, ServedAction] = {}
+        # Unadvertised, not destroyed yet: advertised again (a client reconnecting), the
+        # same server serves on: a second one of the same name would split the ROS goals.
+        self._lingering: dict[str, ServedAction] = {}
         self._pending: dict[tuple[Replier, int], _ServedGoal] = {}
         self._deciding: dict[tuple[Replier, int], _Decision] = {}
         hub.add_reply_listener(self._on_reply)
@@ -114,24 +119,56 @@ class ServedActions:
         ros_type = request.ros_type
         cls = action_class_of(request.type, ros_type)
         existing = self.served.get(action)
+        lingering = self._lingering.get(action)
+        if lingering is not None and lingering.ros_type != ros_type:
+            raise CommandFailedError("action", "an action no other client advertises (or "
+                                     "the same type again)",
+                                     f"{action} ({lingering.ros_type}: its client left, the "
+                                     f"server ends {self._linger_s:g} s after its last goal)",
+                                     code=ErrorCode.ALREADY_EXISTS)
+        graph = [] if lingering is not None else get_action_names_and_types(self._ros.node)
         if already_served("action", action, ros_type, client,
                           existing.owner if existing else None,
-                          existing.ros_type if existing else "",
-                          get_action_names_and_types(self._ros.node)):
+                          existing.ros_type if existing else "", graph):
             assert existing is not None
             return _describe_served(existing, existed=True)
         key = NameKey.action_server(action)
-        served = ServedAction(action, ros_type, cls, client, key, self._names.register(key),
-                              request.goal_timeout, request.decides)
-        served.server = ActionServer(
-            self._ros.node, cls, action, execute_callback=self._execute_for(served),
-            goal_callback=(self._decide_for(served) if served.decides
-                           else lambda _goal: GoalResponse.ACCEPT),
-            cancel_callback=self._cancel_for(served), callback_group=self._group)
+        if lingering is not None:
+            served = self._revive(lingering, client, request)
+        else:
+            served = ServedAction(action, ros_type, cls, client, key,
+                                  self._names.register(key), request.goal_timeout,
+                                  request.decides)
+            served.server = ActionServer(
+                self._ros.node, cls, action, execute_callback=self._execute_for(served),
+                goal_callback=self._goal_callback(served),
+                cancel_callback=self._cancel_for(served), callback_group=self._group)
         self.served[action] = served
-        log.info("serving action %s (%s) for client %s", action, ros_type,
-                 getattr(client, "peer", "?"))
+        log.info("serving action %s (%s) for client %s%s", action, ros_type,
+                 getattr(client, "peer", "?"),
+                 " (its server, still there from an earlier client)" if lingering else "")
         return _describe_served(served, existed=False)
+
+    def _revive(self, served: ServedAction, client: Replier,
+                request: AdvertiseAction) -> ServedAction:
+        """A lingering server serves again, for `client` (loop thread)."""
+        del self._lingering[served.action]
+        if served.linger is not None:
+            served.linger.cancel()
+            served.linger = None
+        served.owner = client
+        served.device = self._names.register(served.key)
+        served.goal_timeout = request.goal_timeout
+        served.received = 0
+        if served.decides != request.decides:
+            served.decides = request.decides
+            served.server.register_goal_callback(self._goal_callback(served))
+        served.closed = False  # last: the executor thread reads it
+        return served
+
+    def _goal_callback(self, served: ServedAction) -> Any:
+        return (self._decide_for(served) if served.decides
+                else lambda _goal: GoalResponse.ACCEPT)
 
     def unadvertise_action(self, request: UnadvertiseAction, client: Optional[Replier]
                            ) -> dict[str, Any]:
@@ -375,10 +412,22 @@ class ServedActions:
 
     def _destroy_later(self, served: ServedAction) -> None:
         """Destroy the server in the executor thread once no goal is executing, and not
-        before the ROS clients had time to fetch the results."""
-        asyncio.get_running_loop().call_later(
-            self._linger_s, lambda: self._ros.executor.create_task(self._destroy_if_idle,
-                                                                   served))
+        before the ROS clients had time to fetch the results (loop thread). Advertised
+        again meanwhile, it is not destroyed."""
+        if not served.closed:
+            return
+        self._lingering[served.action] = served
+        if served.linger is not None:
+            served.linger.cancel()
+        served.linger = asyncio.get_running_loop().call_later(
+            self._linger_s, self._linger_over, served)
+
+    def _linger_over(self, served: ServedAction) -> None:
+        served.linger = None
+        if not served.closed or self._lingering.get(served.action) is not served:
+            return
+        del self._lingering[served.action]
+        self._ros.executor.create_task(self._destroy_if_idle, served)
 
     def _destroy_if_idle(self, served: ServedAction) -> None:
         if served.executing:
@@ -411,10 +460,14 @@ class ServedActions:
                 decision.timer.cancel()
             if not decision.answer.done():
                 decision.answer.set_result(False)
+        for served in self._lingering.values():
+            if served.linger is not None:
+                served.linger.cancel()
         self._ros.executor.wake()
         self._pending.clear()
         self._deciding.clear()
         self.served.clear()
+        self._lingering.clear()
 
 
 def _describe_served(served: ServedAction, existed: bool | None = None) -> dict[str, Any]:

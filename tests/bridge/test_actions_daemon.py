@@ -45,15 +45,18 @@ def server(module_processes: Processes) -> Child:
 
 # Actions these tests serve through the daemon (unadvertised when their client leaves).
 SERVED = {"/served_gripper", "/picky_gripper", "/undecided", "/cancel_me", "/left_behind",
-          "/back"}
+          "/back", "/again"}
 
 
 @pytest.fixture(autouse=True)
 def served_servers_gone(daemon: RunningDaemon) -> Iterator[None]:
     """Each test starts once the action servers earlier tests had the daemon serve are
-    destroyed (2 s after their client left). Destroying one while another served action
-    answers a goal loses that answer: found here, open (see the issue note), and kept out
-    of the other tests' way."""
+    destroyed (2 s after their client left). Found here, open: a goal answer sent around
+    the time the daemon destroys an action server can be lost (its own served actions'
+    and a ROS server's answer to the daemon's goal alike), the mark of Fast DDS dropping a
+    service response for a reader it has not matched yet (it waits 100 ms) while the
+    daemon's participant is busy with the removed endpoints. Kept out of the other tests'
+    way; see the note of issue 14."""
     yield
     with daemon.connect() as probe:
         def gone() -> bool:
@@ -369,6 +372,34 @@ def test_a_served_goal_aborts_when_its_client_leaves(daemon: RunningDaemon,
     finally:
         release.set()
     assert json.loads(line[line.index("RESULT ") + 7:])["status"] == 6  # ABORTED
+
+
+def test_a_served_action_advertised_again_after_its_client_left(daemon: RunningDaemon,
+                                                                processes: Processes) -> None:
+    """A client that reconnects advertises its action again while the daemon's server of
+    it still lingers (results are fetched for 2 s after the last goal): that server serves
+    on, for the new client; another type under that name is refused meanwhile."""
+    first = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
+    first.serve_action("/again", GRIPPER, lambda g, fb, cancelled: ("succeeded", {}))
+    first.close()
+    with slicer_client.connect("127.0.0.1", daemon.port, reconnect=False) as second:
+        error = refused(lambda: second.command("advertise_action", {
+            "action": "/again", "type": "control_msgs/action/PointHead"}))
+        assert (error.error.code, error.error.field) == (ErrorCode.ALREADY_EXISTS, "action")
+        assert error.error.message == (
+            "action: expected an action no other client advertises (or the same type again), "
+            "got /again (control_msgs/action/GripperCommand: its client left, the server "
+            "ends 2 s after its last goal)")
+        served = second.serve_action("/again", GRIPPER,
+                                     lambda g, fb, cancelled: ("succeeded", {"position": 0.4}))
+        assert served.device == "act:again"
+        (listed,) = [a for a in second.command("list_actions")["actions"]
+                     if a["action"] == "/again"]
+        assert listed["types"] == [GRIPPER]
+        caller = processes.python("caller", "gripper_action_client.py", "/again", "0.4")
+        line = caller.wait_for_output("RESULT ", timeout=30)
+        assert json.loads(line[line.index("RESULT ") + 7:]) == {
+            "status": 4, "position": 0.4, "reached_goal": False}
 
 
 def test_serving_errors(ros: Client, server: Child) -> None:

@@ -10,7 +10,9 @@ in time), `FEEDBACK <position>` for each feedback, then
 Fast DDS can drop a service response when the server has not yet matched the client's reply
 reader (rmw_fastrtps sends nothing and reports success); on a loaded machine that hits the
 goal response. The goal then runs, so this client also watches the action's status topic:
-its goal id listed there is an acceptance as good as the response.
+its goal id listed there is an acceptance as good as the response. The get_result request
+or its answer can be lost the same way: once the status topic shows the goal ended, a result
+still missing is asked for again.
 """
 
 import argparse
@@ -20,14 +22,34 @@ import time
 import uuid
 
 import rclpy
-from action_msgs.msg import GoalStatusArray
+from action_msgs.msg import GoalStatus, GoalStatusArray
 from control_msgs.action import GripperCommand
 from rclpy.action import ActionClient
 from rclpy.action.client import ClientGoalHandle
 from rclpy.qos import qos_profile_action_status_default
 from unique_identifier_msgs.msg import UUID
 
+TERMINAL = {GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED}
 TIME_SCALE = float(os.environ.get("SLICER_BRIDGE_TEST_TIME_SCALE", "3"))
+
+
+def wait_for_result(node, handle: ClientGoalHandle, ended: list[float]):  # type: ignore[no-untyped-def]
+    """The goal's result. The get_result request, or its answer, is lost like the goal
+    response can be; once the status topic shows the goal ended, a result still missing a
+    second later is asked for again (as often as needed)."""
+    asked = [handle.get_result_async()]
+    last_ask = time.monotonic()
+    deadline = last_ask + 60.0 * TIME_SCALE
+    while time.monotonic() < deadline:
+        for future in asked:
+            if future.done():
+                return future.result()
+        if ended and time.monotonic() - max(last_ask, ended[0]) > 1.0:
+            print("the result did not come; asked again", flush=True)
+            asked.append(handle.get_result_async())
+            last_ask = time.monotonic()
+        rclpy.spin_once(node, timeout_sec=0.1)
+    raise SystemExit("no result")
 
 
 def main() -> None:
@@ -66,10 +88,14 @@ def main() -> None:
         goal_uuid = UUID(uuid=list(uuid.uuid4().bytes))
         listed: list[bool] = []
 
+        ended: list[float] = []  # when the status topic first showed the goal ended
+
         def on_status(message: GoalStatusArray) -> None:
-            if any(s.goal_info.goal_id.uuid.tolist() == goal_uuid.uuid.tolist()
-                   for s in message.status_list):
-                listed.append(True)
+            for status in message.status_list:
+                if status.goal_info.goal_id.uuid.tolist() == goal_uuid.uuid.tolist():
+                    listed.append(True)
+                    if status.status in TERMINAL and not ended:
+                        ended.append(time.monotonic())
 
         node.create_subscription(GoalStatusArray, args.action + "/_action/status", on_status,
                                  qos_profile_action_status_default)
@@ -93,9 +119,7 @@ def main() -> None:
         handle_box.append(handle)
         print("ACCEPTED", flush=True)
         cancel_if_due()
-        result = handle.get_result_async()
-        rclpy.spin_until_future_complete(node, result, timeout_sec=60.0 * TIME_SCALE)
-        response = result.result()
+        response = wait_for_result(node, handle, ended)
         print("RESULT " + json.dumps({"status": response.status,
                                       "position": response.result.position,
                                       "reached_goal": response.result.reached_goal}),
