@@ -45,7 +45,7 @@ class ActionBridges:
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
                  max_action_clients: int = 32, max_goals_per_client: int = 32,
                  idle_client_s: float = 60.0, lost_server_s: float = 1.0,
-                 linger_s: float = 2.0) -> None:
+                 linger_s: float = 10.0) -> None:
         self._ros = ros
         self.sender = GoalSender(ros, hub, names, max_action_clients=max_action_clients,
                                  max_goals_per_client=max_goals_per_client,

@@ -12,6 +12,12 @@ A server that disappears mid-goal never sends a result: a watchdog on the loop l
 each action client with goals in flight, and once its server has been gone for
 `lost_server_s` the goals end with status ``lost``. A client that leaves has its goals
 cancelled (nobody watches them).
+
+A goal's answer can be lost: Fast DDS drops a service response to a reader the server has
+not matched yet (it waits 100 ms), which a busy machine's discovery easily exceeds. The goal
+then runs all the same, and the action's status topic (transient local, so it arrives
+whenever the match completes) lists it: a goal listed there before its answer came is
+accepted, and followed by its id like any other.
 """
 
 from __future__ import annotations
@@ -69,6 +75,20 @@ def _accepted(cls: Any) -> Any:
     return cls.Impl.SendGoalService.Response(accepted=True)
 
 
+class _StatusWatchingClient(ActionClient):
+    """An rclpy ActionClient that also hands each status message to `on_status`
+    (executor thread; it must only hand off)."""
+
+    def __init__(self, *args: Any, on_status: Callable[[Any], None], **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._on_status = on_status
+
+    async def execute(self, taken_data: Any) -> None:
+        await super().execute(taken_data)
+        if "status" in taken_data:
+            self._on_status(taken_data["status"])
+
+
 @dataclass
 class CalledAction:
     """A cached rclpy ActionClient for `send_goal` (one per action and type)."""
@@ -94,6 +114,7 @@ class SentGoal:
     device: str
     called: CalledAction
     handle: Any = None  # rclpy ClientGoalHandle, once accepted
+    listed: Optional[asyncio.Future[None]] = None  # set once the status topic lists it
     feedbacks: int = 0
     done: bool = False
     timer: Optional[asyncio.TimerHandle] = None
@@ -173,8 +194,10 @@ class GoalSender:
                 raise LimitReachedError("action", f"at most {self._max_called} actions with "
                                         f"goals in flight at once", f"a goal to {action} more")
             self._drop_client(idle)
-        client = ActionClient(self._ros.node, cls, action, callback_group=self._group,
-                              feedback_sub_qos_profile=QoSProfile(depth=_FEEDBACK_DEPTH))
+        client = _StatusWatchingClient(
+            self._ros.node, cls, action, callback_group=self._group,
+            feedback_sub_qos_profile=QoSProfile(depth=_FEEDBACK_DEPTH),
+            on_status=lambda message: self._hub.call_soon(self._on_status, message))
         entry = CalledAction(action, ros_type, cls, client, last_used=now)
         self.called[(action, ros_type)] = entry
         self._schedule_watch()
@@ -245,10 +268,20 @@ class GoalSender:
 
         response = self._in_executor(lambda: client.send_goal_async(
             goal, feedback_callback=on_feedback, goal_uuid=_uuid_msg(sent.goal_id)))
-        try:
-            handle = await asyncio.wait_for(asyncio.shield(response),
-                                            max(0.0, start + timeout - loop.time()))
-        except asyncio.TimeoutError:
+        sent.listed = loop.create_future()
+        done, _ = await asyncio.wait((response, sent.listed),
+                                     timeout=max(0.0, start + timeout - loop.time()),
+                                     return_when=asyncio.FIRST_COMPLETED)
+        if response in done:
+            handle = response.result()
+        elif done:
+            # Its answer was lost. The pending request stays in the rclpy client until an
+            # answer comes or the client is dropped (idle), whichever is first.
+            log.warning("goal %s of %s: the server's answer was lost; the action's status "
+                        "topic lists the goal, so it was accepted", sent.goal_id, sent.action)
+            response.add_done_callback(_ignore_outcome)
+            return ClientGoalHandle(client, _uuid_msg(sent.goal_id), _accepted(sent.called.cls))
+        else:
             # The server may have accepted it and only its answer be lost (Fast DDS drops a
             # response to a reader it has not matched yet), or accept it later: either way
             # the goal would run unwatched, so it is cancelled by its id, and again if an
@@ -260,11 +293,19 @@ class GoalSender:
             raise CommandFailedError("action", f"{what} to accept or reject the goal within "
                                      f"{timeout:g} s", "no answer; the daemon asked the "
                                      f"server to cancel goal {sent.goal_id} in case it runs",
-                                     code=ErrorCode.TIMEOUT) from None
+                                     code=ErrorCode.TIMEOUT)
         if not handle.accepted:
             raise CommandFailedError("goal", f"a goal {what} accepts", "a rejected goal",
                                      code=ErrorCode.REJECTED)
         return handle
+
+    def _on_status(self, message: Any) -> None:
+        """A status message of an action the daemon sends goals to (loop thread): goals
+        still waiting for their answer that it lists were accepted."""
+        for status in message.status_list:
+            sent = self.goals.get(bytes(status.goal_info.goal_id.uuid).hex())
+            if sent is not None and sent.listed is not None and not sent.listed.done():
+                sent.listed.set_result(None)
 
     def _cancel_late(self, response: asyncio.Future[Any]) -> None:
         if response.cancelled() or response.exception() is not None:
@@ -422,6 +463,11 @@ class GoalSender:
         if self._watch is not None:
             self._watch.cancel()
             self._watch = None
+
+
+def _ignore_outcome(outcome: asyncio.Future[Any]) -> None:
+    if not outcome.cancelled():
+        outcome.exception()  # retrieved: a late failure is of no interest any more
 
 
 def _settle_loop(outcome: asyncio.Future[Any], done: Optional[RosFuture],
