@@ -82,8 +82,10 @@ def test_values_at_a_limit_within_rounding_are_clamped(joints) -> None:
 def test_motion_hold_yields_after_a_foreign_state_and_while_paused() -> None:
     hold = MotionHold(yield_s=3.0)
     assert not hold.yields(100.0)
-    hold.foreign_state(100.0)
-    assert hold.yields(102.9) and not hold.yields(103.0)
+    assert hold.foreign_state(100.0) is True  # starts a yield
+    assert hold.foreign_state(101.0) is False  # prolongs it, to 104
+    assert hold.yields(103.9) and not hold.yields(104.0)
+    assert hold.foreign_state(104.0) is True
     hold.pause("goal")
     hold.pause("sliders")
     hold.resume("goal")

@@ -29,7 +29,7 @@ import math
 import sys
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 from bridge.robots.description import RobotDescription, parse_urdf
 
@@ -87,13 +87,16 @@ def create_joint_motion_node(motion: JointMotion, *, rate_hz: float = 50.0,
                              node_name: str = "demo_joint_motion", namespace: str = "",
                              context: Any = None,
                              trajectory_action: Optional[str] = None,
-                             hold: Optional[MotionHold] = None) -> Any:
+                             hold: Optional[MotionHold] = None,
+                             on_yield: Optional[Callable[[float], None]] = None) -> Any:
     """An rclpy node publishing ``motion`` on ``joint_states`` at ``rate_hz`` (for any
     executor, e.g. inside the daemon); rclpy must be initialised. With
     ``trajectory_action``, it also serves FollowJointTrajectory there (see
     `bridge.robots.demo.trajectory`), pausing the idle motion while a goal runs. It also
     listens on ``joint_states``: a message it did not publish (told by its stamp, unique
-    per tick) makes it yield per `hold` (made if not given; see `MotionHold`)."""
+    per tick) makes it yield per `hold` (made if not given; see `MotionHold`);
+    ``on_yield(t)`` is told when such a message starts a yield (t: when it came, seconds
+    on the node's clock, the clock of the stamps)."""
     import rclpy
     from sensor_msgs.msg import JointState
 
@@ -112,7 +115,9 @@ def create_joint_motion_node(motion: JointMotion, *, rate_hz: float = 50.0,
 
     def on_state(msg: Any) -> None:  # does almost nothing: notes a foreign publisher
         if (msg.header.stamp.sec, msg.header.stamp.nanosec) not in own:
-            hold.foreign_state(node.get_clock().now().nanoseconds * 1e-9)
+            now_s = node.get_clock().now().nanoseconds * 1e-9
+            if hold.foreign_state(now_s) and on_yield is not None:
+                on_yield(now_s)
 
     def tick() -> None:
         now = node.get_clock().now()
@@ -195,7 +200,11 @@ def main(argv: Optional[list[str]] = None) -> int:
     with ros_session(parent_pid=inherited_parent_pid()) as session:
         node = create_joint_motion_node(motion, rate_hz=args.rate, node_name=args.node_name,
                                         namespace=args.namespace, trajectory_action=action,
-                                        hold=MotionHold(args.yield_s))
+                                        hold=MotionHold(args.yield_s),
+                                        on_yield=lambda t: print(
+                                            f"joint motion yields for {args.yield_s:g} s to "
+                                            f"another publisher's joint state (at {t:.6f})",
+                                            flush=True))
         served = f", FollowJointTrajectory on {action}" if action else ""
         spin_until_signal(session, [node], on_ready=lambda: print(
             f"joint motion ready: {len(motion.joint_names)} joints at {args.rate:g} Hz"

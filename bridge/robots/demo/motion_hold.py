@@ -80,10 +80,13 @@ class MotionHold:
         with self._lock:
             self._owners.discard(owner)
 
-    def foreign_state(self, now: float) -> None:
-        """Someone else published a joint state at `now` (seconds, any monotonic clock)."""
+    def foreign_state(self, now: float) -> bool:
+        """Someone else published a joint state at `now` (seconds, any monotonic clock).
+        True if this starts a yield (rather than prolonging one)."""
         with self._lock:
+            starts = now >= self._until
             self._until = max(self._until, now + self.yield_s)
+            return starts
 
     def yields(self, now: float) -> bool:
         """Whether the motion publishes nothing at `now`: paused by an owner, or within
