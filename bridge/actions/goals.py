@@ -197,7 +197,7 @@ class GoalSender:
         client = _StatusWatchingClient(
             self._ros.node, cls, action, callback_group=self._group,
             feedback_sub_qos_profile=QoSProfile(depth=_FEEDBACK_DEPTH),
-            on_status=lambda message: self._hub.call_soon(self._on_status, message))
+            on_status=lambda message: self._hub.call_soon(self._on_status, entry, message))
         entry = CalledAction(action, ros_type, cls, client, last_used=now)
         self.called[(action, ros_type)] = entry
         self._schedule_watch()
@@ -279,7 +279,7 @@ class GoalSender:
             # answer comes or the client is dropped (idle), whichever is first.
             log.warning("goal %s of %s: the server's answer was lost; the action's status "
                         "topic lists the goal, so it was accepted", sent.goal_id, sent.action)
-            response.add_done_callback(_ignore_outcome)
+            response.add_done_callback(lambda late: self._late_answer(sent, late))
             return ClientGoalHandle(client, _uuid_msg(sent.goal_id), _accepted(sent.called.cls))
         else:
             # The server may have accepted it and only its answer be lost (Fast DDS drops a
@@ -299,13 +299,24 @@ class GoalSender:
                                      code=ErrorCode.REJECTED)
         return handle
 
-    def _on_status(self, message: Any) -> None:
+    def _on_status(self, entry: CalledAction, message: Any) -> None:
         """A status message of an action the daemon sends goals to (loop thread): goals
-        still waiting for their answer that it lists were accepted."""
+        of that action still waiting for their answer that it lists were accepted."""
         for status in message.status_list:
             sent = self.goals.get(bytes(status.goal_info.goal_id.uuid).hex())
-            if sent is not None and sent.listed is not None and not sent.listed.done():
+            if (sent is not None and sent.called is entry and sent.listed is not None
+                    and not sent.listed.done()):
                 sent.listed.set_result(None)
+
+    @staticmethod
+    def _late_answer(sent: SentGoal, response: asyncio.Future[Any]) -> None:
+        """The answer of a goal already taken as accepted from the status topic."""
+        if response.cancelled() or response.exception() is not None:
+            return
+        if not response.result().accepted:  # then the status came from another publisher
+            log.warning("goal %s of %s: the server's late answer rejects the goal the "
+                        "status topic listed; its result will say how it ended",
+                        sent.goal_id, sent.action)
 
     def _cancel_late(self, response: asyncio.Future[Any]) -> None:
         if response.cancelled() or response.exception() is not None:
@@ -463,11 +474,6 @@ class GoalSender:
         if self._watch is not None:
             self._watch.cancel()
             self._watch = None
-
-
-def _ignore_outcome(outcome: asyncio.Future[Any]) -> None:
-    if not outcome.cancelled():
-        outcome.exception()  # retrieved: a late failure is of no interest any more
 
 
 def _settle_loop(outcome: asyncio.Future[Any], done: Optional[RosFuture],
