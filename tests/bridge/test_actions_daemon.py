@@ -376,6 +376,7 @@ def test_a_served_action_advertised_again_after_its_client_left(daemon: RunningD
     first = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
     first.serve_action("/again", GRIPPER, lambda g, fb, cancelled: ("succeeded", {}))
     first.close()
+    daemon.child.wait_for_output("no longer serving action /again")
     with slicer_client.connect("127.0.0.1", daemon.port, reconnect=False) as second:
         error = refused(lambda: second.command("advertise_action", {
             "action": "/again", "type": "control_msgs/action/PointHead"}))
