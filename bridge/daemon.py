@@ -21,6 +21,7 @@ from bridge.actions import ActionBridges
 from bridge.config import DaemonConfig
 from bridge.dispatch import Dispatcher
 from bridge.hub import Hub
+from bridge.interface_types import InterfaceTypes
 from bridge.markers.capability import MarkerBridges
 from bridge.parameters import ParameterBridges
 from bridge.robots.capability import RobotBridges
@@ -70,7 +71,8 @@ class Daemon:
                                      package_paths=dict(config.package_paths))
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
-                                                          self.robots, self.markers],
+                                                          self.robots, self.markers,
+                                                          InterfaceTypes()],
                                      policy=policy, resolve_frame=self.tf.resolve_frame,
                                      resolve_file=self.robots.file_path)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
