@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import re
-from typing import Any, List, Optional
+from typing import Any, Dict, List, Optional
 
 __all__ = ["to_yaml"]
 
@@ -54,7 +54,7 @@ def to_yaml(value: Any) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _mapping(data: dict, indent: int, lines: List[str], first: Optional[str] = None) -> None:
+def _mapping(data: Dict[Any, Any], indent: int, lines: List[str], first: Optional[str] = None) -> None:
     """Lines of a non-empty mapping; `first` prefixes its first line (``- `` in a list)."""
     pad = " " * indent
     for i, (key, item) in enumerate(data.items()):
@@ -69,7 +69,7 @@ def _mapping(data: dict, indent: int, lines: List[str], first: Optional[str] = N
             lines.append(head + " " + _scalar(item))
 
 
-def _sequence(data: list, indent: int, lines: List[str], first: Optional[str] = None) -> None:
+def _sequence(data: List[Any], indent: int, lines: List[str], first: Optional[str] = None) -> None:
     pad = " " * indent
     for i, item in enumerate(data):
         head = (first if i == 0 and first is not None else pad) + "- "
