@@ -54,7 +54,8 @@ def to_yaml(value: Any) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _mapping(data: Dict[Any, Any], indent: int, lines: List[str], first: Optional[str] = None) -> None:
+def _mapping(data: Dict[Any, Any], indent: int, lines: List[str],
+             first: Optional[str] = None) -> None:
     """Lines of a non-empty mapping; `first` prefixes its first line (``- `` in a list)."""
     pad = " " * indent
     for i, (key, item) in enumerate(data.items()):
@@ -69,7 +70,8 @@ def _mapping(data: Dict[Any, Any], indent: int, lines: List[str], first: Optiona
             lines.append(head + " " + _scalar(item))
 
 
-def _sequence(data: List[Any], indent: int, lines: List[str], first: Optional[str] = None) -> None:
+def _sequence(data: List[Any], indent: int, lines: List[str],
+              first: Optional[str] = None) -> None:
     pad = " " * indent
     for i, item in enumerate(data):
         head = (first if i == 0 and first is not None else pad) + "- "
