@@ -451,6 +451,9 @@ class Client:
     def list_topics(self) -> List[Dict[str, Any]]:
         return list(self.command("list_topics").get("topics", []))
 
+    def list_services(self) -> List[Dict[str, Any]]:
+        return list(self.command("list_services").get("services", []))
+
     def lookup_transform(self, parent: str, child: str, *, timeout: float = 0.5,
                          stamp: Optional[Tuple[int, int]] = None) -> np.ndarray:
         """parent -> child now (or at `stamp`), 4x4 mm; waits up to `timeout` s for tf."""

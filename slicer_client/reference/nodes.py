@@ -95,6 +95,8 @@ class FacadeClient(Protocol):
 
     def describe_type(self, type_name: str, kind: str = "message") -> c.TypeDescription: ...
 
+    def list_services(self) -> List[Dict[str, Any]]: ...
+
     def emit(self, callback: Callable[..., None], *args: Any) -> None: ...
 
 
@@ -248,6 +250,12 @@ class SubscriberNode(_Node):
             return _copy_into(value, target)
         return value
 
+    def GetLastMessageVariant(self) -> Any:  # noqa: N802
+        """The last message in a vtkVariant, where vtk imports (else the value itself)."""
+        value = self.GetLastMessage()
+        vtk = self._values.vtk
+        return vtk.vtkVariant(value) if vtk is not None and value is not None else value
+
     def GetLastMessageYAML(self) -> str:  # noqa: N802
         """The last message as YAML (``ros2 topic echo`` style); "" before the first."""
         data = self._whole()
@@ -343,6 +351,11 @@ class ParameterNode(_Node):
     def IsMonitoredNodeReady(self) -> bool:  # noqa: N802
         return bool(self.resource.ready)
 
+    def Spin(self) -> bool:  # noqa: N802
+        """The reference spins each parameter node; the daemon watches the node itself.
+        True once the node's parameter services answered."""
+        return bool(self.resource.ready)
+
     def AddParameter(self, name: str) -> bool:  # noqa: N802
         """Track one parameter: its value is fetched now if the node is there, else when
         it appears (`IsParameterSet` is False until then). False if already tracked."""
@@ -388,11 +401,14 @@ class ParameterNode(_Node):
                         self.resource.node)
         return False
 
-    def GetParameterType(self, name: str) -> str:  # noqa: N802
+    def GetParameterType(self, name: str, result: Any = None) -> Any:  # noqa: N802
         """"bool", "integer", "double", "string", "bool_array", "integer_array",
-        "double_array", "string_array", "byte_array"; "" when it is not set."""
+        "double_array", "string_array", "byte_array"; "" when it is not set. With
+        `result` (a ``vtk.reference``), as the reference's other overload: it gets the type
+        and the call returns whether the parameter is set."""
         value = self._value(name)
-        return "" if value is None else value.type
+        text = "" if value is None else value.type
+        return text if result is None else _out(result, text, value is not None)
 
     def _as(self, name: str, *types: str) -> Any:
         value = self._value(name)
@@ -405,17 +421,32 @@ class ParameterNode(_Node):
                             f"{value.type}, not {' or '.join(types)}")
         return parameter_to_python(value)
 
-    def GetParameterAsBool(self, name: str) -> bool:  # noqa: N802
+    def GetParameterAsBool(self, name: str, result: Any = None) -> Any:  # noqa: N802
+        if result is not None:  # the reference's out-argument overload
+            return self._into(result, lambda: bool(self._as(name, "bool")), bool())
         return bool(self._as(name, "bool"))
 
-    def GetParameterAsInteger(self, name: str) -> int:  # noqa: N802
+    def GetParameterAsInteger(self, name: str, result: Any = None) -> Any:  # noqa: N802
+        if result is not None:  # the reference's out-argument overload
+            return self._into(result, lambda: int(self._as(name, "integer")), int())
         return int(self._as(name, "integer"))
 
-    def GetParameterAsDouble(self, name: str) -> float:  # noqa: N802
+    def GetParameterAsDouble(self, name: str, result: Any = None) -> Any:  # noqa: N802
+        if result is not None:  # the reference's out-argument overload
+            return self._into(result, lambda: float(self._as(name, "double", "integer")), float())
         return float(self._as(name, "double", "integer"))
 
-    def GetParameterAsString(self, name: str) -> str:  # noqa: N802
+    def GetParameterAsString(self, name: str, result: Any = None) -> Any:  # noqa: N802
+        if result is not None:  # the reference's out-argument overload
+            return self._into(result, lambda: str(self._as(name, "string")), str())
         return str(self._as(name, "string"))
+
+    def _into(self, result: Any, read: Callable[[], Any], empty: Any) -> bool:
+        try:
+            return bool(_out(result, read(), True))
+        except (KeyError, TypeError) as error:
+            log.warning("%s", error)
+            return bool(_out(result, empty, False))
 
     def GetParameterAsVectorOfBools(self, name: str) -> List[bool]:  # noqa: N802
         return [bool(v) for v in self._as(name, "bool_array")]
@@ -651,6 +682,23 @@ class ServiceClientNode(_Node):
     def GetNumberOfRequestsSent(self) -> int:  # noqa: N802
         return self.sent
 
+    def GetSlicerTypeIn(self) -> str:  # noqa: N802
+        return _type_name(self.CreateBlankRequest())
+
+    def GetSlicerTypeOut(self) -> str:  # noqa: N802
+        return str(self._types.message_class(self._description.parts["response"]).__name__)
+
+    def PreRequestCheck(self) -> bool:  # noqa: N802
+        """Is the service in the ROS graph with this type (what the reference checks
+        before sending)?"""
+        listed = self._ros_node.client.list_services()
+        found = [s for s in listed if s.get("service") == self.resource.service]
+        ok = bool(found) and self._description.type in found[0].get("types", [])
+        if not ok:
+            log.warning("PreRequestCheck: service %s (%s) is not in the ROS graph",
+                        self.resource.service, self._description.type)
+        return ok
+
     def CreateBlankRequest(self) -> Any:  # noqa: N802
         request = self._types.new(self._description.parts["request"])
         return request if self._adapter is None else self._adapter.request(request)
@@ -866,6 +914,11 @@ class ROS2Node:
     def GetSpinning(self) -> bool:  # noqa: N802
         return self.client.connected and not self._destroyed
 
+    def WarnIfNotSpinning(self, contextMessage: str) -> None:  # noqa: N802,N803
+        if not self.GetSpinning():
+            log.warning("Node %s is not spinning (not connected to the daemon) when %s",
+                        self.GetROS2NodeName(), contextMessage)
+
     def RegisteredROS2SubscriberNodes(self) -> str:  # noqa: N802
         return " ".join(f"vtkMRMLROS2Subscriber{n}Node" for n in c.REFERENCE_TYPE_NAMES)
 
@@ -1060,6 +1113,19 @@ class ROS2Node:
         if node is not None:
             node.RemoveAllObservers()
         return node is not None
+
+
+def _out(result: Any, value: Any, ok: bool) -> bool:
+    """Fill an out-argument (``vtk.reference``, or a one-item list) as the reference's
+    overloads do; returns `ok`."""
+    if hasattr(result, "set"):
+        result.set(value)
+    elif isinstance(result, list):
+        result[:] = [value]
+    else:
+        raise TypeError(f"expected a vtk.reference (or a list) to fill, got "
+                        f"{type(result).__name__}")
+    return ok
 
 
 def _type_name(value: Any) -> str:
