@@ -164,7 +164,8 @@ class ParameterWatch:
     node: str
     name: str
     on_change: Callable[[ParameterValue], None]
-    get_client: Client
+    # None for the daemon's own node: read in process, never through its own services.
+    get_client: Optional[Client]
     ready: Optional[bool] = None  # None until the first check
     value: Optional[ParameterValue] = None  # the last value reported
     touched: int = 0  # serial of the last event that set `value`
@@ -341,7 +342,15 @@ class ParameterBridges:
         does; ``watch.unanswered`` says why). The node's readiness is judged as for
         parameter clients (`ready_wait_s` at first, then the periodic check). Any other
         failed fetch (a value that cannot be read) raises `CommandError`.
+
+        The daemon's own node is read in process, and told of changes by its set callback:
+        a service call to itself can lose its reply while its own endpoints match.
         """
+        if node == self._server_node:
+            own = ParameterWatch(node, name, on_change, None, ready=True)
+            own.value = self._own_value(name)
+            self.watches.append(own)
+            return own, own.value
         watch = ParameterWatch(node, name, on_change,
                                self._ros.node.create_client(GetParametersSrv,
                                                             f"{node}/get_parameters"))
@@ -371,9 +380,12 @@ class ParameterBridges:
             return
         self.watches.remove(watch)
         self._update_watched()
-        self._ros.destroy(watch.get_client)
+        if watch.get_client is not None:
+            self._ros.destroy(watch.get_client)
 
     async def _fetch_watched(self, watch: ParameterWatch) -> ParameterValue:
+        if watch.get_client is None:
+            return self._own_value(watch.name)
         started = self._event_serial
         reply = await call_ros_service(
             self._hub, watch.get_client, GetParametersSrv.Request(names=[watch.name]),
@@ -411,7 +423,7 @@ class ParameterBridges:
 
     def _on_watched_event(self, event: ParameterEvent) -> None:
         for watch in tuple(self.watches):
-            if watch.node != event.node:
+            if watch.node != event.node or watch.get_client is None:
                 continue
             for p in (*event.new_parameters, *event.changed_parameters):
                 if p.name == watch.name:
@@ -446,8 +458,8 @@ class ParameterBridges:
             if ready != client.ready:
                 self._set_ready(client, ready)
         for watch in tuple(self.watches):
-            if watch.ready is None:
-                continue  # its first wait is still running
+            if watch.ready is None or watch.get_client is None:
+                continue  # its first wait is still running, or it is the daemon's own
             ready = watch.get_client.service_is_ready()
             if ready != watch.ready:
                 watch.ready = ready
@@ -518,7 +530,7 @@ class ParameterBridges:
     def _update_watched(self) -> None:
         self._watched = frozenset([node for node, client in self.clients.items()
                                    if client.observed or client.all_changes]
-                                  + [w.node for w in self.watches])
+                                  + [w.node for w in self.watches if w.get_client is not None])
 
     def _on_event_ros(self, event: ParameterEvent) -> None:
         # Executor thread: only pick the watched nodes' events and hand them off.
@@ -604,8 +616,7 @@ class ParameterBridges:
         node = self._ros.node
         names = request.names or tuple(sorted(node.list_parameters([], 0).names))
         return {"node": self._server_node,
-                "values": {name: (self._server_value(name) if node.has_parameter(name)
-                                  else ParameterValue("not_set")).to_dict() for name in names}}
+                "values": {name: self._own_value(name).to_dict() for name in names}}
 
     def server_undeclare_parameter(self, request: ServerUndeclareParameter) -> dict[str, Any]:
         name = request.name
@@ -619,6 +630,7 @@ class ParameterBridges:
                                      f"{name} ({type(error).__name__})",
                                      code=ErrorCode.ROS_ERROR) from None
         del self.declared[name]
+        self._own_watches_changed([name])
         self._request_server_stream()
         return {"name": name}
 
@@ -629,14 +641,35 @@ class ParameterBridges:
             return ParameterValue("not_set")
         return from_ros_value(ros_value, "value")
 
+    def _own_value(self, name: str) -> ParameterValue:
+        """A parameter of the daemon's own node, not_set if it is not declared."""
+        if not self._ros.node.has_parameter(name):
+            return ParameterValue("not_set")
+        return self._server_value(name)
+
     def _on_server_set_ros(self, parameters: list[Parameter]) -> None:
         # Executor thread (a ROS node set it) or loop thread (a client did): hand off.
         names = [p.name for p in parameters]
         self._hub.call_soon(self._server_changed, names)
 
     def _server_changed(self, names: list[str]) -> None:
+        self._own_watches_changed(names)
         if any(name in self.declared for name in names):
             self._request_server_stream()
+
+    def _own_watches_changed(self, names: list[str]) -> None:
+        for watch in tuple(self.watches):
+            if watch.get_client is None and watch.name in names:
+                try:
+                    value = self._own_value(watch.name)
+                except CommandError as error:
+                    log.warning("parameter %s of %s not usable: %s", watch.name, watch.node,
+                                error)
+                    continue
+                self._event_serial += 1
+                watch.touched = self._event_serial
+                watch.value = value
+                watch.on_change(value)
 
     def _request_server_stream(self) -> None:
         if not self._server_stream_pending:

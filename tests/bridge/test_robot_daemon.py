@@ -9,6 +9,7 @@ from omni.urdf, primitive sizes and the DAE's positions read from the files.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -536,6 +537,40 @@ def test_a_robot_whose_first_description_read_is_lost_loads_at_once(
         assert "could not fetch robot_description of /forgetful_ns" not in daemon.child.output()
     finally:
         client.command("remove_robot", {"name": "forgetful"})
+
+
+def test_a_robot_from_the_daemon_s_own_parameter_is_read_in_process(
+        processes: Processes, client: Connection) -> None:
+    """The daemon reads its own node's parameter without a service call to itself (such a
+    call's reply can be lost while its own endpoints match: issue 25, item 12): loaded when
+    create_robot answers, reloaded at once when the parameter changes, and no parameter
+    client of its own node in the ROS graph."""
+    client.command("server_declare_parameter", {"name": "own_urdf", "value": {
+        "type": "string", "value": two_link_urdf()}})
+    source = {"kind": "parameter", "node": "/slicer_bridge", "parameter": "own_urdf"}
+    try:
+        result = client.command("create_robot", {"name": "own", "source": source},
+                                timeout=LOAD_TIMEOUT)
+        assert result["state"] == "loaded", result
+        assert sorted(devices_of(result)[0]) == ["arm", "base", "tool"]
+        client.command("server_set_parameter", {"name": "own_urdf", "value": {
+            "type": "string", "value": two_link_urdf(extra_link=False)}})
+        wait_until(lambda: robot_summary(client, "own")["loads"] == 2, LOAD_TIMEOUT,
+                   "the robot to reload its changed description")
+        assert robot_summary(client, "own")["links"] == 2
+        # A parameter client made after the robot: once the graph shows it, it shows every
+        # client the daemon's node made before, and none reads the daemon's own parameters.
+        client.command("create_parameter_client", {"node": "/graph_witness"})
+        graph = processes.python("graph", "node_clients.py", "slicer_bridge", "/",
+                                 "/graph_witness/get_parameters")
+        clients = json.loads(graph.wait_for_output("CLIENTS ", timeout=LOAD_TIMEOUT)
+                             .split("CLIENTS ", 1)[1])
+        assert "/graph_witness/get_parameters" in clients
+        assert not [c for c in clients if c.startswith("/slicer_bridge/")], clients
+    finally:
+        client.command("remove_parameter_client", {"node": "/graph_witness"})
+        client.command("remove_robot", {"name": "own"})
+        client.command("server_undeclare_parameter", {"name": "own_urdf"})
 
 
 def test_device_names_are_the_registry_s(omni: dict[str, Any]) -> None:
