@@ -145,7 +145,8 @@ def _crc_blocks(view: memoryview) -> int:
         np.right_shift(crc, s48, out=idx)
         np.bitwise_xor(idx, row, out=idx)
         np.left_shift(crc, s16, out=crc)
-        np.take(t16, idx, out=looked)
+        # Indices as intp: numpy before 2.1 will not take uint64 ones (values < 2**16).
+        np.take(t16, idx.view(np.intp), out=looked)
         np.bitwise_xor(crc, looked, out=crc)
     # Merge neighbours: each level doubles the block length.
     level = block.bit_length() - 1

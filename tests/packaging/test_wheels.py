@@ -3,25 +3,32 @@
 - The daemon's wheel (`pip wheel .`) with the pinned ROS 2 wheels: without tf2_msgs it says
   so in one line; `build-interfaces` provides it; then the daemon answers a client's hello
   and bridges a topic.
-- The client's wheel (tools/build_client_wheel.py): numpy only, into Python 3.9 as 3D
-  Slicer 5.4-5.6 ship, talking to a real daemon.
+- The client's wheel (tools/build_client_wheel.py): numpy only, into the oldest Python it
+  declares (3.9, as 3D Slicer 5.4-5.6 ship) with the oldest and the newest numpy there,
+  loading the demo robot from a real `slicer-ros2-bridge demo`.
 
 Installs use the repository's pip cache (.cache/pip, filled by `make setup`).
 """
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import shutil
 import subprocess
 import sys
+import tomllib
 import venv
 from pathlib import Path
+from typing import Any, Iterator
 
+import numpy as np
 import pytest
 
 from installed_daemon import assert_serves_hello_and_a_pose
-from support import REPO, Processes, assert_clean_exit, pick_free_port, start_daemon
+from support import (REPO, Processes, RunningDaemon, assert_clean_exit, pick_free_port,
+                     scaled)
 
 pytestmark = pytest.mark.ros
 
@@ -46,11 +53,12 @@ def _pip_install(python: Path, *requirements: str) -> None:
                              f"{result.stdout[-2000:]}\n{result.stderr[-3000:]}")
 
 
-def _python_3_9() -> str | None:
-    """A working Python 3.9: on PATH, or one of pyenv's (whose shim may not select it)."""
-    candidates = [shutil.which("python3.9")] + sorted(
+def _python(version: str) -> str | None:
+    """A working Python X.Y with venv: on PATH, or one of pyenv's (whose shim may not
+    select it)."""
+    candidates = [shutil.which(f"python{version}")] + sorted(
         str(p) for p in Path(os.environ.get("PYENV_ROOT", Path.home() / ".pyenv"))
-        .glob("versions/3.9*/bin/python3.9"))
+        .glob(f"versions/{version}.*/bin/python{version}"))
     for candidate in candidates:
         if candidate and _run([candidate, "-c", "import venv, ensurepip"],
                               timeout=60).returncode == 0:
@@ -102,33 +110,110 @@ def test_the_daemon_wheel_reports_what_it_lacks_then_builds_it_and_bridges(
     assert_serves_hello_and_a_pose(daemon, port, processes, "/wheel_pose")
 
 
-def test_the_client_wheel_installs_with_numpy_alone_into_python_3_9(
-        tmp_path: Path, processes: Processes) -> None:
-    python39 = _python_3_9()
-    if python39 is None:
-        pytest.skip("needs a Python 3.9 with venv (3D Slicer 5.4-5.6's version) to check the "
-                    "client wheel on it")
+# ---------------------------------------------------------------- the client's wheel
+
+CLIENT_PYPROJECT = REPO / "packaging" / "client" / "pyproject.toml"
+# The demo arm (bridge/robots/demo/urdf.py): its links, and its visuals (one mesh each).
+DEMO_LINKS = ("base_link", "shoulder_link", "upper_arm_link", "elbow_link", "forearm_link",
+              "wrist_1_link", "wrist_2_link", "wrist_3_link", "tool_flange", "finger_left",
+              "finger_right")
+DEMO_VISUALS = 14
+
+
+def client_declares() -> tuple[str, str]:
+    """(oldest Python "X.Y", oldest numpy) the client wheel declares in its pyproject."""
+    project = tomllib.loads(CLIENT_PYPROJECT.read_text())["project"]
+    python = re.fullmatch(r">=\s*(\d+\.\d+)", project["requires-python"])
+    (numpy,) = [re.fullmatch(r"numpy>=\s*([\d.]+)", d) for d in project["dependencies"]
+                if d.startswith("numpy")]
+    assert python and numpy, project
+    return python[1], numpy[1]
+
+
+@pytest.fixture(scope="module")
+def client_wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("client-wheel")
     built = _run([sys.executable, str(REPO / "tools" / "build_client_wheel.py"),
-                  "--out", str(tmp_path / "dist")])
+                  "--out", str(out)])
     assert built.returncode == 0, built.stderr[-3000:]
     wheel = Path(built.stdout.strip().splitlines()[-1])
     assert wheel.name == "slicer_ros2_bridge_client-0.1.0-py3-none-any.whl"
-    python = _fresh_venv(tmp_path / "venv39", python39)
-    _pip_install(python, str(wheel))
-    installed = _run([str(python), "-m", "pip", "list", "--format=freeze"]).stdout
-    names = {line.split("==")[0].lower() for line in installed.splitlines()}
-    assert names - {"pip", "setuptools", "numpy"} == {"slicer-ros2-bridge-client"}
+    return wheel
 
-    daemon = start_daemon(processes)
-    script = ("import sys, slicer_client\n"
-              f"ros = slicer_client.connect('127.0.0.1', {daemon.port}, reconnect=False)\n"
-              "print('node', ros.daemon_info['node'])\n"
-              "print('version', sys.version_info[:2])\n"
-              "ros.close()\n")
-    # Run outside the repository, so only the installed packages can be imported.
-    result = subprocess.run([str(python), "-c", script], capture_output=True, text=True,
-                            timeout=60, cwd=str(tmp_path), env=PIP_ENV)
-    assert result.returncode == 0, result.stderr[-3000:]
-    assert "node /slicer_bridge" in result.stdout
-    assert "version (3, 9)" in result.stdout
-    assert_clean_exit(daemon)
+
+@pytest.fixture(scope="module")
+def demo(module_processes: Processes) -> Iterator[RunningDaemon]:
+    """`slicer-ros2-bridge demo`: the daemon with the demo robot moving."""
+    port = pick_free_port()
+    child = module_processes.bridge("demo", "--port", str(port))
+    child.wait_for_output("slicer-ros2-bridge demo is running", timeout=60)
+    running = RunningDaemon(child, port)
+    yield running
+    assert_clean_exit(running)
+
+
+def _image_sum(width: int, height: int) -> int:
+    """What tests/peers/stream_publisher.py --image sends, summed (its seed and draw)."""
+    return int(np.random.default_rng(1).integers(0, 255, size=width * height * 3,
+                                                 dtype=np.uint8).astype(np.int64).sum())
+
+
+@pytest.mark.parametrize("numpy_version", ["oldest declared", "newest there"])
+def test_the_client_wheel_on_the_oldest_python_and_numpy_it_declares(
+        numpy_version: str, client_wheel: Path, demo: RunningDaemon, tmp_path: Path,
+        processes: Processes) -> None:
+    """The client wheel in a fresh venv of the oldest Python it declares (3D Slicer 5.4-5.6
+    ship 3.9), with the oldest numpy it declares and with the newest that Python gets,
+    against `slicer-ros2-bridge demo`: the robot's meshes, an image and a model sent to
+    ROS, all messages of 3 KB and more, whose CRC the numpy code computes (no native
+    CRC package in that venv). Issue 25, item 1: numpy before 2.1 failed every such
+    message."""
+    python_version, numpy_floor = client_declares()
+    interpreter = _python(python_version)
+    if interpreter is None:
+        pytest.skip(f"needs Python {python_version} with venv (the oldest the client wheel "
+                    f"declares) on PATH or in pyenv; none here")
+    python = _fresh_venv(tmp_path / "venv", interpreter)
+    numpy_requirement = f"numpy=={numpy_floor}" if numpy_version == "oldest declared" \
+        else "numpy"
+    _pip_install(python, str(client_wheel), numpy_requirement)
+    installed = _run([str(python), "-m", "pip", "list", "--format=freeze"]).stdout
+    versions = dict(line.split("==", 1) for line in installed.splitlines() if "==" in line)
+    assert set(versions) - {"pip", "setuptools", "numpy"} == {"slicer-ros2-bridge-client"}
+    if numpy_version == "oldest declared":
+        assert versions["numpy"] in (numpy_floor, f"{numpy_floor}.0"), versions
+
+    width, height = 64, 48  # rgb8: 9 KB
+    processes.python("wheel-image", "stream_publisher.py", "/wheel_image", "10", "--image",
+                     f"{width}x{height}").wait_for_output("READY", timeout=30)
+    echo = processes.python("wheel-model", "echo_subscriber.py", "/wheel_model",
+                            "shape_msgs/msg/Mesh", "--count", "1")
+    echo.wait_for_output("READY", timeout=30)
+    seen = tmp_path / "model-seen"
+    # Outside the repository, so only the installed packages can be imported.
+    probe = processes.start("wheel-probe", [str(python), "-u", str(
+        Path(__file__).resolve().parent / "client_wheel_probe.py"), str(demo.port),
+        "/wheel_image", "/wheel_model", str(seen)], cwd=tmp_path, env=PIP_ENV)
+
+    def step(name: str) -> dict[str, Any]:
+        line = probe.wait_for_output(f'RESULT {{"step": "{name}"', timeout=120)
+        return dict(json.loads(line.split("RESULT ", 1)[1]))
+
+    environment = step("environment")
+    assert environment["python"] == [int(v) for v in python_version.split(".")]
+    assert environment["numpy"] == versions["numpy"]
+    assert environment["crc_backend"] == "python"  # numpy's CRC, not a native package's
+    robot = step("robot")
+    assert robot["links"] == sorted(DEMO_LINKS), robot
+    assert robot["meshes"] == DEMO_VISUALS and robot["bodies_over_3kb"] >= 5, robot
+    image = step("image")
+    assert sorted(image["shape"]) == sorted([1, height, width, 3])[-len(image["shape"]):]
+    assert image["sum"] == _image_sum(width, height), image
+    mesh = json.loads(echo.wait_for_output("MSG ", timeout=120).split("MSG ", 1)[1])
+    seen.touch()
+    model = step("model")
+    assert model == {"step": "model", "points": 900, "triangles": 841, "seen": True,
+                     "errors": []}
+    assert len(mesh["vertices"]) == 900 and len(mesh["triangles"]) == 841
+    assert mesh["vertices"][31] == {"x": 0.001, "y": 0.001, "z": 0.0}  # mm -> m
+    assert probe.popen.wait(scaled(60)) == 0, probe.output()[-3000:]
