@@ -302,8 +302,12 @@ def test_the_robot_follows_its_joints_through_a_state_publisher(
 def test_the_demo_motion_yields_to_joints_set_from_slicer(
         ros: slicer_client.Client, processes: Processes, tmp_path: Path) -> None:
     """bridge.robots.demo.joint_motion stops for --yield-s after another publisher's joint
-    state: the gap between the state set from Slicer and the motion's next message, read
-    from their stamps, is at least that long."""
+    state: the gap between the state set from Slicer and the motion's next idle message,
+    read from their stamps, is at least that long; and the motion's last word before it
+    falls silent is the pose it saw set (issue 25, item 2), so whichever of its messages
+    reaches the state publisher last, the arm stays where Slicer put it. That holds in the
+    order of the motion's own messages, which every subscriber gets in order: it does not
+    depend on timing."""
     urdf = tmp_path / "yield.urdf"
     urdf.write_text(ROBOT_URDF.replace('name="jointy"', 'name="yielding"'))
     motion = processes.start("yield-motion", [
@@ -320,7 +324,10 @@ def test_the_demo_motion_yields_to_joints_set_from_slicer(
     assert robot.joints()["joint_states_topic"] == "/yielding/joint_states"
 
     def ours(m: dict[str, Any]) -> bool:
-        return not m["velocity"]  # the motion also sends velocities; set_joints does not
+        return m["name"] == ["shoulder"]  # the motion sends all its joints every time
+
+    def idle(m: dict[str, Any]) -> bool:
+        return bool(m["velocity"])  # the idle motion sends velocities, its last word none
 
     _until_received(echo, lambda: None, "the idle motion", count=1)
     topic = robot.joints()["joint_states_topic"]
@@ -346,7 +353,7 @@ def test_the_demo_motion_yields_to_joints_set_from_slicer(
                 if "joint motion yields for 2 s" in line]
 
     def motion_stamps() -> list[float]:
-        return sorted(stamp(m) for m in _messages(echo) if not ours(m))
+        return sorted(stamp(m) for m in _messages(echo) if idle(m))
 
     def yielded() -> bool:  # sent again until one reaches the motion (it may still match)
         return bool(yield_starts()) or set_shoulder(0.25) < 0
@@ -361,8 +368,16 @@ def test_the_demo_motion_yields_to_joints_set_from_slicer(
     # the echo may not have had yet, while it was still matching).
     starts = yield_starts()
     stamps = motion_stamps()
-    for start in starts:  # nothing of the motion's within 2 s of a yield's start
+    for start in starts:  # no idle motion within 2 s of a yield's start
         assert not [t for t in stamps if start < t < start + 2.0], start
+    # The motion's messages in the order it sent them, up to its resumption.
+    motion_said = [m for m in got if not ours(m)]
+    resumed_at = next(i for i, m in enumerate(motion_said)
+                      if idle(m) and stamp(m) >= starts[-1] + 2.0)
+    last_word = motion_said[resumed_at - 1]
+    assert not idle(last_word) and stamp(last_word) >= starts[-1], last_word
+    assert dict(zip(last_word["name"], last_word["position"]))["shoulder"] == 0.25
+    assert sorted(last_word["name"]) == ["shoulder", "slide", "spin"]
 
 
 def test_models_in_a_burst_arrive_in_order_ending_with_the_newest(

@@ -11,7 +11,11 @@ to the state publisher. `JointMotion.positions_at` is pure, for tests.
 itself (the demo's FollowJointTrajectory controller, `bridge.robots.demo.trajectory`) holds
 them and releases them to blend back into the idle motion; and it yields to another
 publisher of ``joint_states`` (a client's sliders through ``set_robot_joints``): nothing for
-``--yield-s`` seconds after the last foreign joint state, 3 s by default.
+``--yield-s`` seconds after the last foreign joint state, 3 s by default. Its last word before
+it falls silent is the pose it saw last: on each foreign state it publishes its own positions
+with the foreign ones laid over them. A motion message sent just before the foreign one may
+reach the state publisher after it (more likely on a busy machine); the motion's own messages
+arrive in order, so this last one wins and the arm stays where it was put.
 
 Command line::
 
@@ -27,6 +31,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import threading
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable, Optional
@@ -112,38 +117,56 @@ def create_joint_motion_node(motion: JointMotion, *, rate_hz: float = 50.0,
                                               lambda: dict(last), action=trajectory_action)
 
     own: deque[tuple[int, int]] = deque(maxlen=256)  # stamps of our recent messages
+    # A tick's yield check and publish, and a foreign state's last word, never interleave
+    # (an executor may run the timer and the subscription in two threads).
+    publishing = threading.Lock()
 
-    def on_state(msg: Any) -> None:  # does almost nothing: notes a foreign publisher
-        if (msg.header.stamp.sec, msg.header.stamp.nanosec) not in own:
-            now_s = node.get_clock().now().nanoseconds * 1e-9
-            if hold.foreign_state(now_s) and on_yield is not None:
-                on_yield(now_s)
-
-    def tick() -> None:
-        now = node.get_clock().now()
-        now_s = now.nanoseconds * 1e-9
-        if hold.yields(now_s):
-            return
-        t = (now - start).nanoseconds * 1e-9
-        if controller is not None:
-            controller.advance(now_s)
-        idle = hold.idle
-        positions = hold.apply(now_s, motion.positions_at(t))
+    def publish(now: Any, positions: dict[str, float], velocities: list[float]) -> None:
         msg = JointState()
         msg.header.stamp = now.to_msg()
         own.append((msg.header.stamp.sec, msg.header.stamp.nanosec))
         msg.name = list(positions)
         msg.position = list(positions.values())
-        # The idle motion's velocities are known; held or blending ones are not given.
-        msg.velocity = list(motion.velocities_at(t).values()) if idle else []
+        msg.velocity = velocities
         publisher.publish(msg)
         last.update(positions)
+
+    def on_state(msg: Any) -> None:  # a foreign publisher: yield, ending on what it set
+        if (msg.header.stamp.sec, msg.header.stamp.nanosec) in own:
+            return
+        now = node.get_clock().now()
+        now_s = now.nanoseconds * 1e-9
+        starts = hold.foreign_state(now_s)
+        with publishing:
+            publish(now, {**last, **foreign_positions(msg, last)}, [])
+        if starts and on_yield is not None:
+            on_yield(now_s)
+
+    def tick() -> None:
+        now = node.get_clock().now()
+        now_s = now.nanoseconds * 1e-9
+        with publishing:
+            if hold.yields(now_s):
+                return
+            t = (now - start).nanoseconds * 1e-9
+            if controller is not None:
+                controller.advance(now_s)
+            idle = hold.idle
+            positions = hold.apply(now_s, motion.positions_at(t))
+            # The idle motion's velocities are known; held or blending ones are not given.
+            publish(now, positions, list(motion.velocities_at(t).values()) if idle else [])
         if controller is not None:
             controller.report(now_s, positions)
 
     node.create_subscription(JointState, "joint_states", on_state, 10)
     node.create_timer(1.0 / rate_hz, tick)
     return node
+
+
+def foreign_positions(msg: Any, joints: dict[str, float]) -> dict[str, float]:
+    """The finite positions a foreign JointState sets for the motion's ``joints``."""
+    return {name: float(value) for name, value in zip(msg.name, msg.position)
+            if name in joints and math.isfinite(value)}
 
 
 def main(argv: Optional[list[str]] = None) -> int:
