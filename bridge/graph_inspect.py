@@ -9,6 +9,7 @@ short-lived node of their own, not the daemon, and see what the daemon would see
 from __future__ import annotations
 
 import argparse
+import difflib
 import sys
 import threading
 import time
@@ -17,8 +18,15 @@ from typing import TYPE_CHECKING, Any, Callable, Optional, TextIO
 if TYPE_CHECKING:  # rclpy is imported only when a subcommand runs: --help stays quick
     from bridge.ros_node import RosNode
 
-# Discovery is not instant: how long the lists wait for the graph to fill by default.
-DEFAULT_DISCOVERY_S = 2.0
+# Discovery is not instant, and on a busy machine it takes seconds. DDS never says it is
+# done: a list is read once the graph has not changed for SETTLED_S (at most --wait), and
+# echo waits for its topic until it appears (at most --wait).
+DEFAULT_DISCOVERY_S = 10.0
+SETTLED_S = 1.5
+_POLL_S = 0.05
+# The name of every inspector's node (this command's, or one that just ended and is still
+# in the graph): their parameter services are not the user's graph.
+INSPECTOR_PREFIX = "slicer_bridge_inspect_"
 
 
 class GraphInspectError(Exception):
@@ -32,7 +40,9 @@ def add_parsers(commands: Any) -> None:
             name, help=f"list the ROS graph's {what}s with their types (as `ros2 {what} list "
                        f"-t`)", description=f"List the {what}s the ROS graph has, with types.")
         listing.add_argument("--wait", type=float, default=DEFAULT_DISCOVERY_S, metavar="S",
-                             help="seconds to wait for discovery (default %(default)s)")
+                             help=f"at most this long for discovery: the list is printed "
+                                  f"once the graph is unchanged for {SETTLED_S:g} s "
+                                  f"(default %(default)s)")
     echo = commands.add_parser(
         "echo", help="print a topic's messages as YAML (as `ros2 topic echo`)",
         description="Print the messages of a topic as YAML, each followed by `---`.")
@@ -45,7 +55,8 @@ def add_parsers(commands: Any) -> None:
     echo.add_argument("--timeout", type=float, metavar="S",
                       help="give up after S seconds without a message (default: wait)")
     echo.add_argument("--wait", type=float, default=DEFAULT_DISCOVERY_S, metavar="S",
-                      help="seconds to wait for the topic to appear (default %(default)s)")
+                      help="at most this long for the topic to appear in the graph, when "
+                           "no type is given (default %(default)s)")
 
 
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
@@ -71,7 +82,7 @@ class _Inspector:
     def __enter__(self) -> RosNode:
         from bridge.ros_node import RosNode, RosOptions
 
-        name = f"slicer_bridge_inspect_{time.time_ns() % 10**9}"
+        name = f"{INSPECTOR_PREFIX}{time.time_ns() % 10**9}"
         self._ros = RosNode(RosOptions(node_name=name))
         self._ros.start()
         return self._ros
@@ -80,17 +91,30 @@ class _Inspector:
         self._ros.stop()
 
 
-def _list(out: TextIO, ros: RosNode, names_and_types: Callable[[], list[tuple[str, list[str]]]],
+NamesAndTypes = list[tuple[str, list[str]]]
+
+
+def _list(out: TextIO, ros: RosNode, names_and_types: Callable[[], NamesAndTypes],
           wait: float) -> int:
-    # Discovery fills the graph over the first moments: look once the wait is over.
-    time.sleep(max(wait, 0.0))
-    seen = names_and_types()
-    own = ros.fully_qualified_name
-    for name, types in sorted(seen):
-        if name.startswith(own + "/"):  # the inspector's own parameter services
-            continue
-        print(f"{name} [{', '.join(types)}]", file=out)
+    for name, types in sorted(settled_graph(names_and_types, wait)):
+        if not name.startswith("/" + INSPECTOR_PREFIX):  # inspectors' parameter services
+            print(f"{name} [{', '.join(types)}]", file=out)
     return 0
+
+
+def settled_graph(read: Callable[[], NamesAndTypes], wait: float, *,
+                  settled_s: float = SETTLED_S) -> NamesAndTypes:
+    """``read()`` once it has returned the same for ``settled_s``, or after ``wait``."""
+    start = changed = time.monotonic()
+    seen = sorted(read())
+    while True:
+        now = time.monotonic()
+        if now - changed >= settled_s or now - start >= wait:
+            return seen
+        time.sleep(_POLL_S)  # graph changes come by polling: rclpy has no graph callback
+        current = sorted(read())
+        if current != seen:
+            seen, changed = current, time.monotonic()
 
 
 def _echo(out: TextIO, ros: RosNode, topic: str, type_name: Optional[str],
@@ -146,8 +170,22 @@ def _graph_type(ros: RosNode, topic: str, wait: float) -> str:
                                         f"name one, e.g. `echo {topic} {types[0]}`")
             return types[0]
         if time.monotonic() >= deadline:
+            seen = [name for name, _ in ros.node.get_topic_names_and_types()]
             raise GraphInspectError(
-                f"expected a topic the ROS graph knows, got {topic} (nothing seen in "
-                f"{wait:g} s: is its publisher running, with the same ROS_DOMAIN_ID? Name "
-                f"the type to wait for it anyway: `echo {topic} pkg/msg/Type`)")
-        time.sleep(0.05)
+                f"expected a topic the ROS graph knows, got {topic}: not among the "
+                f"{seen_topics(topic, seen)} seen in {wait:g} s. Is its publisher running, "
+                f"with the same ROS_DOMAIN_ID? Name the type to wait for it anyway: "
+                f"`echo {topic} pkg/msg/Type`")
+        time.sleep(_POLL_S)
+
+
+def seen_topics(wanted: str, seen: list[str], shown: int = 12) -> str:
+    """What the graph had, for an error: the count, then the names closest to ``wanted``
+    first (a typo shows at once), at most ``shown`` of them."""
+    if not seen:
+        return "0 topics"
+    closest = difflib.get_close_matches(wanted, seen, n=shown, cutoff=0.6)
+    names = closest + [name for name in sorted(seen) if name not in closest]
+    more = f", and {len(names) - shown} more" if len(names) > shown else ""
+    return (f"{len(seen)} topic{'s' if len(seen) != 1 else ''} "
+            f"({', '.join(names[:shown])}{more})")

@@ -3,6 +3,8 @@ SlicerROS2's documentation, for a ROS installed from wheels (no `ros2` command).
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from support import Processes, wait_until
@@ -50,6 +52,48 @@ def test_echo_of_an_unknown_topic_says_what_to_check(processes: Processes) -> No
     output = child.output()
     assert "expected a topic the ROS graph knows, got /gi_nobody_publishes" in output
     assert "ROS_DOMAIN_ID" in output and "Traceback" not in output
+
+
+def test_echo_finds_a_topic_whose_publisher_starts_with_it(processes: Processes) -> None:
+    """Issue 25, item 9: echo waits for discovery until the topic appears (10 s at most by
+    default, not 2), so a publisher started at the same moment is found on a busy machine."""
+    child = processes.bridge("echo", "/gi_together", "--count", "1")
+    processes.python("together", "pose_publisher.py", "/gi_together", "4", "5", "6",
+                     "0", "0", "0", "1", "gi_world")
+    assert _finished(child) == 0, child.output()
+    assert "position:\n    x: 4.0\n    y: 5.0\n    z: 6.0" in child.output()
+
+
+def test_echo_of_a_misspelt_topic_names_what_the_graph_has(processes: Processes,
+                                                           pose_peer: None) -> None:
+    child = processes.bridge("echo", "/gi_pos", "--wait", "5")
+    assert _finished(child) == 1
+    output = child.output()
+    line = next(x for x in output.splitlines() if "expected a topic the ROS graph knows" in x)
+    # The count of topics seen, the closest name first.
+    assert re.search(r"got /gi_pos: not among the \d+ topics \(/gi_pose, ", line), line
+    assert "Traceback" not in output
+
+
+def test_services_lists_no_inspector_s_services(processes: Processes) -> None:
+    """Issue 25, item 11: another inspector (an echo still running) and this one are the
+    CLI's own nodes: their parameter services are not listed; a peer's service is."""
+    processes.python("server", "service_server.py", "--namespace", "gi").wait_for_output(
+        "READY", timeout=30)
+    echo = processes.bridge("echo", "/gi_nothing_here", "std_msgs/msg/String")
+
+    def listed() -> list[str]:
+        child = processes.bridge("services")
+        assert _finished(child) == 0, child.output()
+        return child.output().splitlines()
+    lines: list[str] = []
+
+    def both_seen() -> bool:
+        lines[:] = listed()
+        return "/gi/trigger [std_srvs/srv/Trigger]" in lines and echo.popen.poll() is None
+    wait_until(both_seen, timeout=60, what="the peer's service in the list")
+    assert not [line for line in lines if "slicer_bridge_inspect_" in line], lines
+    assert "/gi/set_enabled [std_srvs/srv/SetBool]" in lines
 
 
 def test_echo_with_a_type_that_is_not_installed(processes: Processes) -> None:
