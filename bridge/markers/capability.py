@@ -668,6 +668,9 @@ class MarkerBridges:
         metadata[KEY_FORMAT] = "json"
         metadata[KEY_MARKERS] = json.dumps([live.device for live in sub.markers.values()])
         metadata[KEY_DELETED] = json.dumps(sorted(set(gone)))
+        # Every index names the last refusal of a marker still refused: a later index
+        # (and so a client that connects later) must not lose it.
+        error = error or next(reversed(sub.errors.values()), "")
         summary = {"markers": len(sub.markers), "withheld": len(sub.withheld),
                    "error": error[:4000]}
         self._hub.stream(Message(device_name=sub.device, body=String(json.dumps(summary)),

@@ -470,6 +470,45 @@ def test_bad_markers_are_refused_and_the_daemon_serves(client: Connection, peer:
     wait_markers(client, "/test_marker", {("good", 1)})
 
 
+def test_a_refused_marker_s_error_stays_for_later_indexes_and_clients(
+        client: Connection, peer: Peer, folders: dict[str, Path],
+        daemon: RunningDaemon) -> None:
+    """Issue 25, item 7: a mesh marker refused by the folders, beside a good one: the
+    topic's index names the refusal while it lasts, in the index of the same message (sent
+    after the refusal, as the good marker was added), in later ones, and to a client that
+    connects later; a fixed marker clears it."""
+    outside = {"ns": "keep", "id": 2, "type": MESH,
+               "mesh": str(folders["outside"] / "tetra.stl")}
+    cube = {"ns": "keep", "id": 1, "type": CUBE, "scale": [0.1] * 3}
+    peer.send(markers=[{"action": DELETEALL}, cube, outside])
+    wait_markers(client, "/test_markers", {("keep", 1)})
+    device = index(client, "/test_markers").device_name
+
+    def error_of(message: Message) -> str:
+        return str(json.loads(message.body.text)["error"])
+
+    def names_it(message: Message) -> bool:
+        return isinstance(message.body, String) and "id 2:" in error_of(message) and \
+            "inside a --robot-dir or --package-path folder" in error_of(message)
+    assert names_it(client.wait_for(device, lambda m: json.loads(m.metadata[KEY_MARKERS]) != [],
+                                    timeout=scaled(10)))
+    peer.send(markers=[cube, outside, dict(cube, id=3)])  # one more: a new index
+    wait_markers(client, "/test_markers", {("keep", 1), ("keep", 3)})
+    latest = client.wait_for(device, lambda m: len(json.loads(m.metadata[KEY_MARKERS])) == 2,
+                             timeout=scaled(10))
+    assert names_it(latest), latest.body.text
+    late = daemon.connect()
+    try:
+        assert names_it(late.wait_for(device, timeout=scaled(10)))
+    finally:
+        late.close()
+    peer.send(markers=[dict(outside, type=CUBE, mesh="", scale=[0.1] * 3)])
+    wait_markers(client, "/test_markers", {("keep", 1), ("keep", 2), ("keep", 3)})
+    fixed = client.wait_for(device, lambda m: len(json.loads(m.metadata[KEY_MARKERS])) == 3,
+                            timeout=scaled(10))
+    assert error_of(fixed) == "", fixed.body.text
+
+
 def test_denied_frame_is_withheld(client: Connection, peer: Peer) -> None:
     peer.send(markers=[{"action": DELETEALL},
                        {"ns": "s", "id": 1, "type": CUBE, "frame": "secret_frame",
@@ -521,9 +560,11 @@ def test_pythonic_client_follows_markers(daemon: RunningDaemon, peer: Peer) -> N
                             "scale": [0.2, 0.2, 0.2], "locked": True},
                            {"ns": "py", "id": 2, "type": TEXT, "text": "label",
                             "pos": [0.0, 0.0, 0.5], "locked": True}])
+        # Waits for the frames' poses too (issue 25, item 7): each marker can be placed.
         found = markers.wait_for_markers(
-            lambda m: {(i.ns, i.id) for i in m.values()} == {("py", 1), ("py", 2)}
-            and all(i.frame_device in markers.frames for i in m.values()), timeout=scaled(10))
+            lambda m: {(i.ns, i.id) for i in m.values()} == {("py", 1), ("py", 2)},
+            timeout=scaled(10))
+        assert all(i.frame_device in markers.frames for i in found.values())
         cube = markers.find("py", 1)
         assert cube is not None and cube.kind == "cube" and cube.frame == "base"
         fixed = markers.points_in_fixed_frame(cube)
