@@ -11,10 +11,11 @@ from slicer_client.bridge_state import BridgeSpec, BridgeState, StateFormatError
 from slicer_client.client import Client, connect
 from slicer_client.errors import (BridgeClientError, CommandRefusedError, CommandTimeoutError,
                                   ConnectionClosedError, DaemonUnreachableError,
-                                  NotTheDaemonError, ParameterRejectedError)
+                                  NotTheDaemonError, ParameterRejectedError,
+                                  RobotNotLoadedError)
 from slicer_client.matrices import MatrixError, as_numpy, to_vtk
 
 __all__ = ["BridgeClientError", "BridgeSpec", "BridgeState", "Client",
            "CommandRefusedError", "CommandTimeoutError", "ConnectionClosedError",
            "DaemonUnreachableError", "MatrixError", "NotTheDaemonError", "ParameterRejectedError",
-           "StateFormatError", "as_numpy", "connect", "to_vtk"]
+           "RobotNotLoadedError", "StateFormatError", "as_numpy", "connect", "to_vtk"]

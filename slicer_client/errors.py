@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+from typing import Optional
+
 from slicer_client.connection import (BridgeClientError, CommandRefusedError,
                                       CommandTimeoutError, ConnectionClosedError,
                                       DaemonUnreachableError, NotTheDaemonError)
 
 __all__ = ["BridgeClientError", "CommandRefusedError", "CommandTimeoutError",
            "ConnectionClosedError", "DaemonUnreachableError", "NotTheDaemonError",
-           "ParameterRejectedError"]
+           "ParameterRejectedError", "PointsError", "RobotNotLoadedError"]
 
 
 class ParameterRejectedError(BridgeClientError):
@@ -19,3 +21,27 @@ class ParameterRejectedError(BridgeClientError):
         self.node = node
         self.name = name
         self.reason = reason
+
+
+class RobotNotLoadedError(BridgeClientError, TimeoutError):
+    """A robot's links and meshes did not all arrive in time; `state` and `reason` are
+    what the daemon last said about its description ("waiting" and why, or "error")."""
+
+    def __init__(self, name: str, timeout: float, *, state: str, reason: str,
+                 received: int, expected: Optional[int]) -> None:
+        count = f"{received} of {expected}" if expected is not None else f"{received}"
+        said = f"{state}: {reason}" if reason else (state or "nothing yet")
+        super().__init__(f"robot {name!r} not loaded within {timeout} s ({count} meshes "
+                         f"received); the daemon says {said}")
+        self.name = name
+        self.state = state
+        self.reason = reason
+
+
+class PointsError(BridgeClientError, ValueError):
+    """Points given to send (a model's, markups') are not (N, 3) finite millimetres."""
+
+    def __init__(self, expected: str, got: str) -> None:
+        super().__init__(f"points: expected {expected}, got {got}")
+        self.expected = expected
+        self.got = got

@@ -18,13 +18,14 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from protocol import commands as c
-from protocol.messages import (Message, Point, PointElement, PolyData, Status, String, Transform,
-                               cells_from_array)
+from protocol.messages import (Message, Point, PointElement, PolyData, Status, StatusCode,
+                               String, Transform, cells_from_array)
 from protocol.naming import (KEY_COLOR, KEY_COUNT, KEY_FRAME, KEY_LINK, KEY_LINK_COUNT,
                              KEY_MARKER_ID, KEY_MARKER_NS, KEY_MARKER_TYPE, KEY_MARKERS,
                              KEY_PARENT_DEVICE, KEY_POSITION, KEY_ROLE, KEY_TOPIC, KEY_VISUAL,
                              KEY_VISUAL_COUNT, KEY_WARNINGS)
 from slicer_client.bridge_state import BridgeSpec
+from slicer_client.errors import PointsError, RobotNotLoadedError
 from slicer_client.matrices import as_numpy, as_rows
 from slicer_client.owner import ResourceOwner
 from slicer_client.values import value_from_message
@@ -274,21 +275,30 @@ class Publisher(Resource):
         self.send(markups_point_body(points, labels))
 
 
-def model_polydata(points_mm: Any, triangles: Any) -> PolyData:
+def points_mm(points: Any, *, flat: bool = False) -> np.ndarray:
+    """(N, 3) finite millimetres as float64 (``flat``: any array of 3N numbers), or
+    `PointsError` naming the shape, or the first row holding a NaN or an infinity."""
+    pts = np.asarray(points, dtype=np.float64)
+    if flat and pts.size % 3 == 0:
+        pts = pts.reshape(-1, 3)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise PointsError("shape (N, 3) in mm", f"shape {pts.shape}")
+    bad = np.flatnonzero(~np.isfinite(pts).all(axis=1))
+    if bad.size:
+        row = int(bad[0])
+        raise PointsError("finite coordinates in mm", f"{pts[row].tolist()} at row {row}")
+    return pts
+
+
+def model_polydata(points: Any, triangles: Any) -> PolyData:
     """(N, 3) points in mm and (M, k) polygons (point indices) -> a POLYDATA body."""
-    pts = np.asarray(points_mm, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
-        raise ValueError(f"points: expected (N, 3) finite numbers in mm, got shape "
-                         f"{pts.shape}")
-    return PolyData(points=pts.astype(np.float32),
+    return PolyData(points=points_mm(points).astype(np.float32),
                     polygons=cells_from_array(np.asarray(triangles, dtype=np.int64)))
 
 
-def markups_point_body(points_mm: Any, labels: Optional[Sequence[str]] = None) -> Point:
+def markups_point_body(points: Any, labels: Optional[Sequence[str]] = None) -> Point:
     """(N, 3) positions in mm and their labels -> a POINT body (one element per point)."""
-    pts = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
-    if not np.all(np.isfinite(pts)):
-        raise ValueError("points: expected finite positions in mm, got NaN or infinity")
+    pts = points_mm(points, flat=True)
     names = list(labels) if labels is not None else [""] * len(pts)
     if len(names) != len(pts):
         raise ValueError(f"labels: expected {len(pts)} (one per point), got {len(names)}")
@@ -551,6 +561,10 @@ class Robot(Resource):
         self._expected: Optional[Tuple[int, int]] = None
         self.warnings: List[str] = []  # of the latest load: missing meshes, skipped joints
         self._joints: Optional[Dict[str, Any]] = None  # describe_robot_joints, once asked
+        # What the daemon last said of the description: "loaded", "waiting" or "error"
+        # (create_robot's reply, then its STATUS), and why it is not loaded.
+        self.state = ""
+        self.reason = ""
 
     def _warn(self, warnings: Sequence[str]) -> None:
         """Each new warning of a load is logged once and given to the callbacks as
@@ -571,6 +585,8 @@ class Robot(Resource):
         super()._created(result)
         self._warn([str(w) for w in result.get("warnings", [])])
         with self._changed:
+            self.state = str(result.get("state", ""))
+            self.reason = str(result.get("reason", ""))
             for item in result.get("links", []):
                 link = self.links.setdefault(item["link"], RobotLink(item["link"]))
                 link.device = item.get("device", "")
@@ -584,9 +600,13 @@ class Robot(Resource):
 
     def _handle(self, message: Message) -> None:
         meta = message.metadata
-        if isinstance(message.body, Status) and KEY_LINK_COUNT in meta:
+        if isinstance(message.body, Status) and KEY_LINK_COUNT not in meta:
+            self._description_status(message.body)
+            return
+        if isinstance(message.body, Status):
             with self._changed:
                 self._expected = (int(meta[KEY_LINK_COUNT]), int(meta.get(KEY_VISUAL_COUNT, 0)))
+                self.state, self.reason = "loaded", ""
                 self._changed.notify_all()
             try:
                 warnings = json.loads(meta.get(KEY_WARNINGS, "[]"))
@@ -615,6 +635,21 @@ class Robot(Resource):
                 return
             self._changed.notify_all()
         self._notify(kind, link_name, value)
+
+    def _description_status(self, status: Status) -> None:
+        """The daemon's word on the description: waiting for it, or not loaded (why)."""
+        with self._changed:
+            if status.code == StatusCode.OK:
+                self.state, self.reason = "loaded", ""
+            else:
+                # "waiting: <reason>" or "description not loaded: <reason>"; a failed
+                # reload keeps the loaded robot (the daemon keeps the previous one).
+                waiting = status.code == StatusCode.NOT_READY
+                self.reason = status.text.split(": ", 1)[1] if waiting and ": " in \
+                    status.text else status.text
+                if self.state != "loaded" or waiting:
+                    self.state = "waiting" if waiting else "error"
+            self._changed.notify_all()
 
     @property
     def transforms(self) -> Dict[str, np.ndarray]:
@@ -662,7 +697,13 @@ class Robot(Resource):
                 if index is not None and index not in entry.meshes:
                     return False
             return bool(self._devices)
-        self._wait(loaded, timeout, f"robot {self.name} links and meshes")
+        with self._changed:
+            if self._changed.wait_for(loaded, timeout):
+                return
+            received, expected = self.progress()
+            raise RobotNotLoadedError(self.name, timeout, state=self.state,
+                                      reason=self.reason, received=received,
+                                      expected=expected)
 
 
 @dataclass
@@ -770,9 +811,15 @@ class MarkerSubscriber(Resource):
         return np.asarray(local @ matrix[:3, :3].T + matrix[:3, 3])
 
     def wait_for_markers(self, predicate: Callable[[Dict[str, MarkerItem]], bool],
-                         timeout: float = 10.0) -> Dict[str, MarkerItem]:
-        """Block until `predicate(markers)` holds (e.g. ``lambda m: len(m) == 3``)."""
-        self._wait(lambda: bool(predicate(self.markers)), timeout,
-                   f"markers on {self.topic}")
+                         timeout: float = 10.0, *, placed: bool = True
+                         ) -> Dict[str, MarkerItem]:
+        """Block until `predicate(markers)` holds (e.g. ``lambda m: len(m) == 3``) and,
+        with ``placed``, every marker's frame pose has come too (a frame's TRANSFORM may
+        follow its marker's model), so `points_in_fixed_frame` has them all."""
+        def ready() -> bool:
+            return bool(predicate(self.markers)) and (not placed or all(
+                item.frame_device in self.frames for item in self.markers.values()))
+        self._wait(ready, timeout, f"markers on {self.topic}"
+                   + (" with their frames' poses" if placed else ""))
         with self._lock:
             return dict(self.markers)

@@ -48,3 +48,19 @@ def test_a_missing_mesh_reaches_the_user(processes: Processes, tmp_path: Path,
             status = listener.wait_for("urdf:warned", timeout=30)
             assert json.loads(status.metadata["ros2.warnings"]) == [warning]
     assert_clean_exit(daemon)
+
+
+def test_a_robot_that_cannot_load_says_why_in_the_exception(
+        ros: slicer_client.Client) -> None:
+    """Issue 25, item 8: the daemon's reason is in the exception, not only in `info`."""
+    robot = ros.robot("absent", namespace="nowhere_ns")
+    reason = ("parameter robot_description of /nowhere_ns/robot_state_publisher: node not "
+              "available yet")
+    assert (robot.state, robot.reason) == ("waiting", reason)
+    with pytest.raises(slicer_client.RobotNotLoadedError) as error:
+        robot.wait_until_loaded(timeout=1.0)
+    assert str(error.value) == (f"robot 'absent' not loaded within 1.0 s (0 meshes "
+                                f"received); the daemon says waiting: {reason}")
+    assert isinstance(error.value, TimeoutError)
+    assert (error.value.state, error.value.reason) == ("waiting", reason)
+    robot.remove()

@@ -78,3 +78,23 @@ def test_send_plans_follow_what_the_connector_can_carry() -> None:
     with pytest.raises(ValueError, match="not a vtkMRMLScalarVolumeNode"):
         plan_send("vtkMRMLScalarVolumeNode", "/v")
     assert set(KIND_ORDER) == set(SEND_TYPES) and KIND_ORDER[0] == "vtkMRMLMarkupsCurveNode"
+
+
+def test_a_model_or_markups_with_a_nan_names_its_row() -> None:
+    """Issue 25, item 11: a NaN is named with its row, not as a shape."""
+    from slicer_client.errors import PointsError
+    from slicer_client.resources import markups_point_body, model_polydata
+
+    points = [[0.0, 0.0, 0.0], [1.0, float("nan"), 0.0], [0.0, 1.0, 0.0]]
+    with pytest.raises(PointsError) as nan:
+        model_polydata(points, [[0, 1, 2]])
+    assert str(nan.value) == "points: expected finite coordinates in mm, got [1.0, nan, 0.0] " \
+                             "at row 1"
+    with pytest.raises(PointsError, match=r"got \[inf, 0.0, 0.0\] at row 0"):
+        markups_point_body([float("inf"), 0, 0], ["entry"])
+    with pytest.raises(PointsError) as shape:
+        model_polydata([[0.0, 0.0], [1.0, 1.0]], [[0, 1, 0]])
+    assert str(shape.value) == "points: expected shape (N, 3) in mm, got shape (2, 2)"
+    assert isinstance(shape.value, ValueError)
+    body = model_polydata(points[:1] + [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], [[0, 1, 2]])
+    assert body.points.tolist() == [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
