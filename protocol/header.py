@@ -35,6 +35,7 @@ __all__ = [
     "decode_text",
     "encode_name",
     "encode_text",
+    "foreign_protocol",
     "pack_metadata",
     "unpack_metadata",
     "unpack_raw",
@@ -152,8 +153,30 @@ def unpack_raw(data: Buffer) -> tuple[int, bytes, bytes, int, int, int]:
         raise HeaderError("header", f"{HEADER_SIZE} bytes", f"{len(data)} bytes")
     fields: tuple[int, bytes, bytes, int, int, int] = _HEADER.unpack(data)
     if fields[0] not in SUPPORTED_HEADER_VERSIONS:
-        raise HeaderError("header version", "1 or 2", fields[0])
+        other = foreign_protocol(bytes(data[:8]))
+        raise HeaderError("header version", "1 or 2", fields[0] if other is None else
+                          f"{fields[0]}: {other}, not OpenIGTLink (first bytes "
+                          f"{bytes(data[:16])!r})")
     return fields
+
+
+# What other protocols' first bytes say about the peer (the client reads a server's).
+_FOREIGN_STARTS: tuple[tuple[tuple[bytes, ...], str], ...] = (
+    ((b"GET ", b"POST ", b"HEAD ", b"PUT ", b"DELETE ", b"OPTIONS ", b"PATCH ", b"CONNECT ",
+      b"TRACE ", b"PRI * HTTP"), "an HTTP client"),
+    ((b"HTTP/", b"<!", b"<html", b"<HTML"), "an HTTP server"),
+    ((b"SSH-",), "an SSH peer"),
+    ((b"\x16\x03",), "a TLS peer"),
+)
+
+
+def foreign_protocol(first: bytes) -> str | None:
+    """The kind of peer whose first bytes these are, if another protocol's ("an HTTP
+    client"); None when they say nothing."""
+    for starts, kind in _FOREIGN_STARTS:
+        if first.startswith(starts):
+            return kind
+    return None
 
 
 @dataclass(frozen=True)

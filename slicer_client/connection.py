@@ -18,6 +18,7 @@ from protocol import commands as c
 from protocol.conversions import igtl_timestamp_now
 from protocol.errors import FramingError, MessageError
 from protocol.framing import Decoder, encode
+from protocol.header import foreign_protocol
 from protocol.messages import Command, Message, RtsCommand, Status
 
 __all__ = [
@@ -67,12 +68,8 @@ _SLICER_ANNOUNCEMENT_KEY = "dummy"
 
 
 def _describe_foreign_bytes(first: bytes) -> str:
-    if first.startswith((b"HTTP/", b"<!", b"<html", b"<HTML")):
-        kind = "an HTTP server answers there"
-    elif first.startswith(b"SSH-"):
-        kind = "an SSH server answers there"
-    else:
-        kind = "the peer does not speak OpenIGTLink"
+    other = foreign_protocol(first)
+    kind = f"{other} answers there" if other else "the peer does not speak OpenIGTLink"
     return f"{kind} (its first bytes: {first[:24]!r})"
 
 

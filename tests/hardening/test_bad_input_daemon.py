@@ -113,6 +113,23 @@ def test_malformed_input_from_one_client_does_not_disturb_another(
     assert "broke the OpenIGTLink framing" in log and "sent a bad message" in log
 
 
+def test_an_http_client_on_the_port_is_named_as_one(daemon: RunningDaemon) -> None:
+    """Issue 25, item 11: a browser or curl on the port is "an HTTP client" in the log and
+    in the STATUS before the close, not "header version ... got 18245"."""
+    request = b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUser-Agent: curl/8.5.0\r\nAccept: */*\r\n\r\n"
+    client = RawClient(daemon.port)
+    try:
+        client.send(request)
+        said = read_until_closed(client.sock)
+    finally:
+        client.close()
+    assert said and said[-1].type_name == "STATUS", said
+    text = said[-1].body.text
+    assert "expected 1 or 2, got 18245: an HTTP client, not OpenIGTLink" in text, text
+    line = daemon.child.wait_for_output("an HTTP client, not OpenIGTLink")
+    assert "broke the OpenIGTLink framing" in line, line
+
+
 def test_each_bad_message_gets_a_status_naming_the_problem(daemon: RunningDaemon) -> None:
     client = RawClient(daemon.port)
     try:

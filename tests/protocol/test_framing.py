@@ -22,7 +22,7 @@ from protocol.errors import (
     ReceiveBudgetError,
 )
 from protocol.framing import DEFAULT_MAX_BODY_SIZE, Decoder, ReceiveBudget, encode
-from protocol.header import HEADER_SIZE, Header
+from protocol.header import HEADER_SIZE, Header, foreign_protocol
 from protocol.messages import (
     Message,
     RawBody,
@@ -465,3 +465,23 @@ def test_close_gives_back_buffer_and_budget_and_refuses_more() -> None:
 def test_budget_arguments_are_checked() -> None:
     with pytest.raises(ValueError, match="total_bytes > 0"):
         ReceiveBudget(0)
+
+
+@pytest.mark.parametrize(("first", "kind"), [
+    (b"GET / HTTP/1.1\r\nHost: localhost:18944\r\n", "an HTTP client"),
+    (b"POST /x HTTP/1.1\r\n", "an HTTP client"),
+    (b"HTTP/1.1 400 Bad Request\r\n", "an HTTP server"),
+    (b"SSH-2.0-OpenSSH_9.2\r\n", "an SSH peer"),
+    (b"\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03", "a TLS peer"),
+])
+def test_another_protocol_s_bytes_are_named_in_the_header_error(first: bytes,
+                                                                 kind: str) -> None:
+    decoder = Decoder()
+    decoder.feed(first.ljust(HEADER_SIZE, b"\0"))
+    with pytest.raises(HeaderError) as info:
+        decoder.next_message()
+    version = int.from_bytes(first[:2], "big")
+    assert str(info.value).startswith(f"header version: expected 1 or 2, got {version}: "
+                                      f"{kind}, not OpenIGTLink (first bytes ")
+    assert foreign_protocol(first) == kind
+    assert foreign_protocol(raw_header(version=7)) is None
