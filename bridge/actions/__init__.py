@@ -25,7 +25,8 @@ from __future__ import annotations
 
 from typing import Any, Optional
 
-from rclpy.action.graph import get_action_names_and_types
+from rclpy.action.graph import get_action_server_names_and_types_by_node
+from rclpy.node import NodeNameNonExistentError
 
 from bridge.actions.goals import GoalSender
 from bridge.actions.served import ServedActions
@@ -53,8 +54,20 @@ class ActionBridges:
         self.servers = ServedActions(ros, hub, names, linger_s=linger_s)
 
     def list_actions(self, request: ListActions, client: Optional[Replier]) -> dict[str, Any]:
-        return {"actions": [{"action": name, "types": list(types)}
-                            for name, types in get_action_names_and_types(self._ros.node)]}
+        """The actions some node serves: a goal can be sent to them. (The graph's action
+        names also hold those that only have clients, the daemon's own after a goal that
+        found no server among them.)"""
+        node = self._ros.node
+        served: dict[str, set[str]] = {}
+        for name, namespace in set(node.get_node_names_and_namespaces()):
+            try:
+                found = get_action_server_names_and_types_by_node(node, name, namespace)
+            except NodeNameNonExistentError:  # gone since the graph was read
+                continue
+            for action, types in found:
+                served.setdefault(action, set()).update(types)
+        return {"actions": [{"action": action, "types": sorted(types)}
+                            for action, types in sorted(served.items())]}
 
     def handlers(self) -> dict[type[Op], Handler]:
         return {

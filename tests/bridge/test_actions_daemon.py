@@ -246,6 +246,20 @@ def test_list_actions(ros: Client, server: Child) -> None:
     wait_until(listed, 20, "/gripper in list_actions")
 
 
+def test_list_actions_lists_served_actions_not_the_daemon_s_own_clients(
+        ros: Client, server: Child) -> None:
+    """Issue 25, item 11: a goal that found no server leaves the daemon's action client in
+    the graph for a while; list_actions lists what some node serves, so not that."""
+    refused(lambda: ros.action("/nobody_listed", GRIPPER).send_goal(goal(1.0), timeout=0.5))
+    wait_until(lambda: any(t["topic"] == "/nobody_listed/_action/status"
+                           for t in ros.command("list_topics")["topics"]), 20,
+               "the daemon's client of /nobody_listed in its graph")
+    wait_until(lambda: {"action": "/gripper", "types": [GRIPPER]}
+               in ros.command("list_actions")["actions"], 20, "/gripper in list_actions")
+    actions = ros.command("list_actions")["actions"]
+    assert not [a for a in actions if a["action"] == "/nobody_listed"], actions
+
+
 # ---------------------------------------------------------------------------- served
 
 
