@@ -127,8 +127,10 @@ class Processes:
         return self.start(name, [sys.executable, "-u", str(path), *args], env=env)
 
     def bridge(self, *args: str, env: Optional[dict[str, str]] = None) -> Child:
-        """Run the `slicer-ros2-bridge` CLI (as `python -m bridge.cli`) with these arguments."""
-        return self.start("bridge", [sys.executable, "-u", "-m", "bridge.cli", *args], env=env)
+        """Run the `slicer-ros2-bridge` command (its entry point, `python -m bridge.console`)
+        with these arguments."""
+        return self.start("bridge", [sys.executable, "-u", "-m", "bridge.console", *args],
+                          env=env)
 
     def stop_all(self) -> None:
         for child in reversed(self.children):

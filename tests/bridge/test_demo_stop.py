@@ -53,6 +53,37 @@ def test_the_demo_s_children_end_with_it(processes: Processes, sig: signal.Signa
     assert "Traceback" not in output, output[-3000:]
 
 
+def _has_loaded(pid: int, library: str) -> bool:
+    with open(f"/proc/{pid}/maps") as maps:
+        return library in maps.read()
+
+
+@pytest.mark.parametrize("stage", ["numpy loaded", "rclpy loaded", "listening"])
+def test_ctrl_c_while_the_demo_starts_ends_it_cleanly(processes: Processes, stage: str) -> None:
+    """Issue 25, item 10: a Ctrl-C in the first seconds of `demo`, while it imports and
+    starts, ends it with exit code 0 and no traceback. Each stage is an event read from
+    /proc or the output: numpy's or rclpy's library loaded (the command's imports), the
+    daemon listening. (Before the command's first line runs, the interpreter's own start,
+    `site` included, prints its traceback: no code of the project's runs there yet.)"""
+    domain = str(int(os.environ["ROS_DOMAIN_ID"]) % 100 + 1)
+    demo = processes.bridge("demo", "--port", str(pick_free_port()),
+                            env={"ROS_DOMAIN_ID": domain})
+    if stage == "listening":
+        demo.wait_for_output("listening on", timeout=90)
+    else:
+        library = {"numpy loaded": "_multiarray_umath", "rclpy loaded": "_rclpy_pybind11"}
+        wait_until(lambda: _has_loaded(demo.pid, library[stage]), timeout=90,
+                   what=f"the demo at stage {stage!r}")
+    demo.popen.send_signal(signal.SIGINT)
+    code = demo.popen.wait(scaled(30))
+    output = demo.output()
+    assert code == 0, output[-3000:]
+    assert "Traceback" not in output and "Exception ignored" not in output, output[-3000:]
+    # Stopped while starting (one line), or, past the daemon's signal handling, as usual.
+    assert output.rstrip().endswith("slicer-ros2-bridge: stopped (Ctrl-C) while starting") \
+        or "shutting down (SIGINT)" in output, output[-3000:]
+
+
 def test_a_child_whose_parent_is_not_there_stops_by_itself(processes: Processes) -> None:
     """The portable check (parent pid), without the kernel's death signal: a child told to
     live with a parent that is not its parent (as after re-parenting) stops at once."""
