@@ -9,8 +9,10 @@ BIN := $(VENV)/bin
 setup:
 	@$(PYTHON) tools/setup_env.py
 
+# DEMO_ARGS: options of `slicer-ros2-bridge demo`, e.g. DEMO_ARGS="--port 19000".
+DEMO_ARGS ?=
 demo: setup
-	$(BIN)/slicer-ros2-bridge demo
+	$(BIN)/slicer-ros2-bridge demo $(DEMO_ARGS)
 
 run: setup
 	$(BIN)/slicer-ros2-bridge run

@@ -5,14 +5,23 @@ The files below make the package a ROS 2 package once installed into a colcon wo
 its ament index marker, its package.xml, and the executables `ros2 run` finds under
 lib/slicer_ros2_bridge. A pip install carries them too, harmlessly, under its prefix.
 
-The compiled tf store (bridge/tf/_compiled_store.pyx) is optional: without Cython (a colcon
-build outside the venv) or a C compiler, the package installs without it and the daemon runs
-the pure Python store (bridge/tf/store.py), with the same results, slower.
+The compiled tf store (bridge/tf/_compiled_store.pyx) is built when Cython is importable
+(pip fetches it; `make setup` puts it in the venv, for colcon; with apt's ROS, `pip install
+Cython` or apt's cython3). Without Cython or a C compiler the package installs without it and
+the daemon runs the pure Python store (bridge/tf/store.py), with the same results, slower.
+
+`ros2 run`'s executables get the building Python as their interpreter, as ament_python's
+console scripts do: their `/usr/bin/env python3` found whichever python3 came first on PATH,
+not the one with rclpy (a venv's, for ROS from PyPI).
 """
+
+import sys
+from pathlib import Path
 
 from setuptools import Extension, setup
 
 PACKAGE = "slicer_ros2_bridge"
+HERE = Path(__file__).resolve().parent
 
 
 def compiled_modules() -> list:
@@ -27,9 +36,22 @@ def compiled_modules() -> list:
     return cythonize([store], quiet=True)
 
 
+def ros2_executables() -> list:
+    """The executables under lib/<package>, written to build/ with this Python's shebang."""
+    out = HERE / "build" / "ros2_executables"
+    out.mkdir(parents=True, exist_ok=True)
+    made = []
+    for name in ("bridge", "demo", "state_publisher"):
+        body = (HERE / "ros2_executables" / name).read_text().split("\n", 1)[1]
+        target = out / name
+        target.write_text(f"#!{sys.executable}\n{body}")
+        target.chmod(0o755)
+        made.append(str(target))
+    return made
+
+
 setup(python_requires=">=3.10", ext_modules=compiled_modules(), data_files=[
     ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
     (f"share/{PACKAGE}", ["package.xml"]),
-    (f"lib/{PACKAGE}", ["ros2_executables/bridge", "ros2_executables/demo",
-                        "ros2_executables/state_publisher"]),
+    (f"lib/{PACKAGE}", ros2_executables()),
 ])

@@ -314,3 +314,21 @@ def test_send_to_ros_pushes_markups_once_as_a_point_list(
     expected = [((1.0, 2.0, 3.0), "entry"), ((4.0, 5.0, 6.0), "target")]
     assert pushed == [expected, expected]
     assert [n.GetName() for n in connector.outgoing] == ["pub:slicer/points"]
+
+
+def test_the_module_s_defaults_fit_the_demo(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 25, item 11: the robot name the GUI offers is the demo's robot, and the frame
+    markers and models default to is the demo arm's root link (there is no "world")."""
+    import xml.etree.ElementTree as ET
+
+    from bridge.robots.demo.urdf import DEMO_URDF
+
+    module = _load_module(monkeypatch)
+    robot = ET.fromstring(DEMO_URDF)
+    children = {joint.find("child").get("link") for joint in robot.iter("joint")}
+    (root,) = [link.get("name") for link in robot.iter("link")
+               if link.get("name") not in children]
+    assert module.DEFAULT_FRAME == root == "base_link"
+    demo_runner = (REPO / "bridge" / "robots" / "demo_runner.py").read_text()
+    assert module.ROS2BridgeParameterNode.robotName == "demo"
+    assert '"create_robot", {"name": "demo"' in demo_runner

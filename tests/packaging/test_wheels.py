@@ -12,6 +12,7 @@ Installs use the repository's pip cache (.cache/pip, filled by `make setup`).
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import os
 import re
@@ -20,6 +21,7 @@ import subprocess
 import sys
 import tomllib
 import venv
+import zipfile
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -83,6 +85,22 @@ def daemon_wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     assert result.returncode == 0, result.stderr[-3000:]
     (wheel,) = out.glob("slicer_ros2_bridge-*.whl")
     return wheel
+
+
+def test_the_readme_s_install_line_names_the_daemon_wheel(daemon_wheel: Path) -> None:
+    """Issue 25, item 4: with the compiled tf store inside, the wheel carries the Python's and
+    the platform's tags; the README's install line names it with a glob that matches it."""
+    readme = (REPO / "README.md").read_text()
+    (pattern,) = re.findall(r'pip install "\$\(echo (dist/slicer_ros2_bridge-[^)]+\.whl)\)'
+                            r'\[interfaces\]"', readme)
+    assert fnmatch.fnmatch(f"dist/{daemon_wheel.name}", pattern), (pattern, daemon_wheel.name)
+    with zipfile.ZipFile(daemon_wheel) as wheel:
+        compiled = [n for n in wheel.namelist() if "_compiled_store" in n and n.endswith(".so")]
+    tag = f"cp{sys.version_info.major}{sys.version_info.minor}"
+    if compiled:
+        assert daemon_wheel.name.endswith(f"-{tag}-{tag}-linux_x86_64.whl"), daemon_wheel.name
+    else:
+        assert daemon_wheel.name.endswith("-py3-none-any.whl"), daemon_wheel.name
 
 
 def test_the_daemon_wheel_reports_what_it_lacks_then_builds_it_and_bridges(

@@ -115,6 +115,10 @@ def _installReferenceEntryPoints():
     if install_entry_points(slicer, _ReferenceLogic()):
         log.info("answering SlicerROS2's getModuleLogic('ROS2') (SlicerROS2 is not installed)")
 
+# The fixed frame markers are placed in and models are sent in, by default: the demo robot's
+# root (REP 105's robot base frame), which a graph without a "world" frame still has.
+DEFAULT_FRAME = "base_link"
+
 
 @parameterNodeWrapper
 class ROS2BridgeParameterNode:
@@ -122,7 +126,8 @@ class ROS2BridgeParameterNode:
 
     host: str = "127.0.0.1"
     port: Annotated[int, WithinRange(1, 65535)] = 18944  # the QSpinBox connector sets the range
-    robotName: str = "robot"
+    # The defaults fit `slicer-ros2-bridge demo` (its robot, its root frame base_link).
+    robotName: str = "demo"
     robotNode: str = "/robot_state_publisher"
     robotParameter: str = "robot_description"
     bridgeState: str = ""
@@ -788,7 +793,7 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         for name in ("MarkerArray", "Marker", "Path", "PolygonStamped", "PointStamped"):
             self.markerTypeCombo.addItem(name)
         self.markerFrameEdit = qt.QLineEdit()
-        self.markerFrameEdit.text = "world"
+        self.markerFrameEdit.text = DEFAULT_FRAME
         self.addMarkersButton = qt.QPushButton("Show markers")
         self.removeMarkersButton = qt.QPushButton("Remove markers")
         form.addRow("Marker topic:", self.markerTopicEdit)
@@ -814,7 +819,7 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         self.sendNodeSelector.setMRMLScene(slicer.mrmlScene)
         self.sendTypeCombo = qt.QComboBox()
         self.sendTopicEdit = qt.QLineEdit("/slicer/model")
-        self.sendFrameEdit = qt.QLineEdit("world")
+        self.sendFrameEdit = qt.QLineEdit(DEFAULT_FRAME)
         self.sendButton = qt.QPushButton("Send to ROS")
         sendForm.addRow("Node:", self.sendNodeSelector)
         sendForm.addRow("As:", self.sendTypeCombo)

@@ -1,0 +1,189 @@
+"""The README's code runs as written against `make demo` (issue 25, item 6).
+
+Every fenced block of README.md names its language, and the language says what the test
+does with it:
+
+- ``python``: run, on its own, with the venv's Python in the repository (as a reader pastes
+  it into `.venv/bin/python`), against the demo; it must exit 0;
+- ``sh``: run with bash in the repository, against the demo; it must exit 0;
+- ``yaml``: a `--config` file: a second daemon starts with it, beside the demo, and must
+  list every bridge it names;
+- ``text``: output or a drawing, never run.
+
+A block that cannot run here says so and why in its info string, after the language:
+```` ```python no-run: 3D Slicer's Python console ````. (GitHub highlights by the first word
+alone.) The demo is `make demo` on the README's port, 18944; where that port is taken (a 3D
+Slicer, another demo), the demo gets a free port and the blocks get that port in its place,
+which the test prints.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+import yaml
+
+from support import (REPO, Child, Processes, assert_clean_exit, pick_free_port, scaled,
+                     start_daemon)
+
+pytestmark = pytest.mark.ros
+
+README = REPO / "README.md"
+README_PORT = 18944
+RUNNERS = ("python", "sh", "yaml")
+NOT_RUN = ("text",)
+_FENCE = re.compile(r"^(?P<indent> *)```(?P<info>[^`]*)$")
+
+
+@dataclass(frozen=True)
+class Block:
+    """One fenced block: its language, why it is not run ("" if it is), its text, and the
+    README line its fence opens on."""
+
+    language: str
+    no_run: str
+    text: str
+    line: int
+
+    @property
+    def name(self) -> str:
+        return f"README.md:{self.line}:{self.language}"
+
+
+class ReadmeFormatError(ValueError):
+    """A fence the test cannot take: it says which line, what was expected and what came."""
+
+
+def blocks(markdown: str) -> list[Block]:
+    """Every fenced block of ``markdown``, its indentation removed (a block in a list item
+    is indented)."""
+    found: list[Block] = []
+    lines = markdown.splitlines()
+    i = 0
+    while i < len(lines):
+        opening = _FENCE.match(lines[i])
+        if opening is None:
+            i += 1
+            continue
+        indent, info = opening["indent"], opening["info"].strip()
+        language, _, rest = info.partition(" ")
+        rest = rest.strip()
+        if rest and not rest.startswith("no-run:"):
+            raise ReadmeFormatError(f"README.md:{i + 1}: expected 'no-run: <why>' after the "
+                                    f"language, got {rest!r}")
+        body: list[str] = []
+        i += 1
+        while i < len(lines) and lines[i].strip() != "```":
+            body.append(lines[i][len(indent):] if lines[i].startswith(indent) else lines[i])
+            i += 1
+        if i == len(lines):
+            raise ReadmeFormatError(f"README.md:{len(found)}: a fence opened and never closed")
+        found.append(Block(language, rest.removeprefix("no-run:").strip(),
+                           "\n".join(body) + "\n", i - len(body)))
+        i += 1
+    return found
+
+
+README_BLOCKS = blocks(README.read_text())
+
+
+def test_every_block_says_what_it_is() -> None:
+    """A language the test knows, and a reason wherever a runnable one is not run."""
+    for block in README_BLOCKS:
+        assert block.language in RUNNERS + NOT_RUN, (
+            f"{block.name}: expected a language among {RUNNERS + NOT_RUN}, got "
+            f"{block.language!r}")
+        if block.language in NOT_RUN:
+            assert not block.no_run, f"{block.name}: text is never run; no reason needed"
+    ran = [b for b in README_BLOCKS if b.language in RUNNERS and not b.no_run]
+    assert len(ran) >= 5, "the README's runnable examples went missing"
+
+
+def _port_free(port: int) -> bool:
+    with socket.socket() as sock:
+        try:
+            sock.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+@dataclass
+class Demo:
+    child: Child
+    port: int
+
+    def as_written(self, text: str) -> str:
+        return text if self.port == README_PORT else text.replace(str(README_PORT),
+                                                                  str(self.port))
+
+
+@pytest.fixture(scope="module")
+def demo(module_processes: Processes) -> Iterator[Demo]:
+    """`make demo` (on the README's port if it is free), stopped as Ctrl-C stops it: SIGINT
+    to the whole process group, make and the demo."""
+    port = README_PORT if _port_free(README_PORT) else pick_free_port()
+    if port != README_PORT:
+        print(f"\nport {README_PORT} is taken here: the demo and the README's blocks use "
+              f"{port}")
+    argv = ["make", "--no-print-directory", "demo"]
+    if port != README_PORT:
+        argv.append(f"DEMO_ARGS=--port {port}")
+    child = module_processes.start("make-demo", argv)
+    child.wait_for_output("Stop with Ctrl-C", timeout=300)  # set-up first, when not in place
+    yield Demo(child, port)
+    os.killpg(child.pid, signal.SIGINT)
+    child.popen.wait(scaled(30))  # make itself ends by the signal (exit -2), after the demo
+    output = child.output()
+    assert "shutting down (SIGINT)" in output, output[-3000:]
+    assert "Traceback" not in output and not re.search(r" (ERROR|CRITICAL) ", output), \
+        output[-3000:]
+
+
+def _run(block: Block, demo: Demo) -> subprocess.CompletedProcess[str]:
+    text = demo.as_written(block.text)
+    argv = [sys.executable, "-c", text] if block.language == "python" else \
+        ["bash", "-euo", "pipefail", "-c", text]
+    return subprocess.run(argv, cwd=str(REPO), capture_output=True, text=True,
+                          timeout=scaled(120), start_new_session=True,
+                          env={**os.environ, "PATH": f"{REPO / '.venv' / 'bin'}:"
+                                                     f"{os.environ['PATH']}"})
+
+
+def _run_config(block: Block, processes: Processes, tmp_path: Path) -> None:
+    """The block as `--config` of a daemon beside the demo: it starts (a bridge it cannot
+    create stops it, one line and exit 2) and lists every bridge the file names."""
+    config = tmp_path / "bridges.yaml"
+    config.write_text(block.text)
+    daemon = start_daemon(processes, "--config", str(config))
+    named = yaml.safe_load(block.text)
+    with daemon.connect() as client:
+        kinds = [b["kind"] for b in client.command("list_bridges")["bridges"]]
+    expected = {"subscribers": "subscriber", "publishers": "publisher",
+                "tf_lookups": "tf_lookup", "robots": "robot"}
+    for section, kind in expected.items():
+        assert kinds.count(kind) == len(named.get(section, [])), (section, kinds)
+    assert_clean_exit(daemon)
+
+
+@pytest.mark.parametrize("block", [b for b in README_BLOCKS
+                                   if b.language in RUNNERS and not b.no_run],
+                         ids=lambda b: b.name)
+def test_the_block_runs_against_the_demo(block: Block, demo: Demo, processes: Processes,
+                                         tmp_path: Path) -> None:
+    if block.language == "yaml":
+        _run_config(block, processes, tmp_path)
+        return
+    result = _run(block, demo)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, f"{block.name} exited {result.returncode}:\n{output[-4000:]}"
+    assert "Traceback" not in output, output[-4000:]
