@@ -482,20 +482,27 @@ class ParameterNode(_Node):
         return True
 
 
-class Tf2BroadcasterNode(_Node):
-    resource: TfBroadcaster
+class _ParentChild(_Node):
+    """A tf2 node: named by its parent and child frames, fixed when it is made."""
+
+    _kind = ""
 
     def GetName(self) -> str:  # noqa: N802
-        return f"ros2:tf2broadcaster:{self.resource.parent}To{self.resource.child}"
+        return f"ros2:{self._kind}:{self.resource.parent}To{self.resource.child}"
 
     def GetParentID(self) -> str:  # noqa: N802
-        return self.resource.parent
+        return str(self.resource.parent)
 
     def GetChildID(self) -> str:  # noqa: N802
-        return self.resource.child
+        return str(self.resource.child)
 
     def IsParentAndChildSet(self) -> bool:  # noqa: N802
         return bool(self.resource.parent and self.resource.child)
+
+
+class Tf2BroadcasterNode(_ParentChild):
+    resource: TfBroadcaster
+    _kind = "tf2broadcaster"
 
     def GetNumberOfBroadcasts(self) -> int:  # noqa: N802
         return self.resource.count
@@ -512,7 +519,7 @@ class Tf2BroadcasterNode(_Node):
             event, lambda caller, _event: self.Broadcast(caller)))
 
 
-class Tf2LookupNode(_Node):
+class Tf2LookupNode(_ParentChild):
     """``vtkMRMLROS2Tf2LookupNode``: parent -> child as tf2 has it. As the reference's, it
     is modified (TransformModifiedEvent, ModifiedEvent) on every spin once the transform is
     known (``SetModifiedOnLookup(False)``: only when it changes), and whenever it changes
@@ -520,6 +527,7 @@ class Tf2LookupNode(_Node):
 
     resource: TfLookup
     _events = ("ModifiedEvent", "TransformModifiedEvent")
+    _kind = "tf2lookup"
 
     def __init__(self, ros_node: ROS2Node, resource: TfLookup) -> None:
         super().__init__(ros_node, resource)
@@ -547,18 +555,6 @@ class Tf2LookupNode(_Node):
 
     def forget(self) -> None:
         self._ros_node.logic.remove_tick(self._tick)
-
-    def GetName(self) -> str:  # noqa: N802
-        return f"ros2:tf2lookup:{self.resource.parent}To{self.resource.child}"
-
-    def GetParentID(self) -> str:  # noqa: N802
-        return self.resource.parent
-
-    def GetChildID(self) -> str:  # noqa: N802
-        return self.resource.child
-
-    def IsParentAndChildSet(self) -> bool:  # noqa: N802
-        return bool(self.resource.parent and self.resource.child)
 
     def SetModifiedOnLookup(self, value: bool) -> None:  # noqa: N802
         self._modified_on_lookup = bool(value)

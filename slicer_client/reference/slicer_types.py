@@ -109,12 +109,16 @@ _KIND_WORDS = {str: "a string", bool: "true or false", int: "an integer in int64
                float: "a number"}
 
 
-class _Array(SlicerType):
-    """Int64MultiArray / Float64MultiArray, 1-D: a vtkIntArray / vtkDoubleArray."""
+class _Numbers(SlicerType):
+    """Int64MultiArray (`integer`) or Float64MultiArray."""
 
     def __init__(self, values: SlicerValues, ros_type: str, integer: bool) -> None:
         super().__init__(values, ros_type)
         self.integer = integer
+
+
+class _Array(_Numbers):
+    """1-D: a vtkIntArray / vtkDoubleArray."""
 
     def from_ros(self, data: Mapping[str, Any]) -> Any:
         return self.values.filled_array(list(data.get("data", [])), integer=self.integer)
@@ -128,12 +132,8 @@ class _Array(SlicerType):
         return self.values.int_array() if self.integer else self.values.double_array()
 
 
-class _Table(SlicerType):
-    """Int64MultiArray / Float64MultiArray, 2-D: a vtkTable with one array per column."""
-
-    def __init__(self, values: SlicerValues, ros_type: str, integer: bool) -> None:
-        super().__init__(values, ros_type)
-        self.integer = integer
+class _Table(_Numbers):
+    """2-D: a vtkTable with one array per column."""
 
     def from_ros(self, data: Mapping[str, Any]) -> Any:
         dims = list(data.get("layout", {}).get("dim", []))
