@@ -29,7 +29,7 @@ from protocol import commands as c
 from protocol.messages import Message
 from protocol.yaml_text import to_yaml
 from slicer_client.actions import Action, GoalHandle
-from slicer_client.matrices import is_vtk_matrix
+from slicer_client.matrices import fill_vtk, is_vtk_matrix
 from slicer_client.reference.messages import MessageObject, MessageTypes, MessageValueError
 from slicer_client.reference.slicer_types import SlicerType, slicer_type_for
 from slicer_client.reference.vtk_values import SlicerValues
@@ -173,10 +173,7 @@ class _Node(_Observable):
         if matrix is None:
             return None
         out = target if target is not None and is_vtk_matrix(target) else self._values.matrix()
-        for i in range(4):
-            for j in range(4):
-                out.SetElement(i, j, float(matrix[i, j]))
-        return out
+        return fill_vtk(matrix, out)
 
     def IsAddedToROS2Node(self) -> bool:  # noqa: N802
         return not getattr(self.resource, "removed", False)
@@ -1134,10 +1131,7 @@ def _type_name(value: Any) -> str:
 def _copy_into(value: Any, target: Any) -> Any:
     """What a getter with an output argument does: fill `target` with `value`."""
     if is_vtk_matrix(value) and is_vtk_matrix(target):
-        for i in range(4):
-            for j in range(4):
-                target.SetElement(i, j, value.GetElement(i, j))
-        return target
+        return fill_vtk(value, target)
     if hasattr(target, "DeepCopy") and type(target) is type(value):
         target.DeepCopy(value)
         return target
