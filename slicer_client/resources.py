@@ -3,8 +3,9 @@
 
 Each resource knows the command that creates it (its `BridgeSpec`, replayed after a
 reconnect), the device name the daemon answered with, and how to read the messages that
-arrive for it. Callbacks run where the client delivers events: in the receive thread by
-default, or in whatever thread calls `Client.process_events()` (see client.py).
+arrive for it. A resource's state changes as messages arrive (on the receive thread, which
+only stores them: values are decoded when read); its callbacks run where the client runs
+callbacks, never on the receive thread (`Client.Spin()` or its dispatcher: events.py).
 """
 
 from __future__ import annotations

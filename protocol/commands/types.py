@@ -95,14 +95,23 @@ def resolve_message_type(text: str, field: str = "type", *,
         full = spelling.match(given)
         if full:
             return f"{full.group(1)}/msg/{full.group(2)}"
-    if packages_of is not None and _BARE.match(stem):
-        packages = tuple(packages_of(stem))
-        if len(packages) == 1:
-            return f"{packages[0]}/msg/{stem}"
-        if packages:
-            raise OutOfRangeError(field, "an unambiguous name; spell one of "
-                                  + ", ".join(f"{p}/msg/{stem}" for p in packages), repr(given))
+    found = _by_package(stem, "msg", packages_of, field)
+    if found is not None:
+        return found
     raise OutOfRangeError(field, _EXPECTED, repr(given))
+
+
+def _by_package(stem: str, kind: str, packages_of: Optional[PackagesOf],
+                field: str) -> Optional[str]:
+    """``pkg/<kind>/stem`` if exactly one installed package defines the bare name `stem`;
+    None if none does (or nothing can look them up); an ambiguous name raises."""
+    if packages_of is None or not _BARE.match(stem):
+        return None
+    packages = tuple(packages_of(stem))
+    if len(packages) > 1:
+        raise OutOfRangeError(field, "an unambiguous name; spell one of "
+                              + ", ".join(f"{p}/{kind}/{stem}" for p in packages), repr(stem))
+    return f"{packages[0]}/{kind}/{stem}" if packages else None
 
 
 def resolve_service_type(text: str, field: str = "type", *,
@@ -122,13 +131,9 @@ def resolve_service_type(text: str, field: str = "type", *,
     stem = class_match.group(1) if class_match else given
     if stem in REFERENCE_SERVICE_NAMES:
         return REFERENCE_SERVICE_NAMES[stem]
-    if packages_of is not None and _BARE.match(stem):
-        packages = tuple(packages_of(stem))
-        if len(packages) == 1:
-            return f"{packages[0]}/srv/{stem}"
-        if packages:
-            raise OutOfRangeError(field, "an unambiguous name; spell one of "
-                                  + ", ".join(f"{p}/srv/{stem}" for p in packages), repr(given))
+    found = _by_package(stem, "srv", packages_of, field)
+    if found is not None:
+        return found
     raise OutOfRangeError(field, expected, repr(text))
 
 

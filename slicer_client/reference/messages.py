@@ -30,7 +30,7 @@ import numpy as np
 
 from protocol.commands import FieldDescription, MessageDescription, TypeDescription
 from protocol.conversions import ConversionError, matrix_to_pose, pose_to_matrix
-from slicer_client.matrices import MatrixError, as_numpy, is_vtk_matrix
+from slicer_client.matrices import MatrixError, as_numpy, fill_vtk, is_vtk_matrix
 from slicer_client.reference.vtk_values import SlicerValues, array_values, is_data_array
 
 __all__ = ["MessageObject", "MessageTypes", "MessageValueError", "accessor_name",
@@ -192,15 +192,9 @@ class MessageTypes:
         if "/" not in type_name:
             return float(raw) if type_name in _FLOAT_TYPES and raw is not None else raw
         if type_name in _MATRIX_FIELDS:
-            where, how = _MATRIX_FIELDS[type_name]
-            position, orientation = raw[where], raw[how]
-            matrix = pose_to_matrix([position[k] for k in "xyz"],
-                                    [orientation[k] for k in "xyzw"])
-            return _fill(self.values.matrix(), matrix)
+            return matrix_of_pose(self.values, raw, *_MATRIX_FIELDS[type_name])
         if type_name in _VECTOR6_FIELDS:
-            first, second = _VECTOR6_FIELDS[type_name]
-            return self.values.filled_array([raw[first][k] for k in "xyz"]
-                                            + [raw[second][k] for k in "xyz"], integer=False)
+            return array_of_vector6(self.values, raw, *_VECTOR6_FIELDS[type_name])
         return self.from_ros(type_name, raw)
 
     def for_yaml(self, ros_type: str, data: Mapping[str, Any]) -> Dict[str, Any]:
@@ -238,21 +232,12 @@ class MessageTypes:
         if "/" not in type_name:
             return value
         if type_name in _MATRIX_FIELDS:
-            where, how = _MATRIX_FIELDS[type_name]
-            try:
-                translation, quaternion = matrix_to_pose(as_numpy(value, field=path,
-                                                                  rigid=False))
-            except (ConversionError, MatrixError) as error:
-                raise MessageValueError(f"{path}: {error}") from None
-            return {where: dict(zip("xyz", map(float, translation))),
-                    how: dict(zip("xyzw", map(float, quaternion)))}
+            return pose_of_matrix(value, *_MATRIX_FIELDS[type_name], path=path)
         if type_name in _VECTOR6_FIELDS:
-            first, second = _VECTOR6_FIELDS[type_name]
             six = array_values(value) if is_data_array(value) else list(value)
             if len(six) != 6:  # the reference sends zeros for anything but 6 values
                 six = [0.0] * 6
-            return {first: dict(zip("xyz", map(float, six[:3]))),
-                    second: dict(zip("xyz", map(float, six[3:])))}
+            return vector6_of(six, *_VECTOR6_FIELDS[type_name])
         if isinstance(value, MessageObject):
             return value.to_ros()
         if isinstance(value, Mapping):  # already generic JSON
@@ -301,8 +286,8 @@ class MessageTypes:
         if type_name in _MATRIX_FIELDS:
             if not is_vtk_matrix(value):
                 try:
-                    value = _fill(self.values.matrix(), as_numpy(value, field=path,
-                                                                  rigid=False))
+                    value = fill_vtk(as_numpy(value, field=path, rigid=False),
+                                     self.values.matrix())
                 except MatrixError as error:
                     raise MessageValueError(str(error)) from None
             return value
@@ -343,9 +328,33 @@ def _sequence(value: Any, path: str) -> List[Any]:
     return list(value)
 
 
-def _fill(target: Any, matrix: Any) -> Any:
-    values = np.asarray(matrix, dtype=np.float64)
-    for i in range(4):
-        for j in range(4):
-            target.SetElement(i, j, float(values[i, j]))
-    return target
+# --- the reference's VTK equivalents, one conversion each way (messages and slicer_types) ---
+def matrix_of_pose(values: SlicerValues, data: Mapping[str, Any], where: str,
+                   how: str) -> Any:
+    """A Pose (``where`` position, ``how`` orientation) or Transform dict in metres -> a
+    4x4 matrix in mm."""
+    matrix = pose_to_matrix([data[where][k] for k in "xyz"], [data[how][k] for k in "xyzw"])
+    return fill_vtk(matrix, values.matrix())
+
+
+def pose_of_matrix(value: Any, where: str, how: str, *, path: str) -> Dict[str, Any]:
+    """A 4x4 matrix in mm (rotation orthonormal within the protocol's tolerance) -> a
+    Pose or Transform dict in metres, with the nearest quaternion."""
+    try:
+        translation, quaternion = matrix_to_pose(as_numpy(value, field=path, rigid=False))
+    except (ConversionError, MatrixError) as error:
+        raise MessageValueError(f"{path}: {error}") from None
+    return {where: dict(zip("xyz", map(float, translation))),
+            how: dict(zip("xyzw", map(float, quaternion)))}
+
+
+def array_of_vector6(values: SlicerValues, data: Mapping[str, Any], first: str,
+                     second: str) -> Any:
+    """A Twist or Wrench dict -> an array of its 6 values."""
+    return values.filled_array([data[first][k] for k in "xyz"]
+                               + [data[second][k] for k in "xyz"], integer=False)
+
+
+def vector6_of(six: List[Any], first: str, second: str) -> Dict[str, Any]:
+    return {first: dict(zip("xyz", map(float, six[:3]))),
+            second: dict(zip("xyz", map(float, six[3:])))}

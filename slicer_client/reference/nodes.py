@@ -29,7 +29,7 @@ from protocol import commands as c
 from protocol.messages import Message
 from protocol.yaml_text import to_yaml
 from slicer_client.actions import Action, GoalHandle
-from slicer_client.matrices import is_vtk_matrix
+from slicer_client.matrices import fill_vtk, is_vtk_matrix
 from slicer_client.reference.messages import MessageObject, MessageTypes, MessageValueError
 from slicer_client.reference.slicer_types import SlicerType, slicer_type_for
 from slicer_client.reference.vtk_values import SlicerValues
@@ -173,10 +173,7 @@ class _Node(_Observable):
         if matrix is None:
             return None
         out = target if target is not None and is_vtk_matrix(target) else self._values.matrix()
-        for i in range(4):
-            for j in range(4):
-                out.SetElement(i, j, float(matrix[i, j]))
-        return out
+        return fill_vtk(matrix, out)
 
     def IsAddedToROS2Node(self) -> bool:  # noqa: N802
         return not getattr(self.resource, "removed", False)
@@ -482,20 +479,27 @@ class ParameterNode(_Node):
         return True
 
 
-class Tf2BroadcasterNode(_Node):
-    resource: TfBroadcaster
+class _ParentChild(_Node):
+    """A tf2 node: named by its parent and child frames, fixed when it is made."""
+
+    _kind = ""
 
     def GetName(self) -> str:  # noqa: N802
-        return f"ros2:tf2broadcaster:{self.resource.parent}To{self.resource.child}"
+        return f"ros2:{self._kind}:{self.resource.parent}To{self.resource.child}"
 
     def GetParentID(self) -> str:  # noqa: N802
-        return self.resource.parent
+        return str(self.resource.parent)
 
     def GetChildID(self) -> str:  # noqa: N802
-        return self.resource.child
+        return str(self.resource.child)
 
     def IsParentAndChildSet(self) -> bool:  # noqa: N802
         return bool(self.resource.parent and self.resource.child)
+
+
+class Tf2BroadcasterNode(_ParentChild):
+    resource: TfBroadcaster
+    _kind = "tf2broadcaster"
 
     def GetNumberOfBroadcasts(self) -> int:  # noqa: N802
         return self.resource.count
@@ -512,7 +516,7 @@ class Tf2BroadcasterNode(_Node):
             event, lambda caller, _event: self.Broadcast(caller)))
 
 
-class Tf2LookupNode(_Node):
+class Tf2LookupNode(_ParentChild):
     """``vtkMRMLROS2Tf2LookupNode``: parent -> child as tf2 has it. As the reference's, it
     is modified (TransformModifiedEvent, ModifiedEvent) on every spin once the transform is
     known (``SetModifiedOnLookup(False)``: only when it changes), and whenever it changes
@@ -520,6 +524,7 @@ class Tf2LookupNode(_Node):
 
     resource: TfLookup
     _events = ("ModifiedEvent", "TransformModifiedEvent")
+    _kind = "tf2lookup"
 
     def __init__(self, ros_node: ROS2Node, resource: TfLookup) -> None:
         super().__init__(ros_node, resource)
@@ -547,18 +552,6 @@ class Tf2LookupNode(_Node):
 
     def forget(self) -> None:
         self._ros_node.logic.remove_tick(self._tick)
-
-    def GetName(self) -> str:  # noqa: N802
-        return f"ros2:tf2lookup:{self.resource.parent}To{self.resource.child}"
-
-    def GetParentID(self) -> str:  # noqa: N802
-        return self.resource.parent
-
-    def GetChildID(self) -> str:  # noqa: N802
-        return self.resource.child
-
-    def IsParentAndChildSet(self) -> bool:  # noqa: N802
-        return bool(self.resource.parent and self.resource.child)
 
     def SetModifiedOnLookup(self, value: bool) -> None:  # noqa: N802
         self._modified_on_lookup = bool(value)
@@ -1138,10 +1131,7 @@ def _type_name(value: Any) -> str:
 def _copy_into(value: Any, target: Any) -> Any:
     """What a getter with an output argument does: fill `target` with `value`."""
     if is_vtk_matrix(value) and is_vtk_matrix(target):
-        for i in range(4):
-            for j in range(4):
-                target.SetElement(i, j, value.GetElement(i, j))
-        return target
+        return fill_vtk(value, target)
     if hasattr(target, "DeepCopy") and type(target) is type(value):
         target.DeepCopy(value)
         return target

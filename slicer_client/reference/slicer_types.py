@@ -29,10 +29,11 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
-from protocol.conversions import ConversionError, matrix_to_pose, pose_to_matrix
 from protocol.messages import Image, Message, PolyData
-from slicer_client.matrices import MatrixError, as_numpy, is_vtk_matrix
-from slicer_client.reference.messages import MessageObject, MessageTypes, MessageValueError
+from slicer_client.matrices import is_vtk_matrix
+from slicer_client.reference.messages import (MessageObject, MessageTypes, MessageValueError,
+                                              array_of_vector6, matrix_of_pose, pose_of_matrix,
+                                              vector6_of)
 from slicer_client.reference.vtk_values import (SlicerValues, array_values, is_data_array,
                                                 is_table, table_columns)
 
@@ -109,12 +110,16 @@ _KIND_WORDS = {str: "a string", bool: "true or false", int: "an integer in int64
                float: "a number"}
 
 
-class _Array(SlicerType):
-    """Int64MultiArray / Float64MultiArray, 1-D: a vtkIntArray / vtkDoubleArray."""
+class _Numbers(SlicerType):
+    """Int64MultiArray (`integer`) or Float64MultiArray."""
 
     def __init__(self, values: SlicerValues, ros_type: str, integer: bool) -> None:
         super().__init__(values, ros_type)
         self.integer = integer
+
+
+class _Array(_Numbers):
+    """1-D: a vtkIntArray / vtkDoubleArray."""
 
     def from_ros(self, data: Mapping[str, Any]) -> Any:
         return self.values.filled_array(list(data.get("data", [])), integer=self.integer)
@@ -128,12 +133,8 @@ class _Array(SlicerType):
         return self.values.int_array() if self.integer else self.values.double_array()
 
 
-class _Table(SlicerType):
-    """Int64MultiArray / Float64MultiArray, 2-D: a vtkTable with one array per column."""
-
-    def __init__(self, values: SlicerValues, ros_type: str, integer: bool) -> None:
-        super().__init__(values, ros_type)
-        self.integer = integer
+class _Table(_Numbers):
+    """2-D: a vtkTable with one array per column."""
 
     def from_ros(self, data: Mapping[str, Any]) -> Any:
         dims = list(data.get("layout", {}).get("dim", []))
@@ -176,21 +177,10 @@ class _Matrix(SlicerType):
         self.where, self.how = where, how
 
     def from_ros(self, data: Mapping[str, Any]) -> Any:
-        matrix = pose_to_matrix([data[self.where][k] for k in "xyz"],
-                                [data[self.how][k] for k in "xyzw"])
-        return _filled_matrix(self.values, matrix)
+        return matrix_of_pose(self.values, data, self.where, self.how)
 
     def to_publish(self, value: Any) -> Publication:
-        if hasattr(value, "GetMatrixTransformToParent") and not is_vtk_matrix(value):
-            target = self.values.matrix()
-            value.GetMatrixTransformToParent(target)  # a Slicer transform node
-            value = target
-        try:
-            translation, quaternion = matrix_to_pose(as_numpy(value, rigid=False))
-        except (ConversionError, MatrixError) as error:
-            raise MessageValueError(f"Publish: {error}") from None
-        return "message", {self.where: dict(zip("xyz", map(float, translation))),
-                           self.how: dict(zip("xyzw", map(float, quaternion)))}
+        return "message", pose_of_matrix(value, self.where, self.how, path="Publish")
 
     def blank(self) -> Any:
         return self.values.matrix()
@@ -204,17 +194,14 @@ class _Vector6(SlicerType):
         self.first, self.second = first, second
 
     def from_ros(self, data: Mapping[str, Any]) -> Any:
-        return self.values.filled_array([data[self.first][k] for k in "xyz"]
-                                        + [data[self.second][k] for k in "xyz"],
-                                        integer=False)
+        return array_of_vector6(self.values, data, self.first, self.second)
 
     def to_publish(self, value: Any) -> Publication:
         six = _numbers(value, "Publish", False)
         if len(six) != 6:
             raise MessageValueError(f"Publish: expected 6 values for {self.ros_type}, got "
                                     f"{len(six)}")
-        return "message", {self.first: dict(zip("xyz", six[:3])),
-                           self.second: dict(zip("xyz", six[3:]))}
+        return "message", vector6_of(six, self.first, self.second)
 
     def blank(self) -> Any:
         return self.values.filled_array([0.0] * 6, integer=False)
@@ -336,15 +323,6 @@ class _Points(SlicerType):
 
     def blank(self) -> Any:
         return self.values.points()
-
-
-def _filled_matrix(values: SlicerValues, matrix: Any) -> Any:
-    target = values.matrix()
-    m = np.asarray(matrix, dtype=np.float64)
-    for i in range(4):
-        for j in range(4):
-            target.SetElement(i, j, float(m[i, j]))
-    return target
 
 
 def _matrix_like(value: Any) -> bool:

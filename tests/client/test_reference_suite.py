@@ -118,29 +118,21 @@ def _filled(array, values):
     return array
 
 
-def test_create_and_add_pub_sub_int_array(slicer, ros2Node) -> None:  # noqa: N803
-    case = PubSub(slicer, ros2Node, "IntArray")
-    sent = _filled(vtk.vtkIntArray(), [1, 2, 3, 4, 5])
-    case.testPub.Publish(sent)
+@pytest.mark.parametrize("type_name, array_type, sent", [
+    ("IntArray", "vtkIntArray", [1, 2, 3, 4, 5]),
+    ("DoubleArray", "vtkDoubleArray", [1.1, 2.2, 3.3, 4.4, 5.5])])
+def test_create_and_add_pub_sub_int_and_double_array(slicer, ros2Node, type_name: str,  # noqa: N803
+                                                     array_type: str, sent: list) -> None:
+    """The reference's test_create_and_add_pub_sub_int_array and ..._double_array."""
+    case = PubSub(slicer, ros2Node, type_name)
+    sentArray = _filled(getattr(vtk, array_type)(), sent)  # noqa: N806
+    case.testPub.Publish(sentArray)
     case.generic_assertions()
     received = case.testSub.GetLastMessage()
-    assert isinstance(received, vtk.vtkIntArray)
-    assert sent.GetNumberOfValues() == received.GetNumberOfValues()
-    for i in range(sent.GetNumberOfValues()):
-        assert sent.GetValue(i) == received.GetValue(i)
-    case.delete_pub_sub()
-
-
-def test_create_and_add_pub_sub_double_array(slicer, ros2Node) -> None:  # noqa: N803
-    case = PubSub(slicer, ros2Node, "DoubleArray")
-    sent = _filled(vtk.vtkDoubleArray(), [1.1, 2.2, 3.3, 4.4, 5.5])
-    case.testPub.Publish(sent)
-    case.generic_assertions()
-    received = case.testSub.GetLastMessage()
-    assert isinstance(received, vtk.vtkDoubleArray)
-    assert sent.GetNumberOfValues() == received.GetNumberOfValues()
-    for i in range(sent.GetNumberOfValues()):
-        assert sent.GetValue(i) == received.GetValue(i)
+    assert isinstance(received, getattr(vtk, array_type))
+    assert sentArray.GetNumberOfValues() == received.GetNumberOfValues()
+    for i in range(sentArray.GetNumberOfValues()):
+        assert sentArray.GetValue(i) == received.GetValue(i)
     case.delete_pub_sub()
 
 
@@ -206,24 +198,16 @@ def _table(array_type, columns):
     return table
 
 
-def test_create_and_add_pub_sub_int_n_array(slicer, ros2Node) -> None:  # noqa: N803
-    case = PubSub(slicer, ros2Node, "IntTable")
-    vtktable = _table(vtk.vtkIntArray, [[3 * i for i in range(3)], [4 * i + 1 for i in range(3)]])
-    case.testPub.Publish(vtktable)
-    case.generic_assertions()
-    received = case.testSub.GetLastMessage()
-    assert vtktable.GetNumberOfColumns() == received.GetNumberOfColumns() == 2
-    assert vtktable.GetNumberOfRows() == received.GetNumberOfRows() == 3
-    for i in range(vtktable.GetNumberOfColumns()):
-        for j in range(vtktable.GetNumberOfRows()):
-            assert vtktable.GetValue(j, i) == received.GetValue(j, i)
-    case.delete_pub_sub()
-
-
-def test_create_and_add_pub_sub_double_n_array(slicer, ros2Node) -> None:  # noqa: N803
-    case = PubSub(slicer, ros2Node, "DoubleTable")
-    vtktable = _table(vtk.vtkDoubleArray, [[3.3 * i for i in range(3)],
-                                           [4.4 * i + 1.1 for i in range(3)]])
+@pytest.mark.parametrize("type_name, array_type, columns", [
+    ("IntTable", "vtkIntArray", [[3 * i for i in range(3)], [4 * i + 1 for i in range(3)]]),
+    ("DoubleTable", "vtkDoubleArray", [[3.3 * i for i in range(3)],
+                                       [4.4 * i + 1.1 for i in range(3)]])])
+def test_create_and_add_pub_sub_int_and_double_n_array(slicer, ros2Node,  # noqa: N803
+                                                       type_name: str, array_type: str,
+                                                       columns: list) -> None:
+    """The reference's test_create_and_add_pub_sub_int_n_array and ..._double_n_array."""
+    case = PubSub(slicer, ros2Node, type_name)
+    vtktable = _table(getattr(vtk, array_type), columns)
     case.testPub.Publish(vtktable)
     case.generic_assertions()
     received = case.testSub.GetLastMessage()
