@@ -55,8 +55,8 @@ def add_parsers(commands: Any) -> None:
     echo.add_argument("--timeout", type=float, metavar="S",
                       help="give up after S seconds without a message (default: wait)")
     echo.add_argument("--wait", type=float, default=DEFAULT_DISCOVERY_S, metavar="S",
-                      help="at most this long for the topic to appear in the graph, when "
-                           "no type is given (default %(default)s)")
+                      help="at most this long for a publisher of the topic to appear in the "
+                           "graph (default %(default)s)")
 
 
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
@@ -128,12 +128,17 @@ def _echo(out: TextIO, ros: RosNode, topic: str, type_name: Optional[str],
         full = ros.resolve_topic(topic)
     except Exception as error:  # rclpy raises several name-validation exceptions
         raise GraphInspectError(f"expected a ROS topic name, got {topic!r} ({error})") from None
-    ros_type = type_name or _graph_type(ros, full, wait)
-    try:
-        cls = message_class(ros_type)
-    except CodecError as error:
-        raise GraphInspectError(f"expected a message type installed here, got {ros_type!r} "
-                                f"({error})") from None
+
+    def installed(ros_type: str) -> Any:
+        try:
+            return message_class(ros_type)
+        except CodecError as error:
+            raise GraphInspectError(f"expected a message type installed here, got "
+                                    f"{ros_type!r} ({error})") from None
+    if type_name:
+        installed(type_name)  # before any wait
+    publishers = _wait_for_publishers(ros, full, wait)
+    cls = installed(type_name or _graph_type(ros, full, wait, publishers))
     printed = 0
     done = threading.Event()
     lock = threading.Lock()
@@ -150,9 +155,13 @@ def _echo(out: TextIO, ros: RosNode, topic: str, type_name: Optional[str],
             if count is not None and printed >= count:
                 done.set()
 
-    # As `ros2 topic echo`: match whatever the publishers offer (latched ones included).
+    # As `ros2 topic echo`: match what the discovered publishers offer (latched ones too).
+    # With none discovered, BEST_AVAILABLE would ask for the most (reliable, transient
+    # local) and never match a volatile publisher found later: ask for the least then.
     qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_AVAILABLE,
-                     durability=DurabilityPolicy.BEST_AVAILABLE)
+                     durability=DurabilityPolicy.BEST_AVAILABLE) if publishers else \
+        QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+                   durability=DurabilityPolicy.VOLATILE)
     ros.node.create_subscription(cls, full, on_message, qos)
     if not done.wait(timeout):
         if timeout is not None and printed == 0:
@@ -160,23 +169,29 @@ def _echo(out: TextIO, ros: RosNode, topic: str, type_name: Optional[str],
     return 0
 
 
-def _graph_type(ros: RosNode, topic: str, wait: float) -> str:
+def _wait_for_publishers(ros: RosNode, topic: str, wait: float) -> int:
+    """The publishers of ``topic`` discovered within ``wait`` (at once when there are)."""
     deadline = time.monotonic() + max(wait, 0.0)
     while True:
-        types = ros.topic_types(topic)
-        if types:
-            if len(types) > 1:
-                raise GraphInspectError(f"{topic} has several types ({', '.join(types)}): "
-                                        f"name one, e.g. `echo {topic} {types[0]}`")
-            return types[0]
-        if time.monotonic() >= deadline:
-            seen = [name for name, _ in ros.node.get_topic_names_and_types()]
-            raise GraphInspectError(
-                f"expected a topic the ROS graph knows, got {topic}: not among the "
-                f"{seen_topics(topic, seen)} seen in {wait:g} s. Is its publisher running, "
-                f"with the same ROS_DOMAIN_ID? Name the type to wait for it anyway: "
-                f"`echo {topic} pkg/msg/Type`")
+        found = ros.node.count_publishers(topic)
+        if found or time.monotonic() >= deadline:
+            return int(found)
         time.sleep(_POLL_S)
+
+
+def _graph_type(ros: RosNode, topic: str, wait: float, publishers: int) -> str:
+    types = ros.topic_types(topic)
+    if len(types) > 1:
+        raise GraphInspectError(f"{topic} has several types ({', '.join(types)}): "
+                                f"name one, e.g. `echo {topic} {types[0]}`")
+    if types and publishers:
+        return types[0]
+    seen = [name for name, _ in ros.node.get_topic_names_and_types()]
+    where = "has no publisher" if types else f"is not among the {seen_topics(topic, seen)}"
+    raise GraphInspectError(
+        f"expected a topic the ROS graph knows, got {topic}: it {where} seen in {wait:g} s. "
+        f"Is its publisher running, with the same ROS_DOMAIN_ID? Name the type to wait for "
+        f"it anyway: `echo {topic} pkg/msg/Type`")
 
 
 def seen_topics(wanted: str, seen: list[str], shown: int = 12) -> str:

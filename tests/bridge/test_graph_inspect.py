@@ -64,6 +64,20 @@ def test_echo_finds_a_topic_whose_publisher_starts_with_it(processes: Processes)
     assert "position:\n    x: 4.0\n    y: 5.0\n    z: 6.0" in child.output()
 
 
+def test_echo_with_a_type_and_no_publisher_yet_matches_a_volatile_one(
+        processes: Processes) -> None:
+    """With no publisher discovered, the subscription asks for the least (best effort,
+    volatile): asking for the most, as BEST_AVAILABLE then does, never matches the volatile
+    publisher that comes later (rclpy warns of an incompatible durability)."""
+    child = processes.bridge("echo", "/gi_later", "geometry_msgs/msg/PoseStamped", "--wait",
+                             "0", "--count", "1")
+    processes.python("later", "pose_publisher.py", "/gi_later", "7", "8", "9",
+                     "0", "0", "0", "1", "gi_world")
+    assert _finished(child) == 0, child.output()
+    assert "position:\n    x: 7.0\n    y: 8.0\n    z: 9.0" in child.output()
+    assert "incompatible QoS" not in child.output()
+
+
 def test_echo_of_a_misspelt_topic_names_what_the_graph_has(processes: Processes,
                                                            pose_peer: None) -> None:
     child = processes.bridge("echo", "/gi_pos", "--wait", "5")
@@ -71,7 +85,7 @@ def test_echo_of_a_misspelt_topic_names_what_the_graph_has(processes: Processes,
     output = child.output()
     line = next(x for x in output.splitlines() if "expected a topic the ROS graph knows" in x)
     # The count of topics seen, the closest name first.
-    assert re.search(r"got /gi_pos: not among the \d+ topics \(/gi_pose, ", line), line
+    assert re.search(r"got /gi_pos: it is not among the \d+ topics \(/gi_pose, ", line), line
     assert "Traceback" not in output
 
 
