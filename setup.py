@@ -15,6 +15,7 @@ console scripts do: their `/usr/bin/env python3` found whichever python3 came fi
 not the one with rclpy (a venv's, for ROS from PyPI).
 """
 
+import os
 import sys
 from pathlib import Path
 
@@ -46,7 +47,7 @@ def ros2_executables() -> list:
         target = out / name
         target.write_text(f"#!{sys.executable}\n{body}")
         target.chmod(0o755)
-        made.append(str(target))
+        made.append(os.path.relpath(target))  # setuptools takes data_files relative only
     return made
 
 
