@@ -22,7 +22,7 @@ from typing import Mapping, Sequence
 
 from bridge.interfaces.errors import StepFailedError, ToolMissingError
 from bridge.interfaces.packages import InterfacePackage, order_packages
-from bridge.interfaces.steps import (RunningStep, Say, Step, last_line, make_percent,
+from bridge.interfaces.steps import (RunningStep, Say, Step, last_line, make_progress,
                                      wait_a_moment)
 
 MIN_CMAKE = (3, 20)
@@ -218,7 +218,7 @@ def package_steps(package: InterfacePackage, tag: str, target: Target, *, cmake:
              build_dir, build_dir / "configure.log", env),
         Step(f"{tag}: building and installing (make -j{jobs} install)",
              ["make", f"-j{jobs}", "install"], build_dir, build_dir / "build.log", env,
-             where=make_percent),
+             where=make_progress),
         Step(f"{tag}: checking that {', '.join(modules)} import in a fresh interpreter",
              [str(target.python), "-c", _IMPORT_CHECK, *modules], build_dir,
              build_dir / "import-check.log", env),

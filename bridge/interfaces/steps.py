@@ -23,7 +23,9 @@ Say = Callable[[str], None]
 # How often a running step says that it still runs.
 REPORT_EVERY_S = 5.0
 _POLL_S = 0.2
-_MAKE_PERCENT = re.compile(r"\[\s*(\d+)%\]")
+_MAKE_LINE = re.compile(r"^\[\s*(\d+)%\](.*)$", re.MULTILINE)
+_MAKE_OBJECT = re.compile(r"Building \w+ object CMakeFiles/([^/]+?)\.dir/")
+_MAKE_LINKING = re.compile(r"Linking \w+ (?:shared |static )?(?:library|module|executable) (\S+)")
 
 
 def last_line(output: str) -> str | None:
@@ -35,10 +37,20 @@ def last_line(output: str) -> str | None:
     return line if len(line) <= 90 else line[:87] + "..."
 
 
-def make_percent(output: str) -> str | None:
-    """The last `[ NN%]` of a CMake-generated Makefile's output, as `NN%`."""
-    found = _MAKE_PERCENT.findall(output)
-    return f"{found[-1]}%" if found else None
+def make_progress(output: str) -> str | None:
+    """Where a CMake-generated Makefile is, from its last `[ NN%] ...` line: `45%, compiling
+    turtlesim__rosidl_typesupport_c` (the target, not the file: those names are long)."""
+    found = _MAKE_LINE.findall(output)
+    if not found:
+        return None
+    percent, doing = found[-1]
+    compiling = _MAKE_OBJECT.search(doing)
+    if compiling:
+        return f"{percent}%, compiling {compiling.group(1)}"
+    linking = _MAKE_LINKING.search(doing)
+    if linking:
+        return f"{percent}%, linking {Path(linking.group(1)).name}"
+    return f"{percent}%, {doing.strip()[:60]}"
 
 
 @dataclass(frozen=True)
