@@ -10,7 +10,8 @@ with an empty response.
 usage: turtlesim_node.py [--ros-args ...]
 Needs the turtlesim interfaces (tests/interfaces/turtlesim, built by the test session).
 Prints READY once its services exist, then `CALL spawn {...}` / `CALL kill {...}` per call
-and `PARAM {"name": ..., "value": ...}` per parameter change. Stops on SIGINT or SIGTERM.
+and `PARAM {"name": ..., "value": ...}` per parameter change. Stops on SIGINT or SIGTERM,
+printing STOPPED once its node is gone.
 """
 
 import json
@@ -77,6 +78,7 @@ def main() -> None:
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+    print("STOPPED", flush=True)
 
 
 if __name__ == "__main__":
