@@ -34,8 +34,8 @@ sys.path.insert(0, str(REPO))
 # the standard library.
 from bridge.interfaces import (INTERFACES_DIR, MIN_CMAKE, InterfaceBuildError,  # noqa: E402
                                Step, StepFailedError, Target, build_interfaces,
-                               find_cmake, last_line, missing_build_tools, run_step,
-                               shipped_packages)
+                               find_cmake, last_line, missing_build_tools, pip_progress,
+                               run_step, shipped_packages)
 
 VENV = REPO / ".venv"
 CACHE = REPO / ".cache"
@@ -104,8 +104,9 @@ def child_env() -> dict[str, str]:
 def run(label: str, cmd: list[str], log: Path) -> None:
     """Run a command, saying what it does every few seconds; on failure show the tail of its
     log and raise."""
+    where = pip_progress if "pip" in label else last_line
     try:
-        run_step(Step(f"[setup] {label}", cmd, REPO, log, child_env(), where=last_line),
+        run_step(Step(f"[setup] {label}", cmd, REPO, log, child_env(), where=where),
                  say=print_flushed)
     except StepFailedError as error:
         raise SetupError(str(error)) from None

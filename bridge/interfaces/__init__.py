@@ -26,14 +26,15 @@ from bridge.interfaces.errors import (DependencyCycleError, InputError, Interfac
                                       MissingDependencyError, PackageError, StepFailedError,
                                       ToolMissingError)
 from bridge.interfaces.packages import InterfacePackage, find_packages, read_package
-from bridge.interfaces.steps import Step, last_line, run_step
+from bridge.interfaces.steps import Step, last_line, pip_progress, run_step
 
 __all__ = ["INTERFACES_DIR", "MIN_CMAKE", "DependencyCycleError", "InputError",
            "InterfaceBuildError", "InterfacePackage", "MissingDependencyError", "PackageError",
            "Step", "StepFailedError", "Target", "ToolMissingError", "build_interfaces",
            "check_build_tools", "cmake_version", "describe_exports", "find_cmake",
            "find_packages", "interface_packages", "last_line", "missing_build_tools",
-           "missing_interfaces", "missing_runtime_line", "prefix_exports", "read_package",
+           "missing_interfaces", "missing_runtime_line", "pip_progress", "prefix_exports",
+           "read_package",
            "run_step", "shipped_packages", "this_environment", "with_exports"]
 
 INTERFACES_DIR = Path(__file__).resolve().parent

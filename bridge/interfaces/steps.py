@@ -23,6 +23,8 @@ Say = Callable[[str], None]
 # How often a running step says that it still runs.
 REPORT_EVERY_S = 5.0
 _POLL_S = 0.2
+_PIP_DOING = re.compile(r"\s*(Collecting|Downloading|Using cached|Processing|Obtaining|"
+                        r"Preparing|Building|Created wheel|Installing|Successfully) ")
 _MAKE_LINE = re.compile(r"^\[\s*(\d+)%\](.*)$", re.MULTILINE)
 _MAKE_OBJECT = re.compile(r"Building \w+ object CMakeFiles/([^/]+?)\.dir/")
 _MAKE_LINKING = re.compile(r"Linking \w+ (?:shared |static )?(?:library|module|executable) (\S+)")
@@ -35,6 +37,13 @@ def last_line(output: str) -> str | None:
         return None
     line = lines[-1]
     return line if len(line) <= 90 else line[:87] + "..."
+
+
+def pip_progress(output: str) -> str | None:
+    """What pip last said it does (`Collecting ...`, `Downloading ...`, `Installing collected
+    packages ...`), its warnings and progress bars left out."""
+    lines = [line.strip() for line in output.splitlines() if _PIP_DOING.match(line)]
+    return last_line(lines[-1]) if lines else None
 
 
 def make_progress(output: str) -> str | None:
