@@ -288,10 +288,12 @@ def _build_interfaces(args: argparse.Namespace) -> int:
     if args.build_dir is None:
         shutil.rmtree(build_root, ignore_errors=True)
     took = f"{time.monotonic() - started:.0f} s"
+    skipped = len(packages) - len(built)
+    rebuild = f"; {skipped} importable already (--force rebuilds them)" if skipped else ""
     if not built:
-        say(f"done in {took}: nothing to build (every package is importable already)")
+        say(f"done in {took}: nothing to build{rebuild}")
         return 0
-    say(f"done in {took}: built {', '.join(built)} into {target.install_prefix}")
+    say(f"done in {took}: built {', '.join(built)} into {target.install_prefix}{rebuild}")
     if target.exports:
         say(f"to use them, export:\n{describe_exports(target.exports)}")
     return 0

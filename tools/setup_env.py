@@ -78,7 +78,9 @@ def interfaces_digest() -> str:
     Python. A set-up rerun for anything else (a new test tool) keeps them."""
     digest = hashlib.sha256()
     for path in sorted(INTERFACES_DIR.rglob("*")):
-        if path.is_file() and "__pycache__" not in path.parts:
+        # What the build reads, not the Python that runs it or the READMEs.
+        if path.suffix in (".msg", ".srv", ".action", ".xml", ".cmake") or \
+                path.name == "CMakeLists.txt":
             digest.update(str(path.relative_to(REPO)).encode())
             digest.update(path.read_bytes())
     pins = [line for line in (REPO / "pyproject.toml").read_text().splitlines()

@@ -242,7 +242,7 @@ def build_interfaces(packages: Sequence[InterfacePackage], target: Target, *, fo
     total = len(plan.order)
     tags = {p.name: f"[{i}/{total}] {p.name}" for i, p in enumerate(plan.order, 1)}
     for name, where in plan.skip.items():
-        say(f"{tags[name]}: importable already ({where}), skipped (--force rebuilds it)")
+        say(f"{tags[name]}: importable already ({where}), skipped")
     todo = plan.to_build
     if not todo:
         return []
