@@ -276,8 +276,10 @@ def _build_interfaces(args: argparse.Namespace) -> int:
     try:
         built = build_interfaces(packages, target, force=args.force, build_root=build_root,
                                  say=say, parallel=args.parallel)
-    except InputError as error:
+    except InputError as error:  # found before anything was built
         print(f"slicer-ros2-bridge build-interfaces: {error}", file=sys.stderr)
+        if args.build_dir is None:
+            shutil.rmtree(build_root, ignore_errors=True)
         return 2
     except InterfaceBuildError as error:
         print(f"slicer-ros2-bridge build-interfaces: {error}", file=sys.stderr)

@@ -64,9 +64,10 @@ def make_package(root: Path, name: str, files: dict[str, str],
     return folder
 
 
-def cli(*args: str, cwd: Path = REPO) -> subprocess.CompletedProcess[str]:
+def cli(*args: str, tmpdir: Path | None = None) -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ, TMPDIR=str(tmpdir)) if tmpdir else None
     return subprocess.run([sys.executable, "-m", "bridge.cli", "build-interfaces", *args],
-                          cwd=cwd, capture_output=True, text=True, timeout=1200)
+                          cwd=REPO, capture_output=True, text=True, timeout=1200, env=env)
 
 
 # --- refused or planned before anything is built --------------------------------------
@@ -112,11 +113,14 @@ def test_a_dependency_cycle_is_named_and_nothing_is_built(tmp_path: Path) -> Non
     make_package(tmp_path, "probe_a_msgs", {"msg/A.msg": "int32 a\n"}, ("probe_b_msgs",))
     make_package(tmp_path, "probe_b_msgs", {"msg/B.msg": "int32 b\n"}, ("probe_c_msgs",))
     make_package(tmp_path, "probe_c_msgs", {"msg/C.msg": "int32 c\n"}, ("probe_a_msgs",))
-    result = cli(str(tmp_path), "--prefix", str(tmp_path / "prefix"))
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    result = cli(str(tmp_path), "--prefix", str(tmp_path / "prefix"), tmpdir=scratch)
     assert result.returncode == 2, result.stdout + result.stderr
     assert ("expected package dependencies without a cycle, got probe_a_msgs -> "
             "probe_b_msgs -> probe_c_msgs -> probe_a_msgs") in result.stderr
     assert not (tmp_path / "prefix").exists()
+    assert list(scratch.iterdir()) == []  # no build folder left behind either
     with pytest.raises(DependencyCycleError) as raised:
         order_packages(find_packages([tmp_path]), available=lambda name: True)
     assert raised.value.cycle == ["probe_a_msgs", "probe_b_msgs", "probe_c_msgs",
