@@ -105,7 +105,8 @@ class RunningStep:
         code = self._popen.poll()
         if code is None:
             if now >= self._next_report:
-                self._next_report += REPORT_EVERY_S
+                while self._next_report <= now:  # one line, even after a long stall
+                    self._next_report += REPORT_EVERY_S
                 self._update_status()
                 status = f", {self._status}" if self._status else ""
                 self.say(f"{self.step.label}: {now - self.started:.0f} s{status}")

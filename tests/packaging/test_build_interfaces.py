@@ -12,6 +12,7 @@ import os
 import re
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -20,7 +21,8 @@ from bridge.interfaces import (MissingDependencyError, PackageError, find_packag
                                prefix_exports, with_exports)
 from bridge.interfaces.errors import DependencyCycleError
 from bridge.interfaces.packages import evaluate_condition, order_packages
-from support import REPO
+from bridge.interfaces.steps import REPORT_EVERY_S, Step, make_progress, pip_progress, run_step
+from support import REPO, wait_until
 
 PACKAGE_XML = """<?xml version="1.0"?>
 <package format="3">
@@ -284,3 +286,46 @@ def test_a_failed_step_shows_its_log_and_installs_nothing(tmp_path: Path) -> Non
     assert "value 'extra !!' can not be converted" in tail  # rosidl's own words
     assert log.is_file()
     assert not (tmp_path / "prefix" / "share" / "probe_broken_msgs").exists()
+
+
+# --- the progress reporter (also setup_env.py's, for pip) --------------------------------
+
+def test_a_long_step_reports_what_it_does_until_it_ends(tmp_path: Path) -> None:
+    """A pip-like command that works until the test lets it end: a line at the start, one
+    every REPORT_EVERY_S with pip's last action (not its warnings), one at the end."""
+    release = tmp_path / "release"
+    script = ("import pathlib, sys, time\n"
+              "print('Collecting ros-jazzy-rclpy==7.1.6', flush=True)\n"
+              "print('  Downloading ros_rclpy-7.1.6-cp311-manylinux_2_28_x86_64.whl (2.6 MB)',"
+              " flush=True)\n"
+              "print('WARNING: Location ignored', flush=True)\n"
+              f"while not pathlib.Path({str(release)!r}).exists():\n"
+              "    time.sleep(0.05)\n"
+              "print('Successfully installed ros-rclpy-7.1.6')\n")
+    said: list[str] = []
+    step = Step("[setup] pip install", [sys.executable, "-c", script], tmp_path,
+                tmp_path / "pip.log", where=pip_progress)
+    runner = threading.Thread(target=run_step, args=(step, said.append))
+    runner.start()
+    try:
+        wait_until(lambda: len(said) >= 2, timeout=REPORT_EVERY_S * 3, what="a progress line")
+    finally:
+        release.write_text("")
+        runner.join(60)
+    assert said[0] == "[setup] pip install ..."
+    assert re.fullmatch(r"\[setup\] pip install: \d+ s, Downloading ros_rclpy-7\.1\.6-cp311-"
+                        r"manylinux_2_28_x86_64\.whl \(2\.6 MB\)", said[1]), said
+    assert re.fullmatch(r"\[setup\] pip install: done in \d+\.\d s", said[-1]), said
+    assert (tmp_path / "pip.log").read_text().endswith("Successfully installed ros-rclpy-7.1.6\n")
+
+
+def test_make_progress_names_the_percentage_and_the_target() -> None:
+    output = ("[  1%] Generating C code for ROS interfaces\n"
+              "[ 45%] Building C object CMakeFiles/turtlesim__rosidl_generator_c.dir/"
+              "rosidl_generator_c/turtlesim/msg/detail/pose__functions.c.o\n")
+    assert make_progress(output) == "45%, compiling turtlesim__rosidl_generator_c"
+    assert make_progress("[ 56%] Linking C shared library libturtlesim__rosidl_generator_c.so"
+                         "\n") == "56%, linking libturtlesim__rosidl_generator_c.so"
+    assert make_progress("[  2%] Generating C code for ROS interfaces\n") == \
+        "2%, Generating C code for ROS interfaces"
+    assert make_progress("-- Install configuration: \"\"\n") is None
