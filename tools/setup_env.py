@@ -180,7 +180,7 @@ def build_shipped_interfaces() -> None:
     same = INTERFACES_STAMP.exists() and INTERFACES_STAMP.read_text().strip() == digest
     started = time.monotonic()
     say("building the interface packages tf2_msgs and control_msgs into the venv (cmake; "
-        "both at once, ~1-2 min on 2 cores, up to 5 on a busy machine)" if not same else
+        "both at once, ~1-2 min on 2 quiet cores, 5-15 on a busy machine)" if not same else
         "interface packages: keeping those built from the same sources")
     INTERFACES_STAMP.unlink(missing_ok=True)
     try:

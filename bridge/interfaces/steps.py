@@ -121,13 +121,18 @@ class RunningStep:
 
     def stop(self) -> None:
         """End it and everything it started (an interrupted build)."""
-        if self._popen is not None and self._popen.poll() is None:
+        if self._popen is None or self._popen.poll() is not None:
+            return
+        for sig, wait_s in ((signal.SIGTERM, 10.0), (signal.SIGKILL, None)):
             try:
-                os.killpg(self._popen.pid, signal.SIGTERM)
-                self._popen.wait(10)
-            except (ProcessLookupError, subprocess.TimeoutExpired):
-                os.killpg(self._popen.pid, signal.SIGKILL)
-                self._popen.wait()
+                os.killpg(self._popen.pid, sig)
+            except ProcessLookupError:
+                pass
+            try:
+                self._popen.wait(wait_s)
+                return
+            except subprocess.TimeoutExpired:
+                continue
 
     def _update_status(self) -> None:
         # Only what was written since the last report (the log may be long), up to its last
