@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import os
 import shlex
-import signal
 import subprocess
 from pathlib import Path
 from typing import Iterator
@@ -15,31 +14,8 @@ from typing import Iterator
 import pytest
 
 from interface_builds import BuiltInterfaces
-from support import REPO, Child, Processes, scaled, wait_until
-
-SUITE = REPO / "tools" / "reference_suite"
-SYSTEM_PYTHON = Path("/usr/bin/python3")
-
-
-def as_the_suite(command: str) -> str:
-    """The shell line SlicerROS2's ROS2Tests.py builds around a ros2 command."""
-    if not SYSTEM_PYTHON.exists():
-        pytest.skip(f"needs {SYSTEM_PYTHON} (the suite's interpreter, without ROS)")
-    return (f"unset PYTHONHOME ; unset PYTHONPATH ; . {shlex.quote(str(SUITE / 'setup.sh'))} ; "
-            f"{SYSTEM_PYTHON} {shlex.quote(str(SUITE / 'ros2_cli.py'))} {command}")
-
-
-def ros2(command: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(as_the_suite(command), shell=True, capture_output=True, text=True,
-                          timeout=scaled(30), start_new_session=True)
-
-
-def stop_group(child: Child) -> int:
-    """SIGTERM to the process group, as the suite's kill_subprocess; the shell's exit code."""
-    if child.popen.poll() is None:
-        os.killpg(child.pid, signal.SIGTERM)
-    return child.popen.wait(scaled(10))
-
+from reference_suite import SUITE, as_the_suite, ros2, stop_group
+from support import Child, Processes, wait_until
 
 def group_members(pgid: int) -> list[int]:
     members = []
