@@ -165,6 +165,8 @@ class Connection:
             try:
                 self._sock.sendall(data)
             except OSError as error:
+                if self._foreign is not None:  # the reader closed on another protocol's bytes
+                    raise self._foreign from None
                 raise ConnectionClosedError(f"sending to the daemon failed: {error}") from None
 
     def command(self, op: str, arguments: Optional[Mapping[str, Any]] = None, *,
