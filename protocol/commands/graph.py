@@ -1,13 +1,17 @@
-"""Ops about the daemon and the ROS graph as a whole: handshake and listings."""
+"""Ops about the daemon and the ROS graph as a whole: handshake, credential, listings."""
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
+from protocol.auth import NONCE
 from protocol.commands.fields import MAX_NAME, Args
 from protocol.commands.op import Op, Resource
 
-__all__ = ["Hello", "ListBridges", "ListServices", "ListTopics"]
+_PROOF = re.compile(r"[0-9a-f]{64}\Z")
+
+__all__ = ["Authenticate", "Hello", "ListBridges", "ListServices", "ListTopics"]
 
 
 @dataclass(frozen=True)
@@ -22,6 +26,24 @@ class Hello(Op, op="hello", writes=False):
     @classmethod
     def from_args(cls, a: Args) -> Hello:
         return cls(client=a.opt_str("client", max_len=MAX_NAME))
+
+
+@dataclass(frozen=True)
+class Authenticate(Op, op="authenticate", writes=False):
+    """Present the daemon's key (protocol/auth.py): a fresh ``nonce`` of this client's (32
+    to 128 hex digits) and ``proof``, the HMAC of the challenge `hello` gave with it. Once
+    accepted, this connection may write (ops that write, data sent to publishers)."""
+
+    nonce: str
+    proof: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()
+
+    @classmethod
+    def from_args(cls, a: Args) -> Authenticate:
+        return cls(nonce=a.req_str("nonce", pattern=NONCE, desc="32 to 128 hex digits"),
+                   proof=a.req_str("proof", pattern=_PROOF, desc="64 hex digits"))
 
 
 @dataclass(frozen=True)
