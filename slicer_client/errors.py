@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+from protocol.auth import KeyFileError
 from slicer_client.connection import (BridgeClientError, CommandRefusedError,
                                       CommandTimeoutError, ConnectionClosedError,
-                                      DaemonUnreachableError, NotTheDaemonError)
+                                      DaemonUnreachableError, DeadLinkError,
+                                      NotTheDaemonError)
 
 __all__ = ["BridgeClientError", "CommandRefusedError", "CommandTimeoutError",
-           "ConnectionClosedError", "DaemonUnreachableError", "NotTheDaemonError",
-           "ParameterRejectedError"]
+           "ConnectionClosedError", "DaemonUnreachableError", "DeadLinkError", "KeyFileError",
+           "NotTheDaemonError", "ParameterRejectedError"]
 
 
 class ParameterRejectedError(BridgeClientError):

@@ -16,16 +16,21 @@ __all__ = ["Authenticate", "Hello", "ListBridges", "ListServices", "ListTopics"]
 
 @dataclass(frozen=True)
 class Hello(Op, op="hello", writes=False):
-    """Handshake: the reply says the daemon's schema, version, node name and ops."""
+    """Handshake: the reply says the daemon's schema, version, node name and ops, whether
+    this connection may write and, when the daemon has a key, the challenge to answer with
+    `Authenticate`. ``heartbeat``: send this connection a STATUS every that many seconds
+    (protocol/liveness.py), so that it notices a dead link."""
 
     client: str | None = None
+    heartbeat: float | None = None
 
     def resources(self) -> tuple[Resource, ...]:
         return ()
 
     @classmethod
     def from_args(cls, a: Args) -> Hello:
-        return cls(client=a.opt_str("client", max_len=MAX_NAME))
+        return cls(client=a.opt_str("client", max_len=MAX_NAME),
+                   heartbeat=a.opt_float("heartbeat", None, low=0.1, high=60.0))
 
 
 @dataclass(frozen=True)
