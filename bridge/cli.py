@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import dataclasses
 import logging
+import os
 import sys
 from pathlib import Path
 from typing import Awaitable, Callable, TypeVar
@@ -14,8 +15,7 @@ from bridge import graph_inspect
 from bridge.allocator import keep_large_buffers_returnable
 from bridge.config import DEFAULT_HOST, DEFAULT_PORT, ConfigError, DaemonConfig
 from bridge.config import ConfigFile, build_security, load_config_file
-from bridge.interfaces import (InterfaceBuildError, build_into_this_environment,
-                               missing_runtime_line)
+from bridge.interfaces import missing_runtime_line
 from bridge.ros_args import RosArgsError, apply_parameters, split_ros_args
 from bridge.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_CLIENT,
                              DEFAULT_MAX_CLIENTS)
@@ -142,11 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
                                            "moving (state publisher and joint motion included).")
     _add_daemon_options(demo)
     graph_inspect.add_parsers(commands)
-    commands.add_parser("build-interfaces",
-                        help="build the ROS interfaces PyPI lacks (tf2_msgs) into this "
-                             "environment",
-                        description="Build tf2_msgs into this Python environment with CMake "
-                                    "(needs the 'interfaces' extra, a C/C++ compiler, make).")
+    _add_build_interfaces_parser(commands)
     # Parsed by its own module (it runs on its own too); listed here for --help.
     commands.add_parser("state-publisher", add_help=False,
                         help="a robot state publisher for any URDF (robot_description, /tf "
@@ -223,17 +219,85 @@ def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.Argume
     raise LookupError(command)
 
 
-def _build_interfaces() -> int:
-    import tempfile
+def _add_build_interfaces_parser(commands: argparse._SubParsersAction) -> None:
+    build = commands.add_parser(
+        "build-interfaces", help="build ROS 2 interface packages (msg/srv/action) into this "
+                                 "environment; without PATH, the ones the daemon ships",
+        description="Build ROS 2 interface packages (a folder with package.xml and a "
+                    "CMakeLists.txt calling rosidl_generate_interfaces, with msg/, srv/, "
+                    "action/) into this Python environment, so that Python and the daemon "
+                    "can use their types: the ROS 2 wheels from PyPI cannot build them "
+                    "themselves. Dependencies are built first (package.xml <depend>, "
+                    "<build_depend>, <exec_depend>); each must be given or installed. A "
+                    "package this environment can import already is skipped. Without PATH: "
+                    "the interfaces the daemon ships (tf2_msgs, control_msgs) that are "
+                    "missing. Needs the 'interfaces' extra, cmake >= 3.20, a C/C++ compiler "
+                    "and make. Exit code 2: bad input, nothing built; 1: a build failed.")
+    build.add_argument("paths", nargs="*", type=Path, metavar="PATH",
+                       help="an interface package's folder, or a folder holding several "
+                            "(a workspace's src/)")
+    build.add_argument("--force", action="store_true",
+                       help="rebuild packages that are importable already")
+    build.add_argument("--prefix", type=Path, metavar="DIR",
+                       help="install into DIR instead of this environment (then prints what "
+                            "to export to use them: PYTHONPATH, LD_LIBRARY_PATH, "
+                            "AMENT_PREFIX_PATH)")
+    build.add_argument("--build-dir", type=Path, metavar="DIR",
+                       help="where to build (default: a temporary folder, removed after a "
+                            "success, kept after a failure for its logs)")
+    build.add_argument("--parallel", type=_positive(int), metavar="N",
+                       default=min(2, os.cpu_count() or 1),
+                       help="build up to N independent packages at once (default: 2, or 1 on "
+                            "a single core)")
 
+
+def _build_interfaces(args: argparse.Namespace) -> int:
+    import shutil
+    import tempfile
+    import time
+
+    from bridge.interfaces import (InputError, InterfaceBuildError, build_interfaces,
+                                   describe_exports, find_packages, shipped_packages,
+                                   this_environment)
+
+    def say(line: str) -> None:
+        print(line, flush=True)
+
+    started = time.monotonic()
+    target = this_environment(args.prefix)
     try:
-        with tempfile.TemporaryDirectory(prefix="slicer-ros2-bridge-interfaces-") as scratch:
-            built = build_into_this_environment(Path(scratch))
+        packages = find_packages(args.paths, note=say) if args.paths else shipped_packages()
+    except InputError as error:
+        print(f"slicer-ros2-bridge build-interfaces: {error}", file=sys.stderr)
+        return 2
+    build_root = args.build_dir or Path(tempfile.mkdtemp(prefix="slicer-ros2-bridge-build-"))
+    say(f"building {len(packages)} interface package(s) into {target.install_prefix}: "
+        f"{', '.join(p.name for p in packages)}")
+    try:
+        built = build_interfaces(packages, target, force=args.force, build_root=build_root,
+                                 say=say, parallel=args.parallel)
+    except InputError as error:  # found before anything was built
+        print(f"slicer-ros2-bridge build-interfaces: {error}", file=sys.stderr)
+        if args.build_dir is None:
+            shutil.rmtree(build_root, ignore_errors=True)
+        return 2
     except InterfaceBuildError as error:
         print(f"slicer-ros2-bridge build-interfaces: {error}", file=sys.stderr)
+        if args.build_dir is None:
+            print(f"slicer-ros2-bridge build-interfaces: the build folder is kept for its "
+                  f"logs: {build_root}", file=sys.stderr)
         return 1
-    print(f"built into {sys.prefix}: {', '.join(built)}" if built
-          else "nothing to build: every interface package is importable already")
+    if args.build_dir is None:
+        shutil.rmtree(build_root, ignore_errors=True)
+    took = f"{time.monotonic() - started:.0f} s"
+    skipped = len(packages) - len(built)
+    rebuild = f"; {skipped} importable already (--force rebuilds them)" if skipped else ""
+    if not built:
+        say(f"done in {took}: nothing to build{rebuild}")
+        return 0
+    say(f"done in {took}: built {', '.join(built)} into {target.install_prefix}{rebuild}")
+    if target.exports:
+        say(f"to use them, export:\n{describe_exports(target.exports)}")
     return 0
 
 
@@ -267,7 +331,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     if args.command == "build-interfaces":
-        return _build_interfaces()
+        return _build_interfaces(args)
     # A wheel installed without ROS or tf2_msgs says so in one line, not with a traceback.
     lacking = missing_runtime_line()
     if lacking is not None:

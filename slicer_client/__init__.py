@@ -10,12 +10,13 @@ Pure Python with numpy and `protocol` only (no rclpy). See slicer_client/README.
 from slicer_client.bridge_state import BridgeSpec, BridgeState, StateFormatError
 from slicer_client.client import Client, connect
 from slicer_client.errors import (BridgeClientError, CommandRefusedError, CommandTimeoutError,
-                                  ConnectionClosedError, DaemonUnreachableError,
-                                  NotTheDaemonError, ParameterRejectedError,
+                                  ConnectionClosedError, DaemonUnreachableError, DeadLinkError,
+                                  KeyFileError, NotTheDaemonError, ParameterRejectedError,
                                   RobotNotLoadedError)
 from slicer_client.matrices import MatrixError, as_numpy, to_vtk
 
 __all__ = ["BridgeClientError", "BridgeSpec", "BridgeState", "Client",
            "CommandRefusedError", "CommandTimeoutError", "ConnectionClosedError",
-           "DaemonUnreachableError", "MatrixError", "NotTheDaemonError", "ParameterRejectedError",
-           "RobotNotLoadedError", "StateFormatError", "as_numpy", "connect", "to_vtk"]
+           "DaemonUnreachableError", "DeadLinkError", "KeyFileError", "MatrixError",
+           "NotTheDaemonError", "ParameterRejectedError", "RobotNotLoadedError",
+           "StateFormatError", "as_numpy", "connect", "to_vtk"]

@@ -19,11 +19,16 @@ names if they changed) and restores observers before user commands go through ag
 from __future__ import annotations
 
 import logging
+import secrets
+import ssl
 import threading
+from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
+from protocol.auth import KeyFileError, proof, read_key_text
+from protocol.liveness import DEAD_AFTER_S, HEARTBEAT_INTERVAL_S
 from protocol.messages import Command, Message
 from protocol.naming import KEY_ROBOT, KEY_ROLE
 from protocol import commands as c
@@ -49,10 +54,13 @@ _MODES = {"auto": "auto", "thread": "auto", "spin": "spin", "queue": "spin"}
 class Client:
     """A session with the daemon over any `Transport`; see the module docstring."""
 
-    def __init__(self, transport: Transport, *, callbacks: str = "auto") -> None:
+    def __init__(self, transport: Transport, *, callbacks: str = "auto",
+                 key: Optional[bytes] = None) -> None:
         if callbacks not in _MODES:
             raise ValueError(f"callbacks: expected 'auto' or 'spin', got {callbacks!r}")
         self._transport = transport
+        self._key = key  # the daemon's key (protocol/auth.py): presented on every connection
+        self.may_write = False  # what the daemon said of this connection, once connected
         self._events = EventDispatcher(_MODES[callbacks])
         self._lock = threading.RLock()
         self._resources: Dict[Tuple[str, ...], Resource] = {}  # creation order
@@ -96,7 +104,11 @@ class Client:
 
     def on_connected(self, command: CommandFn, first: bool) -> None:
         """Re-create everything (in order) on a new connection, then tell the user."""
-        self.daemon_info = command("hello", {"client": "slicer_client 0.1"})
+        hello = c.Hello(client="slicer_client 0.1", heartbeat=HEARTBEAT_INTERVAL_S)
+        self.daemon_info = command(hello.op, hello.to_args())
+        if self.daemon_info.get("heartbeat"):
+            self._transport.expect_data_within(DEAD_AFTER_S)
+        self._authenticate(command)
         with self._lock:
             resources = list(self._resources.values())
             self._by_device.clear()
@@ -107,6 +119,20 @@ class Client:
         if not first:
             for callback in list(self._connection_callbacks):
                 self.emit(callback, True, "")
+
+    def _authenticate(self, command: CommandFn) -> None:
+        """Present the key if the daemon asks for one; `may_write` says what came of it."""
+        auth = dict(self.daemon_info.get("auth") or {})
+        self.may_write = bool(auth.get("writes", True))
+        challenge = auth.get("challenge")
+        if self._key is None or not challenge:
+            if self._key is not None:
+                log.warning("the daemon at %s takes no key: this connection %s", self.address,
+                            "writes" if self.may_write else "is read-only")
+            return
+        nonce = secrets.token_hex(16)
+        request = c.Authenticate(nonce=nonce, proof=proof(self._key, str(challenge), nonce))
+        self.may_write = bool(command(request.op, request.to_args()).get("writes", False))
 
     def on_disconnected(self, reason: str) -> None:
         # The daemon cancels the goals of a client that leaves: their events never come.
@@ -498,14 +524,39 @@ class Client:
 
 
 def connect(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *, reconnect: bool = True,
-            callbacks: str = "auto", retry_interval: float = 0.5, max_interval: float = 5.0,
+            callbacks: str = "auto", key_file: Optional[str] = None,
+            tls: bool = False, ca_file: Optional[str] = None,
+            retry_interval: float = 0.5, max_interval: float = 5.0,
             connect_timeout: float = 3.0) -> Client:
     """Connect to the daemon. Raises `DaemonUnreachableError` (naming host:port and how to
-    start the daemon) if nothing listens there."""
+    start the daemon) if nothing listens there.
+
+    `key_file`: the daemon's key (`slicer-ros2-bridge keygen`), presented on every
+    connection: a daemon with a key lets only its holders write (docs/deployment.md).
+    `tls`: connect to the daemon's TLS port, checking its certificate against `ca_file`
+    (its own certificate, for a self-signed one) or the system's authorities."""
+    key = read_key_file(key_file) if key_file is not None else None
+    context = tls_context(ca_file) if tls else None
     transport = open_transport(host, port, reconnect=reconnect, retry_interval=retry_interval,
-                               max_interval=max_interval, connect_timeout=connect_timeout)
+                               max_interval=max_interval, connect_timeout=connect_timeout,
+                               tls=context)
     try:
-        return Client(transport, callbacks=callbacks)
+        return Client(transport, callbacks=callbacks, key=key)
     except BaseException:
         transport.close()
         raise
+
+
+def read_key_file(path: str) -> bytes:
+    """The key in a key file; `KeyFileError` naming the file if it is not one."""
+    try:
+        text = Path(path).read_text(encoding="ascii")
+    except (OSError, UnicodeDecodeError) as error:
+        raise KeyFileError(f"{path}: expected a key file (`slicer-ros2-bridge keygen "
+                           f"{path}`), got {error}") from None
+    return read_key_text(text, path)
+
+
+def tls_context(ca_file: Optional[str]) -> ssl.SSLContext:
+    """A client's TLS context: the daemon's certificate is checked, names included."""
+    return ssl.create_default_context(cafile=ca_file)

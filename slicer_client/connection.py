@@ -9,7 +9,9 @@ thread) and is kept as the latest value per device.
 from __future__ import annotations
 
 import itertools
+import select
 import socket
+import ssl
 import threading
 import time
 from typing import Any, Callable, Dict, List, Mapping, Optional
@@ -19,6 +21,7 @@ from protocol.conversions import igtl_timestamp_now
 from protocol.errors import FramingError, MessageError
 from protocol.framing import Decoder, encode
 from protocol.header import foreign_protocol
+from protocol.liveness import socket_options
 from protocol.messages import Command, Message, RtsCommand, Status
 
 __all__ = [
@@ -26,6 +29,7 @@ __all__ = [
     "DaemonUnreachableError",
     "NotTheDaemonError",
     "ConnectionClosedError",
+    "DeadLinkError",
     "CommandRefusedError",
     "CommandTimeoutError",
     "Connection",
@@ -77,6 +81,11 @@ class ConnectionClosedError(BridgeClientError, ConnectionError):
     """The daemon closed the connection (or it broke) while a request was waiting."""
 
 
+class DeadLinkError(ConnectionClosedError):
+    """Nothing came from the daemon for longer than its heartbeat allows: the link is down
+    (a pulled cable, the daemon's host gone). The client reconnects by itself."""
+
+
 class CommandRefusedError(BridgeClientError):
     """The daemon answered a command with an error; `error` says which field and why."""
 
@@ -120,17 +129,28 @@ class Connection:
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  on_message: Optional[MessageCallback] = None,
                  on_close: Optional[Callable[[Optional[BaseException]], None]] = None,
-                 connect_timeout: float = 3.0) -> None:
+                 connect_timeout: float = 3.0,
+                 tls: Optional[ssl.SSLContext] = None) -> None:
         self.host = host
         self.port = port
         self._on_message = on_message
         self._on_close = on_close
+        self._dead_after = 0.0  # seconds of silence that mean a dead link (0: never)
         try:
-            self._sock = socket.create_connection((host, port), timeout=connect_timeout)
+            sock = socket.create_connection((host, port), timeout=connect_timeout)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            for level, option, value in socket_options():
+                sock.setsockopt(level, option, value)
+            if tls is not None:
+                sock = tls.wrap_socket(sock, server_hostname=host)
+        except ssl.SSLError as error:
+            raise DaemonUnreachableError(host, port, f"TLS failed: {error.reason or error} "
+                                         f"(is this the daemon's --tls-port, and does the "
+                                         f"certificate match?)") from None
         except OSError as error:
             raise DaemonUnreachableError(host, port, error.strerror or str(error)) from None
+        self._sock = sock
         self._sock.settimeout(None)
-        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._send_lock = threading.Lock()
         self._state_lock = threading.Lock()
         self._pending: Dict[int, _Pending] = {}
@@ -162,6 +182,8 @@ class Connection:
             try:
                 self._sock.sendall(data)
             except OSError as error:
+                if self._foreign is not None:  # the reader closed on another protocol's bytes
+                    raise self._foreign from None
                 raise ConnectionClosedError(f"sending to the daemon failed: {error}") from None
 
     def command(self, op: str, arguments: Optional[Mapping[str, Any]] = None, *,
@@ -202,6 +224,19 @@ class Connection:
         return reply.result
 
     # --- receiving ----------------------------------------------------------------------
+    def expect_data_within(self, seconds: float) -> None:
+        """From now on, `seconds` without a byte from the daemon (which then sends a
+        heartbeat more often) close this connection as dead (`DeadLinkError`)."""
+        self._dead_after = max(0.0, float(seconds))
+
+    def _wait_readable(self) -> bool:
+        """Wait for bytes within the dead-link bound; False if none came in time."""
+        wait = self._dead_after
+        if not wait or (isinstance(self._sock, ssl.SSLSocket) and self._sock.pending()):
+            return True
+        readable, _, _ = select.select([self._sock], [], [], wait)
+        return bool(readable)
+
     def latest(self, device: str) -> Optional[Message]:
         with self._state_lock:
             return self._latest.get(device)
@@ -233,6 +268,11 @@ class Connection:
         received = False
         try:
             while True:
+                if not self._wait_readable():
+                    reason = DeadLinkError(
+                        f"no data from the daemon at {self.host}:{self.port} for "
+                        f"{self._dead_after:g} s: the link is down; reconnecting")
+                    break
                 data = self._sock.recv(1 << 20)
                 if not data:
                     break
@@ -258,7 +298,7 @@ class Connection:
                 self._foreign = NotTheDaemonError(self.host, self.port,
                                                   _describe_foreign_bytes(first))
                 reason = self._foreign
-        except OSError as error:
+        except (OSError, ValueError) as error:  # ValueError: select on a socket closed here
             if not self._closed:
                 reason = error
         finally:

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 from typing import Optional
 
+from protocol.auth import KeyFileError
 from slicer_client.connection import (BridgeClientError, CommandRefusedError,
                                       CommandTimeoutError, ConnectionClosedError,
-                                      DaemonUnreachableError, NotTheDaemonError)
+                                      DaemonUnreachableError, DeadLinkError,
+                                      NotTheDaemonError)
 
 __all__ = ["BridgeClientError", "CommandRefusedError", "CommandTimeoutError",
-           "ConnectionClosedError", "DaemonUnreachableError", "NotTheDaemonError",
-           "ParameterRejectedError", "PointsError", "RobotNotLoadedError"]
+           "ConnectionClosedError", "DaemonUnreachableError", "DeadLinkError", "KeyFileError",
+           "NotTheDaemonError", "ParameterRejectedError", "PointsError", "RobotNotLoadedError"]
 
 
 class ParameterRejectedError(BridgeClientError):

@@ -14,6 +14,7 @@ listener about messages, connections and losses. Two implementations exist:
 from __future__ import annotations
 
 import logging
+import ssl
 import threading
 from collections import deque
 from typing import Any, Callable, Deque, Dict, Mapping, Optional
@@ -63,6 +64,9 @@ class Transport(Protocol):
 
     def send(self, message: Message) -> None: ...
 
+    def expect_data_within(self, seconds: float) -> None:
+        """The daemon sends a heartbeat: `seconds` of silence mean a dead link."""
+
     def close(self) -> None: ...
 
 
@@ -71,8 +75,10 @@ class ReconnectingTransport:
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  reconnect: bool = True, retry_interval: float = 0.5,
-                 max_interval: float = 5.0, connect_timeout: float = 3.0) -> None:
+                 max_interval: float = 5.0, connect_timeout: float = 3.0,
+                 tls: Optional[ssl.SSLContext] = None) -> None:
         self.host = host
+        self._tls = tls
         self.port = port
         self.address = f"{host}:{port}"
         self._reconnect = reconnect
@@ -100,6 +106,7 @@ class ReconnectingTransport:
             self._generation += 1
             generation = self._generation
         return Connection(self.host, self.port, connect_timeout=self._connect_timeout,
+                          tls=self._tls,
                           on_message=self._on_message,
                           on_close=lambda reason: self._lost(generation, reason))
 
@@ -204,6 +211,9 @@ class ReconnectingTransport:
         self._current(0.0, f"sending {message.type_name} to {message.device_name!r}") \
             .send(message)
 
+    def expect_data_within(self, seconds: float) -> None:
+        self._conn.expect_data_within(seconds)
+
     def close(self) -> None:
         self._stop.set()
         self._ready.clear()
@@ -215,8 +225,9 @@ class ReconnectingTransport:
 
 def open_transport(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                    reconnect: bool = True, retry_interval: float = 0.5,
-                   max_interval: float = 5.0, connect_timeout: float = 3.0) -> Transport:
+                   max_interval: float = 5.0, connect_timeout: float = 3.0,
+                   tls: Optional[ssl.SSLContext] = None) -> Transport:
     """The one factory for socket transports (the Slicer module builds its own)."""
     return ReconnectingTransport(host, port, reconnect=reconnect,
                                  retry_interval=retry_interval, max_interval=max_interval,
-                                 connect_timeout=connect_timeout)
+                                 connect_timeout=connect_timeout, tls=tls)

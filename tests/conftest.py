@@ -6,6 +6,8 @@
 - `free_port`: a TCP port nobody listens on.
 - `processes`: starts a child (the daemon, an rclpy peer) and guarantees it is stopped.
 - `module_processes`: the same, shared by the tests of one module.
+- `turtlesim_interfaces`: turtlesim's interfaces (not on PyPI) for the children a test
+  starts, built once into a cache (interface_builds.py); skips where they cannot be built.
 - every test fails if it leaves a child process of the test runner behind.
 - property tests (hypothesis) have no per-example deadline.
 """
@@ -23,6 +25,7 @@ from typing import Iterator
 import pytest
 from hypothesis import settings
 
+from interface_builds import BuildUnavailable, BuiltInterfaces, use_test_interfaces
 from support import Processes, children_of, pick_free_port, scaled
 
 # 0 and 101 are left alone; other ROS users on this host tend to sit on the default 0.
@@ -68,6 +71,16 @@ def module_processes(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Proce
         yield manager
     finally:
         manager.stop_all()
+
+
+@pytest.fixture(scope="session")
+def turtlesim_interfaces() -> BuiltInterfaces:
+    """The `turtlesim` interfaces (tests/interfaces/turtlesim), importable by every process
+    started from now on (PYTHONPATH, LD_LIBRARY_PATH, AMENT_PREFIX_PATH), not by this one."""
+    try:
+        return use_test_interfaces()
+    except BuildUnavailable as error:
+        pytest.skip(str(error))
 
 
 @pytest.fixture(autouse=True)

@@ -5,12 +5,19 @@ they wait for instead of a fixed 100 ms (the suite must pass on a busy machine).
 
 from __future__ import annotations
 
+import os
+import shlex
+import signal
+import subprocess
 import time
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, Callable
 
+import pytest
+
 from slicer_client.reference.entry_points import install
-from support import scaled
+from support import REPO, Child, scaled
 
 
 class _Scene:
@@ -81,3 +88,28 @@ class TestObserverTf2Lookup:
         self.counter += 1
         self.lastTransform = self.vtk.vtkMatrix4x4()
         caller.GetMatrixTransformToParent(self.lastTransform)
+
+
+# --- the ros2 command as the suite runs it (tools/reference_suite/ros2_cli.py) -----------
+SUITE = REPO / "tools" / "reference_suite"
+SYSTEM_PYTHON = Path("/usr/bin/python3")
+
+
+def as_the_suite(command: str) -> str:
+    """The shell line SlicerROS2's ROS2Tests.py builds around a ros2 command."""
+    if not SYSTEM_PYTHON.exists():
+        pytest.skip(f"needs {SYSTEM_PYTHON} (the suite's interpreter, without ROS)")
+    return (f"unset PYTHONHOME ; unset PYTHONPATH ; . {shlex.quote(str(SUITE / 'setup.sh'))} ; "
+            f"{SYSTEM_PYTHON} {shlex.quote(str(SUITE / 'ros2_cli.py'))} {command}")
+
+
+def ros2(command: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(as_the_suite(command), shell=True, capture_output=True, text=True,
+                          timeout=scaled(30), start_new_session=True)
+
+
+def stop_group(child: Child) -> int:
+    """SIGTERM to the process group, as the suite's kill_subprocess; the shell's exit code."""
+    if child.popen.poll() is None:
+        os.killpg(child.pid, signal.SIGTERM)
+    return child.popen.wait(scaled(10))

@@ -7,7 +7,11 @@ What it does, printing each step:
   2. creates `.venv` and installs the project with its pinned dependencies (ROS 2 Jazzy from
      PyPI wheels, test tools, interface build tools);
   3. builds the `tf2_msgs` and `control_msgs` interface packages (bridge/interfaces/) into
-     the venv, because they have no PyPI wheel.
+     the venv, because they have no PyPI wheel: both at once (they do not depend on each
+     other; control_msgs is the long one), and only when their sources, the ROS pins or
+     Python changed since they were built.
+
+Every step says when it starts, what it is doing every few seconds, and how long it took.
 
 It needs no root and writes nothing outside the repository (pip's cache and temporary files
 go to `.cache/`). A second run that finds a stamp matching the inputs returns in a moment.
@@ -18,8 +22,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import shutil
-import subprocess
 import sys
 import sysconfig
 import time
@@ -27,15 +29,20 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
-# How to build the interfaces is the package's own knowledge (the CLI's build-interfaces
-# uses it too); it imports nothing but the standard library.
-from bridge.interfaces import (INTERFACES_DIR, MIN_CMAKE, build_steps,  # noqa: E402
-                               cmake_version, interface_packages)
+# How to build the interfaces, and how to run a long step without going silent, is the
+# package's own knowledge (the CLI's build-interfaces uses it too); it imports nothing but
+# the standard library.
+from bridge.interfaces import (INTERFACES_DIR, MIN_CMAKE, InterfaceBuildError,  # noqa: E402
+                               Step, StepFailedError, Target, build_interfaces,
+                               find_cmake, last_line, missing_build_tools, pip_progress,
+                               run_step, shipped_packages)
 
 VENV = REPO / ".venv"
 CACHE = REPO / ".cache"
 BUILD = REPO / "build"
 STAMP = VENV / ".slicer-ros2-bridge-setup"
+# What the interface packages in the venv were built from (see interfaces_digest).
+INTERFACES_STAMP = VENV / ".slicer-ros2-bridge-interfaces"
 CMAKE_WHEEL = "cmake==3.31.6"
 # The ROS wheels are built for these CPython versions only.
 SUPPORTED_PYTHONS = ((3, 10), (3, 11), (3, 12), (3, 13))
@@ -62,10 +69,23 @@ def inputs_digest() -> str:
     for name in STAMP_INPUTS:
         digest.update(name.encode())
         digest.update((REPO / name).read_bytes())
+    digest.update(interfaces_digest().encode())
+    return digest.hexdigest()
+
+
+def interfaces_digest() -> str:
+    """What the built interface packages depend on: their sources, the ROS wheels' pins and
+    Python. A set-up rerun for anything else (a new test tool) keeps them."""
+    digest = hashlib.sha256()
     for path in sorted(INTERFACES_DIR.rglob("*")):
-        if path.is_file():
+        # What the build reads, not the Python that runs it or the READMEs.
+        if path.suffix in (".msg", ".srv", ".action", ".xml", ".cmake") or \
+                path.name == "CMakeLists.txt":
             digest.update(str(path.relative_to(REPO)).encode())
             digest.update(path.read_bytes())
+    pins = [line for line in (REPO / "pyproject.toml").read_text().splitlines()
+            if '"ros-jazzy-' in line]
+    digest.update("\n".join(pins).encode())
     digest.update(sys.version.encode())
     return digest.hexdigest()
 
@@ -83,24 +103,19 @@ def child_env() -> dict[str, str]:
     return env
 
 
-def run(cmd: list[str], *, cwd: Path = REPO, log: Path | None = None) -> None:
-    """Run a command; on failure show the tail of its output and raise."""
-    started = time.monotonic()
-    if log is None:
-        result = subprocess.run(cmd, cwd=cwd, env=child_env())
-        failed = result.returncode != 0
-        tail = ""
-    else:
-        with log.open("w") as out:
-            result = subprocess.run(cmd, cwd=cwd, env=child_env(), stdout=out,
-                                    stderr=subprocess.STDOUT)
-        failed = result.returncode != 0
-        tail = "\n".join(log.read_text(errors="replace").splitlines()[-30:])
-    if failed:
-        where = f" (full log: {log})" if log else ""
-        raise SetupError(f"command failed with exit code {result.returncode}{where}: "
-                         f"{' '.join(cmd)}\n{tail}")
-    say(f"  done in {time.monotonic() - started:.1f} s")
+def run(label: str, cmd: list[str], log: Path) -> None:
+    """Run a command, saying what it does every few seconds; on failure show the tail of its
+    log and raise."""
+    where = pip_progress if "pip" in label else last_line
+    try:
+        run_step(Step(f"[setup] {label}", cmd, REPO, log, child_env(), where=where),
+                 say=print_flushed)
+    except StepFailedError as error:
+        raise SetupError(str(error)) from None
+
+
+def print_flushed(text: str) -> None:
+    print(text, flush=True)
 
 
 def check_python() -> None:
@@ -117,7 +132,7 @@ def check_python() -> None:
 
 
 def check_build_tools() -> None:
-    missing = [tool for tool in ("cc", "c++", "make") if shutil.which(tool) is None]
+    missing = missing_build_tools()
     if missing:
         raise SetupError(f"missing build tool(s): {', '.join(missing)} (needed to build the "
                          f"tf2_msgs interfaces); on Debian: apt-get install build-essential")
@@ -127,18 +142,21 @@ def check_build_tools() -> None:
                          f"apt-get install python3-dev")
 
 
-def ensure_cmake() -> str:
+def venv_target() -> Target:
+    return Target(venv_python(), VENV, VENV)
+
+
+def ensure_cmake() -> None:
     """A cmake >= 3.20: the system's, or else the cmake wheel installed into the venv."""
-    venv_cmake = VENV / "bin" / "cmake"
-    for candidate in (shutil.which("cmake"), str(venv_cmake) if venv_cmake.exists() else None):
-        if candidate and (cmake_version(candidate) or (0,)) >= MIN_CMAKE:
-            return candidate
-    say(f"cmake >= {'.'.join(map(str, MIN_CMAKE))} not found: installing {CMAKE_WHEEL} "
-        f"into the venv")
-    run([str(venv_python()), "-m", "pip", "install", CMAKE_WHEEL], log=CACHE / "pip-cmake.log")
-    if (cmake_version(str(venv_cmake)) or (0,)) < MIN_CMAKE:
-        raise SetupError(f"cmake from the {CMAKE_WHEEL} wheel does not run: {venv_cmake}")
-    return str(venv_cmake)
+    if find_cmake(venv_target()) is not None:
+        return
+    say(f"cmake >= {'.'.join(map(str, MIN_CMAKE))} not found: installing {CMAKE_WHEEL} into "
+        f"the venv")
+    run("pip install cmake", [str(venv_python()), "-m", "pip", "install", CMAKE_WHEEL],
+        CACHE / "pip-cmake.log")
+    if find_cmake(venv_target()) is None:
+        raise SetupError(f"cmake from the {CMAKE_WHEEL} wheel does not run: "
+                         f"{VENV / 'bin' / 'cmake'}")
 
 
 def create_venv() -> None:
@@ -146,36 +164,43 @@ def create_venv() -> None:
         say(f"venv exists: {VENV}")
         return
     say(f"creating venv {VENV} with {sys.executable}")
-    run([sys.executable, "-m", "venv", str(VENV)])
+    run("python -m venv", [sys.executable, "-m", "venv", str(VENV)], CACHE / "venv.log")
 
 
 def install_project() -> None:
-    say("installing the project and its pinned dependencies (ROS 2 Jazzy wheels, "
-        "pyigtl, numpy, yourdfpy, trimesh, test and interface-build tools)")
-    run([str(venv_python()), "-m", "pip", "install", "-e", f"{REPO}[test,interfaces]"],
-        log=CACHE / "pip-install.log")
+    say("installing the project and its pinned dependencies (ROS 2 Jazzy wheels, pyigtl, "
+        "numpy, yourdfpy, trimesh, test and interface-build tools)")
+    run("pip install", [str(venv_python()), "-m", "pip", "install", "-e",
+                        f"{REPO}[test,interfaces]"], CACHE / "pip-install.log")
 
 
-def build_interfaces(cmake: str) -> None:
-    for package in interface_packages():
-        build_dir = BUILD / "interfaces" / package.name
-        # From scratch: a CMake cache left by an older layout would refuse the source.
-        shutil.rmtree(build_dir, ignore_errors=True)
-        build_dir.mkdir(parents=True)
-        say(f"building interface package {package.name} into the venv (cmake, ~10 s)")
-        for step in build_steps(package, build_dir=build_dir, prefix=VENV,
-                                python=str(venv_python()), cmake=cmake):
-            run(step.argv, cwd=step.cwd, log=step.log)
+def build_shipped_interfaces() -> None:
+    """tf2_msgs and control_msgs, both at once; kept when built from the same inputs."""
+    digest = interfaces_digest()
+    same = INTERFACES_STAMP.exists() and INTERFACES_STAMP.read_text().strip() == digest
+    started = time.monotonic()
+    say("building the interface packages tf2_msgs and control_msgs into the venv (cmake; "
+        "both at once, ~1-2 min on 2 quiet cores, 5-15 on a busy machine)" if not same else
+        "interface packages: keeping those built from the same sources")
+    INTERFACES_STAMP.unlink(missing_ok=True)
+    try:
+        build_interfaces(shipped_packages(), venv_target(), force=not same,
+                         build_root=BUILD / "interfaces", say=say, parallel=2)
+    except InterfaceBuildError as error:
+        raise SetupError(str(error)) from None
+    INTERFACES_STAMP.write_text(digest + "\n")
+    say(f"  interface packages done in {time.monotonic() - started:.1f} s")
 
 
 def verify() -> None:
-    say("checking the environment: rclpy, tf2_msgs, geometry_msgs, pyigtl, yourdfpy")
     probe = ("import rclpy, pyigtl, yourdfpy, trimesh, numpy; "
              "from tf2_msgs.msg import TFMessage, TF2Error; "
              "from control_msgs.action import FollowJointTrajectory; "
              "from geometry_msgs.msg import TransformStamped; "
              "TFMessage(transforms=[TransformStamped()]); print('ok')")
-    run([str(venv_python()), "-c", probe])
+    say("checking the environment: rclpy, tf2_msgs, control_msgs, geometry_msgs, pyigtl, "
+        "yourdfpy")
+    run("import check", [str(venv_python()), "-c", probe], CACHE / "verify.log")
 
 
 def main() -> int:
@@ -192,8 +217,8 @@ def main() -> int:
         STAMP.unlink(missing_ok=True)
         create_venv()
         install_project()
-        cmake = ensure_cmake()
-        build_interfaces(cmake)
+        ensure_cmake()
+        build_shipped_interfaces()
         verify()
         STAMP.write_text(digest + "\n")
     except SetupError as error:

@@ -1,47 +1,47 @@
-"""ROS interface packages the daemon needs that have no PyPI wheel, and how to build them.
+"""ROS interface packages: the ones the daemon needs that have no PyPI wheel, and building
+any interface package into an environment made of the ROS 2 PyPI wheels.
 
 `tf2_msgs` (TFMessage, TF2Error) and `control_msgs` (FollowJointTrajectory and the rest of
 ros2_control's interfaces, for the demo arm's trajectory action) ship here as their upstream
-definitions (control_msgs/README.md says which release). A ROS 2 install
-from apt has it already; an environment made of PyPI wheels gets it built into itself
-with CMake and the ROS interface generators (the `interfaces` extra), by `make setup`
-(tools/setup_env.py) in a clone, or by `slicer-ros2-bridge build-interfaces` after
-`pip install slicer-ros2-bridge[interfaces]`.
+definitions (control_msgs/README.md says which release). A ROS 2 install from apt has them
+already; an environment made of PyPI wheels gets them built into itself with CMake and the
+ROS interface generators (the `interfaces` extra), by `make setup` (tools/setup_env.py) in a
+clone, or by `slicer-ros2-bridge build-interfaces` after `pip install
+slicer-ros2-bridge[interfaces]`. The same command builds a user's own packages (build.py).
 
-No ROS import here: this runs before ROS is known to be importable.
+No ROS import here: this runs before ROS is known to be importable, and with any Python
+(tools/setup_env.py).
 """
 
 from __future__ import annotations
 
 import importlib.util
-import os
-import re
-import shutil
-import subprocess
-import sys
-from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["MIN_CMAKE", "InterfaceBuildError", "build_steps", "cmake_version",
-           "interface_packages", "missing_interfaces", "missing_runtime_line"]
+from bridge.interfaces.build import (MIN_CMAKE, Target, build_interfaces, check_build_tools,
+                                     cmake_version, describe_exports, find_cmake,
+                                     missing_build_tools, prefix_exports, this_environment,
+                                     with_exports)
+from bridge.interfaces.errors import (DependencyCycleError, InputError, InterfaceBuildError,
+                                      MissingDependencyError, PackageError, StepFailedError,
+                                      ToolMissingError)
+from bridge.interfaces.packages import InterfacePackage, find_packages, read_package
+from bridge.interfaces.steps import Step, last_line, pip_progress, run_step
+
+__all__ = ["INTERFACES_DIR", "MIN_CMAKE", "DependencyCycleError", "InputError",
+           "InterfaceBuildError", "InterfacePackage", "MissingDependencyError", "PackageError",
+           "Step", "StepFailedError", "Target", "ToolMissingError", "build_interfaces",
+           "check_build_tools", "cmake_version", "describe_exports", "find_cmake",
+           "find_packages", "interface_packages", "last_line", "missing_build_tools",
+           "missing_interfaces", "missing_runtime_line", "pip_progress", "prefix_exports",
+           "read_package",
+           "run_step", "shipped_packages", "this_environment", "with_exports"]
 
 INTERFACES_DIR = Path(__file__).resolve().parent
-MIN_CMAKE = (3, 20)
 
 
-class InterfaceBuildError(Exception):
-    """A build step failed or a tool is missing; the text says which and what to do."""
-
-
-@dataclass(frozen=True)
-class BuildStep:
-    argv: list[str]
-    cwd: Path
-    log: Path
-
-
-# Built in this order (a package may depend on one built before it); any other shipped
-# package comes after these, by name.
+# Started in this order (what the daemon needs before what the demo needs); the build
+# orders by package.xml dependencies first.
 BUILD_ORDER = ("tf2_msgs", "control_msgs")
 # What the daemon cannot run without.
 REQUIRED = ("tf2_msgs",)
@@ -79,56 +79,6 @@ def missing_runtime_line() -> str | None:
     return None
 
 
-def cmake_version(cmake: str) -> tuple[int, ...] | None:
-    try:
-        out = subprocess.run([cmake, "--version"], capture_output=True, text=True,
-                             check=True).stdout
-    except (OSError, subprocess.CalledProcessError):
-        return None
-    found = re.search(r"(\d+)\.(\d+)", out)
-    return tuple(int(part) for part in found.groups()) if found else None
-
-
-def build_steps(package: Path, *, build_dir: Path, prefix: Path, python: str,
-                cmake: str) -> list[BuildStep]:
-    """Configure and install one interface package into `prefix` (an environment whose
-    ROS wheels provide the generators), as commands with their logs."""
-    jobs = str(max(1, min(4, os.cpu_count() or 1)))
-    return [
-        BuildStep([cmake, str(package), f"-DCMAKE_INSTALL_PREFIX={prefix}",
-                   f"-DCMAKE_PREFIX_PATH={prefix}", f"-DPython3_EXECUTABLE={python}",
-                   "-DBUILD_TESTING=OFF"], build_dir, build_dir / "configure.log"),
-        BuildStep(["make", f"-j{jobs}", "install"], build_dir, build_dir / "build.log"),
-    ]
-
-
-def build_into_this_environment(build_root: Path) -> list[str]:
-    """Build every missing interface package into `sys.prefix`; returns the names built.
-    Raises `InterfaceBuildError` naming the missing tool or the failed step's log."""
-    cmake = shutil.which("cmake")
-    if cmake is None or (cmake_version(cmake) or (0,)) < MIN_CMAKE:
-        raise InterfaceBuildError(
-            f"expected cmake >= {'.'.join(map(str, MIN_CMAKE))}, got "
-            f"{'none' if cmake is None else cmake}: pip install cmake (or your system's)")
-    for tool in ("cc", "c++", "make"):
-        if shutil.which(tool) is None:
-            raise InterfaceBuildError(f"expected the build tool {tool!r} on PATH, got none "
-                                      f"(on Debian: apt-get install build-essential)")
-    built = []
-    for package in interface_packages():
-        if importlib.util.find_spec(package.name) is not None:
-            continue
-        build_dir = build_root / package.name
-        build_dir.mkdir(parents=True, exist_ok=True)
-        for step in build_steps(package, build_dir=build_dir, prefix=Path(sys.prefix),
-                                python=sys.executable, cmake=cmake):
-            with step.log.open("w") as out:
-                result = subprocess.run(step.argv, cwd=step.cwd, stdout=out,
-                                        stderr=subprocess.STDOUT)
-            if result.returncode != 0:
-                tail = "\n".join(step.log.read_text(errors="replace").splitlines()[-15:])
-                raise InterfaceBuildError(f"building {package.name} failed: {' '.join(step.argv)}"
-                                          f" exited with {result.returncode} (log: {step.log})"
-                                          f"\n{tail}")
-        built.append(package.name)
-    return built
+def shipped_packages() -> list[InterfacePackage]:
+    """The interface packages shipped here, read, in BUILD_ORDER."""
+    return [read_package(folder) for folder in interface_packages()]

@@ -1,27 +1,54 @@
-"""Ops about the daemon and the ROS graph as a whole: handshake and listings."""
+"""Ops about the daemon and the ROS graph as a whole: handshake, credential, listings."""
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
+from protocol.auth import NONCE
 from protocol.commands.fields import MAX_NAME, Args
 from protocol.commands.op import Op, Resource
 
-__all__ = ["Hello", "ListBridges", "ListServices", "ListTopics"]
+_PROOF = re.compile(r"[0-9a-f]{64}\Z")
+
+__all__ = ["Authenticate", "Hello", "ListBridges", "ListServices", "ListTopics"]
 
 
 @dataclass(frozen=True)
 class Hello(Op, op="hello", writes=False):
-    """Handshake: the reply says the daemon's schema, version, node name and ops."""
+    """Handshake: the reply says the daemon's schema, version, node name and ops, whether
+    this connection may write and, when the daemon has a key, the challenge to answer with
+    `Authenticate`. ``heartbeat``: send this connection a STATUS every that many seconds
+    (protocol/liveness.py), so that it notices a dead link."""
 
     client: str | None = None
+    heartbeat: float | None = None
 
     def resources(self) -> tuple[Resource, ...]:
         return ()
 
     @classmethod
     def from_args(cls, a: Args) -> Hello:
-        return cls(client=a.opt_str("client", max_len=MAX_NAME))
+        return cls(client=a.opt_str("client", max_len=MAX_NAME),
+                   heartbeat=a.opt_float("heartbeat", None, low=0.1, high=60.0))
+
+
+@dataclass(frozen=True)
+class Authenticate(Op, op="authenticate", writes=False):
+    """Present the daemon's key (protocol/auth.py): a fresh ``nonce`` of this client's (32
+    to 128 hex digits) and ``proof``, the HMAC of the challenge `hello` gave with it. Once
+    accepted, this connection may write (ops that write, data sent to publishers)."""
+
+    nonce: str
+    proof: str
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()
+
+    @classmethod
+    def from_args(cls, a: Args) -> Authenticate:
+        return cls(nonce=a.req_str("nonce", pattern=NONCE, desc="32 to 128 hex digits"),
+                   proof=a.req_str("proof", pattern=_PROOF, desc="64 hex digits"))
 
 
 @dataclass(frozen=True)

@@ -96,7 +96,11 @@ action_types = st.sampled_from(["control_msgs/action/FollowJointTrajectory",
 goal_ids = st.uuids().map(lambda u: u.hex)
 
 STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
-    c.Hello: st.builds(c.Hello, client=st.none() | st.text(min_size=1, max_size=30)),
+    c.Hello: st.builds(c.Hello, client=st.none() | st.text(min_size=1, max_size=30),
+                       heartbeat=st.none() | st.floats(0.1, 60.0)),
+    c.Authenticate: st.builds(c.Authenticate, nonce=st.from_regex(r"[0-9a-f]{32,64}",
+                                                                  fullmatch=True),
+                              proof=st.from_regex(r"[0-9a-f]{64}", fullmatch=True)),
     c.ListBridges: st.just(c.ListBridges()),
     c.ListTopics: st.just(c.ListTopics()),
     c.ListServices: st.just(c.ListServices()),

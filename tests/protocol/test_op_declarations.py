@@ -23,6 +23,7 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "list_topics": ({}, set()),
     "list_services": ({}, set()),
     "describe_type": ({"type": "PoseArray"}, set()),
+    "authenticate": ({"nonce": "0" * 32, "proof": "1" * 64}, set()),
     "create_subscriber": ({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),
     "remove_subscriber": ({"topic": "/a"}, set()),
     "create_publisher": ({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),
