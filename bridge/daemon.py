@@ -58,6 +58,8 @@ class Daemon:
         self.parameters = ParameterBridges(self.ros, self.hub, names, policy=policy)
         self.services = ServiceBridges(self.ros, self.hub, names, policy=policy)
         self.actions = ActionBridges(self.ros, self.hub, names)
+        # An action's hidden cancel service obeys cancel_goal's ownership rule.
+        self.services.add_call_guard(self.actions.sender.judge_service_call)
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
                                    parameters=self.parameters,
                                    package_paths=dict(config.package_paths),
@@ -79,13 +81,17 @@ class Daemon:
 
     async def start(self) -> None:
         try:
-            await self.server.start()
+            # The port is bound first (one in use is the first error), but no client is
+            # accepted before the operator's bridges exist: a client could otherwise race
+            # them (own one, remove one, make one fail with another type).
+            await self.server.start(serving=False)
             self.ros.start()
             for command in self.config.startup:
                 try:
                     await self.dispatcher.execute(command.op, command.arguments)
                 except ProtocolError as error:
                     raise StartupError(f"{command.where}: {error}") from None
+            await self.server.serve()
         except BaseException:
             await self.stop()
             raise

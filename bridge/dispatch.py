@@ -9,6 +9,11 @@ handler comes from the op's declarations (`protocol.commands.op`): the security 
 judges its resources, a creation is counted against its client's quota and recorded with
 who made it (the operator's start-up config or a client), and a removal is allowed by the
 ownership rules (`bridge.security.BridgeOwners`).
+
+Creations and removals of one bridge (its kind and identity) run one at a time, in the
+order they came (`BridgeLocks`): a removal that arrives while an asynchronous creation of
+the same bridge still waits (a parameter client waiting for its node) runs once that
+creation is done, never against a half-made bridge. Requests for other bridges do not wait.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from __future__ import annotations
 import asyncio
 import inspect
 import logging
+from collections import deque
 from typing import (Any, Awaitable, Callable, Mapping, Optional, Protocol, Sequence, Union,
                     cast)
 
@@ -64,6 +70,47 @@ def _identity_fields(request: c.Request) -> tuple[str, ...]:
     return _KINDS[cast(str, cls.removes)].bridge.identity
 
 
+class BridgeLocks:
+    """One first-come-first-served lock per bridge key (loop thread only). A key is held
+    from the start of a create or remove until its outcome is settled."""
+
+    def __init__(self) -> None:
+        self._queues: dict[BridgeKey, deque[asyncio.Future[None]]] = {}
+
+    def try_take(self, key: BridgeKey) -> bool:
+        """Take ``key`` now if nobody holds it."""
+        if key in self._queues:
+            return False
+        self._queues[key] = deque()
+        return True
+
+    async def take(self, key: BridgeKey) -> None:
+        """Take ``key``, after those who asked before."""
+        if self.try_take(key):
+            return
+        turn: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._queues[key].append(turn)
+        try:
+            await turn
+        except asyncio.CancelledError:
+            if turn.done() and not turn.cancelled():
+                self.release(key)  # handed over as we were cancelled: pass it on
+            elif turn in self._queues.get(key, ()):
+                self._queues[key].remove(turn)
+            raise
+
+    def release(self, key: BridgeKey) -> None:
+        queue = self._queues.get(key)
+        if queue is None:
+            return
+        while queue:
+            turn = queue.popleft()
+            if not turn.done():
+                turn.set_result(None)
+                return
+        del self._queues[key]
+
+
 class Dispatcher:
     def __init__(self, ros: RosNode, hub: Hub, capabilities: Sequence[Capability], *,
                  policy: SecurityPolicy | None = None,
@@ -81,6 +128,7 @@ class Dispatcher:
         self._quota = BridgeQuota(self._policy.max_bridges_per_client,
                                   self._policy.max_bridges)
         self._owners = BridgeOwners()
+        self._locks = BridgeLocks()
         hub.add_closed_listener(self._client_left)
         self._tasks: set[asyncio.Task[None]] = set()
         # The one table of what this daemon serves, built from each capability's own list.
@@ -151,6 +199,40 @@ class Dispatcher:
                                    self._resolve_frame, from_client=client is not None,
                                    resolve_file=self._resolve_file)
         key = self._bridge_key(request)
+        if key is None:
+            return self._call(handler, request, client, None)
+        if not self._locks.try_take(key):
+            return self._after_turn(handler, request, client, key)
+        try:
+            outcome = self._call(handler, request, client, key)
+        except BaseException:
+            self._locks.release(key)
+            raise
+        if inspect.isawaitable(outcome):
+            return self._releasing(outcome, key)
+        self._locks.release(key)
+        return outcome
+
+    async def _after_turn(self, handler: Handler, request: c.Request, client: Replier | None,
+                          key: BridgeKey) -> Result:
+        """A create or remove whose bridge another one is creating or removing: its turn
+        comes once that one is settled."""
+        await self._locks.take(key)
+        try:
+            outcome = self._call(handler, request, client, key)
+            return await outcome if inspect.isawaitable(outcome) else outcome
+        finally:
+            self._locks.release(key)
+
+    async def _releasing(self, outcome: Awaitable[Result], key: BridgeKey) -> Result:
+        try:
+            return await outcome
+        finally:
+            self._locks.release(key)
+
+    def _call(self, handler: Handler, request: c.Request, client: Replier | None,
+              key: Optional[BridgeKey]) -> Result | Awaitable[Result]:
+        """The handler with the ownership check before it and the bookkeeping after."""
         if key is not None and type(request).removes is not None:
             self._owners.check_removal(key, _identity_fields(request)[0], client)
         reserved = client is not None and self._quota.reserve(client, request.op)
@@ -163,16 +245,6 @@ class Dispatcher:
             return self._counted(outcome, request, client, key, reserved)
         self._settle(request, client, key, reserved, outcome)
         return outcome
-
-    async def _counted(self, outcome: Awaitable[Result], request: c.Request,
-                       client: Replier | None, key: Optional[BridgeKey],
-                       reserved: bool) -> Result:
-        result: Result | None = None
-        try:
-            result = await outcome
-            return result
-        finally:
-            self._settle(request, client, key, reserved, result)
 
     def _settle(self, request: c.Request, client: Replier | None, key: Optional[BridgeKey],
                 reserved: bool, result: Optional[Result]) -> None:

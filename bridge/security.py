@@ -43,7 +43,8 @@ from protocol.commands import (REQUEST_TYPES, ActionUse, FileUse, ForbiddenError
 __all__ = ["DEFAULT_MAX_BRIDGES", "DEFAULT_MAX_BRIDGES_PER_CLIENT", "DEFAULT_MAX_CLIENTS",
            "OPERATOR",
            "PARAMETER_SERVICES", "SECURITY_KEYS", "BridgeOwners", "BridgeQuota", "NameRules",
-           "PolicyError", "RateLimitedLog", "SecurityPolicy", "inside", "is_loopback_host",
+           "PolicyError", "RateLimitedLog", "SecurityPolicy", "hidden_action", "inside",
+           "is_loopback_host",
            "parameter_service", "parse_network", "positive_int", "strip_frame"]
 
 log = logging.getLogger(__name__)
@@ -476,7 +477,10 @@ class BridgeOwners:
         self._owners: dict[BridgeKey, object] = {}
 
     def created(self, key: BridgeKey, owner: object) -> None:
-        self._owners.setdefault(key, owner)  # asking again for a bridge keeps its maker
+        # Asking again for a bridge keeps its maker, except that the operator's config
+        # always claims its own bridges: no client owns one of them.
+        if owner == OPERATOR or key not in self._owners:
+            self._owners[key] = owner
 
     def owner(self, key: BridgeKey) -> Optional[object]:
         return self._owners.get(key)

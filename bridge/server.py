@@ -52,11 +52,15 @@ class BridgeServer:
         self.sessions: set[ClientSession] = set()
         self.refused = 0
 
-    async def start(self) -> None:
+    async def start(self, *, serving: bool = True) -> None:
+        """Bind the port (a port in use fails here); accept clients now, or only once
+        `serve` is called (``serving`` False: the daemon first makes its start-up bridges,
+        and nothing may connect before they exist)."""
         loop = asyncio.get_running_loop()
         try:
             self._server = await loop.create_server(self._new_session, self._host, self._port,
-                                                    reuse_address=True)
+                                                    reuse_address=True,
+                                                    start_serving=serving)
         except OSError as error:
             if error.errno == 98:  # EADDRINUSE
                 raise PortInUseError(error.errno, f"{self._host}:{self._port} is already in "
@@ -68,6 +72,11 @@ class BridgeServer:
                         "authentication, so anyone who reaches this port can use the bridge%s",
                         self._host, "" if self._policy.allowed_networks else
                         " (restrict clients with --allow CIDR)")
+
+    async def serve(self) -> None:
+        """Start listening (after `start` with ``serving`` False)."""
+        assert self._server is not None
+        await self._server.start_serving()
 
     @property
     def port(self) -> int:

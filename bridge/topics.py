@@ -25,6 +25,7 @@ from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
 from bridge.codecs.slicer_data import markup_labels
 from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
 from bridge.dispatch import Handler
+from bridge.graph_types import refuse_other_type
 from bridge.hub import LARGE_MESSAGE_BYTES, Hub, Replier, approximate_size
 from bridge.logging_limits import RateLimitedLog
 from bridge.message_guards import MessageGuard
@@ -362,11 +363,7 @@ class TopicBridges:
                                      code=ErrorCode.UNKNOWN_ROS_TYPE) from None
 
     def _check_graph(self, topic: str, ros_type: str) -> None:
-        known = self._ros.topic_types(topic)
-        if known and ros_type not in known:
-            raise CommandFailedError("type", f"the type {topic} already has in the ROS graph "
-                                     f"({', '.join(known)})", ros_type,
-                                     code=ErrorCode.ALREADY_EXISTS)
+        refuse_other_type(self._ros, topic, ros_type, "type")
 
     @staticmethod
     def _check_existing(existing: SubscriberBridge | PublisherBridge | None, topic: str,

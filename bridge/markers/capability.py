@@ -77,6 +77,7 @@ from rclpy.serialization import deserialize_message
 
 from bridge.codecs import CodecError, codec_for
 from bridge.dispatch import Handler
+from bridge.graph_types import refuse_other_type
 from bridge.hub import Hub
 from bridge.logging_limits import RateLimitedLog
 from bridge.codecs.cdr import CdrError
@@ -459,11 +460,7 @@ class MarkerBridges:
             raise CommandFailedError("topic", "a topic without a marker subscriber "
                                      "(remove_marker_subscriber first, or repeat the same "
                                      "request)", topic, code=ErrorCode.ALREADY_EXISTS)
-        known = self._ros.topic_types(topic)
-        if known and ros_type not in known:
-            raise CommandFailedError("type", f"the type {topic} has in the ROS graph "
-                                     f"({', '.join(known)})", ros_type,
-                                     code=ErrorCode.ALREADY_EXISTS)
+        refuse_other_type(self._ros, topic, ros_type, "type")
         try:
             message_class = codec_for(ros_type).message_class
         except CodecError as error:
