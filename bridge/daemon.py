@@ -60,6 +60,8 @@ class Daemon:
         self.actions = ActionBridges(self.ros, self.hub, names)
         # An action's hidden cancel service obeys cancel_goal's ownership rule.
         self.services.add_call_guard(self.actions.sender.judge_service_call)
+        # The daemon node's own parameters obey server_set_parameter's rule there too.
+        self.services.add_call_guard(self.parameters.judge_service_call)
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
                                    parameters=self.parameters,
                                    package_paths=dict(config.package_paths),

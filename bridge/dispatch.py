@@ -246,6 +246,16 @@ class Dispatcher:
         self._settle(request, client, key, reserved, outcome)
         return outcome
 
+    async def _counted(self, outcome: Awaitable[Result], request: c.Request,
+                       client: Replier | None, key: Optional[BridgeKey],
+                       reserved: bool) -> Result:
+        result: Result | None = None
+        try:
+            result = await outcome
+            return result
+        finally:
+            self._settle(request, client, key, reserved, result)
+
     def _settle(self, request: c.Request, client: Replier | None, key: Optional[BridgeKey],
                 reserved: bool, result: Optional[Result]) -> None:
         """After a handler: count the client's bridges, record who made or removed one."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import struct
@@ -200,3 +201,21 @@ def is_reply(command_id: int):
     def matches(message: Message) -> bool:
         return message.type_name == "RTS_COMMAND" and message.body.command_id == command_id
     return matches
+
+
+def send_command(client: RawClient, op: str, arguments: dict, command_id: int) -> None:
+    """Send one COMMAND (JSON ``arguments``) without waiting for its reply."""
+    client.send(command_bytes(op, json.dumps(arguments).encode(), command_id))
+
+
+def reply_to(client: RawClient, command_id: int, timeout: float = 10.0) -> dict:
+    """The reply envelope ({"ok", "result" | "error"}) of command ``command_id`` (what
+    came before it is dropped: read replies in the order they come)."""
+    return json.loads(client.read_until(is_reply(command_id), timeout).body.text)
+
+
+def ask(client: RawClient, op: str, arguments: dict, command_id: int,
+        timeout: float = 10.0) -> dict:
+    """Send one COMMAND and return its reply envelope (``timeout`` scaled)."""
+    send_command(client, op, arguments, command_id)
+    return reply_to(client, command_id, timeout)
