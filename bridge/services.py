@@ -552,7 +552,7 @@ class ServiceBridges:
     def describe(self) -> list[dict[str, Any]]:
         out = [_describe_served(served) for served in self.served.values()]
         out += [{"kind": "service_client", "service": entry.service, "type": entry.ros_type,
-                 "device": entry.device, "calls": entry.calls,
+                 "device": entry.device, "calls": entry.calls, "waiting": entry.in_flight,
                  "ready": entry.client.service_is_ready()} for entry in self.called.values()]
         return out
 
