@@ -86,7 +86,7 @@ from bridge.markers.convert import ADD, DELETE, DELETEALL, MarkerEvent, events_o
 from bridge.markers.geometry import MarkerError, MarkerModel, MarkerSpec, build_model
 from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
-from bridge.security import NameRules
+from bridge.security import NameRules, strip_frame
 from bridge.tf.buffer import TfBuffer
 from bridge.tf.capability import TfBridges
 from bridge.tf.errors import ExtrapolationError, TfError
@@ -121,8 +121,8 @@ def place_unlocked(spec: MarkerSpec, fixed_frame: str, buffer: TfBuffer,
     """An unlocked marker placed in ``fixed_frame`` by the fixed<-frame transform at its
     stamp (the latest for stamp 0, or where tf has nothing at the stamp), or None where it
     is not moved: already in the fixed frame, a pose build_model refuses anyway, or a frame
-    tf cannot reach yet. ``resolve`` maps frame ids to the buffer's (frame_prefix); ``memo``
-    keeps the transforms looked up for one batch (an array's markers share a frame)."""
+    tf cannot reach yet. ``resolve`` maps frame ids to the buffer's; ``memo`` keeps the
+    transforms looked up for one batch (an array's markers share a frame)."""
     frame = spec.frame.lstrip("/")
     if not frame or frame == fixed_frame:
         return None
@@ -444,9 +444,11 @@ class MarkerBridges:
 
     def placed(self, sub: _Subscription, spec: MarkerSpec,
                memo: dict[tuple[str, int], Optional[Tf7]]) -> Optional[MarkerSpec]:
-        """`place_unlocked` in this daemon's tf buffer (worker thread: it is thread-safe)."""
-        return place_unlocked(spec, sub.fixed_frame, self._tf.buffer, self._tf.resolve_frame,
-                              memo)
+        """`place_unlocked` in this daemon's tf buffer (worker thread: it is thread-safe).
+        A marker's frame ids are ROS's, as tf holds them: ``--frame-prefix`` (for frame
+        ids a client writes) does not apply, so the frame the policy judges, the one a
+        marker is placed by and the one its TRANSFORM follows are one name."""
+        return place_unlocked(spec, sub.fixed_frame, self._tf.buffer, strip_frame, memo)
 
     # ------------------------------------------------------------------ ops
 

@@ -14,7 +14,7 @@ from protocol.crc64 import crc64
 from protocol.errors import MessageError
 from protocol.framing import Decoder, encode
 from protocol.messages import Command, Message, Status, String, Transform
-from support import scaled
+from support import PEERS, Child, Processes, scaled
 
 import numpy as np
 
@@ -219,3 +219,22 @@ def ask(client: RawClient, op: str, arguments: dict, command_id: int,
     """Send one COMMAND and return its reply envelope (``timeout`` scaled)."""
     send_command(client, op, arguments, command_id)
     return reply_to(client, command_id, timeout)
+
+
+class MarkerPeer:
+    """tests/peers/marker_publisher.py and its control file: `send` publishes once what the
+    document holds (markers, "statics" on /tf_static, ...) and waits until it has."""
+
+    def __init__(self, processes: Processes, folder: Path) -> None:
+        self.control = folder / "control.json"
+        self.seq = 0
+        self.child: Child = processes.python("markers", str(PEERS / "marker_publisher.py"),
+                                             str(self.control))
+        self.child.wait_for_output("READY", timeout=30)
+
+    def send(self, **doc: object) -> None:
+        self.seq += 1
+        tmp = self.control.with_suffix(".tmp")
+        tmp.write_text(json.dumps({"seq": self.seq, **doc}))
+        os.replace(tmp, self.control)
+        self.child.wait_for_output(f"APPLIED {self.seq}", timeout=30)
