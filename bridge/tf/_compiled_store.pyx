@@ -26,7 +26,7 @@ import sys
 from bridge.tf.errors import ConnectivityError, ExtrapolationError, TfError, TfLookupError
 
 # The store interface this module implements (buffer.STORE_INTERFACE): bump both together.
-INTERFACE = 2
+INTERFACE = 3
 
 # CDR's doubles are read as the machine's: on a big-endian machine `insert_cdr` declines.
 cdef bint LITTLE_ENDIAN = sys.byteorder == "little"
@@ -237,10 +237,15 @@ cdef class CompiledFrameStore:
     cdef Py_ssize_t *_chain_src
     cdef Py_ssize_t *_chain_tgt
     cdef public long long graph_version
+    cdef Py_ssize_t _max_frames  # 0: no bound (TfBuffer's, see buffer.py)
+    cdef Py_ssize_t _max_name  # characters of a frame id; 0: no bound
 
-    def __cinit__(self, long long window_ns):
+    def __cinit__(self, long long window_ns, Py_ssize_t max_frames=0,
+                  Py_ssize_t max_name=0):
         # C fields start at 0 / NULL (the allocation is zeroed).
         self._window_ns = window_ns
+        self._max_frames = max_frames
+        self._max_name = max_name
         self._names = []
         self._ids = {}
 
@@ -427,6 +432,7 @@ cdef class CompiledFrameStore:
         cdef double v[7]
         cdef double norm2, n
         cdef Raw *r
+        cdef bint over
         for k in range(count):
             r = &rows[k]
             parent = names[2 * k]
@@ -438,8 +444,14 @@ cdef class CompiledFrameStore:
                 child = child[1:]
             stamp = 0 if static else <int64_t>r.sec * 1000000000 + r.nanosec
             memcpy(v, r.v, sizeof(v))
+            # TfBuffer's bounds (it words them): a frame id too long, a frame past the count.
+            over = ((self._max_name and (len(parent) > self._max_name
+                                         or len(child) > self._max_name))
+                    or (self._max_frames and self._count + 2 > self._max_frames
+                        and self._count + (parent not in self._ids)
+                        + (child not in self._ids) > self._max_frames))
             norm2 = v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]
-            if (not child or not parent or parent == child or stamp < 0
+            if (over or not child or not parent or parent == child or stamp < 0
                     or not (isfinite(v[0]) and isfinite(v[1]) and isfinite(v[2])
                             and isfinite(v[3]) and isfinite(v[4]) and isfinite(v[5])
                             and isfinite(v[6]))
@@ -467,6 +479,10 @@ cdef class CompiledFrameStore:
 
     def known(self):
         return list(self._names)
+
+    @property
+    def frame_count(self):
+        return self._count
 
     def has_frame(self, str frame):
         return frame in self._ids

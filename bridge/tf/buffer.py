@@ -56,11 +56,12 @@ from bridge.tf.errors import (
 )
 from bridge.tf.math import Tf7
 from bridge.tf.store import FrameStore
+from protocol.commands.fields import MAX_NAME
 from protocol.conversions import matrix_to_pose, pose_to_matrix
 
 # The store interface this module expects; the compiled module states the one it was built
 # for, so a module left from an older build (a pull without `make setup`) is not used.
-STORE_INTERFACE = 2
+STORE_INTERFACE = 3
 try:  # built by setup.py where a C compiler is found (optional: see `COMPILED`)
     from bridge.tf import _compiled_store
 except ImportError:
@@ -68,10 +69,16 @@ except ImportError:
 CompiledFrameStore = (_compiled_store.CompiledFrameStore
                       if getattr(_compiled_store, "INTERFACE", None) == STORE_INTERFACE else None)
 
-__all__ = ["StampedTransform", "FrameInfo", "TfBuffer", "COMPILED"]
+__all__ = ["COMPILED", "MAX_FRAMES", "MAX_FRAME_ID", "FrameInfo", "StampedTransform",
+           "TfBuffer"]
 
 _NS_PER_S = 1_000_000_000
 _STAMP_LIMIT = 1 << 63  # tf2's times are int64 ns; so are the compiled store's
+# tf2 keeps every frame it has seen for good: a peer sending new names (1 MB each, or
+# 100,000 small ones) grew the daemon by hundreds of MB. Frame ids are bounded as every
+# ROS name a client sends is (MAX_NAME characters), and so is the number of frames.
+MAX_FRAME_ID = MAX_NAME
+MAX_FRAMES = 10_000
 # Set to 1 to run every TfBuffer on the pure Python store (to compare, or to rule it out).
 PURE_PYTHON_ENV = "SLICER_BRIDGE_PURE_PYTHON_TF"
 COMPILED = CompiledFrameStore is not None and os.environ.get(PURE_PYTHON_ENV, "") != "1"
@@ -144,17 +151,22 @@ class TfBuffer:
     ``cache_time_s`` is how far behind each frame's newest sample older samples are kept
     (tf2's default is 10 s). ``compiled``: True to require the compiled store, False for
     the pure Python one, None (the default) for the compiled one where it was built (see
-    `COMPILED`). Thread-safe: see the module docstring.
+    `COMPILED`). ``max_frames`` and ``max_frame_id`` bound what it keeps (a transform
+    naming a frame id longer than ``max_frame_id`` characters, or a new frame past
+    ``max_frames``, is refused like an invalid one). Thread-safe: see the module docstring.
     """
 
-    def __init__(self, cache_time_s: float = 10.0, *, compiled: Optional[bool] = None) -> None:
+    def __init__(self, cache_time_s: float = 10.0, *, compiled: Optional[bool] = None,
+                 max_frames: int = MAX_FRAMES, max_frame_id: int = MAX_FRAME_ID) -> None:
         if not (isinstance(cache_time_s, (int, float)) and math.isfinite(cache_time_s)
                 and cache_time_s > 0):
             raise InvalidArgumentError("cache_time_s", "a finite number of seconds > 0",
                                        repr(cache_time_s))
         self._cache_ns = int(cache_time_s * _NS_PER_S)
         self._lock = threading.Lock()
-        self._store: _Store = _make_store(self._cache_ns, compiled)
+        self._max_frames = max_frames
+        self._max_frame_id = max_frame_id
+        self._store: _Store = _make_store(self._cache_ns, compiled, max_frames, max_frame_id)
 
     # ------------------------------------------------------------------ writing
 
@@ -189,7 +201,9 @@ class TfBuffer:
             insert = self._store.insert
             for index, tr in enumerate(transforms):
                 try:
-                    parent, child, stamp, value = _check(tr, index, static)
+                    parent, child, stamp, value = _check(tr, index, static,
+                                                         self._max_frame_id)
+                    self._check_room(parent, child, index)
                 except InvalidArgumentError as exc:
                     rejected.append(exc)
                     continue
@@ -222,18 +236,31 @@ class TfBuffer:
         rejected: list[InvalidArgumentError] = []
         for index, raw in refused:
             try:
-                checked = _check(_from_raw(raw), index, static)
+                checked = _check(_from_raw(raw), index, static, self._max_frame_id)
+                with self._lock:
+                    self._check_room(checked[0], checked[1], index)
+                    # The two checks agree (tests hold them together); if they ever did
+                    # not, the sample would be kept, not lost.
+                    if self._store.insert(*checked, static):
+                        changed.add(checked[1])
             except InvalidArgumentError as exc:
                 rejected.append(exc)
-                continue
-            # The two checks agree (tests hold them together); if they ever did not, the
-            # sample would be kept, not lost.
-            with self._lock:
-                if self._store.insert(*checked, static):
-                    changed.add(checked[1])
         if rejected:
             raise RejectedTransformsError(rejected, changed)
         return changed
+
+    def _check_room(self, parent: str, child: str, index: int) -> None:
+        """Under the lock: InvalidArgumentError if storing parent<-child would make the
+        buffer know more than ``max_frames`` frames."""
+        store = self._store
+        if store.frame_count + 2 <= self._max_frames:
+            return  # the usual case: no lookups
+        new = (not store.has_frame(parent)) + (not store.has_frame(child))
+        if new and store.frame_count + new > self._max_frames:
+            raise InvalidArgumentError(
+                f"transforms[{index}]", f"frames the buffer knows, or room for new ones (at "
+                f"most {self._max_frames} frames are kept)", f"{new} new frame(s): "
+                f"'{_shown(parent)}' -> '{_shown(child)}'")
 
     def clear(self) -> None:
         """Forget every frame (for example after a ROS time jump backwards)."""
@@ -342,15 +369,17 @@ class TfBuffer:
 _Store = Union[FrameStore, "CompiledFrameStore"]
 
 
-def _make_store(window_ns: int, compiled: Optional[bool]) -> _Store:
+def _make_store(window_ns: int, compiled: Optional[bool], max_frames: int,
+                max_frame_id: int) -> _Store:
     if compiled is None:
         compiled = COMPILED
     if not compiled:
-        return FrameStore(window_ns)
+        return FrameStore(window_ns)  # TfBuffer checks the bounds before each insert
     if CompiledFrameStore is None:
         raise InvalidArgumentError("compiled", "False or None: the compiled store was not built",
                                    "True")
-    return CompiledFrameStore(window_ns)
+    # It refuses what is out of bounds in insert_cdr; TfBuffer words the refusal.
+    return CompiledFrameStore(window_ns, max_frames, max_frame_id)
 
 
 def _from_raw(raw: Tuple[int, int, str, str, float, float, float, float, float, float, float],
@@ -389,7 +418,13 @@ def _time_arg(time_ns: object) -> int:
     return time_ns
 
 
-def _check(tr: StampedTransform, index: int, static: bool) -> Tuple[str, str, int, Tf7]:
+def _shown(frame: str) -> str:
+    """A frame id as an error shows it: a long one cut (it may be a megabyte)."""
+    return frame if len(frame) <= 64 else f"{frame[:60]}...({len(frame)} characters)"
+
+
+def _check(tr: StampedTransform, index: int, static: bool,
+           max_frame_id: int = MAX_FRAME_ID) -> Tuple[str, str, int, Tf7]:
     """Validate one incoming transform; return (parent, child, stamp, value) to store."""
     where = f"transforms[{index}]"
     parent, child = tr.parent, tr.child
@@ -397,6 +432,10 @@ def _check(tr: StampedTransform, index: int, static: bool) -> Tuple[str, str, in
         raise InvalidArgumentError(f"{where} frame ids", "strings",
                                    f"{type(parent).__name__}, {type(child).__name__}")
     parent, child = _strip(parent), _strip(child)
+    if len(parent) > max_frame_id or len(child) > max_frame_id:
+        name, frame = ("parent", parent) if len(parent) > max_frame_id else ("child", child)
+        raise InvalidArgumentError(f"{where}.{name}", f"a frame id of at most "
+                                   f"{max_frame_id} characters", _shown(frame))
     if not child:
         raise InvalidArgumentError(f"{where}.child", "a non-empty frame id", repr(tr.child))
     if not parent:

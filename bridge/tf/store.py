@@ -122,6 +122,11 @@ class FrameStore:
         self._known: dict[str, None] = {}  # every frame id seen, children and parents
         self.graph_version = 0
 
+    @property
+    def frame_count(self) -> int:
+        """Frame ids known, children and parents alike."""
+        return len(self._known)
+
     # ------------------------------------------------------------------ writing
 
     def insert(self, parent: str, child: str, stamp: int, value: Tf7, static: bool) -> bool:
