@@ -372,7 +372,8 @@ class Watcher:
                 "tf_max_ms": tf["max"], "hello_n": hello["n"], "hello_p99_ms": hello["p99"],
                 "hello_max_ms": max(hello["max"] or 0.0,
                                     data["hello_unanswered"]["oldest_ms"]),
-                "hello_unanswered": data["hello_unanswered"]["n"]}
+                "hello_unanswered": data["hello_unanswered"]["n"],
+                "disconnected": data["disconnected"]}
 
     def close(self) -> None:
         for child in (self.watcher, self.publisher):
@@ -389,13 +390,14 @@ def _watched(figures: dict[str, Any]) -> str:
     return (f"tf p50 {ms(figures['tf_p50_ms'])} / p99 {ms(figures['tf_p99_ms'])} / max "
             f"{ms(figures['tf_max_ms'])} ms (n {figures['tf_n']}); hello p99 "
             f"{ms(figures['hello_p99_ms'])} / max {ms(figures['hello_max_ms'])} ms "
-            f"(n {figures['hello_n']}, unanswered {figures['hello_unanswered']})")
+            f"(n {figures['hello_n']}, unanswered {figures['hello_unanswered']})"
+            + (" DISCONNECTED by the daemon" if figures["disconnected"] else ""))
 
 
 def _meets_targets(figures: dict[str, Any]) -> bool:
     p99 = figures["tf_p99_ms"]
     return (figures["tf_n"] > 0 and p99 is not None and p99 < 20.0
-            and figures["hello_max_ms"] < 100.0)
+            and figures["hello_max_ms"] < 100.0 and not figures["disconnected"])
 
 
 # ------------------------------------------------------------------------- driver

@@ -194,30 +194,40 @@ def watch(port: int, parent: str, child: str, hello_hz: float) -> None:
         return encode(Message("bench", Command(command_id=command_id, name=op,
                                                text=json.dumps(arguments))), header_version=2)
 
-    sock = socket.create_connection(("127.0.0.1", port), timeout=10)
-    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-    sock.sendall(encode(Message("", Status(text="bench watcher")), header_version=2))
-    sock.sendall(command(1, "create_tf_lookup", {"parent": parent, "child": child}))
-    sock.settimeout(None)
+    def connect() -> socket.socket:
+        sock = socket.create_connection(("127.0.0.1", port), timeout=10)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.sendall(encode(Message("", Status(text="bench watcher")), header_version=2))
+        sock.sendall(command(1, "create_tf_lookup", {"parent": parent, "child": child}))
+        sock.settimeout(None)
+        return sock
+
     recorder = Recorder()
     sent: dict[int, int] = {}  # hello command id -> time sent (ns)
     stop = threading.Event()
+    # The daemon closed the connection: said in REPORT; the next RESET connects again.
+    disconnected = threading.Event()
+    again = threading.Event()
     lock = threading.Lock()
+    current = [connect()]
 
     def hellos() -> None:
         next_id = 100
         period = 1.0 / hello_hz
         while not stop.wait(period):  # sleeps between hellos, never spins
+            if disconnected.is_set():
+                continue
             next_id += 1
             with lock:
                 sent[next_id] = time.time_ns()
             try:
-                sock.sendall(command(next_id, "hello", {}))
+                current[0].sendall(command(next_id, "hello", {}))
             except OSError:
-                return
+                pass
 
     def report() -> dict[str, Any]:
         out = recorder.report()
+        out["disconnected"] = disconnected.is_set()
         now = time.time_ns()
         with lock:
             waiting = [now - t for t in sent.values() if t >= recorder.since]
@@ -229,29 +239,48 @@ def watch(port: int, parent: str, child: str, hello_hz: float) -> None:
         for line in sys.stdin:
             word = line.strip()
             if word == "RESET":
+                if disconnected.is_set():
+                    again.set()
                 recorder.reset()
+                with lock:
+                    sent.clear()
             elif word == "REPORT":
                 print(json.dumps(report()), flush=True)
             elif word == "QUIT":
                 break
         stop.set()
-        sock.close()
+        again.set()
+        current[0].close()
 
     threading.Thread(target=commands, daemon=True).start()
     threading.Thread(target=hellos, daemon=True).start()
     print("READY", flush=True)
+    while not stop.is_set():
+        _watch_connection(current[0], recorder, sent, lock)
+        disconnected.set()
+        again.wait()
+        again.clear()
+        if not stop.is_set():
+            current[0] = connect()
+            disconnected.clear()
+
+
+def _watch_connection(sock: socket.socket, recorder: Recorder, sent: dict[int, int],
+                      lock: threading.Lock) -> None:
+    """Read one watcher connection until the daemon closes it: tf arrivals and hello
+    answers into ``recorder``."""
     buffer = bytearray()
     unpack = _HEADER.unpack_from
     size = _HEADER.size
     device = b""
-    while not stop.is_set():
+    while True:
         try:
             chunk = sock.recv(1 << 20)
         except OSError:
-            break
+            return
         arrival = time.time_ns()
         if not chunk:
-            break
+            return
         buffer += chunk
         offset = 0
         while len(buffer) - offset >= size:
@@ -278,7 +307,6 @@ def watch(port: int, parent: str, child: str, hello_hz: float) -> None:
                     with recorder.lock:
                         recorder.add("hello", arrival, started)
         del buffer[:offset]
-    stop.set()
 
 
 # ------------------------------------------------------------------------------ ROS side

@@ -116,7 +116,8 @@ def _sphere_list(marker_id: int, points: int, seed: int) -> dict[str, Any]:
     return {"header": {"frame_id": "world"}, "ns": "bomb", "id": marker_id,
             "type": SPHERE_LIST, "action": 0, "pose": {"orientation": {"w": 1.0}},
             "scale": {"x": 0.01, "y": 0.01, "z": 0.01}, "color": {"r": 1.0, "a": 1.0},
-            "points": [{"x": float(x), "y": float(y), "z": float(z)} for x, y, z in xyz]}
+            "points": [{"x": round(float(x), 4), "y": round(float(y), 4),
+                        "z": round(float(z), 4)} for x, y, z in xyz]}
 
 
 def marker_bomb(port: int, env: dict[str, str], logs: Path, seconds: float

@@ -20,6 +20,7 @@ from typing import Awaitable, Callable, Optional
 from bridge.actions import ActionBridges
 from bridge.config import DaemonConfig
 from bridge.dispatch import Dispatcher
+from bridge.heavy import HeavyWork
 from bridge.hub import Hub
 from bridge.markers.capability import MarkerBridges
 from bridge.parameters import ParameterBridges
@@ -46,6 +47,8 @@ class Daemon:
     def __init__(self, config: DaemonConfig, loop: asyncio.AbstractEventLoop) -> None:
         self.config = config
         self.hub = Hub(loop)
+        # Decoding, conversions and listings too heavy for the loop: one lane per client.
+        self.heavy = HeavyWork()
         self.ros = RosNode(RosOptions(node_name=config.node_name, namespace=config.namespace,
                                       ros_args=config.ros_args))
         names = DeviceNameRegistry()
@@ -76,10 +79,10 @@ class Daemon:
                                                           self.services, self.actions,
                                                           self.robots, self.markers],
                                      policy=policy, resolve_frame=self.tf.resolve_frame,
-                                     resolve_file=self.robots.file_path)
+                                     resolve_file=self.robots.file_path, heavy=self.heavy)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
                                    port=config.port, limits=config.limits,
-                                   policy=config.security)
+                                   policy=config.security, heavy=self.heavy)
 
     async def start(self) -> None:
         try:
@@ -105,6 +108,7 @@ class Daemon:
     async def stop(self) -> None:
         await self.server.close()
         self.dispatcher.close()
+        self.heavy.close()
         self.ros.stop()
 
 

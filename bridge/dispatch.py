@@ -25,6 +25,7 @@ from collections import deque
 from typing import (Any, Awaitable, Callable, Mapping, Optional, Protocol, Sequence, Union,
                     cast)
 
+from bridge.heavy import HeavyWork, LargeResult, OffLoop
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
 from bridge.security import (OPERATOR, BridgeKey, BridgeOwners, BridgeQuota, FileResolver,
@@ -38,7 +39,8 @@ log = logging.getLogger(__name__)
 
 Result = Mapping[str, Any]
 # A handler gets the parsed request and the client that sent it (None for start-up config).
-Handler = Callable[[Any, Union[Replier, None]], Union[Result, Awaitable[Result]]]
+Handler = Callable[[Any, Union[Replier, None]],
+                   Union[Result, Awaitable[Result], "OffLoop[Result]"]]
 
 DAEMON_VERSION = "0.1.0"
 
@@ -115,9 +117,11 @@ class Dispatcher:
     def __init__(self, ros: RosNode, hub: Hub, capabilities: Sequence[Capability], *,
                  policy: SecurityPolicy | None = None,
                  resolve_frame: FrameResolver = strip_frame,
-                 resolve_file: FileResolver | None = None) -> None:
+                 resolve_file: FileResolver | None = None,
+                 heavy: HeavyWork | None = None) -> None:
         self._ros = ros
         self._hub = hub
+        self._heavy = heavy  # clients' lanes for OffLoop work and LargeResult replies
         self._capabilities = tuple(capabilities)
         # Security is checked here, by request fields, so no capability needs to know it.
         self._policy = policy or SecurityPolicy()
@@ -160,11 +164,20 @@ class Dispatcher:
             self._reply(client, message, self._failure(body.name, error))
             return
         if inspect.isawaitable(outcome):
-            task = asyncio.ensure_future(self._finish(outcome, client, message))
-            self._tasks.add(task)
-            task.add_done_callback(self._tasks.discard)
+            self._spawn(self._finish(outcome, client, message))
+        elif isinstance(outcome, LargeResult) and self._heavy is not None:
+            self._spawn(self._finish(self._resolved(outcome), client, message))
         else:
             self._reply(client, message, Reply.success(body.name, outcome))
+
+    def _spawn(self, coroutine: Awaitable[None]) -> None:
+        task = asyncio.ensure_future(coroutine)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    @staticmethod
+    async def _resolved(result: Result) -> Result:
+        return result
 
     async def execute(self, op: str, arguments: Mapping[str, Any]) -> Result:
         """Run one command without a client (start-up config); raises `CommandError`."""
@@ -187,6 +200,8 @@ class Dispatcher:
                                             if k.bridge.per_connection})
         self._quota.release(client, gone)
         self._quota.forget(client)
+        if self._heavy is not None:
+            self._heavy.forget(client)
 
     # --- plumbing -----------------------------------------------------------------------
     def _run(self, request: c.Request, client: Replier | None) -> Result | Awaitable[Result]:
@@ -238,6 +253,8 @@ class Dispatcher:
         reserved = client is not None and self._quota.reserve(client, request.op)
         try:
             outcome = handler(request, client)
+            if isinstance(outcome, OffLoop):
+                outcome = self._off_loop(outcome, client)
         except BaseException:
             self._settle(request, client, key, reserved, None)
             raise
@@ -245,6 +262,14 @@ class Dispatcher:
             return self._counted(outcome, request, client, key, reserved)
         self._settle(request, client, key, reserved, outcome)
         return outcome
+
+    def _off_loop(self, outcome: OffLoop[Result],
+                  client: Replier | None) -> Result | Awaitable[Result]:
+        """A handler's `OffLoop` work, in its client's lane (the operator's start-up
+        commands run it here and now: nothing else is served yet)."""
+        if client is None or self._heavy is None:
+            return outcome.work()
+        return self._heavy.run(client, outcome.work)  # LaneFullError: LIMIT_REACHED
 
     async def _counted(self, outcome: Awaitable[Result], request: c.Request,
                        client: Replier | None, key: Optional[BridgeKey],
@@ -298,7 +323,13 @@ class Dispatcher:
         body = message.body
         assert isinstance(body, Command)
         try:
-            reply = Reply.success(body.name, await outcome)
+            result = await outcome
+            reply = Reply.success(body.name, result)
+            if isinstance(result, LargeResult) and self._heavy is not None:
+                # A listing's JSON is encoded in the client's lane, not on the loop.
+                text = await self._heavy.run(client, reply.to_json)
+                self._reply(client, message, reply, text)
+                return
         except Exception as error:  # noqa: BLE001
             reply = self._failure(body.name, error)
         self._reply(client, message, reply)
@@ -312,12 +343,15 @@ class Dispatcher:
         return c.reply_for_exception(op, error)
 
     @staticmethod
-    def _reply(client: Replier, request: Message, reply: Reply) -> None:
+    def _reply(client: Replier, request: Message, reply: Reply,
+               text: Optional[str] = None) -> None:
+        """Send ``reply`` (its JSON ``text`` when already encoded)."""
         body = request.body
         assert isinstance(body, Command)
         client.send_message(Message(
             device_name=request.device_name,
-            body=RtsCommand(command_id=body.command_id, name=body.name, text=reply.to_json()),
+            body=RtsCommand(command_id=body.command_id, name=body.name,
+                            text=reply.to_json() if text is None else text),
             metadata=reply.metadata(), message_id=request.message_id))
 
     # --- small handlers -----------------------------------------------------------------
@@ -328,14 +362,14 @@ class Dispatcher:
     def _list_bridges(self, request: c.ListBridges, client: Replier | None) -> Result:
         bridges = [bridge for capability in self._capabilities
                    for bridge in capability.describe()]
-        return {"bridges": bridges, "devices": self._hub.devices(),
-                "clients": [client.describe() for client in self._hub.clients],
-                "hub_dropped": self._hub.dropped}
+        return LargeResult(bridges=bridges, devices=self._hub.devices(),
+                           clients=[client.describe() for client in self._hub.clients],
+                           hub_dropped=self._hub.dropped)
 
     def _list_topics(self, request: c.ListTopics, client: Replier | None) -> Result:
-        return {"topics": [{"topic": name, "types": list(types)}
-                           for name, types in self._ros.node.get_topic_names_and_types()]}
+        return LargeResult(topics=[{"topic": name, "types": list(types)} for name, types
+                                   in self._ros.node.get_topic_names_and_types()])
 
     def _list_services(self, request: c.ListServices, client: Replier | None) -> Result:
-        return {"services": [{"service": name, "types": list(types)}
-                             for name, types in self._ros.node.get_service_names_and_types()]}
+        return LargeResult(services=[{"service": name, "types": list(types)} for name, types
+                                     in self._ros.node.get_service_names_and_types()])

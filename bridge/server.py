@@ -17,6 +17,7 @@ import logging
 import time
 from typing import Optional
 
+from bridge.heavy import HeavyWork
 from bridge.hub import Hub
 from bridge.logging_limits import RateLimitedLog
 from bridge.security import SecurityPolicy, is_loopback_host
@@ -38,8 +39,10 @@ class PortInUseError(OSError):
 
 class BridgeServer:
     def __init__(self, hub: Hub, commands: CommandHandler, *, host: str, port: int,
-                 limits: SessionLimits, policy: SecurityPolicy | None = None) -> None:
+                 limits: SessionLimits, policy: SecurityPolicy | None = None,
+                 heavy: HeavyWork | None = None) -> None:
         self._hub = hub
+        self._heavy = heavy  # decodes clients' heavy bodies off the loop
         self._commands = commands
         self._host = host
         self._port = port
@@ -110,7 +113,7 @@ class BridgeServer:
             return
         session = ClientSession(self._hub, self._commands, self._limits, self.sessions.discard,
                                 read_only=self._policy.read_only, budget=self.budget,
-                                incidents=self._incidents)
+                                incidents=self._incidents, heavy=self._heavy)
         self.sessions.add(session)
         transport.set_protocol(session)
         session.connection_made(transport)

@@ -26,6 +26,7 @@ from bridge.codecs.slicer_data import markup_labels
 from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
 from bridge.dispatch import Handler
 from bridge.graph_types import refuse_other_type
+from bridge.heavy import OffLoop
 from bridge.hub import LARGE_MESSAGE_BYTES, Hub, Replier, approximate_size
 from bridge.logging_limits import RateLimitedLog
 from bridge.message_guards import MessageGuard
@@ -224,7 +225,11 @@ class PublisherBridge:
         what the security policy denies."""
         msg = self.codec.from_value(value, stamp=self._stamp_now(), frame_id=self.frame_id)
         self._check(msg)
-        return self._publish(msg)
+        with self._heavy_lock:  # a worker thread publishes (TopicBridges.publish)
+            if self._closed:
+                raise CommandFailedError("topic", "a publisher bridge", f"{self.topic}, "
+                                         f"removed meanwhile", code=ErrorCode.NOT_FOUND)
+            return self._publish(msg)
 
     def _check(self, msg: Any) -> None:
         if self._guard is not None:
@@ -447,18 +452,21 @@ class TopicBridges:
         self._names.release(NameKey.publisher(topic))
         return {"topic": topic, "device": bridge.device}
 
-    def publish(self, request: Publish) -> dict[str, Any]:
+    def publish(self, request: Publish) -> OffLoop[dict[str, Any]]:
         topic = self._resolve(request.topic)
         bridge = self.publishers.get(topic)
         if bridge is None:
             raise CommandFailedError("topic", "a topic with a publisher bridge (create_publisher "
                                      "first)", topic, code=ErrorCode.NOT_FOUND)
-        try:
-            subscribers = bridge.publish_value(request.value)
-        except CodecError as error:
-            raise WrongTypeError(f"value.{error.field}" if error.field else "value",
-                                 error.expected, error.got) from None
-        return {"topic": topic, "subscribers": subscribers}
+
+        def work() -> dict[str, Any]:  # a message of a megabyte of JSON takes a second
+            try:
+                subscribers = bridge.publish_value(request.value)
+            except CodecError as error:
+                raise WrongTypeError(f"value.{error.field}" if error.field else "value",
+                                     error.expected, error.got) from None
+            return {"topic": topic, "subscribers": subscribers}
+        return OffLoop(work)
 
     def get_last_message(self, request: GetLastMessage) -> dict[str, Any]:
         topic = self._resolve(request.topic)

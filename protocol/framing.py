@@ -46,8 +46,8 @@ from protocol.header import (
 )
 from protocol.messages import Message, unpack_body
 
-__all__ = ["DEFAULT_MAX_BODY_SIZE", "DEFAULT_UNCOUNTED_BODY_BYTES", "Decoder", "ReceiveBudget",
-           "StreamTemplate", "encode"]
+__all__ = ["DEFAULT_MAX_BODY_SIZE", "DEFAULT_UNCOUNTED_BODY_BYTES", "Decoder", "RawFrame",
+           "ReceiveBudget", "StreamTemplate", "encode"]
 
 DEFAULT_MAX_BODY_SIZE = 64 * 1024 * 1024  # 64 MiB: a 512^3 uint8 volume with room to spare
 # Bodies up to this size are not counted against a `ReceiveBudget`: commands and poses must
@@ -303,6 +303,14 @@ class Decoder:
         Raises `MessageError` for a bad message (already consumed: call again) and
         `FramingError` when the stream cannot continue (then raised again on every call).
         """
+        frame = self.next_frame()
+        return None if frame is None else frame.decode(self.verify_crc)
+
+    def next_frame(self) -> RawFrame | None:
+        """The next complete frame, its body not checked or decoded yet (`RawFrame.decode`
+        does both), or None if more bytes are needed. A receiver can then judge a message
+        by its header alone (its type, its device) before it spends anything on the body.
+        Raises `FramingError` as `next_message` does."""
         if self._broken is not None:
             raise self._broken
         if self._header is None:
@@ -335,7 +343,7 @@ class Decoder:
             # All consumed: let the (possibly 64 MiB) buffer go now, not at the next feed.
             self._buffer = bytearray()
             self._offset = 0
-        return _decode(version, type_raw, name_raw, timestamp, body, crc, self.verify_crc)
+        return RawFrame(version, type_raw, name_raw, timestamp, body, crc)
 
     def messages(self) -> Iterator[Message]:
         """Yield messages until more bytes are needed (errors as in `next_message`)."""
@@ -344,6 +352,37 @@ class Decoder:
             if message is None:
                 return
             yield message
+
+
+class RawFrame:
+    """One complete frame as received (`Decoder.next_frame`): the header's fields and the
+    body's bytes, neither checked nor decoded."""
+
+    __slots__ = ("version", "type_raw", "name_raw", "timestamp", "body", "crc")
+
+    def __init__(self, version: int, type_raw: bytes, name_raw: bytes, timestamp: int,
+                 body: bytes, crc: int) -> None:
+        self.version = version
+        self.type_raw = type_raw
+        self.name_raw = name_raw
+        self.timestamp = timestamp
+        self.body = body
+        self.crc = crc
+
+    @property
+    def type_name(self) -> str:
+        """The header's type name, as sent (the name `decode` checks)."""
+        return self.type_raw.split(b"\0", 1)[0].decode("latin-1")
+
+    @property
+    def device_name(self) -> str:
+        """The header's device name, as sent (`decode` checks its encoding)."""
+        return self.name_raw.split(b"\0", 1)[0].decode("utf-8", "replace")
+
+    def decode(self, verify_crc: bool = True) -> Message:
+        """The message: CRC checked, body decoded; `MessageError` if either fails."""
+        return _decode(self.version, self.type_raw, self.name_raw, self.timestamp, self.body,
+                       self.crc, verify_crc)
 
 
 def _decode(version: int, type_raw: bytes, name_raw: bytes, timestamp: int, body: bytes,

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import struct
+from array import array
 from dataclasses import dataclass, field, fields
 from enum import IntEnum
 from typing import Any, Callable, ClassVar, Union
@@ -308,6 +309,9 @@ class _CellError(Exception):
         self.got = got
 
 
+_SCAN_WINDOW = 1 << 16  # values of a mixed-size cell array walked at a time
+
+
 def _scan_cells(flat: AnyArray, npoints: int = -1) -> tuple[int, AnyArray]:
     """Validate a VTK-legacy cell array; return (cell count, start offsets).
 
@@ -326,16 +330,20 @@ def _scan_cells(flat: AnyArray, npoints: int = -1) -> tuple[int, AnyArray]:
             if top >= npoints:
                 raise _CellError(f"point indices < NPOINTS ({npoints})", f"index {top}")
         return count, starts
-    values: list[int] = flat.tolist()
-    start_list: list[int] = []
+    # A window of values at a time: a 60 MB array as one Python list was 0.5 GB.
+    start_list = array("q")
     pos = 0
     while pos < length:
-        start_list.append(pos)
-        pos += values[pos] + 1
+        base = pos
+        values: list[int] = flat[base:base + _SCAN_WINDOW].tolist()
+        end = base + len(values)
+        while pos < end:
+            start_list.append(pos)
+            pos += values[pos - base] + 1
     if pos != length:
         raise _CellError(f"cells that end with the array ({length} values)",
                          f"last cell (at {start_list[-1]}) runs to {pos}")
-    starts = np.asarray(start_list, dtype=np.intp)
+    starts = np.frombuffer(start_list, dtype=np.int64).astype(np.intp)
     if npoints >= 0:
         mask = np.ones(length, dtype=bool)
         mask[starts] = False
