@@ -46,7 +46,8 @@ from typing import Callable, Optional
 from bridge.heavy import HeavyWork
 from bridge.hub import Hub
 from bridge.logging_limits import RateLimitedLog
-from bridge.outbox import Frame, Outbox, OutboxOverflow
+from bridge.outbox import WRITE_CHUNK, Frame, Outbox, OutboxOverflow
+from protocol.crc64 import Buffer
 from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
 from protocol.framing import Decoder, RawFrame, ReceiveBudget
 from protocol.messages import Message, Status, StatusCode
@@ -114,7 +115,7 @@ class ClientSession(asyncio.Protocol):
         self._closing = False
         self._attached = False
         self._attach_timer: Optional[asyncio.TimerHandle] = None
-        self._batch: Optional[list[bytes]] = None  # frames gathered for one write
+        self._batch: Optional[list[Buffer]] = None  # frames gathered for one write
         # Direct writes from the executor thread (see the module docstring).
         self._wlock = threading.Lock()
         self._direct: Optional[socket.socket] = None  # a dup of the transport's socket
@@ -414,21 +415,36 @@ class ClientSession(asyncio.Protocol):
             return
         if self._paused or len(self._outbox):
             self._outbox.put_latest(device, frame)
+            return
+        parts = frame.encoded_parts(self.header_version)
+        if len(parts) == 1 and len(parts[0]) <= WRITE_CHUNK:
+            self._write(parts[0])
         else:
-            self._write(frame.encoded(self.header_version))
+            self._write_large(parts)
 
     def send_once(self, frame: Frame) -> None:
         if self._closing:
             return
-        data = frame.encoded(self.header_version)
+        parts = frame.encoded_parts(self.header_version)
         if self._paused or len(self._outbox):
             try:
-                self._outbox.put_once(data)
+                self._outbox.put_once(*parts)
             except OutboxOverflow as error:
                 log.warning("client %s is too slow, closing it: %s", self.peer, error)
                 self.close()
+        elif len(parts) == 1 and len(parts[0]) <= WRITE_CHUNK:
+            self._write(parts[0])
         else:
-            self._write(data)
+            self._write_large(parts)
+
+    def _write_large(self, parts: tuple[Buffer, ...]) -> None:
+        """A frame over `WRITE_CHUNK`: written a chunk at a time as the socket drains
+        (the outbox holds the rest, shared, not copied), after what a batch gathered."""
+        if self._batch:
+            gathered, self._batch = self._batch, []
+            self._transport_write(b"".join(gathered))
+        self._outbox.put_once(*parts)  # the outbox was empty: within any bound
+        self._flush()
 
     def send_message(self, message: Message) -> None:
         self.send_once(Frame(message))
@@ -464,7 +480,7 @@ class ClientSession(asyncio.Protocol):
         if batch and not self._closing:
             self._transport_write(b"".join(batch) if len(batch) > 1 else batch[0])
 
-    def _write(self, data: bytes) -> None:
+    def _write(self, data: Buffer) -> None:
         assert self._transport is not None
         self._sent += 1
         if self._batch is not None:
@@ -472,7 +488,7 @@ class ClientSession(asyncio.Protocol):
         else:
             self._transport_write(data)
 
-    def _transport_write(self, data: bytes) -> None:
+    def _transport_write(self, data: Buffer) -> None:
         assert self._transport is not None
         with self._wlock:
             if self._stash is not None:  # the rest of a direct write goes first
@@ -482,10 +498,11 @@ class ClientSession(asyncio.Protocol):
 
     def _flush(self) -> None:
         while not self._paused and not self._closing:
-            data = self._outbox.pop()
+            data = self._outbox.pop(WRITE_CHUNK)
             if data is None:
                 return
-            self._write(data)
+            self._sent += 1
+            self._transport_write(data)
 
     # --- direct writes (ROS executor thread) -------------------------------------------------
     def write_direct(self, data: bytes) -> bool:
@@ -538,7 +555,7 @@ class ClientSession(asyncio.Protocol):
     def describe(self) -> dict[str, object]:
         return {"peer": self.peer, "header_version": self.header_version,
                 "received": self.received, "sent": self.sent,
-                "coalesced": self._outbox.coalesced, "waiting": len(self._outbox),
+                "coalesced": self._outbox.coalesced, "waiting": self._outbox.frames_waiting,
                 "waiting_bytes": self._outbox.pending_bytes,
                 "receiving_bytes": self._decoder.buffered}
 

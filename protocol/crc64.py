@@ -22,7 +22,8 @@ from typing import Callable, Union
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["BACKEND", "CHECK_VALUE", "POLY", "crc64", "crc64_native", "crc64_python"]
+__all__ = ["BACKEND", "CHECK_VALUE", "POLY", "crc64", "crc64_continue", "crc64_native",
+           "crc64_python"]
 
 POLY = 0x42F0E1EBA9EA3693
 CHECK_VALUE = 0x6C40DF5F0B497347  # crc64(b"123456789"), the catalogue's check value
@@ -157,10 +158,10 @@ def _crc_blocks(view: memoryview) -> int:
     return int(crc[0])
 
 
-def _load_native() -> tuple[Callable[[Buffer], int] | None, str]:
+def _load_native() -> tuple[Callable[..., int] | None, str]:
     try:
         fastcrc = importlib.import_module("fastcrc")
-        ecma_182: Callable[[Buffer], int] = fastcrc.crc64.ecma_182
+        ecma_182: Callable[..., int] = fastcrc.crc64.ecma_182
         if ecma_182(b"123456789") == CHECK_VALUE:  # the same CRC, not a namesake
             return ecma_182, "fastcrc"
     except (ImportError, AttributeError):
@@ -172,7 +173,7 @@ def _load_native() -> tuple[Callable[[Buffer], int] | None, str]:
         return None, "python"
     if not getattr(impl, "_usingExtension", False):
         return None, "python"  # crcmod's own pure-Python path is slower than ours
-    func: Callable[[Buffer], int] = impl.mkCrcFun(
+    func: Callable[..., int] = impl.mkCrcFun(
         (1 << 64) | POLY, initCrc=0, rev=False, xorOut=0
     )
     return func, "crcmod"
@@ -193,3 +194,26 @@ def crc64(data: Buffer) -> int:
     if _native_func is not None:
         return _native_func(data)
     return crc64_python(data)
+
+
+def crc64_continue(crc: int, data: Buffer) -> int:
+    """The CRC of (what gave ``crc``) followed by ``data``: a body's CRC computed over its
+    parts, without joining them first (``crc64_continue(crc64(a), b) == crc64(a + b)``)."""
+    if _native_func is not None:  # fastcrc and crcmod take the CRC to continue from
+        return _native_func(data, crc)
+    view = memoryview(data).cast("B")
+    if len(view) < _NUMPY_THRESHOLD:
+        return _crc_loop(crc, view)
+    # Linearity (module docstring): feed len(data) zero bytes to crc, then XOR data's CRC.
+    return _feed_zeros(crc, len(view)) ^ _crc_blocks(view)
+
+
+def _feed_zeros(crc: int, count: int) -> int:
+    value = np.array([crc], dtype=np.uint64)
+    level = 0
+    while count:
+        if count & 1:
+            value = _apply_shift(_shift_tables(level), value)
+        count >>= 1
+        level += 1
+    return int(value[0])

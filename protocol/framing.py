@@ -21,7 +21,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Iterator
 
-from protocol.crc64 import crc64
+from protocol.crc64 import Buffer, crc64, crc64_continue
 from protocol.errors import (
     BodyError,
     BodyTooLargeError,
@@ -44,10 +44,10 @@ from protocol.header import (
     unpack_metadata,
     unpack_raw,
 )
-from protocol.messages import Message, unpack_body
+from protocol.messages import Message, PolyData, RawBody, unpack_body
 
 __all__ = ["DEFAULT_MAX_BODY_SIZE", "DEFAULT_UNCOUNTED_BODY_BYTES", "Decoder", "RawFrame",
-           "ReceiveBudget", "StreamTemplate", "encode"]
+           "ReceiveBudget", "StreamTemplate", "encode", "encode_parts"]
 
 DEFAULT_MAX_BODY_SIZE = 64 * 1024 * 1024  # 64 MiB: a 512^3 uint8 volume with room to spare
 # Bodies up to this size are not counted against a `ReceiveBudget`: commands and poses must
@@ -65,28 +65,49 @@ def encode(message: Message, *, header_version: int = 1) -> bytes:
     cannot read more); 2 writes the extended header and metadata. The timestamp is written
     as given: setting it (0 means "unset") is the caller's business.
     """
+    head, content, tail = encode_parts(message, header_version=header_version)
+    return b"".join((head, content, tail))
+
+
+def encode_parts(message: Message, *, header_version: int = 1) -> tuple[bytes, Buffer, bytes]:
+    """`encode` as three parts whose concatenation is the message's wire bytes: the header
+    (and v2's extended header), the content, and v2's metadata. The content is the body's
+    own bytes where it has them (a `RawBody`): a large model is then neither copied nor
+    held twice, and the CRC is computed over the parts as they are."""
     type_name = message.type_name
-    content = message.body.pack()
+    body = message.body
+    content: Buffer
+    if isinstance(body, RawBody):
+        content = body.data
+    elif isinstance(body, PolyData):
+        content = body.pack_view()  # a model of tens of MB: no final copy
+    else:
+        content = body.pack()
     if header_version == 1:
-        body = content
+        ext, tail = b"", b""
     elif header_version == 2:
         if isinstance(message.message_id, bool) or not isinstance(message.message_id, int) \
                 or not 0 <= message.message_id <= _U32_MAX:
             raise EncodeError("message_id", "an integer in [0, 2**32)", message.message_id)
         meta_header, meta = _packed_metadata(message.metadata)
-        body = b"".join((_EXT_HEADER.pack(EXT_HEADER_SIZE, len(meta_header), len(meta),
-                                          message.message_id), content, meta_header, meta))
+        ext = _EXT_HEADER.pack(EXT_HEADER_SIZE, len(meta_header), len(meta),
+                               message.message_id)
+        tail = meta_header + meta
     else:
         raise EncodeError("header_version", "1 or 2", header_version)
+    size = len(ext) + len(content) + len(tail)
+    crc = crc64_continue(crc64_continue(crc64(ext), content), tail)
     timestamp = message.timestamp
     if isinstance(timestamp, int) and 0 <= timestamp <= _U64_MAX:
         # The names' checks, once per distinct name; then one struct pack.
-        return _HEADER.pack(header_version, _name_raw(type_name, "type_name"),
-                            _name_raw(message.device_name, "device_name"), timestamp,
-                            len(body), crc64(body)) + body
-    header = Header(header_version, type_name, message.device_name, timestamp,
-                    len(body), crc64(body))
-    return header.pack() + body  # raises the EncodeError that says what is wrong
+        header = _HEADER.pack(header_version, _name_raw(type_name, "type_name"),
+                              _name_raw(message.device_name, "device_name"), timestamp,
+                              size, crc)
+    else:
+        # Raises the EncodeError that says what is wrong.
+        header = Header(header_version, type_name, message.device_name, timestamp, size,
+                        crc).pack()
+    return header + ext, content, tail
 
 
 # Streams repeat the same metadata and names thousands of times a second: their packed
