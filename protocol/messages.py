@@ -897,7 +897,7 @@ class RawBody:
     passed through unchanged."""
 
     type_name: str
-    data: bytes
+    data: Union[bytes, bytearray, memoryview]  # a packed model: a view of its one buffer
 
     def pack(self) -> bytes:
         return bytes(self.data)

@@ -78,12 +78,15 @@ from rclpy.serialization import deserialize_message
 from bridge.codecs import CodecError, codec_for
 from bridge.dispatch import Handler
 from bridge.graph_types import refuse_other_type
+from bridge.heavy import LargeResult
 from bridge.hub import Hub
 from bridge.logging_limits import RateLimitedLog
+from bridge.outbox import SharedFrame
 from bridge.codecs.cdr import CdrError
 from bridge.markers.cdr import layout_supported, read_marker, read_marker_array
 from bridge.markers.convert import ADD, DELETE, DELETEALL, MarkerEvent, events_of
-from bridge.markers.geometry import MarkerError, MarkerModel, MarkerSpec, build_model
+from bridge.markers.geometry import (MarkerError, MarkerModel, MarkerSpec, build_model,
+                                     model_bytes, packed)
 from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
 from bridge.security import NameRules, strip_frame
@@ -106,6 +109,13 @@ log = logging.getLogger(__name__)
 
 MAX_QUEUED = 64  # messages waiting for a topic's worker; past that the oldest go
 MAX_MARKERS = 10_000  # live markers of one topic; more are refused (STATUS)
+# Bytes of models kept (each once, shared by the clients it goes to): one topic's, and
+# every topic's together. A model is judged on its size before it is made.
+MAX_TOPIC_MODEL_BYTES = 128 * 1024 * 1024
+MAX_MODEL_BYTES = 256 * 1024 * 1024
+# A topic's worker meshes at most this share of the time (of one core): a peer's storm
+# then costs the daemon its share, and the worker folds what comes meanwhile.
+MESH_DUTY = 0.25
 _MAX_REFUSALS_KEPT = 16  # whole-message refusals folded while the loop is behind
 _MAX_IN_FLIGHT = 4  # batches handed to the loop and not applied yet (worker waits)
 
@@ -152,6 +162,60 @@ def _fixed_from(buffer: TfBuffer, fixed: str, frame: str, stamp_ns: int) -> Opti
             return buffer.lookup(fixed, frame, 0).as_tuple()
     except TfError:
         return None
+
+
+class ModelBudget:
+    """Bytes of marker models kept, per topic and all together (any thread). A model is
+    charged before it is made (`charge`, its size from `model_bytes`), settled at its real
+    size once made, and released when it is dropped."""
+
+    def __init__(self, topic_limit: int = MAX_TOPIC_MODEL_BYTES,
+                 total_limit: int = MAX_MODEL_BYTES) -> None:
+        self.topic_limit = topic_limit
+        self.total_limit = total_limit
+        self.total = 0
+        self._lock = threading.Lock()
+        self._charges: dict[tuple[str, MarkerKey], int] = {}
+        self._topics: dict[str, int] = {}
+
+    def charge(self, topic: str, key: MarkerKey, nbytes: int, *,
+               settle: bool = False) -> Optional[MarkerError]:
+        """Charge ``nbytes`` for the marker (replacing what it was charged); the refusal,
+        charging nothing, if that is over a bound (``settle``: always charged)."""
+        with self._lock:
+            old = self._charges.get((topic, key), 0)
+            on_topic = self._topics.get(topic, 0) - old + nbytes
+            total = self.total - old + nbytes
+            if not settle and on_topic > self.topic_limit:
+                return MarkerError("points", f"a model within the topic's memory budget "
+                                   f"({self.topic_limit} bytes of models a topic; "
+                                   f"{max(0, self.topic_limit - on_topic + nbytes)} left)",
+                                   f"a model of {nbytes} bytes")
+            if not settle and total > self.total_limit:
+                return MarkerError("points", f"a model within the daemon's memory budget "
+                                   f"({self.total_limit} bytes of models, all topics; "
+                                   f"{max(0, self.total_limit - total + nbytes)} left)",
+                                   f"a model of {nbytes} bytes")
+            self._charges[(topic, key)] = nbytes
+            self._topics[topic] = on_topic
+            self.total = total
+            return None
+
+    def release(self, topic: str, key: Optional[MarkerKey] = None) -> None:
+        """A marker's model is gone (``key`` None: every model of the topic)."""
+        with self._lock:
+            keys = ([k for k in self._charges if k[0] == topic] if key is None
+                    else [(topic, key)])
+            for k in keys:
+                nbytes = self._charges.pop(k, 0)
+                self.total -= nbytes
+                self._topics[topic] = self._topics.get(topic, 0) - nbytes
+            if not self._topics.get(topic):
+                self._topics.pop(topic, None)
+
+    def of_topic(self, topic: str) -> int:
+        with self._lock:
+            return self._topics.get(topic, 0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -219,10 +283,13 @@ class _Worker:
     """One topic's reader: a bounded queue of messages, one thread that meshes them."""
 
     def __init__(self, sub: _Subscription, mesh_roots: tuple[Path, ...],
-                 package_paths: Mapping[str, Path]) -> None:
+                 package_paths: Mapping[str, Path], *, budget: Optional[ModelBudget] = None,
+                 gate: Optional[threading.Lock] = None) -> None:
         self._sub = sub
         self._mesh_roots = mesh_roots
         self._package_paths = dict(package_paths)
+        self._budget = budget or ModelBudget()
+        self._gate = gate or threading.Lock()  # the daemon's: one topic meshes at a time
         self._queue: deque[Any] = deque()
         self._cond = threading.Condition()
         self._in_flight = 0  # batches handed to the loop, not applied yet (under _cond)
@@ -255,16 +322,24 @@ class _Worker:
     def forget(self, key: MarkerKey) -> None:  # loop thread: dropped there
         with self._lock:
             self._models.pop(key, None)
+            self._budget.release(self._sub.topic, key)
 
     def remember(self, key: MarkerKey, digest: bytes, model: MarkerModel) -> None:
         with self._lock:
             self._models[key] = (digest, model)
+            self._budget.charge(self._sub.topic, key, model.nbytes, settle=True)
+
+    def _forget_all(self) -> None:
+        with self._lock:
+            self._models.clear()
+            self._budget.release(self._sub.topic)
 
     def stop(self) -> None:
         with self._cond:
             self._stopped = True
             self._queue.clear()
             self._cond.notify()
+        self._forget_all()
 
     def _run(self) -> None:
         # While the loop is behind (`_MAX_IN_FLIGHT` batches not applied), the worker keeps
@@ -282,24 +357,32 @@ class _Worker:
                 messages = list(self._queue)
                 self._queue.clear()
                 can_hand_over = self._in_flight < _MAX_IN_FLIGHT
+            spent = 0.0
             try:
                 if messages:
                     folded = self._fold(messages, folded)
                 if folded is None or not can_hand_over:
                     continue
-                updates = self._updates(folded)
+                with self._gate:
+                    began = time.thread_time()
+                    updates = self._updates(folded)
+                    spent = time.thread_time() - began
                 folded = None
             except Exception:  # noqa: BLE001 - a bug on one message must not end the topic
                 log.exception("markers on %s: a message could not be read", self._sub.topic)
                 folded = None
                 continue
-            if not updates:
-                continue  # nothing changed (an array re-sent as it was): no loop wake-up
-            with self._cond:
-                if self._stopped:
-                    return
-                self._in_flight += 1
-            self._sub.hand_over(updates)
+            if updates:  # else nothing changed (an array re-sent as it was): no wake-up
+                with self._cond:
+                    if self._stopped:
+                        return
+                    self._in_flight += 1
+                self._sub.hand_over(updates)
+            # Its share of the time (MESH_DUTY): what comes meanwhile is folded after.
+            rest = spent * (1.0 / MESH_DUTY - 1.0)
+            if rest > 0.001:
+                with self._cond:
+                    self._cond.wait_for(lambda: self._stopped, timeout=rest)
 
     def _events(self, msg: Any) -> list[MarkerEvent]:
         sub = self._sub
@@ -339,19 +422,16 @@ class _Worker:
         out, delete_all, events = list(folded.refused), folded.delete_all, folded.last
         placements: dict[tuple[str, int], Optional[Tf7]] = {}  # (frame, stamp) -> fixed<-frame
         if delete_all:
-            with self._lock:
-                self._models.clear()
+            self._forget_all()
             out.append(_Gone(None))
         for key, event in events.items():
             if event.action == DELETE:
-                with self._lock:
-                    self._models.pop(key, None)
+                self.forget(key)
                 out.append(_Gone(key))
                 continue
             assert event.action == ADD
             if event.error is not None or event.spec is None:
-                with self._lock:
-                    self._models.pop(key, None)
+                self.forget(key)
                 out.append(_Refused(key, event.error or MarkerError("marker", "a marker",
                                                                     "nothing")))
                 continue
@@ -371,17 +451,19 @@ class _Worker:
                     continue
                 model = known[1]  # unchanged: only its lifetime is renewed
             else:
+                # Judged before anything is made: a model the budget cannot hold is refused.
+                refusal = self._budget.charge(self._sub.topic, key, model_bytes(spec))
                 try:
-                    model = build_model(spec, mesh_roots=self._mesh_roots,
-                                        package_paths=dict(self._package_paths))
+                    if refusal is not None:
+                        raise refusal
+                    model = packed(build_model(spec, mesh_roots=self._mesh_roots,
+                                               package_paths=dict(self._package_paths)))
                 except MarkerError as error:
-                    with self._lock:
-                        self._models.pop(key, None)
+                    self.forget(key)
                     out.append(_Refused(key, error))
                     continue
                 self.meshed += 1
-                with self._lock:
-                    self._models[key] = (digest, model)
+                self.remember(key, digest, model)
             out.append(_Show(key, frame, spec.frame.lstrip("/"), digest, model,
                              spec.lifetime_ns, spec.stamp))
         return out
@@ -438,6 +520,8 @@ class MarkerBridges:
         self._timer: Optional[asyncio.TimerHandle] = None
         self._timer_due = 0
         self._refusals = RateLimitedLog(log)
+        self.budget = ModelBudget()
+        self._meshing = threading.Lock()  # one topic's worker meshes at a time
 
     def hub_call(self, callback: Any, *args: Any) -> None:
         self._hub.call_soon(callback, *args)
@@ -477,7 +561,8 @@ class MarkerBridges:
         # reader knows (a 1000-marker array: a few ms instead of ~100 through rclpy).
         sub.raw = ros_type in (MARKER_TYPE, MARKER_ARRAY_TYPE) and layout_supported(
             codec_for(MARKER_TYPE).message_class.get_fields_and_field_types())
-        sub.worker = _Worker(sub, self._mesh_roots, self._package_paths)
+        sub.worker = _Worker(sub, self._mesh_roots, self._package_paths, budget=self.budget,
+                             gate=self._meshing)
         try:
             sub.subscription = self._ros.stream_node.create_subscription(
                 message_class, topic, sub.on_message, qos_profile(request.qos), raw=sub.raw)
@@ -513,10 +598,10 @@ class MarkerBridges:
         self._close(sub)
         return {"topic": topic, "devices": devices}
 
-    def list_markers(self, request: ListMarkers) -> dict[str, Any]:
+    def list_markers(self, request: ListMarkers) -> LargeResult:
         sub = self._find(request.topic)
         now = time.monotonic_ns()
-        return {
+        return LargeResult({
             "topic": sub.topic, "device": sub.device,
             "markers": [{"ns": live.key[0], "id": live.key[1], "device": live.device,
                          "type": live.kind, "frame": live.frame, "points": live.points,
@@ -528,7 +613,7 @@ class MarkerBridges:
             "withheld": [{"ns": k[0], "id": k[1], "reason": why}
                          for k, why in sub.withheld.items()],
             "errors": [{"ns": k[0], "id": k[1], "error": why} for k, why in sub.errors.items()],
-        }
+        })
 
     # ------------------------------------------------------------------ loop thread
 
@@ -630,8 +715,10 @@ class MarkerBridges:
         # Stamped with the marker's header stamp, as topic bridges stamp their messages.
         stamp = (igtl_timestamp_from_ros(*update.stamp) if update.stamp[0] > 0
                  else igtl_timestamp_now())
-        self._hub.publish_persistent(Message(device_name=live.device, body=model.body,
-                                             timestamp=stamp, metadata=metadata))
+        # A stream: a client that is behind gets only the newest model of each marker,
+        # and the model's content is shared by every client, not copied per client.
+        self._hub.stream_frame(live.device, SharedFrame(Message(
+            device_name=live.device, body=model.body, timestamp=stamp, metadata=metadata)))
         self._schedule(sub, live)
 
     def _refuse(self, sub: _Subscription, update: _Refused, gone: list[str]) -> None:
@@ -777,7 +864,8 @@ class MarkerBridges:
             "markers": len(sub.markers), "withheld": len(sub.withheld),
             "errors": len(sub.errors), "raw": sub.raw,
             "dropped": worker.dropped if worker is not None else 0,
-            "meshed": worker.meshed if worker is not None else 0}
+            "meshed": worker.meshed if worker is not None else 0,
+            "model_bytes": self.budget.of_topic(sub.topic)}
         if existed is not None:
             out["existed"] = existed
         return out
