@@ -43,6 +43,8 @@ Handler = Callable[[Any, Union[Replier, None]],
                    Union[Result, Awaitable[Result], "OffLoop[Result]"]]
 
 DAEMON_VERSION = "0.1.0"
+# A command text longer than this is parsed off the loop (in its client's lane).
+LARGE_COMMAND_CHARS = 64 * 1024
 
 
 class Capability(Protocol):
@@ -122,6 +124,8 @@ class Dispatcher:
         self._ros = ros
         self._hub = hub
         self._heavy = heavy  # clients' lanes for OffLoop work and LargeResult replies
+        # Clients whose large command is being parsed, and their commands that came after.
+        self._parsing: dict[Replier, deque[Message]] = {}
         self._capabilities = tuple(capabilities)
         # Security is checked here, by request fields, so no capability needs to know it.
         self._policy = policy or SecurityPolicy()
@@ -154,11 +158,55 @@ class Dispatcher:
 
     # --- entry points -------------------------------------------------------------------
     def handle(self, message: Message, client: Replier) -> None:
-        """A COMMAND from a client (loop thread): reply now, or when an async op is done."""
+        """A COMMAND from a client (loop thread): reply now, or when an async op is done.
+
+        A large text (a publish of a megabyte of JSON) is parsed in the client's lane, and
+        the client's later commands wait for it, so that they still run in order."""
+        waiting = self._parsing.get(client)
+        if waiting is not None:
+            waiting.append(message)
+            return
+        body = message.body
+        assert isinstance(body, Command)
+        if self._heavy is not None and len(body.text) > LARGE_COMMAND_CHARS:
+            try:
+                parsing = self._heavy.run(client, lambda: c.parse_request(body.name,
+                                                                          body.text))
+            except CommandError as error:  # the client's lane is full
+                self._reply(client, message, self._failure(body.name, error))
+                return
+            self._parsing[client] = deque()
+            parsing.add_done_callback(lambda done: self._parsed(message, client, done))
+            return
+        try:
+            request = c.parse_request(body.name, body.text)
+        except Exception as error:  # noqa: BLE001 - every failure becomes a reply
+            self._reply(client, message, self._failure(body.name, error))
+            return
+        self._dispatch(message, client, request)
+
+    def _parsed(self, message: Message, client: Replier,
+                done: asyncio.Future[c.Request]) -> None:
+        """A large command's text is parsed (loop thread): run it, then what waited."""
+        waiting = self._parsing.pop(client, deque())
+        body = message.body
+        assert isinstance(body, Command)
+        if not done.cancelled():  # cancelled: the client left
+            error = done.exception()
+            if error is not None:
+                self._reply(client, message, self._failure(body.name, error))
+            else:
+                self._dispatch(message, client, done.result())
+        while waiting:
+            self.handle(waiting.popleft(), client)
+            if client in self._parsing:  # another large one: the rest waits for it
+                self._parsing[client].extend(waiting)
+                return
+
+    def _dispatch(self, message: Message, client: Replier, request: c.Request) -> None:
         body = message.body
         assert isinstance(body, Command)
         try:
-            request = c.parse_request(body.name, body.text)
             outcome = self._run(request, client)
         except Exception as error:  # noqa: BLE001 - every failure becomes a reply
             self._reply(client, message, self._failure(body.name, error))
@@ -200,6 +248,7 @@ class Dispatcher:
                                             if k.bridge.per_connection})
         self._quota.release(client, gone)
         self._quota.forget(client)
+        self._parsing.pop(client, None)
         if self._heavy is not None:
             self._heavy.forget(client)
 
