@@ -338,9 +338,15 @@ class Watcher:
             [sys.executable, "-u", peers, "watch", str(port), "base", "link7"], env=env,
             cwd=str(REPO), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
             stderr=(logs / "watch.log").open("wb"), text=True, start_new_session=True)
-        for child in (self.publisher, self.watcher):
+        # The floor: a plain rclpy subscriber of the same /tf, its own process. What the
+        # machine's load alone does to a ROS stream, beside what the client sees.
+        self.floor = subprocess.Popen(
+            [sys.executable, "-u", peers, "floor", "tf", "/tf"], env=env, cwd=str(REPO),
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            stderr=(logs / "floor.log").open("wb"), text=True, start_new_session=True)
+        for child in (self.publisher, self.watcher, self.floor):
             self._expect(child, "READY")
-        self._say(self.publisher, "WAIT 1")
+        self._say(self.publisher, "WAIT 2")
         self._expect(self.publisher, "MATCHED")
         self._say(self.publisher, "RUN 100 100000")  # until stopped
 
@@ -362,8 +368,11 @@ class Watcher:
 
     def reset(self) -> None:
         self._say(self.watcher, "RESET")
+        self._say(self.floor, "RESET")
 
     def report(self) -> dict[str, Any]:
+        self._say(self.floor, "REPORT")
+        floor = json.loads(self._expect(self.floor, "{"))["all"]
         self._say(self.watcher, "REPORT")
         data = json.loads(self._expect(self.watcher, "{"))
         tf = data["streams"].get("tf", {"n": 0, "p50": None, "p99": None, "max": None})
@@ -373,10 +382,11 @@ class Watcher:
                 "hello_max_ms": max(hello["max"] or 0.0,
                                     data["hello_unanswered"]["oldest_ms"]),
                 "hello_unanswered": data["hello_unanswered"]["n"],
-                "disconnected": data["disconnected"]}
+                "disconnected": data["disconnected"],
+                "floor_p99_ms": floor["p99"], "floor_max_ms": floor["max"]}
 
     def close(self) -> None:
-        for child in (self.watcher, self.publisher):
+        for child in (self.watcher, self.floor, self.publisher):
             try:
                 os.killpg(child.pid, signal.SIGKILL)
             except ProcessLookupError:
@@ -388,7 +398,8 @@ def _watched(figures: dict[str, Any]) -> str:
     def ms(value: Any) -> str:
         return "-" if value is None else f"{value:.1f}"
     return (f"tf p50 {ms(figures['tf_p50_ms'])} / p99 {ms(figures['tf_p99_ms'])} / max "
-            f"{ms(figures['tf_max_ms'])} ms (n {figures['tf_n']}); hello p99 "
+            f"{ms(figures['tf_max_ms'])} ms (n {figures['tf_n']}; rclpy floor p99 "
+            f"{ms(figures['floor_p99_ms'])} / max {ms(figures['floor_max_ms'])}); hello p99 "
             f"{ms(figures['hello_p99_ms'])} / max {ms(figures['hello_max_ms'])} ms "
             f"(n {figures['hello_n']}, unanswered {figures['hello_unanswered']})"
             + (" DISCONNECTED by the daemon" if figures["disconnected"] else ""))
@@ -469,6 +480,7 @@ def main() -> int:
         watcher.reset()
         time.sleep(args.storm_seconds)
         baseline = watcher.report()
+        baseline_load = round(os.getloadavg()[0], 1)
         print(f"\n== baseline (no attack, {args.storm_seconds:g} s)\n   other client: "
               f"{_watched(baseline)}", flush=True)
         for name in chosen:
@@ -485,7 +497,10 @@ def main() -> int:
                 started = time.monotonic()
                 watcher.reset()
                 if name in STORMS:
-                    outcome = run_storm(name, port, env, logs, args.storm_seconds)
+                    # Measured from the attack proper (its set-up, building its messages,
+                    # is not part of it).
+                    outcome = run_storm(name, port, env, logs, args.storm_seconds,
+                                        started=watcher.reset)
                     outcome["served_s"] = fresh_client_served(port)
                 elif name == "slowloris":
                     outcome = slowloris(port, deadline_s)
@@ -503,7 +518,7 @@ def main() -> int:
                 label = name if rounds == 1 else f"{name} {round_}"
                 result = {"attack": label, "before": before, "peak_rss_mb": peak_rss,
                           "after": after, "watched": watched, "daemon_cpu": round(cpu, 2),
-                          **outcome}
+                          "load": round(os.getloadavg()[0], 1), **outcome}
                 results.append(result)
                 print(f"\n== {label}\n   before {before}\n   peak RSS {peak_rss} MB\n"
                       f"   after  {after}\n   daemon CPU {cpu:.0%} of a core\n"
@@ -541,16 +556,17 @@ def main() -> int:
                   f"{ent_after} | {served} |")
         print(f"\nthe other client while each attack runs (targets: tf p99 < 20 ms, every "
               f"hello within 100 ms); baseline in the same run: {_watched(baseline)}")
-        print("\n| attack | tf p50 / p99 / max (ms) | hello p99 / max (ms) | daemon CPU | "
-              "targets |")
-        print("|---|---|---|---|---|")
+        print("\n| attack | tf p50 / p99 / max (ms) | rclpy floor p99 / max (ms) | "
+              "hello p99 / max (ms) | daemon CPU | load | targets |")
+        print("|---|---|---|---|---|---|---|")
         for r in [{"attack": "baseline (no attack)", "watched": baseline,
-                   "daemon_cpu": None}, *results]:
+                   "daemon_cpu": None, "load": baseline_load}, *results]:
             w = r["watched"]
             cpu = "" if r["daemon_cpu"] is None else f"{r['daemon_cpu']:.0%}"
             print(f"| {r['attack']} | {w['tf_p50_ms'] or 0:.1f} / {w['tf_p99_ms'] or 0:.1f} / "
-                  f"{w['tf_max_ms'] or 0:.1f} | {w['hello_p99_ms'] or 0:.1f} / "
-                  f"{w['hello_max_ms']:.1f} | {cpu} | "
+                  f"{w['tf_max_ms'] or 0:.1f} | {w['floor_p99_ms'] or 0:.1f} / "
+                  f"{w['floor_max_ms'] or 0:.1f} | {w['hello_p99_ms'] or 0:.1f} / "
+                  f"{w['hello_max_ms']:.1f} | {cpu} | {r.get('load', '')} | "
                   f"{'met' if _meets_targets(w) else 'MISSED'} |")
         if args.json:
             args.json.write_text(json.dumps({"baseline": baseline, "results": results},

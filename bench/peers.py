@@ -407,6 +407,8 @@ def floor(kind: str, topic: str) -> None:
 
     def on_message(msg: Any) -> None:
         arrival = time.time_ns()
+        if kind == "tf" and (not msg.transforms or msg.transforms[0].child_frame_id != "link1"):
+            return  # another publisher's /tf (a storm's): not the stream measured
         stamp = msg.header.stamp if kind != "tf" else msg.transforms[0].header.stamp
         with recorder.lock:
             recorder.add(kind, arrival, stamp.sec * _NS + stamp.nanosec)

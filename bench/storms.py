@@ -87,8 +87,8 @@ class Peer:
 # ------------------------------------------------------------------------- storms
 
 
-def marker_storm(port: int, env: dict[str, str], logs: Path, seconds: float
-                 ) -> dict[str, Any]:
+def marker_storm(port: int, env: dict[str, str], logs: Path, seconds: float,
+                 started: Callable[[], None]) -> dict[str, Any]:
     shower = RawSession(port, name="marker shower")
     try:
         shower.command("create_marker_subscriber", {"topic": MARKER_STORM_TOPIC,
@@ -97,6 +97,7 @@ def marker_storm(port: int, env: dict[str, str], logs: Path, seconds: float
         peer = Peer(env, logs, "marker-storm", MARKER_STORM_TOPIC, str(seconds))
         try:
             peer.wait_for("READY")
+            started()
             sent = int(peer.wait_for("SENT", timeout=seconds + 60).split()[1])
         finally:
             peer.stop()
@@ -120,19 +121,27 @@ def _sphere_list(marker_id: int, points: int, seed: int) -> dict[str, Any]:
                         "z": round(float(z), 4)} for x, y, z in xyz]}
 
 
-def marker_bomb(port: int, env: dict[str, str], logs: Path, seconds: float
-                ) -> dict[str, Any]:
+def marker_bomb(port: int, env: dict[str, str], logs: Path, seconds: float,
+                started: Callable[[], None]) -> dict[str, Any]:
     bomber = RawSession(port, name="marker bomber")
     try:
         bomber.command("create_marker_subscriber", {"topic": BOMB_TOPIC, "type": "Marker",
                                                     "fixed_frame": "world"})
         bomber.command("create_publisher", {"topic": BOMB_TOPIC,
                                             "type": "visualization_msgs/msg/Marker"})
+        # Built first (the bench's own CPU is not part of the attack): then sent, each
+        # one as soon as the previous one is answered.
+        commands = [_command_bytes(k + 1000, "publish", {
+            "topic": BOMB_TOPIC, "value": _sphere_list(k, MAX_LIST_POINTS, k)})
+            for k in range(12)]
+        started()
         took = []
-        for k in range(12):
+        for k, data in enumerate(commands):
             start = time.monotonic()
-            bomber.command("publish", {"topic": BOMB_TOPIC,
-                                       "value": _sphere_list(k, MAX_LIST_POINTS, k)})
+            bomber.send(data)
+            reply = bomber.reply(k + 1000, timeout=120)
+            if reply is None or not reply["ok"]:
+                raise CommandFailed("publish", (reply or {}).get("error") or {"name": "none"})
             took.append(time.monotonic() - start)
         shown = _wait_listed(bomber, BOMB_TOPIC, 12, seconds)
         start = time.monotonic()
@@ -147,8 +156,8 @@ def marker_bomb(port: int, env: dict[str, str], logs: Path, seconds: float
         bomber.close()
 
 
-def marker_bomb_ros(port: int, env: dict[str, str], logs: Path, seconds: float
-                    ) -> dict[str, Any]:
+def marker_bomb_ros(port: int, env: dict[str, str], logs: Path, seconds: float,
+                    started: Callable[[], None]) -> dict[str, Any]:
     shower = RawSession(port, name="marker shower")
     try:
         shower.command("create_marker_subscriber", {"topic": BOMB_ROS_TOPIC,
@@ -156,6 +165,7 @@ def marker_bomb_ros(port: int, env: dict[str, str], logs: Path, seconds: float
         peer = Peer(env, logs, "marker-bomb", BOMB_ROS_TOPIC, "30")
         try:
             peer.wait_for("READY")
+            started()
             peer.wait_for("SENT", timeout=120)
         finally:
             peer.stop()
@@ -184,6 +194,16 @@ def _wait_listed(session: RawSession, topic: str, want: int, seconds: float) -> 
     return len(session.command("list_markers", {"topic": topic}, timeout=60)["markers"])
 
 
+def _command_bytes(command_id: int, op: str, arguments: dict[str, Any]) -> bytes:
+    import json
+
+    from protocol.framing import encode
+    from protocol.messages import Command, Message
+
+    return encode(Message("bench", Command(command_id=command_id, name=op,
+                                           text=json.dumps(arguments))), header_version=2)
+
+
 def _marker_refusals(session: RawSession) -> list[str]:
     return sorted({text[:160] for _, _, text in session.received.statuses})[:3]
 
@@ -204,14 +224,17 @@ def _mixed_cells_polydata(device: str, body_bytes: int) -> bytes:
     return encode(Message(device, RawBody("POLYDATA", content)), header_version=1)
 
 
-def polydata(port: int, env: dict[str, str], logs: Path, seconds: float) -> dict[str, Any]:
+def polydata(port: int, env: dict[str, str], logs: Path, seconds: float,
+             started: Callable[[], None]) -> dict[str, Any]:
     sender = RawSession(port, name="polydata sender")
     try:
         device = sender.command("create_publisher", {"topic": "/storm_mesh",
                                                      "type": "shape_msgs/msg/Mesh"})["device"]
         out: dict[str, Any] = {}
-        for label, target in (("unrouted", "nowhere"), ("publisher", device)):
-            body = _mixed_cells_polydata(target, 60_000_000)
+        bodies = [(label, _mixed_cells_polydata(target, 60_000_000))
+                  for label, target in (("unrouted", "nowhere"), ("publisher", device))]
+        started()
+        for label, body in bodies:
             before = len(sender.received.statuses)
             start = time.monotonic()
             for _ in range(4):
@@ -229,12 +252,14 @@ def polydata(port: int, env: dict[str, str], logs: Path, seconds: float) -> dict
         sender.close()
 
 
-def tf_frames(port: int, env: dict[str, str], logs: Path, seconds: float) -> dict[str, Any]:
+def tf_frames(port: int, env: dict[str, str], logs: Path, seconds: float,
+              started: Callable[[], None]) -> dict[str, Any]:
     lister = RawSession(port, name="lister")
     try:
         peer = Peer(env, logs, "tf-frames")
         try:
             peer.wait_for("READY")
+            started()
             peer.wait_for("SENT", timeout=300)
         finally:
             peer.stop()
@@ -250,12 +275,13 @@ def tf_frames(port: int, env: dict[str, str], logs: Path, seconds: float) -> dic
         lister.close()
 
 
-def service_slots(port: int, env: dict[str, str], logs: Path, seconds: float
-                  ) -> dict[str, Any]:
+def service_slots(port: int, env: dict[str, str], logs: Path, seconds: float,
+                  started: Callable[[], None]) -> dict[str, Any]:
     server = Peer(env, logs, "trigger-server", "/storm_live")
     hog, other = RawSession(port, name="hog"), RawSession(port, name="other")
     try:
         server.wait_for("READY")
+        started()
         ids = [hog.send_command("call_service", {"service": f"/absent_{i}", "type": TRIGGER,
                                                  "request": {}, "timeout": 120})
                for i in range(64)]
@@ -290,7 +316,7 @@ def service_slots(port: int, env: dict[str, str], logs: Path, seconds: float
         server.stop()
 
 
-Storm = Callable[[int, dict[str, str], Path, float], dict[str, Any]]
+Storm = Callable[[int, dict[str, str], Path, float, Callable[[], None]], dict[str, Any]]
 STORMS: dict[str, Storm] = {
     "marker_storm": marker_storm, "marker_bomb": marker_bomb,
     "marker_bomb_ros": marker_bomb_ros, "polydata": polydata, "tf_frames": tf_frames,
@@ -422,11 +448,12 @@ def peer_main(kind: str, args: list[str]) -> int:
     return 0
 
 
-def run_storm(name: str, port: int, env: dict[str, str], logs: Path,
-              seconds: float) -> dict[str, Any]:
-    """One storm; a failure is a figure too (what broke, instead of a result)."""
+def run_storm(name: str, port: int, env: dict[str, str], logs: Path, seconds: float, *,
+              started: Callable[[], None]) -> dict[str, Any]:
+    """One storm (``started()`` is called once its set-up is done and the attack proper
+    begins); a failure is a figure too (what broke, instead of a result)."""
     try:
-        return STORMS[name](port, env, logs, seconds)
+        return STORMS[name](port, env, logs, seconds, started)
     except (OSError, TimeoutError, CommandFailed, RuntimeError) as error:
         return {"failed": f"{type(error).__name__}: {error}"}
 
