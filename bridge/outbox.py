@@ -61,17 +61,18 @@ class SharedFrame(Frame):
     made it: its wire bytes are its header, that content and its metadata
     (`protocol.framing.encode_parts`), written in turn, never joined."""
 
-    __slots__ = ("_parts",)
+    __slots__ = ("_parts", "_content_crc")
 
-    def __init__(self, message: Message) -> None:
+    def __init__(self, message: Message, content_crc: Optional[int] = None) -> None:
         super().__init__(message)
         self._parts: dict[int, tuple[bytes, Buffer, bytes]] = {}
+        self._content_crc = content_crc  # known where the content was made: not redone
 
     def encoded_parts(self, header_version: int) -> tuple[Buffer, ...]:
         parts = self._parts.get(header_version)
         if parts is None:
             parts = self._parts[header_version] = encode_parts(
-                self._message, header_version=header_version)
+                self._message, header_version=header_version, content_crc=self._content_crc)
         return parts
 
     def encoded(self, header_version: int) -> bytes:

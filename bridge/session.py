@@ -59,6 +59,8 @@ CommandHandler = Callable[[Message, "ClientSession"], None]
 
 # A data message with a larger body is decoded off the loop (see the module docstring).
 HEAVY_BODY_BYTES = 64 * 1024
+# What one loop turn writes to one client from its outbox before others get a turn.
+FLUSH_TURN_BYTES = 4 * WRITE_CHUNK
 # Message types that are not data for a device: commands, statuses, queries, replies.
 _CONTROL_TYPES = ("COMMAND", "STATUS", "GET_", "RTS_", "STT_", "STP_")
 
@@ -116,6 +118,7 @@ class ClientSession(asyncio.Protocol):
         self._attached = False
         self._attach_timer: Optional[asyncio.TimerHandle] = None
         self._batch: Optional[list[Buffer]] = None  # frames gathered for one write
+        self._flush_scheduled = False  # the outbox is written on from the next loop turn
         # Direct writes from the executor thread (see the module docstring).
         self._wlock = threading.Lock()
         self._direct: Optional[socket.socket] = None  # a dup of the transport's socket
@@ -497,12 +500,27 @@ class ClientSession(asyncio.Protocol):
             self._transport.write(data)
 
     def _flush(self) -> None:
+        """Write what waits while the transport takes it, at most `FLUSH_TURN_BYTES` a
+        loop turn: a client that reads 50 MB models as fast as they are written would
+        otherwise keep the loop (every other client's replies and streams) for as long."""
+        self._flush_scheduled = False
+        written = 0
         while not self._paused and not self._closing:
+            if written >= FLUSH_TURN_BYTES:
+                if self._outbox:
+                    self._flush_scheduled = True
+                    asyncio.get_running_loop().call_soon(self._flush_turn)
+                return
             data = self._outbox.pop(WRITE_CHUNK)
             if data is None:
                 return
             self._sent += 1
+            written += len(data)
             self._transport_write(data)
+
+    def _flush_turn(self) -> None:
+        if self._flush_scheduled:
+            self._flush()
 
     # --- direct writes (ROS executor thread) -------------------------------------------------
     def write_direct(self, data: bytes) -> bool:

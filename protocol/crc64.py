@@ -22,8 +22,8 @@ from typing import Callable, Union
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["BACKEND", "CHECK_VALUE", "POLY", "crc64", "crc64_continue", "crc64_native",
-           "crc64_python"]
+__all__ = ["BACKEND", "CHECK_VALUE", "POLY", "crc64", "crc64_combine", "crc64_continue",
+           "crc64_native", "crc64_python"]
 
 POLY = 0x42F0E1EBA9EA3693
 CHECK_VALUE = 0x6C40DF5F0B497347  # crc64(b"123456789"), the catalogue's check value
@@ -206,6 +206,13 @@ def crc64_continue(crc: int, data: Buffer) -> int:
         return _crc_loop(crc, view)
     # Linearity (module docstring): feed len(data) zero bytes to crc, then XOR data's CRC.
     return _feed_zeros(crc, len(view)) ^ _crc_blocks(view)
+
+
+def crc64_combine(crc_a: int, crc_b: int, length_b: int) -> int:
+    """``crc64(a + b)`` from ``crc64(a)``, ``crc64(b)`` and ``len(b)``: a model's content
+    CRC, computed once where the model was made, then combined with a header made later
+    (a few table look-ups, whatever the length)."""
+    return _feed_zeros(crc_a, length_b) ^ crc_b
 
 
 def _feed_zeros(crc: int, count: int) -> int:

@@ -718,7 +718,8 @@ class MarkerBridges:
         # A stream: a client that is behind gets only the newest model of each marker,
         # and the model's content is shared by every client, not copied per client.
         self._hub.stream_frame(live.device, SharedFrame(Message(
-            device_name=live.device, body=model.body, timestamp=stamp, metadata=metadata)))
+            device_name=live.device, body=model.body, timestamp=stamp, metadata=metadata),
+            content_crc=model.content_crc))
         self._schedule(sub, live)
 
     def _refuse(self, sub: _Subscription, update: _Refused, gone: list[str]) -> None:

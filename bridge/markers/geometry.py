@@ -53,6 +53,7 @@ import numpy.typing as npt
 from bridge.robots.errors import RobotError
 from bridge.robots.resources import PackageResolver
 from protocol.conversions import metres_to_mm, quaternion_to_rotation
+from protocol.crc64 import crc64
 from protocol.errors import ProtocolError
 from protocol.messages import AttributeKind, PolyData, PolyDataAttribute, RawBody, String
 from protocol.naming import (KEY_LINE_WIDTH, KEY_POINT_COLORS, KEY_POINT_SIZE, KEY_POSITION,
@@ -157,6 +158,7 @@ class MarkerModel:
     body: Union[PolyData, String, RawBody]  # RawBody: a POLYDATA packed from a template
     rgba: Rgba
     metadata: dict[str, str]
+    content_crc: Optional[int] = None  # a packed body's CRC (`packed`), for its frames
 
     @property
     def type_name(self) -> str:
@@ -186,8 +188,9 @@ def packed(model: MarkerModel) -> MarkerModel:
     copy, shared by every client that gets it."""
     if not isinstance(model.body, PolyData):
         return model
-    return MarkerModel(model.kind, RawBody(PolyData.TYPE, model.body.pack_view()),
-                       model.rgba, model.metadata)
+    content = model.body.pack_view()
+    return MarkerModel(model.kind, RawBody(PolyData.TYPE, content), model.rgba,
+                       model.metadata, crc64(content))
 
 
 # ---------------------------------------------------------------------------- checks
