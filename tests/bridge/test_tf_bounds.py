@@ -89,3 +89,15 @@ def test_new_frames_past_the_bound_are_refused_known_ones_still_update(store: St
     # Known frames keep updating once the bound is reached.
     assert store(buffer, [StampedTransform("c", "b", 9, (0.0, 0.0, 2.0), IDQ)]) == {"b"}
     assert buffer.lookup("c", "b").translation == (0.0, 0.0, 2.0)
+
+
+def test_a_flood_of_refusals_is_counted_and_worded_a_few_at_a_time() -> None:
+    """A peer's message of a thousand new frames past the bound: each refusal is counted,
+    the first few are worded (wording each one again in Python cost 20 ms a message)."""
+    buffer = TfBuffer(max_frames=3)
+    store_cdr = _as_cdr
+    with pytest.raises(RejectedTransformsError) as raised:
+        store_cdr(buffer, [tf("world", f"f{i}") for i in range(1000)])
+    assert raised.value.count == 998 and raised.value.changed == {"f0", "f1"}
+    assert 1 <= len(raised.value.rejected) <= 998
+    assert "(and 997 more)" in str(raised.value)
