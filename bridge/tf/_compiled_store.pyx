@@ -411,10 +411,8 @@ cdef class CompiledFrameStore:
         try:
             # Decode every frame id first: bytes that are not UTF-8 store nothing.
             for k in range(count):
-                names.append(PyUnicode_DecodeUTF8(<const char *>p + rows[k].frame_at,
-                                                  rows[k].frame_len, NULL))
-                names.append(PyUnicode_DecodeUTF8(<const char *>p + rows[k].child_at,
-                                                  rows[k].child_len, NULL))
+                names.append(self._name(p, rows[k].frame_at, rows[k].frame_len))
+                names.append(self._name(p, rows[k].child_at, rows[k].child_len))
         except UnicodeDecodeError:
             PyMem_Free(rows)
             return None
@@ -422,6 +420,15 @@ cdef class CompiledFrameStore:
             return self._store_rows(rows, count, names, static)
         finally:
             PyMem_Free(rows)
+
+    cdef str _name(self, const unsigned char *p, Py_ssize_t at, Py_ssize_t length):
+        """A frame id; one far over the bound (a peer's 1 MB ids) only as much of it as
+        shows that, and marked cut: it is refused, and a megabyte string a frame id would
+        be made for nothing (and stay in the heap)."""
+        cdef Py_ssize_t most = 4 * self._max_name  # UTF-8: at most 4 bytes a character
+        if self._max_name and length > most:
+            return PyUnicode_DecodeUTF8(<const char *>p + at, most, "replace") + "\u2026"
+        return PyUnicode_DecodeUTF8(<const char *>p + at, length, NULL)
 
     cdef tuple _store_rows(self, Raw *rows, Py_ssize_t count, list names, bint static):
         cdef set changed = set()

@@ -69,7 +69,10 @@ def test_a_frame_id_over_the_bound_is_refused_and_the_rest_kept(store: Store) ->
     first, second = raised.value.rejected
     assert isinstance(first, InvalidArgumentError)
     assert "transforms[0].child" in str(first) and "at most 8 characters" in str(first)
-    assert "(1000000 characters)" in str(first) and len(str(first)) < 300
+    # Cut in the error: whole from transforms, cut where it was read (a 1 MB id is not
+    # even decoded whole from CDR).
+    assert ("(1000000 characters)" in str(first) or str(first).endswith("\u2026"))
+    assert len(str(first)) < 300
     assert "transforms[2].parent" in str(second)
     assert buffer.frames() == ["eightchr", "ok", "world"]
 
