@@ -74,7 +74,8 @@ class Daemon:
         self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
                                      frame_rules=policy.frames,
                                      mesh_roots=tuple(Path(d) for d in policy.robot_dirs),
-                                     package_paths=dict(config.package_paths))
+                                     package_paths=dict(config.package_paths),
+                                     max_model_bytes=policy.max_marker_bytes)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
                                                           self.robots, self.markers],

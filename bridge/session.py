@@ -575,7 +575,7 @@ class ClientSession(asyncio.Protocol):
                 "received": self.received, "sent": self.sent,
                 "coalesced": self._outbox.coalesced, "waiting": self._outbox.frames_waiting,
                 "waiting_bytes": self._outbox.pending_bytes,
-                "receiving_bytes": self._decoder.buffered}
+                "receiving_bytes": self._decoder.buffered, "decoding": self._decoding}
 
 
 def _status_of(error: MessageError) -> int:

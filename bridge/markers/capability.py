@@ -89,7 +89,7 @@ from bridge.markers.geometry import (MarkerError, MarkerModel, MarkerSpec, build
                                      model_bytes, packed)
 from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
-from bridge.security import NameRules, strip_frame
+from bridge.security import DEFAULT_MAX_MARKER_BYTES, NameRules, strip_frame
 from bridge.tf.buffer import TfBuffer
 from bridge.tf.capability import TfBridges
 from bridge.tf.errors import ExtrapolationError, TfError
@@ -109,10 +109,6 @@ log = logging.getLogger(__name__)
 
 MAX_QUEUED = 64  # messages waiting for a topic's worker; past that the oldest go
 MAX_MARKERS = 10_000  # live markers of one topic; more are refused (STATUS)
-# Bytes of models kept (each once, shared by the clients it goes to): one topic's, and
-# every topic's together. A model is judged on its size before it is made.
-MAX_TOPIC_MODEL_BYTES = 128 * 1024 * 1024
-MAX_MODEL_BYTES = 256 * 1024 * 1024
 # A topic's worker meshes at most this share of the time (of one core): a peer's storm
 # then costs the daemon its share, and the worker folds what comes meanwhile.
 MESH_DUTY = 0.25
@@ -165,13 +161,13 @@ def _fixed_from(buffer: TfBuffer, fixed: str, frame: str, stamp_ns: int) -> Opti
 
 
 class ModelBudget:
-    """Bytes of marker models kept, per topic and all together (any thread). A model is
-    charged before it is made (`charge`, its size from `model_bytes`), settled at its real
-    size once made, and released when it is dropped."""
+    """Bytes of marker models kept (each once, shared by the clients it goes to), all
+    topics together and per topic (half of that), from any thread. A model is charged
+    before it is made (`charge`, its size from `model_bytes`), settled at its real size
+    once made, and released when it is dropped."""
 
-    def __init__(self, topic_limit: int = MAX_TOPIC_MODEL_BYTES,
-                 total_limit: int = MAX_MODEL_BYTES) -> None:
-        self.topic_limit = topic_limit
+    def __init__(self, total_limit: int = DEFAULT_MAX_MARKER_BYTES) -> None:
+        self.topic_limit = total_limit // 2
         self.total_limit = total_limit
         self.total = 0
         self._lock = threading.Lock()
@@ -505,7 +501,8 @@ class MarkerBridges:
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: TfBridges,
                  frame_rules: Optional[NameRules] = None,
                  mesh_roots: tuple[Path, ...] = (),
-                 package_paths: Optional[Mapping[str, Path]] = None) -> None:
+                 package_paths: Optional[Mapping[str, Path]] = None,
+                 max_model_bytes: int = DEFAULT_MAX_MARKER_BYTES) -> None:
         self._ros = ros
         self._hub = hub
         self._names = names
@@ -520,7 +517,7 @@ class MarkerBridges:
         self._timer: Optional[asyncio.TimerHandle] = None
         self._timer_due = 0
         self._refusals = RateLimitedLog(log)
-        self.budget = ModelBudget()
+        self.budget = ModelBudget(max_model_bytes)
         self._meshing = threading.Lock()  # one topic's worker meshes at a time
 
     def hub_call(self, callback: Any, *args: Any) -> None:
