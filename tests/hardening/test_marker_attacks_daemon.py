@@ -63,3 +63,49 @@ def test_a_denied_frame_does_not_leak_through_a_marker_on_a_prefixed_daemon(
         assert float(np.abs(np.asarray(model.body.points)).max()) <= 5.0 + 1e-3
     finally:
         client.close()
+
+
+SPHERE_LIST = 7
+
+
+def _sphere_list(marker_id: int, points: int) -> dict:
+    grid = [[0.01 * (i % 50), 0.01 * (i // 50), 0.0] for i in range(points)]
+    return {"ns": "bomb", "id": marker_id, "type": SPHERE_LIST, "frame": "world",
+            "scale": [0.01, 0.01, 0.01], "points": grid}
+
+
+def test_models_past_the_memory_budget_are_refused_before_they_are_made(
+        processes: Processes, tmp_path: Path) -> None:
+    """The issue's bomb, scaled down: each SPHERE_LIST is a model of 2,456 bytes a point
+    (42 vertices, 80 triangles), and a topic may keep half of --max-marker-bytes. What
+    fits is shown; the next is refused, named with the budget, and nothing of it kept."""
+    daemon = start_daemon(processes, "--max-marker-bytes", "4000000")
+    peer = MarkerPeer(processes, tmp_path)
+    client = RawClient(daemon.port)
+    try:
+        assert ask(client, "create_marker_subscriber", {
+            "topic": "/test_markers", "type": "MarkerArray", "fixed_frame": "world"}, 1)["ok"]
+        # 600 points: 1.47 MB each. The first fits the topic's 2 MB, the second does not.
+        peer.send(markers=[_sphere_list(1, 600), _sphere_list(2, 600)])
+        listed: dict = {}
+
+        def settled() -> bool:
+            nonlocal listed
+            listed = ask(client, "list_markers", {"topic": "/test_markers"}, 2)["result"]
+            return len(listed["markers"]) + len(listed["errors"]) == 2
+        wait_until(settled, timeout=20, what="both markers judged")
+        assert [m["id"] for m in listed["markers"]] == [1]
+        (error,) = listed["errors"]
+        assert error["id"] == 2 and "memory budget" in error["error"]
+        assert "2000000 bytes of models a topic" in error["error"]
+        assert "a model of 1473664 bytes" in error["error"]
+        bridges = ask(client, "list_bridges", {}, 3)["result"]["bridges"]
+        (sub,) = [b for b in bridges if b["kind"] == "marker_subscriber"]
+        assert 1_400_000 < sub["model_bytes"] <= 2_000_000
+        # Deleting the first frees its share: the second fits when sent again.
+        peer.send(markers=[{"ns": "bomb", "id": 1, "action": 2}, _sphere_list(2, 600)])
+        wait_until(lambda: [m["id"] for m in ask(client, "list_markers", {
+            "topic": "/test_markers"}, 4)["result"]["markers"]] == [2], timeout=20,
+            what="the second marker shown")
+    finally:
+        client.close()
