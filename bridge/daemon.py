@@ -22,6 +22,7 @@ from bridge.config import DaemonConfig
 from bridge.dispatch import Dispatcher
 from bridge.heavy import HeavyWork
 from bridge.hub import Hub
+from bridge.interface_types import InterfaceTypes
 from bridge.markers.capability import MarkerBridges
 from bridge.parameters import ParameterBridges
 from bridge.robots.capability import RobotBridges
@@ -78,7 +79,8 @@ class Daemon:
                                      max_model_bytes=policy.max_marker_bytes)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
-                                                          self.robots, self.markers],
+                                                          self.robots, self.markers,
+                                                          InterfaceTypes()],
                                      policy=policy, resolve_frame=self.tf.resolve_frame,
                                      resolve_file=self.robots.file_path, heavy=self.heavy)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,

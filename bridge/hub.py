@@ -1,7 +1,9 @@
 """The daemon-wide switch between ROS-side bridges and connected OpenIGTLink clients.
 
 Bridges are daemon-wide, as with an OpenIGTLink server in 3D Slicer: every client receives
-every streamed device, and a client that connects gets the current state at once (the
+every streamed device (except a device with an audience: a client's own message stream
+goes to the clients that joined it, `join`), and a client that connects gets the current
+state at once (the
 newest value of each streamed device, and every persistent one-shot such as a robot mesh),
 except what a late ROS subscriber would not get either: the newest image or point cloud of
 a volatile topic is not kept once sent (`keep_latest`), as it may be tens of MB and the next
@@ -96,6 +98,9 @@ class Hub:
         self._latest: dict[str, Frame] = {}
         self._not_kept: set[str] = set()  # devices whose newest value is not kept
         self._persistent: dict[str, Frame] = {}
+        # Devices that go only to the clients that joined them (may be none); a device not
+        # listed goes to every client. Tuples, replaced whole: other threads iterate them.
+        self._audience: dict[str, tuple[Subscriber, ...]] = {}
         self._inbound: dict[str, InboundHandler] = {}
         self._reply_listeners: list[ReplyListener] = []
         self._closed_listeners: list[ClosedListener] = []
@@ -124,13 +129,52 @@ class Hub:
             self._client_tuple = tuple(self.clients)
             for frame in self._persistent.values():
                 client.send_once(frame)
+            audience = self._audience
             for device, frame in self._latest.items():
-                client.send_stream(device, frame)
+                members = audience.get(device)
+                if members is None or client in members:
+                    client.send_stream(device, frame)
 
     def detach(self, client: Subscriber) -> None:
         with self._lock:
             self.clients.discard(client)
             self._client_tuple = tuple(self.clients)
+            for device, members in tuple(self._audience.items()):
+                if client in members:
+                    self._audience[device] = tuple(m for m in members if m is not client)
+
+    # --- audiences (loop thread) -------------------------------------------------------------
+    def limit_to_audience(self, device: str) -> None:
+        """From now on `device` goes only to the clients that `join` it (none yet)."""
+        with self._lock:
+            self._audience.setdefault(device, ())
+
+    def join(self, device: str, client: Subscriber) -> None:
+        """Stream `device` (limited to an audience) to `client` too; it gets the newest
+        value at once, as a client that connects gets the others'."""
+        with self._lock:
+            members = self._audience.get(device, ())
+            if client in members:
+                return
+            self._audience[device] = (*members, client)
+            frame = self._latest.get(device)
+            if frame is not None and client in self.clients:
+                client.send_stream(device, frame)
+
+    def leave(self, device: str, client: Subscriber) -> None:
+        with self._lock:
+            members = self._audience.get(device)
+            if members is not None and client in members:
+                self._audience[device] = tuple(m for m in members if m is not client)
+
+    def has_audience(self, device: str) -> bool:
+        """Does anyone get `device` (any thread: a bridge asks before making a value)?"""
+        members = self._audience.get(device)
+        return members is None or bool(members)
+
+    def _recipients(self, device: str) -> tuple[Subscriber, ...]:
+        members = self._audience.get(device)
+        return self._client_tuple if members is None else members
 
     # --- outbound (loop thread) ------------------------------------------------------------
     def stream(self, message: Message) -> None:
@@ -153,7 +197,7 @@ class Hub:
         if device not in self._not_kept:
             self._latest[device] = frame
         self.streamed += 1
-        for client in tuple(self.clients):
+        for client in self._recipients(device):
             client.send_stream(device, frame)
 
     @contextmanager
@@ -209,6 +253,7 @@ class Hub:
             self._incoming_large.pop(device, None)
             self._latest.pop(device, None)
         self._persistent.pop(device, None)
+        self._audience.pop(device, None)
         self._not_kept.discard(device)
         self._held.pop(device, None)
         self._min_interval.pop(device, None)
@@ -216,7 +261,11 @@ class Hub:
         for client in tuple(self.clients):
             client.forget_device(device)
 
-    def latest(self, device: str) -> Message | None:
+    def latest(self, device: str, client: Subscriber | None = None) -> Message | None:
+        """The newest value of `device`; with `client`, only if that client gets it."""
+        members = self._audience.get(device)
+        if client is not None and members is not None and client not in members:
+            return None
         frame = self._latest.get(device) or self._persistent.get(device)
         return frame.message if frame else None
 
@@ -302,7 +351,8 @@ class Hub:
         caller keeps removed devices out (the tf capability's delivery lock)."""
         if not frames:
             return
-        if self._direct_writes and not any(d in self._min_interval for d, _ in frames):
+        if self._direct_writes and not any(d in self._min_interval or d in self._audience
+                                           for d, _ in frames):
             with self._lock:
                 if not (self._wake_pending or self._draining):
                     self._write_direct_many(frames)
@@ -331,7 +381,7 @@ class Hub:
         self._latest[device] = frame
         self.streamed += 1
         self.direct += 1
-        for client in self._client_tuple:
+        for client in self._recipients(device):
             if not client.write_direct(frame.encoded(client.header_version)):
                 client.hand_over(device, frame)
 

@@ -147,6 +147,8 @@ class ParameterClient:
     types_client: Client
     ready: Optional[bool] = None  # None until the first check
     observed: tuple[str, ...] = ()
+    # Also stream every other parameter a /parameter_events message declares or changes.
+    all_changes: bool = False
     values: dict[str, ParameterValue] = field(default_factory=dict)
     # name -> serial of the last event that changed it: a fetch that started earlier must
     # not overwrite what an event reported meanwhile.
@@ -279,7 +281,9 @@ class ParameterBridges:
     async def observe_parameters(self, request: ObserveParameters) -> dict[str, Any]:
         client = self._client(request.node)
         client.observed = tuple(dict.fromkeys(request.names))
-        client.values = {n: v for n, v in client.values.items() if n in client.observed}
+        client.all_changes = request.all_changes
+        if not client.all_changes:
+            client.values = {n: v for n, v in client.values.items() if n in client.observed}
         self._update_watched()
         if client.observed and client.ready:
             await self._refresh(client)  # a failure is the reply; a later (re)appearance retries
@@ -499,7 +503,8 @@ class ParameterBridges:
             log.warning("could not fetch the observed parameters of %s: %s", client.node, error)
 
     def _stream_values(self, client: ParameterClient) -> None:
-        values = {n: client.values[n].to_dict() for n in client.observed if n in client.values}
+        values = {n: v.to_dict() for n, v in client.values.items()
+                  if client.all_changes or n in client.observed}
         text = dumps({"node": client.node, "values": values})
         self._stream_text(client.device, client.key, text)
 
@@ -518,7 +523,8 @@ class ParameterBridges:
 
     def _update_watched(self) -> None:
         self._watched = frozenset([node for node, client in self.clients.items()
-                                   if client.observed] + [w.node for w in self.watches])
+                                   if client.observed or client.all_changes]
+                                  + [w.node for w in self.watches])
 
     def _on_event_ros(self, event: ParameterEvent) -> None:
         # Executor thread: only pick the watched nodes' events and hand them off.
@@ -529,13 +535,14 @@ class ParameterBridges:
         if self.watches:
             self._on_watched_event(event)
         client = self.clients.get(event.node)
-        if client is None or not client.observed:
+        if client is None or not (client.observed or client.all_changes):
             return
         changed = False
         updates = [(p.name, p.value) for p in (*event.new_parameters, *event.changed_parameters)]
         updates += [(p.name, RosParameterValue()) for p in event.deleted_parameters]
         for name, ros_value in updates:
-            if name not in client.observed:
+            if name not in client.observed and not (
+                    client.all_changes and self._policy.visible_parameters(client.node, [name])):
                 continue
             try:
                 value = from_ros_value(ros_value, name)

@@ -395,7 +395,7 @@ class ClientSession(asyncio.Protocol):
         devices = [message.device_name] if message.device_name else self._hub.devices()
         found = 0
         for device in devices:
-            latest = self._hub.latest(device)
+            latest = self._hub.latest(device, self)
             if latest is not None and latest.type_name == wanted:
                 self.send_once(Frame(latest))
                 found += 1

@@ -22,12 +22,14 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String as StringMsg
 
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
+from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
 from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
 from bridge.dispatch import Handler
 from bridge.graph_types import refuse_other_type
 from bridge.heavy import OffLoop
-from bridge.hub import LARGE_MESSAGE_BYTES, Hub, Replier, approximate_size
+from bridge.hub import (LARGE_MESSAGE_BYTES, Hub, Replier, StreamChannel, Subscriber,
+                        approximate_size)
 from bridge.logging_limits import RateLimitedLog
 from bridge.message_guards import MessageGuard
 from bridge.outbox import BulkFrame, Frame, TemplateFrame
@@ -39,9 +41,9 @@ from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
                                OutOfRangeError, Publish, QoS, RemovePublisher, RemoveSubscriber,
                                WrongTypeError)
 from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
-from protocol.messages import Message, PolyData, StatusCode
+from protocol.messages import Json, Message, PolyData, StatusCode
 from protocol.messages import Point as PointBody
-from protocol.naming import KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
+from protocol.naming import KEY_COUNT, KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
 
 log = logging.getLogger(__name__)
 
@@ -92,6 +94,9 @@ class SubscriberBridge:
         # The security policy's view of a message (tf frames, parameters): None = drop it.
         self._filter = message_filter
         self.count = 0
+        # The message stream (`enable_messages`): each message whole, as JSON, for the
+        # clients that joined its device; None until a client asks for it.
+        self._messages: Optional[_MessageStream] = None
         # (serialized bytes or None, message or None) of the last message, replaced whole;
         # (None, None) with `last_size` set when it was too large to keep.
         self._last: tuple[Optional[bytes], Any] = (None, None)
@@ -131,6 +136,13 @@ class SubscriberBridge:
         else:
             self._last = (data, None)
 
+    def enable_messages(self, device: str, metadata: dict[str, str]) -> str:
+        """Open the message stream on `device` (once); clients then `join` it on the hub."""
+        if self._messages is None:
+            self._hub.limit_to_audience(device)
+            self._messages = _MessageStream(self._hub.open_channel(device), metadata)
+        return self._messages.channel.device
+
     def _on_raw(self, data: bytes) -> None:  # ROS executor thread: convert, hand off
         if self._channel.closed:
             return
@@ -145,6 +157,7 @@ class SubscriberBridge:
                 return
             self._hub.post_frame(self._channel, TemplateFrame(template, content, timestamp,
                                                               values, transform_body))
+            self._post_whole(None, data)
             return
         try:
             msg = deserialize_message(data, self.codec.message_class)
@@ -161,6 +174,16 @@ class SubscriberBridge:
             self._keep(data)
         self.count += 1
         self._convert(msg)
+        self._post_whole(msg, data)
+
+    def _post_whole(self, msg: Any, data: bytes) -> None:
+        """The message stream's copy of this message, if anyone gets it (executor thread)."""
+        stream = self._messages
+        if stream is None or not self._hub.has_audience(stream.channel.device):
+            return
+        if msg is None:
+            msg = deserialize_message(data, self.codec.message_class)
+        stream.post(self._hub, msg, self.count)
 
     def _convert(self, msg: Any) -> None:
         try:
@@ -185,7 +208,31 @@ class SubscriberBridge:
 
     def close(self) -> None:
         self._hub.close_channel(self._channel)
+        if self._messages is not None:
+            self._hub.close_channel(self._messages.channel)
         self._ros.destroy(self._subscription)
+
+
+@dataclass
+class _MessageStream:
+    """A subscriber's message stream: each message whole, as generic JSON, with the count of
+    messages the subscription had received (a client's GetNumberOfMessages stays exact when
+    its stream was coalesced)."""
+
+    channel: StreamChannel
+    metadata: dict[str, str]
+
+    def post(self, hub: Hub, msg: Any, count: int) -> None:
+        metadata = dict(self.metadata)
+        metadata[KEY_COUNT] = str(count)
+        stamp = getattr(getattr(msg, "header", None), "stamp", None)
+        timestamp = (igtl_timestamp_from_ros(stamp.sec, stamp.nanosec)
+                     if stamp is not None and stamp.sec > 0 else igtl_timestamp_now())
+        message = Message(device_name=self.channel.device, body=Json(message_to_json(msg)),
+                          timestamp=timestamp, metadata=metadata)
+        large = approximate_size(message) > LARGE_MESSAGE_BYTES
+        hub.post_frame(self.channel, BulkFrame(message) if large else Frame(message),
+                       large=large)
 
 
 class PublisherBridge:
@@ -225,7 +272,25 @@ class PublisherBridge:
         what the security policy denies."""
         msg = self.codec.from_value(value, stamp=self._stamp_now(), frame_id=self.frame_id)
         self._check(msg)
-        with self._heavy_lock:  # a worker thread publishes (TopicBridges.publish)
+        return self._publish_open(msg)
+
+    def publish_message(self, fields: dict[str, Any]) -> int:
+        """Publish a whole message given as generic JSON (ROS units, every field checked);
+        an empty header stamp is stamped now, and an empty frame id gets the publisher's."""
+        msg = dict_to_message(self.codec.message_class, fields)
+        header = getattr(msg, "header", None)
+        if header is not None:
+            if header.stamp.sec == 0 and header.stamp.nanosec == 0:
+                header.stamp.sec, header.stamp.nanosec = self._stamp_now()
+            if not header.frame_id:
+                header.frame_id = self.frame_id
+        self._check(msg)
+        return self._publish_open(msg)
+
+    def _publish_open(self, msg: Any) -> int:
+        """Publish unless the bridge was removed meanwhile (a worker thread publishes:
+        TopicBridges.publish)."""
+        with self._heavy_lock:
             if self._closed:
                 raise CommandFailedError("topic", "a publisher bridge", f"{self.topic}, "
                                          f"removed meanwhile", code=ErrorCode.NOT_FOUND)
@@ -383,12 +448,14 @@ class TopicBridges:
                                      code=ErrorCode.ALREADY_EXISTS)
         return True
 
-    def create_subscriber(self, request: CreateSubscriber) -> dict[str, Any]:
+    def create_subscriber(self, request: CreateSubscriber,
+                          client: Optional[Subscriber] = None) -> dict[str, Any]:
         topic = self._resolve(request.topic)
         ros_type = request.ros_type
         codec = self._codec(request.type, ros_type)
         if self._check_existing(self.subscribers.get(topic), topic, ros_type):
-            return _describe(self.subscribers[topic].info(), existed=True)
+            return self._with_messages(request, client, self.subscribers[topic],
+                                       _describe(self.subscribers[topic].info(), existed=True))
         self._check_graph(topic, ros_type)
         key = NameKey.subscriber(topic)
         device = self._names.register(key)
@@ -399,7 +466,20 @@ class TopicBridges:
             max_rate_hz=request.rate_hz, message_filter=self._filter_for(topic, ros_type))
         self.subscribers[topic] = bridge
         log.info("subscribed to %s (%s) as device %r", topic, ros_type, device)
-        return _describe(bridge.info(), existed=False)
+        return self._with_messages(request, client, bridge,
+                                   _describe(bridge.info(), existed=False))
+
+    def _with_messages(self, request: CreateSubscriber, client: Optional[Subscriber],
+                       bridge: SubscriberBridge, reply: dict[str, Any]) -> dict[str, Any]:
+        """Join `client` to the bridge's message stream if it asked (not for images and
+        point clouds: their IMAGE / POLYDATA stream is the whole message already)."""
+        if not request.messages or client is None or bridge.codec.bulk:
+            return reply
+        key = NameKey.subscriber_messages(bridge.topic)
+        device = bridge.enable_messages(self._names.register(key),
+                                        metadata_for(key, ros_type=bridge.codec.ros_type))
+        self._hub.join(device, client)
+        return {**reply, "message_device": device}
 
     def _filter_for(self, topic: str, ros_type: str) -> Optional[Callable[[Any], Any]]:
         guard = self._policy.message_guard(topic, ros_type)
@@ -413,6 +493,7 @@ class TopicBridges:
                                      code=ErrorCode.NOT_FOUND)
         bridge.close()
         self._names.release(NameKey.subscriber(topic))
+        self._names.release(NameKey.subscriber_messages(topic))
         return {"topic": topic, "device": bridge.device}
 
     def create_publisher(self, request: CreatePublisher) -> dict[str, Any]:
@@ -458,12 +539,16 @@ class TopicBridges:
         if bridge is None:
             raise CommandFailedError("topic", "a topic with a publisher bridge (create_publisher "
                                      "first)", topic, code=ErrorCode.NOT_FOUND)
+        field = "value" if request.message is None else "message"
 
         def work() -> dict[str, Any]:  # a message of a megabyte of JSON takes a second
             try:
-                subscribers = bridge.publish_value(request.value)
+                if request.message is None:
+                    subscribers = bridge.publish_value(request.value)
+                else:
+                    subscribers = bridge.publish_message(request.message)
             except CodecError as error:
-                raise WrongTypeError(f"value.{error.field}" if error.field else "value",
+                raise WrongTypeError(f"{field}.{error.field}" if error.field else field,
                                      error.expected, error.got) from None
             return {"topic": topic, "subscribers": subscribers}
         return OffLoop(work)
@@ -490,7 +575,7 @@ class TopicBridges:
 
     def handlers(self) -> dict[type[Op], Handler]:
         return {
-            CreateSubscriber: lambda request, _: self.create_subscriber(request),
+            CreateSubscriber: lambda request, client: self.create_subscriber(request, client),
             RemoveSubscriber: lambda request, _: self.remove_subscriber(request),
             CreatePublisher: lambda request, _: self.create_publisher(request),
             RemovePublisher: lambda request, _: self.remove_publisher(request),

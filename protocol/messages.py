@@ -42,6 +42,7 @@ __all__ = [
     "Body",
     "Command",
     "Image",
+    "Json",
     "KnownBody",
     "Message",
     "Point",
@@ -888,6 +889,38 @@ class RtsCommand(_CommandLayout):
         return cls(*cls._fields_from(content))
 
 
+# ----------------------------------------------------------------------------- JSON
+
+_JSON_HEAD = struct.Struct(">I")
+
+
+@dataclass
+class Json:
+    """This project's own type, not in the OpenIGTLink spec: one JSON document, LENGTH u32
+    then UTF-8 text. The daemon sends it only to its own clients that ask for it (a
+    subscriber's message stream, `create_subscriber` with ``messages``): STRING stops at
+    65535 bytes, and an OpenIGTLink peer that did not ask never sees this type."""
+
+    TYPE: ClassVar[str] = "JSON"
+    text: str
+
+    def pack(self) -> bytes:
+        raw = encode_text(self.text, ENCODING_UTF8, "JSON text")
+        if len(raw) > _U32_MAX:
+            raise EncodeError("JSON text", "under 4 GiB", f"{len(raw)} bytes")
+        return _JSON_HEAD.pack(len(raw)) + raw
+
+    @classmethod
+    def unpack(cls, content: bytes) -> Json:
+        _need(cls.TYPE, content, _JSON_HEAD.size, "header")
+        (length,) = _JSON_HEAD.unpack_from(content)
+        end = _JSON_HEAD.size + length
+        if end > len(content):
+            raise _bad(cls.TYPE, "LENGTH", f"<= {len(content) - _JSON_HEAD.size} (bytes left)",
+                       length)
+        return cls(decode_text(content[_JSON_HEAD.size:end], ENCODING_UTF8, "text", cls.TYPE))
+
+
 # ----------------------------------------------------------------------------- others
 
 
@@ -903,12 +936,13 @@ class RawBody:
         return bytes(self.data)
 
 
-KnownBody = Union[Transform, String, Status, PolyData, Point, Image, Command, RtsCommand]
-Body = Union[Transform, String, Status, PolyData, Point, Image, Command, RtsCommand, RawBody]
+KnownBody = Union[Transform, String, Status, PolyData, Point, Image, Command, RtsCommand, Json]
+Body = Union[Transform, String, Status, PolyData, Point, Image, Command, RtsCommand, Json,
+             RawBody]
 
 BODY_TYPES: dict[str, type[KnownBody]] = {
     cls.TYPE: cls
-    for cls in (Transform, String, Status, PolyData, Point, Image, Command, RtsCommand)
+    for cls in (Transform, String, Status, PolyData, Point, Image, Command, RtsCommand, Json)
 }
 
 _UNPACKERS: dict[str, Callable[[bytes], Body]] = {

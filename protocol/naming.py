@@ -71,6 +71,7 @@ __all__ = [
     "KEY_ACTION",
     "KEY_CHILD",
     "KEY_COLOR",
+    "KEY_COUNT",
     "KEY_DROPPED",
     "KEY_ENCODING",
     "KEY_FORMAT",
@@ -141,6 +142,7 @@ class Role(str, enum.Enum):
     """What a device name stands for; also the value of metadata ``ros2.role``."""
 
     SUBSCRIBER = "subscriber"
+    SUBSCRIBER_MESSAGES = "subscriber_messages"
     PUBLISHER = "publisher"
     TF_LOOKUP = "tf_lookup"
     TF_BROADCASTER = "tf_broadcaster"
@@ -161,6 +163,7 @@ class Role(str, enum.Enum):
 # Prefix of the readable form, and the names of the parts (also their metadata keys).
 _PREFIX: dict[Role, str] = {
     Role.SUBSCRIBER: "",
+    Role.SUBSCRIBER_MESSAGES: "msg:",
     Role.PUBLISHER: "pub:",
     Role.TF_LOOKUP: "tf:",
     Role.TF_BROADCASTER: "tfb:",
@@ -208,6 +211,10 @@ KEY_ENCODING = "ros2.encoding"  # sensor_msgs/Image encoding of the ROS side ("b
 KEY_FORMAT = "ros2.format"  # "text" or "json": how to read a STRING body
 KEY_LABELS = "ros2.labels"  # JSON list of MultiArrayDimension labels
 KEY_DROPPED = "ros2.dropped"  # points left out of a cloud for a NaN/inf coordinate
+# On a subscriber's message stream (``msg:`` devices): how many messages the daemon's
+# subscription had received when it sent this one (exact even when a slow client's
+# stream was coalesced).
+KEY_COUNT = "ros2.count"
 # A marker's identity and kind (visualization_msgs/Marker ns, id, and its type as a word:
 # "cube", "line_strip", ..., or "path", "polygon", "point" for the other marker sources).
 # A model sent from Slicer as a Marker takes its ns and id from the same two keys.
@@ -236,6 +243,7 @@ UNITS_MM = "mm"
 
 _PART_KEYS: dict[Role, tuple[str, ...]] = {
     Role.SUBSCRIBER: (KEY_TOPIC,),
+    Role.SUBSCRIBER_MESSAGES: (KEY_TOPIC,),
     Role.PUBLISHER: (KEY_TOPIC,),
     Role.TF_LOOKUP: (KEY_PARENT, KEY_CHILD),
     Role.TF_BROADCASTER: (KEY_PARENT, KEY_CHILD),
@@ -290,6 +298,10 @@ class NameKey:
     @classmethod
     def subscriber(cls, topic: str) -> NameKey:
         return cls(Role.SUBSCRIBER, (_clean(topic, KEY_TOPIC),))
+
+    @classmethod
+    def subscriber_messages(cls, topic: str) -> NameKey:
+        return cls(Role.SUBSCRIBER_MESSAGES, (_clean(topic, KEY_TOPIC),))
 
     @classmethod
     def publisher(cls, topic: str) -> NameKey:

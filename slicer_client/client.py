@@ -5,10 +5,11 @@
         sub = ros.subscribe("/tool", "PoseStamped", callback=print)
         pub = ros.publisher("/cmd", "String"); pub.publish("hello")
 
-Threads: callbacks run in the transport's receive thread by default (keep them short; never
-block on a command there). For GUI code pass ``callbacks="queue"`` and call
-`Client.process_events()` from the GUI thread (for example from a Qt timer): the callbacks
-then run there.
+Threads: callbacks never run on the transport's receive thread (slicer_client/events.py).
+They run in `Client.Spin()` (the reference's name; `process_events` is the same) on the
+thread that calls it, or, when nobody spins, on the client's dispatcher thread: one at a
+time, in order, and free to call anything, blocking commands included. A GUI passes
+``callbacks="spin"`` and spins from its own thread (a Qt timer): they then run there only.
 
 Reconnection: if the daemon goes away the transport retries in the background; when it is
 back, the client re-creates every resource in creation order (same objects, new device
@@ -18,7 +19,6 @@ names if they changed) and restores observers before user commands go through ag
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
@@ -31,6 +31,7 @@ from slicer_client.actions import (Accept, Action, Execute, GoalHandle, ServedAc
                                    route_goal_event)
 from slicer_client.bridge_state import REMOVE_OPS, BridgeSpec, BridgeState
 from slicer_client.connection import DEFAULT_HOST, DEFAULT_PORT, CommandRefusedError
+from slicer_client.events import EventDispatcher
 from slicer_client.matrices import as_numpy
 from slicer_client.resources import (MarkerSubscriber, ParameterClient, Publisher, Resource,
                                      Robot, Service, Subscriber, TfBroadcaster, TfLookup)
@@ -40,19 +41,19 @@ __all__ = ["Client", "connect"]
 
 log = logging.getLogger(__name__)
 
-_QUEUE = "queue"
-_THREAD = "thread"
+# Earlier names of the modes: "thread" ran callbacks on the receive thread (now a dispatcher
+# thread), "queue" left them to process_events (now Spin).
+_MODES = {"auto": "auto", "thread": "auto", "spin": "spin", "queue": "spin"}
 
 
 class Client:
     """A session with the daemon over any `Transport`; see the module docstring."""
 
-    def __init__(self, transport: Transport, *, callbacks: str = _THREAD) -> None:
-        if callbacks not in (_THREAD, _QUEUE):
-            raise ValueError(f"callbacks: expected 'thread' or 'queue', got {callbacks!r}")
+    def __init__(self, transport: Transport, *, callbacks: str = "auto") -> None:
+        if callbacks not in _MODES:
+            raise ValueError(f"callbacks: expected 'auto' or 'spin', got {callbacks!r}")
         self._transport = transport
-        self._mode = callbacks
-        self._events: "queue.Queue[Tuple[Callable[..., None], Tuple[Any, ...]]]" = queue.Queue()
+        self._events = EventDispatcher(_MODES[callbacks])
         self._lock = threading.RLock()
         self._resources: Dict[Tuple[str, ...], Resource] = {}  # creation order
         self._by_device: Dict[str, Resource] = {}
@@ -60,7 +61,8 @@ class Client:
         self._connection_callbacks: List[Callable[[bool, str], None]] = []
         self.errors: List[str] = []  # STATUS errors and unreadable messages, newest last
         self.daemon_info: Dict[str, Any] = {}
-        self._facade: Any = None
+        self._logic: Any = None
+        self._types: Dict[Tuple[str, str], c.TypeDescription] = {}
         # Actions: goals waiting for their events (by goal id), actions this client serves.
         self._goals: Dict[str, GoalHandle] = {}
         self._served_actions: Dict[str, ServedAction] = {}
@@ -117,31 +119,21 @@ class Client:
 
     # --- event delivery ------------------------------------------------------------------
     def emit(self, callback: Callable[..., None], *args: Any) -> None:
-        if self._mode == _QUEUE:
-            self._events.put((callback, args))
-            return
-        try:
-            callback(*args)
-        except Exception:  # noqa: BLE001 - a user callback must not kill the receive thread
-            log.exception("callback %r raised", callback)
+        """Queue `callback(*args)` where callbacks run (never here, on the receive thread)."""
+        self._events.post(callback, *args)
 
-    def process_events(self, timeout: float = 0.0, max_events: int = 1000) -> int:
-        """Run queued callbacks in the calling thread (``callbacks="queue"`` mode); waits
-        up to `timeout` s for the first one. Returns how many ran."""
-        ran = 0
-        block = timeout > 0
-        while ran < max_events:
-            try:
-                callback, args = self._events.get(block=block, timeout=timeout if block
-                                                  else None)
-            except queue.Empty:
-                break
-            block = False
-            try:
-                callback(*args)
-            finally:
-                ran += 1
-        return ran
+    def process_events(self, timeout: float = 0.0, max_events: Optional[int] = None) -> int:
+        """Run the callbacks queued so far on the calling thread (waiting up to `timeout` s
+        for the first), then the tick hooks; returns how many callbacks ran."""
+        return self._events.spin(timeout, max_events)
+
+    def Spin(self) -> None:  # noqa: N802 - the reference logic's name
+        """The reference's ``logic.Spin()``: run what arrived since the last spin, here."""
+        self._events.spin()
+
+    @property
+    def events(self) -> EventDispatcher:
+        return self._events
 
     def on_connection_change(self, callback: Callable[[bool, str], None]) -> None:
         """`callback(connected, reason)` after a loss and after each re-sync."""
@@ -189,10 +181,13 @@ class Client:
 
     def subscribe(self, topic: str, type: str, *, qos: Optional[Mapping[str, Any]] = None,
                   rate_hz: Optional[float] = None,
-                  callback: Optional[Callable[[Any], None]] = None) -> Subscriber:
+                  callback: Optional[Callable[[Any], None]] = None,
+                  messages: bool = False) -> Subscriber:
         """Subscribe to a ROS topic. `type`: "String", "PoseStamped", "pkg/msg/Type"...
-        `callback(value)` on every message (see the module docstring for the thread)."""
-        sub: Subscriber = self._add(Subscriber(self, topic, type, qos=qos, rate_hz=rate_hz))
+        `callback(value)` on every message (see the module docstring for the thread).
+        `messages`: also keep each message whole (`Subscriber.last_whole`)."""
+        sub: Subscriber = self._add(Subscriber(self, topic, type, qos=qos, rate_hz=rate_hz,
+                                               messages=messages))
         if callback is not None:
             sub.add_callback(callback)
         return sub
@@ -386,7 +381,8 @@ class Client:
         resource: Resource
         if spec.op == "create_subscriber":
             resource = self.subscribe(a["topic"], a["type"], qos=a.get("qos"),
-                                      rate_hz=a.get("rate_hz"))
+                                      rate_hz=a.get("rate_hz"),
+                                      messages=bool(a.get("messages", False)))
         elif spec.op == "create_publisher":
             resource = self.publisher(a["topic"], a["type"], qos=a.get("qos"),
                                       frame=a.get("frame"), labels_topic=a.get("labels_topic"))
@@ -394,7 +390,8 @@ class Client:
             params = self.parameters(a["node"])
             for op, args in spec.then:
                 if op == "observe_parameters":
-                    params.observe(args.get("names", []))
+                    params.observe(args.get("names", []),
+                                   all_changes=bool(args.get("all_changes", False)))
             resource = params
         elif spec.op == "create_tf_lookup":
             resource = self.tf_lookup(a["parent"], a["child"], rate_hz=a.get("rate_hz"))
@@ -430,6 +427,21 @@ class Client:
         """Any op of protocol/README.md; returns its result or raises a typed error."""
         return self._transport.command(op, arguments, timeout=timeout)
 
+    def request(self, request: c.Op, *, timeout: float = 10.0) -> Dict[str, Any]:
+        """Send a request built from the protocol's op classes; returns its result."""
+        return self.command(request.op, request.to_args(), timeout=timeout)
+
+    def describe_type(self, type_name: str, kind: str = "message") -> c.TypeDescription:
+        """What an interface type installed in the daemon's environment is made of (kept:
+        types do not change while the daemon runs)."""
+        key = (type_name, kind)
+        described = self._types.get(key)
+        if described is None:
+            described = c.TypeDescription.from_dict(
+                self.request(c.DescribeType(type=type_name, kind=kind)))
+            self._types[key] = described
+        return described
+
     def send(self, message: Message) -> None:
         self._transport.send(message)
 
@@ -438,6 +450,9 @@ class Client:
 
     def list_topics(self) -> List[Dict[str, Any]]:
         return list(self.command("list_topics").get("topics", []))
+
+    def list_services(self) -> List[Dict[str, Any]]:
+        return list(self.command("list_services").get("services", []))
 
     def lookup_transform(self, parent: str, child: str, *, timeout: float = 0.5,
                          stamp: Optional[Tuple[int, int]] = None) -> np.ndarray:
@@ -453,16 +468,23 @@ class Client:
             return self._latest.get(device)
 
     # --- the reference-compatible facade -------------------------------------------------
+    @property
+    def logic(self) -> Any:
+        """The reference's module logic over this client (slicer_client/reference):
+        ``Spin()``, ``GetDefaultROS2Node()``, ``AddRobot``..."""
+        if self._logic is None:
+            from slicer_client.reference.logic import ROS2Logic
+            self._logic = ROS2Logic(self)
+        return self._logic
+
     def GetDefaultROS2Node(self) -> Any:  # noqa: N802 - the reference's name
-        """The CamelCase facade (reference_api.py): the same resources, reference names."""
-        if self._facade is None:
-            from slicer_client.reference_api import ROS2Node
-            self._facade = ROS2Node(self)
-        return self._facade
+        """The CamelCase facade's default node: the same resources, reference names."""
+        return self.logic.GetDefaultROS2Node()
 
     # --- lifetime ------------------------------------------------------------------------
     def close(self) -> None:
         self._transport.close()
+        self._events.close()
 
     def __enter__(self) -> Client:
         return self
@@ -476,7 +498,7 @@ class Client:
 
 
 def connect(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *, reconnect: bool = True,
-            callbacks: str = _THREAD, retry_interval: float = 0.5, max_interval: float = 5.0,
+            callbacks: str = "auto", retry_interval: float = 0.5, max_interval: float = 5.0,
             connect_timeout: float = 3.0) -> Client:
     """Connect to the daemon. Raises `DaemonUnreachableError` (naming host:port and how to
     start the daemon) if nothing listens there."""

@@ -3,8 +3,9 @@
 
 Each resource knows the command that creates it (its `BridgeSpec`, replayed after a
 reconnect), the device name the daemon answered with, and how to read the messages that
-arrive for it. Callbacks run where the client delivers events: in the receive thread by
-default, or in whatever thread calls `Client.process_events()` (see client.py).
+arrive for it. A resource's state changes as messages arrive (on the receive thread, which
+only stores them: values are decoded when read); its callbacks run where the client runs
+callbacks, never on the receive thread (`Client.Spin()` or its dispatcher: events.py).
 """
 
 from __future__ import annotations
@@ -20,10 +21,10 @@ import numpy as np
 from protocol import commands as c
 from protocol.messages import (Message, Point, PointElement, PolyData, Status, String, Transform,
                                cells_from_array)
-from protocol.naming import (KEY_COLOR, KEY_FRAME, KEY_LINK, KEY_LINK_COUNT, KEY_MARKER_ID,
-                             KEY_MARKER_NS, KEY_MARKER_TYPE, KEY_MARKERS, KEY_PARENT_DEVICE,
-                             KEY_POSITION, KEY_ROLE, KEY_TOPIC, KEY_VISUAL, KEY_VISUAL_COUNT,
-                             KEY_WARNINGS)
+from protocol.naming import (KEY_COLOR, KEY_COUNT, KEY_FRAME, KEY_LINK, KEY_LINK_COUNT,
+                             KEY_MARKER_ID, KEY_MARKER_NS, KEY_MARKER_TYPE, KEY_MARKERS,
+                             KEY_PARENT_DEVICE, KEY_POSITION, KEY_ROLE, KEY_TOPIC, KEY_VISUAL,
+                             KEY_VISUAL_COUNT, KEY_WARNINGS)
 from slicer_client.bridge_state import BridgeSpec
 from slicer_client.matrices import as_numpy, as_rows
 from slicer_client.owner import ResourceOwner
@@ -76,6 +77,13 @@ class Resource:
         for callback in list(self._callbacks):
             self._client.emit(callback, *args)
 
+    def _notify_lazy(self, make_args: Callable[[], Tuple[Any, ...]]) -> None:
+        """Call the callbacks with ``make_args()``, made where they run (a message is
+        decoded there, not on the receive thread), once for all of them."""
+        callbacks = list(self._callbacks)
+        if callbacks:
+            self._client.emit(_call_each, callbacks, make_args)
+
     def _wait(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
         with self._changed:
             if not self._changed.wait_for(predicate, timeout):
@@ -102,35 +110,75 @@ class Resource:
 
 
 class Subscriber(Resource):
-    """A ROS subscription streamed to this client (the reference's subscriber node)."""
+    """A ROS subscription streamed to this client (the reference's subscriber node).
+
+    With ``messages``, this client also gets each message whole (the daemon's message
+    stream: lossless JSON in ROS units, with the subscription's own message count), kept as
+    `last_whole`; `add_whole_callback` hears of each. Images and point clouds have no such
+    stream (their native one is whole): `message_device` stays empty."""
 
     def __init__(self, client: ResourceOwner, topic: str, type: str, *,
                  qos: Optional[Mapping[str, Any]] = None,
-                 rate_hz: Optional[float] = None) -> None:
+                 rate_hz: Optional[float] = None, messages: bool = False) -> None:
         super().__init__(client, BridgeSpec("create_subscriber", _drop_none(
-            {"topic": topic, "type": type, "qos": _qos_dict(qos), "rate_hz": rate_hz})))
+            {"topic": topic, "type": type, "qos": _qos_dict(qos), "rate_hz": rate_hz,
+             "messages": True if messages else None})))
         self.topic = topic
         self.type = type
         self.count = 0  # messages this client received (the daemon may coalesce a burst)
         self.last_message: Optional[Message] = None
+        self._last_value: Tuple[Optional[Message], Any] = (None, None)  # decoded once
+        self.message_device = ""
+        self.last_whole: Optional[Message] = None
+        # Messages the daemon's subscription received, as its message stream said last.
+        self.received_by_daemon = 0
+        self._whole_callbacks: List[Callable[[Message], None]] = []
+
+    def _created(self, result: Mapping[str, Any]) -> None:
+        super()._created(result)
+        self.message_device = str(result.get("message_device", ""))
+        self.received_by_daemon = int(result.get("messages", 0) or 0)
+
+    def devices(self) -> Tuple[str, ...]:
+        return tuple(d for d in (self.device, self.message_device) if d)
+
+    def add_whole_callback(self, callback: Callable[[Message], None]) -> None:
+        """`callback(message)` for each message of the message stream (where callbacks
+        run, never on the receive thread)."""
+        self._whole_callbacks.append(callback)
 
     @property
     def ros_type(self) -> str:
         return str(self.info.get("type", c.resolve_message_type(self.type)))
 
     def _handle(self, message: Message) -> None:
+        if self.message_device and message.device_name == self.message_device:
+            with self._changed:
+                self.last_whole = message
+                self.received_by_daemon = _count_of(message, self.received_by_daemon)
+                self._changed.notify_all()
+            for callback in list(self._whole_callbacks):
+                self._client.emit(callback, message)
+            return
         with self._changed:
             self.count += 1
             self.last_message = message
             self._changed.notify_all()
-        self._notify(self.last_value)
+        self._notify_lazy(lambda: (self._value_of(message),))
+
+    def _value_of(self, message: Message) -> Any:
+        cached, value = self._last_value
+        if cached is not message:
+            value = value_from_message(message)
+            self._last_value = (message, value)
+        return value
 
     @property
     def last_value(self) -> Any:
         """The last message as a Python value: str/bool/int/float, a 4x4 numpy matrix in
         mm, a list/dict for JSON types, numpy pixels, PolyData; None before the first."""
         message = self.last_message
-        return None if message is None else value_from_message(message)
+        return None if message is None else self._value_of(message)
 
     def wait_for_message(self, timeout: float = 10.0,
                          predicate: Optional[Callable[[Any], bool]] = None) -> Any:
@@ -179,6 +227,15 @@ class Publisher(Resource):
         result = self._client.command("publish", {"topic": self.topic,
                                                   "value": _json_value(value)},
                                       timeout=timeout)
+        self.sent += 1
+        return int(result.get("subscribers", 0))
+
+    def publish_message(self, message: Mapping[str, Any], timeout: float = 10.0) -> int:
+        """Publish one whole message given as generic JSON in ROS units (metres,
+        quaternions; as a subscriber's `last_whole` holds it); returns the number of ROS
+        subscribers. An empty header stamp is stamped now by the daemon."""
+        request = c.Publish(topic=self.topic, message=dict(message))
+        result = self._client.command(request.op, request.to_args(), timeout=timeout)
         self.sent += 1
         return int(result.get("subscribers", 0))
 
@@ -239,6 +296,22 @@ def markups_point_body(points_mm: Any, labels: Optional[Sequence[str]] = None) -
     return Point([PointElement(name=str(name), position=p) for name, p in zip(names, pts)])
 
 
+def _call_each(callbacks: List[Callback], make_args: Callable[[], Tuple[Any, ...]]) -> None:
+    args = make_args()
+    for callback in callbacks:
+        try:
+            callback(*args)
+        except Exception:  # noqa: BLE001 - one callback must not stop the others
+            log.exception("callback %r raised", callback)
+
+
+def _count_of(message: Message, previous: int) -> int:
+    try:
+        return int(message.metadata.get(KEY_COUNT, previous))
+    except ValueError:
+        return previous
+
+
 def _json_value(value: Any) -> Any:
     """numpy and vtk values -> JSON-able ones (matrices stay in mm)."""
     if hasattr(value, "GetElement"):
@@ -265,12 +338,15 @@ class ParameterClient(Resource):
         super().__init__(client, BridgeSpec("create_parameter_client", {"node": node}))
         self.node = node
         self.observed: Tuple[str, ...] = ()
+        self.all_changes = False
         self.values: Dict[str, c.ParameterValue] = {}  # last known, kept by observe/get
         self.ready = False  # the node's parameter services answered (observe's reply)
 
     def _restore(self, command: Callable[..., Dict[str, Any]]) -> None:
-        if self.observed:
-            command("observe_parameters", {"node": self.node, "names": list(self.observed)})
+        if self.observed or self.all_changes:
+            request = c.ObserveParameters(node=self.node, names=self.observed,
+                                          all_changes=self.all_changes)
+            command(request.op, request.to_args())
 
     def _handle(self, message: Message) -> None:
         if not isinstance(message.body, String):
@@ -319,21 +395,24 @@ class ParameterClient(Resource):
             from slicer_client.errors import ParameterRejectedError
             raise ParameterRejectedError(self.node, name, str(outcome.get("reason", "")))
 
-    def observe(self, names: Sequence[str], timeout: float = 10.0) -> bool:
+    def observe(self, names: Sequence[str], timeout: float = 10.0, *,
+                all_changes: bool = False) -> bool:
         """Have changes of `names` pushed (replaces the observed set; [] stops), and when
-        the node is absent, pushed once it appears. Callbacks get (name, value). Returns
-        whether the node is there now."""
-        result = self._client.command("observe_parameters",
-                                      {"node": self.node, "names": list(names)},
-                                      timeout=timeout)
+        the node is absent, pushed once it appears; with `all_changes`, also every other
+        parameter of the node that is declared or changed from now on. Callbacks get
+        (name, value). Returns whether the node is there now."""
+        request = c.ObserveParameters(node=self.node, names=tuple(names),
+                                      all_changes=all_changes)
+        result = self._client.command(request.op, request.to_args(), timeout=timeout)
         self.ready = bool(result.get("ready", False))
         with self._changed:
             for name, raw in dict(result.get("values", {})).items():
                 self.values[name] = c.ParameterValue.from_json_value(raw, f"values.{name}")
         self.observed = tuple(names)
+        self.all_changes = all_changes
         self.spec = BridgeSpec(self.spec.op, self.spec.args, (
-            ("observe_parameters", {"node": self.node, "names": list(names)}),)
-            if names else ())
+            (request.op, {k: v for k, v in request.to_args().items() if k != "schema"}),)
+            if names or all_changes else ())
         self._client.spec_changed(self)
         return self.ready
 

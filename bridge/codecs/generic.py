@@ -35,15 +35,17 @@ from functools import cache
 from typing import Any
 
 import numpy as np
-import yaml
 from rosidl_parser import definition as rdef
 
 from bridge.codecs.errors import CodecError
 from bridge.codecs.registry import message_class, resolve_type, ros_type_of
+from protocol.commands import FieldDescription, MessageDescription
+from protocol.yaml_text import to_yaml
 
 __all__ = [
     "check_float",
     "check_int",
+    "describe_message",
     "dict_to_message",
     "is_message",
     "json_to_message",
@@ -190,8 +192,44 @@ def message_to_json(msg: Any) -> str:
 def message_to_yaml(msg: Any) -> str:
     """A message as YAML in the style of ``ros2 topic echo`` (block style, field order,
     ``uint8[]`` as lists of ints)."""
-    return yaml.safe_dump(message_to_dict(msg, bytes_as="list"), sort_keys=False,
-                          default_flow_style=False, allow_unicode=True, width=1 << 16)
+    return to_yaml(message_to_dict(msg, bytes_as="list"))
+
+
+# --------------------------------------------------------------------------- descriptions
+
+# IDL names of basic types (what SLOT_TYPES carries) -> the names of .msg files.
+_MSG_FILE_NAMES = {"boolean": "bool", "octet": "byte", "float": "float32", "double": "float64",
+                   "long double": "float64", "wchar": "char"}
+
+
+def describe_message(cls: Any, into: dict[str, MessageDescription]) -> str:
+    """Add the description of message class `cls`, and of every message type it is made
+    of, to `into` (keyed by ``pkg/msg/Type``); returns its own type name."""
+    ros_type = ros_type_of(cls)
+    if ros_type in into:
+        return ros_type
+    fields = []
+    nested = []
+    for f in _plan(cls):
+        array = {None: None, "array": "fixed", "sequence": "sequence"}[f.container]
+        fields.append(FieldDescription(f.name, _MSG_FILE_NAMES.get(f.base, f.base), array,
+                                       f.size, f.max_string))
+        if f.kind == "msg":
+            nested.append(f.base)
+    meta = type(cls)
+    constants = getattr(meta, f"_{meta.__name__}__constants", {})
+    into[ros_type] = MessageDescription(
+        ros_type, tuple(fields), message_to_dict(cls()),
+        {k: _value_of_constant(v) for k, v in constants.items() if not k.endswith("__DEFAULT")})
+    for name in nested:
+        describe_message(message_class(name), into)
+    return ros_type
+
+
+def _value_of_constant(value: Any) -> JsonValue:
+    if isinstance(value, (bytes, bytearray)):
+        return value[0] if len(value) == 1 else list(value)
+    return value
 
 
 # --------------------------------------------------------------------------- checks

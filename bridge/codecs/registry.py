@@ -18,19 +18,19 @@ from functools import cache, lru_cache
 from typing import Any
 
 from bridge.codecs.errors import CodecError
-from protocol.commands import REFERENCE_TYPE_NAMES, OutOfRangeError, resolve_message_type
+from protocol.commands import (REFERENCE_TYPE_NAMES, OutOfRangeError, resolve_message_type,
+                               resolve_service_type)
 
 __all__ = ["REFERENCE_SHORT_NAMES", "action_class", "installed_types", "message_class",
-           "resolve_type",
-           "ros_type_of",
-           "service_class"]
+           "resolve_service", "resolve_type", "ros_type_of", "service_class"]
 
 # The reference's short names: one table, in the protocol (clients resolve them too).
 REFERENCE_SHORT_NAMES = REFERENCE_TYPE_NAMES
 
 _IDENT = r"[A-Za-z][A-Za-z0-9_]*"
 _CANONICAL = re.compile(rf"^({_IDENT})/msg/({_IDENT})$")
-_IMPORT_LINE = re.compile(rf"^from\s+({_IDENT})\.msg\.\w+\s+import\s+({_IDENT})", re.MULTILINE)
+_IMPORT_LINES = {kind: re.compile(rf"^from\s+({_IDENT})\.{kind}\.\w+\s+import\s+({_IDENT})",
+                                  re.MULTILINE) for kind in ("msg", "srv")}
 
 
 def _unknown(name: str, why: str) -> CodecError:
@@ -97,17 +97,24 @@ def action_class(ros_type: str) -> Any:
 
 
 def ros_type_of(msg_or_class: Any) -> str:
-    """``pkg/msg/Type`` of an rclpy message instance or class."""
+    """``pkg/msg/Type`` of an rclpy message instance or class (``pkg/srv/Type_Request``
+    for a service's part, ``pkg/action/Type_Goal`` for an action's)."""
     cls = msg_or_class if isinstance(msg_or_class, type) else type(msg_or_class)
-    module = cls.__module__  # "sensor_msgs.msg._image"
-    pkg = module.split(".", 1)[0]
-    return f"{pkg}/msg/{cls.__name__}"
+    parts = cls.__module__.split(".")  # "sensor_msgs.msg._image"
+    kind = parts[1] if len(parts) > 2 and parts[1] in ("srv", "action") else "msg"
+    return f"{parts[0]}/{kind}/{cls.__name__}"
 
 
-@lru_cache(maxsize=1)
 def _installed_messages() -> dict[str, tuple[str, ...]]:
-    """Bare message name -> packages defining it, read from every ``<pkg>/msg/__init__.py``
-    on sys.path (the generated file lists one import per message, so no import is needed)."""
+    return _installed("msg")
+
+
+@lru_cache(maxsize=2)
+def _installed(kind: str) -> dict[str, tuple[str, ...]]:
+    """Bare message (``kind`` msg) or service (srv) name -> packages defining it, read from
+    every ``<pkg>/<kind>/__init__.py`` on sys.path (the generated file lists one import per
+    interface, so no import is needed)."""
+    import_line = _IMPORT_LINES[kind]
     found: dict[str, list[str]] = {}
     for entry in sys.path:
         if not entry or not os.path.isdir(entry):
@@ -117,7 +124,7 @@ def _installed_messages() -> dict[str, tuple[str, ...]]:
         except OSError:
             continue
         for pkg in children:
-            init = os.path.join(entry, pkg, "msg", "__init__.py")
+            init = os.path.join(entry, pkg, kind, "__init__.py")
             if not os.path.isfile(init):
                 continue
             try:
@@ -125,7 +132,7 @@ def _installed_messages() -> dict[str, tuple[str, ...]]:
                     text = f.read()
             except OSError:
                 continue
-            for imp_pkg, name in _IMPORT_LINE.findall(text):
+            for imp_pkg, name in import_line.findall(text):
                 if imp_pkg == pkg and pkg not in found.setdefault(name, []):
                     found[name].append(pkg)
     return {name: tuple(sorted(pkgs)) for name, pkgs in found.items()}
@@ -155,4 +162,17 @@ def resolve_type(name: str) -> str:
     except OutOfRangeError as error:
         raise _unknown(name.strip(), error.expected) from None
     message_class(ros_type)
+    return ros_type
+
+
+def resolve_service(name: str) -> str:
+    """Any accepted spelling of a service type (``pkg/srv/Type``, a reference service client
+    class name, a bare name defined by one installed package) -> ``pkg/srv/Type``, checked
+    to be installed; `CodecError` naming it otherwise."""
+    try:
+        ros_type = resolve_service_type(name, packages_of=lambda bare: _installed("srv").get(
+            bare, ()))
+    except OutOfRangeError as error:
+        raise _unknown(str(name).strip(), error.expected) from None
+    service_class(ros_type)
     return ros_type

@@ -70,7 +70,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional, Union
+from typing import Any, Callable, Mapping, Optional, Union, cast
 
 import numpy as np
 from rclpy.serialization import deserialize_message
@@ -79,7 +79,7 @@ from bridge.codecs import CodecError, codec_for
 from bridge.dispatch import Handler
 from bridge.graph_types import refuse_other_type
 from bridge.heavy import LargeResult
-from bridge.hub import Hub
+from bridge.hub import Hub, Replier, Subscriber
 from bridge.logging_limits import RateLimitedLog
 from bridge.outbox import SharedFrame
 from bridge.codecs.cdr import CdrError
@@ -98,7 +98,7 @@ from bridge.tf.lookups import LookupKey
 from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
                                ListMarkers, Op, OutOfRangeError, RemoveMarkerSubscriber)
 from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
-from protocol.messages import Message, String
+from protocol.messages import Message, StatusCode, String
 from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_FORMAT, KEY_MARKER_TYPE, KEY_MARKERS,
                              KEY_PARENT_DEVICE, UNITS_MM, DeviceNameRegistry, NameKey,
                              NamingError, metadata_for)
@@ -160,6 +160,11 @@ def _fixed_from(buffer: TfBuffer, fixed: str, frame: str, stamp_ns: int) -> Opti
         return None
 
 
+class BudgetError(MarkerError):
+    """A model the memory budget cannot hold (the clients that show its topic get a
+    STATUS RESOURCE_ERROR as well)."""
+
+
 class ModelBudget:
     """Bytes of marker models kept (each once, shared by the clients it goes to), all
     topics together and per topic (half of that), from any thread. A model is charged
@@ -183,12 +188,12 @@ class ModelBudget:
             on_topic = self._topics.get(topic, 0) - old + nbytes
             total = self.total - old + nbytes
             if not settle and on_topic > self.topic_limit:
-                return MarkerError("points", f"a model within the topic's memory budget "
+                return BudgetError("points", f"a model within the topic's memory budget "
                                    f"({self.topic_limit} bytes of models a topic; "
                                    f"{max(0, self.topic_limit - on_topic + nbytes)} left)",
                                    f"a model of {nbytes} bytes")
             if not settle and total > self.total_limit:
-                return MarkerError("points", f"a model within the daemon's memory budget "
+                return BudgetError("points", f"a model within the daemon's memory budget "
                                    f"({self.total_limit} bytes of models, all topics; "
                                    f"{max(0, self.total_limit - total + nbytes)} left)",
                                    f"a model of {nbytes} bytes")
@@ -264,6 +269,7 @@ class _FrameRef:
     name_key: NameKey
     handle: LookupKey
     users: int = 0
+    limited: bool = False  # goes only to the audiences of the topics that use it
 
 
 @dataclass
@@ -484,6 +490,10 @@ class _Subscription:
     received: int = 0
     closed: bool = False
     last_error: str = ""
+    # The clients its devices go to: those that created or subscribed to it (None: every
+    # client: the operator's, which plain OpenIGTLinkIF clients cannot ask for).
+    audience: Optional[set[Replier]] = None
+    last_budget_status: float = 0.0  # monotonic: one STATUS a second at most
 
     def on_message(self, msg: Any) -> None:  # ROS executor thread: hand off only
         self.received += 1
@@ -518,6 +528,7 @@ class MarkerBridges:
         self._timer_due = 0
         self._refusals = RateLimitedLog(log)
         self.budget = ModelBudget(max_model_bytes)
+        hub.add_closed_listener(self._client_left)
         self._meshing = threading.Lock()  # one topic's worker meshes at a time
 
     def hub_call(self, callback: Any, *args: Any) -> None:
@@ -533,12 +544,15 @@ class MarkerBridges:
 
     # ------------------------------------------------------------------ ops
 
-    def create(self, request: CreateMarkerSubscriber) -> dict[str, Any]:
+    def create(self, request: CreateMarkerSubscriber,
+               client: Optional[Replier] = None) -> dict[str, Any]:
         topic = self._resolve(request.topic)
         ros_type = request.ros_type
         existing = self.subscriptions.get(topic)
         if existing is not None:
             if existing.request == request:  # a reconnecting client re-creates what it had
+                if client is not None:  # or another subscribes: it gets the topic's too
+                    self._join(existing, client)
                 return self._describe(existing, existed=True)
             raise CommandFailedError("topic", "a topic without a marker subscriber "
                                      "(remove_marker_subscriber first, or repeat the same "
@@ -553,7 +567,9 @@ class MarkerBridges:
         topic_key = NameKey.marker_topic(topic)
         device = self._names.register(topic_key)
         sub = _Subscription(topic, ros_type, request, request.fixed_frame.lstrip("/"),
-                            topic_key, device, self, message_class=message_class)
+                            topic_key, device, self, message_class=message_class,
+                            audience=None if client is None else {client})
+        self._limit(sub, device)
         # Markers are read from their bytes when the installed Marker is the one the CDR
         # reader knows (a 1000-marker array: a few ms instead of ~100 through rclpy).
         sub.raw = ros_type in (MARKER_TYPE, MARKER_ARRAY_TYPE) and layout_supported(
@@ -565,6 +581,7 @@ class MarkerBridges:
                 message_class, topic, sub.on_message, qos_profile(request.qos), raw=sub.raw)
         except BaseException:
             sub.worker.stop()
+            self._hub.forget(device)
             self._names.release(topic_key)
             raise
         self.subscriptions[topic] = sub
@@ -572,6 +589,35 @@ class MarkerBridges:
         log.info("markers from %s (%s) in fixed frame %s: status device %r", topic, ros_type,
                  sub.fixed_frame, device)
         return self._describe(sub, existed=False)
+
+    # ------------------------------------------------------------------ audiences
+
+    def _limit(self, sub: _Subscription, device: str) -> None:
+        """``device`` (of ``sub``) goes only to ``sub``'s audience (if it has one)."""
+        if sub.audience is None:
+            return
+        self._hub.limit_to_audience(device)
+        for client in sub.audience:
+            self._hub.join(device, cast(Subscriber, client))
+
+    def _join(self, sub: _Subscription, client: Replier) -> None:
+        """``client`` subscribes to ``sub``'s markers: every device of it, now and later."""
+        if sub.audience is None or client in sub.audience:
+            return
+        sub.audience.add(client)
+        member = cast(Subscriber, client)
+        for device in [sub.device, *(live.device for live in sub.markers.values())]:
+            self._hub.join(device, member)
+        for parent in {live.parent for live in sub.markers.values()}:
+            ref = self._frames.get((sub.fixed_frame, parent))
+            if ref is not None and ref.limited:
+                self._hub.join(ref.device, member)
+
+    def _client_left(self, client: Replier) -> None:
+        # The hub forgets it in every audience; the topics' own lists too.
+        for sub in self.subscriptions.values():
+            if sub.audience is not None:
+                sub.audience.discard(client)
 
     def _resolve(self, topic: str) -> str:
         try:
@@ -688,13 +734,14 @@ class MarkerBridges:
                 return
             try:  # a namespace or frame no device name or tf lookup can hold (NUL)
                 name_key = NameKey.marker(sub.topic, key[0], key[1])
-                self._use_frame(sub.fixed_frame, parent)
+                self._use_frame(sub, parent)
             except (NamingError, TfError) as error:
                 self._refuse(sub, _Refused(key, MarkerError(
                     "ns/frame", "a namespace and frame id usable as names (no NUL)",
                     f"{key[0]!r} in frame {frame!r} ({error})")), gone)
                 return
             device = self._names.register(name_key)
+            self._limit(sub, device)
             live = _Live(key, name_key, device, frame, parent, model.kind, body_type,
                          update.digest, model.point_count)
             sub.markers[key] = live
@@ -723,6 +770,8 @@ class MarkerBridges:
         key = update.key
         text = f"marker ns {key[0]!r} id {key[1]}: {update.error}"
         self._drop(sub, key, gone)
+        if isinstance(update.error, BudgetError):
+            self._tell_budget(sub, text)
         if sub.errors.get(key) == text:
             return
         sub.errors[key] = text
@@ -731,6 +780,18 @@ class MarkerBridges:
                                text)
         self._index(sub, gone, error=text)
         gone.clear()  # the index just sent said so
+
+    def _tell_budget(self, sub: _Subscription, text: str) -> None:
+        """A STATUS RESOURCE_ERROR on the topic's device to the clients that show it, at
+        most one a second (the topic's STRING names every refusal)."""
+        now = time.monotonic()
+        if now - sub.last_budget_status < 1.0:
+            return
+        sub.last_budget_status = now
+        clients = (tuple(sub.audience) if sub.audience is not None
+                   else tuple(cast(Replier, c) for c in self._hub.clients))
+        for client in clients:
+            client.send_status(sub.device, StatusCode.RESOURCE_ERROR, text[:4000])
 
     def _drop(self, sub: _Subscription, key: MarkerKey, gone: list[str]) -> None:
         if sub.worker is not None:
@@ -759,14 +820,30 @@ class MarkerBridges:
 
     # ------------------------------------------------------------------ frames
 
-    def _use_frame(self, fixed: str, frame: str) -> None:
+    def _use_frame(self, sub: _Subscription, frame: str) -> None:
+        """A marker of ``sub`` is in ``frame``: its TRANSFORM (shared by every marker of
+        every topic in it) goes to the audiences of those topics, or to everyone once a
+        topic without an audience (the operator's) uses it."""
+        fixed = sub.fixed_frame
         ref = self._frames.get((fixed, frame))
         if ref is None:
             name_key = NameKey.marker_frame(fixed, frame)
             device = self._names.register(name_key)
+            self._limit(sub, device)
             metadata = metadata_for(name_key, frame=fixed, units=UNITS_MM)
             handle = self._tf.stream_lookup(fixed, frame, device=device, metadata=metadata)
-            ref = self._frames[(fixed, frame)] = _FrameRef(device, name_key, handle)
+            ref = self._frames[(fixed, frame)] = _FrameRef(device, name_key, handle,
+                                                           limited=sub.audience is not None)
+        elif ref.limited and sub.audience is None:
+            # To everyone from now on: streamed again, without an audience.
+            self._tf.stop_lookup(ref.handle)
+            self._hub.forget(ref.device)
+            ref.handle = self._tf.stream_lookup(
+                fixed, frame, device=ref.device,
+                metadata=metadata_for(ref.name_key, frame=fixed, units=UNITS_MM))
+            ref.limited = False
+        elif ref.limited:
+            self._limit(sub, ref.device)
         ref.users += 1
 
     def _release_frame(self, fixed: str, frame: str) -> None:
@@ -847,7 +924,7 @@ class MarkerBridges:
 
     def handlers(self) -> dict[type[Op], Handler]:
         return {
-            CreateMarkerSubscriber: lambda request, _: self.create(request),
+            CreateMarkerSubscriber: self.create,
             RemoveMarkerSubscriber: lambda request, _: self.remove(request),
             ListMarkers: lambda request, _: self.list_markers(request),
         }

@@ -18,7 +18,7 @@ The package, by job:
     values      QoS, Stamp, ParameterValue, RobotSource, matrices
     types       the one grammar of ROS type names
     op          the op base class, its declarations and the registry; parsing
-    graph, topics, parameters, tf, robots, services, markers, actions
+    graph, topics, parameters, tf, robots, services, markers, actions, interfaces
                 the ops, by area (adding an op: a class in one of these, and a handler)
     replies     the Reply and error replies
 
@@ -53,10 +53,12 @@ from protocol.commands.markers import __all__ as _markers
 from protocol.commands.services import __all__ as _services
 from protocol.commands.actions import *  # noqa: F403
 from protocol.commands.actions import __all__ as _actions
+from protocol.commands.interfaces import *  # noqa: F403
+from protocol.commands.interfaces import __all__ as _interfaces
 from protocol.commands.replies import *  # noqa: F403
 from protocol.commands.replies import __all__ as _replies
 
 __all__ = [*_errors, *_wire, *_values, *_types, *_op, *_graph, *_topics, *_parameters,
-           *_tf, *_robots, *_services, *_markers, *_actions, *_replies]
+           *_tf, *_robots, *_services, *_markers, *_actions, *_interfaces, *_replies]
 
 bridge_kinds()  # noqa: F405 - a create op without its remove op fails here, at import

@@ -52,6 +52,10 @@ class Args:
                                                  and k not in self._used], n=1, cutoff=0.6)
         return f"nothing (but an unknown key {close[0]!r}: a typo?)" if close else "nothing"
 
+    def keys(self) -> tuple[str, ...]:
+        """The keys the object has (read or not)."""
+        return tuple(k for k in self._data if isinstance(k, str))
+
     def allow(self, name: str) -> None:
         """Accept `name` without reading it (``schema``, read by the envelope)."""
         self._used.add(name)

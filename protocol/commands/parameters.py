@@ -101,18 +101,23 @@ class SetParameters(Op, op="set_parameters", writes=True):
 
 @dataclass(frozen=True)
 class ObserveParameters(Op, op="observe_parameters", writes=False, follows="parameter_client"):
-    """Replace the set of a parameter client's parameters whose changes are pushed to
-    the client (a STRING message under the client's device name); ``[]`` stops."""
+    """Replace the set of a parameter client's parameters whose values are fetched and whose
+    changes are pushed to the client (a STRING message under the client's device name);
+    ``[]`` stops. ``all_changes``: also push every other parameter of the node that is
+    declared or changed from now on (the reference's parameter node keeps those too), as
+    far as the parameter globs let a client see it."""
 
     node: str
     names: tuple[str, ...]
+    all_changes: bool = False
 
     def resources(self) -> tuple[Resource, ...]:
         return (ParameterUse("names", self.names, self.node, "node"),)
 
     @classmethod
     def from_args(cls, a: Args) -> ObserveParameters:
-        return cls(node=a.ros_name("node"), names=a.str_list("names", pattern=PARAM_NAME))
+        return cls(node=a.ros_name("node"), names=a.str_list("names", pattern=PARAM_NAME),
+                   all_changes=a.opt_bool("all_changes", False))
 
 
 @dataclass(frozen=True)

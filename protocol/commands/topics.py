@@ -5,11 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from protocol.commands.errors import OutOfRangeError
-from protocol.commands.fields import ROS_NAME, ROS_NAME_DESC, Args
+from protocol.commands.errors import OutOfRangeError, WrongTypeError
+from protocol.commands.fields import MISSING, ROS_NAME, ROS_NAME_DESC, Args
 from protocol.commands.op import Bridge, FrameUse, Op, Resource, TopicUse
 from protocol.commands.types import resolve_message_type
 from protocol.commands.values import QoS
+from protocol.commands.wire import json_type
 
 __all__ = ["LABELS_TYPE", "CreatePublisher", "CreateSubscriber", "GetLastMessage", "Publish",
            "RemovePublisher", "RemoveSubscriber"]
@@ -36,12 +37,16 @@ class CreateSubscriber(Op, op="create_subscriber", writes=False,
     """Subscribe to a ROS topic; messages then flow to clients as OpenIGTLink messages.
 
     ``type`` is kept as given (the reference's ``IntTable`` vs ``IntArray`` choose the
-    Slicer representation); `ros_type` is the resolved ``pkg/msg/Type``."""
+    Slicer representation); `ros_type` is the resolved ``pkg/msg/Type``. ``messages``: this
+    client also gets every message whole, as generic JSON in ROS units, on the device the
+    reply names ``message_device`` (lossless, for message objects; images and point clouds
+    have none: their IMAGE / POLYDATA stream is already whole)."""
 
     topic: str
     type: str
     qos: QoS = QoS()
     rate_hz: float | None = None
+    messages: bool = False
 
     def resources(self) -> tuple[Resource, ...]:
         return (TopicUse("topic", self.topic, self.type),)
@@ -52,7 +57,8 @@ class CreateSubscriber(Op, op="create_subscriber", writes=False,
 
     @classmethod
     def from_args(cls, a: Args) -> CreateSubscriber:
-        return cls(topic=a.ros_name("topic"), type=_msg_type(a), qos=_qos(a), rate_hz=a.rate_hz())
+        return cls(topic=a.ros_name("topic"), type=_msg_type(a), qos=_qos(a), rate_hz=a.rate_hz(),
+                   messages=a.opt_bool("messages", False))
 
 
 @dataclass(frozen=True)
@@ -122,19 +128,37 @@ class RemovePublisher(Op, op="remove_publisher", writes=False, removes="publishe
 
 @dataclass(frozen=True)
 class Publish(Op, op="publish", writes=True):
-    """Publish one message on an existing publisher. ``value`` is the message as a JSON
+    """Publish one message on an existing publisher. Either ``value``: the message as a JSON
     object of its fields, or a bare value for one-field types (String: "text", Int: 3, a
-    4x4 mm matrix for Pose/PoseStamped/Transform...). Reply: subscriber count."""
+    4x4 mm matrix for Pose/PoseStamped/Transform...); or ``message``: the whole message as
+    generic JSON in ROS units (metres, quaternions), every field checked strictly, as a
+    subscriber's message stream gives it. Reply: subscriber count."""
 
     topic: str
-    value: Any
+    value: Any = None
+    message: dict[str, Any] | None = None
 
     def resources(self) -> tuple[Resource, ...]:
         return (TopicUse("topic", self.topic, writes=True),)
 
+    def to_args(self) -> dict[str, Any]:
+        out = super().to_args()
+        if self.message is None:
+            out["value"] = self.value  # null is a value (Empty), not a missing field
+        return out
+
     @classmethod
     def from_args(cls, a: Args) -> Publish:
-        return cls(topic=a.ros_name("topic"), value=a.any("value"))
+        topic = a.ros_name("topic")
+        message = a.raw("message", False)
+        if message is MISSING:
+            return cls(topic=topic, value=a.any("value"))
+        if "value" in a.keys():
+            raise OutOfRangeError(a.path("value"), "either value or message, not both",
+                                  "both")
+        if not isinstance(message, dict):
+            raise WrongTypeError(a.path("message"), "an object", json_type(message))
+        return cls(topic=topic, message=message)
 
 
 @dataclass(frozen=True)

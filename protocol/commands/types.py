@@ -15,8 +15,8 @@ from typing import Callable, Optional, Sequence
 
 from protocol.commands.errors import OutOfRangeError
 
-__all__ = ["REFERENCE_TYPE_NAMES", "PackagesOf", "resolve_action_type",
-           "resolve_message_type", "resolve_service_type"]
+__all__ = ["REFERENCE_SERVICE_NAMES", "REFERENCE_TYPE_NAMES", "PackagesOf",
+           "resolve_action_type", "resolve_message_type", "resolve_service_type"]
 
 # A bare message name -> the installed packages that define it.
 PackagesOf = Callable[[str], Sequence[str]]
@@ -57,6 +57,17 @@ REFERENCE_TYPE_NAMES: dict[str, str] = {
     "PointCloud": "sensor_msgs/msg/PointCloud",
     "PointCloud2": "sensor_msgs/msg/PointCloud2",
 }
+# The reference's service client class names (``vtkMRMLROS2ServiceClient<Name>Node``): the
+# services its build generates a client for, and its hand-written SetBool client.
+REFERENCE_SERVICE_NAMES: dict[str, str] = {
+    **{name: f"rosbag2_interfaces/srv/{name}" for name in (
+        "Burst", "GetRate", "IsPaused", "Pause", "Play", "PlayNext", "Resume", "Seek",
+        "SetRate", "Snapshot", "SplitBagfile", "Stop", "TogglePaused")},
+    **{name: f"moveit_msgs/srv/{name}" for name in (
+        "GetPositionFK", "GetPositionIK", "GetCartesianPath")},
+    "Spawn": "turtlesim/srv/Spawn",
+    "SetBoolString": "std_srvs/srv/SetBool",
+}
 _PKG = r"[a-z][a-z0-9_]*"
 _NAME = r"[A-Z][A-Za-z0-9]*"
 _SPELLINGS = (re.compile(rf"({_PKG})/msg/({_NAME})\Z"), re.compile(rf"({_PKG})/({_NAME})\Z"),
@@ -65,6 +76,7 @@ _SERVICE = re.compile(rf"({_PKG})/(?:srv/)?({_NAME})\Z")
 _ACTION = re.compile(rf"({_PKG})/(?:action/)?({_NAME})\Z")
 _BARE = re.compile(rf"{_NAME}\Z")
 _CLASS_NAME = re.compile(r"vtkMRMLROS2(?:Subscriber|Publisher)([A-Za-z0-9]+)Node\Z")
+_SERVICE_CLASS_NAME = re.compile(r"vtkMRMLROS2ServiceClient([A-Za-z0-9]+)Node\Z")
 _EXPECTED = "pkg/msg/Type, pkg/Type, or a short name such as String or PoseStamped"
 
 
@@ -83,22 +95,46 @@ def resolve_message_type(text: str, field: str = "type", *,
         full = spelling.match(given)
         if full:
             return f"{full.group(1)}/msg/{full.group(2)}"
-    if packages_of is not None and _BARE.match(stem):
-        packages = tuple(packages_of(stem))
-        if len(packages) == 1:
-            return f"{packages[0]}/msg/{stem}"
-        if packages:
-            raise OutOfRangeError(field, "an unambiguous name; spell one of "
-                                  + ", ".join(f"{p}/msg/{stem}" for p in packages), repr(given))
+    found = _by_package(stem, "msg", packages_of, field)
+    if found is not None:
+        return found
     raise OutOfRangeError(field, _EXPECTED, repr(given))
 
 
-def resolve_service_type(text: str, field: str = "type") -> str:
-    """``pkg/srv/Type`` or ``pkg/Type`` -> ``pkg/srv/Type``."""
-    full = _SERVICE.match(text.strip()) if isinstance(text, str) else None
+def _by_package(stem: str, kind: str, packages_of: Optional[PackagesOf],
+                field: str) -> Optional[str]:
+    """``pkg/<kind>/stem`` if exactly one installed package defines the bare name `stem`;
+    None if none does (or nothing can look them up); an ambiguous name raises."""
+    if packages_of is None or not _BARE.match(stem):
+        return None
+    packages = tuple(packages_of(stem))
+    if len(packages) > 1:
+        raise OutOfRangeError(field, "an unambiguous name; spell one of "
+                              + ", ".join(f"{p}/{kind}/{stem}" for p in packages), repr(stem))
+    return f"{packages[0]}/{kind}/{stem}" if packages else None
+
+
+def resolve_service_type(text: str, field: str = "type", *,
+                         packages_of: Optional[PackagesOf] = None) -> str:
+    """``pkg/srv/Type``, ``pkg/Type``, a reference service client class name
+    (``vtkMRMLROS2ServiceClientSpawnNode``) or its stem (``Spawn``) -> ``pkg/srv/Type``;
+    with `packages_of` (services installed by bare name), any bare name defined by exactly
+    one package."""
+    given = text.strip() if isinstance(text, str) else None
+    full = _SERVICE.match(given) if given is not None else None
     if full:
         return f"{full.group(1)}/srv/{full.group(2)}"
-    raise OutOfRangeError(field, "a service type pkg/srv/Type", repr(text))
+    expected = "a service type pkg/srv/Type or a reference service client class name"
+    if given is None:
+        raise OutOfRangeError(field, expected, repr(text))
+    class_match = _SERVICE_CLASS_NAME.match(given)
+    stem = class_match.group(1) if class_match else given
+    if stem in REFERENCE_SERVICE_NAMES:
+        return REFERENCE_SERVICE_NAMES[stem]
+    found = _by_package(stem, "srv", packages_of, field)
+    if found is not None:
+        return found
+    raise OutOfRangeError(field, expected, repr(text))
 
 
 def resolve_action_type(text: str, field: str = "type") -> str:

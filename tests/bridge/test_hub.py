@@ -48,3 +48,58 @@ def test_a_device_forgotten_before_the_loop_drains_does_not_come_back() -> None:
         assert kept is not None and kept.body.text == "2"
     finally:
         loop.close()
+
+
+class _Client:
+    """What the hub needs of a session, recording what it is sent."""
+
+    header_version = 2
+
+    def __init__(self) -> None:
+        self.got: list[tuple[str, str]] = []
+
+    def send_stream(self, device: str, frame) -> None:  # noqa: ANN001
+        self.got.append((device, frame.message.body.text))
+
+    def send_once(self, frame) -> None:  # noqa: ANN001
+        self.got.append((frame.message.device_name, frame.message.body.text))
+
+    def write_direct(self, data: bytes) -> bool:
+        return False  # always the loop's path, so send_stream records it
+
+    def hand_over(self, device: str, frame) -> None:  # noqa: ANN001
+        self.send_stream(device, frame)
+
+    def forget_device(self, device: str) -> None:
+        pass
+
+
+def test_a_device_with_an_audience_reaches_only_the_clients_that_joined() -> None:
+    loop = asyncio.new_event_loop()
+    try:
+        hub = Hub(loop)
+        a, b, late = _Client(), _Client(), _Client()
+        hub.attach(a)
+        hub.attach(b)
+        hub.limit_to_audience("msg:x")
+        assert not hub.has_audience("msg:x") and hub.has_audience("x")
+        hub.stream(_text("msg:x", "before anyone joined"))
+        hub.stream(_text("x", "shared"))
+        hub.join("msg:x", a)  # gets the newest value at once
+        assert hub.has_audience("msg:x")
+        hub.stream(_text("msg:x", "for a"))
+        hub.attach(late)  # a client that connects later gets only the shared state
+        assert a.got == [("x", "shared"), ("msg:x", "before anyone joined"), ("msg:x", "for a")]
+        assert b.got == [("x", "shared")]
+        assert late.got == [("x", "shared")]
+        assert hub.latest("msg:x", b) is None and hub.latest("msg:x", a) is not None
+        hub.detach(a)  # leaving drops it from every audience
+        assert not hub.has_audience("msg:x")
+        hub.join("msg:x", b)
+        hub.leave("msg:x", b)
+        hub.stream(_text("msg:x", "to nobody"))
+        assert b.got == [("x", "shared"), ("msg:x", "for a")]
+        hub.forget("msg:x")  # a removed bridge's device goes to everyone again if reused
+        assert hub.has_audience("msg:x")
+    finally:
+        loop.close()

@@ -1,4 +1,4 @@
-"""The Pythonic API against a real daemon: callbacks and their threads, the queue mode,
+"""The Pythonic API against a real daemon: callbacks and their threads, the spin mode,
 errors that say what went wrong, and daemon restarts."""
 
 from __future__ import annotations
@@ -16,7 +16,9 @@ from support import Processes, RunningDaemon, pick_free_port, wait_until
 pytestmark = pytest.mark.ros
 
 
-def test_subscriber_callback_runs_in_the_receive_thread(ros: slicer_client.Client) -> None:
+def test_subscriber_callback_runs_on_the_dispatcher_thread(ros: slicer_client.Client) -> None:
+    """Nobody spins: the dispatcher thread runs it, never the receive thread (a callback
+    there could not wait for a reply that same thread must read)."""
     threads: list[str] = []
     got = threading.Event()
 
@@ -28,14 +30,14 @@ def test_subscriber_callback_runs_in_the_receive_thread(ros: slicer_client.Clien
     pub = ros.publisher("/py_cb", "String")
     wait_until(lambda: pub.publish("x") >= 1 and got.wait(0.1), timeout=20,
                what="the callback")
-    assert threads[0] == "igtl-receive"
+    assert threads[0] == "slicer-client-callbacks"
     assert sub.last_value == "x" and sub.count >= 1
     assert sub.last_message_yaml() == "data: x\n"
     assert ros.subscribe("/py_cb", "String") is sub  # idempotent, like the daemon
 
 
-def test_queue_mode_runs_callbacks_in_the_polling_thread(daemon: RunningDaemon) -> None:
-    with slicer_client.connect("127.0.0.1", daemon.port, callbacks="queue") as ros:
+def test_spin_mode_runs_callbacks_in_the_spinning_thread(daemon: RunningDaemon) -> None:
+    with slicer_client.connect("127.0.0.1", daemon.port, callbacks="spin") as ros:
         seen: list[tuple[object, str]] = []
         ros.subscribe("/py_queue", "Int", callback=lambda v: seen.append(
             (v, threading.current_thread().name)))
@@ -145,8 +147,8 @@ def test_service_call_through_the_pythonic_api_and_the_facade(ros: slicer_client
     server.wait_for_output('CALL set_enabled {"data": true}')
     node = ros.GetDefaultROS2Node().CreateAndAddServiceClientNode("std_srvs/srv/Trigger",
                                                                   "/py_srv/trigger")
-    assert node.SendBlockingRequest({})["success"] is True
-    assert node.GetLastResponse()["success"] is True
+    assert node.SendBlockingRequest({}).GetSuccess() is True  # a message object
+    assert node.GetLastResponse().GetSuccess() is True
     with pytest.raises(slicer_client.CommandRefusedError) as caught:
         ros.service("/py_srv/nobody_here", "std_srvs/srv/Trigger").call({}, timeout=0.5)
     assert caught.value.code in (ErrorCode.UNAVAILABLE, ErrorCode.TIMEOUT)

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import slicer_client
+from slicer_client.matrices import as_numpy
 from protocol.commands import ErrorCode
 from protocol.messages import PolyData
 from jointy_urdf import JOINTY_URDF
@@ -287,12 +288,12 @@ def test_the_robot_follows_its_joints_through_a_state_publisher(
 
     def follows() -> bool:
         matrix = node.GetLinkTransform("a")
-        if matrix is not None and abs(matrix[1, 0] - math.sin(angle)) < 1e-4:
+        if matrix is not None and abs(matrix.GetElement(1, 0) - math.sin(angle)) < 1e-4:
             return True
         node.SetJointPositions({"shoulder": angle})
         return False
     wait_until(follows, timeout=30, what="link a rotated by the joint state")
-    matrix = node.GetLinkTransform("a")
+    matrix = as_numpy(node.GetLinkTransform("a"), rigid=False)
     np.testing.assert_allclose(matrix[:2, :2], [[math.cos(angle), -math.sin(angle)],
                                                 [math.sin(angle), math.cos(angle)]],
                                atol=1e-4)

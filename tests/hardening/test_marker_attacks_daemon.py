@@ -4,6 +4,7 @@ kept apart. A real daemon, raw TCP clients, rclpy peers in their own processes."
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -54,8 +55,10 @@ def test_a_denied_frame_does_not_leak_through_a_marker_on_a_prefixed_daemon(
         assert withheld["id"] == 2 and "PSM1/secret" in withheld["reason"]
         (row,) = listed["markers"]
         assert (row["id"], row["frame"], row["placed"]) == (1, "secret", False), row
-        viewer = RawClient(daemon.port)  # gets the live models as it connects
-        viewer.send(command_bytes("hello", b"{}", 1))  # header v2: models come with it
+        viewer = RawClient(daemon.port)  # subscribes: gets the live models at once
+        viewer.send(command_bytes("create_marker_subscriber", json.dumps({
+            "topic": "/test_markers", "type": "MarkerArray",
+            "fixed_frame": "world"}).encode(), 1))
         model = viewer.read_until(lambda m: m.device_name == row["device"], timeout=10)
         viewer.close()
         assert isinstance(model.body, PolyData)
@@ -109,3 +112,55 @@ def test_models_past_the_memory_budget_are_refused_before_they_are_made(
             what="the second marker shown")
     finally:
         client.close()
+
+
+def _marker_messages(messages: list) -> list[str]:
+    return [m.device_name for m in messages
+            if m.device_name.startswith(("mk:", "mks:", "mkf:"))]
+
+
+def test_markers_go_only_to_the_clients_that_asked_for_them(
+        processes: Processes, tmp_path: Path) -> None:
+    """Issue 22, item 3: every client was sent every marker model (a storm disconnected a
+    client that had asked for nothing). A marker topic's models, index and frames go to
+    the clients that created or subscribed to it; the operator's go to everyone."""
+    config = tmp_path / "bridges.yaml"
+    config.write_text("marker_subscribers:\n  - {topic: /test_marker, type: "
+                      "visualization_msgs/msg/Marker, fixed_frame: world}\n")
+    daemon = start_daemon(processes, "--config", str(config))
+    peer = MarkerPeer(processes, tmp_path)
+    asker, other = RawClient(daemon.port), RawClient(daemon.port)
+    try:
+        other.send(command_bytes("hello", b"{}", 1))  # header v2, attached
+        other.read_until(lambda m: m.type_name == "RTS_COMMAND", timeout=10)
+        assert ask(asker, "create_marker_subscriber", {
+            "topic": "/test_markers", "type": "MarkerArray", "fixed_frame": "world"}, 1)["ok"]
+        peer.send(markers=[{"ns": "a", "id": 1, "type": CUBE, "scale": [0.1] * 3,
+                            "frame": "base", "locked": True}],
+                  marker={"ns": "op", "id": 1, "type": CUBE, "scale": [0.1] * 3,
+                          "frame": "world"})
+        model = asker.read_until(lambda m: m.device_name.startswith("mk:test_markers"),
+                                 timeout=20)
+        assert isinstance(model.body, PolyData)
+        # Whatever the hub sent ``other`` before its next reply, it sent in order: none
+        # of the asker's topic, but the operator's topic's model.
+        other.send(command_bytes("hello", b"{}", 2))
+        seen: list = []
+        other.read_until(lambda m: seen.append(m) or (  # type: ignore[func-returns-value]
+            m.type_name == "RTS_COMMAND" and m.body.command_id == 2), timeout=10)
+        got = _marker_messages(seen)
+        assert not [d for d in got if "test_markers" in d or d.startswith("mkf:world>base")]
+        if not any(d.startswith("mk:test_marker:") for d in got):
+            other.read_until(lambda m: m.device_name.startswith("mk:test_marker:"),
+                             timeout=20)
+        # Subscribing (creating it again) gives the asker's topic to ``other`` too: its
+        # live models at once (before the reply), and the later ones.
+        other.send(command_bytes("create_marker_subscriber", json.dumps({
+            "topic": "/test_markers", "type": "MarkerArray",
+            "fixed_frame": "world"}).encode(), 3))
+        other.read_until(lambda m: m.device_name == model.device_name, timeout=10)
+        assert json.loads(other.read_until(lambda m: m.type_name == "RTS_COMMAND",
+                                           timeout=10).body.text)["result"]["existed"]
+    finally:
+        asker.close()
+        other.close()

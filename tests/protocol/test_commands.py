@@ -101,13 +101,14 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.ListTopics: st.just(c.ListTopics()),
     c.ListServices: st.just(c.ListServices()),
     c.CreateSubscriber: st.builds(c.CreateSubscriber, topic=ros_names, type=msg_types, qos=qos,
-                                  rate_hz=rates),
+                                  rate_hz=rates, messages=st.booleans()),
     c.RemoveSubscriber: st.builds(c.RemoveSubscriber, topic=ros_names),
     c.CreatePublisher: st.builds(c.CreatePublisher, topic=ros_names, type=msg_types, qos=qos,
                                  frame=st.none() | frames,
                                  labels_topic=st.none() | ros_names),
     c.RemovePublisher: st.builds(c.RemovePublisher, topic=ros_names),
-    c.Publish: st.builds(c.Publish, topic=ros_names, value=json_values),
+    c.Publish: st.builds(c.Publish, topic=ros_names, value=json_values) | st.builds(
+        c.Publish, topic=ros_names, message=json_objects),
     c.GetLastMessage: st.builds(c.GetLastMessage, topic=ros_names,
                                 format=st.sampled_from(["yaml", "json"])),
     c.CreateParameterClient: st.builds(c.CreateParameterClient, node=ros_names),
@@ -117,7 +118,8 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.SetParameters: st.builds(c.SetParameters, node=ros_names,
                                values=st.dictionaries(param_names, param_values, min_size=1,
                                                       max_size=4)),
-    c.ObserveParameters: st.builds(c.ObserveParameters, node=ros_names, names=names_tuples),
+    c.ObserveParameters: st.builds(c.ObserveParameters, node=ros_names, names=names_tuples,
+                                   all_changes=st.booleans()),
     c.ServerDeclareParameter: st.builds(c.ServerDeclareParameter, name=param_names,
                                         value=param_values, read_only=st.booleans(),
                                         description=st.text(max_size=30)),
@@ -175,6 +177,9 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.ActionCancel: st.builds(c.ActionCancel, action=ros_names, goal_id=goal_ids),
     c.ActionDecide: st.builds(c.ActionDecide, action=ros_names, type=action_types,
                               goal=json_objects, timeout=st.floats(0.01, 3_600.0)),
+    c.DescribeType: st.builds(c.DescribeType, type=st.sampled_from(
+        ["PoseArray", "geometry_msgs/msg/PoseStamped", "vtkMRMLROS2ServiceClientSpawnNode",
+         "control_msgs/action/GripperCommand"]), kind=st.sampled_from(c.INTERFACE_KINDS)),
 }
 
 

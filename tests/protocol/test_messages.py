@@ -16,6 +16,7 @@ from protocol.messages import (
     AttributeKind,
     Command,
     Image,
+    Json,
     Point,
     PointElement,
     PolyData,
@@ -100,7 +101,7 @@ def test_command_roundtrip(command: Command, reply: RtsCommand) -> None:
 
 def test_registry_lists_every_type() -> None:
     assert set(BODY_TYPES) == {"TRANSFORM", "STRING", "STATUS", "POLYDATA", "POINT", "IMAGE",
-                               "COMMAND", "RTS_COMMAND"}
+                               "COMMAND", "RTS_COMMAND", "JSON"}
     for name, cls in BODY_TYPES.items():
         assert cls.TYPE == name
 
@@ -131,6 +132,19 @@ def test_string_golden() -> None:
     assert String("hi").pack() == bytes.fromhex("006a 0002 6869")
     assert String("hi", 3).pack() == bytes.fromhex("0003 0002 6869")
     assert String("é").pack() == bytes.fromhex("006a 0002 c3a9")
+
+
+def test_json_golden_and_bounds() -> None:
+    """The project's own JSON body: LENGTH u32, UTF-8; no 65535-byte cap as STRING has."""
+    assert Json('{"a":"é"}').pack() == bytes.fromhex("0000000a") + '{"a":"é"}'.encode()
+    big = Json("x" * 100_000)
+    assert Json.unpack(big.pack()) == big
+    with pytest.raises(BodyError, match="LENGTH"):
+        Json.unpack(bytes.fromhex("00000005") + b"abc")
+    with pytest.raises(BodyError):
+        Json.unpack(b"\x00\x00")
+    with pytest.raises(BodyError):
+        Json.unpack(bytes.fromhex("00000002") + b"\xff\xfe")  # not UTF-8
 
 
 def test_status_golden() -> None:

@@ -37,6 +37,7 @@ from protocol.naming import (
         (NameKey.subscriber("/tool"), "tool"),
         (NameKey.subscriber("tool"), "tool"),
         (NameKey.subscriber("/PSM1/measured_cp"), "PSM1/measured_cp"),
+        (NameKey.subscriber_messages("/tool"), "msg:tool"),
         (NameKey.publisher("/tool"), "pub:tool"),
         (NameKey.tf_lookup("world", "tool"), "tf:world>tool"),
         (NameKey.tf_broadcaster("world", "tool"), "tfb:world>tool"),
@@ -256,7 +257,8 @@ def test_metadata_for_robot_visual() -> None:
 
 
 ALL_KEYS = [
-    NameKey.subscriber("/a/b"), NameKey.publisher("x"), NameKey.tf_lookup("w", "t"),
+    NameKey.subscriber("/a/b"), NameKey.subscriber_messages("/a/b"), NameKey.publisher("x"),
+    NameKey.tf_lookup("w", "t"),
     NameKey.tf_broadcaster("wörld", "t"), NameKey.robot_link("R", "l"),
     NameKey.robot_visual("R", "l", 3), NameKey.robot_description("R"),
     NameKey.parameter_client("/n"), NameKey.parameter_server("/s"),

@@ -22,6 +22,7 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "list_bridges": ({}, set()),
     "list_topics": ({}, set()),
     "list_services": ({}, set()),
+    "describe_type": ({"type": "PoseArray"}, set()),
     "create_subscriber": ({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),
     "remove_subscriber": ({"topic": "/a"}, set()),
     "create_publisher": ({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),

@@ -11,8 +11,16 @@ installed beside this file instead.
 Transport: Slicer's own OpenIGTLinkIF connector node (client mode). Commands go through
 `vtkSlicerOpenIGTLinkCommand`; what arrives becomes MRML nodes made by the connector; this
 module only parents, colours and files them as the scene planner (slicer_client/scene_plan.py)
-says. The reference CamelCase API is
-`slicer.util.getModuleLogic('ROS2Bridge').GetDefaultROS2Node()`.
+says.
+
+The reference SlicerROS2's API: where SlicerROS2 itself is not installed, this module
+answers its entry points (slicer_client/reference/entry_points.py), so a script written for
+it runs with no line changed: `slicer.util.getModuleLogic('ROS2')` gives the logic
+(`Spin()`, `GetDefaultROS2Node()`...; used before Connect, it connects to the host and port
+of this module's settings), and `slicer.mrmlScene.AddNewNodeByClass("vtkMRMLROS2NodeNode")`
+a ROS node. `slicer.util.getModuleLogic('ROS2Bridge')` offers the same methods. Observers
+and callbacks run on Slicer's main thread, in this module's 20 ms spin (the reference's 50
+Hz timer), never while a command waits.
 
 Verified against (every Slicer/MRML/VTK call below was read in these sources; the list with
 the facts relied on is in slicer_client/README.md, "Verified against"):
@@ -66,12 +74,15 @@ from slicer_client.connection import CommandTimeoutError, ConnectionClosedError 
 from slicer_client.connector_codec import (SLICER_TEXT_ENCODING, build_command,  # noqa: E402
                                            message_from_node, outgoing_content, parse_reply)
 from slicer_client.joint_sliders import joint_sliders, slider_positions  # noqa: E402
+from slicer_client.reference.entry_points import install as install_entry_points  # noqa: E402
 from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER,  # noqa: E402
                                       describe_bridges, metadata_from_attributes, plan_node,
                                       robot_status_lines, stale_marker_nodes)
 from slicer_client.send_plan import KIND_ORDER, SEND_TYPES, plan_send  # noqa: E402
 
 CONNECTOR_NAME = "ROS2BridgeConnector"
+SPIN_INTERVAL_MS = 20  # the reference spins its node at 50 Hz
+CONNECT_WAIT_S = 10.0  # a script's first reference call waits this long for the daemon
 log = logging.getLogger("ROS2Bridge")
 
 
@@ -88,6 +99,21 @@ class ROS2Bridge(ScriptedLoadableModule):
             "(<code>slicer-ros2-bridge run</code>), then press Connect.")
         self.parent.acknowledgementText = (
             "Mirrors the API of SlicerROS2 (rosmed/slicer_ros2_module) out of process.")
+        # Once every module is loaded: is SlicerROS2 there to answer its own name?
+        slicer.app.connect("startupCompleted()", _installReferenceEntryPoints)
+
+
+class _ReferenceLogic:
+    """`getModuleLogic('ROS2')` before this module's GUI exists: the module logic is made
+    (and connected) only when a reference method is first called."""
+
+    def __getattr__(self, name):
+        return getattr(slicer.util.getModuleLogic("ROS2Bridge"), name)
+
+
+def _installReferenceEntryPoints():
+    if install_entry_points(slicer, _ReferenceLogic()):
+        log.info("answering SlicerROS2's getModuleLogic('ROS2') (SlicerROS2 is not installed)")
 
 
 @parameterNodeWrapper
@@ -336,6 +362,9 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._timer = qt.QTimer()
         self._timer.setInterval(200)  # new connector nodes are placed within 0.2 s
         self._timer.connect("timeout()", self._onTimer)
+        self._spinTimer = qt.QTimer()
+        self._spinTimer.setInterval(SPIN_INTERVAL_MS)
+        self._spinTimer.connect("timeout()", self.Spin)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartSaveEvent, self._onSave)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
                          self._onSceneStartClose)
@@ -364,11 +393,13 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.addObserver(self.connector, slicer.vtkMRMLIGTLConnectorNode.ConnectedEvent,
                          self._onConnected)
         self._timer.start()
+        self._spinTimer.start()
         if self.isConnected():
             self._onConnected()
 
     def disconnect(self):
         self._timer.stop()
+        self._spinTimer.stop()
         if self.connector is not None:
             self.removeObservers(self._onConnected)
             self.connector.Stop()
@@ -391,7 +422,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             return  # the transport re-syncs the existing client itself
         transport = ConnectorTransport(self.connector)
         try:
-            client = Client(transport)  # sends hello
+            # Callbacks wait for this module's spin: they run on the main thread.
+            client = Client(transport, callbacks="spin")  # sends hello
         except Exception as error:
             transport.close()
             if caller is None:
@@ -414,8 +446,37 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
                                "(and start the daemon with `slicer-ros2-bridge run`)")
         return self.client
 
+    # --- the reference's logic (vtkSlicerROS2Logic) -------------------------------------------
+    def referenceLogic(self):
+        """The reference's logic over this module's client; a script that calls it before
+        Connect gets connected to the settings' host and port (waiting up to 10 s)."""
+        if self.client is None and not self.isActive():
+            parameters = self.getParameterNode()
+            self.connect(parameters.host, parameters.port)
+        deadline = time.monotonic() + CONNECT_WAIT_S
+        while self.client is None and time.monotonic() < deadline:
+            slicer.app.processEvents()  # runs the connector's timer: it connects
+            time.sleep(0.01)
+        return self.requireClient().logic
+
+    def Spin(self):  # noqa: N802
+        """Run the callbacks of what arrived (the spin timer calls it every 20 ms)."""
+        if self.client is not None:
+            self.client.Spin()
+
     def GetDefaultROS2Node(self):  # noqa: N802 - the reference's name
-        return self.requireClient().GetDefaultROS2Node()
+        return self.referenceLogic().GetDefaultROS2Node()
+
+    def CreateROS2Node(self, name=""):  # noqa: N802
+        return self.referenceLogic().CreateROS2Node(name)
+
+    def AddRobot(self, robotName, parameterNodeName, parameterName="robot_description",  # noqa: N802,N803
+                 fixedFrame="", tfPrefix=""):  # noqa: N803
+        return self.referenceLogic().AddRobot(robotName, parameterNodeName, parameterName,
+                                              fixedFrame, tfPrefix)
+
+    def RemoveRobot(self, robotName):  # noqa: N802,N803
+        return self.referenceLogic().RemoveRobot(robotName)
 
     # --- robots and bridges -------------------------------------------------------------
     def loadRobot(self, name, node, parameter):

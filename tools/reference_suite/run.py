@@ -1,0 +1,194 @@
+"""Run SlicerROS2's own unit tests, unchanged, against this project's daemon.
+
+    sudo .venv/bin/python tools/reference_suite/run.py PATH/TO/ROS2Tests.py
+
+`PATH/TO/ROS2Tests.py` is `Testing/Python/ROS2Tests.py` of rosmed/slicer_ros2_module, as
+it is (its code is not part of this project: fetch it yourself). What stands in for what
+it expects:
+
+* 3D Slicer's ``slicer`` module: a stand-in with the reference's two entry points answered
+  by `slicer_client.reference.entry_points.install` (``slicer.util.getModuleLogic('ROS2')``,
+  ``slicer.mrmlScene.AddNewNodeByClass("vtkMRMLROS2NodeNode")``), as the ROS2Bridge module
+  answers them inside Slicer, plus the names the file imports (``ScriptedLoadableModule``
+  and co, ``VTKObservationMixin``, ``vtkMRMLTransformNode.TransformModifiedEvent``);
+* VTK: the real one (the test extra's wheel);
+* ROS: a daemon started here, on a ROS domain of its own;
+* ``/opt/ros/$ROS_DISTRO/{setup.sh,bin/ros2}``: ros2_cli.py and setup.sh from this folder,
+  mounted there in a private mount namespace (so this needs root and ``unshare``; the host's
+  /opt is not touched), with turtlesim as tests/peers/turtlesim_node.py and its interfaces
+  built from tests/interfaces/turtlesim.
+
+The cases run with unittest's own runner, verbosely; the last line says how many passed,
+and the exit code is 0 only if all did.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import types
+import unittest
+from pathlib import Path
+from typing import Any, List
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parents[1]
+DISTRO = "jazzy"
+_IN_NAMESPACE = "SLICER_ROS2_BRIDGE_REFERENCE_SUITE_NS"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("suite", type=Path, help="SlicerROS2's Testing/Python/ROS2Tests.py")
+    args = parser.parse_args()
+    if not args.suite.is_file():
+        parser.error(f"expected the reference's ROS2Tests.py, got {args.suite} (no such file)")
+    if os.environ.get(_IN_NAMESPACE) != "1":
+        return _rerun_in_a_mount_namespace()
+    _mount_ros_standin()
+    sys.path[:0] = [str(REPO), str(REPO / "tests")]
+    from interface_builds import use_test_interfaces  # tests/: the turtlesim interfaces
+    use_test_interfaces()
+    os.environ.update(ROS_DISTRO=DISTRO, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                      ROS_DOMAIN_ID=str(random.randint(102, 232)))
+    daemon, port = _start_daemon()
+    try:
+        return _run(args.suite, port)
+    finally:
+        daemon.send_signal(signal.SIGINT)
+        daemon.wait(timeout=30)
+
+
+def _rerun_in_a_mount_namespace() -> int:
+    if os.geteuid() != 0 or shutil.which("unshare") is None:
+        print("run.py: expected root and unshare (it mounts the ros2 stand-in at /opt/ros in "
+              "a private mount namespace), got neither: run it with sudo", file=sys.stderr)
+        return 2
+    env = dict(os.environ, **{_IN_NAMESPACE: "1"})
+    return subprocess.call(["unshare", "--mount", "--propagation", "private",
+                            sys.executable, *sys.argv], env=env)
+
+
+def _mount_ros_standin() -> None:
+    """/opt/ros/<distro>/{setup.sh, bin/ros2} in this namespace only (a tmpfs over /opt)."""
+    staging = Path(tempfile.mkdtemp(prefix="reference-suite-opt-"))
+    root = staging / "ros" / DISTRO
+    (root / "bin").mkdir(parents=True)
+    (root / "setup.sh").symlink_to(HERE / "setup.sh")
+    (root / "bin" / "ros2").symlink_to(HERE / "ros2_cli.py")  # finds the repo through it
+    subprocess.run(["mount", "--bind", str(staging), "/opt"], check=True)
+
+
+def _start_daemon() -> tuple[subprocess.Popen[str], int]:
+    port = random.randint(20000, 40000)
+    daemon = subprocess.Popen([str(REPO / ".venv" / "bin" / "slicer-ros2-bridge"), "run",
+                               "--port", str(port)], stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True)
+    assert daemon.stdout is not None
+    for line in daemon.stdout:
+        sys.stdout.write(f"[daemon] {line}")
+        if "listening on" in line:
+            return daemon, port
+    raise SystemExit(f"the daemon did not start (exit code {daemon.wait()})")
+
+
+def _slicer_standin(logic: Any) -> types.ModuleType:
+    """What ROS2Tests.py imports of 3D Slicer, with the reference's entry points installed."""
+    from slicer_client.reference.entry_points import install
+
+    slicer = types.ModuleType("slicer")
+    scripted = types.ModuleType("slicer.ScriptedLoadableModule")
+
+    class ScriptedLoadableModule:
+        def __init__(self, parent: Any) -> None:
+            self.parent = parent
+
+    class ScriptedLoadableModuleWidget:
+        def __init__(self, parent: Any = None) -> None:
+            self.parent = parent
+
+        def setup(self) -> None:
+            pass
+
+    class ScriptedLoadableModuleLogic:
+        def __init__(self) -> None:
+            pass
+
+    class ScriptedLoadableModuleTest(unittest.TestCase):
+        pass
+
+    for cls in (ScriptedLoadableModule, ScriptedLoadableModuleWidget,
+                ScriptedLoadableModuleLogic, ScriptedLoadableModuleTest):
+        setattr(scripted, cls.__name__, cls)
+    scripted.__all__ = [cls.__name__ for cls in (  # type: ignore[attr-defined]
+        ScriptedLoadableModule, ScriptedLoadableModuleWidget, ScriptedLoadableModuleLogic,
+        ScriptedLoadableModuleTest)]
+
+    util = types.ModuleType("slicer.util")
+
+    def getModuleLogic(module: str) -> Any:  # noqa: N802
+        raise RuntimeError(f"Could not find module with name '{module}'")
+
+    def pip_install(requirements: str) -> None:
+        print(f"[slicer stand-in] pip_install({requirements!r}) skipped")
+
+    class VTKObservationMixin:
+        pass
+
+    util.getModuleLogic = getModuleLogic  # type: ignore[attr-defined]
+    util.pip_install = pip_install  # type: ignore[attr-defined]
+    util.VTKObservationMixin = VTKObservationMixin  # type: ignore[attr-defined]
+
+    class Scene:
+        def AddNewNodeByClass(self, class_name: str, *args: Any) -> Any:  # noqa: N802
+            raise RuntimeError(f"the stand-in scene makes no {class_name}")
+
+    slicer.util = util  # type: ignore[attr-defined]
+    slicer.ScriptedLoadableModule = scripted  # type: ignore[attr-defined]
+    slicer.mrmlScene = Scene()  # type: ignore[attr-defined]
+    slicer.vtkMRMLTransformNode = types.SimpleNamespace(  # type: ignore[attr-defined]
+        TransformModifiedEvent=15000)
+    if not install(slicer, logic):
+        raise SystemExit("the stand-in looked like a Slicer with SlicerROS2 installed")
+    sys.modules.update({"slicer": slicer, "slicer.util": util,
+                        "slicer.ScriptedLoadableModule": scripted})
+    return slicer
+
+
+def _run(suite_path: Path, port: int) -> int:
+    import slicer_client
+
+    client = slicer_client.connect("127.0.0.1", port)
+    try:
+        _slicer_standin(client.logic)
+        spec = importlib.util.spec_from_file_location("ROS2Tests", suite_path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        logic = module.ROS2TestsLogic
+        cases: List[type] = [logic.TestTurtlesimNode, logic.TestCreateAndAddPubSub,
+                             logic.TestParameterNode, logic.TestTf2BroadcasterAndLookupNode,
+                             logic.TestServiceClient]  # the order of its own run()
+        suite = unittest.TestSuite(unittest.TestLoader().loadTestsFromTestCase(case)
+                                   for case in cases)
+        started = time.monotonic()
+        result = unittest.TextTestRunner(verbosity=2, stream=sys.stdout).run(suite)
+        failed = len(result.failures) + len(result.errors)
+        print(f"\nSlicerROS2's unit tests against slicer-ros2-bridge: "
+              f"{result.testsRun - failed} of {result.testsRun} passed "
+              f"in {time.monotonic() - started:.1f} s")
+        return 0 if result.wasSuccessful() else 1
+    finally:
+        client.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
