@@ -334,10 +334,16 @@ def _node(name: str) -> Any:
     return rclpy.create_node(name)
 
 
-def _wait_matched(publisher: Any, timeout: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout
+def _ready_publisher(node_name: str, cls: Any, topic: str, depth: int) -> Any:
+    """A publisher of a new node, once the daemon's subscription has matched it (then
+    nothing is lost to discovery); says READY."""
+    node = _node(node_name)
+    publisher = node.create_publisher(cls, topic, depth)
+    deadline = time.monotonic() + 30.0
     while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
         time.sleep(0.02)
+    print("READY", flush=True)
+    return publisher
 
 
 def _marker(marker_id: int, points: Any) -> Any:
@@ -357,11 +363,8 @@ def _peer_marker_storm(topic: str, seconds: float) -> None:
     import numpy as np
     from visualization_msgs.msg import MarkerArray
 
-    node = _node("storm_marker_peer")
-    publisher = node.create_publisher(MarkerArray, topic, 10)
-    _wait_matched(publisher)
+    publisher = _ready_publisher("storm_marker_peer", MarkerArray, topic, 10)
     rng = np.random.default_rng(1)
-    print("READY", flush=True)
     start, sent = time.monotonic(), 0
     while time.monotonic() - start < seconds:
         due = start + sent * 0.3
@@ -377,11 +380,8 @@ def _peer_marker_bomb(topic: str, count: int) -> None:
     import numpy as np
     from visualization_msgs.msg import Marker
 
-    node = _node("storm_bomb_peer")
-    publisher = node.create_publisher(Marker, topic, 50)
-    _wait_matched(publisher)
+    publisher = _ready_publisher("storm_bomb_peer", Marker, topic, 50)
     rng = np.random.default_rng(2)
-    print("READY", flush=True)
     for k in range(count):
         publisher.publish(_marker(k, rng.random((MAX_LIST_POINTS, 3))))
         time.sleep(0.2)
@@ -390,16 +390,14 @@ def _peer_marker_bomb(topic: str, count: int) -> None:
 
 
 def _peer_tf_frames() -> None:
+    from builtin_interfaces.msg import Time
     from geometry_msgs.msg import TransformStamped
     from tf2_msgs.msg import TFMessage
 
-    node = _node("storm_tf_peer")
-    publisher = node.create_publisher(TFMessage, "/tf", 100)
-    _wait_matched(publisher)
-    print("READY", flush=True)
+    publisher = _ready_publisher("storm_tf_peer", TFMessage, "/tf", 100)
 
     def batch(names: list[str]) -> TFMessage:
-        stamp = node.get_clock().now().to_msg()
+        stamp = Time(sec=int(time.time()))
         out = []
         for name in names:
             t = TransformStamped(child_frame_id=name)

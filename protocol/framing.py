@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterator
+from typing import NamedTuple
 
 from protocol.crc64 import Buffer, crc64, crc64_combine, crc64_continue
 from protocol.errors import (
@@ -379,20 +380,16 @@ class Decoder:
             yield message
 
 
-class RawFrame:
+class RawFrame(NamedTuple):
     """One complete frame as received (`Decoder.next_frame`): the header's fields and the
     body's bytes, neither checked nor decoded."""
 
-    __slots__ = ("version", "type_raw", "name_raw", "timestamp", "body", "crc")
-
-    def __init__(self, version: int, type_raw: bytes, name_raw: bytes, timestamp: int,
-                 body: bytes, crc: int) -> None:
-        self.version = version
-        self.type_raw = type_raw
-        self.name_raw = name_raw
-        self.timestamp = timestamp
-        self.body = body
-        self.crc = crc
+    version: int
+    type_raw: bytes
+    name_raw: bytes
+    timestamp: int
+    body: bytes
+    crc: int
 
     @property
     def type_name(self) -> str:
