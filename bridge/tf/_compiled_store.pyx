@@ -505,6 +505,18 @@ cdef class CompiledFrameStore:
                         f.samples[f.end - 1].stamp, f.samples[first].stamp, f.end - first))
         return out
 
+    def samples_of(self, str frame):
+        """The live samples of a child frame, oldest first: (stamp, parent, value)."""
+        cdef Frame *f = &self._frames[<Py_ssize_t>self._ids[frame]]
+        cdef Py_ssize_t i
+        cdef Sample *s
+        cdef list out = []
+        for i in range(first_live(f, self._window_ns), f.end):
+            s = &f.samples[i]
+            out.append((s.stamp, self._names[s.parent],
+                        (s.v[0], s.v[1], s.v[2], s.v[3], s.v[4], s.v[5], s.v[6])))
+        return out
+
     cdef list _cached_names(self):
         cdef Py_ssize_t k
         return [self._names[k] for k in range(self._count) if self._frames[k].cached]

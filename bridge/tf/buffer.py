@@ -168,6 +168,7 @@ class TfBuffer:
         self._lock = threading.Lock()
         self._max_frames = max_frames
         self._max_frame_id = max_frame_id
+        self._no_stale_until = 0  # stamp before which a full buffer has no stale frame
         self._store: _Store = _make_store(self._cache_ns, compiled, max_frames, max_frame_id)
 
     # ------------------------------------------------------------------ writing
@@ -200,16 +201,16 @@ class TfBuffer:
         changed: set[str] = set()
         rejected: list[InvalidArgumentError] = []
         with self._lock:
-            insert = self._store.insert
             for index, tr in enumerate(transforms):
                 try:
                     parent, child, stamp, value = _check(tr, index, static,
                                                          self._max_frame_id)
-                    self._check_room(parent, child, index)
+                    self._check_room(parent, child, index, stamp)
                 except InvalidArgumentError as exc:
                     rejected.append(exc)
                     continue
-                if insert(parent, child, stamp, value, static):
+                # The store itself: `_check_room` may have made a new one.
+                if self._store.insert(parent, child, stamp, value, static):
                     changed.add(child)
         if rejected:
             raise RejectedTransformsError(rejected, changed)
@@ -243,7 +244,7 @@ class TfBuffer:
             try:
                 checked = _check(_from_raw(raw), index, static, self._max_frame_id)
                 with self._lock:
-                    self._check_room(checked[0], checked[1], index)
+                    self._check_room(checked[0], checked[1], index, checked[2])
                     # The two checks agree (tests hold them together); if they ever did
                     # not, the sample would be kept, not lost.
                     if self._store.insert(*checked, static):
@@ -258,18 +259,51 @@ class TfBuffer:
             raise RejectedTransformsError(rejected, changed, unworded)
         return changed
 
-    def _check_room(self, parent: str, child: str, index: int) -> None:
-        """Under the lock: InvalidArgumentError if storing parent<-child would make the
-        buffer know more than ``max_frames`` frames."""
+    def _check_room(self, parent: str, child: str, index: int, stamp: int) -> None:
+        """Under the lock: InvalidArgumentError if storing parent<-child (at ``stamp``)
+        would make the buffer know more than ``max_frames`` frames, once stale frames are
+        forgotten."""
         store = self._store
         if store.frame_count + 2 <= self._max_frames:
             return  # the usual case: no lookups
         new = (not store.has_frame(parent)) + (not store.has_frame(child))
+        if new and store.frame_count + new > self._max_frames and self._forget_stale(stamp):
+            store = self._store
+            new = (not store.has_frame(parent)) + (not store.has_frame(child))
         if new and store.frame_count + new > self._max_frames:
             raise InvalidArgumentError(
                 f"transforms[{index}]", f"frames the buffer knows, or room for new ones (at "
                 f"most {self._max_frames} frames are kept)", f"{new} new frame(s): "
                 f"'{_shown(parent)}' -> '{_shown(child)}'")
+
+    def _forget_stale(self, stamp: int) -> bool:
+        """Under the lock, with the buffer full: forget the dynamic frames whose newest
+        sample is more than the cache time older than the newest sample of all, or than
+        ``stamp`` (a new frame's: a peer's flood of once-sent frames must not keep it out),
+        so that new frames find room again; whether any went.
+        Unlike tf2, which keeps every frame for good, a full buffer lets stale ones go:
+        the store is made again from the frames kept (only ever when full)."""
+        if stamp < self._no_stale_until:
+            return False  # the last look found none, and none can have gone stale since
+        rows = self._store.frame_rows()
+        dynamic = [row[3] for row in rows if not row[2]]
+        newest = max([stamp, *dynamic])
+        stale = {row[0] for row in rows if not row[2] and row[3] < newest - self._cache_ns}
+        if not stale:
+            # A frame's newest sample only gets newer: none is stale before this.
+            self._no_stale_until = min(dynamic, default=_STAMP_LIMIT) + self._cache_ns
+            return False
+        old = self._store
+        store = _make_store(self._cache_ns, not isinstance(old, FrameStore),
+                            self._max_frames, self._max_frame_id)
+        for frame, _, static, _, _, _ in rows:
+            if frame not in stale:
+                for stamp, parent, value in old.samples_of(frame):
+                    store.insert(parent, frame, stamp, value, static)
+        store.graph_version = old.graph_version + 1  # every lookup's chain is derived again
+        self._store = store
+        self._no_stale_until = 0
+        return True
 
     def clear(self) -> None:
         """Forget every frame (for example after a ROS time jump backwards)."""

@@ -201,6 +201,12 @@ class FrameStore:
                         len(c.stamps) - first))
         return out
 
+    def samples_of(self, frame: str) -> List[Tuple[int, str, Tf7]]:
+        """The live samples of a child frame, oldest first: (stamp, parent, value)."""
+        c = self._frames[frame]
+        first = c.first()
+        return list(zip(c.stamps[first:], c.parents[first:], c.values[first:]))
+
     def lookup(self, target: str, source: str, t: int) -> Result:
         """target<-source at ``t`` (0: the latest common time), or a TfError."""
         t, value = self._lookup(target, source, t, None)

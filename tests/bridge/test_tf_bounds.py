@@ -32,7 +32,8 @@ def _cdr(batch: list[StampedTransform]) -> bytes:
         ts = TransformStamped()
         ts.header.stamp.nanosec = tr.stamp_ns
         ts.header.frame_id, ts.child_frame_id = tr.parent, tr.child
-        ts.transform.translation.z = tr.translation[2]
+        t = ts.transform.translation
+        t.x, t.y, t.z = tr.translation
         ts.transform.rotation.w = 1.0
         msg.transforms.append(ts)
     return serialize_message(msg)
@@ -104,3 +105,24 @@ def test_a_flood_of_refusals_is_counted_and_worded_a_few_at_a_time() -> None:
     assert raised.value.count == 998 and raised.value.changed == {"f0", "f1"}
     assert 1 <= len(raised.value.rejected) <= 998
     assert "(and 997 more)" in str(raised.value)
+
+
+@WAYS
+def test_a_full_buffer_forgets_stale_frames_to_make_room(store: Store) -> None:
+    """A peer's once-sent frames must not keep new ones out for good: when the buffer is
+    full, dynamic frames silent for longer than the cache time (judged by the newest
+    sample of all) are forgotten; static frames, and frames still moving, stay."""
+    second = 1_000_000_000
+    buffer = TfBuffer(cache_time_s=1.0, max_frames=5)
+    buffer.set_transforms([tf("world", "fixed")], static=True)
+    flood = [StampedTransform("world", f"junk{i}", 1 * second, (0.0, 0.0, 1.0), IDQ)
+             for i in range(3)]
+    store(buffer, flood)
+    assert len(buffer.frames()) == 5
+    # Three seconds later, new frames only (the flood's stamps are all the buffer has).
+    later = [StampedTransform("world", "arm", 4 * second, (1.0, 0.0, 0.0), IDQ),
+             StampedTransform("arm", "hand", 4 * second, (1.0, 0.0, 0.0), IDQ)]
+    assert store(buffer, later) == {"arm", "hand"}
+    assert buffer.frames() == ["arm", "fixed", "hand", "world"]
+    assert buffer.lookup("world", "hand").translation == (2.0, 0.0, 0.0)
+    assert buffer.lookup("world", "fixed").translation == (0.0, 0.0, 1.0)
