@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections import OrderedDict, deque
 from typing import Any, Callable, Optional
 
-from protocol.crc64 import Buffer
+from protocol.crc64 import Buffer, KnownCrc
 from protocol.framing import Decoder, StreamTemplate, encode, encode_parts
 from protocol.messages import Body, Message
 
@@ -63,7 +63,7 @@ class SharedFrame(Frame):
 
     __slots__ = ("_parts", "_content_crc")
 
-    def __init__(self, message: Message, content_crc: Optional[int] = None) -> None:
+    def __init__(self, message: Message, content_crc: Optional[KnownCrc] = None) -> None:
         super().__init__(message)
         self._parts: dict[int, tuple[bytes, Buffer, bytes]] = {}
         self._content_crc = content_crc  # known where the content was made: not redone

@@ -22,7 +22,7 @@ from typing import Callable, Union
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["BACKEND", "CHECK_VALUE", "POLY", "crc64", "crc64_combine", "crc64_continue",
+__all__ = ["BACKEND", "CHECK_VALUE", "POLY", "KnownCrc", "crc64", "crc64_continue",
            "crc64_native", "crc64_python"]
 
 POLY = 0x42F0E1EBA9EA3693
@@ -205,22 +205,39 @@ def crc64_continue(crc: int, data: Buffer) -> int:
     if len(view) < _NUMPY_THRESHOLD:
         return _crc_loop(crc, view)
     # Linearity (module docstring): feed len(data) zero bytes to crc, then XOR data's CRC.
-    return _feed_zeros(crc, len(view)) ^ _crc_blocks(view)
+    fed = _feed_zeros(np.array([crc], dtype=np.uint64), len(view))
+    return int(fed[0]) ^ _crc_blocks(view)
 
 
-def crc64_combine(crc_a: int, crc_b: int, length_b: int) -> int:
-    """``crc64(a + b)`` from ``crc64(a)``, ``crc64(b)`` and ``len(b)``: a model's content
-    CRC, computed once where the model was made, then combined with a header made later
-    (a few table look-ups, whatever the length)."""
-    return _feed_zeros(crc_a, length_b) ^ crc_b
+class KnownCrc:
+    """The CRC of some bytes (`crc`), and what continues a CRC through them without
+    reading them again: ``after(crc64(a)) == crc64(a + data)`` in eight table look-ups.
+    Made where a large body is made (a thread of its own), so that the header put before
+    it later costs almost nothing."""
+
+    __slots__ = ("crc", "length", "_tables")
+
+    def __init__(self, data: Buffer) -> None:
+        self.crc = crc64(data)
+        self.length = len(memoryview(data).cast("B"))
+        self._tables = _tables_from_basis(_feed_zeros(_BASIS, self.length))
+
+    def after(self, prefix_crc: int) -> int:
+        """``crc64(prefix + data)`` from ``crc64(prefix)``."""
+        shifted = _apply_shift(self._tables, np.array([prefix_crc], dtype=np.uint64))
+        return int(shifted[0]) ^ self.crc
 
 
-def _feed_zeros(crc: int, count: int) -> int:
-    value = np.array([crc], dtype=np.uint64)
+_BASIS = np.uint64(1) << np.arange(64, dtype=np.uint64)
+
+
+def _feed_zeros(values: U64Array, count: int) -> U64Array:
+    """The registers ``values`` after feeding ``count`` zero bytes (linearity: see the
+    module docstring)."""
     level = 0
     while count:
         if count & 1:
-            value = _apply_shift(_shift_tables(level), value)
+            values = _apply_shift(_shift_tables(level), values)
         count >>= 1
         level += 1
-    return int(value[0])
+    return values

@@ -22,7 +22,7 @@ import struct
 from collections.abc import Iterator
 from typing import NamedTuple
 
-from protocol.crc64 import Buffer, crc64, crc64_combine, crc64_continue
+from protocol.crc64 import Buffer, KnownCrc, crc64, crc64_continue
 from protocol.errors import (
     BodyError,
     BodyTooLargeError,
@@ -71,12 +71,12 @@ def encode(message: Message, *, header_version: int = 1) -> bytes:
 
 
 def encode_parts(message: Message, *, header_version: int = 1,
-                 content_crc: int | None = None) -> tuple[bytes, Buffer, bytes]:
+                 content_crc: KnownCrc | None = None) -> tuple[bytes, Buffer, bytes]:
     """`encode` as three parts whose concatenation is the message's wire bytes: the header
     (and v2's extended header), the content, and v2's metadata. The content is the body's
     own bytes where it has them (a `RawBody`): a large model is then neither copied nor
     held twice, and the CRC is computed over the parts as they are. ``content_crc``: the
-    content's own CRC (`crc64` of it), when known, saves going over it again."""
+    content's, made beforehand, saves going over it again."""
     type_name = message.type_name
     body = message.body
     content: Buffer
@@ -100,7 +100,7 @@ def encode_parts(message: Message, *, header_version: int = 1,
         raise EncodeError("header_version", "1 or 2", header_version)
     size = len(ext) + len(content) + len(tail)
     crc = (crc64_continue(crc64(ext), content) if content_crc is None
-           else crc64_combine(crc64(ext), content_crc, len(content)))
+           else content_crc.after(crc64(ext)))
     crc = crc64_continue(crc, tail)
     timestamp = message.timestamp
     if isinstance(timestamp, int) and 0 <= timestamp <= _U64_MAX:

@@ -86,7 +86,7 @@ from bridge.codecs.cdr import CdrError
 from bridge.markers.cdr import layout_supported, read_marker, read_marker_array
 from bridge.markers.convert import ADD, DELETE, DELETEALL, MarkerEvent, events_of
 from bridge.markers.geometry import (MarkerError, MarkerModel, MarkerSpec, build_model,
-                                     model_bytes, packed)
+                                     model_bytes, packed, warm_up)
 from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
 from bridge.security import DEFAULT_MAX_MARKER_BYTES, NameRules, strip_frame
@@ -349,6 +349,11 @@ class _Worker:
         # messages stays short and no DELETE is dropped with an old message; the folded
         # state is meshed and handed over once the loop takes batches again.
         folded: Optional[_Folded] = None
+        try:
+            warm_up()  # the mesh libraries load now, not with a storm's first marker
+        except Exception:  # noqa: BLE001 - the markers that need them will say why
+            log.exception("markers on %s: the mesh primitives could not be made",
+                          self._sub.topic)
         while True:
             with self._cond:
                 while not self._stopped and not self._queue and not (

@@ -53,7 +53,7 @@ import numpy.typing as npt
 from bridge.robots.errors import RobotError
 from bridge.robots.resources import PackageResolver
 from protocol.conversions import metres_to_mm, quaternion_to_rotation
-from protocol.crc64 import crc64
+from protocol.crc64 import KnownCrc
 from protocol.errors import ProtocolError
 from protocol.messages import AttributeKind, PolyData, PolyDataAttribute, RawBody, String
 from protocol.naming import (KEY_LINE_WIDTH, KEY_POINT_COLORS, KEY_POINT_SIZE, KEY_POSITION,
@@ -62,7 +62,7 @@ from protocol.naming import (KEY_LINE_WIDTH, KEY_POINT_COLORS, KEY_POINT_SIZE, K
 __all__ = ["ARROW_HEAD_FRACTION", "KINDS", "MAX_ARRAY_MARKERS", "MAX_MARKER_POINTS",
            "MAX_MODEL_POINTS",
            "MarkerError", "MarkerModel", "MarkerSpec", "RGBA_ATTRIBUTE", "build_model",
-           "kind_of_type", "model_bytes", "packed"]
+           "kind_of_type", "model_bytes", "packed", "warm_up"]
 
 F64 = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
@@ -158,7 +158,7 @@ class MarkerModel:
     body: Union[PolyData, String, RawBody]  # RawBody: a POLYDATA packed from a template
     rgba: Rgba
     metadata: dict[str, str]
-    content_crc: Optional[int] = None  # a packed body's CRC (`packed`), for its frames
+    content_crc: Optional[KnownCrc] = None  # a packed body's (`packed`), for its frames
 
     @property
     def type_name(self) -> str:
@@ -190,7 +190,7 @@ def packed(model: MarkerModel) -> MarkerModel:
         return model
     content = model.body.pack_view()
     return MarkerModel(model.kind, RawBody(PolyData.TYPE, content), model.rgba,
-                       model.metadata, crc64(content))
+                       model.metadata, KnownCrc(content))
 
 
 # ---------------------------------------------------------------------------- checks
@@ -269,6 +269,14 @@ def _unit(kind: str) -> tuple[F64, U32]:
     else:
         mesh = cache.primitive("cone", 0.5, 1.0)
     return np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+
+
+def warm_up() -> None:
+    """Make the unit primitives now (their first use imports the mesh libraries: a second
+    or two of a thread that holds the interpreter), so that it is not the first marker of
+    a storm that pays it."""
+    for kind in ("cube", "sphere", "list_sphere", "cylinder", "cone"):
+        _unit(kind)
 
 
 def _polydata(points_m: F64, *, rgba: Rgba, colours: Optional[F32] = None,
