@@ -20,7 +20,10 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterator
-from typing import NamedTuple
+from typing import NamedTuple, cast
+
+import numpy as np
+import numpy.typing as npt
 
 from protocol.crc64 import Buffer, KnownCrc, crc64, crc64_continue
 from protocol.errors import (
@@ -54,6 +57,8 @@ DEFAULT_MAX_BODY_SIZE = 64 * 1024 * 1024  # 64 MiB: a 512^3 uint8 volume with ro
 # Bodies up to this size are not counted against a `ReceiveBudget`: commands and poses must
 # get through while large senders have used it up (64 clients x 256 KiB = 16 MiB at most).
 DEFAULT_UNCOUNTED_BODY_BYTES = 256 * 1024
+# A body this large is received into a buffer of its own (`Decoder`): an image, a model.
+LARGE_BODY_BYTES = 4 * 1024 * 1024
 
 _U32_MAX = 0xFFFFFFFF
 _U64_MAX = (1 << 64) - 1
@@ -264,12 +269,16 @@ class Decoder:
         self._offset = 0
         self._header: tuple[int, bytes, bytes, int, int, int] | None = None
         self._broken: FramingError | None = None
+        # A large body is received into a buffer of its own, its size known from its
+        # header: no copy when it is complete, none when the shared buffer grows.
+        self._body: npt.NDArray[np.uint8] | None = None
+        self._filled = 0
         self.frames = 0  # frames consumed, good or bad: a deadline restarts with each
 
     @property
     def frame_in_progress(self) -> bool:
         """Part of a frame has arrived (after the complete ones were taken)."""
-        return len(self._buffer) > self._offset
+        return len(self._buffer) > self._offset or self._body is not None
 
     @property
     def pending_body_size(self) -> int | None:
@@ -279,7 +288,8 @@ class Decoder:
     @property
     def buffered(self) -> int:
         """Bytes received and not yet returned as part of a message."""
-        return len(self._buffer) - self._offset
+        large = 0 if self._body is None else HEADER_SIZE + self._filled
+        return len(self._buffer) - self._offset + large
 
     @property
     def broken(self) -> FramingError | None:
@@ -290,6 +300,13 @@ class Decoder:
         """Append received bytes (any size, including 1 byte or none)."""
         if self._broken is not None:
             raise self._broken
+        if self._body is not None and self._filled < len(self._body):
+            n = min(len(data), len(self._body) - self._filled)
+            self._body[self._filled:self._filled + n] = np.frombuffer(data, np.uint8, n)
+            self._filled += n
+            data = memoryview(data)[n:]
+            if not data:
+                return
         if self._offset and self._offset * 2 >= len(self._buffer):
             del self._buffer[: self._offset]
             self._offset = 0
@@ -302,6 +319,7 @@ class Decoder:
         self._buffer = bytearray()
         self._offset = 0
         self._header = None
+        self._body = None
         if self._broken is None:
             self._broken = FramingError("decoder", "an open decoder", "a closed one")
         # Its traceback holds the frames that raised it, and with them their owners.
@@ -316,6 +334,17 @@ class Decoder:
         self._broken = error
         self._release_claim()
         return error
+
+    def _receive_apart(self, body_size: int) -> None:
+        """The body just announced is large: it goes into its own buffer (not zeroed),
+        with what of it has arrived already; the shared buffer goes on after it."""
+        self._body = np.empty(body_size, dtype=np.uint8)
+        start = self._offset + HEADER_SIZE
+        n = min(len(self._buffer) - start, body_size)
+        with memoryview(self._buffer) as view:
+            self._body[:n] = np.frombuffer(view[start:start + n], np.uint8)
+        self._filled = n
+        self._offset = start + n
 
     def _take(self, size: int) -> bytes:
         start = self._offset
@@ -357,12 +386,21 @@ class Decoder:
                 except ReceiveBudgetError as exc:
                     raise self._break(exc) from None
             self._header = fields
+            if body_size >= LARGE_BODY_BYTES:
+                self._receive_apart(body_size)
         version, type_raw, name_raw, timestamp, body_size, crc = self._header
-        if self.buffered < HEADER_SIZE + body_size:
-            return None
+        body: Buffer
+        if self._body is not None:
+            if self._filled < body_size:
+                return None
+            body = self._body.data.toreadonly()
+            self._body = None
+        else:
+            if self.buffered < HEADER_SIZE + body_size:
+                return None
+            self._offset += HEADER_SIZE
+            body = self._take(body_size)
         self._header = None
-        self._offset += HEADER_SIZE
-        body = self._take(body_size)
         self.frames += 1
         self._release_claim()
         if self._offset == len(self._buffer):
@@ -382,13 +420,14 @@ class Decoder:
 
 class RawFrame(NamedTuple):
     """One complete frame as received (`Decoder.next_frame`): the header's fields and the
-    body's bytes, neither checked nor decoded."""
+    body's bytes (a large one's: a read-only view of its own buffer), neither checked nor
+    decoded."""
 
     version: int
     type_raw: bytes
     name_raw: bytes
     timestamp: int
-    body: bytes
+    body: Buffer
     crc: int
 
     @property
@@ -407,7 +446,7 @@ class RawFrame(NamedTuple):
                        self.crc, verify_crc)
 
 
-def _decode(version: int, type_raw: bytes, name_raw: bytes, timestamp: int, body: bytes,
+def _decode(version: int, type_raw: bytes, name_raw: bytes, timestamp: int, body: Buffer,
             crc: int, verify_crc: bool) -> Message:
     if verify_crc:
         actual = crc64(body)
@@ -428,7 +467,8 @@ def _decode(version: int, type_raw: bytes, name_raw: bytes, timestamp: int, body
                 body[content_end:content_end + ext.meta_header_size],
                 body[content_end + ext.meta_header_size:], type_name)
             message_id = ext.message_id
-        parsed = unpack_body(type_name, content)
+        # A large body is a memoryview: every unpacker reads with struct and numpy.
+        parsed = unpack_body(type_name, cast(bytes, content))
     except ProtocolError:
         raise
     except (ValueError, IndexError, TypeError, UnicodeDecodeError) as exc:

@@ -559,10 +559,12 @@ class PolyData:
         names: list[str] = []
         name_start = pos
         for i in range(nattr):
-            nul = content.find(b"\0", pos, pos + _MAX_ATTRIBUTE_NAME + 1)
+            # bytes() of the name's bytes alone: the content may be a memoryview.
+            nul = bytes(content[pos:pos + _MAX_ATTRIBUTE_NAME + 1]).find(b"\0")
+            nul = nul + pos if nul >= 0 else nul
             if nul < 0:
                 raise _bad(t, f"attribute #{i} name", "NUL-terminated, at most 255 bytes",
-                           f"{content[pos:pos + 32]!r}...")
+                           f"{bytes(content[pos:pos + 32])!r}...")
             names.append(decode_text(content[pos:nul], ENCODING_UTF8, f"attribute #{i} name", t))
             pos = nul + 1
         if (pos - name_start) % 2:
