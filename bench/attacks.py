@@ -1,8 +1,9 @@
-"""Attacks on a running daemon (issue 12), each bounded, on 127.0.0.1 only, with the daemon's
-figures before and after, and a fresh client served during each.
+"""Attacks on a running daemon (issues 12 and 22), each bounded, on 127.0.0.1 only, with the
+daemon's figures before and after, a fresh client served during each, and another client's
+tf stream and hello round trip while each runs, beside their baseline from the same run.
 
 Run: .venv/bin/python bench/attacks.py [--only NAME ...] [--flood-seconds 10] [--json OUT]
-     [--flood-depth 10] [--flood-remove] [-- DAEMON OPTIONS ...]
+     [--flood-depth 10] [--flood-remove] [--storm-seconds 15] [-- DAEMON OPTIONS ...]
 
 The daemon runs as a user runs it (`bridge.cli run`, default options unless given after
 ``--``), in its own ROS domain, localhost only. Attacks, in order:
@@ -13,7 +14,16 @@ The daemon runs as a user runs it (`bridge.cli run`, default options unless give
   KiB, then hold on;
 - hold and go: 6 clients each send 40 MiB of a body, then disconnect without finishing;
 - flood (a measurement): a rclpy peer publishes a 20 MB PointCloud2 at 10 Hz to a topic a
-  client subscribes to, for --flood-seconds, three floods in a row.
+  client subscribes to, for --flood-seconds, three floods in a row;
+- the storms of issue 22 (bench/storms.py): marker_storm, marker_bomb, marker_bomb_ros,
+  polydata, tf_frames, service_slots.
+
+The other client (bench/peers.py ``watch``, its own process) streams the tf lookup base <-
+link7 of a 7-link robot that a rclpy peer (bench/peers.py ``publish tf``, sleeping between
+messages) publishes at 100 Hz, and sends ``hello`` at 10 Hz. Its figures (tf latency
+publish() -> last byte, p50 / p99 / max; hello round trip) are measured for --storm-seconds
+before any attack (the baseline) and during each attack. Targets (issue 22): tf p99 under
+20 ms and every hello answered within 100 ms during each storm.
 
 Measured for each: the daemon's RSS, open fds, threads and ROS entities (the daemon node's
 publishers, subscribers, services and clients in the ROS graph) before, at the peak and
@@ -46,6 +56,7 @@ from typing import Any, Callable, Optional
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from bench.storms import STORMS, run_storm  # noqa: E402
 from protocol.framing import Decoder  # noqa: E402
 from slicer_client.connection import BridgeClientError, Connection  # noqa: E402
 
@@ -101,6 +112,12 @@ def proc_figures(pid: int) -> dict[str, int]:
     fields = {line.split(":")[0]: line.split(":")[1].split() for line in status}
     return {"rss_mb": int(fields["VmRSS"][0]) // 1024, "threads": int(fields["Threads"][0]),
             "fds": len(os.listdir(f"/proc/{pid}/fd"))}
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of the process so far."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def settled(pid: int, timeout: float = 15.0) -> dict[str, int]:
@@ -307,6 +324,93 @@ def flood_peer(topic: str, seconds: float) -> int:
     return 0
 
 
+class Watcher:
+    """The other client and its tf source: bench/peers.py ``publish tf`` at 100 Hz and
+    ``watch`` (each its own process); `measure` gives its figures over a span."""
+
+    def __init__(self, port: int, env: dict[str, str], logs: Path) -> None:
+        peers = str(REPO / "bench" / "peers.py")
+        self.publisher = subprocess.Popen(
+            [sys.executable, "-u", peers, "publish", "tf", "/tf"], env=env, cwd=str(REPO),
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=(logs / "tf.log").open("wb"),
+            text=True, start_new_session=True)
+        self.watcher = subprocess.Popen(
+            [sys.executable, "-u", peers, "watch", str(port), "base", "link7"], env=env,
+            cwd=str(REPO), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            stderr=(logs / "watch.log").open("wb"), text=True, start_new_session=True)
+        # The floor: a plain rclpy subscriber of the same /tf, its own process. What the
+        # machine's load alone does to a ROS stream, beside what the client sees.
+        self.floor = subprocess.Popen(
+            [sys.executable, "-u", peers, "floor", "tf", "/tf"], env=env, cwd=str(REPO),
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            stderr=(logs / "floor.log").open("wb"), text=True, start_new_session=True)
+        for child in (self.publisher, self.watcher, self.floor):
+            self._expect(child, "READY")
+        self._say(self.publisher, "WAIT 2")
+        self._expect(self.publisher, "MATCHED")
+        self._say(self.publisher, "RUN 100 100000")  # until stopped
+
+    @staticmethod
+    def _say(child: subprocess.Popen[str], line: str) -> None:
+        assert child.stdin is not None
+        child.stdin.write(line + "\n")
+        child.stdin.flush()
+
+    @staticmethod
+    def _expect(child: subprocess.Popen[str], word: str) -> str:
+        assert child.stdout is not None
+        while True:
+            line = child.stdout.readline()
+            if not line:
+                raise RuntimeError(f"a bench peer exited before {word}")
+            if line.startswith(word):
+                return line
+
+    def reset(self) -> None:
+        self._say(self.watcher, "RESET")
+        self._say(self.floor, "RESET")
+
+    def report(self) -> dict[str, Any]:
+        self._say(self.floor, "REPORT")
+        floor = json.loads(self._expect(self.floor, "{"))["all"]
+        self._say(self.watcher, "REPORT")
+        data = json.loads(self._expect(self.watcher, "{"))
+        tf = data["streams"].get("tf", {"n": 0, "p50": None, "p99": None, "max": None})
+        hello = data["streams"].get("hello", {"n": 0, "p50": None, "p99": None, "max": None})
+        return {"tf_n": tf["n"], "tf_p50_ms": tf["p50"], "tf_p99_ms": tf["p99"],
+                "tf_max_ms": tf["max"], "hello_n": hello["n"], "hello_p99_ms": hello["p99"],
+                "hello_max_ms": max(hello["max"] or 0.0,
+                                    data["hello_unanswered"]["oldest_ms"]),
+                "hello_unanswered": data["hello_unanswered"]["n"],
+                "disconnected": data["disconnected"],
+                "floor_p99_ms": floor["p99"], "floor_max_ms": floor["max"]}
+
+    def close(self) -> None:
+        for child in (self.watcher, self.floor, self.publisher):
+            try:
+                os.killpg(child.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            child.wait()
+
+
+def _watched(figures: dict[str, Any]) -> str:
+    def ms(value: Any) -> str:
+        return "-" if value is None else f"{value:.1f}"
+    return (f"tf p50 {ms(figures['tf_p50_ms'])} / p99 {ms(figures['tf_p99_ms'])} / max "
+            f"{ms(figures['tf_max_ms'])} ms (n {figures['tf_n']}; rclpy floor p99 "
+            f"{ms(figures['floor_p99_ms'])} / max {ms(figures['floor_max_ms'])}); hello p99 "
+            f"{ms(figures['hello_p99_ms'])} / max {ms(figures['hello_max_ms'])} ms "
+            f"(n {figures['hello_n']}, unanswered {figures['hello_unanswered']})"
+            + (" DISCONNECTED by the daemon" if figures["disconnected"] else ""))
+
+
+def _meets_targets(figures: dict[str, Any]) -> bool:
+    p99 = figures["tf_p99_ms"]
+    return (figures["tf_n"] > 0 and p99 is not None and p99 < 20.0
+            and figures["hello_max_ms"] < 100.0 and not figures["disconnected"])
+
+
 # ------------------------------------------------------------------------- driver
 
 
@@ -320,7 +424,10 @@ def main() -> int:
         argv = argv[:argv.index("--")]
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--only", action="append", choices=["slowloris", "half_sent_bodies",
-                                                            "hold_and_go", "flood"])
+                                                            "hold_and_go", "flood",
+                                                            *STORMS])
+    parser.add_argument("--storm-seconds", type=float, default=15.0,
+                        help="how long a storm runs (and the baseline is measured)")
     parser.add_argument("--flood-seconds", type=float, default=10.0)
     parser.add_argument("--flood-depth", type=int, default=None,
                         help="the flood subscriber's QoS depth (history kept by ROS; default: "
@@ -329,7 +436,7 @@ def main() -> int:
                         help="remove the flood subscriber after the floods and measure again")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
-    chosen = args.only or ["slowloris", "half_sent_bodies", "hold_and_go", "flood"]
+    chosen = args.only or ["slowloris", "half_sent_bodies", "hold_and_go", "flood", *STORMS]
 
     logs = Path(tempfile.mkdtemp(prefix="attacks-"))
     env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(102, 200)),
@@ -348,6 +455,7 @@ def main() -> int:
                               stdin=subprocess.DEVNULL, stdout=log_path.open("wb"),
                               stderr=subprocess.STDOUT, start_new_session=True)
     graph: Optional[Graph] = None
+    watcher: Optional[Watcher] = None
     subscriber: Optional[Connection] = None
     clouds_received = [0]
 
@@ -367,6 +475,14 @@ def main() -> int:
         pid = daemon.pid
         print(f"attacks on the daemon (pid {pid}, port {port}, options "
               f"{daemon_args or 'default'}); logs in {logs}", flush=True)
+        watcher = Watcher(port, env, logs)
+        time.sleep(2.0)  # the lookup streams: the baseline starts on a running stream
+        watcher.reset()
+        time.sleep(args.storm_seconds)
+        baseline = watcher.report()
+        baseline_load = round(os.getloadavg()[0], 1)
+        print(f"\n== baseline (no attack, {args.storm_seconds:g} s)\n   other client: "
+              f"{_watched(baseline)}", flush=True)
         for name in chosen:
             rounds = 3 if name == "flood" else 1
             for round_ in range(1, rounds + 1):
@@ -377,7 +493,16 @@ def main() -> int:
                         "topic": FLOOD_TOPIC, "type": "PointCloud2", "qos": qos})
                 before = {**settled(pid), **graph.entities()}
                 peak = Peak(pid)
-                if name == "slowloris":
+                cpu_before = cpu_seconds(pid)
+                started = time.monotonic()
+                watcher.reset()
+                if name in STORMS:
+                    # Measured from the attack proper (its set-up, building its messages,
+                    # is not part of it).
+                    outcome = run_storm(name, port, env, logs, args.storm_seconds,
+                                        started=watcher.reset)
+                    outcome["served_s"] = fresh_client_served(port)
+                elif name == "slowloris":
                     outcome = slowloris(port, deadline_s)
                 elif name == "half_sent_bodies":
                     outcome = half_sent_bodies(port)
@@ -386,14 +511,21 @@ def main() -> int:
                 else:
                     outcome = flood(port, env, logs, args.flood_seconds,
                                     lambda: clouds_received[0], round_)
+                watched = watcher.report()
+                cpu = (cpu_seconds(pid) - cpu_before) / max(1e-9, time.monotonic() - started)
                 peak_rss = peak.stop()
                 after = {**settled(pid), **graph.entities()}
                 label = name if rounds == 1 else f"{name} {round_}"
                 result = {"attack": label, "before": before, "peak_rss_mb": peak_rss,
-                          "after": after, **outcome}
+                          "after": after, "watched": watched, "daemon_cpu": round(cpu, 2),
+                          "load": round(os.getloadavg()[0], 1), **outcome}
                 results.append(result)
                 print(f"\n== {label}\n   before {before}\n   peak RSS {peak_rss} MB\n"
-                      f"   after  {after}\n   {json.dumps(outcome)}", flush=True)
+                      f"   after  {after}\n   daemon CPU {cpu:.0%} of a core\n"
+                      f"   other client: {_watched(watched)} (baseline: tf p99 "
+                      f"{baseline['tf_p99_ms']:.1f} ms, hello max "
+                      f"{baseline['hello_max_ms']:.1f} ms)\n   {json.dumps(outcome)}",
+                      flush=True)
         if subscriber is not None:
             if args.flood_remove:
                 before = {**settled(pid), **graph.entities()}
@@ -405,7 +537,7 @@ def main() -> int:
         ok = all(r["served_s"] is not None for r in results)
         for r in results:
             b, a = r["before"], r["after"]
-            if not r["attack"].startswith("flood"):
+            if not r["attack"].startswith("flood") and r["attack"] not in STORMS:
                 ok = ok and a["fds"] <= b["fds"] and all(
                     a[k] <= b[k] for k in ("publishers", "subscribers", "services", "clients"))
         print("\n| attack | RSS MB before | peak | after | fds before/after | threads "
@@ -422,8 +554,23 @@ def main() -> int:
             print(f"| {r['attack']} | {b['rss_mb']} | {r['peak_rss_mb']} | {a['rss_mb']} | "
                   f"{b['fds']}/{a['fds']} | {b['threads']}/{a['threads']} | {ent} -> "
                   f"{ent_after} | {served} |")
+        print(f"\nthe other client while each attack runs (targets: tf p99 < 20 ms, every "
+              f"hello within 100 ms); baseline in the same run: {_watched(baseline)}")
+        print("\n| attack | tf p50 / p99 / max (ms) | rclpy floor p99 / max (ms) | "
+              "hello p99 / max (ms) | daemon CPU | load | targets |")
+        print("|---|---|---|---|---|---|---|")
+        for r in [{"attack": "baseline (no attack)", "watched": baseline,
+                   "daemon_cpu": None, "load": baseline_load}, *results]:
+            w = r["watched"]
+            cpu = "" if r["daemon_cpu"] is None else f"{r['daemon_cpu']:.0%}"
+            print(f"| {r['attack']} | {w['tf_p50_ms'] or 0:.1f} / {w['tf_p99_ms'] or 0:.1f} / "
+                  f"{w['tf_max_ms'] or 0:.1f} | {w['floor_p99_ms'] or 0:.1f} / "
+                  f"{w['floor_max_ms'] or 0:.1f} | {w['hello_p99_ms'] or 0:.1f} / "
+                  f"{w['hello_max_ms']:.1f} | {cpu} | {r.get('load', '')} | "
+                  f"{'met' if _meets_targets(w) else 'MISSED'} |")
         if args.json:
-            args.json.write_text(json.dumps(results, indent=2))
+            args.json.write_text(json.dumps({"baseline": baseline, "results": results},
+                                            indent=2))
         daemon.send_signal(signal.SIGINT)
         code = daemon.wait(30)
         print(f"daemon exit code {code}; {'PASS' if ok and code == 0 else 'FAIL'}")
@@ -431,6 +578,8 @@ def main() -> int:
     finally:
         if subscriber is not None:
             subscriber.close()
+        if watcher is not None:
+            watcher.close()
         if graph is not None:
             graph.close()
         if daemon.poll() is None:

@@ -5,6 +5,7 @@ ROS floor), and a raw OpenIGTLink reader with any number of connections.
     peers.py publish KIND TOPIC      KIND: pose | image | tf
     peers.py floor KIND TOPIC
     peers.py read PORT CLIENTS [--setup JSON]
+    peers.py watch PORT PARENT CHILD [--hello-hz HZ]
 
 Every peer prints READY when it can start, then obeys lines on stdin:
 
@@ -13,7 +14,11 @@ Every peer prints READY when it can start, then obeys lines on stdin:
   sleeps until each message is due (a publisher that spins would take the CPU the daemon
   needs on a 2-core machine) and catches up without sleeping when it is late;
 * floor and reader: ``RESET`` forgets what was received, ``REPORT`` prints one JSON line
-  of figures (see `Recorder.report`), ``QUIT`` exits.
+  of figures (see `Recorder.report`), ``QUIT`` exits;
+* watcher (the other client of bench/attacks.py): one raw connection that streams the tf
+  lookup PARENT <- CHILD (stream ``tf``) and sends ``hello`` at HZ, each one's round trip
+  recorded as stream ``hello`` (stamp: when it was sent); a hello still unanswered at
+  REPORT counts in ``hello_unanswered`` with its age.
 
 Latency is ``arrival - stamp`` in one host clock (``time.time_ns``). The reader takes the
 arrival time when `recv` returns the chunk that completes a message: for an image, its
@@ -180,6 +185,130 @@ def read(port: int, clients: int, setup: list[dict[str, Any]], v2: bool) -> None
             del buffer[:offset]
 
 
+def watch(port: int, parent: str, child: str, hello_hz: float) -> None:
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    from protocol.framing import encode
+    from protocol.messages import Command, Message, Status
+
+    def command(command_id: int, op: str, arguments: dict[str, Any]) -> bytes:
+        return encode(Message("bench", Command(command_id=command_id, name=op,
+                                               text=json.dumps(arguments))), header_version=2)
+
+    def connect() -> socket.socket:
+        sock = socket.create_connection(("127.0.0.1", port), timeout=10)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.sendall(encode(Message("", Status(text="bench watcher")), header_version=2))
+        sock.sendall(command(1, "create_tf_lookup", {"parent": parent, "child": child}))
+        sock.settimeout(None)
+        return sock
+
+    recorder = Recorder()
+    sent: dict[int, int] = {}  # hello command id -> time sent (ns)
+    stop = threading.Event()
+    # The daemon closed the connection: said in REPORT; the next RESET connects again.
+    disconnected = threading.Event()
+    again = threading.Event()
+    lock = threading.Lock()
+    current = [connect()]
+
+    def hellos() -> None:
+        next_id = 100
+        period = 1.0 / hello_hz
+        while not stop.wait(period):  # sleeps between hellos, never spins
+            if disconnected.is_set():
+                continue
+            next_id += 1
+            with lock:
+                sent[next_id] = time.time_ns()
+            try:
+                current[0].sendall(command(next_id, "hello", {}))
+            except OSError:
+                pass
+
+    def report() -> dict[str, Any]:
+        out = recorder.report()
+        out["disconnected"] = disconnected.is_set()
+        now = time.time_ns()
+        with lock:
+            waiting = [now - t for t in sent.values() if t >= recorder.since]
+        out["hello_unanswered"] = {"n": len(waiting),
+                                   "oldest_ms": max(waiting, default=0) / 1e6}
+        return out
+
+    def commands() -> None:
+        for line in sys.stdin:
+            word = line.strip()
+            if word == "RESET":
+                if disconnected.is_set():
+                    again.set()
+                recorder.reset()
+                with lock:
+                    sent.clear()
+            elif word == "REPORT":
+                print(json.dumps(report()), flush=True)
+            elif word == "QUIT":
+                break
+        stop.set()
+        again.set()
+        current[0].close()
+
+    threading.Thread(target=commands, daemon=True).start()
+    threading.Thread(target=hellos, daemon=True).start()
+    print("READY", flush=True)
+    while not stop.is_set():
+        _watch_connection(current[0], recorder, sent, lock)
+        disconnected.set()
+        again.wait()
+        again.clear()
+        if not stop.is_set():
+            current[0] = connect()
+            disconnected.clear()
+
+
+def _watch_connection(sock: socket.socket, recorder: Recorder, sent: dict[int, int],
+                      lock: threading.Lock) -> None:
+    """Read one watcher connection until the daemon closes it: tf arrivals and hello
+    answers into ``recorder``."""
+    buffer = bytearray()
+    unpack = _HEADER.unpack_from
+    size = _HEADER.size
+    device = b""
+    while True:
+        try:
+            chunk = sock.recv(1 << 20)
+        except OSError:
+            return
+        arrival = time.time_ns()
+        if not chunk:
+            return
+        buffer += chunk
+        offset = 0
+        while len(buffer) - offset >= size:
+            version, type_raw, name_raw, stamp, body_size, _ = unpack(buffer, offset)
+            end = offset + size + body_size
+            if end > len(buffer):
+                break
+            body = offset + size
+            offset = end
+            if type_raw.startswith(b"TRANSFORM") and name_raw.rstrip(b"\0") == device:
+                with recorder.lock:
+                    recorder.add("tf", arrival, _stamp_ns(stamp))
+            elif type_raw.startswith(b"RTS_COMMAND"):
+                content = body + (12 if version == 2 else 0)  # extended header
+                command_id = struct.unpack_from(">I", buffer, content)[0]
+                if command_id == 1:
+                    length = struct.unpack_from(">I", buffer, content + 134)[0]
+                    text = bytes(buffer[content + 138:content + 138 + length])
+                    device = json.loads(text)["result"]["device"].encode()
+                    continue
+                with lock:
+                    started = sent.pop(command_id, None)
+                if started is not None:
+                    with recorder.lock:
+                        recorder.add("hello", arrival, started)
+        del buffer[:offset]
+
+
 # ------------------------------------------------------------------------------ ROS side
 
 
@@ -278,6 +407,8 @@ def floor(kind: str, topic: str) -> None:
 
     def on_message(msg: Any) -> None:
         arrival = time.time_ns()
+        if kind == "tf" and (not msg.transforms or msg.transforms[0].child_frame_id != "link1"):
+            return  # another publisher's /tf (a storm's): not the stream measured
         stamp = msg.header.stamp if kind != "tf" else msg.transforms[0].header.stamp
         with recorder.lock:
             recorder.add(kind, arrival, stamp.sec * _NS + stamp.nanosec)
@@ -305,11 +436,18 @@ def main() -> None:
     p.add_argument("clients", type=int)
     p.add_argument("--setup", default="[]", help="JSON list of {op, arguments} to run first")
     p.add_argument("--v1", action="store_true", help="do not announce header v2 (pyigtl)")
+    p = sub.add_parser("watch")
+    p.add_argument("port", type=int)
+    p.add_argument("parent")
+    p.add_argument("child")
+    p.add_argument("--hello-hz", type=float, default=10.0)
     args = parser.parse_args()
     if args.role == "publish":
         publish(args.kind, args.topic)
     elif args.role == "floor":
         floor(args.kind, args.topic)
+    elif args.role == "watch":
+        watch(args.port, args.parent, args.child, args.hello_hz)
     else:
         read(args.port, args.clients, json.loads(args.setup), not args.v1)
 

@@ -109,6 +109,11 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
     security.add_argument("--max-send-buffer-bytes", type=int, metavar="BYTES",
                           help="unsent one-shot bytes (meshes, replies) a client may let pile "
                                "up before it is closed as too slow (default 256 MiB)")
+    security.add_argument("--max-marker-bytes", type=int, metavar="BYTES",
+                          help="bytes of marker models the daemon keeps, all marker topics "
+                               "together (default 256 MiB; one topic may hold half); a "
+                               "marker whose model would not fit is refused before it is "
+                               "made")
     security.add_argument("--max-receive-buffer-bytes", type=_positive(int), metavar="BYTES",
                           help="bytes of partly received message bodies all clients together "
                                "may hold (default twice --max-message-bytes); a body that "
@@ -162,7 +167,8 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
            "max_clients": args.max_clients, "max_bridges_per_client": args.max_bridges_per_client,
            "max_bridges": args.max_bridges,
            "max_message_bytes": args.max_message_bytes,
-           "max_send_buffer_bytes": args.max_send_buffer_bytes, "robot_dirs": args.robot_dir}
+           "max_send_buffer_bytes": args.max_send_buffer_bytes,
+           "max_marker_bytes": args.max_marker_bytes, "robot_dirs": args.robot_dir}
     where = f"{file.name}: security (or its command-line option)" if file.name else "option"
     security, limits = build_security(file.security, cli, where)
     if args.max_receive_buffer_bytes is not None:

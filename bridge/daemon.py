@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import gc
 import logging
 import sys
 from pathlib import Path
@@ -20,6 +21,7 @@ from typing import Awaitable, Callable, Optional
 from bridge.actions import ActionBridges
 from bridge.config import DaemonConfig
 from bridge.dispatch import Dispatcher
+from bridge.heavy import HeavyWork
 from bridge.hub import Hub
 from bridge.interface_types import InterfaceTypes
 from bridge.markers.capability import MarkerBridges
@@ -37,6 +39,7 @@ from protocol.errors import ProtocolError
 log = logging.getLogger("bridge")
 
 GIL_SWITCH_INTERVAL_S = 0.0005
+GC_THRESHOLDS = (100_000, 50, 100)  # CPython's default: (700, 10, 10)
 
 
 class StartupError(Exception):
@@ -47,6 +50,8 @@ class Daemon:
     def __init__(self, config: DaemonConfig, loop: asyncio.AbstractEventLoop) -> None:
         self.config = config
         self.hub = Hub(loop)
+        # Decoding, conversions and listings too heavy for the loop: one lane per client.
+        self.heavy = HeavyWork()
         self.ros = RosNode(RosOptions(node_name=config.node_name, namespace=config.namespace,
                                       ros_args=config.ros_args))
         names = DeviceNameRegistry()
@@ -59,6 +64,10 @@ class Daemon:
         self.parameters = ParameterBridges(self.ros, self.hub, names, policy=policy)
         self.services = ServiceBridges(self.ros, self.hub, names, policy=policy)
         self.actions = ActionBridges(self.ros, self.hub, names)
+        # An action's hidden cancel service obeys cancel_goal's ownership rule.
+        self.services.add_call_guard(self.actions.sender.judge_service_call)
+        # The daemon node's own parameters obey server_set_parameter's rule there too.
+        self.services.add_call_guard(self.parameters.judge_service_call)
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
                                    parameters=self.parameters,
                                    package_paths=dict(config.package_paths),
@@ -68,26 +77,31 @@ class Daemon:
         self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
                                      frame_rules=policy.frames,
                                      mesh_roots=tuple(Path(d) for d in policy.robot_dirs),
-                                     package_paths=dict(config.package_paths))
+                                     package_paths=dict(config.package_paths),
+                                     max_model_bytes=policy.max_marker_bytes)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
                                                           self.robots, self.markers,
                                                           InterfaceTypes()],
                                      policy=policy, resolve_frame=self.tf.resolve_frame,
-                                     resolve_file=self.robots.file_path)
+                                     resolve_file=self.robots.file_path, heavy=self.heavy)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
                                    port=config.port, limits=config.limits,
-                                   policy=config.security)
+                                   policy=config.security, heavy=self.heavy)
 
     async def start(self) -> None:
         try:
-            await self.server.start()
+            # The port is bound first (one in use is the first error), but no client is
+            # accepted before the operator's bridges exist: a client could otherwise race
+            # them (own one, remove one, make one fail with another type).
+            await self.server.start(serving=False)
             self.ros.start()
             for command in self.config.startup:
                 try:
                     await self.dispatcher.execute(command.op, command.arguments)
                 except ProtocolError as error:
                     raise StartupError(f"{command.where}: {error}") from None
+            await self.server.serve()
         except BaseException:
             await self.stop()
             raise
@@ -99,6 +113,7 @@ class Daemon:
     async def stop(self) -> None:
         await self.server.close()
         self.dispatcher.close()
+        self.heavy.close()
         self.ros.stop()
 
 
@@ -116,6 +131,14 @@ async def run_daemon(config: DaemonConfig,
     signals.install()
     daemon = Daemon(config, loop)
     await daemon.start()
+    # The cyclic collector holds the interpreter while it walks: what start-up made
+    # (modules, ROS types, the nodes) lives as long as the daemon, out of its sight; and
+    # it runs a hundred times less often, so that the tens of thousands of objects a large
+    # request makes for a moment (a megabyte of JSON, a message of 23,809 points) are
+    # gone before it looks, instead of promoted and walked again (pauses of 40 ms,
+    # every other thread waiting, measured with the default thresholds).
+    gc.freeze()
+    gc.set_threshold(*GC_THRESHOLDS)
     try:
         if started is not None:
             await started(daemon)

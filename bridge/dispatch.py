@@ -9,6 +9,11 @@ handler comes from the op's declarations (`protocol.commands.op`): the security 
 judges its resources, a creation is counted against its client's quota and recorded with
 who made it (the operator's start-up config or a client), and a removal is allowed by the
 ownership rules (`bridge.security.BridgeOwners`).
+
+Creations and removals of one bridge (its kind and identity) run one at a time, in the
+order they came (`BridgeLocks`): a removal that arrives while an asynchronous creation of
+the same bridge still waits (a parameter client waiting for its node) runs once that
+creation is done, never against a half-made bridge. Requests for other bridges do not wait.
 """
 
 from __future__ import annotations
@@ -16,9 +21,11 @@ from __future__ import annotations
 import asyncio
 import inspect
 import logging
+from collections import deque
 from typing import (Any, Awaitable, Callable, Mapping, Optional, Protocol, Sequence, Union,
                     cast)
 
+from bridge.heavy import HeavyWork, LargeResult, OffLoop
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
 from bridge.security import (OPERATOR, BridgeKey, BridgeOwners, BridgeQuota, FileResolver,
@@ -32,9 +39,12 @@ log = logging.getLogger(__name__)
 
 Result = Mapping[str, Any]
 # A handler gets the parsed request and the client that sent it (None for start-up config).
-Handler = Callable[[Any, Union[Replier, None]], Union[Result, Awaitable[Result]]]
+Handler = Callable[[Any, Union[Replier, None]],
+                   Union[Result, Awaitable[Result], "OffLoop[Result]"]]
 
 DAEMON_VERSION = "0.1.0"
+# A command text longer than this is parsed off the loop (in its client's lane).
+LARGE_COMMAND_CHARS = 64 * 1024
 
 
 class Capability(Protocol):
@@ -64,13 +74,58 @@ def _identity_fields(request: c.Request) -> tuple[str, ...]:
     return _KINDS[cast(str, cls.removes)].bridge.identity
 
 
+class BridgeLocks:
+    """One first-come-first-served lock per bridge key (loop thread only). A key is held
+    from the start of a create or remove until its outcome is settled."""
+
+    def __init__(self) -> None:
+        self._queues: dict[BridgeKey, deque[asyncio.Future[None]]] = {}
+
+    def try_take(self, key: BridgeKey) -> bool:
+        """Take ``key`` now if nobody holds it."""
+        if key in self._queues:
+            return False
+        self._queues[key] = deque()
+        return True
+
+    async def take(self, key: BridgeKey) -> None:
+        """Take ``key``, after those who asked before."""
+        if self.try_take(key):
+            return
+        turn: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._queues[key].append(turn)
+        try:
+            await turn
+        except asyncio.CancelledError:
+            if turn.done() and not turn.cancelled():
+                self.release(key)  # handed over as we were cancelled: pass it on
+            elif turn in self._queues.get(key, ()):
+                self._queues[key].remove(turn)
+            raise
+
+    def release(self, key: BridgeKey) -> None:
+        queue = self._queues.get(key)
+        if queue is None:
+            return
+        while queue:
+            turn = queue.popleft()
+            if not turn.done():
+                turn.set_result(None)
+                return
+        del self._queues[key]
+
+
 class Dispatcher:
     def __init__(self, ros: RosNode, hub: Hub, capabilities: Sequence[Capability], *,
                  policy: SecurityPolicy | None = None,
                  resolve_frame: FrameResolver = strip_frame,
-                 resolve_file: FileResolver | None = None) -> None:
+                 resolve_file: FileResolver | None = None,
+                 heavy: HeavyWork | None = None) -> None:
         self._ros = ros
         self._hub = hub
+        self._heavy = heavy  # clients' lanes for OffLoop work and LargeResult replies
+        # Clients whose large command is being parsed, and their commands that came after.
+        self._parsing: dict[Replier, deque[Message]] = {}
         self._capabilities = tuple(capabilities)
         # Security is checked here, by request fields, so no capability needs to know it.
         self._policy = policy or SecurityPolicy()
@@ -81,6 +136,7 @@ class Dispatcher:
         self._quota = BridgeQuota(self._policy.max_bridges_per_client,
                                   self._policy.max_bridges)
         self._owners = BridgeOwners()
+        self._locks = BridgeLocks()
         hub.add_closed_listener(self._client_left)
         self._tasks: set[asyncio.Task[None]] = set()
         # The one table of what this daemon serves, built from each capability's own list.
@@ -102,21 +158,74 @@ class Dispatcher:
 
     # --- entry points -------------------------------------------------------------------
     def handle(self, message: Message, client: Replier) -> None:
-        """A COMMAND from a client (loop thread): reply now, or when an async op is done."""
+        """A COMMAND from a client (loop thread): reply now, or when an async op is done.
+
+        A large text (a publish of a megabyte of JSON) is parsed in the client's lane, and
+        the client's later commands wait for it, so that they still run in order."""
+        waiting = self._parsing.get(client)
+        if waiting is not None:
+            waiting.append(message)
+            return
+        body = message.body
+        assert isinstance(body, Command)
+        if self._heavy is not None and len(body.text) > LARGE_COMMAND_CHARS:
+            try:
+                parsing = self._heavy.run(client, lambda: c.parse_request(body.name,
+                                                                          body.text))
+            except CommandError as error:  # the client's lane is full
+                self._reply(client, message, self._failure(body.name, error))
+                return
+            self._parsing[client] = deque()
+            parsing.add_done_callback(lambda done: self._parsed(message, client, done))
+            return
+        try:
+            request = c.parse_request(body.name, body.text)
+        except Exception as error:  # noqa: BLE001 - every failure becomes a reply
+            self._reply(client, message, self._failure(body.name, error))
+            return
+        self._dispatch(message, client, request)
+
+    def _parsed(self, message: Message, client: Replier,
+                done: asyncio.Future[c.Request]) -> None:
+        """A large command's text is parsed (loop thread): run it, then what waited."""
+        waiting = self._parsing.pop(client, deque())
+        body = message.body
+        assert isinstance(body, Command)
+        if not done.cancelled():  # cancelled: the client left
+            error = done.exception()
+            if error is not None:
+                self._reply(client, message, self._failure(body.name, error))
+            else:
+                self._dispatch(message, client, done.result())
+        while waiting:
+            self.handle(waiting.popleft(), client)
+            if client in self._parsing:  # another large one: the rest waits for it
+                self._parsing[client].extend(waiting)
+                return
+
+    def _dispatch(self, message: Message, client: Replier, request: c.Request) -> None:
         body = message.body
         assert isinstance(body, Command)
         try:
-            request = c.parse_request(body.name, body.text)
             outcome = self._run(request, client)
         except Exception as error:  # noqa: BLE001 - every failure becomes a reply
             self._reply(client, message, self._failure(body.name, error))
             return
         if inspect.isawaitable(outcome):
-            task = asyncio.ensure_future(self._finish(outcome, client, message))
-            self._tasks.add(task)
-            task.add_done_callback(self._tasks.discard)
+            self._spawn(self._finish(outcome, client, message))
+        elif isinstance(outcome, LargeResult) and self._heavy is not None:
+            self._spawn(self._finish(self._resolved(outcome), client, message))
         else:
             self._reply(client, message, Reply.success(body.name, outcome))
+
+    def _spawn(self, coroutine: Awaitable[None]) -> None:
+        task = asyncio.ensure_future(coroutine)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    @staticmethod
+    async def _resolved(result: Result) -> Result:
+        return result
 
     async def execute(self, op: str, arguments: Mapping[str, Any]) -> Result:
         """Run one command without a client (start-up config); raises `CommandError`."""
@@ -139,6 +248,9 @@ class Dispatcher:
                                             if k.bridge.per_connection})
         self._quota.release(client, gone)
         self._quota.forget(client)
+        self._parsing.pop(client, None)
+        if self._heavy is not None:
+            self._heavy.forget(client)
 
     # --- plumbing -----------------------------------------------------------------------
     def _run(self, request: c.Request, client: Replier | None) -> Result | Awaitable[Result]:
@@ -151,11 +263,47 @@ class Dispatcher:
                                    self._resolve_frame, from_client=client is not None,
                                    resolve_file=self._resolve_file)
         key = self._bridge_key(request)
+        if key is None:
+            return self._call(handler, request, client, None)
+        if not self._locks.try_take(key):
+            return self._after_turn(handler, request, client, key)
+        try:
+            outcome = self._call(handler, request, client, key)
+        except BaseException:
+            self._locks.release(key)
+            raise
+        if inspect.isawaitable(outcome):
+            return self._releasing(outcome, key)
+        self._locks.release(key)
+        return outcome
+
+    async def _after_turn(self, handler: Handler, request: c.Request, client: Replier | None,
+                          key: BridgeKey) -> Result:
+        """A create or remove whose bridge another one is creating or removing: its turn
+        comes once that one is settled."""
+        await self._locks.take(key)
+        try:
+            outcome = self._call(handler, request, client, key)
+            return await outcome if inspect.isawaitable(outcome) else outcome
+        finally:
+            self._locks.release(key)
+
+    async def _releasing(self, outcome: Awaitable[Result], key: BridgeKey) -> Result:
+        try:
+            return await outcome
+        finally:
+            self._locks.release(key)
+
+    def _call(self, handler: Handler, request: c.Request, client: Replier | None,
+              key: Optional[BridgeKey]) -> Result | Awaitable[Result]:
+        """The handler with the ownership check before it and the bookkeeping after."""
         if key is not None and type(request).removes is not None:
             self._owners.check_removal(key, _identity_fields(request)[0], client)
         reserved = client is not None and self._quota.reserve(client, request.op)
         try:
             outcome = handler(request, client)
+            if isinstance(outcome, OffLoop):
+                outcome = self._off_loop(outcome, client)
         except BaseException:
             self._settle(request, client, key, reserved, None)
             raise
@@ -163,6 +311,14 @@ class Dispatcher:
             return self._counted(outcome, request, client, key, reserved)
         self._settle(request, client, key, reserved, outcome)
         return outcome
+
+    def _off_loop(self, outcome: OffLoop[Result],
+                  client: Replier | None) -> Result | Awaitable[Result]:
+        """A handler's `OffLoop` work, in its client's lane (the operator's start-up
+        commands run it here and now: nothing else is served yet)."""
+        if client is None or self._heavy is None:
+            return outcome.work()
+        return self._heavy.run(client, outcome.work)  # LaneFullError: LIMIT_REACHED
 
     async def _counted(self, outcome: Awaitable[Result], request: c.Request,
                        client: Replier | None, key: Optional[BridgeKey],
@@ -216,7 +372,13 @@ class Dispatcher:
         body = message.body
         assert isinstance(body, Command)
         try:
-            reply = Reply.success(body.name, await outcome)
+            result = await outcome
+            reply = Reply.success(body.name, result)
+            if isinstance(result, LargeResult) and self._heavy is not None:
+                # A listing's JSON is encoded in the client's lane, not on the loop.
+                text = await self._heavy.run(client, reply.to_json)
+                self._reply(client, message, reply, text)
+                return
         except Exception as error:  # noqa: BLE001
             reply = self._failure(body.name, error)
         self._reply(client, message, reply)
@@ -230,12 +392,15 @@ class Dispatcher:
         return c.reply_for_exception(op, error)
 
     @staticmethod
-    def _reply(client: Replier, request: Message, reply: Reply) -> None:
+    def _reply(client: Replier, request: Message, reply: Reply,
+               text: Optional[str] = None) -> None:
+        """Send ``reply`` (its JSON ``text`` when already encoded)."""
         body = request.body
         assert isinstance(body, Command)
         client.send_message(Message(
             device_name=request.device_name,
-            body=RtsCommand(command_id=body.command_id, name=body.name, text=reply.to_json()),
+            body=RtsCommand(command_id=body.command_id, name=body.name,
+                            text=reply.to_json() if text is None else text),
             metadata=reply.metadata(), message_id=request.message_id))
 
     # --- small handlers -----------------------------------------------------------------
@@ -246,14 +411,14 @@ class Dispatcher:
     def _list_bridges(self, request: c.ListBridges, client: Replier | None) -> Result:
         bridges = [bridge for capability in self._capabilities
                    for bridge in capability.describe()]
-        return {"bridges": bridges, "devices": self._hub.devices(),
-                "clients": [client.describe() for client in self._hub.clients],
-                "hub_dropped": self._hub.dropped}
+        return LargeResult(bridges=bridges, devices=self._hub.devices(),
+                           clients=[client.describe() for client in self._hub.clients],
+                           hub_dropped=self._hub.dropped)
 
     def _list_topics(self, request: c.ListTopics, client: Replier | None) -> Result:
-        return {"topics": [{"topic": name, "types": list(types)}
-                           for name, types in self._ros.node.get_topic_names_and_types()]}
+        return LargeResult(topics=[{"topic": name, "types": list(types)} for name, types
+                                   in self._ros.node.get_topic_names_and_types()])
 
     def _list_services(self, request: c.ListServices, client: Replier | None) -> Result:
-        return {"services": [{"service": name, "types": list(types)}
-                             for name, types in self._ros.node.get_service_names_and_types()]}
+        return LargeResult(services=[{"service": name, "types": list(types)} for name, types
+                                     in self._ros.node.get_service_names_and_types()])

@@ -13,10 +13,17 @@ from __future__ import annotations
 from collections import OrderedDict, deque
 from typing import Any, Callable, Optional
 
-from protocol.framing import Decoder, StreamTemplate, encode
+from protocol.crc64 import Buffer, KnownCrc
+from protocol.framing import Decoder, StreamTemplate, encode, encode_parts
 from protocol.messages import Body, Message
 
-__all__ = ["BulkFrame", "Frame", "Outbox", "OutboxOverflow", "TemplateFrame"]
+__all__ = ["BulkFrame", "Frame", "Outbox", "OutboxOverflow", "SharedFrame", "TemplateFrame",
+           "WRITE_CHUNK"]
+
+# A larger one-shot (or stream value) is written this much at a time, as the transport
+# drains: asyncio copies whatever the socket does not take at once into its own buffer,
+# which for a 50 MB model and each client would be a copy of up to 50 MB per client.
+WRITE_CHUNK = 256 * 1024
 
 
 class Frame:
@@ -43,6 +50,33 @@ class Frame:
             data = encode(self.message, header_version=header_version)
             self._encoded[header_version] = data
         return data
+
+    def encoded_parts(self, header_version: int) -> tuple[Buffer, ...]:
+        """The wire bytes as consecutive parts (one, except for a `SharedFrame`)."""
+        return (self.encoded(header_version),)
+
+
+class SharedFrame(Frame):
+    """A large message (a marker's model) whose content is kept once, shared with whoever
+    made it: its wire bytes are its header, that content and its metadata
+    (`protocol.framing.encode_parts`), written in turn, never joined."""
+
+    __slots__ = ("_parts", "_content_crc")
+
+    def __init__(self, message: Message, content_crc: Optional[KnownCrc] = None) -> None:
+        super().__init__(message)
+        self._parts: dict[int, tuple[bytes, Buffer, bytes]] = {}
+        self._content_crc = content_crc  # known where the content was made: not redone
+
+    def encoded_parts(self, header_version: int) -> tuple[Buffer, ...]:
+        parts = self._parts.get(header_version)
+        if parts is None:
+            parts = self._parts[header_version] = encode_parts(
+                self._message, header_version=header_version, content_crc=self._content_crc)
+        return parts
+
+    def encoded(self, header_version: int) -> bytes:
+        return b"".join(self.encoded_parts(header_version))  # rare: a GET_ query
 
 
 class BulkFrame(Frame):
@@ -134,12 +168,20 @@ class Outbox:
         self._max_oneshot_bytes = max_oneshot_bytes
         self._header_version = header_version
         self._latest: OrderedDict[str, Frame] = OrderedDict()
-        self._oneshots: deque[bytes] = deque()
+        # One entry per frame: the parts not written yet (the first one may be the rest of
+        # a part a chunk was taken from).
+        self._oneshots: deque[list[Buffer]] = deque()
+        self._started = False  # the first one-shot is partly written
         self._oneshot_bytes = 0
         self.coalesced = 0  # older values replaced before they were sent
 
     def __len__(self) -> int:
         return len(self._latest) + len(self._oneshots)
+
+    @property
+    def frames_waiting(self) -> int:
+        """Frames not begun yet (a frame partly written is not waiting: it is going)."""
+        return len(self._latest) + len(self._oneshots) - self._started
 
     @property
     def pending_bytes(self) -> int:
@@ -153,27 +195,50 @@ class Outbox:
             self.coalesced += 1
         self._latest[device] = frame
 
-    def put_once(self, data: bytes) -> None:
-        if self._oneshot_bytes + len(data) > self._max_oneshot_bytes:
-            raise OutboxOverflow(self._max_oneshot_bytes, self._oneshot_bytes + len(data))
-        self._oneshots.append(data)
-        self._oneshot_bytes += len(data)
+    def put_once(self, *parts: Buffer) -> None:
+        """One frame's bytes (in consecutive parts, each kept as it is, not copied)."""
+        size = sum(len(part) for part in parts)
+        if self._oneshot_bytes + size > self._max_oneshot_bytes:
+            raise OutboxOverflow(self._max_oneshot_bytes, self._oneshot_bytes + size)
+        self._oneshots.append(list(parts))
+        self._oneshot_bytes += size
 
     def discard(self, device: str) -> None:
         self._latest.pop(device, None)
 
-    def pop(self) -> Optional[bytes]:
-        """The next frame to write: one-shots first (replies are awaited), then streams."""
-        if self._oneshots:
-            data = self._oneshots.popleft()
-            self._oneshot_bytes -= len(data)
-            return data
-        if self._latest:
-            return self._latest.popitem(last=False)[1].encoded(self._header_version())
-        return None
+    def pop(self, limit: Optional[int] = None) -> Optional[Buffer]:
+        """The next bytes to write: one-shots first (replies are awaited), then streams.
+        With ``limit``, at most that many: the rest of a frame stays first in line (a
+        frame is never interleaved with another)."""
+        if not self._oneshots and self._latest:
+            frame = self._latest.popitem(last=False)[1]
+            parts = frame.encoded_parts(self._header_version())
+            if limit is None or sum(len(part) for part in parts) <= limit:
+                return parts[0] if len(parts) == 1 else b"".join(parts)
+            self._oneshots.append(list(parts))  # written in turn, before anything else
+            self._oneshot_bytes += sum(len(part) for part in parts)
+        if not self._oneshots:
+            return None
+        head = self._oneshots[0]
+        data = head[0]
+        if limit is not None and len(data) > limit:
+            view = memoryview(data)
+            head[0] = view[limit:]
+            self._oneshot_bytes -= limit
+            self._started = True
+            return view[:limit]
+        del head[0]
+        self._oneshot_bytes -= len(data)
+        if head:
+            self._started = True
+        else:
+            self._oneshots.popleft()
+            self._started = False
+        return data
 
     def clear(self) -> None:
         """Drop every waiting frame (the client is gone)."""
         self._latest.clear()
         self._oneshots.clear()
         self._oneshot_bytes = 0
+        self._started = False

@@ -24,7 +24,7 @@ import asyncio
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Iterable, Optional
 
 from rcl_interfaces.msg import Parameter as RosParameter
 from rcl_interfaces.msg import ParameterDescriptor, ParameterEvent, ParameterType
@@ -39,12 +39,13 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_parameter_events
 
 from bridge.dispatch import Handler
-from bridge.hub import Hub
+from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
-from bridge.security import SecurityPolicy
+from bridge.security import SecurityPolicy, parameter_service
 from bridge.services import call_ros_service, resolve_name, wait_until_ready
 from protocol.commands import (Op, CommandError, CommandFailedError, CreateParameterClient,
-                               ErrorCode, GetParameters, ListParameters, ObserveParameters,
+                               ErrorCode, ForbiddenError, GetParameters, ListParameters,
+                               ObserveParameters,
                                OutOfRangeError, ParameterValue, RemoveParameterClient,
                                ServerDeclareParameter, ServerGetParameters,
                                ServerSetParameter, ServerUndeclareParameter, SetParameters,
@@ -59,6 +60,8 @@ _MAX_STRING_BYTES = 0xFFFF  # an OpenIGTLink STRING's limit
 # A read of another node's parameters unanswered this long is sent again (see
 # services.call_ros_service): well above a loaded node's answer time, well below the timeout.
 _RESEND_READS_S = 1.0
+# A node's parameter services that set values (see security.PARAMETER_SERVICES).
+_SETTING_SERVICES = ("set_parameters", "set_parameters_atomically")
 
 # ---------------------------------------------------------------------------- conversion
 
@@ -259,9 +262,12 @@ class ParameterBridges:
         return {"node": client.node,
                 "values": {name: value.to_dict() for name, value in values.items()}}
 
-    async def set_parameters(self, request: SetParameters) -> dict[str, Any]:
+    async def set_parameters(self, request: SetParameters,
+                             caller: Optional[Replier] = None) -> dict[str, Any]:
         client = self._client(request.node)
         names = list(request.values)
+        if caller is not None:
+            self._judge_own_write(client.node, names, "values")
         reply = await self._call(client, client.set_client, SetParametersSrv.Request(
             parameters=[RosParameter(name=name, value=to_ros_value(request.values[name]))
                         for name in names]))
@@ -597,11 +603,14 @@ class ParameterBridges:
         self._request_server_stream()
         return {"name": name, "value": self._server_value(name).to_dict(), "existed": False}
 
-    def server_set_parameter(self, request: ServerSetParameter) -> dict[str, Any]:
+    def server_set_parameter(self, request: ServerSetParameter,
+                             caller: Optional[Replier] = None) -> dict[str, Any]:
         name, node = request.name, self._ros.node
         if not node.has_parameter(name):
             raise CommandFailedError("name", "a declared parameter (server_declare_parameter "
                                      "first)", name, code=ErrorCode.NOT_FOUND)
+        if caller is not None:
+            self._judge_own_write(self._server_node, (name,), "name")
         try:
             result = node.set_parameters([_rclpy_parameter(name, request.value)])[0]
         except (ParameterException, ValueError, TypeError) as error:
@@ -633,6 +642,32 @@ class ParameterBridges:
         self._own_watches_changed([name])
         self._request_server_stream()
         return {"name": name}
+
+    def _judge_own_write(self, node: str, names: Iterable[str], field: str) -> None:
+        """Of the daemon's own node, a client sets only the parameters clients declared
+        (`server_declare_parameter`). Its own, ``use_sim_time`` above all (it changes the
+        stamp of everything the daemon publishes and broadcasts), are the operator's, set
+        with ``--ros-args -p``. The one rule, whatever the route: `server_set_parameter`,
+        `set_parameters` through a parameter client of the daemon's node, or a
+        `call_service` of its parameter services (`judge_service_call`)."""
+        if node != self._server_node:
+            return
+        for name in names:
+            if name not in self.declared:
+                raise ForbiddenError(field, "a parameter of the daemon's own node that a "
+                                     "client declared (server_declare_parameter); the "
+                                     "node's own are set by the operator (--ros-args -p)",
+                                     f"{node}.{name}")
+
+    def judge_service_call(self, service: str, ros_type: str, request: Any,
+                           client: Optional[Replier]) -> None:
+        """A `ServiceBridges` call guard: a call of the daemon node's own set_parameters
+        services is judged as `set_parameters` (`_judge_own_write`)."""
+        found = parameter_service(service, ros_type)
+        if client is None or found is None or found[1] not in _SETTING_SERVICES:
+            return
+        names = [p.name for p in getattr(request, "parameters", ())]
+        self._judge_own_write(found[0], names, "request.parameters")
 
     def _server_value(self, name: str) -> ParameterValue:
         try:
@@ -694,10 +729,10 @@ class ParameterBridges:
             RemoveParameterClient: lambda r, _: self.remove_parameter_client(r),
             ListParameters: lambda r, _: self.list_parameters(r),
             GetParameters: lambda r, _: self.get_parameters(r),
-            SetParameters: lambda r, _: self.set_parameters(r),
+            SetParameters: self.set_parameters,
             ObserveParameters: lambda r, _: self.observe_parameters(r),
             ServerDeclareParameter: lambda r, _: self.server_declare_parameter(r),
-            ServerSetParameter: lambda r, _: self.server_set_parameter(r),
+            ServerSetParameter: self.server_set_parameter,
             ServerGetParameters: lambda r, _: self.server_get_parameters(r),
             ServerUndeclareParameter: lambda r, _: self.server_undeclare_parameter(r),
         }

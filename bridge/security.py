@@ -41,9 +41,11 @@ from protocol.commands import (REQUEST_TYPES, ActionUse, FileUse, ForbiddenError
                                ServiceUse, TopicUse, resolve_message_type, resolve_service_type)
 
 __all__ = ["DEFAULT_MAX_BRIDGES", "DEFAULT_MAX_BRIDGES_PER_CLIENT", "DEFAULT_MAX_CLIENTS",
+           "DEFAULT_MAX_MARKER_BYTES",
            "OPERATOR",
            "PARAMETER_SERVICES", "SECURITY_KEYS", "BridgeOwners", "BridgeQuota", "NameRules",
-           "PolicyError", "RateLimitedLog", "SecurityPolicy", "inside", "is_loopback_host",
+           "PolicyError", "RateLimitedLog", "SecurityPolicy", "hidden_action", "inside",
+           "is_loopback_host",
            "parameter_service", "parse_network", "positive_int", "strip_frame"]
 
 log = logging.getLogger(__name__)
@@ -143,6 +145,7 @@ DEFAULT_MAX_BRIDGES_PER_CLIENT = 1000
 # Over all clients, past and present: bridges outlive their client, so a per-client count
 # alone would let a client that reconnects make as many again.
 DEFAULT_MAX_BRIDGES = 2000
+DEFAULT_MAX_MARKER_BYTES = 256 * 1024 * 1024
 
 
 class PolicyError(ValueError):
@@ -186,6 +189,8 @@ class SecurityPolicy:
     max_clients: int = DEFAULT_MAX_CLIENTS
     max_bridges_per_client: int = DEFAULT_MAX_BRIDGES_PER_CLIENT
     max_bridges: int = DEFAULT_MAX_BRIDGES  # made by clients, all together
+    # Bytes of marker models kept, all topics together (a topic may hold half of it).
+    max_marker_bytes: int = DEFAULT_MAX_MARKER_BYTES
     # Folders whose URDF files clients may load by path (`--robot-dir`, and the daemon adds
     # every `--package-path` folder): a client must not make the daemon read any file.
     robot_dirs: tuple[str, ...] = ()
@@ -389,7 +394,8 @@ class SecurityPolicy:
             policy = replace(policy, **{kind: rules})
         dirs = _globs(settings, "robot_dirs", where)
         policy = replace(policy, robot_dirs=tuple(dirs))
-        for key in ("max_clients", "max_bridges_per_client", "max_bridges"):
+        for key in ("max_clients", "max_bridges_per_client", "max_bridges",
+                    "max_marker_bytes"):
             if settings.get(key) is not None:
                 policy = replace(policy, **{key: positive_int(settings[key], f"{where}.{key}")})
         return policy
@@ -401,7 +407,8 @@ class SecurityPolicy:
                                     if self.allowed_networks else "any address"),
                  f"at most {self.max_clients} clients",
                  f"{self.max_bridges_per_client} bridges per client, "
-                 f"{self.max_bridges} from all clients"]
+                 f"{self.max_bridges} from all clients",
+                 f"{self.max_marker_bytes} bytes of marker models"]
         for kind in ("topics", "services", "actions", "parameters", "frames"):
             rules: NameRules = getattr(self, kind)
             if rules.active:
@@ -417,7 +424,7 @@ SECURITY_KEYS: tuple[str, ...] = (
     "allow_actions", "deny_actions",
     "allow_parameters", "deny_parameters", "allow_frames", "deny_frames",
     "max_clients", "max_bridges_per_client", "max_bridges", "max_message_bytes",
-    "max_send_buffer_bytes",
+    "max_send_buffer_bytes", "max_marker_bytes",
     "robot_dirs",
 )
 
@@ -476,7 +483,10 @@ class BridgeOwners:
         self._owners: dict[BridgeKey, object] = {}
 
     def created(self, key: BridgeKey, owner: object) -> None:
-        self._owners.setdefault(key, owner)  # asking again for a bridge keeps its maker
+        # Asking again for a bridge keeps its maker, except that the operator's config
+        # always claims its own bridges: no client owns one of them.
+        if owner == OPERATOR or key not in self._owners:
+            self._owners[key] = owner
 
     def owner(self, key: BridgeKey) -> Optional[object]:
         return self._owners.get(key)

@@ -17,6 +17,7 @@ import logging
 import time
 from typing import Optional
 
+from bridge.heavy import HeavyWork
 from bridge.hub import Hub
 from bridge.logging_limits import RateLimitedLog
 from bridge.security import SecurityPolicy, is_loopback_host
@@ -38,8 +39,10 @@ class PortInUseError(OSError):
 
 class BridgeServer:
     def __init__(self, hub: Hub, commands: CommandHandler, *, host: str, port: int,
-                 limits: SessionLimits, policy: SecurityPolicy | None = None) -> None:
+                 limits: SessionLimits, policy: SecurityPolicy | None = None,
+                 heavy: HeavyWork | None = None) -> None:
         self._hub = hub
+        self._heavy = heavy  # decodes clients' heavy bodies off the loop
         self._commands = commands
         self._host = host
         self._port = port
@@ -52,11 +55,15 @@ class BridgeServer:
         self.sessions: set[ClientSession] = set()
         self.refused = 0
 
-    async def start(self) -> None:
+    async def start(self, *, serving: bool = True) -> None:
+        """Bind the port (a port in use fails here); accept clients now, or only once
+        `serve` is called (``serving`` False: the daemon first makes its start-up bridges,
+        and nothing may connect before they exist)."""
         loop = asyncio.get_running_loop()
         try:
             self._server = await loop.create_server(self._new_session, self._host, self._port,
-                                                    reuse_address=True)
+                                                    reuse_address=True,
+                                                    start_serving=serving)
         except OSError as error:
             if error.errno == 98:  # EADDRINUSE
                 raise PortInUseError(error.errno, f"{self._host}:{self._port} is already in "
@@ -68,6 +75,11 @@ class BridgeServer:
                         "authentication, so anyone who reaches this port can use the bridge%s",
                         self._host, "" if self._policy.allowed_networks else
                         " (restrict clients with --allow CIDR)")
+
+    async def serve(self) -> None:
+        """Start listening (after `start` with ``serving`` False)."""
+        assert self._server is not None
+        await self._server.start_serving()
 
     @property
     def port(self) -> int:
@@ -101,7 +113,7 @@ class BridgeServer:
             return
         session = ClientSession(self._hub, self._commands, self._limits, self.sessions.discard,
                                 read_only=self._policy.read_only, budget=self.budget,
-                                incidents=self._incidents)
+                                incidents=self._incidents, heavy=self._heavy)
         self.sessions.add(session)
         transport.set_protocol(session)
         session.connection_made(transport)

@@ -21,7 +21,7 @@ import itertools
 import logging
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any, Iterable, Optional
+from typing import Any, Callable, Iterable, Optional
 
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.client import Client
@@ -239,9 +239,16 @@ class ServedService:
     closed: bool = False
 
 
+# Judges a call_service request before it is sent: (service, its type, the ROS request,
+# the calling client or None for the operator); raises a CommandError to refuse it.
+CallGuard = Callable[[str, str, Any, Optional[Replier]], None]
+
 # call_service's cached rclpy clients: how many at most, and how long one may sit unused.
 MAX_SERVICE_CLIENTS = 64
 IDLE_SERVICE_CLIENT_S = 60.0
+# Calls one client may have waiting at once: a quarter of the clients above, so that one
+# client calling absent services cannot take every slot from the others.
+MAX_CALLS_PER_CLIENT = MAX_SERVICE_CLIENTS // 4
 
 
 class ServiceBridges:
@@ -251,6 +258,7 @@ class ServiceBridges:
                  answer_timeout_s: float = 4.0,
                  policy: Optional[SecurityPolicy] = None,
                  max_service_clients: int = MAX_SERVICE_CLIENTS,
+                 max_calls_per_client: int = MAX_CALLS_PER_CLIENT,
                  idle_client_s: float = IDLE_SERVICE_CLIENT_S) -> None:
         self._ros = ros
         # A parameter listing through call_service shows what the parameter globs allow.
@@ -268,18 +276,41 @@ class ServiceBridges:
         self._max_called = max_service_clients
         self._idle_s = idle_client_s
         self._idle_timer: Optional[asyncio.TimerHandle] = None
+        self._idle_due = 0.0  # loop time the idle timer fires
+        # The calls each client is waiting for (their tasks): a slot a client holds goes
+        # with it, and no client holds more than `max_calls_per_client`.
+        self._calls: dict[Replier, set[asyncio.Task[Any]]] = {}
+        self._max_calls_per_client = max_calls_per_client
+        self._call_guards: list[CallGuard] = []
         self.served: dict[str, ServedService] = {}
         self._pending: dict[tuple[Replier, int], _PendingAnswer] = {}
         hub.add_reply_listener(self._on_reply)
         hub.add_closed_listener(self._on_client_closed)
 
     # --- call_service ----------------------------------------------------------------------
-    async def call_service(self, request: CallService) -> dict[str, Any]:
+    def add_call_guard(self, guard: CallGuard) -> None:
+        """``guard(service, ros_type, request, client)`` judges each call before it is sent
+        (raises a `CommandError` to refuse it): the rules another capability keeps about a
+        service (an action's hidden services) then hold on this route too."""
+        self._call_guards.append(guard)
+
+    async def call_service(self, request: CallService,
+                           client: Optional[Replier] = None) -> dict[str, Any]:
         service = resolve_name(self._ros, request.service, "service")
         ros_type = request.ros_type
         srv = _service_class(request.type, ros_type)
         ros_request = message_from_json(srv.Request, request.request, "request")
+        for guard in self._call_guards:
+            guard(service, ros_type, ros_request, client)
+        mine = self._calls.get(client) if client is not None else None
+        if mine is not None and len(mine) >= self._max_calls_per_client:
+            raise LimitReachedError("service", f"at most {self._max_calls_per_client} calls "
+                                    f"waiting for an answer per client", f"a call to "
+                                    f"{service} more")
         entry = self._client_for(service, ros_type, srv)
+        task = asyncio.current_task()
+        if client is not None and task is not None:
+            self._calls.setdefault(client, set()).add(task)
         entry.in_flight += 1
         try:
             # The whole timeout may go to discovery: a server missed by the first
@@ -291,6 +322,9 @@ class ServiceBridges:
         finally:
             entry.in_flight -= 1
             entry.last_used = asyncio.get_running_loop().time()
+            self._schedule_idle_check()
+            if client is not None and task is not None:
+                self._forget_call(client, task)
         entry.calls += 1
         return {"service": service, "type": ros_type, "response":
                 self._policy.filter_service_response(service, ros_type,
@@ -323,10 +357,27 @@ class ServiceBridges:
         if not any(e.key == entry.key for e in self.called.values()):
             self._names.release(entry.key)
 
+    def _forget_call(self, client: Replier, task: asyncio.Task[Any]) -> None:
+        mine = self._calls.get(client)
+        if mine is not None:
+            mine.discard(task)
+            if not mine:
+                del self._calls[client]
+
     def _schedule_idle_check(self) -> None:
-        if self._idle_timer is None and self.called:
-            self._idle_timer = asyncio.get_running_loop().call_later(self._idle_s,
-                                                                      self._drop_idle)
+        """Arm the timer for the moment the first idle client has been unused for
+        `idle_client_s` (a client waiting for an answer is not idle)."""
+        idle = [e.last_used for e in self.called.values() if e.in_flight == 0]
+        if not idle:
+            return
+        due = min(idle) + self._idle_s
+        if self._idle_timer is not None:
+            if self._idle_due <= due:
+                return
+            self._idle_timer.cancel()
+        loop = asyncio.get_running_loop()
+        self._idle_timer = loop.call_later(max(0.0, due - loop.time()), self._drop_idle)
+        self._idle_due = due
 
     def _drop_idle(self) -> None:
         """A client not used for `idle_client_s` goes: the next call makes a new one."""
@@ -486,11 +537,14 @@ class ServiceBridges:
     def _on_client_closed(self, client: Replier) -> None:
         for served in [s for s in self.served.values() if s.owner is client]:
             self._unadvertise(served)
+        # Nobody waits for its calls' answers any more: their slots are free now.
+        for task in self._calls.pop(client, set()):
+            task.cancel()
 
     # --- capability ------------------------------------------------------------------------
     def handlers(self) -> dict[type[Op], Handler]:
         return {
-            CallService: lambda request, _: self.call_service(request),
+            CallService: self.call_service,
             AdvertiseService: self.advertise_service,
             UnadvertiseService: self.unadvertise_service,
         }
@@ -498,7 +552,7 @@ class ServiceBridges:
     def describe(self) -> list[dict[str, Any]]:
         out = [_describe_served(served) for served in self.served.values()]
         out += [{"kind": "service_client", "service": entry.service, "type": entry.ros_type,
-                 "device": entry.device, "calls": entry.calls,
+                 "device": entry.device, "calls": entry.calls, "waiting": entry.in_flight,
                  "ready": entry.client.service_is_ready()} for entry in self.called.values()]
         return out
 

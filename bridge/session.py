@@ -11,6 +11,12 @@ or the connection is closed; a client that never sends is not affected. Partly r
 bodies count against the daemon-wide `ReceiveBudget`. At close the receive and send
 buffers are dropped at once: nothing waits for the cyclic garbage collector.
 
+Heavy bodies: a data message (not a command, status or query) whose body is larger than
+`HEAVY_BODY_BYTES` is judged by its header first (a read-only daemon, a device nobody
+receives: refused before a byte of it is decoded), then decoded in the client's lane of
+the daemon's `HeavyWork`, never on the loop. Meanwhile the client's later messages wait,
+in order, and its socket is not read (its own sending slows down, nobody else's).
+
 Writing: frames go straight to the transport while it keeps up; once its buffer passes the
 high-water mark, they wait in the client's `Outbox`, where a newer value of a device
 replaces an unsent older one.
@@ -37,17 +43,26 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Callable, Optional
 
+from bridge.heavy import HeavyWork
 from bridge.hub import Hub
 from bridge.logging_limits import RateLimitedLog
-from bridge.outbox import Frame, Outbox, OutboxOverflow
+from bridge.outbox import WRITE_CHUNK, Frame, Outbox, OutboxOverflow
+from protocol.crc64 import Buffer
 from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
-from protocol.framing import Decoder, ReceiveBudget
+from protocol.framing import Decoder, RawFrame, ReceiveBudget
 from protocol.messages import Message, Status, StatusCode
 from protocol.negotiation import HeaderVersionNegotiator
 
 log = logging.getLogger(__name__)
 
 CommandHandler = Callable[[Message, "ClientSession"], None]
+
+# A data message with a larger body is decoded off the loop (see the module docstring).
+HEAVY_BODY_BYTES = 64 * 1024
+# What one loop turn writes to one client from its outbox before others get a turn.
+FLUSH_TURN_BYTES = 4 * WRITE_CHUNK
+# Message types that are not data for a device: commands, statuses, queries, replies.
+_CONTROL_TYPES = ("COMMAND", "STATUS", "GET_", "RTS_", "STT_", "STP_")
 
 
 
@@ -77,8 +92,11 @@ class ClientSession(asyncio.Protocol):
     def __init__(self, hub: Hub, commands: CommandHandler, limits: SessionLimits,
                  on_close: Callable[[ClientSession], None], *, read_only: bool = False,
                  budget: Optional[ReceiveBudget] = None,
-                 incidents: Optional[RateLimitedLog] = None) -> None:
+                 incidents: Optional[RateLimitedLog] = None,
+                 heavy: Optional[HeavyWork] = None) -> None:
         self._hub = hub
+        self._heavy = heavy  # None: every body is decoded on the loop (tests)
+        self._decoding = False  # a heavy body of this client is being decoded
         self._read_only = read_only  # --read-only: data messages to devices are refused
         self._commands = commands
         self._limits = limits
@@ -99,7 +117,8 @@ class ClientSession(asyncio.Protocol):
         self._closing = False
         self._attached = False
         self._attach_timer: Optional[asyncio.TimerHandle] = None
-        self._batch: Optional[list[bytes]] = None  # frames gathered for one write
+        self._batch: Optional[list[Buffer]] = None  # frames gathered for one write
+        self._flush_scheduled = False  # the outbox is written on from the next loop turn
         # Direct writes from the executor thread (see the module docstring).
         self._wlock = threading.Lock()
         self._direct: Optional[socket.socket] = None  # a dup of the transport's socket
@@ -169,6 +188,8 @@ class ClientSession(asyncio.Protocol):
         self._decoder.close()
         self._outbox.clear()
         self._batch = None
+        if self._heavy is not None:
+            self._heavy.forget(self)
 
     def pause_writing(self) -> None:
         self._paused = True
@@ -183,33 +204,85 @@ class ClientSession(asyncio.Protocol):
         frames_before = self._decoder.frames
         try:
             self._decoder.feed(data)
-            while not self._closing:
-                try:
-                    message = self._decoder.next_message()
-                except MessageError as error:
-                    self._warn_bad_message(error)
-                    self.send_status(getattr(error, "device_name", "") or "", _status_of(error),
-                                     str(error))
-                    continue
-                if message is None:
+        except FramingError as error:
+            self._broken(error)
+            return
+        self._take_frames(frames_before)
+
+    def _take_frames(self, frames_before: int) -> None:
+        """Handle the complete frames received, in order, until a heavy one goes off the
+        loop (`_decoded` goes on from there)."""
+        try:
+            while not self._closing and not self._decoding:
+                frame = self._decoder.next_frame()
+                if frame is None:
                     break
+                if (self._heavy is not None and len(frame.body) > HEAVY_BODY_BYTES
+                        and not frame.type_name.startswith(_CONTROL_TYPES)):
+                    if not self._data_refused(frame.type_name, frame.device_name):
+                        self._decode_off_loop(frame)
+                    continue
+                try:
+                    message = frame.decode(self._decoder.verify_crc)
+                except MessageError as error:
+                    self._bad_message(error)
+                    continue
                 self.received += 1
                 self._handle(message)
-        except ReceiveBudgetError as error:
+        except FramingError as error:
+            self._broken(error)
+        self._watch_frame(frames_before)
+
+    def _decode_off_loop(self, frame: RawFrame) -> None:
+        assert self._heavy is not None
+        self._decoding = True
+        if self._transport is not None:
+            self._transport.pause_reading()
+        verify = self._decoder.verify_crc
+        self._heavy.run(self, lambda: frame.decode(verify)).add_done_callback(self._decoded)
+
+    def _decoded(self, outcome: asyncio.Future[Message]) -> None:
+        """A heavy body's decoding ended (loop thread): handle it, go on with the rest."""
+        self._decoding = False
+        if self._closing or outcome.cancelled():
+            return
+        error = outcome.exception()
+        if isinstance(error, MessageError):
+            self._bad_message(error)
+        elif error is not None:
+            log.error("decoding a message of client %s failed", self.peer, exc_info=error)
+            self.send_status("", StatusCode.UNKNOWN_ERROR, f"the message could not be "
+                             f"decoded: {type(error).__name__}")
+        else:
+            self.received += 1
+            self._handle(outcome.result())
+        if self._closing:
+            return
+        if self._transport is not None:
+            self._transport.resume_reading()
+        self._take_frames(self._decoder.frames)
+
+    def _bad_message(self, error: MessageError) -> None:
+        self._warn_bad_message(error)
+        self.send_status(getattr(error, "device_name", "") or "", _status_of(error),
+                         str(error))
+
+    def _broken(self, error: FramingError) -> None:
+        """The stream cannot go on: say why and close."""
+        if isinstance(error, ReceiveBudgetError):
             self._incidents.warning("budget", time.monotonic(), "client %s: body refused, "
                                     "closing: %s", self.peer, error)
             self.send_status("", StatusCode.RESOURCE_ERROR, f"closing the connection: {error}")
-            self.close()
-        except FramingError as error:
+        else:
             log.warning("client %s broke the OpenIGTLink framing, closing: %s", self.peer, error)
             self.send_status("", StatusCode.UNKNOWN_ERROR, f"closing the connection: {error}")
-            self.close()
-        self._watch_frame(frames_before)
+        self.close()
 
     def _watch_frame(self, frames_before: int) -> None:
         """Keep a deadline on the unfinished frame, if any (the decoder has no clock)."""
         decoder = self._decoder
-        if self._closing or not decoder.frame_in_progress:
+        # While a heavy body is decoded the socket is not read: no deadline meanwhile.
+        if self._closing or self._decoding or not decoder.frame_in_progress:
             if self._frame_timer is not None:
                 self._frame_timer.cancel()
                 self._frame_timer = None
@@ -282,32 +355,39 @@ class ClientSession(asyncio.Protocol):
             self._hub.deliver_reply(message, self)  # answers a COMMAND the daemon sent
         elif type_name.startswith(("STT_", "STP_", "RTS_")):
             pass  # streaming control and replies to queries we never make
-        elif self._read_only:
-            # Checked here, at data routing, as the dispatcher checks commands.
-            if message.device_name not in self._unrouted_warned:
-                self._unrouted_warned.add(message.device_name)
-                log.warning("client %s sent %s to device %r on a read-only daemon; refused "
-                            "(said once per device)", self.peer, type_name, message.device_name)
-                self.send_status(message.device_name, StatusCode.ACCESS_DENIED,
-                                 "the daemon is read-only (--read-only): clients cannot send "
-                                 "data to ROS")
-        else:
+        elif not self._data_refused(type_name, message.device_name):
             handler = self._hub.inbound_handler(message.device_name)
-            if handler is None:
-                if message.device_name not in self._unrouted_warned:
-                    self._unrouted_warned.add(message.device_name)
-                    log.warning("client %s sent %s to device %r, which no publisher or "
-                                "broadcaster receives; ignored (said once per device)",
-                                self.peer, type_name, message.device_name)
-                    self.send_status(message.device_name, StatusCode.NOT_FOUND,
-                                     f"no publisher or broadcaster receives device "
-                                     f"{message.device_name!r}")
-                return
+            assert handler is not None
             try:
                 handler(message, self)
             except Exception as error:  # a bridge's bug must not take the connection down
                 log.exception("handling %s for device %r failed", type_name, message.device_name)
                 self.send_status(message.device_name, StatusCode.UNKNOWN_ERROR, str(error))
+
+    def _data_refused(self, type_name: str, device: str) -> bool:
+        """Whether a data message to ``device`` is refused, judged by its header alone
+        (before its body is decoded): a read-only daemon, or a device no publisher or
+        broadcaster receives. The client is told once per device."""
+        if self._read_only:
+            # Checked here, at data routing, as the dispatcher checks commands.
+            if device not in self._unrouted_warned:
+                self._unrouted_warned.add(device)
+                log.warning("client %s sent %s to device %r on a read-only daemon; refused "
+                            "(said once per device)", self.peer, type_name, device)
+                self.send_status(device, StatusCode.ACCESS_DENIED,
+                                 "the daemon is read-only (--read-only): clients cannot send "
+                                 "data to ROS")
+            return True
+        if self._hub.inbound_handler(device) is not None:
+            return False
+        if device not in self._unrouted_warned:
+            self._unrouted_warned.add(device)
+            log.warning("client %s sent %s to device %r, which no publisher or broadcaster "
+                        "receives; ignored (said once per device)", self.peer, type_name,
+                        device)
+            self.send_status(device, StatusCode.NOT_FOUND,
+                             f"no publisher or broadcaster receives device {device!r}")
+        return True
 
     def _answer_query(self, message: Message) -> None:
         """GET_<TYPE> asks for the current value of a device (empty name: all of that type)."""
@@ -338,21 +418,36 @@ class ClientSession(asyncio.Protocol):
             return
         if self._paused or len(self._outbox):
             self._outbox.put_latest(device, frame)
+            return
+        parts = frame.encoded_parts(self.header_version)
+        if len(parts) == 1 and len(parts[0]) <= WRITE_CHUNK:
+            self._write(parts[0])
         else:
-            self._write(frame.encoded(self.header_version))
+            self._write_large(parts)
 
     def send_once(self, frame: Frame) -> None:
         if self._closing:
             return
-        data = frame.encoded(self.header_version)
+        parts = frame.encoded_parts(self.header_version)
         if self._paused or len(self._outbox):
             try:
-                self._outbox.put_once(data)
+                self._outbox.put_once(*parts)
             except OutboxOverflow as error:
                 log.warning("client %s is too slow, closing it: %s", self.peer, error)
                 self.close()
+        elif len(parts) == 1 and len(parts[0]) <= WRITE_CHUNK:
+            self._write(parts[0])
         else:
-            self._write(data)
+            self._write_large(parts)
+
+    def _write_large(self, parts: tuple[Buffer, ...]) -> None:
+        """A frame over `WRITE_CHUNK`: written a chunk at a time as the socket drains
+        (the outbox holds the rest, shared, not copied), after what a batch gathered."""
+        if self._batch:
+            gathered, self._batch = self._batch, []
+            self._transport_write(b"".join(gathered))
+        self._outbox.put_once(*parts)  # the outbox was empty: within any bound
+        self._flush()
 
     def send_message(self, message: Message) -> None:
         self.send_once(Frame(message))
@@ -388,7 +483,7 @@ class ClientSession(asyncio.Protocol):
         if batch and not self._closing:
             self._transport_write(b"".join(batch) if len(batch) > 1 else batch[0])
 
-    def _write(self, data: bytes) -> None:
+    def _write(self, data: Buffer) -> None:
         assert self._transport is not None
         self._sent += 1
         if self._batch is not None:
@@ -396,7 +491,7 @@ class ClientSession(asyncio.Protocol):
         else:
             self._transport_write(data)
 
-    def _transport_write(self, data: bytes) -> None:
+    def _transport_write(self, data: Buffer) -> None:
         assert self._transport is not None
         with self._wlock:
             if self._stash is not None:  # the rest of a direct write goes first
@@ -405,11 +500,27 @@ class ClientSession(asyncio.Protocol):
             self._transport.write(data)
 
     def _flush(self) -> None:
+        """Write what waits while the transport takes it, at most `FLUSH_TURN_BYTES` a
+        loop turn: a client that reads 50 MB models as fast as they are written would
+        otherwise keep the loop (every other client's replies and streams) for as long."""
+        self._flush_scheduled = False
+        written = 0
         while not self._paused and not self._closing:
-            data = self._outbox.pop()
+            if written >= FLUSH_TURN_BYTES:
+                if self._outbox:
+                    self._flush_scheduled = True
+                    asyncio.get_running_loop().call_soon(self._flush_turn)
+                return
+            data = self._outbox.pop(WRITE_CHUNK)
             if data is None:
                 return
-            self._write(data)
+            self._sent += 1
+            written += len(data)
+            self._transport_write(data)
+
+    def _flush_turn(self) -> None:
+        if self._flush_scheduled:
+            self._flush()
 
     # --- direct writes (ROS executor thread) -------------------------------------------------
     def write_direct(self, data: bytes) -> bool:
@@ -462,9 +573,9 @@ class ClientSession(asyncio.Protocol):
     def describe(self) -> dict[str, object]:
         return {"peer": self.peer, "header_version": self.header_version,
                 "received": self.received, "sent": self.sent,
-                "coalesced": self._outbox.coalesced, "waiting": len(self._outbox),
+                "coalesced": self._outbox.coalesced, "waiting": self._outbox.frames_waiting,
                 "waiting_bytes": self._outbox.pending_bytes,
-                "receiving_bytes": self._decoder.buffered}
+                "receiving_bytes": self._decoder.buffered, "decoding": self._decoding}
 
 
 def _status_of(error: MessageError) -> int:

@@ -26,6 +26,8 @@ from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
 from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
 from bridge.dispatch import Handler
+from bridge.graph_types import refuse_other_type
+from bridge.heavy import OffLoop
 from bridge.hub import (LARGE_MESSAGE_BYTES, Hub, Replier, StreamChannel, Subscriber,
                         approximate_size)
 from bridge.logging_limits import RateLimitedLog
@@ -270,7 +272,7 @@ class PublisherBridge:
         what the security policy denies."""
         msg = self.codec.from_value(value, stamp=self._stamp_now(), frame_id=self.frame_id)
         self._check(msg)
-        return self._publish(msg)
+        return self._publish_open(msg)
 
     def publish_message(self, fields: dict[str, Any]) -> int:
         """Publish a whole message given as generic JSON (ROS units, every field checked);
@@ -283,7 +285,16 @@ class PublisherBridge:
             if not header.frame_id:
                 header.frame_id = self.frame_id
         self._check(msg)
-        return self._publish(msg)
+        return self._publish_open(msg)
+
+    def _publish_open(self, msg: Any) -> int:
+        """Publish unless the bridge was removed meanwhile (a worker thread publishes:
+        TopicBridges.publish)."""
+        with self._heavy_lock:
+            if self._closed:
+                raise CommandFailedError("topic", "a publisher bridge", f"{self.topic}, "
+                                         f"removed meanwhile", code=ErrorCode.NOT_FOUND)
+            return self._publish(msg)
 
     def _check(self, msg: Any) -> None:
         if self._guard is not None:
@@ -422,11 +433,7 @@ class TopicBridges:
                                      code=ErrorCode.UNKNOWN_ROS_TYPE) from None
 
     def _check_graph(self, topic: str, ros_type: str) -> None:
-        known = self._ros.topic_types(topic)
-        if known and ros_type not in known:
-            raise CommandFailedError("type", f"the type {topic} already has in the ROS graph "
-                                     f"({', '.join(known)})", ros_type,
-                                     code=ErrorCode.ALREADY_EXISTS)
+        refuse_other_type(self._ros, topic, ros_type, "type")
 
     @staticmethod
     def _check_existing(existing: SubscriberBridge | PublisherBridge | None, topic: str,
@@ -526,22 +533,25 @@ class TopicBridges:
         self._names.release(NameKey.publisher(topic))
         return {"topic": topic, "device": bridge.device}
 
-    def publish(self, request: Publish) -> dict[str, Any]:
+    def publish(self, request: Publish) -> OffLoop[dict[str, Any]]:
         topic = self._resolve(request.topic)
         bridge = self.publishers.get(topic)
         if bridge is None:
             raise CommandFailedError("topic", "a topic with a publisher bridge (create_publisher "
                                      "first)", topic, code=ErrorCode.NOT_FOUND)
         field = "value" if request.message is None else "message"
-        try:
-            if request.message is None:
-                subscribers = bridge.publish_value(request.value)
-            else:
-                subscribers = bridge.publish_message(request.message)
-        except CodecError as error:
-            raise WrongTypeError(f"{field}.{error.field}" if error.field else field,
-                                 error.expected, error.got) from None
-        return {"topic": topic, "subscribers": subscribers}
+
+        def work() -> dict[str, Any]:  # a message of a megabyte of JSON takes a second
+            try:
+                if request.message is None:
+                    subscribers = bridge.publish_value(request.value)
+                else:
+                    subscribers = bridge.publish_message(request.message)
+            except CodecError as error:
+                raise WrongTypeError(f"{field}.{error.field}" if error.field else field,
+                                     error.expected, error.got) from None
+            return {"topic": topic, "subscribers": subscribers}
+        return OffLoop(work)
 
     def get_last_message(self, request: GetLastMessage) -> dict[str, Any]:
         topic = self._resolve(request.topic)

@@ -22,7 +22,8 @@ from typing import Callable, Union
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["BACKEND", "CHECK_VALUE", "POLY", "crc64", "crc64_native", "crc64_python"]
+__all__ = ["BACKEND", "CHECK_VALUE", "POLY", "KnownCrc", "crc64", "crc64_continue",
+           "crc64_native", "crc64_python"]
 
 POLY = 0x42F0E1EBA9EA3693
 CHECK_VALUE = 0x6C40DF5F0B497347  # crc64(b"123456789"), the catalogue's check value
@@ -158,10 +159,10 @@ def _crc_blocks(view: memoryview) -> int:
     return int(crc[0])
 
 
-def _load_native() -> tuple[Callable[[Buffer], int] | None, str]:
+def _load_native() -> tuple[Callable[..., int] | None, str]:
     try:
         fastcrc = importlib.import_module("fastcrc")
-        ecma_182: Callable[[Buffer], int] = fastcrc.crc64.ecma_182
+        ecma_182: Callable[..., int] = fastcrc.crc64.ecma_182
         if ecma_182(b"123456789") == CHECK_VALUE:  # the same CRC, not a namesake
             return ecma_182, "fastcrc"
     except (ImportError, AttributeError):
@@ -173,7 +174,7 @@ def _load_native() -> tuple[Callable[[Buffer], int] | None, str]:
         return None, "python"
     if not getattr(impl, "_usingExtension", False):
         return None, "python"  # crcmod's own pure-Python path is slower than ours
-    func: Callable[[Buffer], int] = impl.mkCrcFun(
+    func: Callable[..., int] = impl.mkCrcFun(
         (1 << 64) | POLY, initCrc=0, rev=False, xorOut=0
     )
     return func, "crcmod"
@@ -194,3 +195,50 @@ def crc64(data: Buffer) -> int:
     if _native_func is not None:
         return _native_func(data)
     return crc64_python(data)
+
+
+def crc64_continue(crc: int, data: Buffer) -> int:
+    """The CRC of (what gave ``crc``) followed by ``data``: a body's CRC computed over its
+    parts, without joining them first (``crc64_continue(crc64(a), b) == crc64(a + b)``)."""
+    if _native_func is not None:  # fastcrc and crcmod take the CRC to continue from
+        return _native_func(data, crc)
+    view = memoryview(data).cast("B")
+    if len(view) < _NUMPY_THRESHOLD:
+        return _crc_loop(crc, view)
+    # Linearity (module docstring): feed len(data) zero bytes to crc, then XOR data's CRC.
+    fed = _feed_zeros(np.array([crc], dtype=np.uint64), len(view))
+    return int(fed[0]) ^ _crc_blocks(view)
+
+
+class KnownCrc:
+    """The CRC of some bytes (`crc`), and what continues a CRC through them without
+    reading them again: ``after(crc64(a)) == crc64(a + data)`` in eight table look-ups.
+    Made where a large body is made (a thread of its own), so that the header put before
+    it later costs almost nothing."""
+
+    __slots__ = ("crc", "length", "_tables")
+
+    def __init__(self, data: Buffer) -> None:
+        self.crc = crc64(data)
+        self.length = len(memoryview(data).cast("B"))
+        self._tables = _tables_from_basis(_feed_zeros(_BASIS, self.length))
+
+    def after(self, prefix_crc: int) -> int:
+        """``crc64(prefix + data)`` from ``crc64(prefix)``."""
+        shifted = _apply_shift(self._tables, np.array([prefix_crc], dtype=np.uint64))
+        return int(shifted[0]) ^ self.crc
+
+
+_BASIS = np.uint64(1) << np.arange(64, dtype=np.uint64)
+
+
+def _feed_zeros(values: U64Array, count: int) -> U64Array:
+    """The registers ``values`` after feeding ``count`` zero bytes (linearity: see the
+    module docstring)."""
+    level = 0
+    while count:
+        if count & 1:
+            values = _apply_shift(_shift_tables(level), values)
+        count >>= 1
+        level += 1
+    return values

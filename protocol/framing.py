@@ -20,8 +20,12 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterator
+from typing import NamedTuple, cast
 
-from protocol.crc64 import crc64
+import numpy as np
+import numpy.typing as npt
+
+from protocol.crc64 import Buffer, KnownCrc, crc64, crc64_continue
 from protocol.errors import (
     BodyError,
     BodyTooLargeError,
@@ -44,15 +48,17 @@ from protocol.header import (
     unpack_metadata,
     unpack_raw,
 )
-from protocol.messages import Message, unpack_body
+from protocol.messages import Message, PolyData, RawBody, unpack_body
 
-__all__ = ["DEFAULT_MAX_BODY_SIZE", "DEFAULT_UNCOUNTED_BODY_BYTES", "Decoder", "ReceiveBudget",
-           "StreamTemplate", "encode"]
+__all__ = ["DEFAULT_MAX_BODY_SIZE", "DEFAULT_UNCOUNTED_BODY_BYTES", "Decoder", "RawFrame",
+           "ReceiveBudget", "StreamTemplate", "encode", "encode_parts"]
 
 DEFAULT_MAX_BODY_SIZE = 64 * 1024 * 1024  # 64 MiB: a 512^3 uint8 volume with room to spare
 # Bodies up to this size are not counted against a `ReceiveBudget`: commands and poses must
 # get through while large senders have used it up (64 clients x 256 KiB = 16 MiB at most).
 DEFAULT_UNCOUNTED_BODY_BYTES = 256 * 1024
+# A body this large is received into a buffer of its own (`Decoder`): an image, a model.
+LARGE_BODY_BYTES = 4 * 1024 * 1024
 
 _U32_MAX = 0xFFFFFFFF
 _U64_MAX = (1 << 64) - 1
@@ -65,28 +71,53 @@ def encode(message: Message, *, header_version: int = 1) -> bytes:
     cannot read more); 2 writes the extended header and metadata. The timestamp is written
     as given: setting it (0 means "unset") is the caller's business.
     """
+    head, content, tail = encode_parts(message, header_version=header_version)
+    return b"".join((head, content, tail))
+
+
+def encode_parts(message: Message, *, header_version: int = 1,
+                 content_crc: KnownCrc | None = None) -> tuple[bytes, Buffer, bytes]:
+    """`encode` as three parts whose concatenation is the message's wire bytes: the header
+    (and v2's extended header), the content, and v2's metadata. The content is the body's
+    own bytes where it has them (a `RawBody`): a large model is then neither copied nor
+    held twice, and the CRC is computed over the parts as they are. ``content_crc``: the
+    content's, made beforehand, saves going over it again."""
     type_name = message.type_name
-    content = message.body.pack()
+    body = message.body
+    content: Buffer
+    if isinstance(body, RawBody):
+        content = body.data
+    elif isinstance(body, PolyData):
+        content = body.pack_view()  # a model of tens of MB: no final copy
+    else:
+        content = body.pack()
     if header_version == 1:
-        body = content
+        ext, tail = b"", b""
     elif header_version == 2:
         if isinstance(message.message_id, bool) or not isinstance(message.message_id, int) \
                 or not 0 <= message.message_id <= _U32_MAX:
             raise EncodeError("message_id", "an integer in [0, 2**32)", message.message_id)
         meta_header, meta = _packed_metadata(message.metadata)
-        body = b"".join((_EXT_HEADER.pack(EXT_HEADER_SIZE, len(meta_header), len(meta),
-                                          message.message_id), content, meta_header, meta))
+        ext = _EXT_HEADER.pack(EXT_HEADER_SIZE, len(meta_header), len(meta),
+                               message.message_id)
+        tail = meta_header + meta
     else:
         raise EncodeError("header_version", "1 or 2", header_version)
+    size = len(ext) + len(content) + len(tail)
+    crc = (crc64_continue(crc64(ext), content) if content_crc is None
+           else content_crc.after(crc64(ext)))
+    crc = crc64_continue(crc, tail)
     timestamp = message.timestamp
     if isinstance(timestamp, int) and 0 <= timestamp <= _U64_MAX:
         # The names' checks, once per distinct name; then one struct pack.
-        return _HEADER.pack(header_version, _name_raw(type_name, "type_name"),
-                            _name_raw(message.device_name, "device_name"), timestamp,
-                            len(body), crc64(body)) + body
-    header = Header(header_version, type_name, message.device_name, timestamp,
-                    len(body), crc64(body))
-    return header.pack() + body  # raises the EncodeError that says what is wrong
+        header = _HEADER.pack(header_version, _name_raw(type_name, "type_name"),
+                              _name_raw(message.device_name, "device_name"), timestamp,
+                              size, crc)
+    else:
+        # Raises the EncodeError that says what is wrong.
+        header = Header(header_version, type_name, message.device_name, timestamp, size,
+                        crc).pack()
+    return header + ext, content, tail
 
 
 # Streams repeat the same metadata and names thousands of times a second: their packed
@@ -238,12 +269,16 @@ class Decoder:
         self._offset = 0
         self._header: tuple[int, bytes, bytes, int, int, int] | None = None
         self._broken: FramingError | None = None
+        # A large body is received into a buffer of its own, its size known from its
+        # header: no copy when it is complete, none when the shared buffer grows.
+        self._body: npt.NDArray[np.uint8] | None = None
+        self._filled = 0
         self.frames = 0  # frames consumed, good or bad: a deadline restarts with each
 
     @property
     def frame_in_progress(self) -> bool:
         """Part of a frame has arrived (after the complete ones were taken)."""
-        return len(self._buffer) > self._offset
+        return len(self._buffer) > self._offset or self._body is not None
 
     @property
     def pending_body_size(self) -> int | None:
@@ -253,7 +288,8 @@ class Decoder:
     @property
     def buffered(self) -> int:
         """Bytes received and not yet returned as part of a message."""
-        return len(self._buffer) - self._offset
+        large = 0 if self._body is None else HEADER_SIZE + self._filled
+        return len(self._buffer) - self._offset + large
 
     @property
     def broken(self) -> FramingError | None:
@@ -264,6 +300,13 @@ class Decoder:
         """Append received bytes (any size, including 1 byte or none)."""
         if self._broken is not None:
             raise self._broken
+        if self._body is not None and self._filled < len(self._body):
+            n = min(len(data), len(self._body) - self._filled)
+            self._body[self._filled:self._filled + n] = np.frombuffer(data, np.uint8, n)
+            self._filled += n
+            data = memoryview(data)[n:]
+            if not data:
+                return
         if self._offset and self._offset * 2 >= len(self._buffer):
             del self._buffer[: self._offset]
             self._offset = 0
@@ -276,6 +319,7 @@ class Decoder:
         self._buffer = bytearray()
         self._offset = 0
         self._header = None
+        self._body = None
         if self._broken is None:
             self._broken = FramingError("decoder", "an open decoder", "a closed one")
         # Its traceback holds the frames that raised it, and with them their owners.
@@ -291,6 +335,17 @@ class Decoder:
         self._release_claim()
         return error
 
+    def _receive_apart(self, body_size: int) -> None:
+        """The body just announced is large: it goes into its own buffer (not zeroed),
+        with what of it has arrived already; the shared buffer goes on after it."""
+        self._body = np.empty(body_size, dtype=np.uint8)
+        start = self._offset + HEADER_SIZE
+        n = min(len(self._buffer) - start, body_size)
+        with memoryview(self._buffer) as view:
+            self._body[:n] = np.frombuffer(view[start:start + n], np.uint8)
+        self._filled = n
+        self._offset = start + n
+
     def _take(self, size: int) -> bytes:
         start = self._offset
         self._offset = start + size
@@ -303,6 +358,14 @@ class Decoder:
         Raises `MessageError` for a bad message (already consumed: call again) and
         `FramingError` when the stream cannot continue (then raised again on every call).
         """
+        frame = self.next_frame()
+        return None if frame is None else frame.decode(self.verify_crc)
+
+    def next_frame(self) -> RawFrame | None:
+        """The next complete frame, its body not checked or decoded yet (`RawFrame.decode`
+        does both), or None if more bytes are needed. A receiver can then judge a message
+        by its header alone (its type, its device) before it spends anything on the body.
+        Raises `FramingError` as `next_message` does."""
         if self._broken is not None:
             raise self._broken
         if self._header is None:
@@ -323,19 +386,28 @@ class Decoder:
                 except ReceiveBudgetError as exc:
                     raise self._break(exc) from None
             self._header = fields
+            if body_size >= LARGE_BODY_BYTES:
+                self._receive_apart(body_size)
         version, type_raw, name_raw, timestamp, body_size, crc = self._header
-        if self.buffered < HEADER_SIZE + body_size:
-            return None
+        body: Buffer
+        if self._body is not None:
+            if self._filled < body_size:
+                return None
+            body = self._body.data.toreadonly()
+            self._body = None
+        else:
+            if self.buffered < HEADER_SIZE + body_size:
+                return None
+            self._offset += HEADER_SIZE
+            body = self._take(body_size)
         self._header = None
-        self._offset += HEADER_SIZE
-        body = self._take(body_size)
         self.frames += 1
         self._release_claim()
         if self._offset == len(self._buffer):
             # All consumed: let the (possibly 64 MiB) buffer go now, not at the next feed.
             self._buffer = bytearray()
             self._offset = 0
-        return _decode(version, type_raw, name_raw, timestamp, body, crc, self.verify_crc)
+        return RawFrame(version, type_raw, name_raw, timestamp, body, crc)
 
     def messages(self) -> Iterator[Message]:
         """Yield messages until more bytes are needed (errors as in `next_message`)."""
@@ -346,7 +418,35 @@ class Decoder:
             yield message
 
 
-def _decode(version: int, type_raw: bytes, name_raw: bytes, timestamp: int, body: bytes,
+class RawFrame(NamedTuple):
+    """One complete frame as received (`Decoder.next_frame`): the header's fields and the
+    body's bytes (a large one's: a read-only view of its own buffer), neither checked nor
+    decoded."""
+
+    version: int
+    type_raw: bytes
+    name_raw: bytes
+    timestamp: int
+    body: Buffer
+    crc: int
+
+    @property
+    def type_name(self) -> str:
+        """The header's type name, as sent (the name `decode` checks)."""
+        return self.type_raw.split(b"\0", 1)[0].decode("latin-1")
+
+    @property
+    def device_name(self) -> str:
+        """The header's device name, as sent (`decode` checks its encoding)."""
+        return self.name_raw.split(b"\0", 1)[0].decode("utf-8", "replace")
+
+    def decode(self, verify_crc: bool = True) -> Message:
+        """The message: CRC checked, body decoded; `MessageError` if either fails."""
+        return _decode(self.version, self.type_raw, self.name_raw, self.timestamp, self.body,
+                       self.crc, verify_crc)
+
+
+def _decode(version: int, type_raw: bytes, name_raw: bytes, timestamp: int, body: Buffer,
             crc: int, verify_crc: bool) -> Message:
     if verify_crc:
         actual = crc64(body)
@@ -367,7 +467,8 @@ def _decode(version: int, type_raw: bytes, name_raw: bytes, timestamp: int, body
                 body[content_end:content_end + ext.meta_header_size],
                 body[content_end + ext.meta_header_size:], type_name)
             message_id = ext.message_id
-        parsed = unpack_body(type_name, content)
+        # A large body is a memoryview: every unpacker reads with struct and numpy.
+        parsed = unpack_body(type_name, cast(bytes, content))
     except ProtocolError:
         raise
     except (ValueError, IndexError, TypeError, UnicodeDecodeError) as exc:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import struct
+from array import array
 from dataclasses import dataclass, field, fields
 from enum import IntEnum
 from typing import Any, Callable, ClassVar, Union
@@ -309,6 +310,9 @@ class _CellError(Exception):
         self.got = got
 
 
+_SCAN_WINDOW = 1 << 16  # values of a mixed-size cell array walked at a time
+
+
 def _scan_cells(flat: AnyArray, npoints: int = -1) -> tuple[int, AnyArray]:
     """Validate a VTK-legacy cell array; return (cell count, start offsets).
 
@@ -327,16 +331,20 @@ def _scan_cells(flat: AnyArray, npoints: int = -1) -> tuple[int, AnyArray]:
             if top >= npoints:
                 raise _CellError(f"point indices < NPOINTS ({npoints})", f"index {top}")
         return count, starts
-    values: list[int] = flat.tolist()
-    start_list: list[int] = []
+    # A window of values at a time: a 60 MB array as one Python list was 0.5 GB.
+    start_list = array("q")
     pos = 0
     while pos < length:
-        start_list.append(pos)
-        pos += values[pos] + 1
+        base = pos
+        values: list[int] = flat[base:base + _SCAN_WINDOW].tolist()
+        end = base + len(values)
+        while pos < end:
+            start_list.append(pos)
+            pos += values[pos - base] + 1
     if pos != length:
         raise _CellError(f"cells that end with the array ({length} values)",
                          f"last cell (at {start_list[-1]}) runs to {pos}")
-    starts = np.asarray(start_list, dtype=np.intp)
+    starts = np.frombuffer(start_list, dtype=np.int64).astype(np.intp)
     if npoints >= 0:
         mask = np.ones(length, dtype=bool)
         mask[starts] = False
@@ -428,6 +436,12 @@ class PolyData:
     __eq__ = _dataclass_eq
 
     def pack(self) -> bytes:
+        return bytes(self.pack_view())
+
+    def pack_view(self) -> memoryview:
+        """`pack`'s bytes, written into one buffer by numpy (which lets other threads run
+        while a model of tens of MB is converted and copied) and returned without the
+        final copy, as a read-only view."""
         points = _as_array(self.points, "POLYDATA points", np.float32, "(N, 3) numbers")
         if points.ndim != 2 or points.shape[1] != 3:
             raise EncodeError("POLYDATA points", "shape (N, 3)", f"shape {points.shape}")
@@ -435,22 +449,21 @@ class PolyData:
         if npoints > _U32_MAX:
             raise EncodeError("POLYDATA points", "fewer than 2**32 points", npoints)
         counts: list[int] = []
-        sections: list[bytes] = []
+        sections: list[AnyArray] = []
         for name in _CELL_SECTIONS:
             flat = _flat_cells(getattr(self, name), f"POLYDATA {name}")
             try:
                 count, _ = _scan_cells(flat, npoints)
             except _CellError as exc:
                 raise EncodeError(f"POLYDATA {name}", exc.expected, exc.got) from None
-            raw = flat.astype(">u4").tobytes()
-            if len(raw) > _U32_MAX:
-                raise EncodeError(f"POLYDATA {name}", "under 4 GiB", f"{len(raw)} bytes")
-            counts += [count, len(raw)]
-            sections.append(raw)
+            if 4 * flat.size > _U32_MAX:
+                raise EncodeError(f"POLYDATA {name}", "under 4 GiB", f"{4 * flat.size} bytes")
+            counts += [count, 4 * flat.size]
+            sections.append(flat)
         ncells = sum(counts[0::2])
         heads: list[bytes] = []
         names: list[bytes] = []
-        datas: list[bytes] = []
+        datas: list[AnyArray] = []
         for i, attr in enumerate(self.attributes):
             what = f"POLYDATA attributes[{i}]"
             try:
@@ -460,13 +473,15 @@ class PolyData:
             name_raw = encode_text(attr.name, ENCODING_UTF8, f"{what}.name")
             if not 0 < len(name_raw) <= _MAX_ATTRIBUTE_NAME or b"\0" in name_raw:
                 raise EncodeError(f"{what}.name", "1 to 255 bytes without NUL", repr(attr.name))
-            data = _as_array(attr.data, f"{what}.data", np.float32, "(N, components) numbers")
+            data = np.asarray(attr.data)  # cast to float32 as it is written
             if data.ndim == 1:
                 data = data.reshape(-1, 1)
             low, high = _KIND_COMPONENTS[kind]
             if data.ndim != 2 or not low <= data.shape[1] <= high:
                 raise EncodeError(f"{what}.data", f"shape (N, {low}..{high}) for {kind.name}",
                                   f"shape {data.shape}")
+            if data.dtype.kind not in "uif":
+                data = _as_array(data, f"{what}.data", np.float32, "(N, components) numbers")
             n_expected = ncells if attr.on_cells else npoints
             if data.shape[0] != n_expected:
                 target = "cells" if attr.on_cells else "points"
@@ -475,18 +490,36 @@ class PolyData:
             heads.append(_ATTR_HEAD.pack(int(kind) | (_CELL_FLAG if attr.on_cells else 0),
                                          data.shape[1], data.shape[0]))
             names.append(name_raw + b"\0")
-            datas.append(data.astype(">f4").tobytes())
+            datas.append(data)
         name_blob = b"".join(names)
         if len(name_blob) % 2:
             name_blob += b"\0"
-        return b"".join([
-            _POLY_HEAD.pack(npoints, *counts, len(self.attributes)),
-            points.astype(">f4").tobytes(),
-            *sections,
-            *heads,
-            name_blob,
-            *datas,
-        ])
+        fixed = _POLY_HEAD.pack(npoints, *counts, len(self.attributes))
+        attr_block = b"".join(heads) + name_blob
+        total = (len(fixed) + 12 * npoints + sum(counts[1::2]) + len(attr_block)
+                 + sum(4 * d.size for d in datas))
+        out = np.empty(total, dtype=np.uint8)
+        pos = 0
+
+        def put_raw(raw: bytes) -> None:
+            nonlocal pos
+            out[pos:pos + len(raw)] = np.frombuffer(raw, dtype=np.uint8)
+            pos += len(raw)
+
+        def put_array(values: AnyArray, wire: str) -> None:
+            nonlocal pos
+            size = 4 * values.size
+            out[pos:pos + size].view(wire).reshape(values.shape)[...] = values
+            pos += size
+
+        put_raw(fixed)
+        put_array(points, ">f4")
+        for flat in sections:
+            put_array(flat, ">u4")
+        put_raw(attr_block)
+        for data in datas:
+            put_array(data, ">f4")
+        return out.data.toreadonly()
 
     @classmethod
     def unpack(cls, content: bytes) -> PolyData:
@@ -526,10 +559,12 @@ class PolyData:
         names: list[str] = []
         name_start = pos
         for i in range(nattr):
-            nul = content.find(b"\0", pos, pos + _MAX_ATTRIBUTE_NAME + 1)
+            # bytes() of the name's bytes alone: the content may be a memoryview.
+            nul = bytes(content[pos:pos + _MAX_ATTRIBUTE_NAME + 1]).find(b"\0")
+            nul = nul + pos if nul >= 0 else nul
             if nul < 0:
                 raise _bad(t, f"attribute #{i} name", "NUL-terminated, at most 255 bytes",
-                           f"{content[pos:pos + 32]!r}...")
+                           f"{bytes(content[pos:pos + 32])!r}...")
             names.append(decode_text(content[pos:nul], ENCODING_UTF8, f"attribute #{i} name", t))
             pos = nul + 1
         if (pos - name_start) % 2:
@@ -897,7 +932,7 @@ class RawBody:
     passed through unchanged."""
 
     type_name: str
-    data: bytes
+    data: Union[bytes, bytearray, memoryview]  # a packed model: a view of its one buffer
 
     def pack(self) -> bytes:
         return bytes(self.data)

@@ -40,10 +40,11 @@ from bridge.actions.common import action_class_of, destroy_quietly
 from bridge.codecs import CodecError, message_to_dict
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
+from bridge.security import hidden_action
 from bridge.services import connected_client, message_from_json, resolve_name
 from protocol import commands as c
 from protocol.commands import (CancelGoal, CommandError, CommandFailedError, ErrorCode,
-                               LimitReachedError, SendGoal)
+                               ForbiddenError, LimitReachedError, SendGoal)
 from protocol.messages import Message, String
 from protocol.naming import (KEY_FORMAT, KEY_GOAL_STATUS, DeviceNameRegistry, NameKey,
                              metadata_for)
@@ -62,6 +63,7 @@ _CANCEL_TIMEOUT_S = 10.0
 # Feedback waiting to be taken by the executor: rclpy's default (10) loses feedback when the
 # executor thread stalls for 10 feedback periods (measured: 2 of 2,000 at 200 Hz under load).
 _FEEDBACK_DEPTH = 100
+_CANCEL_TYPE = "action_msgs/srv/CancelGoal"
 # action_msgs/srv/CancelGoal return codes.
 _CANCEL_CODES = {0: "none", 1: "rejected", 2: "unknown_goal", 3: "goal_terminated"}
 
@@ -134,6 +136,9 @@ class GoalSender:
         # (three service clients, two subscriptions), so at most `max_action_clients`.
         self.called: OrderedDict[tuple[str, str], CalledAction] = OrderedDict()
         self._max_called = max_action_clients
+        # A quarter of the action clients per client: one client waiting on absent
+        # servers cannot take every slot from the others.
+        self._max_actions_per_client = max(1, max_action_clients // 4)
         self._max_goals = max_goals_per_client
         self._idle_s = idle_client_s
         self._lost_s = lost_server_s
@@ -219,6 +224,11 @@ class GoalSender:
         if mine >= self._max_goals:
             raise LimitReachedError("goal", f"at most {self._max_goals} goals in flight per "
                                     f"client", f"a goal more to {action}")
+        held = {(g.action, g.ros_type) for g in self.goals.values() if g.owner is client}
+        if (action, ros_type) not in held and len(held) >= self._max_actions_per_client:
+            raise LimitReachedError("action", f"goals to at most "
+                                    f"{self._max_actions_per_client} actions in flight per "
+                                    f"client", f"a goal to {action} more")
         goal_id = request.goal_id or uuid.uuid4().hex
         if goal_id in self.goals:
             raise CommandFailedError("goal_id", "a goal id not in use", goal_id,
@@ -257,6 +267,9 @@ class GoalSender:
         what = f"the action server of {sent.action}"
         client = sent.called.client
         while not client.server_is_ready():
+            if sent.done:  # its client left: the slot is already free, stop waiting
+                raise CommandFailedError("action", "a connected client", "a client that left",
+                                         code=ErrorCode.UNAVAILABLE)
             if loop.time() - start >= timeout:
                 raise CommandFailedError("action", f"{what} to be available",
                                          f"no server after {timeout:g} s",
@@ -427,14 +440,45 @@ class GoalSender:
         self._schedule_watch()
 
     # --- cancel_goal -----------------------------------------------------------------------
+    def _owned(self, action: str, goal_id: str, client: Optional[Replier],
+               field: str) -> SentGoal:
+        """The goal a client (None: the operator) may cancel: one of ``action`` it sent that
+        has not ended; NOT_FOUND naming ``field`` otherwise. The one rule, whatever the
+        route (`cancel_goal`, or a call of the action's hidden cancel service)."""
+        sent = self.goals.get(goal_id)
+        if sent is None or sent.action != action or (client is not None
+                                                     and sent.owner is not client):
+            raise CommandFailedError(field, f"a goal of {action} this client sent that has "
+                                     f"not ended", goal_id, code=ErrorCode.NOT_FOUND)
+        return sent
+
+    def judge_service_call(self, service: str, ros_type: str, request: Any,
+                           client: Optional[Replier]) -> None:
+        """A `ServiceBridges` call guard: `call_service` of ``<action>/_action/cancel_goal``
+        is judged as `cancel_goal`: its request (action_msgs/srv/CancelGoal) may name one
+        goal, by its id, that this client sent. A zero id or a stamp asks the server to
+        cancel every goal (or every goal before the stamp), other clients' and ROS nodes'
+        too: refused."""
+        action = hidden_action(service, ("cancel_goal",))
+        if action is None or client is None:  # not that service, or the operator's config
+            return
+        if ros_type != _CANCEL_TYPE:
+            raise ForbiddenError("type", f"{_CANCEL_TYPE} (the hidden cancel service of "
+                                 f"{action})", ros_type)
+        info = request.goal_info
+        goal = bytes(info.goal_id.uuid)
+        if not any(goal) or info.stamp.sec or info.stamp.nanosec:
+            raise ForbiddenError("request.goal_info", f"the id of one goal of {action} this "
+                                 "client sent, with a zero stamp (a zero id or a stamp "
+                                 "cancels other clients' goals too)",
+                                 f"goal id {goal.hex()}, stamp {info.stamp.sec}."
+                                 f"{info.stamp.nanosec:09d}")
+        self._owned(action, goal.hex(), client, "request.goal_info.goal_id")
+
     async def cancel_goal(self, request: CancelGoal, client: Optional[Replier]
                           ) -> dict[str, Any]:
         action = resolve_name(self._ros, request.action, "action")
-        sent = self.goals.get(request.goal_id)
-        if sent is None or sent.action != action or (client is not None
-                                                     and sent.owner is not client):
-            raise CommandFailedError("goal_id", f"a goal of {action} this client sent that has "
-                                     f"not ended", request.goal_id, code=ErrorCode.NOT_FOUND)
+        sent = self._owned(action, request.goal_id, client, "goal_id")
         if sent.handle is None:
             raise CommandFailedError("goal_id", "a goal the server has accepted",
                                      "a goal still waiting for its acceptance",

@@ -70,22 +70,26 @@ import time
 from collections import deque
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional, Union
+from typing import Any, Callable, Mapping, Optional, Union, cast
 
 import numpy as np
 from rclpy.serialization import deserialize_message
 
 from bridge.codecs import CodecError, codec_for
 from bridge.dispatch import Handler
-from bridge.hub import Hub
+from bridge.graph_types import refuse_other_type
+from bridge.heavy import LargeResult
+from bridge.hub import Hub, Replier, Subscriber
 from bridge.logging_limits import RateLimitedLog
+from bridge.outbox import SharedFrame
 from bridge.codecs.cdr import CdrError
 from bridge.markers.cdr import layout_supported, read_marker, read_marker_array
 from bridge.markers.convert import ADD, DELETE, DELETEALL, MarkerEvent, events_of
-from bridge.markers.geometry import MarkerError, MarkerModel, MarkerSpec, build_model
+from bridge.markers.geometry import (MarkerError, MarkerModel, MarkerSpec, build_model,
+                                     model_bytes, packed, warm_up)
 from bridge.qos import qos_profile
 from bridge.ros_node import RosNode
-from bridge.security import NameRules
+from bridge.security import DEFAULT_MAX_MARKER_BYTES, NameRules, strip_frame
 from bridge.tf.buffer import TfBuffer
 from bridge.tf.capability import TfBridges
 from bridge.tf.errors import ExtrapolationError, TfError
@@ -94,7 +98,7 @@ from bridge.tf.lookups import LookupKey
 from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
                                ListMarkers, Op, OutOfRangeError, RemoveMarkerSubscriber)
 from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
-from protocol.messages import Message, String
+from protocol.messages import Message, StatusCode, String
 from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_FORMAT, KEY_MARKER_TYPE, KEY_MARKERS,
                              KEY_PARENT_DEVICE, UNITS_MM, DeviceNameRegistry, NameKey,
                              NamingError, metadata_for)
@@ -105,6 +109,9 @@ log = logging.getLogger(__name__)
 
 MAX_QUEUED = 64  # messages waiting for a topic's worker; past that the oldest go
 MAX_MARKERS = 10_000  # live markers of one topic; more are refused (STATUS)
+# A topic's worker meshes at most this share of the time (of one core): a peer's storm
+# then costs the daemon its share, and the worker folds what comes meanwhile.
+MESH_DUTY = 0.25
 _MAX_REFUSALS_KEPT = 16  # whole-message refusals folded while the loop is behind
 _MAX_IN_FLIGHT = 4  # batches handed to the loop and not applied yet (worker waits)
 
@@ -120,8 +127,8 @@ def place_unlocked(spec: MarkerSpec, fixed_frame: str, buffer: TfBuffer,
     """An unlocked marker placed in ``fixed_frame`` by the fixed<-frame transform at its
     stamp (the latest for stamp 0, or where tf has nothing at the stamp), or None where it
     is not moved: already in the fixed frame, a pose build_model refuses anyway, or a frame
-    tf cannot reach yet. ``resolve`` maps frame ids to the buffer's (frame_prefix); ``memo``
-    keeps the transforms looked up for one batch (an array's markers share a frame)."""
+    tf cannot reach yet. ``resolve`` maps frame ids to the buffer's; ``memo`` keeps the
+    transforms looked up for one batch (an array's markers share a frame)."""
     frame = spec.frame.lstrip("/")
     if not frame or frame == fixed_frame:
         return None
@@ -151,6 +158,65 @@ def _fixed_from(buffer: TfBuffer, fixed: str, frame: str, stamp_ns: int) -> Opti
             return buffer.lookup(fixed, frame, 0).as_tuple()
     except TfError:
         return None
+
+
+class BudgetError(MarkerError):
+    """A model the memory budget cannot hold (the clients that show its topic get a
+    STATUS RESOURCE_ERROR as well)."""
+
+
+class ModelBudget:
+    """Bytes of marker models kept (each once, shared by the clients it goes to), all
+    topics together and per topic (half of that), from any thread. A model is charged
+    before it is made (`charge`, its size from `model_bytes`), settled at its real size
+    once made, and released when it is dropped."""
+
+    def __init__(self, total_limit: int = DEFAULT_MAX_MARKER_BYTES) -> None:
+        self.topic_limit = total_limit // 2
+        self.total_limit = total_limit
+        self.total = 0
+        self._lock = threading.Lock()
+        self._charges: dict[tuple[str, MarkerKey], int] = {}
+        self._topics: dict[str, int] = {}
+
+    def charge(self, topic: str, key: MarkerKey, nbytes: int, *,
+               settle: bool = False) -> Optional[MarkerError]:
+        """Charge ``nbytes`` for the marker (replacing what it was charged); the refusal,
+        charging nothing, if that is over a bound (``settle``: always charged)."""
+        with self._lock:
+            old = self._charges.get((topic, key), 0)
+            on_topic = self._topics.get(topic, 0) - old + nbytes
+            total = self.total - old + nbytes
+            if not settle and on_topic > self.topic_limit:
+                return BudgetError("points", f"a model within the topic's memory budget "
+                                   f"({self.topic_limit} bytes of models a topic; "
+                                   f"{max(0, self.topic_limit - on_topic + nbytes)} left)",
+                                   f"a model of {nbytes} bytes")
+            if not settle and total > self.total_limit:
+                return BudgetError("points", f"a model within the daemon's memory budget "
+                                   f"({self.total_limit} bytes of models, all topics; "
+                                   f"{max(0, self.total_limit - total + nbytes)} left)",
+                                   f"a model of {nbytes} bytes")
+            self._charges[(topic, key)] = nbytes
+            self._topics[topic] = on_topic
+            self.total = total
+            return None
+
+    def release(self, topic: str, key: Optional[MarkerKey] = None) -> None:
+        """A marker's model is gone (``key`` None: every model of the topic)."""
+        with self._lock:
+            keys = ([k for k in self._charges if k[0] == topic] if key is None
+                    else [(topic, key)])
+            for k in keys:
+                nbytes = self._charges.pop(k, 0)
+                self.total -= nbytes
+                self._topics[topic] = self._topics.get(topic, 0) - nbytes
+            if not self._topics.get(topic):
+                self._topics.pop(topic, None)
+
+    def of_topic(self, topic: str) -> int:
+        with self._lock:
+            return self._topics.get(topic, 0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -203,6 +269,7 @@ class _FrameRef:
     name_key: NameKey
     handle: LookupKey
     users: int = 0
+    limited: bool = False  # goes only to the audiences of the topics that use it
 
 
 @dataclass
@@ -218,10 +285,13 @@ class _Worker:
     """One topic's reader: a bounded queue of messages, one thread that meshes them."""
 
     def __init__(self, sub: _Subscription, mesh_roots: tuple[Path, ...],
-                 package_paths: Mapping[str, Path]) -> None:
+                 package_paths: Mapping[str, Path], *, budget: Optional[ModelBudget] = None,
+                 gate: Optional[threading.Lock] = None) -> None:
         self._sub = sub
         self._mesh_roots = mesh_roots
         self._package_paths = dict(package_paths)
+        self._budget = budget or ModelBudget()
+        self._gate = gate or threading.Lock()  # the daemon's: one topic meshes at a time
         self._queue: deque[Any] = deque()
         self._cond = threading.Condition()
         self._in_flight = 0  # batches handed to the loop, not applied yet (under _cond)
@@ -254,16 +324,24 @@ class _Worker:
     def forget(self, key: MarkerKey) -> None:  # loop thread: dropped there
         with self._lock:
             self._models.pop(key, None)
+            self._budget.release(self._sub.topic, key)
 
     def remember(self, key: MarkerKey, digest: bytes, model: MarkerModel) -> None:
         with self._lock:
             self._models[key] = (digest, model)
+            self._budget.charge(self._sub.topic, key, model.nbytes, settle=True)
+
+    def _forget_all(self) -> None:
+        with self._lock:
+            self._models.clear()
+            self._budget.release(self._sub.topic)
 
     def stop(self) -> None:
         with self._cond:
             self._stopped = True
             self._queue.clear()
             self._cond.notify()
+        self._forget_all()
 
     def _run(self) -> None:
         # While the loop is behind (`_MAX_IN_FLIGHT` batches not applied), the worker keeps
@@ -271,6 +349,11 @@ class _Worker:
         # messages stays short and no DELETE is dropped with an old message; the folded
         # state is meshed and handed over once the loop takes batches again.
         folded: Optional[_Folded] = None
+        try:
+            warm_up()  # the mesh libraries load now, not with a storm's first marker
+        except Exception:  # noqa: BLE001 - the markers that need them will say why
+            log.exception("markers on %s: the mesh primitives could not be made",
+                          self._sub.topic)
         while True:
             with self._cond:
                 while not self._stopped and not self._queue and not (
@@ -281,24 +364,32 @@ class _Worker:
                 messages = list(self._queue)
                 self._queue.clear()
                 can_hand_over = self._in_flight < _MAX_IN_FLIGHT
+            spent = 0.0
             try:
                 if messages:
                     folded = self._fold(messages, folded)
                 if folded is None or not can_hand_over:
                     continue
-                updates = self._updates(folded)
+                with self._gate:
+                    began = time.thread_time()
+                    updates = self._updates(folded)
+                    spent = time.thread_time() - began
                 folded = None
             except Exception:  # noqa: BLE001 - a bug on one message must not end the topic
                 log.exception("markers on %s: a message could not be read", self._sub.topic)
                 folded = None
                 continue
-            if not updates:
-                continue  # nothing changed (an array re-sent as it was): no loop wake-up
-            with self._cond:
-                if self._stopped:
-                    return
-                self._in_flight += 1
-            self._sub.hand_over(updates)
+            if updates:  # else nothing changed (an array re-sent as it was): no wake-up
+                with self._cond:
+                    if self._stopped:
+                        return
+                    self._in_flight += 1
+                self._sub.hand_over(updates)
+            # Its share of the time (MESH_DUTY): what comes meanwhile is folded after.
+            rest = spent * (1.0 / MESH_DUTY - 1.0)
+            if rest > 0.001:
+                with self._cond:
+                    self._cond.wait_for(lambda: self._stopped, timeout=rest)
 
     def _events(self, msg: Any) -> list[MarkerEvent]:
         sub = self._sub
@@ -338,19 +429,16 @@ class _Worker:
         out, delete_all, events = list(folded.refused), folded.delete_all, folded.last
         placements: dict[tuple[str, int], Optional[Tf7]] = {}  # (frame, stamp) -> fixed<-frame
         if delete_all:
-            with self._lock:
-                self._models.clear()
+            self._forget_all()
             out.append(_Gone(None))
         for key, event in events.items():
             if event.action == DELETE:
-                with self._lock:
-                    self._models.pop(key, None)
+                self.forget(key)
                 out.append(_Gone(key))
                 continue
             assert event.action == ADD
             if event.error is not None or event.spec is None:
-                with self._lock:
-                    self._models.pop(key, None)
+                self.forget(key)
                 out.append(_Refused(key, event.error or MarkerError("marker", "a marker",
                                                                     "nothing")))
                 continue
@@ -370,17 +458,19 @@ class _Worker:
                     continue
                 model = known[1]  # unchanged: only its lifetime is renewed
             else:
+                # Judged before anything is made: a model the budget cannot hold is refused.
+                refusal = self._budget.charge(self._sub.topic, key, model_bytes(spec))
                 try:
-                    model = build_model(spec, mesh_roots=self._mesh_roots,
-                                        package_paths=dict(self._package_paths))
+                    if refusal is not None:
+                        raise refusal
+                    model = packed(build_model(spec, mesh_roots=self._mesh_roots,
+                                               package_paths=dict(self._package_paths)))
                 except MarkerError as error:
-                    with self._lock:
-                        self._models.pop(key, None)
+                    self.forget(key)
                     out.append(_Refused(key, error))
                     continue
                 self.meshed += 1
-                with self._lock:
-                    self._models[key] = (digest, model)
+                self.remember(key, digest, model)
             out.append(_Show(key, frame, spec.frame.lstrip("/"), digest, model,
                              spec.lifetime_ns, spec.stamp))
         return out
@@ -405,6 +495,10 @@ class _Subscription:
     received: int = 0
     closed: bool = False
     last_error: str = ""
+    # The clients its devices go to: those that created or subscribed to it (None: every
+    # client: the operator's, which plain OpenIGTLinkIF clients cannot ask for).
+    audience: Optional[set[Replier]] = None
+    last_budget_status: float = 0.0  # monotonic: one STATUS a second at most
 
     def on_message(self, msg: Any) -> None:  # ROS executor thread: hand off only
         self.received += 1
@@ -422,7 +516,8 @@ class MarkerBridges:
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: TfBridges,
                  frame_rules: Optional[NameRules] = None,
                  mesh_roots: tuple[Path, ...] = (),
-                 package_paths: Optional[Mapping[str, Path]] = None) -> None:
+                 package_paths: Optional[Mapping[str, Path]] = None,
+                 max_model_bytes: int = DEFAULT_MAX_MARKER_BYTES) -> None:
         self._ros = ros
         self._hub = hub
         self._names = names
@@ -437,33 +532,37 @@ class MarkerBridges:
         self._timer: Optional[asyncio.TimerHandle] = None
         self._timer_due = 0
         self._refusals = RateLimitedLog(log)
+        self.budget = ModelBudget(max_model_bytes)
+        hub.add_closed_listener(self._client_left)
+        self._meshing = threading.Lock()  # one topic's worker meshes at a time
 
     def hub_call(self, callback: Any, *args: Any) -> None:
         self._hub.call_soon(callback, *args)
 
     def placed(self, sub: _Subscription, spec: MarkerSpec,
                memo: dict[tuple[str, int], Optional[Tf7]]) -> Optional[MarkerSpec]:
-        """`place_unlocked` in this daemon's tf buffer (worker thread: it is thread-safe)."""
-        return place_unlocked(spec, sub.fixed_frame, self._tf.buffer, self._tf.resolve_frame,
-                              memo)
+        """`place_unlocked` in this daemon's tf buffer (worker thread: it is thread-safe).
+        A marker's frame ids are ROS's, as tf holds them: ``--frame-prefix`` (for frame
+        ids a client writes) does not apply, so the frame the policy judges, the one a
+        marker is placed by and the one its TRANSFORM follows are one name."""
+        return place_unlocked(spec, sub.fixed_frame, self._tf.buffer, strip_frame, memo)
 
     # ------------------------------------------------------------------ ops
 
-    def create(self, request: CreateMarkerSubscriber) -> dict[str, Any]:
+    def create(self, request: CreateMarkerSubscriber,
+               client: Optional[Replier] = None) -> dict[str, Any]:
         topic = self._resolve(request.topic)
         ros_type = request.ros_type
         existing = self.subscriptions.get(topic)
         if existing is not None:
             if existing.request == request:  # a reconnecting client re-creates what it had
+                if client is not None:  # or another subscribes: it gets the topic's too
+                    self._join(existing, client)
                 return self._describe(existing, existed=True)
             raise CommandFailedError("topic", "a topic without a marker subscriber "
                                      "(remove_marker_subscriber first, or repeat the same "
                                      "request)", topic, code=ErrorCode.ALREADY_EXISTS)
-        known = self._ros.topic_types(topic)
-        if known and ros_type not in known:
-            raise CommandFailedError("type", f"the type {topic} has in the ROS graph "
-                                     f"({', '.join(known)})", ros_type,
-                                     code=ErrorCode.ALREADY_EXISTS)
+        refuse_other_type(self._ros, topic, ros_type, "type")
         try:
             message_class = codec_for(ros_type).message_class
         except CodecError as error:
@@ -473,17 +572,21 @@ class MarkerBridges:
         topic_key = NameKey.marker_topic(topic)
         device = self._names.register(topic_key)
         sub = _Subscription(topic, ros_type, request, request.fixed_frame.lstrip("/"),
-                            topic_key, device, self, message_class=message_class)
+                            topic_key, device, self, message_class=message_class,
+                            audience=None if client is None else {client})
+        self._limit(sub, device)
         # Markers are read from their bytes when the installed Marker is the one the CDR
         # reader knows (a 1000-marker array: a few ms instead of ~100 through rclpy).
         sub.raw = ros_type in (MARKER_TYPE, MARKER_ARRAY_TYPE) and layout_supported(
             codec_for(MARKER_TYPE).message_class.get_fields_and_field_types())
-        sub.worker = _Worker(sub, self._mesh_roots, self._package_paths)
+        sub.worker = _Worker(sub, self._mesh_roots, self._package_paths, budget=self.budget,
+                             gate=self._meshing)
         try:
             sub.subscription = self._ros.stream_node.create_subscription(
                 message_class, topic, sub.on_message, qos_profile(request.qos), raw=sub.raw)
         except BaseException:
             sub.worker.stop()
+            self._hub.forget(device)
             self._names.release(topic_key)
             raise
         self.subscriptions[topic] = sub
@@ -491,6 +594,35 @@ class MarkerBridges:
         log.info("markers from %s (%s) in fixed frame %s: status device %r", topic, ros_type,
                  sub.fixed_frame, device)
         return self._describe(sub, existed=False)
+
+    # ------------------------------------------------------------------ audiences
+
+    def _limit(self, sub: _Subscription, device: str) -> None:
+        """``device`` (of ``sub``) goes only to ``sub``'s audience (if it has one)."""
+        if sub.audience is None:
+            return
+        self._hub.limit_to_audience(device)
+        for client in sub.audience:
+            self._hub.join(device, cast(Subscriber, client))
+
+    def _join(self, sub: _Subscription, client: Replier) -> None:
+        """``client`` subscribes to ``sub``'s markers: every device of it, now and later."""
+        if sub.audience is None or client in sub.audience:
+            return
+        sub.audience.add(client)
+        member = cast(Subscriber, client)
+        for device in [sub.device, *(live.device for live in sub.markers.values())]:
+            self._hub.join(device, member)
+        for parent in {live.parent for live in sub.markers.values()}:
+            ref = self._frames.get((sub.fixed_frame, parent))
+            if ref is not None and ref.limited:
+                self._hub.join(ref.device, member)
+
+    def _client_left(self, client: Replier) -> None:
+        # The hub forgets it in every audience; the topics' own lists too.
+        for sub in self.subscriptions.values():
+            if sub.audience is not None:
+                sub.audience.discard(client)
 
     def _resolve(self, topic: str) -> str:
         try:
@@ -514,10 +646,10 @@ class MarkerBridges:
         self._close(sub)
         return {"topic": topic, "devices": devices}
 
-    def list_markers(self, request: ListMarkers) -> dict[str, Any]:
+    def list_markers(self, request: ListMarkers) -> LargeResult:
         sub = self._find(request.topic)
         now = time.monotonic_ns()
-        return {
+        return LargeResult({
             "topic": sub.topic, "device": sub.device,
             "markers": [{"ns": live.key[0], "id": live.key[1], "device": live.device,
                          "type": live.kind, "frame": live.frame, "points": live.points,
@@ -529,7 +661,7 @@ class MarkerBridges:
             "withheld": [{"ns": k[0], "id": k[1], "reason": why}
                          for k, why in sub.withheld.items()],
             "errors": [{"ns": k[0], "id": k[1], "error": why} for k, why in sub.errors.items()],
-        }
+        })
 
     # ------------------------------------------------------------------ loop thread
 
@@ -607,13 +739,14 @@ class MarkerBridges:
                 return
             try:  # a namespace or frame no device name or tf lookup can hold (NUL)
                 name_key = NameKey.marker(sub.topic, key[0], key[1])
-                self._use_frame(sub.fixed_frame, parent)
+                self._use_frame(sub, parent)
             except (NamingError, TfError) as error:
                 self._refuse(sub, _Refused(key, MarkerError(
                     "ns/frame", "a namespace and frame id usable as names (no NUL)",
                     f"{key[0]!r} in frame {frame!r} ({error})")), gone)
                 return
             device = self._names.register(name_key)
+            self._limit(sub, device)
             live = _Live(key, name_key, device, frame, parent, model.kind, body_type,
                          update.digest, model.point_count)
             sub.markers[key] = live
@@ -631,14 +764,19 @@ class MarkerBridges:
         # Stamped with the marker's header stamp, as topic bridges stamp their messages.
         stamp = (igtl_timestamp_from_ros(*update.stamp) if update.stamp[0] > 0
                  else igtl_timestamp_now())
-        self._hub.publish_persistent(Message(device_name=live.device, body=model.body,
-                                             timestamp=stamp, metadata=metadata))
+        # A stream: a client that is behind gets only the newest model of each marker,
+        # and the model's content is shared by every client, not copied per client.
+        self._hub.stream_frame(live.device, SharedFrame(Message(
+            device_name=live.device, body=model.body, timestamp=stamp, metadata=metadata),
+            content_crc=model.content_crc))
         self._schedule(sub, live)
 
     def _refuse(self, sub: _Subscription, update: _Refused, gone: list[str]) -> None:
         key = update.key
         text = f"marker ns {key[0]!r} id {key[1]}: {update.error}"
         self._drop(sub, key, gone)
+        if isinstance(update.error, BudgetError):
+            self._tell_budget(sub, text)
         if sub.errors.get(key) == text:
             return
         sub.errors[key] = text
@@ -647,6 +785,18 @@ class MarkerBridges:
                                text)
         self._index(sub, gone, error=text)
         gone.clear()  # the index just sent said so
+
+    def _tell_budget(self, sub: _Subscription, text: str) -> None:
+        """A STATUS RESOURCE_ERROR on the topic's device to the clients that show it, at
+        most one a second (the topic's STRING names every refusal)."""
+        now = time.monotonic()
+        if now - sub.last_budget_status < 1.0:
+            return
+        sub.last_budget_status = now
+        clients = (tuple(sub.audience) if sub.audience is not None
+                   else tuple(cast(Replier, c) for c in self._hub.clients))
+        for client in clients:
+            client.send_status(sub.device, StatusCode.RESOURCE_ERROR, text[:4000])
 
     def _drop(self, sub: _Subscription, key: MarkerKey, gone: list[str]) -> None:
         if sub.worker is not None:
@@ -678,14 +828,30 @@ class MarkerBridges:
 
     # ------------------------------------------------------------------ frames
 
-    def _use_frame(self, fixed: str, frame: str) -> None:
+    def _use_frame(self, sub: _Subscription, frame: str) -> None:
+        """A marker of ``sub`` is in ``frame``: its TRANSFORM (shared by every marker of
+        every topic in it) goes to the audiences of those topics, or to everyone once a
+        topic without an audience (the operator's) uses it."""
+        fixed = sub.fixed_frame
         ref = self._frames.get((fixed, frame))
         if ref is None:
             name_key = NameKey.marker_frame(fixed, frame)
             device = self._names.register(name_key)
+            self._limit(sub, device)
             metadata = metadata_for(name_key, frame=fixed, units=UNITS_MM)
             handle = self._tf.stream_lookup(fixed, frame, device=device, metadata=metadata)
-            ref = self._frames[(fixed, frame)] = _FrameRef(device, name_key, handle)
+            ref = self._frames[(fixed, frame)] = _FrameRef(device, name_key, handle,
+                                                           limited=sub.audience is not None)
+        elif ref.limited and sub.audience is None:
+            # To everyone from now on: streamed again, without an audience.
+            self._tf.stop_lookup(ref.handle)
+            self._hub.forget(ref.device)
+            ref.handle = self._tf.stream_lookup(
+                fixed, frame, device=ref.device,
+                metadata=metadata_for(ref.name_key, frame=fixed, units=UNITS_MM))
+            ref.limited = False
+        elif ref.limited:
+            self._limit(sub, ref.device)
         ref.users += 1
 
     def _release_frame(self, fixed: str, frame: str) -> None:
@@ -766,7 +932,7 @@ class MarkerBridges:
 
     def handlers(self) -> dict[type[Op], Handler]:
         return {
-            CreateMarkerSubscriber: lambda request, _: self.create(request),
+            CreateMarkerSubscriber: self.create,
             RemoveMarkerSubscriber: lambda request, _: self.remove(request),
             ListMarkers: lambda request, _: self.list_markers(request),
         }
@@ -781,7 +947,8 @@ class MarkerBridges:
             "markers": len(sub.markers), "withheld": len(sub.withheld),
             "errors": len(sub.errors), "raw": sub.raw,
             "dropped": worker.dropped if worker is not None else 0,
-            "meshed": worker.meshed if worker is not None else 0}
+            "meshed": worker.meshed if worker is not None else 0,
+            "model_bytes": self.budget.of_topic(sub.topic)}
         if existed is not None:
             out["existed"] = existed
         return out

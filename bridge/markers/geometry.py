@@ -53,6 +53,7 @@ import numpy.typing as npt
 from bridge.robots.errors import RobotError
 from bridge.robots.resources import PackageResolver
 from protocol.conversions import metres_to_mm, quaternion_to_rotation
+from protocol.crc64 import KnownCrc
 from protocol.errors import ProtocolError
 from protocol.messages import AttributeKind, PolyData, PolyDataAttribute, RawBody, String
 from protocol.naming import (KEY_LINE_WIDTH, KEY_POINT_COLORS, KEY_POINT_SIZE, KEY_POSITION,
@@ -61,7 +62,7 @@ from protocol.naming import (KEY_LINE_WIDTH, KEY_POINT_COLORS, KEY_POINT_SIZE, K
 __all__ = ["ARROW_HEAD_FRACTION", "KINDS", "MAX_ARRAY_MARKERS", "MAX_MARKER_POINTS",
            "MAX_MODEL_POINTS",
            "MarkerError", "MarkerModel", "MarkerSpec", "RGBA_ATTRIBUTE", "build_model",
-           "kind_of_type"]
+           "kind_of_type", "model_bytes", "packed", "warm_up"]
 
 F64 = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
@@ -157,6 +158,7 @@ class MarkerModel:
     body: Union[PolyData, String, RawBody]  # RawBody: a POLYDATA packed from a template
     rgba: Rgba
     metadata: dict[str, str]
+    content_crc: Optional[KnownCrc] = None  # a packed body's (`packed`), for its frames
 
     @property
     def type_name(self) -> str:
@@ -169,6 +171,26 @@ class MarkerModel:
         if isinstance(self.body, RawBody):
             return int.from_bytes(self.body.data[:4], "big")
         return 1
+
+    @property
+    def nbytes(self) -> int:
+        """What it holds: its content's bytes (packed, `packed`) or its text's."""
+        if isinstance(self.body, RawBody):
+            return len(self.body.data)
+        if isinstance(self.body, String):
+            return len(self.body.text)
+        return len(self.body.pack_view())
+
+
+def packed(model: MarkerModel) -> MarkerModel:
+    """``model`` with its POLYDATA as its content's bytes alone (one numpy buffer): its
+    arrays, several times its size while they were made, go; what is kept and sent is one
+    copy, shared by every client that gets it."""
+    if not isinstance(model.body, PolyData):
+        return model
+    content = model.body.pack_view()
+    return MarkerModel(model.kind, RawBody(PolyData.TYPE, content), model.rgba,
+                       model.metadata, KnownCrc(content))
 
 
 # ---------------------------------------------------------------------------- checks
@@ -247,6 +269,14 @@ def _unit(kind: str) -> tuple[F64, U32]:
     else:
         mesh = cache.primitive("cone", 0.5, 1.0)
     return np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+
+
+def warm_up() -> None:
+    """Make the unit primitives now (their first use imports the mesh libraries: a second
+    or two of a thread that holds the interpreter), so that it is not the first marker of
+    a storm that pays it."""
+    for kind in ("cube", "sphere", "list_sphere", "cylinder", "cone"):
+        _unit(kind)
 
 
 def _polydata(points_m: F64, *, rgba: Rgba, colours: Optional[F32] = None,
@@ -482,6 +512,33 @@ def _mesh(spec: MarkerSpec, rgba: Rgba, mesh_roots: Optional[tuple[object, ...]]
     body = _polydata(_posed(np.asarray(mesh.vertices), spec), rgba=rgba, colours=colours,
                      triangles=np.asarray(mesh.triangles))
     return body, rgba
+
+
+# POLYDATA bytes of a model: a point (3 + 4 float32: position, RGBA) and a triangle cell.
+_POINT_BYTES = 28
+_TRIANGLE_BYTES = 16
+
+
+def model_bytes(spec: MarkerSpec) -> int:
+    """The size of the model `build_model` would make of ``spec`` (its POLYDATA content,
+    to within a few hundred bytes), known before any of it is made: a memory budget is
+    judged on it first. A MESH_RESOURCE's size is known only once its file is read: 0."""
+    kind, n = spec.kind, len(spec.points)
+    if kind in ("cube_list", "sphere_list"):
+        v, t = _unit("cube" if kind == "cube_list" else "list_sphere")
+        return 64 + n * (len(v) * _POINT_BYTES + len(t) * _TRIANGLE_BYTES)
+    if kind in ("points", "point"):
+        return 64 + n * (_POINT_BYTES + 8)
+    if kind in ("line_strip", "line_list", "path", "polygon"):
+        return 64 + n * (_POINT_BYTES + 4) + 8
+    if kind == "triangle_list":
+        return 64 + n * _POINT_BYTES + (n // 3) * _TRIANGLE_BYTES
+    if kind == "text_view_facing":
+        return 64 + min(len(spec.text), MAX_TEXT_BYTES)
+    if kind in ("cube", "sphere", "cylinder", "arrow"):
+        v, t = _unit("sphere" if kind in ("sphere", "arrow") else kind)
+        return 64 + len(v) * _POINT_BYTES + len(t) * _TRIANGLE_BYTES
+    return 0
 
 
 def build_model(spec: MarkerSpec, *, mesh_roots: Optional[tuple[object, ...]] = (),

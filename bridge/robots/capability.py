@@ -53,6 +53,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String as StringMsg
 
 from bridge.dispatch import Handler
+from bridge.graph_types import refuse_other_type
 from bridge.parameters import ParameterBridges, ParameterWatch
 from bridge.robots.errors import RobotError
 from bridge.robots.joints import describe_joints, joint_positions
@@ -81,6 +82,8 @@ log = logging.getLogger(__name__)
 _STATUS_NAME = "slicer-ros2-bridge"
 # How long create_robot waits for a latched description on a topic before saying "waiting".
 _TOPIC_WAIT_S = 2.0
+_JOINT_STATES_TYPE = "sensor_msgs/msg/JointState"
+_DESCRIPTION_TYPE = "std_msgs/msg/String"
 # robot_state_publisher's own profile for robot_description: a late subscriber gets it.
 # As joint_states publishers do (robot_state_publisher subscribes reliable, depth 10).
 _JOINT_STATES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
@@ -270,6 +273,7 @@ class RobotBridges:
         # topic
         loop = asyncio.get_running_loop()
         robot.first_description = loop.create_future()
+        refuse_other_type(self._ros, source.topic, _DESCRIPTION_TYPE, "source.topic")
         robot.subscription = self._ros.node.create_subscription(
             StringMsg, source.topic, lambda msg: self._hub.call_soon(
                 self._on_topic, robot, msg.data), _DESCRIPTION_QOS)
@@ -583,6 +587,7 @@ class RobotBridges:
             if robot.joint_publisher is not None:
                 self._ros.destroy(robot.joint_publisher)
                 robot.joint_publisher = None
+            refuse_other_type(self._ros, topic, _JOINT_STATES_TYPE, "topic")
             robot.joint_publisher = self._ros.node.create_publisher(
                 JointState, topic, _JOINT_STATES_QOS)
             robot.joint_topic = topic

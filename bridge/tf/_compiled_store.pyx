@@ -26,7 +26,7 @@ import sys
 from bridge.tf.errors import ConnectivityError, ExtrapolationError, TfError, TfLookupError
 
 # The store interface this module implements (buffer.STORE_INTERFACE): bump both together.
-INTERFACE = 2
+INTERFACE = 3
 
 # CDR's doubles are read as the machine's: on a big-endian machine `insert_cdr` declines.
 cdef bint LITTLE_ENDIAN = sys.byteorder == "little"
@@ -237,10 +237,15 @@ cdef class CompiledFrameStore:
     cdef Py_ssize_t *_chain_src
     cdef Py_ssize_t *_chain_tgt
     cdef public long long graph_version
+    cdef Py_ssize_t _max_frames  # 0: no bound (TfBuffer's, see buffer.py)
+    cdef Py_ssize_t _max_name  # characters of a frame id; 0: no bound
 
-    def __cinit__(self, long long window_ns):
+    def __cinit__(self, long long window_ns, Py_ssize_t max_frames=0,
+                  Py_ssize_t max_name=0):
         # C fields start at 0 / NULL (the allocation is zeroed).
         self._window_ns = window_ns
+        self._max_frames = max_frames
+        self._max_name = max_name
         self._names = []
         self._ids = {}
 
@@ -406,10 +411,8 @@ cdef class CompiledFrameStore:
         try:
             # Decode every frame id first: bytes that are not UTF-8 store nothing.
             for k in range(count):
-                names.append(PyUnicode_DecodeUTF8(<const char *>p + rows[k].frame_at,
-                                                  rows[k].frame_len, NULL))
-                names.append(PyUnicode_DecodeUTF8(<const char *>p + rows[k].child_at,
-                                                  rows[k].child_len, NULL))
+                names.append(self._name(p, rows[k].frame_at, rows[k].frame_len))
+                names.append(self._name(p, rows[k].child_at, rows[k].child_len))
         except UnicodeDecodeError:
             PyMem_Free(rows)
             return None
@@ -417,6 +420,15 @@ cdef class CompiledFrameStore:
             return self._store_rows(rows, count, names, static)
         finally:
             PyMem_Free(rows)
+
+    cdef str _name(self, const unsigned char *p, Py_ssize_t at, Py_ssize_t length):
+        """A frame id; one far over the bound (a peer's 1 MB ids) only as much of it as
+        shows that, and marked cut: it is refused, and a megabyte string a frame id would
+        be made for nothing (and stay in the heap)."""
+        cdef Py_ssize_t most = 4 * self._max_name  # UTF-8: at most 4 bytes a character
+        if self._max_name and length > most:
+            return PyUnicode_DecodeUTF8(<const char *>p + at, most, "replace") + "\u2026"
+        return PyUnicode_DecodeUTF8(<const char *>p + at, length, NULL)
 
     cdef tuple _store_rows(self, Raw *rows, Py_ssize_t count, list names, bint static):
         cdef set changed = set()
@@ -427,6 +439,7 @@ cdef class CompiledFrameStore:
         cdef double v[7]
         cdef double norm2, n
         cdef Raw *r
+        cdef bint over
         for k in range(count):
             r = &rows[k]
             parent = names[2 * k]
@@ -438,8 +451,14 @@ cdef class CompiledFrameStore:
                 child = child[1:]
             stamp = 0 if static else <int64_t>r.sec * 1000000000 + r.nanosec
             memcpy(v, r.v, sizeof(v))
+            # TfBuffer's bounds (it words them): a frame id too long, a frame past the count.
+            over = ((self._max_name and (len(parent) > self._max_name
+                                         or len(child) > self._max_name))
+                    or (self._max_frames and self._count + 2 > self._max_frames
+                        and self._count + (parent not in self._ids)
+                        + (child not in self._ids) > self._max_frames))
             norm2 = v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]
-            if (not child or not parent or parent == child or stamp < 0
+            if (over or not child or not parent or parent == child or stamp < 0
                     or not (isfinite(v[0]) and isfinite(v[1]) and isfinite(v[2])
                             and isfinite(v[3]) and isfinite(v[4]) and isfinite(v[5])
                             and isfinite(v[6]))
@@ -468,6 +487,10 @@ cdef class CompiledFrameStore:
     def known(self):
         return list(self._names)
 
+    @property
+    def frame_count(self):
+        return self._count
+
     def has_frame(self, str frame):
         return frame in self._ids
 
@@ -480,6 +503,18 @@ cdef class CompiledFrameStore:
             first = first_live(f, self._window_ns)
             out.append((name, self._names[f.samples[f.end - 1].parent], f.static,
                         f.samples[f.end - 1].stamp, f.samples[first].stamp, f.end - first))
+        return out
+
+    def samples_of(self, str frame):
+        """The live samples of a child frame, oldest first: (stamp, parent, value)."""
+        cdef Frame *f = &self._frames[<Py_ssize_t>self._ids[frame]]
+        cdef Py_ssize_t i
+        cdef Sample *s
+        cdef list out = []
+        for i in range(first_live(f, self._window_ns), f.end):
+            s = &f.samples[i]
+            out.append((s.stamp, self._names[s.parent],
+                        (s.v[0], s.v[1], s.v[2], s.v[3], s.v[4], s.v[5], s.v[6])))
         return out
 
     cdef list _cached_names(self):

@@ -56,11 +56,12 @@ from bridge.tf.errors import (
 )
 from bridge.tf.math import Tf7
 from bridge.tf.store import FrameStore
+from protocol.commands.fields import MAX_NAME
 from protocol.conversions import matrix_to_pose, pose_to_matrix
 
 # The store interface this module expects; the compiled module states the one it was built
 # for, so a module left from an older build (a pull without `make setup`) is not used.
-STORE_INTERFACE = 2
+STORE_INTERFACE = 3
 try:  # built by setup.py where a C compiler is found (optional: see `COMPILED`)
     from bridge.tf import _compiled_store
 except ImportError:
@@ -68,10 +69,18 @@ except ImportError:
 CompiledFrameStore = (_compiled_store.CompiledFrameStore
                       if getattr(_compiled_store, "INTERFACE", None) == STORE_INTERFACE else None)
 
-__all__ = ["StampedTransform", "FrameInfo", "TfBuffer", "COMPILED"]
+__all__ = ["COMPILED", "MAX_FRAMES", "MAX_FRAME_ID", "FrameInfo", "StampedTransform",
+           "TfBuffer"]
 
 _NS_PER_S = 1_000_000_000
 _STAMP_LIMIT = 1 << 63  # tf2's times are int64 ns; so are the compiled store's
+# tf2 keeps every frame it has seen for good: a peer sending new names (1 MB each, or
+# 100,000 small ones) grew the daemon by hundreds of MB. Frame ids are bounded as every
+# ROS name a client sends is (MAX_NAME characters), and so is the number of frames.
+MAX_FRAME_ID = MAX_NAME
+MAX_FRAMES = 10_000
+# Refusals of one TFMessage's CDR worded one by one; the others are counted.
+_WORDED_REFUSALS = 8
 # Set to 1 to run every TfBuffer on the pure Python store (to compare, or to rule it out).
 PURE_PYTHON_ENV = "SLICER_BRIDGE_PURE_PYTHON_TF"
 COMPILED = CompiledFrameStore is not None and os.environ.get(PURE_PYTHON_ENV, "") != "1"
@@ -144,17 +153,23 @@ class TfBuffer:
     ``cache_time_s`` is how far behind each frame's newest sample older samples are kept
     (tf2's default is 10 s). ``compiled``: True to require the compiled store, False for
     the pure Python one, None (the default) for the compiled one where it was built (see
-    `COMPILED`). Thread-safe: see the module docstring.
+    `COMPILED`). ``max_frames`` and ``max_frame_id`` bound what it keeps (a transform
+    naming a frame id longer than ``max_frame_id`` characters, or a new frame past
+    ``max_frames``, is refused like an invalid one). Thread-safe: see the module docstring.
     """
 
-    def __init__(self, cache_time_s: float = 10.0, *, compiled: Optional[bool] = None) -> None:
+    def __init__(self, cache_time_s: float = 10.0, *, compiled: Optional[bool] = None,
+                 max_frames: int = MAX_FRAMES, max_frame_id: int = MAX_FRAME_ID) -> None:
         if not (isinstance(cache_time_s, (int, float)) and math.isfinite(cache_time_s)
                 and cache_time_s > 0):
             raise InvalidArgumentError("cache_time_s", "a finite number of seconds > 0",
                                        repr(cache_time_s))
         self._cache_ns = int(cache_time_s * _NS_PER_S)
         self._lock = threading.Lock()
-        self._store: _Store = _make_store(self._cache_ns, compiled)
+        self._max_frames = max_frames
+        self._max_frame_id = max_frame_id
+        self._no_stale_until = 0  # stamp before which a full buffer has no stale frame
+        self._store: _Store = _make_store(self._cache_ns, compiled, max_frames, max_frame_id)
 
     # ------------------------------------------------------------------ writing
 
@@ -186,14 +201,16 @@ class TfBuffer:
         changed: set[str] = set()
         rejected: list[InvalidArgumentError] = []
         with self._lock:
-            insert = self._store.insert
             for index, tr in enumerate(transforms):
                 try:
-                    parent, child, stamp, value = _check(tr, index, static)
+                    parent, child, stamp, value = _check(tr, index, static,
+                                                         self._max_frame_id)
+                    self._check_room(parent, child, index, stamp)
                 except InvalidArgumentError as exc:
                     rejected.append(exc)
                     continue
-                if insert(parent, child, stamp, value, static):
+                # The store itself: `_check_room` may have made a new one.
+                if self._store.insert(parent, child, stamp, value, static):
                     changed.add(child)
         if rejected:
             raise RejectedTransformsError(rejected, changed)
@@ -220,20 +237,73 @@ class TfBuffer:
         if not refused:
             return changed
         rejected: list[InvalidArgumentError] = []
-        for index, raw in refused:
+        # A peer's flood (a thousand new frames past the bound in each message) is worded
+        # a few at a time: judging each refusal again in Python cost 20 ms a message.
+        unworded = max(0, len(refused) - _WORDED_REFUSALS)
+        for index, raw in refused[:_WORDED_REFUSALS]:
             try:
-                checked = _check(_from_raw(raw), index, static)
+                checked = _check(_from_raw(raw), index, static, self._max_frame_id)
+                with self._lock:
+                    self._check_room(checked[0], checked[1], index, checked[2])
+                    # The two checks agree (tests hold them together); if they ever did
+                    # not, the sample would be kept, not lost.
+                    if self._store.insert(*checked, static):
+                        changed.add(checked[1])
             except InvalidArgumentError as exc:
                 rejected.append(exc)
-                continue
-            # The two checks agree (tests hold them together); if they ever did not, the
-            # sample would be kept, not lost.
-            with self._lock:
-                if self._store.insert(*checked, static):
-                    changed.add(checked[1])
+        if unworded and not rejected:  # the worded few were stored after all
+            rejected.append(InvalidArgumentError("transforms", "transforms the buffer keeps",
+                                                 f"{unworded} refused"))
+            unworded -= 1
         if rejected:
-            raise RejectedTransformsError(rejected, changed)
+            raise RejectedTransformsError(rejected, changed, unworded)
         return changed
+
+    def _check_room(self, parent: str, child: str, index: int, stamp: int) -> None:
+        """Under the lock: InvalidArgumentError if storing parent<-child (at ``stamp``)
+        would make the buffer know more than ``max_frames`` frames, once stale frames are
+        forgotten."""
+        store = self._store
+        if store.frame_count + 2 <= self._max_frames:
+            return  # the usual case: no lookups
+        new = (not store.has_frame(parent)) + (not store.has_frame(child))
+        if new and store.frame_count + new > self._max_frames and self._forget_stale(stamp):
+            store = self._store
+            new = (not store.has_frame(parent)) + (not store.has_frame(child))
+        if new and store.frame_count + new > self._max_frames:
+            raise InvalidArgumentError(
+                f"transforms[{index}]", f"frames the buffer knows, or room for new ones (at "
+                f"most {self._max_frames} frames are kept)", f"{new} new frame(s): "
+                f"'{_shown(parent)}' -> '{_shown(child)}'")
+
+    def _forget_stale(self, stamp: int) -> bool:
+        """Under the lock, with the buffer full: forget the dynamic frames whose newest
+        sample is more than the cache time older than the newest sample of all, or than
+        ``stamp`` (a new frame's: a peer's flood of once-sent frames must not keep it out),
+        so that new frames find room again; whether any went.
+        Unlike tf2, which keeps every frame for good, a full buffer lets stale ones go:
+        the store is made again from the frames kept (only ever when full)."""
+        if stamp < self._no_stale_until:
+            return False  # the last look found none, and none can have gone stale since
+        rows = self._store.frame_rows()
+        dynamic = [row[3] for row in rows if not row[2]]
+        newest = max([stamp, *dynamic])
+        stale = {row[0] for row in rows if not row[2] and row[3] < newest - self._cache_ns}
+        if not stale:
+            # A frame's newest sample only gets newer: none is stale before this.
+            self._no_stale_until = min(dynamic, default=_STAMP_LIMIT) + self._cache_ns
+            return False
+        old = self._store
+        store = _make_store(self._cache_ns, not isinstance(old, FrameStore),
+                            self._max_frames, self._max_frame_id)
+        for frame, _, static, _, _, _ in rows:
+            if frame not in stale:
+                for stamp, parent, value in old.samples_of(frame):
+                    store.insert(parent, frame, stamp, value, static)
+        store.graph_version = old.graph_version + 1  # every lookup's chain is derived again
+        self._store = store
+        self._no_stale_until = 0
+        return True
 
     def clear(self) -> None:
         """Forget every frame (for example after a ROS time jump backwards)."""
@@ -342,15 +412,17 @@ class TfBuffer:
 _Store = Union[FrameStore, "CompiledFrameStore"]
 
 
-def _make_store(window_ns: int, compiled: Optional[bool]) -> _Store:
+def _make_store(window_ns: int, compiled: Optional[bool], max_frames: int,
+                max_frame_id: int) -> _Store:
     if compiled is None:
         compiled = COMPILED
     if not compiled:
-        return FrameStore(window_ns)
+        return FrameStore(window_ns)  # TfBuffer checks the bounds before each insert
     if CompiledFrameStore is None:
         raise InvalidArgumentError("compiled", "False or None: the compiled store was not built",
                                    "True")
-    return CompiledFrameStore(window_ns)
+    # It refuses what is out of bounds in insert_cdr; TfBuffer words the refusal.
+    return CompiledFrameStore(window_ns, max_frames, max_frame_id)
 
 
 def _from_raw(raw: Tuple[int, int, str, str, float, float, float, float, float, float, float],
@@ -389,7 +461,13 @@ def _time_arg(time_ns: object) -> int:
     return time_ns
 
 
-def _check(tr: StampedTransform, index: int, static: bool) -> Tuple[str, str, int, Tf7]:
+def _shown(frame: str) -> str:
+    """A frame id as an error shows it: a long one cut (it may be a megabyte)."""
+    return frame if len(frame) <= 64 else f"{frame[:60]}...({len(frame)} characters)"
+
+
+def _check(tr: StampedTransform, index: int, static: bool,
+           max_frame_id: int = MAX_FRAME_ID) -> Tuple[str, str, int, Tf7]:
     """Validate one incoming transform; return (parent, child, stamp, value) to store."""
     where = f"transforms[{index}]"
     parent, child = tr.parent, tr.child
@@ -397,6 +475,10 @@ def _check(tr: StampedTransform, index: int, static: bool) -> Tuple[str, str, in
         raise InvalidArgumentError(f"{where} frame ids", "strings",
                                    f"{type(parent).__name__}, {type(child).__name__}")
     parent, child = _strip(parent), _strip(child)
+    if len(parent) > max_frame_id or len(child) > max_frame_id:
+        name, frame = ("parent", parent) if len(parent) > max_frame_id else ("child", child)
+        raise InvalidArgumentError(f"{where}.{name}", f"a frame id of at most "
+                                   f"{max_frame_id} characters", _shown(frame))
     if not child:
         raise InvalidArgumentError(f"{where}.child", "a non-empty frame id", repr(tr.child))
     if not parent:

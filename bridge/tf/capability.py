@@ -347,7 +347,7 @@ class TfBridges:
     def _warn_rejected(self, error: RejectedTransformsError, static: bool) -> None:
         topic = self._tf_static_topic if static else self._tf_topic
         self._refusals.warning(topic, None, "refused %d transform(s) from %s: %s",
-                               len(error.rejected), topic, error, count=len(error.rejected))
+                               error.count, topic, error, count=error.count)
 
     def _call_loop(self) -> None:
         with self._lock:

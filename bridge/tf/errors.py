@@ -177,12 +177,15 @@ class RejectedTransformsError(InvalidArgumentError):
     transform (its ``field`` starts with ``transforms[i]``).
     """
 
-    def __init__(self, rejected: Sequence[InvalidArgumentError], changed: set[str]) -> None:
+    def __init__(self, rejected: Sequence[InvalidArgumentError], changed: set[str],
+                 unworded: int = 0) -> None:
         self.rejected = list(rejected)
         self.changed = changed
+        # Refused too, not worded one by one (a flood of them: the first few say enough).
+        self.count = len(self.rejected) + unworded
         first = self.rejected[0]
-        more = f" (and {len(self.rejected) - 1} more)" if len(self.rejected) > 1 else ""
+        more = f" (and {self.count - 1} more)" if self.count > 1 else ""
         super().__init__(first.field, first.expected, f"{first.got!s}{more}")
 
     def __reduce__(self) -> tuple[object, ...]:
-        return (type(self), (self.rejected, self.changed))
+        return (type(self), (self.rejected, self.changed, self.count - len(self.rejected)))

@@ -122,6 +122,11 @@ class FrameStore:
         self._known: dict[str, None] = {}  # every frame id seen, children and parents
         self.graph_version = 0
 
+    @property
+    def frame_count(self) -> int:
+        """Frame ids known, children and parents alike."""
+        return len(self._known)
+
     # ------------------------------------------------------------------ writing
 
     def insert(self, parent: str, child: str, stamp: int, value: Tf7, static: bool) -> bool:
@@ -195,6 +200,12 @@ class FrameStore:
             out.append((name, c.parents[-1], c.static, c.stamps[-1], c.stamps[first],
                         len(c.stamps) - first))
         return out
+
+    def samples_of(self, frame: str) -> List[Tuple[int, str, Tf7]]:
+        """The live samples of a child frame, oldest first: (stamp, parent, value)."""
+        c = self._frames[frame]
+        first = c.first()
+        return list(zip(c.stamps[first:], c.parents[first:], c.values[first:]))
 
     def lookup(self, target: str, source: str, t: int) -> Result:
         """target<-source at ``t`` (0: the latest common time), or a TfError."""

@@ -48,23 +48,27 @@ def _reject_constant(name: str) -> Any:
 
 
 def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in out:
-            raise BadJsonError(key, "each key once", "a duplicate key")
-        out[key] = value
+    out = dict(pairs)
+    if len(out) != len(pairs):  # the rare case: find the key, to name it
+        seen: set[str] = set()
+        for key, _ in pairs:
+            if key in seen:
+                raise BadJsonError(key, "each key once", "a duplicate key")
+            seen.add(key)
     return out
 
 
 def _depth_ok(value: Any, limit: int) -> bool:
+    # Only containers go on the stack: a list of 70,000 numbers is one look at each.
+    containers = (dict, list)
     stack: list[tuple[Any, int]] = [(value, 1)]
     while stack:
         item, depth = stack.pop()
-        if isinstance(item, (dict, list)):
-            if depth > limit:
-                return False
-            children = item.values() if isinstance(item, dict) else item
-            stack.extend((child, depth + 1) for child in children)
+        if depth > limit:
+            return False
+        children = item.values() if isinstance(item, dict) else item
+        stack.extend([(child, depth + 1) for child in children
+                      if isinstance(child, containers)])
     return True
 
 

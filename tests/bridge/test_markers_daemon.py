@@ -417,9 +417,13 @@ def test_delete_deleteall_and_lifetime(client: Connection, peer: Peer,
     assert gone not in json.loads(status.metadata[KEY_MARKERS])
     assert {rows_after[("d", 0)]["device"], rows_after[("d", 2)]["device"]} == \
         set(json.loads(status.metadata[KEY_MARKERS]))
-    # A client connecting now gets the live models and not the deleted one.
+    # A client subscribing now gets the live models and not the deleted one (markers go
+    # to the clients that created or subscribed to their topic: issue 22).
     late = daemon.connect()
     try:
+        assert late.command("create_marker_subscriber", {
+            "topic": "/test_markers", "type": "MarkerArray",
+            "fixed_frame": "world"})["existed"] is True
         late.wait_for(rows[("d", 2)]["device"], timeout=scaled(10))
         late.wait_for(status.device_name, timeout=scaled(10))
         assert late.latest(gone) is None

@@ -98,3 +98,24 @@ def test_with_every_client_busy_a_new_service_is_refused(processes: Processes) -
             assert len(list(ros.node.clients)) == 1
 
     asyncio.run(scenario())
+
+
+def test_an_idle_client_goes_idle_client_s_after_its_last_call(processes: Processes) -> None:
+    """The documented lifetime (issue 22, item 11: one lived 115 s against 60): the idle
+    timer is armed for the moment the client has been unused for idle_client_s, not a
+    whole period after the last check (which made it almost twice that)."""
+    server = processes.python("server", "service_server.py", "--namespace", "/sb3")
+    server.wait_for_output("READY", timeout=30)
+    idle = 2.0
+
+    async def scenario() -> None:
+        async with _services("idle", idle_client_s=idle) as (ros, services):
+            loop = asyncio.get_running_loop()
+            await services.call_service(_call("/sb3/trigger", "std_srvs/srv/Trigger", {}))
+            (entry,) = services.called.values()
+            await _until(lambda: not services.called, "the idle client dropped")
+            lived = loop.time() - entry.last_used
+            # Its due time, plus the loop's lateness; a whole period more before the fix.
+            assert idle <= lived < 1.5 * idle, lived
+
+    asyncio.run(scenario())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import struct
@@ -13,7 +14,7 @@ from protocol.crc64 import crc64
 from protocol.errors import MessageError
 from protocol.framing import Decoder, encode
 from protocol.messages import Command, Message, Status, String, Transform
-from support import scaled
+from support import PEERS, Child, Processes, scaled
 
 import numpy as np
 
@@ -200,3 +201,40 @@ def is_reply(command_id: int):
     def matches(message: Message) -> bool:
         return message.type_name == "RTS_COMMAND" and message.body.command_id == command_id
     return matches
+
+
+def send_command(client: RawClient, op: str, arguments: dict, command_id: int) -> None:
+    """Send one COMMAND (JSON ``arguments``) without waiting for its reply."""
+    client.send(command_bytes(op, json.dumps(arguments).encode(), command_id))
+
+
+def reply_to(client: RawClient, command_id: int, timeout: float = 10.0) -> dict:
+    """The reply envelope ({"ok", "result" | "error"}) of command ``command_id`` (what
+    came before it is dropped: read replies in the order they come)."""
+    return json.loads(client.read_until(is_reply(command_id), timeout).body.text)
+
+
+def ask(client: RawClient, op: str, arguments: dict, command_id: int,
+        timeout: float = 10.0) -> dict:
+    """Send one COMMAND and return its reply envelope (``timeout`` scaled)."""
+    send_command(client, op, arguments, command_id)
+    return reply_to(client, command_id, timeout)
+
+
+class MarkerPeer:
+    """tests/peers/marker_publisher.py and its control file: `send` publishes once what the
+    document holds (markers, "statics" on /tf_static, ...) and waits until it has."""
+
+    def __init__(self, processes: Processes, folder: Path) -> None:
+        self.control = folder / "control.json"
+        self.seq = 0
+        self.child: Child = processes.python("markers", str(PEERS / "marker_publisher.py"),
+                                             str(self.control))
+        self.child.wait_for_output("READY", timeout=30)
+
+    def send(self, **doc: object) -> None:
+        self.seq += 1
+        tmp = self.control.with_suffix(".tmp")
+        tmp.write_text(json.dumps({"seq": self.seq, **doc}))
+        os.replace(tmp, self.control)
+        self.child.wait_for_output(f"APPLIED {self.seq}", timeout=30)

@@ -6,10 +6,12 @@ tf: /tf_static world -> base (0.1, 0.2, 0.3) m, identity; /tf world -> moving at
 translation from the control file's "moving" (default 0, 0, 0), identity rotation.
 
 CONTROL_FILE is JSON {"seq": N, "markers": [...], "marker": {...}, "path": {...},
-"polygon": {...}, "point": {...}, "moving": [x, y, z]}, rewritten whole by the test
+"polygon": {...}, "point": {...}, "moving": [x, y, z], "statics": [[parent, child, x, y,
+z], ...]}, rewritten whole by the test
 (rename). Each time its seq changes the peer publishes, ONCE, what it holds: "markers" as
 one MarkerArray on /test_markers, "marker" as a Marker on /test_marker, the others on
-/test_path, /test_polygon, /test_point; then prints "APPLIED N". Nothing is published
+/test_path, /test_polygon, /test_point, "statics" (with world -> base) on /tf_static;
+then prints "APPLIED N". Nothing is published
 before the daemon's subscriptions have matched (reliable QoS: then nothing is lost), so
 a marker's lifetime is not renewed by repeats.
 
@@ -100,6 +102,10 @@ def main() -> None:
                 continue
             if pub.get_subscription_count() < 1:
                 return  # not matched yet: try again on the next tick
+        if "statics" in doc:
+            static_pub.publish(TFMessage(transforms=[
+                transform(node, "world", "base", (0.1, 0.2, 0.3))] + [
+                transform(node, parent, child, xyz) for parent, child, *xyz in doc["statics"]]))
         if "markers" in doc:
             pubs["markers"].publish(MarkerArray(markers=[marker(m) for m in doc["markers"]]))
         if "marker" in doc:

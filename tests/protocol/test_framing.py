@@ -485,3 +485,25 @@ def test_another_protocol_s_bytes_are_named_in_the_header_error(first: bytes,
                                       f"{kind}, not OpenIGTLink (first bytes ")
     assert foreign_protocol(first) == kind
     assert foreign_protocol(raw_header(version=7)) is None
+
+
+def test_a_large_body_is_received_apart_and_the_stream_goes_on() -> None:
+    """A body of LARGE_BODY_BYTES or more goes into a buffer of its own as it arrives
+    (none copied again when it is complete); any chunking, with the next message in the
+    same chunk as its last bytes, gives the same messages."""
+    from protocol.framing import LARGE_BODY_BYTES
+    from protocol.messages import RawBody
+
+    big = Message("big", RawBody("BLOB", bytes(range(256)) * (LARGE_BODY_BYTES // 256 + 3)))
+    small = Message("small", String("after"))
+    wire = encode(big, header_version=2) + encode(small, header_version=2)
+    for chunk in (997, 4093, 65536, 1 << 20, len(wire)):
+        decoder = Decoder(max_body_size=2 * LARGE_BODY_BYTES)
+        got = []
+        for start in range(0, len(wire), chunk):
+            decoder.feed(wire[start:start + chunk])
+            assert decoder.frame_in_progress or not decoder.buffered
+            got.extend(decoder.messages())
+        assert [m.device_name for m in got] == ["big", "small"], chunk
+        assert bytes(got[0].body.data) == bytes(big.body.data)
+        assert got[1].body.text == "after" and decoder.buffered == 0
