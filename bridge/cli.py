@@ -13,9 +13,11 @@ from typing import Awaitable, Callable, TypeVar
 
 from bridge import graph_inspect
 from bridge.allocator import keep_large_buffers_returnable
-from bridge.config import DEFAULT_HOST, DEFAULT_PORT, ConfigError, DaemonConfig
+from bridge.config import (DEFAULT_HOST, DEFAULT_PORT, DEFAULT_TLS_PORT, ConfigError,
+                           DaemonConfig, TlsListener)
 from bridge.config import ConfigFile, build_security, load_config_file
 from bridge.interfaces import missing_runtime_line
+from protocol.auth import new_key_text
 from bridge.ros_args import RosArgsError, apply_parameters, split_ros_args
 from bridge.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_CLIENT,
                              DEFAULT_MAX_CLIENTS)
@@ -78,6 +80,21 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
     security.add_argument("--allow", action="append", default=[], metavar="CIDR",
                           help="accept clients only from this IPv4/IPv6 address or block "
                                "(repeatable; others are closed at once and logged)")
+    security.add_argument("--key-file", metavar="FILE",
+                          help="writers' key (make it with `slicer-ros2-bridge keygen FILE`): "
+                               "a connection may change ROS only once it presents this key "
+                               "(slicer_client: connect(key_file=...)), or if it comes from a "
+                               "--trust network. Without a key, a daemon listening beyond "
+                               "loopback lets only this machine's connections write")
+    security.add_argument("--trust", action="append", default=[], metavar="CIDR",
+                          help="plain connections (3D Slicer's OpenIGTLinkIF cannot present a "
+                               "key) from this address or block may write (repeatable)")
+    security.add_argument("--tls-cert", metavar="PEM",
+                          help="certificate chain for a TLS listener on --tls-port (the "
+                               "project's own clients: connect(tls=True)); with --tls-key")
+    security.add_argument("--tls-key", metavar="PEM", help="the private key of --tls-cert")
+    security.add_argument("--tls-port", type=int, default=DEFAULT_TLS_PORT, metavar="PORT",
+                          help=f"port of the TLS listener (default {DEFAULT_TLS_PORT})")
     security.add_argument("--read-only", action="store_true", default=False,
                           help="clients can only receive: publishing, tf broadcasts, "
                                "parameter changes, service calls and action goals are refused "
@@ -148,6 +165,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_daemon_options(demo)
     graph_inspect.add_parsers(commands)
     _add_build_interfaces_parser(commands)
+    keygen = commands.add_parser("keygen", help="make a writers' key file (--key-file)",
+                                 description="Write a new random key (32 bytes, hex) to FILE, "
+                                             "readable by its owner only. Give the daemon "
+                                             "--key-file FILE and each writer's machine a "
+                                             "copy (docs/deployment.md).")
+    keygen.add_argument("file", type=Path, metavar="FILE")
+    keygen.add_argument("--force", action="store_true", help="replace an existing FILE")
     # Parsed by its own module (it runs on its own too); listed here for --help.
     commands.add_parser("state-publisher", add_help=False,
                         help="a robot state publisher for any URDF (robot_description, /tf "
@@ -168,7 +192,8 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
            "max_bridges": args.max_bridges,
            "max_message_bytes": args.max_message_bytes,
            "max_send_buffer_bytes": args.max_send_buffer_bytes,
-           "max_marker_bytes": args.max_marker_bytes, "robot_dirs": args.robot_dir}
+           "max_marker_bytes": args.max_marker_bytes, "robot_dirs": args.robot_dir,
+           "key_file": args.key_file, "trust": args.trust}
     where = f"{file.name}: security (or its command-line option)" if file.name else "option"
     security, limits = build_security(file.security, cli, where)
     if args.max_receive_buffer_bytes is not None:
@@ -179,12 +204,18 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
         limits = dataclasses.replace(limits, receive_budget_bytes=args.max_receive_buffer_bytes)
     if args.frame_deadline is not None:
         limits = dataclasses.replace(limits, frame_deadline_s=args.frame_deadline)
+    tls = None
+    if args.tls_cert or args.tls_key:
+        if not (args.tls_cert and args.tls_key):
+            raise ConfigError("--tls-cert and --tls-key: expected both, got one")
+        tls = TlsListener(args.tls_cert, args.tls_key, args.tls_port)
+        tls.context()  # a bad file stops the start here, in one line
     return DaemonConfig(host=args.host, port=args.port, node_name=args.node_name,
                         namespace=args.namespace, log_level=args.log_level, startup=file.startup,
                         package_paths=tuple(args.package_path), security=security,
                         limits=limits, frame_prefix=args.frame_prefix,
                         ros_args=tuple(getattr(args, "ros_args", ())),
-                        stop_timeout_s=args.stop_timeout)
+                        stop_timeout_s=args.stop_timeout, tls=tls)
 
 
 def _configure_logging(level: str) -> None:
@@ -307,6 +338,27 @@ def _build_interfaces(args: argparse.Namespace) -> int:
     return 0
 
 
+def _keygen(path: Path, *, force: bool) -> int:
+    """Write a new key, owner-only from its first byte (never world-readable for a moment)."""
+    flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if force else os.O_EXCL)
+    try:
+        fd = os.open(path, flags, 0o600)
+    except FileExistsError:
+        print(f"slicer-ros2-bridge keygen: {path} exists; expected a new file (--force "
+              f"replaces it, and every writer then needs the new key)", file=sys.stderr)
+        return 2
+    except OSError as error:
+        print(f"slicer-ros2-bridge keygen: cannot write {path}: {error.strerror}",
+              file=sys.stderr)
+        return 2
+    with os.fdopen(fd, "w", encoding="ascii") as file:
+        os.fchmod(file.fileno(), 0o600)
+        file.write(new_key_text())
+    print(f"wrote a new key to {path} (owner-only). Start the daemon with --key-file {path}; "
+          f"copy it to each machine that writes (slicer_client.connect(key_file=...)).")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["state-publisher"]:
@@ -338,6 +390,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.command == "build-interfaces":
         return _build_interfaces(args)
+    if args.command == "keygen":
+        return _keygen(args.file, force=args.force)
     # A wheel installed without ROS or tf2_msgs says so in one line, not with a traceback.
     lacking = missing_runtime_line()
     if lacking is not None:

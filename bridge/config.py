@@ -15,6 +15,8 @@ of the same names add to it (globs, networks) or override it (limits):
     security:
       read_only: true
       allow: [127.0.0.1/32, 10.0.0.0/8]
+      key_file: /etc/slicer-ros2-bridge/writers.key   # writers present it (docs/deployment.md)
+      trust: [10.0.0.5/32]                            # plain clients that may write
       deny_topics: ["/cmd_vel", "/rosout*"]
       max_clients: 8
 """
@@ -23,7 +25,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Mapping
+import ssl
+from typing import Any, Mapping, Optional
 
 import yaml
 
@@ -40,6 +43,7 @@ SECURITY_SECTION = "security"
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 18944
+DEFAULT_TLS_PORT = 18945
 
 
 class ConfigError(Exception):
@@ -70,6 +74,29 @@ class DaemonConfig:
     stop_timeout_s: float = 10.0
     # What followed --ros-args (remaps, __node, __ns, ...), for the daemon's node to apply.
     ros_args: tuple[str, ...] = ()
+    # A second listener, OpenIGTLink over TLS, for the project's own clients (--tls-cert).
+    tls: Optional[TlsListener] = None
+
+
+@dataclass(frozen=True)
+class TlsListener:
+    """The TLS port: a certificate chain and its private key (PEM files), checked at
+    start-up (`context`), so a bad file stops the daemon with one line."""
+
+    cert_file: str
+    key_file: str
+    port: int = DEFAULT_TLS_PORT
+
+    def context(self) -> ssl.SSLContext:
+        context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+        context.minimum_version = ssl.TLSVersion.TLSv1_2
+        try:
+            context.load_cert_chain(self.cert_file, self.key_file)
+        except (OSError, ssl.SSLError) as error:
+            raise ConfigError(f"--tls-cert/--tls-key: expected a PEM certificate chain and "
+                              f"its private key, got {self.cert_file!r} and "
+                              f"{self.key_file!r} ({error})") from None
+        return context
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ from bridge.markers.capability import MarkerBridges
 from bridge.parameters import ParameterBridges
 from bridge.robots.capability import RobotBridges
 from bridge.ros_node import RosNode, RosOptions
+from bridge.security import is_loopback_host
 from bridge.server import BridgeServer
 from bridge.shutdown import StopSignals
 from bridge.services import ServiceBridges
@@ -56,8 +57,11 @@ class Daemon:
                                       ros_args=config.ros_args))
         names = DeviceNameRegistry()
         # Clients' robots may read files (URDF, meshes) from the --package-path folders too.
+        # Who may write depends on where the daemon listens (see SecurityPolicy.grant_at_accept).
         policy = dataclasses.replace(config.security, robot_dirs=config.security.robot_dirs
-                                     + tuple(folder for _, folder in config.package_paths))
+                                     + tuple(folder for _, folder in config.package_paths),
+                                     beyond_loopback=not is_loopback_host(config.host))
+        self.policy = policy
         self.topics = TopicBridges(self.ros, self.hub, names, policy=policy)
         self.tf = TfBridges(self.ros, self.hub, names, frame_prefix=config.frame_prefix,
                             frame_rules=policy.frames)
@@ -87,7 +91,7 @@ class Daemon:
                                      resolve_file=self.robots.file_path, heavy=self.heavy)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
                                    port=config.port, limits=config.limits,
-                                   policy=config.security, heavy=self.heavy)
+                                   policy=policy, heavy=self.heavy, tls=config.tls)
 
     async def start(self) -> None:
         try:
@@ -107,7 +111,10 @@ class Daemon:
             raise
         log.info("listening on %s:%d (OpenIGTLink); ROS node %s", self.config.host,
                  self.server.port, self.ros.fully_qualified_name)
-        log.info("security: %s", self.config.security.describe())
+        if self.config.tls is not None:
+            log.info("listening on %s:%d (OpenIGTLink over TLS)", self.config.host,
+                     self.server.tls_port)
+        log.info("security: %s", self.policy.describe())
         log.info("tf buffer on the %s", self.tf.store_in_use())
 
     async def stop(self) -> None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import asyncio
 import inspect
 import logging
+import time
 from collections import deque
 from typing import (Any, Awaitable, Callable, Mapping, Optional, Protocol, Sequence, Union,
                     cast)
@@ -28,11 +29,13 @@ from typing import (Any, Awaitable, Callable, Mapping, Optional, Protocol, Seque
 from bridge.heavy import HeavyWork, LargeResult, OffLoop
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
-from bridge.security import (OPERATOR, BridgeKey, BridgeOwners, BridgeQuota, FileResolver,
-                             FrameResolver, SecurityPolicy, strip_frame)
+from bridge.logging_limits import RateLimitedLog
+from bridge.security import (OPERATOR, WRITES, BridgeKey, BridgeOwners, BridgeQuota,
+                             FileResolver, FrameResolver, SecurityPolicy, strip_frame)
+from protocol.auth import new_challenge, verify
 from protocol import commands as c
-from protocol.commands import (CommandError, CommandFailedError, ErrorCode, Op,
-                               OutOfRangeError, Reply)
+from protocol.commands import (CommandError, CommandFailedError, ErrorCode, ForbiddenError,
+                               Op, OutOfRangeError, Reply)
 from protocol.messages import Command, Message, RtsCommand
 
 log = logging.getLogger(__name__)
@@ -137,12 +140,14 @@ class Dispatcher:
                                   self._policy.max_bridges)
         self._owners = BridgeOwners()
         self._locks = BridgeLocks()
+        self._auth_failures = RateLimitedLog(log)
         hub.add_closed_listener(self._client_left)
         self._tasks: set[asyncio.Task[None]] = set()
         # The one table of what this daemon serves, built from each capability's own list.
         # Ops of the schema missing here are answered NOT_SUPPORTED, naming the op.
         own: dict[type[Op], Handler] = {
             c.Hello: self._hello,
+            c.Authenticate: self._authenticate,
             c.ListBridges: self._list_bridges,
             c.ListTopics: self._list_topics,
             c.ListServices: self._list_services,
@@ -261,7 +266,8 @@ class Dispatcher:
                                      code=ErrorCode.NOT_SUPPORTED)
         self._policy.check_request(request, self._resolve, self._ros.fully_qualified_name,
                                    self._resolve_frame, from_client=client is not None,
-                                   resolve_file=self._resolve_file)
+                                   resolve_file=self._resolve_file,
+                                   grant=client.grant if client is not None else WRITES)
         key = self._bridge_key(request)
         if key is None:
             return self._call(handler, request, client, None)
@@ -405,8 +411,48 @@ class Dispatcher:
 
     # --- small handlers -----------------------------------------------------------------
     def _hello(self, request: c.Hello, client: Replier | None) -> Result:
-        return {"schema": c.SCHEMA_VERSION, "version": DAEMON_VERSION,
-                "node": self._ros.fully_qualified_name, "ops": sorted(self._handlers)}
+        """The handshake; for a client, also what it may do (``auth``: whether it writes,
+        why not, and the challenge its key must answer) and its heartbeat, if asked."""
+        reply: dict[str, Any] = {"schema": c.SCHEMA_VERSION, "version": DAEMON_VERSION,
+                                 "node": self._ros.fully_qualified_name,
+                                 "ops": sorted(self._handlers)}
+        if client is None:
+            return reply
+        auth: dict[str, Any] = {"writes": client.grant.writes}
+        if not client.grant.writes:
+            auth["why"] = client.grant.why
+        if self._policy.key is not None and not client.grant.writes \
+                and not self._policy.read_only:
+            client.challenge = auth["challenge"] = new_challenge()
+        reply["auth"] = auth
+        if request.heartbeat is not None:
+            client.start_heartbeat(request.heartbeat)
+            reply["heartbeat"] = request.heartbeat
+        return reply
+
+    def _authenticate(self, request: c.Authenticate, client: Replier | None) -> Result:
+        """A key presented against this connection's challenge (one try per challenge: a
+        wrong proof needs a new hello)."""
+        if client is None:
+            raise CommandFailedError("op", "a client's op", "authenticate in the config")
+        if self._policy.key is None:
+            raise CommandFailedError("op", "a daemon started with --key-file", "a daemon "
+                                     "without a key (it judges writers by address: "
+                                     f"{self._policy.grant_summary()})",
+                                     code=ErrorCode.NOT_SUPPORTED)
+        challenge, client.challenge = client.challenge, None
+        if challenge is None:
+            raise ForbiddenError("op", "authenticate after a hello that gave a challenge",
+                                 "no challenge outstanding (send hello again)")
+        if not verify(self._policy.key, challenge, request.nonce, request.proof):
+            self._auth_failures.warning("auth", time.monotonic(), "a key proof failed "
+                                        "(wrong key?); the connection stays read-only")
+            raise ForbiddenError("proof", "the proof of the daemon's key for this challenge",
+                                 "a proof that does not match (is the key file the "
+                                 "daemon's?)")
+        client.granted(self._policy.grant_after_proof())
+        log.info("a client presented the key: it may write")
+        return {"writes": client.grant.writes}
 
     def _list_bridges(self, request: c.ListBridges, client: Replier | None) -> Result:
         bridges = [bridge for capability in self._capabilities

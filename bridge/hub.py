@@ -34,9 +34,10 @@ import threading
 import time
 from collections import deque
 from contextlib import contextmanager
-from typing import Callable, Iterator, Protocol
+from typing import Callable, Iterator, Optional, Protocol
 
 from bridge.outbox import Frame
+from bridge.security import WriteGrant
 from protocol.messages import Message
 
 log = logging.getLogger(__name__)
@@ -77,10 +78,15 @@ class Subscriber(Protocol):
 
 
 class Replier(Protocol):
-    """The client a message came from, to answer it."""
+    """The client a message came from, to answer it, and what that connection may do."""
+
+    grant: WriteGrant  # may it change ROS, and why not
+    challenge: Optional[str]  # the one its hello reply gave, until a key answers it
 
     def send_status(self, device: str, code: int, text: str) -> None: ...
     def send_message(self, message: Message) -> None: ...
+    def granted(self, grant: WriteGrant) -> None: ...
+    def start_heartbeat(self, interval: float) -> None: ...
 
 
 InboundHandler = Callable[[Message, Replier], None]

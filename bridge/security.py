@@ -29,18 +29,20 @@ import ipaddress
 import logging
 import os
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from fnmatch import fnmatchcase
 from typing import Any, Callable, Optional, Union
 
 from bridge.logging_limits import RateLimitedLog
+from protocol.auth import KeyFileError, read_key_text
 from bridge.message_guards import (PARAMETER_EVENT_TYPE, TF_MESSAGE_TYPE, HeaderFrameGuard,
                                    MessageGuard, ParameterEventGuard, TfMessageGuard)
 from protocol.commands import (REQUEST_TYPES, ActionUse, FileUse, ForbiddenError, FrameUse,
                                LimitReachedError, Op, OutOfRangeError, ParameterUse, Resource,
                                ServiceUse, TopicUse, resolve_message_type, resolve_service_type)
 
-__all__ = ["DEFAULT_MAX_BRIDGES", "DEFAULT_MAX_BRIDGES_PER_CLIENT", "DEFAULT_MAX_CLIENTS",
+__all__ = ["WRITES", "DEFAULT_MAX_BRIDGES", "WriteGrant", "read_key_file",
+           "DEFAULT_MAX_BRIDGES_PER_CLIENT", "DEFAULT_MAX_CLIENTS",
            "DEFAULT_MAX_MARKER_BYTES",
            "OPERATOR",
            "PARAMETER_SERVICES", "SECURITY_KEYS", "BridgeOwners", "BridgeQuota", "NameRules",
@@ -153,6 +155,18 @@ class PolicyError(ValueError):
 
 
 @dataclass(frozen=True)
+class WriteGrant:
+    """Whether one connection may change ROS (ops that write or remove, data sent to
+    publishers and broadcasters), and, when not, why: the refusal says it."""
+
+    writes: bool
+    why: str = ""
+
+
+WRITES = WriteGrant(True)
+
+
+@dataclass(frozen=True)
 class NameRules:
     """Allow and deny globs for one kind of name (topics, services, parameters, frames)."""
 
@@ -194,25 +208,49 @@ class SecurityPolicy:
     # Folders whose URDF files clients may load by path (`--robot-dir`, and the daemon adds
     # every `--package-path` folder): a client must not make the daemon read any file.
     robot_dirs: tuple[str, ...] = ()
+    # The writers' shared key (`--key-file`, protocol/auth.py); None: no key.
+    key: Optional[bytes] = field(default=None, repr=False)
+    # Networks whose plain connections may write without a key (`--trust`).
+    trusted_networks: tuple[Network, ...] = ()
+    # Listening beyond loopback (set by the daemon from --host): then, without a key, only
+    # this machine's own connections and --trust networks may write.
+    beyond_loopback: bool = False
+
+    # --- who may write ---------------------------------------------------------------------
+    def grant_at_accept(self, address: str) -> WriteGrant:
+        """What a new connection from `address` may do before it presents a key."""
+        if self.read_only:
+            return WriteGrant(False, "the daemon runs --read-only: clients change and "
+                                     "remove nothing")
+        if _in_networks(address, self.trusted_networks):
+            return WRITES
+        if self.key is not None:
+            return WriteGrant(False, "this connection has not presented the daemon's key "
+                                     "(slicer_client: connect(key_file=...); the ROS2Bridge "
+                                     "module: its key file setting); a plain OpenIGTLink "
+                                     "client may write only from a network the operator "
+                                     "names with --trust")
+        if not self.beyond_loopback or _in_networks(address, _LOOPBACK):
+            return WRITES
+        return WriteGrant(False, "a client on another machine may write only with a key (the "
+                                 "operator starts the daemon with --key-file) or from a "
+                                 "network the operator names with --trust")
+
+    def grant_after_proof(self) -> WriteGrant:
+        """What a connection may do once it has presented the key."""
+        return self.grant_at_accept("") if self.read_only else WRITES
 
     # --- at accept -----------------------------------------------------------------------
     def admits(self, address: str) -> bool:
         """May a client from `address` (an IP literal) connect?"""
-        if not self.allowed_networks:
-            return True
-        try:
-            ip = ipaddress.ip_address(address.split("%", 1)[0])
-        except ValueError:  # not an IP peer (a Unix socket): no network rule can admit it
-            return False
-        if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
-            ip = ip.ipv4_mapped  # a dual-stack socket reports IPv4 peers as ::ffff:a.b.c.d
-        return any(ip.version == net.version and ip in net for net in self.allowed_networks)
+        return not self.allowed_networks or _in_networks(address, self.allowed_networks)
 
     # --- per request ---------------------------------------------------------------------
     def check_request(self, request: Op, resolve: NameResolver, own_node: str,
                       resolve_frame: FrameResolver = strip_frame, *,
                       from_client: bool = True,
-                      resolve_file: Optional[FileResolver] = None) -> None:
+                      resolve_file: Optional[FileResolver] = None,
+                      grant: WriteGrant = WRITES) -> None:
         """Raise `ForbiddenError` if the policy refuses this parsed request.
 
         `resolve(name, field)` makes a topic, service or node name fully qualified (so
@@ -222,7 +260,7 @@ class SecurityPolicy:
         capability's, so ``--frame-prefix`` cannot be used to slip past a frame glob);
         `resolve_file` turns a robot's file source into the path the daemon would read.
         `from_client` is False for the operator's own start-up config, whose file paths are
-        trusted.
+        trusted; `grant` is what the requesting connection may do (`grant_at_accept`).
         """
         cls = type(request)
         if REQUEST_TYPES.get(cls.op) is not cls:  # fail closed: nothing undeclared runs
@@ -230,10 +268,11 @@ class SecurityPolicy:
         if cls.to_client:
             raise ForbiddenError("op", "an op a client sends (the daemon sends this one)",
                                  cls.op)
-        if self.read_only and (cls.writes or cls.removes is not None):
-            raise ForbiddenError("op", "an op that only receives (the daemon runs "
-                                       "--read-only: clients change and remove nothing)",
-                                 cls.op)
+        if cls.writes or cls.removes is not None:
+            refusal = self.grant_at_accept("") if self.read_only else grant
+            if not refusal.writes:
+                raise ForbiddenError("op", f"an op that only receives ({refusal.why})",
+                                     cls.op)
         for use in request.resources():
             self._judge(use, resolve, own_node, resolve_frame, from_client, resolve_file)
 
@@ -387,7 +426,12 @@ class SecurityPolicy:
             policy = replace(policy, read_only=value)
         networks = tuple(parse_network(text, f"{where}.allow")
                          for text in _globs(settings, "allow", where))
-        policy = replace(policy, allowed_networks=networks)
+        trusted = tuple(parse_network(text, f"{where}.trust")
+                        for text in _globs(settings, "trust", where))
+        policy = replace(policy, allowed_networks=networks, trusted_networks=trusted)
+        if settings.get("key_file") is not None:
+            policy = replace(policy, key=read_key_file(settings["key_file"],
+                                                       f"{where}.key_file"))
         for kind in ("topics", "services", "actions", "parameters", "frames"):
             rules = NameRules(allow=_globs(settings, f"allow_{kind}", where),
                               deny=_globs(settings, f"deny_{kind}", where))
@@ -400,6 +444,16 @@ class SecurityPolicy:
                 policy = replace(policy, **{key: positive_int(settings[key], f"{where}.{key}")})
         return policy
 
+    def grant_summary(self) -> str:
+        if self.read_only:
+            return "none (read-only)"
+        who = ["connections that present the key"] if self.key is not None else []
+        if self.key is None:
+            who.append("this machine's own connections" if self.beyond_loopback
+                       else "every connection (listening on loopback only)")
+        who += [f"plain connections from {net}" for net in self.trusted_networks]
+        return ", ".join(who)
+
     def describe(self) -> str:
         """One log line: what is locked down."""
         parts = ["read-only" if self.read_only else "read-write",
@@ -408,7 +462,8 @@ class SecurityPolicy:
                  f"at most {self.max_clients} clients",
                  f"{self.max_bridges_per_client} bridges per client, "
                  f"{self.max_bridges} from all clients",
-                 f"{self.max_marker_bytes} bytes of marker models"]
+                 f"{self.max_marker_bytes} bytes of marker models",
+                 "who may change ROS: " + self.grant_summary()]
         for kind in ("topics", "services", "actions", "parameters", "frames"):
             rules: NameRules = getattr(self, kind)
             if rules.active:
@@ -425,8 +480,24 @@ SECURITY_KEYS: tuple[str, ...] = (
     "allow_parameters", "deny_parameters", "allow_frames", "deny_frames",
     "max_clients", "max_bridges_per_client", "max_bridges", "max_message_bytes",
     "max_send_buffer_bytes", "max_marker_bytes",
-    "robot_dirs",
+    "robot_dirs", "key_file", "trust",
 )
+
+
+def read_key_file(path: Any, where: str) -> bytes:
+    """The writers' key from its file (made by `slicer-ros2-bridge keygen`)."""
+    if not isinstance(path, (str, os.PathLike)) or not str(path):
+        raise PolicyError(f"{where}: expected the path of a key file, got {path!r}")
+    try:
+        with open(path, encoding="ascii", errors="replace") as file:
+            text = file.read(4096)
+    except OSError as error:
+        raise PolicyError(f"{where}: expected a readable key file, got {path!r} "
+                          f"({error.strerror})") from None
+    try:
+        return read_key_text(text, f"{where} ({path})")
+    except KeyFileError as error:
+        raise PolicyError(str(error)) from None
 
 
 def parse_network(text: str, where: str) -> Network:
@@ -455,6 +526,20 @@ def _globs(settings: Mapping[str, Any], key: str, where: str) -> tuple[str, ...]
         raise PolicyError(f"{where}.{key}: expected a list of non-empty strings, "
                           f"got {value!r}")
     return tuple(value)
+
+
+_LOOPBACK = (ipaddress.ip_network("127.0.0.0/8"), ipaddress.ip_network("::1/128"))
+
+
+def _in_networks(address: str, networks: Iterable[Network]) -> bool:
+    """Is `address` (an IP literal, as a socket reports its peer) inside one of them?"""
+    try:
+        ip = ipaddress.ip_address(address.split("%", 1)[0])
+    except ValueError:  # not an IP peer (a Unix socket): no network rule can name it
+        return False
+    if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
+        ip = ip.ipv4_mapped  # a dual-stack socket reports IPv4 peers as ::ffff:a.b.c.d
+    return any(ip.version == net.version and ip in net for net in networks)
 
 
 def is_loopback_host(host: str) -> bool:

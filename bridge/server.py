@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import ssl
 import time
 from typing import Optional
 
+from bridge.config import TlsListener
 from bridge.heavy import HeavyWork
 from bridge.hub import Hub
 from bridge.logging_limits import RateLimitedLog
@@ -40,7 +42,7 @@ class PortInUseError(OSError):
 class BridgeServer:
     def __init__(self, hub: Hub, commands: CommandHandler, *, host: str, port: int,
                  limits: SessionLimits, policy: SecurityPolicy | None = None,
-                 heavy: HeavyWork | None = None) -> None:
+                 heavy: HeavyWork | None = None, tls: TlsListener | None = None) -> None:
         self._hub = hub
         self._heavy = heavy  # decodes clients' heavy bodies off the loop
         self._commands = commands
@@ -52,6 +54,8 @@ class BridgeServer:
         self._incidents = RateLimitedLog(log)  # deadlines and budget, over all sessions
         self.budget: ReceiveBudget = limits.receive_budget()
         self._server: Optional[asyncio.base_events.Server] = None
+        self._tls = tls
+        self._tls_server: Optional[asyncio.base_events.Server] = None
         self.sessions: set[ClientSession] = set()
         self.refused = 0
 
@@ -59,32 +63,45 @@ class BridgeServer:
         """Bind the port (a port in use fails here); accept clients now, or only once
         `serve` is called (``serving`` False: the daemon first makes its start-up bridges,
         and nothing may connect before they exist)."""
+        self._server = await self._listen(self._port, None, serving)
+        if self._tls is not None:
+            self._tls_server = await self._listen(self._tls.port, self._tls.context(), serving)
+        if not is_loopback_host(self._host):
+            log.warning("listening on %s, reachable from other machines; %s%s", self._host,
+                        "who may change ROS: " + self._policy.grant_summary(),
+                        "" if self._policy.allowed_networks else
+                        " (restrict who may connect at all with --allow CIDR)")
+
+    async def _listen(self, port: int, tls: Optional[ssl.SSLContext],
+                      serving: bool) -> asyncio.base_events.Server:
         loop = asyncio.get_running_loop()
         try:
-            self._server = await loop.create_server(self._new_session, self._host, self._port,
-                                                    reuse_address=True,
-                                                    start_serving=serving)
+            return await loop.create_server(self._new_session, self._host, port,
+                                            reuse_address=True, start_serving=serving,
+                                            ssl=tls)
         except OSError as error:
             if error.errno == 98:  # EADDRINUSE
-                raise PortInUseError(error.errno, f"{self._host}:{self._port} is already in "
+                raise PortInUseError(error.errno, f"{self._host}:{port} is already in "
                                                   f"use (is another bridge or an OpenIGTLink "
                                                   f"server running?)") from None
             raise
-        if not is_loopback_host(self._host):
-            log.warning("listening on %s, reachable from other machines: OpenIGTLink has no "
-                        "authentication, so anyone who reaches this port can use the bridge%s",
-                        self._host, "" if self._policy.allowed_networks else
-                        " (restrict clients with --allow CIDR)")
 
     async def serve(self) -> None:
         """Start listening (after `start` with ``serving`` False)."""
         assert self._server is not None
         await self._server.start_serving()
+        if self._tls_server is not None:
+            await self._tls_server.start_serving()
 
     @property
     def port(self) -> int:
         assert self._server is not None and self._server.sockets
         return int(self._server.sockets[0].getsockname()[1])
+
+    @property
+    def tls_port(self) -> int:
+        assert self._tls_server is not None and self._tls_server.sockets
+        return int(self._tls_server.sockets[0].getsockname()[1])
 
     def _new_session(self) -> asyncio.Protocol:
         # The peer's address is known only once connected: the gate decides then.
@@ -112,7 +129,8 @@ class BridgeServer:
             transport.close()  # after the STATUS is written
             return
         session = ClientSession(self._hub, self._commands, self._limits, self.sessions.discard,
-                                read_only=self._policy.read_only, budget=self.budget,
+                                grant=self._policy.grant_at_accept(address),
+                                budget=self.budget,
                                 incidents=self._incidents, heavy=self._heavy)
         self.sessions.add(session)
         transport.set_protocol(session)
@@ -137,12 +155,13 @@ class BridgeServer:
         return True
 
     async def close(self) -> None:
-        if self._server is None:
-            return
-        self._server.close()
+        servers = [s for s in (self._server, self._tls_server) if s is not None]
+        for server in servers:
+            server.close()
         for session in tuple(self.sessions):
             session.close()
-        await self._server.wait_closed()
+        for server in servers:
+            await server.wait_closed()
 
 
 class _Gate(asyncio.Protocol):

@@ -47,9 +47,11 @@ from bridge.heavy import HeavyWork
 from bridge.hub import Hub
 from bridge.logging_limits import RateLimitedLog
 from bridge.outbox import WRITE_CHUNK, Frame, Outbox, OutboxOverflow
+from bridge.security import WRITES, WriteGrant
 from protocol.crc64 import Buffer
 from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
 from protocol.framing import Decoder, RawFrame, ReceiveBudget
+from protocol.liveness import HEARTBEAT_DEVICE, socket_options
 from protocol.messages import Message, Status, StatusCode
 from protocol.negotiation import HeaderVersionNegotiator
 
@@ -90,14 +92,18 @@ class SessionLimits:
 
 class ClientSession(asyncio.Protocol):
     def __init__(self, hub: Hub, commands: CommandHandler, limits: SessionLimits,
-                 on_close: Callable[[ClientSession], None], *, read_only: bool = False,
+                 on_close: Callable[[ClientSession], None], *, grant: WriteGrant = WRITES,
                  budget: Optional[ReceiveBudget] = None,
                  incidents: Optional[RateLimitedLog] = None,
                  heavy: Optional[HeavyWork] = None) -> None:
         self._hub = hub
         self._heavy = heavy  # None: every body is decoded on the loop (tests)
         self._decoding = False  # a heavy body of this client is being decoded
-        self._read_only = read_only  # --read-only: data messages to devices are refused
+        # May this connection change ROS (commands that write, data to publishers)? Set at
+        # accept by the policy; a key presented (the authenticate op) may widen it.
+        self.grant = grant
+        self.challenge: Optional[str] = None  # the hello reply's, until a key answers it
+        self._heartbeat: Optional[asyncio.TimerHandle] = None
         self._commands = commands
         self._limits = limits
         self._on_close: Optional[Callable[[ClientSession], None]] = on_close
@@ -139,8 +145,11 @@ class ClientSession(asyncio.Protocol):
         self.peer = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
         sock = transport.get_extra_info("socket")
         if sock is not None and sock.family in (socket.AF_INET, socket.AF_INET6):
-            # Latency matters more than packet count: no Nagle delay.
+            # Latency matters more than packet count: no Nagle delay. A dead peer is found
+            # in seconds, and what its send buffer held is dropped, not delivered late.
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            for level, option, value in socket_options():
+                sock.setsockopt(level, option, value)
         transport.set_write_buffer_limits(high=self._limits.write_high_water)
         if sock is not None and transport.get_extra_info("sslcontext") is None:
             # Its own descriptor: closed in connection_lost, under the write lock, before
@@ -180,10 +189,10 @@ class ClientSession(asyncio.Protocol):
 
     def _release(self) -> None:
         """Drop what the session holds (buffers, budget, timers) at once. Idempotent."""
-        for timer in (self._attach_timer, self._frame_timer):
+        for timer in (self._attach_timer, self._frame_timer, self._heartbeat):
             if timer is not None:
                 timer.cancel()
-        self._attach_timer = self._frame_timer = None
+        self._attach_timer = self._frame_timer = self._heartbeat = None
         self.frame_started = None
         self._decoder.close()
         self._outbox.clear()
@@ -368,15 +377,14 @@ class ClientSession(asyncio.Protocol):
         """Whether a data message to ``device`` is refused, judged by its header alone
         (before its body is decoded): a read-only daemon, or a device no publisher or
         broadcaster receives. The client is told once per device."""
-        if self._read_only:
+        if not self.grant.writes:
             # Checked here, at data routing, as the dispatcher checks commands.
             if device not in self._unrouted_warned:
                 self._unrouted_warned.add(device)
-                log.warning("client %s sent %s to device %r on a read-only daemon; refused "
+                log.warning("client %s sent %s to device %r and may not write; refused "
                             "(said once per device)", self.peer, type_name, device)
                 self.send_status(device, StatusCode.ACCESS_DENIED,
-                                 "the daemon is read-only (--read-only): clients cannot send "
-                                 "data to ROS")
+                                 f"this connection cannot send data to ROS: {self.grant.why}")
             return True
         if self._hub.inbound_handler(device) is not None:
             return False
@@ -456,6 +464,30 @@ class ClientSession(asyncio.Protocol):
         self.send_message(Message(device_name=device[:20],
                                   body=Status(code=code, error_name="slicer-ros2-bridge"[:20],
                                               text=text)))
+
+    def granted(self, grant: WriteGrant) -> None:
+        """A key was presented: what this connection may do now."""
+        self.grant = grant
+        self.challenge = None  # one answer per challenge
+        self._unrouted_warned.clear()  # refusals said before may not hold now
+
+    def start_heartbeat(self, interval: float) -> None:
+        """Send a STATUS on `HEARTBEAT_DEVICE` every `interval` seconds (the client asked
+        for it in hello), as a stream value: a client that does not read holds one."""
+        if self._heartbeat is not None:
+            self._heartbeat.cancel()
+        loop = asyncio.get_running_loop()
+
+        def beat() -> None:
+            if self._closing:
+                return
+            self.send_stream(HEARTBEAT_DEVICE, Frame(Message(
+                device_name=HEARTBEAT_DEVICE, body=Status(code=StatusCode.OK,
+                                                          error_name="heartbeat",
+                                                          text=""))))
+            self._heartbeat = loop.call_later(interval, beat)
+
+        self._heartbeat = loop.call_later(interval, beat)
 
     def forget_device(self, device: str) -> None:
         self._outbox.discard(device)

@@ -132,7 +132,12 @@ class Client:
             return
         nonce = secrets.token_hex(16)
         request = c.Authenticate(nonce=nonce, proof=proof(self._key, str(challenge), nonce))
-        self.may_write = bool(command(request.op, request.to_args()).get("writes", False))
+        try:
+            self.may_write = bool(command(request.op, request.to_args()).get("writes", False))
+        except CommandRefusedError as error:  # a wrong key: read-only, and said why
+            log.warning("the daemon at %s refused this client's key: the connection is "
+                        "read-only (%s)", self.address, error)
+            self.errors.append(f"authenticate: {error}")
 
     def on_disconnected(self, reason: str) -> None:
         # The daemon cancels the goals of a client that leaves: their events never come.
