@@ -31,6 +31,7 @@ from bridge.ros_node import RosNode, RosOptions
 from bridge.security import is_loopback_host
 from bridge.server import BridgeServer
 from bridge.shutdown import StopSignals
+from bridge.stream_health import StreamHealth
 from bridge.services import ServiceBridges
 from bridge.tf.capability import TfBridges
 from bridge.topics import TopicBridges
@@ -62,7 +63,10 @@ class Daemon:
                                      + tuple(folder for _, folder in config.package_paths),
                                      beyond_loopback=not is_loopback_host(config.host))
         self.policy = policy
-        self.topics = TopicBridges(self.ros, self.hub, names, policy=policy)
+        # Streams that go stale (publisher gone, silent past their period) are said so.
+        self.health = StreamHealth(self.hub, loop)
+        self.topics = TopicBridges(self.ros, self.hub, names, policy=policy,
+                                   health=self.health)
         self.tf = TfBridges(self.ros, self.hub, names, frame_prefix=config.frame_prefix,
                             frame_rules=policy.frames)
         self.parameters = ParameterBridges(self.ros, self.hub, names, policy=policy)
@@ -119,6 +123,7 @@ class Daemon:
 
     async def stop(self) -> None:
         await self.server.close()
+        self.health.close()
         self.dispatcher.close()
         self.heavy.close()
         self.ros.stop()

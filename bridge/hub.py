@@ -104,6 +104,9 @@ class Hub:
         self._latest: dict[str, Frame] = {}
         self._not_kept: set[str] = set()  # devices whose newest value is not kept
         self._persistent: dict[str, Frame] = {}
+        # A device's condition while it is not normal (a stale stream's STATUS): sent to
+        # its clients when it changes, and to a client that connects or joins later.
+        self._condition: dict[str, Frame] = {}
         # Devices that go only to the clients that joined them (may be none); a device not
         # listed goes to every client. Tuples, replaced whole: other threads iterate them.
         self._audience: dict[str, tuple[Subscriber, ...]] = {}
@@ -140,6 +143,10 @@ class Hub:
                 members = audience.get(device)
                 if members is None or client in members:
                     client.send_stream(device, frame)
+            for device, frame in self._condition.items():
+                members = audience.get(device)
+                if members is None or client in members:
+                    client.send_once(frame)
 
     def detach(self, client: Subscriber) -> None:
         with self._lock:
@@ -236,6 +243,16 @@ class Hub:
         for client in tuple(self.clients):
             client.send_once(frame)
 
+    def set_condition(self, device: str, kept: Frame | None, sent: Frame) -> None:
+        """Loop thread: tell `device`'s clients `sent` (a STATUS), and keep `kept` for
+        those that come later (None: the device is back to normal)."""
+        if kept is None:
+            self._condition.pop(device, None)
+        else:
+            self._condition[device] = kept
+        for client in self._recipients(device):
+            client.send_once(sent)
+
     def keep_latest(self, device: str, keep: bool) -> None:
         """Whether clients that connect later get ``device``'s newest value (default)."""
         if keep:
@@ -259,6 +276,7 @@ class Hub:
             self._incoming_large.pop(device, None)
             self._latest.pop(device, None)
         self._persistent.pop(device, None)
+        self._condition.pop(device, None)
         self._audience.pop(device, None)
         self._not_kept.discard(device)
         self._held.pop(device, None)

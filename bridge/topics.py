@@ -15,6 +15,7 @@ import asyncio
 import json
 import logging
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Optional
 
@@ -36,6 +37,7 @@ from bridge.outbox import BulkFrame, Frame, TemplateFrame
 from bridge.qos import default_depth, qos_profile
 from bridge.ros_node import RosNode
 from bridge.security import SecurityPolicy
+from bridge.stream_health import Arrivals, StreamHealth
 from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
                                CreateSubscriber, ErrorCode, ForbiddenError, GetLastMessage, Op,
                                OutOfRangeError, Publish, QoS, RemovePublisher, RemoveSubscriber,
@@ -94,6 +96,7 @@ class SubscriberBridge:
         # The security policy's view of a message (tf frames, parameters): None = drop it.
         self._filter = message_filter
         self.count = 0
+        self.arrivals = Arrivals()  # judged by StreamHealth: is the stream stale?
         # The message stream (`enable_messages`): each message whole, as JSON, for the
         # clients that joined its device; None until a client asks for it.
         self._messages: Optional[_MessageStream] = None
@@ -146,6 +149,7 @@ class SubscriberBridge:
     def _on_raw(self, data: bytes) -> None:  # ROS executor thread: convert, hand off
         if self._channel.closed:
             return
+        self.arrivals.note(time.monotonic())
         fast = self._fast
         if fast is not None:
             self.count += 1
@@ -408,9 +412,11 @@ class TopicBridges:
     """The daemon's subscriber and publisher bridges, one of each kind per topic."""
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
-                 policy: Optional[SecurityPolicy] = None) -> None:
+                 policy: Optional[SecurityPolicy] = None,
+                 health: Optional[StreamHealth] = None) -> None:
         self._ros = ros
         self._hub = hub
+        self._health = health  # tells clients when a stream goes stale (None: nobody)
         self._names = names
         # Judges what messages name (a tf topic's frames); the dispatcher judged the request.
         self._policy = policy or SecurityPolicy()
@@ -465,6 +471,10 @@ class TopicBridges:
             device=device, metadata=metadata_for(key, ros_type=ros_type),
             max_rate_hz=request.rate_hz, message_filter=self._filter_for(topic, ros_type))
         self.subscribers[topic] = bridge
+        if self._health is not None:
+            node = self._ros.node
+            self._health.watch(device, topic, bridge.arrivals,
+                               lambda: node.count_publishers(topic))
         log.info("subscribed to %s (%s) as device %r", topic, ros_type, device)
         return self._with_messages(request, client, bridge,
                                    _describe(bridge.info(), existed=False))
@@ -492,6 +502,8 @@ class TopicBridges:
             raise CommandFailedError("topic", "a topic with a subscriber bridge", topic,
                                      code=ErrorCode.NOT_FOUND)
         bridge.close()
+        if self._health is not None:
+            self._health.unwatch(bridge.device)
         self._names.release(NameKey.subscriber(topic))
         self._names.release(NameKey.subscriber_messages(topic))
         return {"topic": topic, "device": bridge.device}
@@ -586,7 +598,14 @@ class TopicBridges:
     def describe(self) -> list[dict[str, Any]]:
         bridges: list[SubscriberBridge | PublisherBridge] = [*self.subscribers.values(),
                                                             *self.publishers.values()]
-        return [_describe(bridge.info()) for bridge in bridges]
+        described = []
+        for bridge in bridges:
+            entry = _describe(bridge.info())
+            stale = self._health.stale(bridge.device) if self._health is not None else None
+            if stale is not None and isinstance(bridge, SubscriberBridge):
+                entry["stale"] = stale
+            described.append(entry)
+        return described
 
     def close(self) -> None:
         for bridge in [*self.subscribers.values(), *self.publishers.values()]:

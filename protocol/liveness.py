@@ -12,6 +12,10 @@ set of timings the daemon and its clients share.
   ``HEARTBEAT_INTERVAL_S``; a client that hears nothing for ``DEAD_AFTER_S`` takes the
   link for dead, closes it and reconnects (then gets the newest state, not the backlog).
 
+* Stale streams: the daemon sends a STATUS named ``stale`` (code NOT_READY, the reason in
+  its text) on a stream's device when its publisher is gone or it fell silent, and one
+  named ``live`` (code OK) when it comes back; `stream_condition` reads them.
+
 `socket_options` lists the options as ``(level, option, value)`` for ``setsockopt``; the
 ones an operating system lacks (macOS, Windows) are left out. No socket is touched here.
 """
@@ -19,9 +23,12 @@ ones an operating system lacks (macOS, Windows) are left out. No socket is touch
 from __future__ import annotations
 
 import socket
-from typing import List, Tuple
+from typing import List, Optional, Tuple
 
-__all__ = ["DEAD_AFTER_S", "HEARTBEAT_DEVICE", "HEARTBEAT_INTERVAL_S", "KEEPALIVE_COUNT",
+from protocol.messages import Message, Status, StatusCode
+
+__all__ = ["LIVE", "STALE", "condition_status", "stream_condition",
+           "DEAD_AFTER_S", "HEARTBEAT_DEVICE", "HEARTBEAT_INTERVAL_S", "KEEPALIVE_COUNT",
            "KEEPALIVE_IDLE_S", "KEEPALIVE_INTERVAL_S", "NOTSENT_LOWAT_BYTES", "USER_TIMEOUT_S",
            "socket_options"]
 
@@ -45,3 +52,23 @@ def socket_options() -> List[Tuple[int, int, int]]:
               (socket.IPPROTO_TCP, "TCP_NOTSENT_LOWAT", NOTSENT_LOWAT_BYTES)]
     return [(level, int(getattr(socket, name)), value) for level, name, value in wanted
             if hasattr(socket, name)]
+
+
+STALE = "stale"
+LIVE = "live"
+
+
+def condition_status(reason: Optional[str], topic: str) -> Status:
+    """The STATUS that says a stream is stale (`reason`) or live again (None)."""
+    if reason is None:
+        return Status(code=StatusCode.OK, error_name=LIVE, text=f"{topic} is live again")
+    return Status(code=StatusCode.NOT_READY, error_name=STALE, text=reason)
+
+
+def stream_condition(message: Message) -> Optional[str]:
+    """For a stale/live STATUS: the reason it is stale, or "" when live again; None for
+    any other message."""
+    body = message.body
+    if not isinstance(body, Status) or body.error_name not in (STALE, LIVE):
+        return None
+    return body.text if body.error_name == STALE else ""

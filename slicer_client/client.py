@@ -28,7 +28,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 import numpy as np
 
 from protocol.auth import KeyFileError, proof, read_key_text
-from protocol.liveness import DEAD_AFTER_S, HEARTBEAT_INTERVAL_S
+from protocol.liveness import DEAD_AFTER_S, HEARTBEAT_INTERVAL_S, stream_condition
 from protocol.messages import Command, Message
 from protocol.naming import KEY_ROBOT, KEY_ROLE
 from protocol import commands as c
@@ -82,6 +82,13 @@ class Client:
             self._on_daemon_command(message)
             return
         if route_goal_event(self._goals, message):
+            return
+        condition = stream_condition(message)
+        if condition is not None:  # a stream went stale or came back: not its value
+            with self._lock:
+                resource = self._by_device.get(message.device_name)
+            if isinstance(resource, Subscriber):
+                resource._set_stale(condition)
             return
         with self._lock:
             self._latest[message.device_name] = message

@@ -134,6 +134,10 @@ class Subscriber(Resource):
         # Messages the daemon's subscription received, as its message stream said last.
         self.received_by_daemon = 0
         self._whole_callbacks: List[Callable[[Message], None]] = []
+        # Why the stream is stale (its publisher gone, silent past its period), as the
+        # daemon said; "" while it is live.
+        self.stale = ""
+        self._stale_callbacks: List[Callable[[str], None]] = []
 
     def _created(self, result: Mapping[str, Any]) -> None:
         super()._created(result)
@@ -142,6 +146,20 @@ class Subscriber(Resource):
 
     def devices(self) -> Tuple[str, ...]:
         return tuple(d for d in (self.device, self.message_device) if d)
+
+    def add_stale_callback(self, callback: Callable[[str], None]) -> None:
+        """`callback(reason)` when the stream goes stale, `callback("")` when it is live
+        again (where callbacks run, never on the receive thread)."""
+        self._stale_callbacks.append(callback)
+
+    def _set_stale(self, reason: str) -> None:
+        with self._changed:
+            if reason == self.stale:
+                return
+            self.stale = reason
+            self._changed.notify_all()
+        for callback in list(self._stale_callbacks):
+            self._client.emit(callback, reason)
 
     def add_whole_callback(self, callback: Callable[[Message], None]) -> None:
         """`callback(message)` for each message of the message stream (where callbacks
@@ -161,6 +179,8 @@ class Subscriber(Resource):
             for callback in list(self._whole_callbacks):
                 self._client.emit(callback, message)
             return
+        if self.stale:
+            self._set_stale("")  # a new message: live again, whatever the STATUS says later
         with self._changed:
             self.count += 1
             self.last_message = message

@@ -210,8 +210,17 @@ def describe_bridges(result: Mapping[str, Any]) -> List[str]:
         else:
             continue  # daemon-internal entries (the shared tf buffer...)
         device = f" as {b['device']}" if b.get("device") else ""
-        lines.append(f"{kind}: {what}{device}")
+        stale = f" (STALE: {b['stale']})" if b.get("stale") else ""
+        lines.append(f"{kind}: {what}{device}{stale}")
     return lines
+
+
+def stale_lines(result: Mapping[str, Any]) -> List[str]:
+    """list_bridges' result -> one line per stale stream (its publisher gone, or silent
+    past its period), for the module's warning label; empty while all are live."""
+    return [f"{b.get('topic', b.get('device', '?'))} is stale: {b['stale']}"
+            for b in result.get("bridges", []) or []
+            if isinstance(b, dict) and b.get("stale")]
 
 
 def robot_status_lines(robots: Sequence[Any]) -> List[str]:

@@ -82,7 +82,8 @@ def test_hostile_ros_messages_are_logged_rate_limited_and_serving_goes_on(
         bad = processes.python("bad", BAD_PEER, "/bad_", "--rounds", "20")
         # Good data keeps flowing next to the bad: judged while the peers still send (a
         # daemon that keeps up has nothing newer once the tf peer has stopped).
-        first = client.wait_for(lookup, timeout=10)
+        tf.wait_for_output("READY", timeout=60)  # a busy machine starts rclpy slowly
+        first = client.wait_for(lookup, timeout=30)
         wait_until(lambda: client.latest(lookup).timestamp != first.timestamp, timeout=10,
                    what="a newer lookup value")
         bad.wait_for_output("DONE", timeout=60)

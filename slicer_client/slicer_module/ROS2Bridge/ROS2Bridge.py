@@ -77,7 +77,8 @@ from slicer_client.joint_sliders import joint_sliders, slider_positions  # noqa:
 from slicer_client.reference.entry_points import install as install_entry_points  # noqa: E402
 from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER,  # noqa: E402
                                       describe_bridges, metadata_from_attributes, plan_node,
-                                      robot_status_lines, stale_marker_nodes)
+                                      robot_status_lines, stale_lines,
+                                      stale_marker_nodes)
 from slicer_client.send_plan import KIND_ORDER, SEND_TYPES, plan_send  # noqa: E402
 
 CONNECTOR_NAME = "ROS2BridgeConnector"
@@ -636,6 +637,13 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
     def bridgeLines(self):
         return describe_bridges(self.requireClient().list_bridges())
 
+    def staleLines(self):
+        """The streams the daemon says are stale, for the GUI: a frozen robot must not
+        look live."""
+        if self.client is None or not self.isConnected():
+            return []
+        return stale_lines(self.client.list_bridges())
+
     def robotLines(self):
         """Load progress and warnings of every robot, for the GUI (not only the log)."""
         if self.client is None:
@@ -781,6 +789,10 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         self.robotStatusLabel = qt.QLabel("")
         self.robotStatusLabel.wordWrap = True
         form.addRow("Robots:", self.robotStatusLabel)
+        self.staleLabel = qt.QLabel("")
+        self.staleLabel.wordWrap = True
+        self.staleLabel.styleSheet = "color: #b36b00; font-weight: bold"
+        form.addRow(self.staleLabel)
         self.problemsLabel = qt.QLabel("")
         self.problemsLabel.wordWrap = True
         self.problemsLabel.styleSheet = "color: #b00020"
@@ -855,6 +867,7 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                          self.onSceneStartClose)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.EndCloseEvent, self.onSceneEndClose)
         self.initializeParameterNode()
+        self._statusTicks = 0
         self._statusTimer = qt.QTimer()
         self._statusTimer.setInterval(500)
         self._statusTimer.connect("timeout()", self.updateStatus)
@@ -904,6 +917,12 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
             self.statusLabel.text = "Not connected"
         self.robotStatusLabel.text = "\n".join(self.logic.robotLines())
         self.problemsLabel.text = "\n".join(self.logic.problems[-5:])
+        self._statusTicks += 1
+        if self._statusTicks % 4 == 0:  # every 2 s: a listing is a command to the daemon
+            try:
+                self.staleLabel.text = "\n".join(self.logic.staleLines())
+            except Exception as error:  # noqa: BLE001 - a lost link: the status line says it
+                self.staleLabel.text = f"stream status unknown ({error})"
         active = self.logic.isActive()
         if self.connectButton.checked != active:  # e.g. after a scene close
             wasBlocked = self.connectButton.blockSignals(True)
