@@ -33,6 +33,7 @@ from bridge.logging_limits import RateLimitedLog
 from bridge.security import (OPERATOR, WRITES, BridgeKey, BridgeOwners, BridgeQuota,
                              FileResolver, FrameResolver, SecurityPolicy, strip_frame)
 from protocol.auth import new_challenge, verify
+from protocol.freshness import daemon_clock_ms
 from protocol import commands as c
 from protocol.commands import (CommandError, CommandFailedError, ErrorCode, ForbiddenError,
                                Op, OutOfRangeError, Reply)
@@ -428,6 +429,7 @@ class Dispatcher:
         if request.heartbeat is not None:
             client.start_heartbeat(request.heartbeat)
             reply["heartbeat"] = request.heartbeat
+        reply["clock_ms"] = daemon_clock_ms()  # streams' message ids are on this clock
         return reply
 
     def _authenticate(self, request: c.Authenticate, client: Replier | None) -> Result:

@@ -38,6 +38,7 @@ from typing import Callable, Iterator, Optional, Protocol
 
 from bridge.outbox import Frame
 from bridge.security import WriteGrant
+from protocol.freshness import daemon_clock_ms
 from protocol.messages import Message
 
 log = logging.getLogger(__name__)
@@ -196,6 +197,8 @@ class Hub:
 
     def stream_frame(self, device: str, frame: Frame) -> None:
         """`stream` for a value already made into a `Frame` (a hot path's `TemplateFrame`)."""
+        if not frame.clock:  # stamped when taken (protocol/freshness.py)
+            frame.clock = daemon_clock_ms()
         if self._min_interval:
             interval = self._min_interval.get(device)
             if interval:
@@ -359,6 +362,8 @@ class Hub:
         large value replaces its device's waiting one. Memory stays bounded, the newest
         value always arrives, and the loop is woken once per batch."""
         device = channel.device
+        if not frame.clock:
+            frame.clock = daemon_clock_ms()
         if (self._direct_writes and not large and device not in self._min_interval):
             with self._lock:
                 if channel.closed:
@@ -375,6 +380,9 @@ class Hub:
         caller keeps removed devices out (the tf capability's delivery lock)."""
         if not frames:
             return
+        clock = daemon_clock_ms()
+        for _, frame in frames:
+            frame.clock = frame.clock or clock
         if self._direct_writes and not any(d in self._min_interval or d in self._audience
                                            for d, _ in frames):
             with self._lock:
@@ -411,6 +419,8 @@ class Hub:
 
     def _post(self, device: str, frame: Frame, large: bool,
               channel: StreamChannel | None) -> None:
+        if not frame.clock:
+            frame.clock = daemon_clock_ms()
         with self._lock:
             if channel is not None and channel.closed:
                 return  # the bridge is gone: its device must not come back

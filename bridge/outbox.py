@@ -11,6 +11,7 @@ lets them pile up past the bound is too slow to serve (`OutboxOverflow`).
 from __future__ import annotations
 
 from collections import OrderedDict, deque
+from dataclasses import replace
 from typing import Any, Callable, Optional
 
 from protocol.crc64 import Buffer, KnownCrc
@@ -34,20 +35,28 @@ class Frame:
     one encode serves every client of that version.
     """
 
-    __slots__ = ("_message", "_encoded")
+    __slots__ = ("_message", "_encoded", "clock")
 
     def __init__(self, message: Message) -> None:
         self._message = message
         self._encoded: dict[int, bytes] = {}
+        # The daemon's clock when the hub took this stream value (protocol/freshness.py),
+        # sent as the v2 message id; 0: not stamped (one-shots, replies).
+        self.clock = 0
 
     @property
     def message(self) -> Message:
         return self._message
 
+    def _stamped(self, message: Message) -> Message:
+        if not self.clock or message.message_id:
+            return message
+        return replace(message, message_id=self.clock)
+
     def encoded(self, header_version: int) -> bytes:
         data = self._encoded.get(header_version)
         if data is None:
-            data = encode(self.message, header_version=header_version)
+            data = encode(self._stamped(self.message), header_version=header_version)
             self._encoded[header_version] = data
         return data
 
@@ -105,7 +114,7 @@ class BulkFrame(Frame):
     def encoded(self, header_version: int) -> bytes:
         kept = self._encoded.get(self._KEPT_VERSION)
         if kept is None:
-            kept = encode(self._message, header_version=self._KEPT_VERSION)
+            kept = encode(self._stamped(self._message), header_version=self._KEPT_VERSION)
             self._encoded[self._KEPT_VERSION] = kept
             self._message = None  # type: ignore[assignment]
         if header_version == self._KEPT_VERSION:
@@ -125,6 +134,7 @@ class TemplateFrame(Frame):
                  values: Any, body_of: Callable[[Any], Body]) -> None:
         self._message = None  # type: ignore[assignment]
         self._encoded = {}
+        self.clock = 0
         self._template = template
         self._content = content
         self._timestamp = timestamp
@@ -142,7 +152,8 @@ class TemplateFrame(Frame):
     def encoded(self, header_version: int) -> bytes:
         data = self._encoded.get(header_version)
         if data is None:
-            data = self._template.encode(self._content, self._timestamp, header_version)
+            data = self._template.encode(self._content, self._timestamp, header_version,
+                                         self.clock)
             self._encoded[header_version] = data
         return data
 

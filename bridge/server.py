@@ -115,18 +115,18 @@ class BridgeServer:
             self.refused += 1
             self._refusals.warning("allow", time.monotonic(), "refused client %s: not in the "
                                    "allowed networks (--allow)", who)
-            transport.abort()  # nothing is said to a peer that may not connect
+            # One STATUS says why (the address is all it reveals: the peer knows it).
+            self._refuse(transport, "allow", f"client address: expected one in the allowed "
+                         f"networks (--allow {', '.join(map(str, self._policy.allowed_networks))}"
+                         f"), got {address}; closing")
             return
         if len(self.sessions) >= self._policy.max_clients and not self._evict_stalled(who):
             self.refused += 1
             self._refusals.warning("max_clients", time.monotonic(), "refused client %s: "
                                    "%d clients already connected (--max-clients)", who,
                                    len(self.sessions))
-            text = (f"clients: expected at most {self._policy.max_clients} "
-                    f"(--max-clients), got one more; closing")
-            transport.write(encode(Message(device_name="", body=Status(
-                code=StatusCode.RESOURCE_ERROR, error_name="max_clients", text=text))))
-            transport.close()  # after the STATUS is written
+            self._refuse(transport, "max_clients", f"clients: expected at most "
+                         f"{self._policy.max_clients} (--max-clients), got one more; closing")
             return
         session = ClientSession(self._hub, self._commands, self._limits, self.sessions.discard,
                                 grant=self._policy.grant_at_accept(address),
@@ -135,6 +135,14 @@ class BridgeServer:
         self.sessions.add(session)
         transport.set_protocol(session)
         session.connection_made(transport)
+
+    @staticmethod
+    def _refuse(transport: asyncio.Transport, name: str, text: str) -> None:
+        """Say why in one STATUS, then close (after it is written)."""
+        code = StatusCode.ACCESS_DENIED if name == "allow" else StatusCode.RESOURCE_ERROR
+        transport.write(encode(Message(device_name="", body=Status(
+            code=code, error_name=name, text=text))))
+        transport.close()
 
     def _evict_stalled(self, newcomer: str) -> bool:
         """Close the client with the oldest unfinished frame, if one is old enough, to make

@@ -51,6 +51,7 @@ from bridge.security import WRITES, WriteGrant
 from protocol.crc64 import Buffer
 from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
 from protocol.framing import Decoder, RawFrame, ReceiveBudget
+from protocol.freshness import daemon_clock_ms
 from protocol.liveness import HEARTBEAT_DEVICE, socket_options
 from protocol.messages import Message, Status, StatusCode
 from protocol.negotiation import HeaderVersionNegotiator
@@ -482,9 +483,8 @@ class ClientSession(asyncio.Protocol):
             if self._closing:
                 return
             self.send_stream(HEARTBEAT_DEVICE, Frame(Message(
-                device_name=HEARTBEAT_DEVICE, body=Status(code=StatusCode.OK,
-                                                          error_name="heartbeat",
-                                                          text=""))))
+                device_name=HEARTBEAT_DEVICE, message_id=daemon_clock_ms(),
+                body=Status(code=StatusCode.OK, error_name="heartbeat", text=""))))
             self._heartbeat = loop.call_later(interval, beat)
 
         self._heartbeat = loop.call_later(interval, beat)

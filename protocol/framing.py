@@ -174,7 +174,7 @@ class StreamTemplate:
     """
 
     __slots__ = ("type_name", "device_name", "metadata", "_type_raw", "_name_raw",
-                 "_meta_tail", "_ext_v2")
+                 "_meta_tail", "_ext_v2", "_meta_sizes")
 
     def __init__(self, type_name: str, device_name: str, metadata: dict[str, str]) -> None:
         self.type_name = type_name
@@ -190,13 +190,17 @@ class StreamTemplate:
             raise EncodeError("metadata", "a header under 64 KiB and values under 4 GiB",
                               f"{len(meta_header)} + {len(meta)} bytes")
         self._meta_tail = meta_header + meta
+        self._meta_sizes = (len(meta_header), len(meta))
         self._ext_v2 = _EXT_HEADER.pack(EXT_HEADER_SIZE, len(meta_header), len(meta), 0)
 
-    def encode(self, content: bytes, timestamp: int, header_version: int) -> bytes:
-        """The wire bytes of one message with this content (a packed body) and time stamp
-        (a u64, as in `Message.timestamp`)."""
+    def encode(self, content: bytes, timestamp: int, header_version: int,
+               message_id: int = 0) -> bytes:
+        """The wire bytes of one message with this content (a packed body), time stamp
+        (a u64, as in `Message.timestamp`) and v2 message id."""
         if header_version == 2:
-            body = b"".join((self._ext_v2, content, self._meta_tail))
+            ext = self._ext_v2 if not message_id else _EXT_HEADER.pack(
+                EXT_HEADER_SIZE, *self._meta_sizes, message_id)
+            body = b"".join((ext, content, self._meta_tail))
         elif header_version == 1:
             body = content
         else:

@@ -22,13 +22,16 @@ import logging
 import secrets
 import ssl
 import threading
+import time
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
 from protocol.auth import KeyFileError, proof, read_key_text
-from protocol.liveness import DEAD_AFTER_S, HEARTBEAT_INTERVAL_S, stream_condition
+from protocol.freshness import DEFAULT_FRESHNESS_S, Freshness
+from protocol.liveness import (DEAD_AFTER_S, HEARTBEAT_DEVICE, HEARTBEAT_INTERVAL_S,
+                               stream_condition)
 from protocol.messages import Command, Message
 from protocol.naming import KEY_ROBOT, KEY_ROLE
 from protocol import commands as c
@@ -55,7 +58,8 @@ class Client:
     """A session with the daemon over any `Transport`; see the module docstring."""
 
     def __init__(self, transport: Transport, *, callbacks: str = "auto",
-                 key: Optional[bytes] = None) -> None:
+                 key: Optional[bytes] = None,
+                 freshness: float = DEFAULT_FRESHNESS_S) -> None:
         if callbacks not in _MODES:
             raise ValueError(f"callbacks: expected 'auto' or 'spin', got {callbacks!r}")
         self._transport = transport
@@ -69,6 +73,11 @@ class Client:
         self._connection_callbacks: List[Callable[[bool, str], None]] = []
         self.errors: List[str] = []  # STATUS errors and unreadable messages, newest last
         self.daemon_info: Dict[str, Any] = {}
+        # Stream values that came later than `freshness` seconds (a stalled link's
+        # backlog): never made current (protocol/freshness.py). Counted in `late_dropped`.
+        self._freshness = Freshness(freshness)
+        self._valued: set = set()  # devices with a value on this connection
+        self.late_dropped = 0
         self._logic: Any = None
         self._types: Dict[Tuple[str, str], c.TypeDescription] = {}
         # Actions: goals waiting for their events (by goal id), actions this client serves.
@@ -82,6 +91,9 @@ class Client:
             self._on_daemon_command(message)
             return
         if route_goal_event(self._goals, message):
+            return
+        late = self._judge_freshness(message)
+        if late is None:
             return
         condition = stream_condition(message)
         if condition is not None:  # a stream went stale or came back: not its value
@@ -108,11 +120,45 @@ class Client:
                 target._handle(message)
             except Exception:  # noqa: BLE001 - one bad message must not stop the stream
                 log.exception("handling %s for %r failed", message.type_name, target)
+        if late and isinstance(resource, Subscriber):
+            resource._set_stale(late)
+
+    def _judge_freshness(self, message: Message) -> Optional[str]:
+        """None: drop this message (a heartbeat, or a stream value that came late while a
+        newer one was already here); else "" or, for the first value of a device on this
+        connection that is old (a stream that has stopped), why it is stale."""
+        stamp = message.message_id
+        if not stamp:
+            return ""
+        now = time.monotonic_ns() // 1_000_000
+        if message.device_name == HEARTBEAT_DEVICE:
+            self._freshness.heartbeat(stamp, now)
+            return None
+        if message.type_name == "STATUS":
+            return ""
+        age = self._freshness.age_ms(stamp, now)
+        device = message.device_name
+        first = device not in self._valued
+        self._valued.add(device)
+        if age is None or age <= self._freshness.bound_ms:
+            return ""
+        if first:
+            return f"its newest value is {age / 1000:.1f} s old"
+        self.late_dropped += 1
+        if self.late_dropped in (1, 10, 100) or self.late_dropped % 1000 == 0:
+            log.warning("%d stream values came later than %.0f ms (a stalled link's "
+                        "backlog?) and were dropped, the last on %s (%.0f ms late)",
+                        self.late_dropped, self._freshness.bound_ms, device, age)
+        return None
 
     def on_connected(self, command: CommandFn, first: bool) -> None:
         """Re-create everything (in order) on a new connection, then tell the user."""
         hello = c.Hello(client="slicer_client 0.1", heartbeat=HEARTBEAT_INTERVAL_S)
         self.daemon_info = command(hello.op, hello.to_args())
+        self._valued = set()
+        if self.daemon_info.get("clock_ms"):
+            self._freshness.reset(int(self.daemon_info["clock_ms"]),
+                                  time.monotonic_ns() // 1_000_000)
         if self.daemon_info.get("heartbeat"):
             self._transport.expect_data_within(DEAD_AFTER_S)
         self._authenticate(command)
@@ -537,6 +583,7 @@ class Client:
 
 def connect(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *, reconnect: bool = True,
             callbacks: str = "auto", key_file: Optional[str] = None,
+            freshness: float = DEFAULT_FRESHNESS_S,
             tls: bool = False, ca_file: Optional[str] = None,
             retry_interval: float = 0.5, max_interval: float = 5.0,
             connect_timeout: float = 3.0) -> Client:
@@ -545,6 +592,8 @@ def connect(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *, reconnect: bo
 
     `key_file`: the daemon's key (`slicer-ros2-bridge keygen`), presented on every
     connection: a daemon with a key lets only its holders write (docs/deployment.md).
+    `freshness`: a stream value that arrives later than this many seconds (a stalled
+    link's backlog) is dropped, never made current (protocol/freshness.py).
     `tls`: connect to the daemon's TLS port, checking its certificate against `ca_file`
     (its own certificate, for a self-signed one) or the system's authorities."""
     key = read_key_file(key_file) if key_file is not None else None
@@ -553,7 +602,7 @@ def connect(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *, reconnect: bo
                                max_interval=max_interval, connect_timeout=connect_timeout,
                                tls=context)
     try:
-        return Client(transport, callbacks=callbacks, key=key)
+        return Client(transport, callbacks=callbacks, key=key, freshness=freshness)
     except BaseException:
         transport.close()
         raise

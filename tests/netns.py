@@ -70,6 +70,12 @@ class Hosts:
         """`argv` run on `host` (its network namespace; the same files and processes)."""
         return ["ip", "netns", "exec", self._namespaces[host], *argv]
 
+    def route_default(self, host: str, toward: str) -> None:
+        """`host` sends everything it has no route for (DDS multicast discovery) down its
+        cable to `toward`."""
+        link, _ = self._ends[(host, toward)]
+        self._ip("-n", self._namespaces[host], "route", "add", "default", "dev", link)
+
     def pull(self, a: str, b: str) -> None:
         """The cable between `a` and `b` goes dead (b's end loses its link)."""
         link, _ = self._ends[(b, a)]

@@ -118,10 +118,14 @@ def test_max_clients_extra_client_gets_a_status_and_is_closed(locked: RunningDae
     assert "refused client 127.0.0.1" in locked.child.output()
 
 
-def test_clients_outside_allow_are_closed_at_once(processes: Processes) -> None:
+def test_clients_outside_allow_are_told_why_and_closed_at_once(processes: Processes) -> None:
     daemon = start_daemon(processes, "--allow", "10.0.0.0/8", "--allow", "fd00::/8")
     with socket.create_connection(("127.0.0.1", daemon.port)) as refused:
-        assert read_until_closed(refused) == []  # nothing said to a refused peer
+        said = read_until_closed(refused)  # one STATUS: the address is all it reveals
+    assert [m.type_name for m in said] == ["STATUS"]
+    assert said[0].body.code == StatusCode.ACCESS_DENIED
+    assert said[0].body.text == ("client address: expected one in the allowed networks "
+                                 "(--allow 10.0.0.0/8, fd00::/8), got 127.0.0.1; closing")
     line = daemon.child.wait_for_output("refused client 127.0.0.1")
     assert "not in the allowed networks (--allow)" in line
     assert_clean_exit(daemon)

@@ -1,0 +1,187 @@
+"""The operating room (issue 23), as docs/deployment.md sets it up: three hosts in network
+namespaces (ROBOT: the ROS nodes; BRIDGE: the daemon, `--host 0.0.0.0 --allow` the
+workstations' network, a writers' key; SLICER: the client), Fast DDS discovery across the
+robot's cable. Cables are pulled as a user's would be; what each side saw is judged from
+its own output. Figures are printed (run with -s); the bounds asserted are the issue's."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+
+from netns import Hosts
+from support import REPO, Child, Processes, pick_free_port, scaled, wait_until
+
+pytestmark = pytest.mark.ros
+
+TOPIC = "/or_pose"
+FRESHNESS_S = 0.5
+
+
+@dataclass
+class Room:
+    net: Hosts
+    daemon: Child
+    robot: Child
+    port: int
+    key: Path
+    env: dict[str, str]
+
+
+def lines(child: Child, word: str) -> list[tuple[float, str]]:
+    """(time, rest) of each output line `<time> WORD rest`."""
+    found = []
+    for line in child.output().splitlines():
+        parts = line.split(" ", 2)
+        if len(parts) >= 2 and parts[1] == word:
+            found.append((float(parts[0]), parts[2] if len(parts) > 2 else ""))
+    return found
+
+
+def shown_ages(client: Child, since: float) -> list[float]:
+    """Ages (ms) of the poses the client made current after `since`."""
+    return [float(rest.split()[0]) for t, rest in lines(client, "POSE")
+            if t > since and rest.endswith(" 1")]
+
+
+def log_time(line: str) -> float:
+    """The daemon log line's time (its format: `2026-11-25 15:35:47,373 LEVEL ...`)."""
+    stamp = time.strptime(line[:19], "%Y-%m-%d %H:%M:%S")
+    return time.mktime(stamp) + int(line[20:23]) / 1000
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Room]:
+    folder = tmp_path_factory.mktemp("room")
+    processes = Processes(folder)
+    with Hosts(["robot", "bridge", "slicer"],
+               cables=[("robot", "bridge", "10.77.1"), ("bridge", "slicer", "10.77.0")]) as net:
+        net.route_default("robot", "bridge")
+        net.route_default("bridge", "robot")
+        # DDS discovery crosses the robot's cable (the namespaces hold nothing else).
+        env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "PYTHONPATH": str(REPO)}
+        key = folder / "writers.key"
+        made = subprocess.run([sys.executable, "-m", "bridge.console", "keygen", str(key)],
+                              cwd=REPO, capture_output=True, text=True, timeout=60)
+        assert made.returncode == 0, made.stderr
+        port = pick_free_port()
+        daemon = processes.start("daemon", net.argv("bridge", [
+            sys.executable, "-u", "-m", "bridge.console", "run", "--host", "0.0.0.0",
+            "--port", str(port), "--allow", "10.77.0.0/24", "--key-file", str(key)]), env=env)
+        daemon.wait_for_output("listening on", timeout=60)
+        robot = processes.start("robot", net.argv("robot", [
+            sys.executable, "-u", str(REPO / "tests/peers/stream_publisher.py"), TOPIC, "100",
+            "--count", "100000000"]), env=env)
+        try:
+            yield Room(net, daemon, robot, port, key, env)
+        finally:
+            processes.stop_all()
+
+
+def slicer_client_on(room: Room, processes: Processes, name: str) -> Child:
+    child = processes.start(name, room.net.argv("slicer", [
+        sys.executable, "-u", str(REPO / "tests/peers/or_client.py"),
+        room.net.address("bridge", "slicer"), str(room.port), str(room.key), TOPIC]),
+        env=room.env)
+    child.wait_for_output("READY", timeout=60)
+    return child
+
+
+def test_a_plain_client_on_the_network_changes_nothing(room: Room,
+                                                       processes: Processes) -> None:
+    probe = processes.start("probe", room.net.argv("slicer", [
+        sys.executable, "-u", str(REPO / "tests/peers/plain_writer.py"),
+        room.net.address("bridge", "slicer"), str(room.port)]), env=room.env)
+    assert probe.popen.wait(scaled(60)) == 0, probe.output()[-2000:]
+    out = probe.output()
+    # What a hand-written OpenIGTLink client tried (the issue's three moves), and the why.
+    for op in ("create_publisher", "call_service", "send_goal"):
+        assert re.search(rf"^{op} FORBIDDEN .*key", out, re.M), out
+    assert "hello writes=False" in out
+
+
+def test_a_client_outside_allow_is_told_why(room: Room, processes: Processes) -> None:
+    probe = processes.start("outside", room.net.argv("robot", [
+        sys.executable, "-u", str(REPO / "tests/peers/plain_writer.py"),
+        room.net.address("bridge", "robot"), str(room.port), "--expect-refusal"]),
+        env=room.env)
+    assert probe.popen.wait(scaled(60)) == 0, probe.output()[-2000:]
+    assert "refused: " in probe.output() and "--allow" in probe.output()
+
+
+def test_a_pulled_cable_is_noticed_by_both_sides_and_no_old_pose_comes_back(
+        room: Room, processes: Processes) -> None:
+    client = slicer_client_on(room, processes, "slicer")
+    wait_until(lambda: len(lines(client, "POSE")) >= 50, 60, "50 poses at the client")
+    assert "writes=True" in client.output()
+    pulled = time.time()
+    room.net.pull("bridge", "slicer")
+    wait_until(lambda: bool(lines(client, "LOST")), 60, "the client noticing")
+    client_noticed = lines(client, "LOST")[0][0] - pulled
+
+    def daemon_saw() -> list[float]:
+        return [log_time(entry) for entry in room.daemon.output().splitlines()
+                if re.search(r"client 10\.77\.0\.2:\d+ disconnected", entry)
+                and log_time(entry) > pulled]
+
+    wait_until(lambda: bool(daemon_saw()), 60, "the daemon noticing")
+    daemon_noticed = daemon_saw()[0] - pulled
+    time.sleep(scaled(2.0))  # the cable stays out a while: poses pile up on the way
+    room.net.plug("bridge", "slicer")
+    plugged = time.time()
+    wait_until(lambda: any(t > plugged for t, _ in lines(client, "CONNECTED")), 60,
+               "the client back")
+    wait_until(lambda: len(shown_ages(client, plugged)) >= 50, 60,
+               "50 poses shown after the cable is back")
+    after = shown_ages(client, plugged)
+    print(f"\ncable pulled: the client noticed in {client_noticed:.1f} s, the daemon in "
+          f"{daemon_noticed:.1f} s; after it came back, {len(after)} poses, the oldest "
+          f"{max(after):.0f} ms old (freshness bound {FRESHNESS_S * 1000:.0f} ms)")
+    assert client_noticed < 10 and daemon_noticed < 10
+    assert max(after) < FRESHNESS_S * 1000 + 1000  # the bound, plus a busy machine's slack
+
+
+def test_a_short_stall_s_backlog_is_dropped_not_shown(room: Room,
+                                                      processes: Processes) -> None:
+    client = slicer_client_on(room, processes, "slicer-short")
+    wait_until(lambda: len(lines(client, "POSE")) >= 50, 60, "50 poses at the client")
+    room.net.pull("bridge", "slicer")
+    time.sleep(1.5)  # shorter than the heartbeat's 3 s: the connection survives
+    room.net.plug("bridge", "slicer")
+    plugged = time.time()
+    wait_until(lambda: len(shown_ages(client, plugged)) >= 50, 60,
+               "50 poses shown after the stall")
+    late = sum(1 for t, rest in lines(client, "POSE") if t > plugged and rest.endswith(" 0"))
+    after = shown_ages(client, plugged)
+    lost = lines(client, "LOST")
+    oldest = max(float(rest.split()[0]) for t, rest in lines(client, "POSE") if t > plugged)
+    print(f"\na 1.5 s stall: {late} values came late (the oldest {oldest:.0f} ms) and were "
+          f"dropped, {len(lost)} reconnects; the oldest pose shown after it was "
+          f"{max(after):.0f} ms old")
+    assert max(after) < FRESHNESS_S * 1000 + 1000
+    assert late > 0 or lost, "the backlog was neither dropped nor cut with the connection"
+
+
+def test_a_robot_gone_from_the_network_is_stale_at_the_client_within_2_s(
+        room: Room, processes: Processes) -> None:
+    client = slicer_client_on(room, processes, "slicer-stale")
+    wait_until(lambda: len(lines(client, "POSE")) >= 50, 60, "50 poses at the client")
+    pulled = time.time()
+    room.net.pull("robot", "bridge")  # the DDS cable: the daemon keeps its client link
+    try:
+        wait_until(lambda: bool(lines(client, "STALE")), 60, "the stream marked stale")
+        noticed = lines(client, "STALE")[0][0] - pulled
+        print(f"\nrobot cable pulled: stale at the client after {noticed:.2f} s "
+              f"({lines(client, 'STALE')[0][1]})")
+        assert noticed < 2.0
+    finally:
+        room.net.plug("robot", "bridge")
+    wait_until(lambda: any(t > pulled for t, _ in lines(client, "LIVE")), 60,
+               "the stream live again")
