@@ -26,6 +26,7 @@ from bridge.security import SecurityPolicy, is_loopback_host
 from bridge.session import ClientSession, CommandHandler, SessionLimits
 from protocol.framing import ReceiveBudget
 from protocol.framing import encode
+from protocol.liveness import PEER_SILENT_AFTER_S
 from protocol.messages import Message, Status, StatusCode
 
 log = logging.getLogger(__name__)
@@ -33,6 +34,7 @@ log = logging.getLogger(__name__)
 # An unfinished frame this old may be closed to admit a new client when all slots are
 # taken: far above a frame's transit time on any working link, far below the deadline.
 STALLED_FRAME_EVICT_S = 1.0
+LINK_CHECK_INTERVAL_S = 1.0  # how often clients' links are checked for a dead peer
 
 
 class PortInUseError(OSError):
@@ -56,6 +58,7 @@ class BridgeServer:
         self._server: Optional[asyncio.base_events.Server] = None
         self._tls = tls
         self._tls_server: Optional[asyncio.base_events.Server] = None
+        self._link_check: Optional[asyncio.TimerHandle] = None
         self.sessions: set[ClientSession] = set()
         self.refused = 0
 
@@ -90,6 +93,8 @@ class BridgeServer:
         """Start listening (after `start` with ``serving`` False)."""
         assert self._server is not None
         await self._server.start_serving()
+        self._link_check = asyncio.get_running_loop().call_later(LINK_CHECK_INTERVAL_S,
+                                                                 self._check_links)
         if self._tls_server is not None:
             await self._tls_server.start_serving()
 
@@ -136,6 +141,17 @@ class BridgeServer:
         transport.set_protocol(session)
         session.connection_made(transport)
 
+    def _check_links(self) -> None:
+        """Close the clients whose link is dead (a pulled cable): their slot and buffers
+        are free within seconds, and nothing they held arrives late."""
+        for session in tuple(self.sessions):
+            silent = session.peer_silence()
+            if silent is not None and silent >= PEER_SILENT_AFTER_S:
+                session.abort_dead(silent)
+                self.sessions.discard(session)
+        self._link_check = asyncio.get_running_loop().call_later(LINK_CHECK_INTERVAL_S,
+                                                                 self._check_links)
+
     @staticmethod
     def _refuse(transport: asyncio.Transport, name: str, text: str) -> None:
         """Say why in one STATUS, then close (after it is written)."""
@@ -163,6 +179,8 @@ class BridgeServer:
         return True
 
     async def close(self) -> None:
+        if self._link_check is not None:
+            self._link_check.cancel()
         servers = [s for s in (self._server, self._tls_server) if s is not None]
         for server in servers:
             server.close()

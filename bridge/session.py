@@ -52,7 +52,7 @@ from protocol.crc64 import Buffer
 from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
 from protocol.framing import Decoder, RawFrame, ReceiveBudget
 from protocol.freshness import daemon_clock_ms
-from protocol.liveness import HEARTBEAT_DEVICE, socket_options
+from protocol.liveness import HEARTBEAT_DEVICE, TCP_INFO_BYTES, peer_silence, socket_options
 from protocol.messages import Message, Status, StatusCode
 from protocol.negotiation import HeaderVersionNegotiator
 
@@ -488,6 +488,29 @@ class ClientSession(asyncio.Protocol):
             self._heartbeat = loop.call_later(interval, beat)
 
         self._heartbeat = loop.call_later(interval, beat)
+
+    def peer_silence(self) -> Optional[float]:
+        """Seconds the peer has acknowledged nothing while data waits for it (None:
+        nothing waits, or not a TCP socket): see protocol/liveness.py."""
+        transport = self._transport
+        sock = transport.get_extra_info("socket") if transport is not None else None
+        if sock is None or sock.family not in (socket.AF_INET, socket.AF_INET6) \
+                or not hasattr(socket, "TCP_INFO"):
+            return None
+        try:
+            return peer_silence(sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO,
+                                                TCP_INFO_BYTES))
+        except OSError:
+            return None
+
+    def abort_dead(self, silent_s: float) -> None:
+        """The link is dead: close now, dropping what waits (it would arrive stale)."""
+        log.warning("client %s has acknowledged nothing for %.1f s while data waits: the "
+                    "link is dead; closing it", self.peer, silent_s)
+        with self._wlock:
+            self._closing = True
+        if self._transport is not None:
+            self._transport.abort()
 
     def forget_device(self, device: str) -> None:
         self._outbox.discard(device)

@@ -7,6 +7,7 @@ its own output. Figures are printed (run with -s); the bounds asserted are the i
 from __future__ import annotations
 
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -17,6 +18,7 @@ from typing import Iterator
 import pytest
 
 from netns import Hosts
+from protocol.liveness import PEER_SILENT_AFTER_S
 from support import REPO, Child, Processes, pick_free_port, scaled, wait_until
 
 pytestmark = pytest.mark.ros
@@ -185,3 +187,20 @@ def test_a_robot_gone_from_the_network_is_stale_at_the_client_within_2_s(
         room.net.plug("robot", "bridge")
     wait_until(lambda: any(t > pulled for t, _ in lines(client, "LIVE")), 60,
                "the stream live again")
+
+
+def test_a_client_that_stops_reading_is_not_taken_for_a_dead_link(
+        room: Room, processes: Processes) -> None:
+    before = len(room.daemon.output())
+    client = slicer_client_on(room, processes, "slicer-frozen")
+    wait_until(lambda: len(lines(client, "POSE")) >= 50, 60, "50 poses at the client")
+    client.popen.send_signal(signal.SIGSTOP)  # a frozen GUI: its kernel still acknowledges
+    try:
+        time.sleep(PEER_SILENT_AFTER_S + 3)
+    finally:
+        client.popen.send_signal(signal.SIGCONT)
+    resumed = time.time()
+    wait_until(lambda: len(shown_ages(client, resumed)) >= 20, 60, "poses after resuming")
+    closed = [line for line in room.daemon.output()[before:].splitlines()
+              if re.search(r"client 10\.77\.0\.2:\d+ has acknowledged nothing", line)]
+    assert not closed, closed

@@ -40,3 +40,21 @@ def test_a_judge_needs_a_positive_bound_and_stamps_are_never_zero() -> None:
         Freshness(0)
     assert Freshness(1.0).age_ms(5, 5) is None  # no hello yet
     assert all(daemon_clock_ms() > 0 for _ in range(100))
+
+
+def test_peer_silence_reads_the_kernel_s_tcp_info() -> None:
+    import struct
+    import sys
+
+    from protocol.liveness import TCP_INFO_BYTES, peer_silence
+
+    def info(unacked: int, last_ack_recv_ms: int) -> bytes:
+        u32s = [0] * 13
+        u32s[4], u32s[12] = unacked, last_ack_recv_ms
+        order = "<" if sys.byteorder == "little" else ">"
+        return bytes(8) + struct.pack(f"{order}13I", *u32s) + bytes(40)
+
+    assert len(info(0, 0)) >= TCP_INFO_BYTES
+    assert peer_silence(info(3, 6_500)) == 6.5  # data waits, nothing acknowledged: 6.5 s
+    assert peer_silence(info(0, 60_000)) is None  # nothing waits: an idle link is keepalive's
+    assert peer_silence(b"\0" * 10) is None
