@@ -74,7 +74,8 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
                              "lookups and broadcasters (and what --allow-frame judges), not "
                              "to robot models: give create_robot a tf_prefix")
     security = parser.add_argument_group(
-        "security", "OpenIGTLink has no authentication: lock the daemon down with these (also "
+        "security", "Who may connect and who may change ROS (docs/deployment.md): lock the "
+                    "daemon down with these (also "
                     "a `security:` section in --config; lists add up, limits given here win). "
                     "See docs/security.md.")
     security.add_argument("--allow", action="append", default=[], metavar="CIDR",

@@ -7,6 +7,7 @@ its own output. Figures are printed (run with -s); the bounds asserted are the i
 from __future__ import annotations
 
 import re
+import shlex
 import signal
 import subprocess
 import sys
@@ -59,6 +60,26 @@ def log_time(line: str) -> float:
     return time.mktime(stamp) + int(line[20:23]) / 1000
 
 
+DEPLOYMENT = REPO / "docs" / "deployment.md"
+DOC_KEY = "/etc/slicer-ros2-bridge/writers.key"
+
+
+def deploy_block(name: str) -> str:
+    """The text of docs/deployment.md's block marked ``deploy: <name>``."""
+    found = re.search(rf"^```\w+ deploy: {name}\n(.*?)^```", DEPLOYMENT.read_text(),
+                      re.M | re.S)
+    assert found, f"docs/deployment.md has no block 'deploy: {name}'"
+    return found.group(1)
+
+
+def as_run_here(command: str, key: Path, port: int) -> list[str]:
+    """A documented command line, with this test's key file and port, and this venv's
+    entry point."""
+    argv = shlex.split(command.replace(DOC_KEY, str(key)).replace("18944", str(port)))
+    assert argv[0] == "slicer-ros2-bridge", argv
+    return [sys.executable, "-u", "-m", "bridge.console", *argv[1:]]
+
+
 @pytest.fixture(scope="module")
 def room(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Room]:
     folder = tmp_path_factory.mktemp("room")
@@ -70,13 +91,13 @@ def room(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Room]:
         # DDS discovery crosses the robot's cable (the namespaces hold nothing else).
         env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "PYTHONPATH": str(REPO)}
         key = folder / "writers.key"
-        made = subprocess.run([sys.executable, "-m", "bridge.console", "keygen", str(key)],
-                              cwd=REPO, capture_output=True, text=True, timeout=60)
-        assert made.returncode == 0, made.stderr
         port = pick_free_port()
-        daemon = processes.start("daemon", net.argv("bridge", [
-            sys.executable, "-u", "-m", "bridge.console", "run", "--host", "0.0.0.0",
-            "--port", str(port), "--allow", "10.77.0.0/24", "--key-file", str(key)]), env=env)
+        # The guide's own commands (docs/deployment.md), with this test's key and port.
+        made = subprocess.run(as_run_here(deploy_block("keygen"), key, port), cwd=REPO,
+                              capture_output=True, text=True, timeout=60)
+        assert made.returncode == 0, made.stderr
+        daemon = processes.start("daemon", net.argv("bridge", as_run_here(
+            deploy_block("bridge"), key, port)), env=env)
         daemon.wait_for_output("listening on", timeout=60)
         robot = processes.start("robot", net.argv("robot", [
             sys.executable, "-u", str(REPO / "tests/peers/stream_publisher.py"), TOPIC, "100",
@@ -204,3 +225,17 @@ def test_a_client_that_stops_reading_is_not_taken_for_a_dead_link(
     closed = [line for line in room.daemon.output()[before:].splitlines()
               if re.search(r"client 10\.77\.0\.2:\d+ has acknowledged nothing", line)]
     assert not closed, closed
+
+
+def test_the_guide_s_client_snippet_runs_on_the_workstation(room: Room,
+                                                             processes: Processes,
+                                                             tmp_path: Path) -> None:
+    snippet = deploy_block("slicer").replace(DOC_KEY, str(room.key)).replace(
+        "18944", str(room.port))
+    script = tmp_path / "snippet.py"
+    script.write_text(snippet + "pose.wait_for_message(30)\nprint('pose', pose.count > 0)\n"
+                      "ros.close()\n")
+    run = processes.start("snippet", room.net.argv("slicer", [sys.executable, str(script)]),
+                          env=room.env)
+    assert run.popen.wait(scaled(90)) == 0, run.output()[-2000:]
+    assert "may change ROS: True" in run.output() and "pose True" in run.output()

@@ -69,7 +69,7 @@ from slicer.ScriptedLoadableModule import (ScriptedLoadableModule,  # noqa: E402
 from slicer.util import VTKObservationMixin  # noqa: E402
 
 from slicer_client.bridge_state import BridgeState  # noqa: E402
-from slicer_client.client import Client  # noqa: E402
+from slicer_client.client import Client, read_key_file  # noqa: E402
 from slicer_client.connection import CommandTimeoutError, ConnectionClosedError  # noqa: E402
 from slicer_client.connector_codec import (SLICER_TEXT_ENCODING, build_command,  # noqa: E402
                                            message_from_node, outgoing_content, parse_reply)
@@ -131,6 +131,9 @@ class ROS2BridgeParameterNode:
     robotName: str = "demo"
     robotNode: str = "/robot_state_publisher"
     robotParameter: str = "robot_description"
+    # The writers' key (`slicer-ros2-bridge keygen`): presented on each connection, so this
+    # module may change ROS on a daemon that asks for it (docs/deployment.md).
+    keyFile: str = ""
     bridgeState: str = ""
 
 
@@ -363,6 +366,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.connector = None
         self.transport = None
         self.client = None
+        self._key = None  # the writers' key, when connect() was given one
         self.problems = []  # errors met outside a button's handler, shown in the GUI
         self._planned = set()  # node ids already placed
         self._timer = qt.QTimer()
@@ -384,7 +388,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.removeObservers()
 
     # --- connection ---------------------------------------------------------------------
-    def connect(self, host, port):
+    def connect(self, host, port, keyFile=""):
+        self._key = read_key_file(keyFile) if keyFile else None  # a bad file: said now
         if self.connector is None:
             self.connector = slicer.mrmlScene.GetFirstNode(CONNECTOR_NAME,
                                                            "vtkMRMLIGTLConnectorNode")
@@ -429,7 +434,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         transport = ConnectorTransport(self.connector)
         try:
             # Callbacks wait for this module's spin: they run on the main thread.
-            client = Client(transport, callbacks="spin")  # sends hello
+            client = Client(transport, callbacks="spin",
+                            key=self._key)  # sends hello (and the key)
         except Exception as error:
             transport.close()
             if caller is None:
@@ -762,11 +768,15 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
 
         self.hostEdit = qt.QLineEdit()
         self.portSpin = qt.QSpinBox()
+        self.keyFileEdit = qt.QLineEdit()
+        self.keyFileEdit.placeholderText = ("writers' key file (needed to change ROS on a "
+                                            "remote daemon)")
         self.connectButton = qt.QPushButton("Connect")
         self.connectButton.checkable = True
         self.statusLabel = qt.QLabel("Not connected")
         form.addRow("Host:", self.hostEdit)
         form.addRow("Port:", self.portSpin)
+        form.addRow("Key file:", self.keyFileEdit)
         form.addRow(self.connectButton)
         form.addRow("Status:", self.statusLabel)
 
@@ -902,7 +912,8 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
             # Widgets made in code: map parameter names to widgets explicitly
             # (connectGui looks for the "SlicerParameterName" property of .ui widgets).
             self._parameterNodeGuiTag = self._parameterNode.connectParametersToGui({
-                "host": self.hostEdit, "port": self.portSpin, "robotName": self.robotNameEdit,
+                "host": self.hostEdit, "port": self.portSpin, "keyFile": self.keyFileEdit,
+                "robotName": self.robotNameEdit,
                 "robotNode": self.robotNodeEdit, "robotParameter": self.robotParameterEdit})
 
     def updateStatus(self):
@@ -932,7 +943,8 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
     def onConnectToggled(self, on):
         with slicer.util.tryWithErrorDisplay("Failed to (dis)connect.", waitCursor=True):
             if on:
-                self.logic.connect(self._parameterNode.host, self._parameterNode.port)
+                self.logic.connect(self._parameterNode.host, self._parameterNode.port,
+                                   self._parameterNode.keyFile)
             else:
                 self.logic.disconnect()
             self.updateStatus()
