@@ -53,6 +53,9 @@ class TransportListener(Protocol):
 
 class Transport(Protocol):
     address: str
+    # Can it take a heartbeat's silence for a dead link (`expect_data_within`)? 3D Slicer's
+    # connector cannot: its data comes through MRML nodes, not every message.
+    watches_silence: bool
 
     @property
     def connected(self) -> bool: ...
@@ -72,6 +75,8 @@ class Transport(Protocol):
 
 class ReconnectingTransport:
     """A TCP connection to the daemon that comes back by itself."""
+
+    watches_silence = True
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  reconnect: bool = True, retry_interval: float = 0.5,

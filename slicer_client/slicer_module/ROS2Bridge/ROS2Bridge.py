@@ -148,6 +148,10 @@ class ConnectorTransport:
     unconnected connectors), so a loss is also noticed by `poll()` from the module's timer.
     """
 
+    # The connector's data reaches us through its MRML nodes: a heartbeat's silence could
+    # not be told from a quiet stream here (the daemon watches this link from its side).
+    watches_silence = False
+
     def __init__(self, connector):
         self.connector = connector
         self.address = f"{connector.GetServerHostname()}:{connector.GetServerPort()}"
