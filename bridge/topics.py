@@ -42,7 +42,7 @@ from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
                                CreateSubscriber, ErrorCode, ForbiddenError, GetLastMessage, Op,
                                OutOfRangeError, Publish, QoS, RemovePublisher, RemoveSubscriber,
                                WrongTypeError)
-from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
+from protocol.conversions import igtl_stamp_or_now, igtl_timestamp_now
 from protocol.messages import Json, Message, PolyData, StatusCode
 from protocol.messages import Point as PointBody
 from protocol.naming import KEY_COUNT, KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
@@ -196,8 +196,7 @@ class SubscriberBridge:
             self._bad.warning("convert", None, "cannot convert a %s from %s, not sent: %s",
                               self.codec.ros_type, self.topic, error)
             return
-        stamp = (igtl_timestamp_from_ros(*encoded.stamp) if encoded.stamp and encoded.stamp[0] > 0
-                 else igtl_timestamp_now())
+        stamp = igtl_stamp_or_now(*encoded.stamp) if encoded.stamp else igtl_timestamp_now()
         metadata = dict(self._metadata)
         metadata.update(encoded.metadata)
         message = Message(device_name=self.device, body=encoded.body, timestamp=stamp,
@@ -230,8 +229,8 @@ class _MessageStream:
         metadata = dict(self.metadata)
         metadata[KEY_COUNT] = str(count)
         stamp = getattr(getattr(msg, "header", None), "stamp", None)
-        timestamp = (igtl_timestamp_from_ros(stamp.sec, stamp.nanosec)
-                     if stamp is not None and stamp.sec > 0 else igtl_timestamp_now())
+        timestamp = (igtl_stamp_or_now(stamp.sec, stamp.nanosec) if stamp is not None
+                     else igtl_timestamp_now())
         message = Message(device_name=self.channel.device, body=Json(message_to_json(msg)),
                           timestamp=timestamp, metadata=metadata)
         large = approximate_size(message) > LARGE_MESSAGE_BYTES

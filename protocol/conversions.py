@@ -363,6 +363,19 @@ def igtl_timestamp_now() -> int:
     return igtl_timestamp_from_ros(total // _NS_PER_S, total % _NS_PER_S)
 
 
+def igtl_stamp_or_now(sec: int, nanosec: int) -> int:
+    """The one rule for a ROS header stamp -> OpenIGTLink time stamp, on every path: a
+    stamp that is unset (0) or that OpenIGTLink cannot hold (negative, a second beyond
+    2106, a nanosecond field of a second or more: legal in a uint32) becomes the current
+    time, never an error."""
+    if isinstance(sec, bool) or isinstance(nanosec, bool) or not isinstance(sec, int) \
+            or not isinstance(nanosec, int):
+        return igtl_timestamp_now()
+    if 0 < sec <= _U32_MAX and 0 <= nanosec < _NS_PER_S:
+        return igtl_timestamp_from_ros(sec, nanosec)
+    return igtl_timestamp_now()
+
+
 def igtl_timestamp_to_seconds(ts: int) -> float:
     """OpenIGTLink time stamp -> float seconds since 1970 (for display and rate maths)."""
     t = _check_int(ts, "timestamp", 0, _U64_MAX)

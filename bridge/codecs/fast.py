@@ -17,8 +17,7 @@ from bridge.codecs.base import TypeCodec
 from bridge.codecs.cdr import RAW_POSE_READERS, CdrError
 from protocol.conversions import (
     igtl12_to_matrix,
-    igtl_timestamp_from_ros,
-    igtl_timestamp_now,
+    igtl_stamp_or_now,
     pose_to_igtl12,
 )
 from protocol.errors import ProtocolError
@@ -80,11 +79,7 @@ class RawPoseStream:
         template = self._templates.get((frame, child))
         if template is None:
             template = self._template_for(data, frame, child)
-        if sec > 0 and 0 <= nanosec < 1_000_000_000 and sec <= _U32_MAX:
-            timestamp = igtl_timestamp_from_ros(sec, nanosec)
-        else:
-            timestamp = igtl_timestamp_now()
-        return template, content, timestamp, values
+        return template, content, igtl_stamp_or_now(sec, nanosec), values
 
     def _template_for(self, data: bytes, frame: str, child: str) -> StreamTemplate:
         from rclpy.serialization import deserialize_message

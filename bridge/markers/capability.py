@@ -97,7 +97,7 @@ from bridge.tf.math import Tf7, compose, quat_normalize
 from bridge.tf.lookups import LookupKey
 from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
                                ListMarkers, Op, OutOfRangeError, RemoveMarkerSubscriber)
-from protocol.conversions import igtl_timestamp_from_ros, igtl_timestamp_now
+from protocol.conversions import igtl_stamp_or_now
 from protocol.messages import Message, StatusCode, String
 from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_FORMAT, KEY_MARKER_TYPE, KEY_MARKERS,
                              KEY_PARENT_DEVICE, UNITS_MM, DeviceNameRegistry, NameKey,
@@ -762,8 +762,7 @@ class MarkerBridges:
         metadata[KEY_COLOR] = " ".join(f"{c:.6g}" for c in model.rgba)
         metadata.update(model.metadata)
         # Stamped with the marker's header stamp, as topic bridges stamp their messages.
-        stamp = (igtl_timestamp_from_ros(*update.stamp) if update.stamp[0] > 0
-                 else igtl_timestamp_now())
+        stamp = igtl_stamp_or_now(*update.stamp)
         # A stream: a client that is behind gets only the newest model of each marker,
         # and the model's content is shared by every client, not copied per client.
         self._hub.stream_frame(live.device, SharedFrame(Message(

@@ -81,7 +81,7 @@ from protocol.commands import (
 )
 from protocol.conversions import (
     ConversionError,
-    igtl_timestamp_from_ros,
+    igtl_stamp_or_now,
     igtl_timestamp_now,
     pose_to_igtl12,
     validate_matrix,
@@ -162,8 +162,7 @@ def _igtl_timestamp(stamp_ns: int) -> int:
     last = _last_stamp  # one read: another thread may replace it meanwhile
     if stamp_ns == last[0]:  # the lookups of one /tf message share their stamp
         return last[1]
-    sec, nanosec = divmod(stamp_ns, _NS_PER_S)
-    timestamp = igtl_timestamp_from_ros(sec, nanosec)
+    timestamp = igtl_stamp_or_now(*divmod(stamp_ns, _NS_PER_S))
     _last_stamp = (stamp_ns, timestamp)
     return timestamp
 
