@@ -60,6 +60,10 @@ def test_set_up_s_entry_point_is_the_guarded_one(monkeypatch: pytest.MonkeyPatch
     monkeypatch.syspath_prepend(str(REPO / "tools"))
     import setup_env
     calls: list[object] = []
-    monkeypatch.setattr(setup_env, "guarded", lambda body: calls.append(body) or 7)
+
+    def guarded(body: object) -> int:
+        calls.append(body)
+        return 7
+    monkeypatch.setattr(setup_env, "guarded", guarded)
     assert setup_env.main() == 7
     assert calls == [setup_env.set_up]
