@@ -1,6 +1,7 @@
-"""The README's code runs as written against `make demo` (issue 25, item 6).
+"""The READMEs' code runs as written against `make demo` (issue 25, item 6): README.md and
+slicer_client/README.md.
 
-Every fenced block of README.md names its language, and the language says what the test
+Every fenced block of each README names its language, and the language says what the test
 does with it:
 
 - ``python``: run, on its own, with the venv's Python in the repository (as a reader pastes
@@ -37,7 +38,9 @@ from support import (REPO, Child, Processes, assert_clean_exit, pick_free_port, 
 
 pytestmark = pytest.mark.ros
 
-README = REPO / "README.md"
+# Each README checked, with how many runnable blocks it has at least (so they cannot go
+# missing unnoticed).
+READMES = {"README.md": 5, "slicer_client/README.md": 2}
 README_PORT = 18944
 RUNNERS = ("python", "sh", "yaml")
 NOT_RUN = ("text",)
@@ -46,9 +49,10 @@ _FENCE = re.compile(r"^(?P<indent> *)```(?P<info>[^`]*)$")
 
 @dataclass(frozen=True)
 class Block:
-    """One fenced block: its language, why it is not run ("" if it is), its text, and the
-    README line its fence opens on."""
+    """One fenced block: its README, its language, why it is not run ("" if it is), its
+    text, and the README line its fence opens on."""
 
+    readme: str
     language: str
     no_run: str
     text: str
@@ -56,16 +60,16 @@ class Block:
 
     @property
     def name(self) -> str:
-        return f"README.md:{self.line}:{self.language}"
+        return f"{self.readme}:{self.line}:{self.language}"
 
 
 class ReadmeFormatError(ValueError):
     """A fence the test cannot take: it says which line, what was expected and what came."""
 
 
-def blocks(markdown: str) -> list[Block]:
-    """Every fenced block of ``markdown``, its indentation removed (a block in a list item
-    is indented)."""
+def blocks(markdown: str, readme: str = "README.md") -> list[Block]:
+    """Every fenced block of ``markdown`` (the text of ``readme``), its indentation removed
+    (a block in a list item is indented)."""
     found: list[Block] = []
     lines = markdown.splitlines()
     i = 0
@@ -78,7 +82,7 @@ def blocks(markdown: str) -> list[Block]:
         language, _, rest = info.partition(" ")
         rest = rest.strip()
         if rest and not rest.startswith("no-run:"):
-            raise ReadmeFormatError(f"README.md:{i + 1}: expected 'no-run: <why>' after the "
+            raise ReadmeFormatError(f"{readme}:{i + 1}: expected 'no-run: <why>' after the "
                                     f"language, got {rest!r}")
         body: list[str] = []
         i += 1
@@ -86,26 +90,35 @@ def blocks(markdown: str) -> list[Block]:
             body.append(lines[i][len(indent):] if lines[i].startswith(indent) else lines[i])
             i += 1
         if i == len(lines):
-            raise ReadmeFormatError(f"README.md:{len(found)}: a fence opened and never closed")
-        found.append(Block(language, rest.removeprefix("no-run:").strip(),
+            raise ReadmeFormatError(f"{readme}:{len(found)}: a fence opened and never closed")
+        found.append(Block(readme, language, rest.removeprefix("no-run:").strip(),
                            "\n".join(body) + "\n", i - len(body)))
         i += 1
     return found
 
 
-README_BLOCKS = blocks(README.read_text())
+README_BLOCKS = [block for readme in READMES
+                 for block in blocks((REPO / readme).read_text(), readme)]
 
 
-def test_every_block_says_what_it_is() -> None:
+@pytest.mark.parametrize("readme", list(READMES))
+def test_every_block_says_what_it_is(readme: str) -> None:
     """A language the test knows, and a reason wherever a runnable one is not run."""
-    for block in README_BLOCKS:
+    found = [b for b in README_BLOCKS if b.readme == readme]
+    for block in found:
         assert block.language in RUNNERS + NOT_RUN, (
             f"{block.name}: expected a language among {RUNNERS + NOT_RUN}, got "
             f"{block.language!r}")
         if block.language in NOT_RUN:
             assert not block.no_run, f"{block.name}: text is never run; no reason needed"
-    ran = [b for b in README_BLOCKS if b.language in RUNNERS and not b.no_run]
-    assert len(ran) >= 5, "the README's runnable examples went missing"
+    ran = [b for b in found if b.language in RUNNERS and not b.no_run]
+    assert len(ran) >= READMES[readme], f"{readme}'s runnable examples went missing"
+
+
+def test_a_fence_names_its_readme_when_it_is_wrong() -> None:
+    with pytest.raises(ReadmeFormatError, match=r"^slicer_client/README\.md:3: expected "
+                                                r"'no-run: <why>'"):
+        blocks("text\n\n```python later\nx = 1\n```\n", "slicer_client/README.md")
 
 
 def _port_free(port: int) -> bool:

@@ -22,10 +22,12 @@ from __future__ import annotations
 
 import hashlib
 import os
+import signal
 import sys
 import sysconfig
 import time
 from pathlib import Path
+from typing import Callable
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -203,29 +205,45 @@ def verify() -> None:
     run("import check", [str(venv_python()), "-c", probe], CACHE / "verify.log")
 
 
-def main() -> int:
+def set_up() -> int:
     started = time.monotonic()
+    digest = inputs_digest()
+    if venv_python().exists() and STAMP.exists() and STAMP.read_text().strip() == digest:
+        say(f"environment up to date ({VENV}); nothing to do")
+        return 0
+    check_python()
+    check_build_tools()
+    for folder in (CACHE / "pip", CACHE / "tmp", BUILD):
+        folder.mkdir(parents=True, exist_ok=True)
+    STAMP.unlink(missing_ok=True)
+    create_venv()
+    install_project()
+    ensure_cmake()
+    build_shipped_interfaces()
+    verify()
+    STAMP.write_text(digest + "\n")
+    say(f"environment ready in {time.monotonic() - started:.0f} s: {VENV}")
+    return 0
+
+
+def guarded(body: Callable[[], int]) -> int:
+    """``body()``'s exit status; a `SetupError` is one line and 1, and Ctrl-C (SIGINT) one
+    line and 130 (128 + SIGINT, as a shell reports it), never a traceback. By then the
+    interrupted step's processes are stopped (`run_step`), and the stamp, removed before
+    anything changed, makes the next run redo what was cut short."""
     try:
-        digest = inputs_digest()
-        if venv_python().exists() and STAMP.exists() and STAMP.read_text().strip() == digest:
-            say(f"environment up to date ({VENV}); nothing to do")
-            return 0
-        check_python()
-        check_build_tools()
-        for folder in (CACHE / "pip", CACHE / "tmp", BUILD):
-            folder.mkdir(parents=True, exist_ok=True)
-        STAMP.unlink(missing_ok=True)
-        create_venv()
-        install_project()
-        ensure_cmake()
-        build_shipped_interfaces()
-        verify()
-        STAMP.write_text(digest + "\n")
+        return body()
     except SetupError as error:
         print(f"[setup] ERROR: {error}", file=sys.stderr, flush=True)
         return 1
-    say(f"environment ready in {time.monotonic() - started:.0f} s: {VENV}")
-    return 0
+    except KeyboardInterrupt:
+        print("[setup] interrupted (Ctrl-C); run `make setup` again to finish",
+              file=sys.stderr, flush=True)
+        return 128 + signal.SIGINT
+
+
+def main() -> int:
+    return guarded(set_up)
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 import re
 import sys
-from typing import Any
+from typing import Any, Optional
 
 import pytest
 
@@ -60,13 +60,36 @@ def test_the_hold_pauses_the_idle_motion_and_blends_back() -> None:
 # ---------------------------------------------------------------------------- with ROS
 
 
-def joint_states(echo: Child) -> list[dict[str, float]]:
+def joint_states(echo: Child, *, idle: Optional[bool] = None) -> list[dict[str, float]]:
+    """The positions of each joint state the echo printed; ``idle`` True: only the idle
+    motion's (they carry velocities), False: only held or moved ones (no velocities)."""
     out = []
     for line in echo.output().splitlines():
         if line.startswith("MSG "):
             msg = json.loads(line[4:])
-            out.append(dict(zip(msg["name"], msg["position"])))
+            if idle is None or bool(msg["velocity"]) == idle:
+                out.append(dict(zip(msg["name"], msg["position"])))
     return out
+
+
+def share_along(state: dict[str, float], a: dict[str, float], b: dict[str, float]
+                ) -> Optional[float]:
+    """u in [0, 1] if ``state`` is ``a + u (b - a)`` in every joint of ``a`` (1e-6), else
+    None."""
+    span = {j: b[j] - a[j] for j in a}
+    norm = sum(d * d for d in span.values())
+    if norm == 0.0:
+        return 0.0 if all(abs(state[j] - a[j]) < 1e-6 for j in a) else None
+    u = sum((state[j] - a[j]) * span[j] for j in a) / norm
+    if not -1e-6 <= u <= 1 + 1e-6:
+        return None
+    return u if all(abs(state[j] - (a[j] + u * span[j])) < 1e-6 for j in a) else None
+
+
+def started_from(line: str) -> dict[str, float]:
+    """The positions a "trajectory started: ..., from joint_1=..., joint_2=..." line gives."""
+    return {name: float(value) for name, value in
+            (pair.split("=") for pair in line.split(" from ", 1)[1].split(", "))}
 
 
 @pytest.mark.ros
@@ -79,6 +102,9 @@ def test_the_demo_arm_follows_a_trajectory_sent_through_the_daemon(processes: Pr
     echo = processes.python("echo", "echo_subscriber.py", "/joint_states",
                             "sensor_msgs/msg/JointState")
     echo.wait_for_output("READY")
+    # READY: its subscription exists; the motion's states reach it once discovery matched
+    # the two, and only then can it see the whole trajectory.
+    wait_until(lambda: len(joint_states(echo)) > 0, 20, "the echo's first joint state")
     daemon = start_daemon(processes)
     ros = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
     try:
@@ -105,9 +131,28 @@ def test_the_demo_arm_follows_a_trajectory_sent_through_the_daemon(processes: Pr
                    s["joint_2"] == pytest.approx(0.5, abs=1e-6) for s in held)
         # The other joints kept where they were when the goal began.
         assert len({round(s["joint_3"], 9) for s in held}) == 1
-        # On the way, joint_1 passed through the interpolated values.
-        path = [s["joint_1"] for s in joint_states(echo)]
-        assert any(0.2 < p < 0.9 for p in path) and any(1.05 < p < 1.45 for p in path)
+        # On the way, the joints went along the interpolation: from where the arm was
+        # (the motion says where) to the first point, then to the second, both joints at
+        # the same share of each segment, never back.
+        start = started_from(motion.wait_for_output("trajectory started"))
+        assert set(start) == {"joint_1", "joint_2"}
+        first, second = {"joint_1": 1.0, "joint_2": -0.5}, {"joint_1": 1.5, "joint_2": 0.5}
+        moved = joint_states(echo, idle=False)
+        end = next(i for i, s in enumerate(moved)
+                   if s["joint_1"] == pytest.approx(1.5, abs=1e-9) and
+                   s["joint_2"] == pytest.approx(0.5, abs=1e-9))
+        progress: list[tuple[int, float]] = []
+        for state in moved[:end + 1]:
+            u, v = share_along(state, start, first), share_along(state, first, second)
+            if u is not None and (v is None or u < 1):
+                progress.append((0, u))
+            else:
+                assert v is not None, (state, start)
+                progress.append((1, v))
+        assert progress == sorted(progress), progress
+        if abs(start["joint_1"] - 1.0) + abs(start["joint_2"] + 0.5) > 0.01:
+            assert any(0.05 < u < 0.95 for segment, u in progress if segment == 0), progress
+        assert any(0.05 < v < 0.95 for segment, v in progress if segment == 1), progress
 
         # Bad joints: rejected, as joint_trajectory_controller does.
         with pytest.raises(CommandRefusedError) as refused:

@@ -141,8 +141,9 @@ def create_trajectory_server(node: Any, hold: MotionHold, actuated: Sequence[str
             self.release_at = None
             hold.hold(current())  # every joint pauses, not only the goal's
             hold.hold(run.positions_at(0.0))
-            print(f"trajectory started: {len(run.joints)} joints, {run.duration:g} s",
-                  flush=True)
+            start = run.positions_at(0.0)
+            print(f"trajectory started: {len(run.joints)} joints, {run.duration:g} s, from "
+                  + ", ".join(f"{j}={start[j]!r}" for j in run.joints), flush=True)
             finished = await done
             if goal_handle.is_cancel_requested:
                 goal_handle.canceled()
