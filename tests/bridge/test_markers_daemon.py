@@ -501,8 +501,11 @@ def test_a_refused_marker_s_error_stays_for_later_indexes_and_clients(
     latest = client.wait_for(device, lambda m: len(json.loads(m.metadata[KEY_MARKERS])) == 2,
                              timeout=scaled(10))
     assert names_it(latest), latest.body.text
-    late = daemon.connect()
+    late = daemon.connect()  # markers go to the clients that asked for them (issue 22)
     try:
+        assert late.command("create_marker_subscriber", {
+            "topic": "/test_markers", "type": "MarkerArray",
+            "fixed_frame": "world"})["existed"] is True
         assert names_it(late.wait_for(device, timeout=scaled(10)))
     finally:
         late.close()
