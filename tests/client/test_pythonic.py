@@ -122,13 +122,15 @@ def test_reconnects_after_a_daemon_restart_and_restores_subscriptions(
         before = sub.count
         assert first.stop() == 0
         wait_until(lambda: not ros.connected, timeout=10, what="the client to see the loss")
-        assert changes and changes[0][0] is False
+        wait_until(lambda: bool(changes) and changes[0][0] is False, timeout=10,
+                   what="the loss's callback")
         with pytest.raises(slicer_client.ConnectionClosedError, match=f"127.0.0.1:{port}"):
             ros.command("list_bridges", timeout=0.2)
         second = processes.bridge("run", "--port", str(port))
         second.wait_for_output("listening on", timeout=30)
         wait_until(lambda: ros.connected, timeout=30, what="the client to reconnect")
-        assert changes[-1] == (True, "")
+        # Connection callbacks run where callbacks run (not on the receive thread): after.
+        wait_until(lambda: changes[-1] == (True, ""), timeout=30, what="the callback")
         # The same object streams again: the new daemon got the subscription back.
         wait_until(lambda: sub.count > before + 3, timeout=30, what="messages after restart")
         np.testing.assert_allclose(sub.last_value[0, 3], 1.0, atol=1e-6)

@@ -15,7 +15,7 @@ import slicer_client
 from hardening_tools import command_bytes, fd_count, header
 from slicer_client.connection import Connection
 from support import (Processes, RunningDaemon, assert_clean_exit, pick_free_port,
-                     start_daemon, wait_until)
+                     scaled, start_daemon, wait_until)
 
 pytestmark = pytest.mark.ros
 TF_PEER = "../hardening/peers/tf_robot_publisher.py"
@@ -83,7 +83,7 @@ def test_hostile_ros_messages_are_logged_rate_limited_and_serving_goes_on(
         # Good data keeps flowing next to the bad: judged while the peers still send (a
         # daemon that keeps up has nothing newer once the tf peer has stopped).
         tf.wait_for_output("READY", timeout=60)  # a busy machine starts rclpy slowly
-        first = client.wait_for(lookup, timeout=30)
+        first = client.wait_for(lookup, timeout=scaled(60))  # discovery in a busy domain
         wait_until(lambda: client.latest(lookup).timestamp != first.timestamp, timeout=10,
                    what="a newer lookup value")
         bad.wait_for_output("DONE", timeout=60)
