@@ -157,9 +157,9 @@ class Client:
                         if self._transport.watches_silence else None)
         self.daemon_info = command(hello.op, hello.to_args())
         self._valued = set()
-        if self.daemon_info.get("clock_ms"):
-            self._freshness.reset(int(self.daemon_info["clock_ms"]),
-                                  time.monotonic_ns() // 1_000_000)
+        clock = self.daemon_info.get("clock_ms")
+        if isinstance(clock, int) and not isinstance(clock, bool) and 0 < clock < 1 << 32:
+            self._freshness.reset(clock, time.monotonic_ns() // 1_000_000)
         if self.daemon_info.get("heartbeat"):
             self._transport.expect_data_within(DEAD_AFTER_S)
         self._authenticate(command)
