@@ -26,7 +26,7 @@ import sys
 from bridge.tf.errors import ConnectivityError, ExtrapolationError, TfError, TfLookupError
 
 # The store interface this module implements (buffer.STORE_INTERFACE): bump both together.
-INTERFACE = 3
+INTERFACE = 4
 
 # CDR's doubles are read as the machine's: on a big-endian machine `insert_cdr` declines.
 cdef bint LITTLE_ENDIAN = sys.byteorder == "little"
@@ -455,8 +455,7 @@ cdef class CompiledFrameStore:
             over = ((self._max_name and (len(parent) > self._max_name
                                          or len(child) > self._max_name))
                     or (self._max_frames and self._count + 2 > self._max_frames
-                        and self._count + (parent not in self._ids)
-                        + (child not in self._ids) > self._max_frames))
+                        and self._new_past_bound(parent, child)))
             norm2 = v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]
             if (over or not child or not parent or parent == child or stamp < 0
                     or not (isfinite(v[0]) and isfinite(v[1]) and isfinite(v[2])
@@ -475,6 +474,12 @@ cdef class CompiledFrameStore:
             if self._insert(parent, child, stamp, v, static):
                 changed.add(child)
         return changed, refused
+
+    cdef bint _new_past_bound(self, str parent, str child):
+        """Whether parent<-child names a new frame past ``max_frames`` (TfBuffer may still
+        take it into its reserve; frames already known are always stored)."""
+        cdef Py_ssize_t new = (parent not in self._ids) + (child not in self._ids)
+        return new > 0 and self._count + new > self._max_frames
 
     def clear(self):
         self._free_frames()

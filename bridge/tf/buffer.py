@@ -61,7 +61,7 @@ from protocol.conversions import matrix_to_pose, pose_to_matrix
 
 # The store interface this module expects; the compiled module states the one it was built
 # for, so a module left from an older build (a pull without `make setup`) is not used.
-STORE_INTERFACE = 3
+STORE_INTERFACE = 4
 try:  # built by setup.py where a C compiler is found (optional: see `COMPILED`)
     from bridge.tf import _compiled_store
 except ImportError:
@@ -79,6 +79,10 @@ _STAMP_LIMIT = 1 << 63  # tf2's times are int64 ns; so are the compiled store's
 # ROS name a client sends is (MAX_NAME characters), and so is the number of frames.
 MAX_FRAME_ID = MAX_NAME
 MAX_FRAMES = 10_000
+# Past MAX_FRAMES, room kept for the frames clients look up and the chains that lead to
+# them: a peer's flood of other frames, once it has filled the buffer, must not keep a
+# robot that starts later out of every lookup.
+LOOKED_UP_RESERVE = MAX_FRAMES // 10
 # Refusals of one TFMessage's CDR worded one by one; the others are counted.
 _WORDED_REFUSALS = 8
 # Set to 1 to run every TfBuffer on the pure Python store (to compare, or to rule it out).
@@ -155,11 +159,14 @@ class TfBuffer:
     the pure Python one, None (the default) for the compiled one where it was built (see
     `COMPILED`). ``max_frames`` and ``max_frame_id`` bound what it keeps (a transform
     naming a frame id longer than ``max_frame_id`` characters, or a new frame past
-    ``max_frames``, is refused like an invalid one). Thread-safe: see the module docstring.
+    ``max_frames``, is refused like an invalid one); ``looked_up_reserve`` more frames are
+    kept for the frames `look_up` names and the chains leading to them. Thread-safe: see the
+    module docstring.
     """
 
     def __init__(self, cache_time_s: float = 10.0, *, compiled: Optional[bool] = None,
-                 max_frames: int = MAX_FRAMES, max_frame_id: int = MAX_FRAME_ID) -> None:
+                 max_frames: int = MAX_FRAMES, max_frame_id: int = MAX_FRAME_ID,
+                 looked_up_reserve: int = LOOKED_UP_RESERVE) -> None:
         if not (isinstance(cache_time_s, (int, float)) and math.isfinite(cache_time_s)
                 and cache_time_s > 0):
             raise InvalidArgumentError("cache_time_s", "a finite number of seconds > 0",
@@ -168,6 +175,9 @@ class TfBuffer:
         self._lock = threading.Lock()
         self._max_frames = max_frames
         self._max_frame_id = max_frame_id
+        self._reserve = looked_up_reserve
+        self._looked_up: frozenset[str] = frozenset()  # frames named by clients' lookups
+        self._chains: Tuple[int, frozenset[str]] = (-1, frozenset())  # (graph_version, frames)
         self._no_stale_until = 0  # stamp before which a full buffer has no stale frame
         self._store: _Store = _make_store(self._cache_ns, compiled, max_frames, max_frame_id)
 
@@ -199,21 +209,18 @@ class TfBuffer:
         error per refused transform. ``static=True`` ignores the stamps.
         """
         changed: set[str] = set()
-        rejected: list[InvalidArgumentError] = []
+        rejected: list[tuple[int, InvalidArgumentError]] = []
+        checked: list[tuple[int, _Checked]] = []
+        for index, tr in enumerate(transforms):
+            try:
+                checked.append((index, _check(tr, index, static, self._max_frame_id)))
+            except InvalidArgumentError as exc:
+                rejected.append((index, exc))
         with self._lock:
-            for index, tr in enumerate(transforms):
-                try:
-                    parent, child, stamp, value = _check(tr, index, static,
-                                                         self._max_frame_id)
-                    self._check_room(parent, child, index, stamp)
-                except InvalidArgumentError as exc:
-                    rejected.append(exc)
-                    continue
-                # The store itself: `_check_room` may have made a new one.
-                if self._store.insert(parent, child, stamp, value, static):
-                    changed.add(child)
+            rejected += self._store_checked(checked, static, changed)
         if rejected:
-            raise RejectedTransformsError(rejected, changed)
+            raise RejectedTransformsError([exc for _, exc in sorted(rejected, key=_first)],
+                                          changed)
         return changed
 
     def set_transforms_cdr(self, data: bytes, *, static: bool) -> Optional[set[str]]:
@@ -236,33 +243,97 @@ class TfBuffer:
         changed, refused = stored
         if not refused:
             return changed
-        rejected: list[InvalidArgumentError] = []
         # A peer's flood (a thousand new frames past the bound in each message) is worded
-        # a few at a time: judging each refusal again in Python cost 20 ms a message.
-        unworded = max(0, len(refused) - _WORDED_REFUSALS)
-        for index, raw in refused[:_WORDED_REFUSALS]:
+        # a few at a time: judging each refusal again in Python cost 20 ms a message. Past
+        # those few, only transforms toward a looked-up frame are judged again.
+        worded, rest = refused[:_WORDED_REFUSALS], refused[_WORDED_REFUSALS:]
+        rejected: list[tuple[int, InvalidArgumentError]] = []
+        checked: list[tuple[int, _Checked]] = []
+        for index, raw in worded:
             try:
-                checked = _check(_from_raw(raw), index, static, self._max_frame_id)
-                with self._lock:
-                    self._check_room(checked[0], checked[1], index, checked[2])
-                    # The two checks agree (tests hold them together); if they ever did
-                    # not, the sample would be kept, not lost.
-                    if self._store.insert(*checked, static):
-                        changed.add(checked[1])
+                checked.append((index, _check(_from_raw(raw), index, static,
+                                              self._max_frame_id)))
             except InvalidArgumentError as exc:
-                rejected.append(exc)
+                rejected.append((index, exc))
+        unworded = len(rest)
+        with self._lock:
+            ends = self._toward_looked_up() if self._looked_up and rest else frozenset()
+        for index, raw in rest:
+            if _strip(raw[3]) in ends:
+                try:
+                    checked.append((index, _check(_from_raw(raw), index, static,
+                                                  self._max_frame_id)))
+                except InvalidArgumentError:
+                    continue
+        with self._lock:
+            room_refused = self._store_checked(checked, static, changed)
+        last_worded = worded[-1][0]
+        rejected += [(index, exc) for index, exc in room_refused if index <= last_worded]
+        unworded -= sum(1 for index, _ in checked if index > last_worded)
+        unworded += sum(1 for index, _ in room_refused if index > last_worded)
         if unworded and not rejected:  # the worded few were stored after all
-            rejected.append(InvalidArgumentError("transforms", "transforms the buffer keeps",
-                                                 f"{unworded} refused"))
+            rejected.append((0, InvalidArgumentError("transforms", "transforms the buffer keeps",
+                                                     f"{unworded} refused")))
             unworded -= 1
         if rejected:
-            raise RejectedTransformsError(rejected, changed, unworded)
+            raise RejectedTransformsError([exc for _, exc in sorted(rejected, key=_first)],
+                                          changed, unworded)
         return changed
+
+    def _store_checked(self, rows: list[tuple[int, _Checked]], static: bool,
+                       changed: set[str]) -> list[tuple[int, InvalidArgumentError]]:
+        """Under the lock: store each checked transform there is room for; the refusals.
+        Refused ones whose child leads to a looked-up frame are tried again while the tree
+        grows: a chain sent root first gets into the reserve from its looked-up end."""
+        refused: dict[int, tuple[_Checked, InvalidArgumentError]] = {}
+        pending = rows
+        while pending:
+            version = self._store.graph_version
+            for index, (parent, child, stamp, value) in pending:
+                try:
+                    self._check_room(parent, child, index, stamp)
+                except InvalidArgumentError as exc:
+                    refused[index] = ((parent, child, stamp, value), exc)
+                    continue
+                refused.pop(index, None)
+                # The store itself: `_check_room` may have made a new one.
+                if self._store.insert(parent, child, stamp, value, static):
+                    changed.add(child)
+            if not (refused and self._looked_up and self._store.graph_version != version):
+                break
+            ends = self._toward_looked_up()
+            pending = [(index, row) for index, (row, _) in refused.items() if row[1] in ends]
+        return [(index, exc) for index, (_, exc) in refused.items()]
+
+    def look_up(self, frames: Iterable[str]) -> None:
+        """The frames clients look up (`LookupRegistry` says): they, and the frames that
+        lead to them, may use the reserve past ``max_frames``."""
+        wanted = frozenset(_strip(frame) for frame in frames)
+        with self._lock:
+            self._looked_up = wanted
+            self._chains = (-1, frozenset())
+
+    def _toward_looked_up(self) -> frozenset[str]:
+        """Under the lock: the looked-up frames and every frame above them (their parents,
+        their parents' parents...) as the store knows them now; kept per graph version."""
+        version, frames = self._chains
+        if version == self._store.graph_version:
+            return frames
+        parent_of = {row[0]: row[1] for row in self._store.frame_rows()}
+        found = set(self._looked_up)
+        todo = list(found)
+        while todo:
+            parent = parent_of.get(todo.pop())
+            if parent is not None and parent not in found:
+                found.add(parent)
+                todo.append(parent)
+        self._chains = (self._store.graph_version, frozenset(found))
+        return self._chains[1]
 
     def _check_room(self, parent: str, child: str, index: int, stamp: int) -> None:
         """Under the lock: InvalidArgumentError if storing parent<-child (at ``stamp``)
         would make the buffer know more than ``max_frames`` frames, once stale frames are
-        forgotten."""
+        forgotten; a child that leads to a looked-up frame may use the reserve past that."""
         store = self._store
         if store.frame_count + 2 <= self._max_frames:
             return  # the usual case: no lookups
@@ -271,6 +342,9 @@ class TfBuffer:
             store = self._store
             new = (not store.has_frame(parent)) + (not store.has_frame(child))
         if new and store.frame_count + new > self._max_frames:
+            if (store.frame_count + new <= self._max_frames + self._reserve
+                    and self._looked_up and child in self._toward_looked_up()):
+                return
             raise InvalidArgumentError(
                 f"transforms[{index}]", f"frames the buffer knows, or room for new ones (at "
                 f"most {self._max_frames} frames are kept)", f"{new} new frame(s): "
@@ -425,8 +499,15 @@ def _make_store(window_ns: int, compiled: Optional[bool], max_frames: int,
     return CompiledFrameStore(window_ns, max_frames, max_frame_id)
 
 
-def _from_raw(raw: Tuple[int, int, str, str, float, float, float, float, float, float, float],
-              ) -> StampedTransform:
+_RawTransform = Tuple[int, int, str, str, float, float, float, float, float, float, float]
+_Checked = Tuple[str, str, int, Tf7]  # parent, child, stamp, value: what `_check` passed
+
+
+def _first(row: Tuple[int, object]) -> int:
+    return row[0]
+
+
+def _from_raw(raw: _RawTransform) -> StampedTransform:
     """A transform as read from CDR (sec, nanosec, frame, child, tx..qw)."""
     sec, nanosec, frame, child, tx, ty, tz, x, y, z, w = raw
     return StampedTransform(frame, child, sec * _NS_PER_S + nanosec, (tx, ty, tz), (x, y, z, w))

@@ -115,6 +115,7 @@ class LookupRegistry:
             if state is None:
                 state = self._pairs[pair] = _PairState()
                 self._chain_version = -1  # derive this pair's chain at the next call
+                self._buffer.look_up(frame for ends in self._pairs for frame in ends)
             entry = state.entries.get(tag)
             if entry is None:
                 state.entries[tag] = _Entry(key, interval)
@@ -134,6 +135,7 @@ class LookupRegistry:
             if not state.entries:
                 del self._pairs[pair]
                 self._dirty.discard(pair)
+                self._buffer.look_up(frame for ends in self._pairs for frame in ends)
                 for frame in state.frames:
                     users = self._by_frame.get(frame)
                     if users is not None:

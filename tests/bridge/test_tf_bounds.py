@@ -18,8 +18,8 @@ IDQ = (0.0, 0.0, 0.0, 1.0)
 Store = Callable[[TfBuffer, list[StampedTransform]], set[str]]
 
 
-def tf(parent: str, child: str) -> StampedTransform:
-    return StampedTransform(parent, child, 5, (0.0, 0.0, 1.0), IDQ)
+def tf(parent: str, child: str, stamp: int = 5) -> StampedTransform:
+    return StampedTransform(parent, child, stamp, (0.0, 0.0, 1.0), IDQ)
 
 
 def _cdr(batch: list[StampedTransform]) -> bytes:
@@ -126,3 +126,49 @@ def test_a_full_buffer_forgets_stale_frames_to_make_room(store: Store) -> None:
     assert buffer.frames() == ["arm", "fixed", "hand", "world"]
     assert buffer.lookup("world", "hand").translation == (2.0, 0.0, 0.0)
     assert buffer.lookup("world", "fixed").translation == (0.0, 0.0, 1.0)
+
+
+@WAYS
+def test_a_full_buffer_keeps_room_for_the_looked_up_frames_and_their_chains(
+        store: Store) -> None:
+    """A peer's flood that fills the buffer and keeps its frames fresh must not keep a robot
+    that starts later out of every lookup: the frames clients look up, and the chains that
+    lead to them (sent root first, as robot_state_publisher does), use a bounded reserve."""
+    buffer = TfBuffer(max_frames=5, looked_up_reserve=4)
+    buffer.look_up(["base", "tip"])
+    with pytest.raises(RejectedTransformsError):
+        store(buffer, [tf("junk", f"j{i}") for i in range(6)])
+    assert len(buffer.frames()) == 5
+    assert store(buffer, [tf("base", "l1"), tf("l1", "tip")]) == {"l1", "tip"}
+    assert buffer.lookup("base", "tip").translation == (0.0, 0.0, 2.0)
+    # Other new frames are still refused; known ones (the flood's too) still update.
+    with pytest.raises(RejectedTransformsError, match="at most 5 frames are kept"):
+        store(buffer, [tf("junk", "j9")])
+    assert store(buffer, [tf("junk", "j0", stamp=6)]) == {"j0"}
+    # The reserve is bounded too: a ninth frame fits, a tenth does not.
+    assert store(buffer, [tf("above", "base")]) == {"base"}
+    with pytest.raises(RejectedTransformsError, match="at most 5 frames are kept"):
+        store(buffer, [tf("higher", "above")])
+    assert len(buffer.frames()) == 9
+    # Once no client looks them up, they are frames like any other.
+    buffer.look_up([])
+    with pytest.raises(RejectedTransformsError):
+        store(buffer, [tf("base", "other")])
+
+
+def test_a_looked_up_chain_in_a_long_message_after_a_flood_gets_in() -> None:
+    """Through the CDR path with more refusals than are worded: the transforms toward the
+    looked-up frame are judged again and stored; the flood's are counted, not stored."""
+    buffer = TfBuffer(max_frames=20, looked_up_reserve=20)
+    buffer.look_up(["r0", "r12"])
+    with pytest.raises(RejectedTransformsError):
+        _as_cdr(buffer, [tf("junk", f"j{i}") for i in range(100)])
+    chain = [tf(f"r{i}", f"r{i + 1}") for i in range(12)]
+    for _ in range(12):  # a robot re-sends its chain at every tick
+        try:
+            _as_cdr(buffer, chain)
+            break
+        except RejectedTransformsError:
+            continue
+    assert buffer.lookup("r0", "r12").translation == (0.0, 0.0, 12.0)
+    assert len(buffer.frames()) == 33
