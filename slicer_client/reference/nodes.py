@@ -496,6 +496,20 @@ class _ParentChild(_Node):
     def IsParentAndChildSet(self) -> bool:  # noqa: N802
         return bool(self.resource.parent and self.resource.child)
 
+    def SetParentID(self, parent_id: str) -> bool:  # noqa: N802
+        """Use another parent frame, as the reference's next spin does: the daemon-side
+        bridge of the new pair replaces this node's (False, logged, for an empty id or a
+        pair another node of this ROS node already has)."""
+        return bool(self._ros_node._retarget(self, parent_id, self.GetChildID()))
+
+    def SetChildID(self, child_id: str) -> bool:  # noqa: N802
+        """Use another child frame (see `SetParentID`)."""
+        return bool(self._ros_node._retarget(self, self.GetParentID(), child_id))
+
+    def _attach(self, resource: Any) -> None:
+        """Take `resource` (the bridge of the pair now named) as this node's."""
+        self.resource = resource
+
 
 class Tf2BroadcasterNode(_ParentChild):
     resource: TfBroadcaster
@@ -530,8 +544,13 @@ class Tf2LookupNode(_ParentChild):
         super().__init__(ros_node, resource)
         self._modified_on_lookup = True
         self._changed_since_spin = False
-        resource.add_callback(self._changed)
+        self._attach(resource)
         ros_node.logic.add_tick(self._tick)
+
+    def _attach(self, resource: Any) -> None:
+        super()._attach(resource)
+        self._changed_since_spin = False
+        resource.add_callback(self._changed)
 
     def _changed(self, matrix: np.ndarray) -> None:
         if self._ros_node.logic.spinning_here():
@@ -941,6 +960,32 @@ class ROS2Node:
             node.forget()
         if self.logic.release(key, self):
             return self.client.remove_bridge(*key)
+        return True
+
+    def _retarget(self, node: _ParentChild, parent: str, child: str) -> bool:
+        """`node` names parent -> child from now on: the new pair's bridge is made first,
+        then the old one let go (removed if no other node holds it)."""
+        if not (isinstance(parent, str) and parent and isinstance(child, str) and child):
+            log.error("%s: the parent and child frame ids must be non-empty strings, got "
+                      "%r and %r", node.GetName(), parent, child)
+            return False
+        old_key = node.resource.spec.key
+        lookup = isinstance(node, Tf2LookupNode)
+        new_key = ("create_tf_lookup" if lookup else "create_tf_broadcaster", parent, child)
+        if new_key == old_key:
+            return True
+        if new_key in self._nodes:
+            log.error("%s: %s -> %s is already %s of this ROS node; use that one",
+                      node.GetName(), parent, child, self._nodes[new_key].GetName())
+            return False
+        resource = (self.client.tf_lookup(parent, child) if lookup
+                    else self.client.tf_broadcaster(parent, child))
+        node._attach(resource)
+        self._nodes.pop(old_key, None)
+        self._nodes[new_key] = node
+        self.logic.hold(new_key, self)
+        if self.logic.release(old_key, self):
+            self.client.remove_bridge(*old_key)
         return True
 
     def _drop(self, *key: str) -> bool:

@@ -357,3 +357,41 @@ def test_doc_tf2_lookup_example(daemon: RunningDaemon, processes: Processes) -> 
         np.testing.assert_allclose(lookupMat[:3, 3], [0.0, 0.0, 500.0], atol=1e-6)
         np.testing.assert_allclose(lookupMat[:3, :3], [[0, -1, 0], [1, 0, 0], [0, 0, 1]],
                                    atol=1e-6)
+
+
+def test_tf2_nodes_set_to_another_pair_follow_it(daemon: RunningDaemon) -> None:
+    """SetParentID / SetChildID, as the reference's: the node looks up (or broadcasts) the
+    new pair from then on; the old pair's bridge goes, the node and its observers stay."""
+    with slicer_client.connect("127.0.0.1", daemon.port) as rosLogic:  # noqa: N806
+        rosNode = rosLogic.GetDefaultROS2Node()  # noqa: N806
+        broadcaster = rosNode.CreateAndAddTf2BroadcasterNode('rt_world', 'rt_a')
+        lookup = rosNode.CreateAndAddTf2LookupNode('rt_world', 'rt_a')
+        seen: list[float] = []
+        lookup.AddObserver('ModifiedEvent', lambda caller, event: seen.append(
+            float(as_numpy(caller.GetMatrixTransformToParent(), rigid=False)[0, 3])))
+        first = np.eye(4)
+        first[0, 3] = 11.0
+        wait_until(lambda: broadcaster.Broadcast(first) and 11.0 in seen, timeout=20,
+                   what="the lookup to see the first pair's broadcast")
+
+        assert broadcaster.SetChildID('rt_b') and lookup.SetChildID('rt_b')
+        assert (broadcaster.GetParentID(), broadcaster.GetChildID()) == ('rt_world', 'rt_b')
+        assert lookup.GetName() == "ros2:tf2lookup:rt_worldTort_b"
+        assert rosNode.GetTf2LookupNodeByParentChild('rt_world', 'rt_b') is lookup
+        assert rosNode.GetTf2LookupNodeByParentChild('rt_world', 'rt_a') is None
+        listed = rosLogic.command("list_bridges")["bridges"]
+        pairs = {(b["kind"], b["parent"], b["child"]) for b in listed
+                 if b["kind"] in ("tf_lookup", "tf_broadcaster") and b["parent"] == "rt_world"}
+        assert pairs == {("tf_lookup", "rt_world", "rt_b"), ("tf_broadcaster", "rt_world", "rt_b")}
+        second = np.eye(4)
+        second[0, 3] = 22.0
+        wait_until(lambda: broadcaster.Broadcast(second) and 22.0 in seen, timeout=20,
+                   what="the same lookup node to see the new pair")
+
+        # As the reference: an empty id is refused, and so is a pair this node already has.
+        assert not lookup.SetParentID('')
+        other = rosNode.CreateAndAddTf2LookupNode('rt_world', 'rt_c')
+        assert not lookup.SetChildID('rt_c')
+        assert lookup.GetChildID() == 'rt_b' and other.GetChildID() == 'rt_c'
+        assert rosNode.RemoveAndDeleteTf2LookupNode('rt_world', 'rt_b')
+        assert rosNode.RemoveAndDeleteTf2BroadcasterNode('rt_world', 'rt_b')
