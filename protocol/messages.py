@@ -310,14 +310,18 @@ class _CellError(Exception):
         self.got = got
 
 
-_SCAN_WINDOW = 1 << 16  # values of a mixed-size cell array walked at a time
+# Mixed-size cells are walked CELL_STRIDE cells a step in Python; the cells in between are
+# found by numpy gathers (which let other threads run): a 60 MB array took 1.2 s of Python
+# one cell a step, holding the interpreter from every other thread.
+_CELL_STRIDE_LOG2 = 5
+_SCAN_WINDOW = 1 << 16
 
 
 def _scan_cells(flat: AnyArray, npoints: int = -1) -> tuple[int, AnyArray]:
     """Validate a VTK-legacy cell array; return (cell count, start offsets).
 
     Fast path: every cell has the same size (triangles, vertices, ...), checked with one
-    strided comparison. Mixed sizes need a walk over the cells (one Python step per cell).
+    strided comparison. Mixed sizes: `_mixed_cell_starts`.
     """
     length = len(flat)
     if length == 0:
@@ -331,20 +335,7 @@ def _scan_cells(flat: AnyArray, npoints: int = -1) -> tuple[int, AnyArray]:
             if top >= npoints:
                 raise _CellError(f"point indices < NPOINTS ({npoints})", f"index {top}")
         return count, starts
-    # A window of values at a time: a 60 MB array as one Python list was 0.5 GB.
-    start_list = array("q")
-    pos = 0
-    while pos < length:
-        base = pos
-        values: list[int] = flat[base:base + _SCAN_WINDOW].tolist()
-        end = base + len(values)
-        while pos < end:
-            start_list.append(pos)
-            pos += values[pos - base] + 1
-    if pos != length:
-        raise _CellError(f"cells that end with the array ({length} values)",
-                         f"last cell (at {start_list[-1]}) runs to {pos}")
-    starts = np.frombuffer(start_list, dtype=np.int64).astype(np.intp)
+    starts = _mixed_cell_starts(flat)
     if npoints >= 0:
         mask = np.ones(length, dtype=bool)
         mask[starts] = False
@@ -352,7 +343,43 @@ def _scan_cells(flat: AnyArray, npoints: int = -1) -> tuple[int, AnyArray]:
             top = int(flat[mask].max())
             if top >= npoints:
                 raise _CellError(f"point indices < NPOINTS ({npoints})", f"index {top}")
-    return len(start_list), starts
+    return len(starts), starts
+
+
+def _mixed_cell_starts(flat: AnyArray) -> AnyArray:
+    """The start offsets of the cells of `flat` (``[n, i0..i(n-1), ...]``), which must end
+    with the array. ``step[i]`` is where the next cell starts if one starts at ``i``
+    (``length``: the array's end; ``length + 1``: past it; both lead to themselves);
+    squared a few times, it jumps ``2**_CELL_STRIDE_LOG2`` cells, which a Python loop
+    follows from 0; the cells between those checkpoints are then gathered in one go."""
+    length = len(flat)
+    index = np.int32 if 2 * length + 2 < np.iinfo(np.int32).max else np.int64
+    step = np.empty(length + 2, dtype=index)
+    np.minimum(flat, length, out=step[:length], casting="unsafe")
+    for at in range(0, length, _SCAN_WINDOW * 16):  # a slice at a time: no full-size arange
+        part = step[at:min(at + _SCAN_WINDOW * 16, length)]
+        part += np.arange(at + 1, at + 1 + len(part), dtype=index)
+    np.minimum(step, length + 1, out=step)
+    step[length], step[length + 1] = length, length + 1
+    jump = step
+    for _ in range(_CELL_STRIDE_LOG2):
+        jump = jump[jump]
+    checkpoints = array("q")
+    item = jump.item
+    pos = 0
+    while pos < length:
+        checkpoints.append(pos)
+        pos = item(pos)
+    rows = [np.frombuffer(checkpoints, dtype=np.int64).astype(index)]
+    for _ in range((1 << _CELL_STRIDE_LOG2) - 1):
+        rows.append(step[rows[-1]])
+    starts = np.stack(rows, axis=1).reshape(-1)
+    starts = starts[starts < length].astype(np.intp)
+    if pos != length:
+        last = int(starts[-1])
+        raise _CellError(f"cells that end with the array ({length} values)",
+                         f"last cell (at {last}) runs to {last + int(flat[last]) + 1}")
+    return starts
 
 
 def _flat_cells(value: object, field_name: str) -> U32Array:

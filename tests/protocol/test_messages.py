@@ -255,6 +255,38 @@ def test_cell_helpers() -> None:
         cells_from_array(np.array([[-1, 0]]))
 
 
+def _walked_starts(flat: list[int]) -> tuple[list[int], int]:
+    """The cell starts one cell a step, and where the walk ended (the plain definition)."""
+    starts, pos = [], 0
+    while pos < len(flat):
+        starts.append(pos)
+        pos += flat[pos] + 1
+    return starts, pos
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_mixed_size_cells_are_found_as_a_walk_one_cell_a_step_finds_them(seed: int) -> None:
+    """Cells of 0 to 40 indices (and up to 300: a long polyline), some arrays cut short
+    or run long, against the plain walk: the same starts, or the same error."""
+    rng = np.random.default_rng(seed)
+    top = 300 if seed % 5 == 0 else 40
+    sizes = rng.integers(0, top + 1, size=int(rng.integers(1, 3000)))
+    flat = np.concatenate([np.concatenate(([k], rng.integers(0, 9, size=k)))
+                           for k in sizes]).astype(np.uint32)
+    if seed % 4 == 1:
+        flat = flat[:-int(rng.integers(1, min(len(flat), 50) + 1))]  # the last cell cut
+    elif seed % 4 == 2:
+        flat = np.concatenate((flat, np.array([2**32 - 1], np.uint32)))  # one runs far out
+    expected, end = _walked_starts(flat.tolist())
+    if end == len(flat):
+        assert cell_count(flat) == len(expected)
+        assert [c.tolist() for c in cells_to_list(flat)] == [
+            flat[s + 1:s + 1 + int(flat[s])].tolist() for s in expected]
+    else:
+        with pytest.raises(EncodeError, match=rf"last cell \(at {expected[-1]}\) runs to"):
+            cell_count(flat)
+
+
 # ------------------------------------------------------------------ invalid values to encode
 
 
