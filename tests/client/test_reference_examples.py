@@ -151,12 +151,19 @@ def test_read_parameters_of_an_rclpy_node(daemon: RunningDaemon,
         assert param.GetParameterType('untracked') == ''
         with pytest.raises(TypeError, match="count.*integer, not string"):
             param.GetParameterAsString('count')
-        # An observed change arrives as ParameterModifiedEvent.
+        # An observed change arrives as ParameterModifiedEvent, with the value readable in
+        # the observer (earlier events, of values that came after the first ones, may still
+        # be on their way: only the one that shows 43 counts).
         changed = threading.Event()
-        param.AddObserver('ParameterModifiedEvent', lambda caller, event: changed.set())
+
+        def modified(caller, event) -> None:
+            if caller.GetParameterAsInteger('count') == 43:
+                changed.set()
+
+        param.AddObserver('ParameterModifiedEvent', modified)
         param.resource.set('count', 43)
         node.wait_for_output("SET count=43")
-        assert changed.wait(10), "no ParameterModifiedEvent after the change"
+        assert changed.wait(scaled(10)), "no ParameterModifiedEvent showing the change"
         assert param.GetParameterAsInteger('count') == 43
         assert param.RemoveParameter('count') and not param.IsParameterSet('count')
         assert rosNode.GetParameterNodeByNode('/client_param_peer') is param
