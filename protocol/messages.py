@@ -979,6 +979,12 @@ _UNPACKERS: dict[str, Callable[[bytes], Body]] = {
 }
 
 
+# Bodies whose unpackers read only with struct and numpy, so a large body (a read-only view
+# on its own buffer, protocol/framing.py) is decoded in place: copying a 60 MB POLYDATA
+# first held the interpreter from every other thread. The others get bytes.
+_READ_IN_PLACE = frozenset({PolyData.TYPE, Image.TYPE})
+
+
 def unpack_body(type_name: str, content: bytes) -> Body:
     """Decode ``content`` by type name; unknown types become `RawBody`. Only `BodyError`
     leaves this function: stray low-level errors are wrapped, naming the type."""
@@ -986,7 +992,7 @@ def unpack_body(type_name: str, content: bytes) -> Body:
     if unpack is None:
         return RawBody(type_name, bytes(content))
     try:
-        return unpack(bytes(content))
+        return unpack(content if type_name in _READ_IN_PLACE else bytes(content))
     except BodyError:
         raise
     except (struct.error, ValueError, IndexError, TypeError, OverflowError,
