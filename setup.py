@@ -34,7 +34,25 @@ def compiled_modules() -> list:
     # the compiled store's results equal the pure Python store's to the bit.
     store = Extension("bridge.tf._compiled_store", ["bridge/tf/_compiled_store.pyx"],
                       extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
-    return cythonize([store], quiet=True)
+    return cythonize([store, *rcl_reader()], quiet=True)
+
+
+def rcl_reader() -> list:
+    """The reader that takes /tf without the interpreter's lock (bridge/_rcl_reader.pyx),
+    where rcl's headers are found: beside this Python (ROS 2 from PyPI) or in a sourced ROS
+    prefix. Linked by name only: at run time rclpy has loaded the same libraries."""
+    prefixes = [Path(sys.prefix), *(Path(p) for p in
+                                    os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)
+                                    if p)]
+    for prefix in prefixes:
+        include = prefix / "include"
+        if (include / "rcl" / "rcl" / "rcl.h").is_file():
+            dirs = sorted(str(d) for d in include.iterdir() if (d / d.name).is_dir())
+            return [Extension("bridge._rcl_reader", ["bridge/_rcl_reader.pyx"],
+                              include_dirs=dirs, library_dirs=[str(prefix / "lib")],
+                              libraries=["rcl", "rmw", "rcutils"], extra_compile_args=["-O2"],
+                              optional=True)]
+    return []
 
 
 def ros2_executables() -> list:

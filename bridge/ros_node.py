@@ -13,6 +13,10 @@ Two nodes, two executors:
   thousand idle subscriptions); the EventsExecutor queues events in C++ and calls Python
   only for the callback (about 0.05 ms). Jazzy's EventsExecutor cannot run coroutine
   service callbacks (ros2/rclpy#1473, fixed after 7.1.x), hence the split.
+
+Raw readers (`raw_reader`, bridge/raw_reader.py) take some of ``stream_node``'s raw
+subscriptions (/tf) in threads of their own, without the interpreter's lock; `stop` closes
+them before the nodes go.
 """
 
 from __future__ import annotations
@@ -33,6 +37,9 @@ from rclpy.publisher import Publisher
 from rclpy.service import Service
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
+
+from bridge.raw_reader import RawReader, RawTopic
+from bridge.raw_reader import available as raw_reader_available
 
 log = logging.getLogger(__name__)
 
@@ -102,6 +109,7 @@ class RosNode:
         self._thread: Optional[threading.Thread] = None
         self._stream_thread: Optional[threading.Thread] = None
         self._stopping = threading.Event()
+        self._raw_readers: list[RawReader] = []
 
     @property
     def fully_qualified_name(self) -> str:
@@ -136,6 +144,16 @@ class RosNode:
                     unlogged += 1
                 time.sleep(_ERROR_PAUSE_S)
 
+    def raw_reader(self, topics: list[RawTopic], name: str) -> Optional[RawReader]:
+        """`topics` subscribed raw on ``stream_node`` and read without the interpreter's
+        lock in the thread ``name`` (bridge/raw_reader.py); None where the compiled reader
+        is not built (then subscribe through rclpy). Closed by `stop` at the latest."""
+        if not raw_reader_available():
+            return None
+        reader = RawReader(self.stream_node, topics, name)
+        self._raw_readers.append(reader)
+        return reader
+
     def destroy(self, entity: RosEntity) -> None:
         """Destroy a subscription, publisher, client or service of the node.
 
@@ -167,6 +185,8 @@ class RosNode:
         # The executor thread must be out of its callbacks before the executor's handles
         # are destroyed: shutting down under a running callback raises InvalidHandle.
         self._stopping.set()
+        for reader in self._raw_readers:  # their subscriptions go before the node
+            reader.close()
         self.executor.wake()
         self.stream_executor.wake()
         for thread in (self._thread, self._stream_thread):

@@ -14,7 +14,6 @@ Bits: every formula is store.py's and bridge/tf/math.py's in the same order of o
 compiled with -ffp-contract=off (no fused multiply-add), so results match exactly.
 """
 
-from cpython.bytes cimport PyBytes_AS_STRING, PyBytes_GET_SIZE
 from cpython.mem cimport PyMem_Free, PyMem_Malloc, PyMem_Realloc
 from cpython.unicode cimport PyUnicode_DecodeUTF8
 from libc.math cimport acos, isfinite, sin, sqrt
@@ -26,7 +25,7 @@ import sys
 from bridge.tf.errors import ConnectivityError, ExtrapolationError, TfError, TfLookupError
 
 # The store interface this module implements (buffer.STORE_INTERFACE): bump both together.
-INTERFACE = 4
+INTERFACE = 5
 
 # CDR's doubles are read as the machine's: on a big-endian machine `insert_cdr` declines.
 cdef bint LITTLE_ENDIAN = sys.byteorder == "little"
@@ -395,14 +394,16 @@ cdef class CompiledFrameStore:
         f.cap = cap
         return 0
 
-    def insert_cdr(self, bytes data, bint static):
-        """Read a serialized TFMessage and store its transforms, as `TfBuffer.set_transforms`
-        of it would: (changed child frames, refused) with ``refused`` a list of (index,
-        (sec, nanosec, frame, child, tx, ty, tz, qx, qy, qz, qw)) for `TfBuffer` to word.
-        None, with nothing stored, for bytes this does not read (not little-endian CDR)."""
-        cdef const unsigned char *p = <const unsigned char *>PyBytes_AS_STRING(data)
+    def insert_cdr(self, const unsigned char[::1] data, bint static):
+        """Read a serialized TFMessage (bytes, or a view such as the rcl reader's) and store
+        its transforms, as `TfBuffer.set_transforms` of it would: (changed child frames,
+        refused) with ``refused`` a list of (index, (sec, nanosec, frame, child, tx, ty, tz,
+        qx, qy, qz, qw)) for `TfBuffer` to word. None, with nothing stored, for bytes this
+        does not read (not little-endian CDR)."""
+        cdef Py_ssize_t size = data.shape[0]
+        cdef const unsigned char *p = &data[0] if size else <const unsigned char *>b""
         cdef Raw *rows = NULL
-        cdef Py_ssize_t count = read_tf_message(p, PyBytes_GET_SIZE(data), &rows)
+        cdef Py_ssize_t count = read_tf_message(p, size, &rows)
         cdef list names = []
         cdef Py_ssize_t k
         if count < 0 or not LITTLE_ENDIAN:

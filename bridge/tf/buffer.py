@@ -61,7 +61,7 @@ from protocol.conversions import matrix_to_pose, pose_to_matrix
 
 # The store interface this module expects; the compiled module states the one it was built
 # for, so a module left from an older build (a pull without `make setup`) is not used.
-STORE_INTERFACE = 4
+STORE_INTERFACE = 5
 try:  # built by setup.py where a C compiler is found (optional: see `COMPILED`)
     from bridge.tf import _compiled_store
 except ImportError:
@@ -223,7 +223,8 @@ class TfBuffer:
                                           changed)
         return changed
 
-    def set_transforms_cdr(self, data: bytes, *, static: bool) -> Optional[set[str]]:
+    def set_transforms_cdr(self, data: Union[bytes, memoryview], *, static: bool
+                           ) -> Optional[set[str]]:
         """`set_transforms` of a serialized ``tf2_msgs/TFMessage`` (a raw subscription's
         bytes), with the same results and errors, read and stored in one call by the
         compiled store. None (nothing stored) when this buffer does not read those bytes:

@@ -55,6 +55,7 @@ from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
 from bridge.logging_limits import RateLimitedLog
 from bridge.outbox import Frame, TemplateFrame
+from bridge.raw_reader import RawTopic
 from bridge.ros_node import RosNode
 from bridge.security import NameRules
 from bridge.tf.buffer import StampedTransform, TfBuffer
@@ -284,40 +285,50 @@ class TfBridges:
         self._static_transforms: dict[str, Any] = {}  # child -> TransformStamped (latched)
         # The EventsExecutor's node, taken raw: /tf may come at kHz rates, and rclpy builds
         # six Python objects per transform (most of the daemon's CPU in a 1 kHz robot).
+        # Where the compiled rcl reader is built, /tf is taken without the interpreter's
+        # lock (rclpy held it about 20 ms for a peer's 10 MB TFMessage, stalling every
+        # client's stream): bridge/raw_reader.py.
+        self._reader = ros.raw_reader([
+            RawTopic(self._tf_topic, TFMessage, TF_QOS, self._on_tf),
+            RawTopic(self._tf_static_topic, TFMessage, TF_STATIC_SUBSCRIBER_QOS,
+                     self._on_tf_static)], name="tf-reader")
         node = ros.stream_node
-        self._subscriptions = [
+        self._subscriptions = [] if self._reader is not None else [
             node.create_subscription(TFMessage, self._tf_topic, self._on_tf, TF_QOS, raw=True),
             node.create_subscription(TFMessage, self._tf_static_topic, self._on_tf_static,
                                      TF_STATIC_SUBSCRIBER_QOS, raw=True),
         ]
 
     def store_in_use(self) -> str:
-        """Which store the buffer runs on, for the daemon's start-up log."""
+        """Which store the buffer runs on, and how /tf is taken, for the start-up log."""
+        taken = ("; /tf taken without the interpreter's lock (rcl reader)" if self._reader
+                 is not None else "; /tf taken through rclpy (the rcl reader is not built here)")
         if self.buffer.compiled:
-            return "compiled store"
+            return "compiled store" + taken
         return ("pure Python store (the compiled one is not built here, is from an older "
-                "build, or SLICER_BRIDGE_PURE_PYTHON_TF=1)")
+                "build, or SLICER_BRIDGE_PURE_PYTHON_TF=1)" + taken)
 
     # ------------------------------------------------------------------ ROS thread
 
-    def _on_tf(self, data: bytes) -> None:
+    def _on_tf(self, data: Union[bytes, memoryview]) -> None:
         self.received["tf"] += 1
         self._store_cdr(data, static=False)
 
-    def _on_tf_static(self, data: bytes) -> None:
+    def _on_tf_static(self, data: Union[bytes, memoryview]) -> None:
         self.received["tf_static"] += 1
         self._store_cdr(data, static=True)
 
-    def _store_cdr(self, data: bytes, *, static: bool) -> None:
-        """Store one serialized TFMessage: read and stored in one call by the compiled
-        store, else read here and stored as `StampedTransform`s."""
+    def _store_cdr(self, data: Union[bytes, memoryview], *, static: bool) -> None:
+        """Store one serialized TFMessage (rclpy's bytes, or the raw reader's view, valid
+        during the call): read and stored in one call by the compiled store, else read here
+        and stored as `StampedTransform`s."""
         try:
             changed = self.buffer.set_transforms_cdr(data, static=static)
         except RejectedTransformsError as error:
             self._warn_rejected(error, static)
             changed = error.changed
         if changed is None:
-            self._store(tf_cdr_to_transforms(data), static=static)
+            self._store(tf_cdr_to_transforms(bytes(data)), static=static)
         else:
             self._deliver(changed)
 
@@ -716,6 +727,8 @@ class TfBridges:
         self.broadcasters.clear()
         self._by_key.clear()
         self._by_device.clear()
+        if self._reader is not None:
+            self._reader.close()
         for subscription in self._subscriptions:
             self._ros.destroy(subscription)
         self._subscriptions = []

@@ -467,22 +467,31 @@ def test_frame_prefix_maps_relative_frames_and_leaves_absolute_ones() -> None:
         loop.close()
 
 
+@pytest.mark.parametrize("rclpy_take", [False, True], ids=["rcl reader", "rclpy take"])
 @pytest.mark.parametrize("pure_python", [False, True], ids=["compiled store", "Python store"])
-def test_a_daemon_serves_lookups_on_either_tf_store(processes: Processes,
-                                                    pure_python: bool) -> None:
+def test_a_daemon_serves_lookups_on_either_tf_store(processes: Processes, pure_python: bool,
+                                                    rclpy_take: bool) -> None:
     """The daemon reads /tf on whichever store its TfBuffer runs: the compiled one reads the
     CDR itself, the pure Python one (where the compiled store was not built) lets the
-    capability read it. Both stream the same composed lookup."""
+    capability read it; and takes /tf either way: without the interpreter's lock (the rcl
+    reader) or through rclpy. All stream the same composed lookup."""
+    from bridge.raw_reader import _rcl_reader
     from bridge.tf.buffer import CompiledFrameStore
 
     if not pure_python and CompiledFrameStore is None:
         pytest.skip("the compiled tf store was not built (no C compiler or Cython at install)")
-    env = {"SLICER_BRIDGE_PURE_PYTHON_TF": "1" if pure_python else "0"}
+    if not rclpy_take and _rcl_reader is None:
+        pytest.skip("the rcl reader was not built (no rcl headers, C compiler or Cython)")
+    env = {"SLICER_BRIDGE_PURE_PYTHON_TF": "1" if pure_python else "0",
+           "SLICER_BRIDGE_RCLPY_TAKE": "1" if rclpy_take else "0"}
     port = pick_free_port()
     daemon = processes.bridge("run", "--port", str(port), env=env)
     daemon.wait_for_output("tf buffer on the", timeout=30)  # logged after "listening on"
     expected = "pure Python" if pure_python else "compiled"
     assert f"tf buffer on the {expected} store" in daemon.output()
+    taken = ("/tf taken through rclpy" if rclpy_take
+             else "/tf taken without the interpreter's lock (rcl reader)")
+    assert taken in daemon.output()
     p = fresh("store")
     with Connection("127.0.0.1", port) as client:
         device = client.command("create_tf_lookup",

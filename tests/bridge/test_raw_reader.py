@@ -1,0 +1,121 @@
+"""The raw reader (bridge/raw_reader.py): subscriptions taken without the interpreter's lock,
+fed by real publishers in other processes. What it saves (the lock rclpy held about 20 ms for
+each 10 MB message) is measured by bench/attacks.py's tf_frames storm, not here."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Iterator
+
+import pytest
+from geometry_msgs.msg import PoseStamped
+from rclpy.serialization import deserialize_message
+from tf2_msgs.msg import TFMessage
+
+from bridge import raw_reader
+from bridge.qos import TF_QOS
+from bridge.raw_reader import RawTopic
+from bridge.ros_node import RosNode, RosOptions
+from support import Processes, scaled, wait_until
+
+pytestmark = [pytest.mark.ros, pytest.mark.skipif(
+    raw_reader._rcl_reader is None,
+    reason="the rcl reader was not built (no rcl headers, C compiler or Cython at install)")]
+
+
+@pytest.fixture
+def ros(monkeypatch: pytest.MonkeyPatch) -> Iterator[RosNode]:
+    monkeypatch.delenv(raw_reader.RCLPY_TAKE_ENV, raising=False)
+    node = RosNode(RosOptions(node_name="raw_reader_test"))
+    node.start()
+    try:
+        yield node
+    finally:
+        node.stop()
+
+
+def test_two_topics_are_read_in_turn_and_close_removes_them(ros: RosNode,
+                                                            processes: Processes) -> None:
+    poses: list[float] = []
+    chains: list[list[str]] = []
+    threads: set[str] = set()
+    got_both = threading.Event()
+
+    def on_pose(view: memoryview) -> None:
+        threads.add(threading.current_thread().name)
+        poses.append(deserialize_message(bytes(view), PoseStamped).pose.position.x)
+        if chains:
+            got_both.set()
+
+    def on_tf(view: memoryview) -> None:
+        threads.add(threading.current_thread().name)
+        chains.append([t.child_frame_id for t in deserialize_message(bytes(view),
+                                                                     TFMessage).transforms])
+        if poses:
+            got_both.set()
+
+    reader = ros.raw_reader([RawTopic("/rr_pose", PoseStamped, TF_QOS, on_pose),
+                             RawTopic("/tf", TFMessage, TF_QOS, on_tf)], name="rr-test")
+    assert reader is not None
+    # The subscriptions are real ones of the daemon's stream node: the graph lists them.
+    assert ros.stream_node.count_subscribers("/rr_pose") == 1
+    processes.python("poses", "stream_publisher.py", "/rr_pose", "100", "--count", "100000")
+    processes.python("chain", "tf_chain_publisher.py", "rr_", "--rate", "100", "--no-static")
+    assert got_both.wait(scaled(30)), f"poses {len(poses)}, tf messages {len(chains)}"
+    wait_until(lambda: len(poses) >= 20 and len(chains) >= 20, timeout=30,
+               what="20 messages of each topic")
+    assert threads == {"rr-test"}
+    assert all(chain == ["rr_link1", "rr_tool"] for chain in chains), chains[:3]
+    # stream_publisher.py: the n-th pose has x = n * 1e-6 m, in the order sent.
+    assert poses == sorted(poses) and len(set(poses)) == len(poses), poses[:10]
+
+    reader.close()
+    seen = len(poses)
+    wait_until(lambda: ros.stream_node.count_subscribers("/rr_pose") == 0, timeout=10,
+               what="the reader's subscription gone from the graph")
+    assert len(poses) == seen  # nothing is handed on after close
+    reader.close()  # idempotent
+
+
+def test_a_failing_callback_is_logged_and_the_reader_goes_on(
+        ros: RosNode, processes: Processes, caplog: pytest.LogCaptureFixture) -> None:
+    taken: list[int] = []
+    healthy = threading.Event()
+
+    def failing(view: memoryview) -> None:
+        taken.append(len(view))
+        if len(taken) >= 5:
+            healthy.set()
+        raise ValueError("a callback bug")
+
+    with caplog.at_level(logging.ERROR, logger="bridge.raw_reader"):
+        reader = ros.raw_reader([RawTopic("/rr_failing", PoseStamped, TF_QOS, failing)],
+                                name="rr-failing")
+        assert reader is not None
+        processes.python("poses", "stream_publisher.py", "/rr_failing", "100", "--count",
+                         "100000")
+        assert healthy.wait(scaled(30)), f"the reader stopped after {len(taken)} messages"
+    failures = [r for r in caplog.records if "a callback of /rr_failing failed" in r.getMessage()]
+    assert failures and failures[0].exc_info is not None
+    assert failures[0].exc_info[0] is ValueError
+    assert len(failures) == 1, [r.getMessage() for r in failures]  # once per 5 s
+
+
+def test_stop_closes_a_reader_that_waits(ros: RosNode) -> None:
+    """RosNode.stop closes its readers before the node goes (a wait in progress ends at
+    once): no message ever came here."""
+    reader = ros.raw_reader([RawTopic("/rr_silent", PoseStamped, TF_QOS, lambda view: None)],
+                            name="rr-silent")
+    assert reader is not None
+    thread = reader._thread
+    assert thread is not None and thread.is_alive()
+    ros.stop()
+    assert not thread.is_alive()
+
+
+def test_rclpy_take_rules_the_reader_out(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(raw_reader.RCLPY_TAKE_ENV, "1")
+    assert not raw_reader.available()
+    monkeypatch.setenv(raw_reader.RCLPY_TAKE_ENV, "0")
+    assert raw_reader.available()
