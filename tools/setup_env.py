@@ -51,7 +51,7 @@ SUPPORTED_PYTHONS = ((3, 10), (3, 11), (3, 12), (3, 13))
 # Inputs whose change means the environment must be rebuilt (the install builds the compiled
 # tf store from its .pyx, so an edit of it is one).
 STAMP_INPUTS = ("pyproject.toml", "setup.py", "tools/setup_env.py",
-                "bridge/tf/_compiled_store.pyx")
+                "bridge/tf/_compiled_store.pyx", "bridge/_rcl_reader.pyx")
 
 
 class SetupError(Exception):
@@ -176,6 +176,15 @@ def install_project() -> None:
                         f"{REPO}[test,interfaces]"], CACHE / "pip-install.log")
 
 
+def build_compiled_modules() -> None:
+    """The compiled modules again, in place, now that the venv has rcl's headers: pip
+    builds the project before it installs the ROS wheels, so its own build could make the
+    tf store but not the rcl reader (setup.py says where each comes from)."""
+    say("building the compiled modules (tf store, rcl reader) in place")
+    run("setup.py build_ext", [str(venv_python()), "setup.py", "-q", "build_ext", "--inplace",
+                               "--force"], CACHE / "build-ext.log")
+
+
 def build_shipped_interfaces() -> None:
     """tf2_msgs and control_msgs, both at once; kept when built from the same inputs."""
     digest = interfaces_digest()
@@ -218,6 +227,7 @@ def set_up() -> int:
     STAMP.unlink(missing_ok=True)
     create_venv()
     install_project()
+    build_compiled_modules()
     ensure_cmake()
     build_shipped_interfaces()
     verify()
