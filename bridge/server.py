@@ -26,6 +26,7 @@ from bridge.security import SecurityPolicy, is_loopback_host
 from bridge.session import ClientSession, CommandHandler, SessionLimits
 from protocol.framing import ReceiveBudget
 from protocol.framing import encode
+from protocol.liveness import PEER_SILENT_AFTER_S
 from protocol.messages import Message, Status, StatusCode
 
 log = logging.getLogger(__name__)
@@ -33,7 +34,7 @@ log = logging.getLogger(__name__)
 # An unfinished frame this old may be closed to admit a new client when all slots are
 # taken: far above a frame's transit time on any working link, far below the deadline.
 STALLED_FRAME_EVICT_S = 1.0
-LINK_CHECK_INTERVAL_S = 0.25  # how often clients' links are checked for a dead peer
+LINK_CHECK_INTERVAL_S = 1.0  # how often clients' links are checked for a dead peer
 
 
 class PortInUseError(OSError):
@@ -145,7 +146,7 @@ class BridgeServer:
         are free within seconds, and nothing they held arrives late."""
         for session in tuple(self.sessions):
             silent = session.peer_silence()
-            if silent is not None and silent >= session.silence_limit_s:
+            if silent is not None and silent >= PEER_SILENT_AFTER_S:
                 session.abort_dead(silent)
                 self.sessions.discard(session)
         self._link_check = asyncio.get_running_loop().call_later(LINK_CHECK_INTERVAL_S,

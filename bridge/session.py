@@ -52,9 +52,7 @@ from protocol.crc64 import Buffer
 from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
 from protocol.framing import Decoder, RawFrame, ReceiveBudget
 from protocol.freshness import daemon_clock_ms
-from protocol.liveness import (HEARTBEAT_DEVICE, PEER_SILENT_AFTER_S,
-                               PLAIN_PEER_SILENT_AFTER_S, TCP_INFO_BYTES, peer_silence,
-                               socket_options)
+from protocol.liveness import HEARTBEAT_DEVICE, TCP_INFO_BYTES, peer_silence, socket_options
 from protocol.messages import Message, Status, StatusCode
 from protocol.negotiation import HeaderVersionNegotiator
 
@@ -107,9 +105,6 @@ class ClientSession(asyncio.Protocol):
         self.grant = grant
         self.challenge: Optional[str] = None  # the hello reply's, until a key answers it
         self._heartbeat: Optional[asyncio.TimerHandle] = None
-        # How long its link may acknowledge nothing while data waits before it is cut: a
-        # client that asks for a heartbeat judges freshness itself (protocol/liveness.py).
-        self.silence_limit_s = PLAIN_PEER_SILENT_AFTER_S
         self._commands = commands
         self._limits = limits
         self._on_close: Optional[Callable[[ClientSession], None]] = on_close
@@ -482,7 +477,6 @@ class ClientSession(asyncio.Protocol):
         for it in hello), as a stream value: a client that does not read holds one."""
         if self._heartbeat is not None:
             self._heartbeat.cancel()
-        self.silence_limit_s = PEER_SILENT_AFTER_S
         loop = asyncio.get_running_loop()
 
         def beat() -> None:
@@ -512,8 +506,7 @@ class ClientSession(asyncio.Protocol):
     def abort_dead(self, silent_s: float) -> None:
         """The link is dead: close now, dropping what waits (it would arrive stale)."""
         log.warning("client %s has acknowledged nothing for %.1f s while data waits: the "
-                    "link is dead or stalled; closing it (what waits would arrive stale)",
-                    self.peer, silent_s)
+                    "link is dead; closing it", self.peer, silent_s)
         with self._wlock:
             self._closing = True
         if self._transport is not None:

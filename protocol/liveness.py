@@ -9,9 +9,7 @@ set of timings the daemon and its clients share.
   send buffer goes with it instead of arriving minutes later as if it were new. A peer
   that is alive but not reading (a stalled GUI) still acknowledges the kernel's window
   probes, so it is not taken for dead. (``TCP_USER_TIMEOUT`` cannot tell the two apart:
-  it also ends a connection whose reader paused for that long.) A client that reads no
-  freshness stamps (it asked for no heartbeat: 3D Slicer's connector) is cut after
-  ``PLAIN_PEER_SILENT_AFTER_S``: what sat in the send buffer would reach it late as if new.
+  it also ends a connection whose reader paused for that long.)
 * A heartbeat: the daemon sends a client that asks for it a STATUS every
   ``HEARTBEAT_INTERVAL_S``; a client that hears nothing for ``DEAD_AFTER_S`` takes the
   link for dead, closes it and reconnects (then gets the newest state, not the backlog).
@@ -34,16 +32,12 @@ from protocol.messages import Message, Status, StatusCode
 __all__ = ["LIVE", "STALE", "condition_status", "stream_condition",
            "DEAD_AFTER_S", "HEARTBEAT_DEVICE", "HEARTBEAT_INTERVAL_S", "KEEPALIVE_COUNT",
            "KEEPALIVE_IDLE_S", "KEEPALIVE_INTERVAL_S",
-           "PEER_SILENT_AFTER_S", "PLAIN_PEER_SILENT_AFTER_S", "TCP_INFO_BYTES",
-           "peer_silence", "socket_options"]
+           "PEER_SILENT_AFTER_S", "TCP_INFO_BYTES", "peer_silence", "socket_options"]
 
 KEEPALIVE_IDLE_S = 2
 KEEPALIVE_INTERVAL_S = 1
 KEEPALIVE_COUNT = 3
 PEER_SILENT_AFTER_S = 5.0
-# A plain OpenIGTLink client (3D Slicer's connector) reads no freshness stamps: its link is
-# cut sooner, so that no backlog older than this reaches it when the link comes back.
-PLAIN_PEER_SILENT_AFTER_S = 0.5
 HEARTBEAT_INTERVAL_S = 1.0
 DEAD_AFTER_S = 3.0
 HEARTBEAT_DEVICE = "heartbeat"
