@@ -547,9 +547,11 @@ def is_loopback_host(host: str) -> bool:
     if host == "localhost":
         return True
     try:
-        return ipaddress.ip_address(host).is_loopback
+        address = ipaddress.ip_address(host)
     except ValueError:
         return False  # a host name: whatever it resolves to may be reachable from outside
+    mapped = address.ipv4_mapped if isinstance(address, ipaddress.IPv6Address) else None
+    return (mapped or address).is_loopback  # ::ffff:127.0.0.1 is a dual-stack socket's
 
 
 BridgeKey = tuple[str, tuple[str, ...]]  # (bridge kind, its identity values)

@@ -8,12 +8,18 @@ A half-sent frame must not hold a client slot: when all slots are taken, the cli
 unfinished frame is the oldest (over `STALLED_FRAME_EVICT_S`) is closed to make room.
 Clients that only receive, or that send whole messages, are never evicted. All sessions
 share one `ReceiveBudget` for partly received bodies.
+
+Every `LINK_CHECK_INTERVAL_S` each client's link is checked (protocol/liveness.py); a dead
+one is reset, and a plain client's reset is delivered by knocking once its link is back
+(bridge/knock.py). The listeners share their port for that (``SO_REUSEPORT``), so the port
+is first claimed without it: another daemon's listener still makes this one fail to start.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 import ssl
 import time
 from typing import Optional
@@ -21,12 +27,12 @@ from typing import Optional
 from bridge.config import TlsListener
 from bridge.heavy import HeavyWork
 from bridge.hub import Hub
+from bridge.knock import KNOCKS, Knocker
 from bridge.logging_limits import RateLimitedLog
 from bridge.security import SecurityPolicy, is_loopback_host
 from bridge.session import ClientSession, CommandHandler, SessionLimits
 from protocol.framing import ReceiveBudget
 from protocol.framing import encode
-from protocol.liveness import PEER_SILENT_AFTER_S
 from protocol.messages import Message, Status, StatusCode
 
 log = logging.getLogger(__name__)
@@ -34,7 +40,7 @@ log = logging.getLogger(__name__)
 # An unfinished frame this old may be closed to admit a new client when all slots are
 # taken: far above a frame's transit time on any working link, far below the deadline.
 STALLED_FRAME_EVICT_S = 1.0
-LINK_CHECK_INTERVAL_S = 1.0  # how often clients' links are checked for a dead peer
+LINK_CHECK_INTERVAL_S = 0.1  # how often clients' links are checked for a dead peer
 
 
 class PortInUseError(OSError):
@@ -59,6 +65,7 @@ class BridgeServer:
         self._tls = tls
         self._tls_server: Optional[asyncio.base_events.Server] = None
         self._link_check: Optional[asyncio.TimerHandle] = None
+        self.knocker = Knocker()
         self.sessions: set[ClientSession] = set()
         self.refused = 0
 
@@ -79,9 +86,11 @@ class BridgeServer:
                       serving: bool) -> asyncio.base_events.Server:
         loop = asyncio.get_running_loop()
         try:
+            if KNOCKS and port:
+                await _claim(self._host, port)
             return await loop.create_server(self._new_session, self._host, port,
-                                            reuse_address=True, start_serving=serving,
-                                            ssl=tls)
+                                            reuse_address=True, reuse_port=KNOCKS,
+                                            start_serving=serving, ssl=tls)
         except OSError as error:
             if error.errno == 98:  # EADDRINUSE
                 raise PortInUseError(error.errno, f"{self._host}:{port} is already in "
@@ -145,10 +154,11 @@ class BridgeServer:
         """Close the clients whose link is dead (a pulled cable): their slot and buffers
         are free within seconds, and nothing they held arrives late."""
         for session in tuple(self.sessions):
-            silent = session.peer_silence()
-            if silent is not None and silent >= PEER_SILENT_AFTER_S:
-                session.abort_dead(silent)
+            if session.link_is_dead():
+                ends = session.abort_dead()
                 self.sessions.discard(session)
+                if ends is not None and not session.reads_stamps:
+                    self.knocker.knock(*ends)  # its connector would never hear the reset
         self._link_check = asyncio.get_running_loop().call_later(LINK_CHECK_INTERVAL_S,
                                                                  self._check_links)
 
@@ -186,8 +196,22 @@ class BridgeServer:
             server.close()
         for session in tuple(self.sessions):
             session.close()
+        await self.knocker.close()
         for server in servers:
             await server.wait_closed()
+
+
+async def _claim(host: str, port: int) -> None:
+    """Bind `host`:`port` as a plain listener would, and let go: raises EADDRINUSE when
+    another socket listens there (a shared listener would not see it)."""
+    loop = asyncio.get_running_loop()
+    for family, kind, proto, _, address in await loop.getaddrinfo(
+            host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE):
+        with socket.socket(family, kind, proto) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            if family == socket.AF_INET6 and hasattr(socket, "IPPROTO_IPV6"):
+                probe.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)
+            probe.bind(address)
 
 
 class _Gate(asyncio.Protocol):

@@ -37,6 +37,7 @@ import logging
 import operator
 import os
 import socket
+import struct
 import threading
 import time
 from dataclasses import dataclass
@@ -47,12 +48,13 @@ from bridge.heavy import HeavyWork
 from bridge.hub import Hub
 from bridge.logging_limits import RateLimitedLog
 from bridge.outbox import WRITE_CHUNK, Frame, Outbox, OutboxOverflow
-from bridge.security import WRITES, WriteGrant
+from bridge.security import WRITES, WriteGrant, is_loopback_host
 from protocol.crc64 import Buffer
 from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
 from protocol.framing import Decoder, RawFrame, ReceiveBudget
 from protocol.freshness import daemon_clock_ms
-from protocol.liveness import HEARTBEAT_DEVICE, TCP_INFO_BYTES, peer_silence, socket_options
+from protocol.liveness import (HEARTBEAT_DEVICE, TCP_INFO_BYTES, LinkState, link_is_dead,
+                                read_link, socket_options)
 from protocol.messages import Message, Status, StatusCode
 from protocol.negotiation import HeaderVersionNegotiator
 
@@ -135,6 +137,7 @@ class ClientSession(asyncio.Protocol):
         self._unrouted_warned: set[str] = set()
         self._bad_log = RateLimitedLog(log)
         self.peer = "?"
+        self.on_loopback = False  # a loopback link cannot be pulled (protocol/liveness.py)
         self.received = 0
         self._sent = 0
 
@@ -144,6 +147,7 @@ class ClientSession(asyncio.Protocol):
         self._transport = transport
         peer = transport.get_extra_info("peername")
         self.peer = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
+        self.on_loopback = isinstance(peer, tuple) and is_loopback_host(str(peer[0]))
         sock = transport.get_extra_info("socket")
         if sock is not None and sock.family in (socket.AF_INET, socket.AF_INET6):
             # Latency matters more than packet count: no Nagle delay. A dead peer is found
@@ -489,28 +493,55 @@ class ClientSession(asyncio.Protocol):
 
         self._heartbeat = loop.call_later(interval, beat)
 
-    def peer_silence(self) -> Optional[float]:
-        """Seconds the peer has acknowledged nothing while data waits for it (None:
-        nothing waits, or not a TCP socket): see protocol/liveness.py."""
+    @property
+    def reads_stamps(self) -> bool:
+        """It asked for the heartbeat: a project client, which watches its link and drops
+        late values by their freshness stamps (a plain connector shows what arrives)."""
+        return self._heartbeat is not None
+
+    def _tcp_socket(self) -> Optional[socket.socket]:
         transport = self._transport
         sock = transport.get_extra_info("socket") if transport is not None else None
-        if sock is None or sock.family not in (socket.AF_INET, socket.AF_INET6) \
-                or not hasattr(socket, "TCP_INFO"):
+        if sock is None or sock.family not in (socket.AF_INET, socket.AF_INET6):
+            return None
+        return sock
+
+    def link_state(self) -> Optional[LinkState]:
+        """What waits for the peer's acknowledgement (None: nothing, or not a TCP socket):
+        see protocol/liveness.py."""
+        sock = self._tcp_socket()
+        if sock is None or not hasattr(socket, "TCP_INFO"):
             return None
         try:
-            return peer_silence(sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO,
-                                                TCP_INFO_BYTES))
+            return read_link(sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO,
+                                             TCP_INFO_BYTES))
         except OSError:
             return None
 
-    def abort_dead(self, silent_s: float) -> None:
-        """The link is dead: close now, dropping what waits (it would arrive stale)."""
+    def link_is_dead(self) -> bool:
+        return link_is_dead(self.link_state(), reads_stamps=self.reads_stamps,
+                            loopback=self.on_loopback)
+
+    def abort_dead(self) -> Optional[tuple[tuple[str, int], tuple[str, int]]]:
+        """The link is dead: reset the connection now, dropping what waits in the kernel
+        too (it would arrive stale). Returns the connection's (local, peer) addresses."""
+        state = self.link_state()
         log.warning("client %s has acknowledged nothing for %.1f s while data waits: the "
-                    "link is dead; closing it", self.peer, silent_s)
+                    "link is dead; closing it", self.peer, state.silent_s if state else 0.0)
         with self._wlock:
             self._closing = True
+        sock = self._tcp_socket()
+        ends = None
+        if sock is not None:
+            try:
+                ends = sock.getsockname()[:2], sock.getpeername()[:2]
+                # Linger 0: close sends a reset and drops the send queue.
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            except OSError:
+                pass
         if self._transport is not None:
             self._transport.abort()
+        return ends
 
     def forget_device(self, device: str) -> None:
         self._outbox.discard(device)

@@ -37,6 +37,20 @@ def test_port_in_use_is_one_line_and_exit_code_2(processes: Processes) -> None:
     assert "Traceback" not in result.stderr
 
 
+def test_a_second_bridge_on_a_running_bridge_s_port_is_refused(processes: Processes) -> None:
+    # The bridge's listener shares its port for knocks (bridge/knock.py); another bridge of
+    # the same user must still be told the port is taken, not share its clients.
+    daemon = start_daemon(processes)
+    result = subprocess.run([sys.executable, "-m", "bridge.cli", "run", "--port",
+                             str(daemon.port)], cwd=REPO, capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 2, result.stderr
+    assert f"127.0.0.1:{daemon.port} is already in use" in result.stderr
+    with socket.create_connection(("127.0.0.1", daemon.port), timeout=5):
+        pass
+    assert_clean_exit(daemon)
+
+
 def test_bad_config_file_is_refused_with_its_location(tmp_path: Path) -> None:
     config = tmp_path / "bridges.yaml"
     config.write_text("subscribers:\n  - {topic: /ok, type: String}\n"

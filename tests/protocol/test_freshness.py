@@ -42,19 +42,45 @@ def test_a_judge_needs_a_positive_bound_and_stamps_are_never_zero() -> None:
     assert all(daemon_clock_ms() > 0 for _ in range(100))
 
 
-def test_peer_silence_reads_the_kernel_s_tcp_info() -> None:
+def test_read_link_reads_the_kernel_s_tcp_info() -> None:
     import struct
     import sys
 
-    from protocol.liveness import TCP_INFO_BYTES, peer_silence
+    from protocol.liveness import TCP_INFO_BYTES, LinkState, read_link
 
-    def info(unacked: int, last_ack_recv_ms: int) -> bytes:
+    def info(unacked: int, last_ack_recv_ms: int, retransmits: int = 0) -> bytes:
         u32s = [0] * 13
         u32s[4], u32s[12] = unacked, last_ack_recv_ms
         order = "<" if sys.byteorder == "little" else ">"
-        return bytes(8) + struct.pack(f"{order}13I", *u32s) + bytes(40)
+        return bytes([1, 0, retransmits]) + bytes(5) + struct.pack(f"{order}13I", *u32s) \
+            + bytes(40)
 
     assert len(info(0, 0)) >= TCP_INFO_BYTES
-    assert peer_silence(info(3, 6_500)) == 6.5  # data waits, nothing acknowledged: 6.5 s
-    assert peer_silence(info(0, 60_000)) is None  # nothing waits: an idle link is keepalive's
-    assert peer_silence(b"\0" * 10) is None
+    # data waits, nothing acknowledged for 6.5 s
+    assert read_link(info(3, 6_500)) == LinkState(silent_s=6.5, retransmitting=False)
+    assert read_link(info(3, 450, retransmits=2)) == LinkState(0.45, retransmitting=True)
+    assert read_link(info(0, 60_000)) is None  # nothing waits: an idle link is keepalive's
+    assert read_link(b"\0" * 10) is None
+
+
+def test_a_plain_remote_client_is_cut_under_the_freshness_bound_others_after_5_s() -> None:
+    from protocol.freshness import DEFAULT_FRESHNESS_S
+    from protocol.liveness import (PEER_SILENT_AFTER_S, PLAIN_SILENT_AFTER_S, LinkState,
+                                   link_is_dead)
+
+    assert PLAIN_SILENT_AFTER_S < DEFAULT_FRESHNESS_S < PEER_SILENT_AFTER_S
+    lost = LinkState(silent_s=0.45, retransmitting=True)
+    assert link_is_dead(lost, reads_stamps=False, loopback=False)
+    # It drops late values itself; a loopback link cannot be pulled; a window probe or a
+    # packet still in its first flight is no sign of a dead link.
+    assert not link_is_dead(lost, reads_stamps=True, loopback=False)
+    assert not link_is_dead(lost, reads_stamps=False, loopback=True)
+    assert not link_is_dead(LinkState(0.45, retransmitting=False), reads_stamps=False,
+                            loopback=False)
+    assert not link_is_dead(LinkState(0.3, retransmitting=True), reads_stamps=False,
+                            loopback=False)
+    assert not link_is_dead(None, reads_stamps=False, loopback=False)
+    for reads_stamps in (True, False):
+        for loopback in (True, False):
+            assert link_is_dead(LinkState(5.0, retransmitting=False),
+                                reads_stamps=reads_stamps, loopback=loopback)
