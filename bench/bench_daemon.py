@@ -40,7 +40,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -219,10 +219,12 @@ class Figure:
 
 
 def run_phase(publisher: Child, readers: list[Child], rate: float, seconds: float,
-              measured: Optional[Child], subscribers: int, *,
-              warmup: bool = True) -> tuple[list[dict[str, Any]], float, str]:
-    """Publish at `rate` for `seconds` once `subscribers` ROS subscribers matched; returns
-    the readers' reports, the measured process's CPU share, and the load average."""
+              measured: Optional[Child], subscribers: int, *, warmup: bool = True,
+              burst: int = 1, during: Optional[Callable[[], None]] = None,
+              ) -> tuple[list[dict[str, Any]], float, str]:
+    """Publish at `rate` for `seconds` (`burst` at a time) once `subscribers` ROS
+    subscribers matched, calling `during` once the publishing has begun; returns the
+    readers' reports, the measured process's CPU share, and the load average."""
     publisher.ask(f"WAIT {subscribers}", "MATCHED")
     if warmup:
         _warm_up(publisher, readers, rate)
@@ -230,10 +232,12 @@ def run_phase(publisher: Child, readers: list[Child], rate: float, seconds: floa
         reader.say("RESET")
     time.sleep(0.2)
     cpu0, t0 = (measured.cpu_seconds() if measured else 0.0), time.monotonic()
-    line = publisher.ask(f"RUN {rate} {seconds}", "DONE", timeout=seconds * 10 + 60)
+    publisher.say(f"RUN {rate} {seconds} {burst}")
+    if during is not None:
+        during()
+    publisher.expect("DONE", timeout=seconds * 10 + 60)
     cpu1, t1 = (measured.cpu_seconds() if measured else 0.0), time.monotonic()
     average_load = load()
-    del line
     time.sleep(max(0.5, seconds * 0.05))  # the last messages arrive
     reports = [reader.report() for reader in readers]
     return reports, (cpu1 - cpu0) / (t1 - t0), average_load
@@ -303,6 +307,9 @@ class Results:
     pose: dict[str, Figure] = field(default_factory=dict)
     clients: dict[int, Figure] = field(default_factory=dict)
     burst: dict[str, Figure] = field(default_factory=dict)
+    bursty: dict[str, Figure] = field(default_factory=dict)  # bursts of BURST, same rate
+    isolation: dict[str, Figure] = field(default_factory=dict)  # "facade", "stopped"
+    resumed: dict[str, float] = field(default_factory=dict)  # the stopped client's
     tf: Optional[Figure] = None
     tf_floor: float = float("nan")  # bench_fanout_floor.py's CPU share, 8 clients
     image: dict[str, Figure] = field(default_factory=dict)
@@ -325,6 +332,8 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
                                                               args.burst_seconds),
                                                  args.burst_rate, cpu, avg)
             print_progress("floor, pose burst", results.burst["floor"])
+            results.bursty["floor"] = bursty_run(args, publisher, [floor], floor)
+            print_progress(f"floor, bursts of {BURST}", results.bursty["floor"])
         finally:
             floor.stop()
         for kind in ("bridge", "naive"):
@@ -343,6 +352,8 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
                         reports, int(args.burst_rate * args.burst_seconds), args.burst_rate,
                         cpu, avg)
                     print_progress(f"{kind}, pose burst", results.burst[kind])
+                    results.bursty[kind] = bursty_run(args, publisher, readers, relay.child)
+                    print_progress(f"{kind}, bursts of {BURST}", results.bursty[kind])
                 finally:
                     stop_all(readers)
                 if kind == "bridge":
@@ -362,6 +373,69 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
                 relay.stop()
     finally:
         publisher.stop()
+
+
+BURST = 10  # messages back to back, as a driver that batches sends them
+ISOLATION_CLIENTS = 32
+STOP_S = 5.0  # how long the stopped client reads nothing
+
+
+def bursty_run(args: argparse.Namespace, publisher: Child, readers: list[Child],
+               measured: Child) -> Figure:
+    """`args.burst_rate` messages a second, BURST at a time."""
+    reports, cpu, avg = run_phase(publisher, readers, args.burst_rate, args.burst_seconds,
+                                  measured, 1, burst=BURST)
+    return figure_from(reports, int(args.burst_rate * args.burst_seconds), args.burst_rate,
+                       cpu, avg)
+
+
+def isolation_phase(args: argparse.Namespace, results: Results) -> None:
+    """32 raw clients at 1 kHz with a facade client (it decodes everything in Python), then
+    the same with one more client that stops reading for STOP_S and reads on: the 32's
+    figures side by side, and what the stopped one read when it resumed."""
+    publisher = peer("pose publisher", "publish", "pose", POSE_TOPIC)
+    relay = Relay("bridge", {"pose": POSE_TOPIC})
+    readers = readers_for(relay.port, ISOLATION_CLIENTS)
+    facade = peer("facade client", "facade", str(relay.port), POSE_TOPIC)
+    seconds = STOP_S + 3.0
+    try:
+        reports, cpu, avg = run_phase(publisher, readers, args.rate, seconds, relay.child, 1)
+        results.isolation["facade"] = figure_from(reports, int(args.rate * seconds),
+                                                  args.rate, cpu, avg)
+        print_progress(f"bridge, {ISOLATION_CLIENTS} + facade", results.isolation["facade"])
+        stopped = readers_for(relay.port, 1)[0]
+        try:
+            def stop_reading() -> None:
+                time.sleep(1.0)
+                stopped.ask(f"PAUSE {STOP_S}", "PAUSED")
+
+            reports, cpu, avg = run_phase(publisher, [*readers, stopped], args.rate, seconds,
+                                          relay.child, 1, during=stop_reading)
+            results.isolation["stopped"] = figure_from(reports[:-1], int(args.rate * seconds),
+                                                       args.rate, cpu, avg)
+            results.resumed = reports[-1].get("resumed", {})
+            print_progress(f"bridge, {ISOLATION_CLIENTS} + facade + stopped",
+                           results.isolation["stopped"])
+            print(f"  {'':<34} the stopped client, reading again: {resumed_text(results)}",
+                  flush=True)
+        finally:
+            stopped.stop()
+    finally:
+        facade.stop()
+        stop_all(readers)
+        relay.stop()
+        publisher.stop()
+
+
+def resumed_text(results: Results) -> str:
+    r = results.resumed
+    if not r:
+        return "-"
+    return (f"its own socket buffer held {r['held_values']:.0f} values "
+            f"({r['held_bytes'] / 1024:.0f} KiB, the first {ms(r['first_age_ms'])} ms old); "
+            f"{r['read_before_fresh'] - r['held_values']:.0f} more older than 100 ms came "
+            f"from the relay, then the newest ({ms(r['fresh_after_ms'])} ms after resuming); "
+            f"{r['stale_after_fresh']:.0f} older than 100 ms after those")
 
 
 def tf_phase(args: argparse.Namespace, results: Results) -> None:
@@ -489,6 +563,22 @@ def table(results: Results, args: argparse.Namespace) -> str:
                      "1 client: delivered", burst, Figure.delivered_text))
     rows.append(_row("… lag, p50 of the first → last second (ms)", burst, lag))
     rows.append(_row("… process CPU", burst, lambda f: pct(f.cpu)))
+    bursty = tuple(results.bursty.get(k, Figure()) for k in ("floor", "bridge", "naive"))
+    rows.append(_row(f"the same rate in bursts of {BURST} (every {BURST / args.burst_rate * 1000:g}"
+                     f" ms) → 1 client: delivered; p50 / p99 (ms)", bursty,
+                     lambda f: f"{f.delivered_text()}; {ms(f.p50)} / {ms(f.p99)}"))
+    rows.append(_row("… lag, p50 of the first → last second (ms)", bursty, lag))
+    rows.append(_row("… process CPU", bursty, lambda f: pct(f.cpu)))
+    for key, what in (("facade", f"{ISOLATION_CLIENTS} raw clients and a facade client"),
+                      ("stopped", f"… and one more client that stops reading for "
+                                  f"{STOP_S:g} s")):
+        fig = results.isolation.get(key)
+        if fig is not None:
+            rows.append(f"| PoseStamped at {rate} → {what}: the raw clients' delivered; "
+                        f"p50 / p99 (ms); CPU | | {fig.delivered_text()}; {ms(fig.p50)} / "
+                        f"{ms(fig.p99)}; {pct(fig.cpu)} | |")
+    if results.resumed:
+        rows.append(f"| … the stopped client, reading again | | {resumed_text(results)} | |")
     if results.tf is not None:
         tf = results.tf
         rows.append(f"| tf of a {LINKS}-link robot at {rate}, {LINKS} streamed lookups → 8 "
@@ -522,6 +612,8 @@ def per_khz(results: Results) -> str:
                       *((f"bridge, {c} clients", f) for c, f in sorted(results.clients.items())),
                       ("bridge, burst", results.burst.get("bridge")),
                       ("naive, burst", results.burst.get("naive")),
+                      (f"bridge, bursts of {BURST}", results.bursty.get("bridge")),
+                      (f"naive, bursts of {BURST}", results.bursty.get("naive")),
                       ("bridge, tf (per TFMessage)", results.tf)):
         if fig is not None:
             lines.append(f"  {name:<28} {pct(fig.cpu_per_khz):>7}   (load {fig.load})")
@@ -535,7 +627,8 @@ def main() -> int:
     parser.add_argument("--rate", type=float, default=1000.0, help="pose and tf rate (Hz)")
     parser.add_argument("--burst-rate", type=float, default=10_000.0,
                         help="the sustained-throughput phase's rate (msg/s)")
-    parser.add_argument("--only", choices=("pose", "tf", "image"), action="append",
+    parser.add_argument("--only", choices=("pose", "isolation", "tf", "image"),
+                        action="append",
                         help="run only these phases (repeatable)")
     args = parser.parse_args()
     args.seconds = 2.0 if args.quick else 5.0
@@ -543,12 +636,14 @@ def main() -> int:
     os.environ["ROS_DOMAIN_ID"] = str(random.randint(101, 200))
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="bench-roslog-"))
-    phases = args.only or ["pose", "tf", "image"]
+    phases = args.only or ["pose", "isolation", "tf", "image"]
     print(f"{os.cpu_count()} CPUs, load {load()} at the start; "
           f"{'quick' if args.quick else 'full'} run", flush=True)
     results = Results()
     if "pose" in phases:
         pose_phases(args, results)
+    if "isolation" in phases:
+        isolation_phase(args, results)
     if "tf" in phases:
         tf_phase(args, results)
     if "image" in phases:

@@ -6,15 +6,23 @@ ROS floor), and a raw OpenIGTLink reader with any number of connections.
     peers.py floor KIND TOPIC
     peers.py read PORT CLIENTS [--setup JSON]
     peers.py watch PORT PARENT CHILD [--hello-hz HZ]
+    peers.py facade PORT TOPIC
 
 Every peer prints READY when it can start, then obeys lines on stdin:
 
-* publisher: ``RUN RATE SECONDS`` publishes at RATE Hz for SECONDS, stamping each message
-  with ``time.time_ns()`` just before ``publish()``, then prints ``DONE <count>``. It
-  sleeps until each message is due (a publisher that spins would take the CPU the daemon
-  needs on a 2-core machine) and catches up without sleeping when it is late;
+* publisher: ``RUN RATE SECONDS [BURST]`` publishes at RATE Hz for SECONDS, stamping each
+  message with ``time.time_ns()`` just before ``publish()``, then prints ``DONE <count>``.
+  It sleeps until each message is due (a publisher that spins would take the CPU the
+  daemon needs on a 2-core machine) and catches up without sleeping when it is late. With
+  BURST, messages go out BURST at a time, back to back, every BURST/RATE seconds (a driver
+  that batches);
 * floor and reader: ``RESET`` forgets what was received, ``REPORT`` prints one JSON line
-  of figures (see `Recorder.report`), ``QUIT`` exits;
+  of figures (see `Recorder.report`), ``QUIT`` exits. A reader also takes ``PAUSE
+  SECONDS``: it reads nothing for that long (a stalled GUI), then reads on; its report
+  then says what it read first (``resumed``);
+* facade: a `slicer_client` subscriber of TOPIC (PoseStamped) whose callback reads each
+  message, as a script or the ROS2Bridge module would: a client that decodes everything in
+  Python. ``REPORT`` prints ``{"received": N}``;
 * watcher (the other client of bench/attacks.py): one raw connection that streams the tf
   lookup PARENT <- CHILD (stream ``tf``) and sends ``hello`` at HZ, each one's round trip
   recorded as stream ``hello`` (stamp: when it was sent); a hello still unanswered at
@@ -29,12 +37,14 @@ own cost is the same whichever relay it reads.
 from __future__ import annotations
 
 import argparse
+import fcntl
 import json
 import os
 import selectors
 import socket
 import struct
 import sys
+import termios
 import threading
 import time
 from typing import Any, Callable
@@ -66,6 +76,11 @@ class Recorder:
             # Messages published before the reset (a warm-up's, a reliable retransmission
             # after discovery) are not part of what is measured next.
             self.since = time.time_ns()
+            self.resumed_at = 0  # when a PAUSE ended (ns), 0: no pause
+            self.held_at_resume = 0  # bytes the reader's socket buffer held then
+            self.held_values = 0  # stream values among those bytes
+            self.read_since_resume = 0  # bytes
+            self.after_resume: list[tuple[int, int]] = []  # (arrival, stamp), all streams
 
     def add(self, stream: str, arrival_ns: int, stamp_ns: int) -> None:
         if stamp_ns < self.since:
@@ -74,6 +89,8 @@ class Recorder:
         if samples is None:
             samples = self.samples[stream] = []
         samples.append((arrival_ns, stamp_ns))
+        if self.resumed_at and arrival_ns >= self.resumed_at:
+            self.after_resume.append((arrival_ns, stamp_ns))
 
     def report(self) -> dict[str, Any]:
         """Per stream: count, out-of-order arrivals, latency percentiles (ms) and the p50 of
@@ -93,6 +110,20 @@ class Recorder:
                 out["streams"][name]["arrivals"] = [[s, a] for a, s in values]
         out["all"] = _percentiles(every)
         out["all"]["n"] = len(every)
+        with self.lock:
+            after = list(self.after_resume)
+        if after:
+            # What the reader read once it read again: first what its own socket buffer held
+            # (values that reached it on time), then what the relay had kept for it.
+            ages = [(a - s) / 1e6 for a, s in after]
+            fresh = next((i for i, age in enumerate(ages) if age < 100), len(ages))
+            out["resumed"] = {"first_age_ms": ages[0], "read_before_fresh": fresh,
+                              "held_bytes": self.held_at_resume,
+                              "held_values": self.held_values,
+                              "stale_after_fresh": sum(1 for age in ages[fresh:]
+                                                       if age >= 100),
+                              "fresh_after_ms": ((after[fresh][0] - after[0][0]) / 1e6
+                                                 if fresh < len(after) else float("nan"))}
         return out
 
 
@@ -117,13 +148,16 @@ def _per_second(values: list[tuple[int, int]]) -> list[float]:
     return [round(_percentiles(buckets[k])["p50"], 3) for k in sorted(buckets)]
 
 
-def _serve_commands(recorder: Recorder, quit_: Callable[[], None]) -> None:
+def _serve_commands(recorder: Recorder, quit_: Callable[[], None],
+                    pause: Callable[[float], None] | None = None) -> None:
     for line in sys.stdin:
         word = line.strip()
         if word == "RESET":
             recorder.reset()
         elif word == "REPORT":
             print(json.dumps(recorder.report()), flush=True)
+        elif word.startswith("PAUSE ") and pause is not None:
+            pause(float(word.split()[1]))
         elif word == "QUIT":
             break
     quit_()
@@ -155,11 +189,33 @@ def read(port: int, clients: int, setup: list[dict[str, Any]], v2: bool) -> None
         sock.setblocking(False)
         selector.register(sock, selectors.EVENT_READ, [index, bytearray()])
     stop = threading.Event()
-    threading.Thread(target=_serve_commands, args=(recorder, stop.set), daemon=True).start()
+    paused_until = [0.0]
+
+    def pause(seconds: float) -> None:
+        paused_until[0] = time.monotonic() + seconds
+        recorder.resumed_at = time.time_ns() + int(seconds * _NS)
+        print("PAUSED", flush=True)
+
+    def held_bytes() -> int:
+        """What the reader's own kernel holds for it, unread (the socket's buffer)."""
+        held = 0
+        for key in selector.get_map().values():
+            unread = fcntl.ioctl(key.fileobj, termios.FIONREAD, b"\0\0\0\0")
+            held += int.from_bytes(unread, sys.byteorder)
+        return held
+
+    threading.Thread(target=_serve_commands, args=(recorder, stop.set, pause),
+                     daemon=True).start()
     print("READY", flush=True)
     unpack = _HEADER.unpack_from
     header_size = _HEADER.size
     while not stop.is_set():
+        if paused_until[0]:
+            if time.monotonic() < paused_until[0]:
+                time.sleep(0.01)
+                continue
+            paused_until[0] = 0.0
+            recorder.held_at_resume = held_bytes()
         for key, _ in selector.select(timeout=0.2):
             index, buffer = key.data
             try:
@@ -182,6 +238,10 @@ def read(port: int, clients: int, setup: list[dict[str, Any]], v2: bool) -> None
                     if stamp and type_raw[:5] in (b"TRANS", b"IMAGE"):
                         name = name_raw.rstrip(b"\0").decode()
                         recorder.add(f"{index}:{name}", arrival, _stamp_ns(stamp))
+                        if recorder.resumed_at and arrival >= recorder.resumed_at:
+                            recorder.read_since_resume += header_size + size
+                            if recorder.read_since_resume <= recorder.held_at_resume:
+                                recorder.held_values += 1
             del buffer[:offset]
 
 
@@ -382,13 +442,15 @@ def publish(kind: str, topic: str) -> None:
             print(f"MATCHED {publisher.get_subscription_count()}", flush=True)
         elif parts and parts[0] == "RUN":
             rate, seconds = float(parts[1]), float(parts[2])
+            burst = int(parts[3]) if len(parts) > 3 else 1
             count = int(rate * seconds)
             period = 1.0 / rate
             start = time.monotonic()
             for n in range(count):
-                delay = start + n * period - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
+                if n % burst == 0:  # the next burst is due (every message, without BURST)
+                    delay = start + n * period - time.monotonic()
+                    if delay > 0:
+                        time.sleep(delay)
                 set_stamp(message, time.time_ns())
                 publisher.publish(message)
             print(f"DONE {count}", flush=True)
@@ -423,6 +485,29 @@ def floor(kind: str, topic: str) -> None:
         pass
 
 
+def facade(port: int, topic: str) -> None:
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    import slicer_client
+
+    received = [0]
+    ros = slicer_client.connect("127.0.0.1", port)
+    pose = ros.subscribe(topic, "PoseStamped")
+
+    def on_pose(message: Any) -> None:  # reads the message, as a user's observer does
+        received[0] += 1
+        del message
+
+    pose.add_callback(on_pose)
+    print("READY", flush=True)
+    for line in sys.stdin:
+        word = line.strip()
+        if word == "REPORT":
+            print(json.dumps({"received": received[0]}), flush=True)
+        elif word == "QUIT":
+            break
+    ros.close()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -441,6 +526,9 @@ def main() -> None:
     p.add_argument("parent")
     p.add_argument("child")
     p.add_argument("--hello-hz", type=float, default=10.0)
+    p = sub.add_parser("facade")
+    p.add_argument("port", type=int)
+    p.add_argument("topic")
     args = parser.parse_args()
     if args.role == "publish":
         publish(args.kind, args.topic)
@@ -448,6 +536,8 @@ def main() -> None:
         floor(args.kind, args.topic)
     elif args.role == "watch":
         watch(args.port, args.parent, args.child, args.hello_hz)
+    elif args.role == "facade":
+        facade(args.port, args.topic)
     else:
         read(args.port, args.clients, json.loads(args.setup), not args.v1)
 

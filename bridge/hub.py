@@ -15,13 +15,16 @@ executor thread and hand values over through a `StreamChannel` (`post_frame`):
 * the hot path: a small value, with nothing waiting for the loop, is written from the
   executor thread to each client that keeps up, under that client's write lock
   (`Subscriber.write_direct`): no loop wake-up per message. A client that is behind gets
-  the value through the loop instead (`hand_over`), in order, into its own outbox;
+  the value through the loop instead (`hand_over`: in order, one wake-up for all handed
+  meanwhile), into its own outbox;
 * otherwise small values queue in order (bounded), large ones (images, point clouds)
   replace their device's waiting one, and the loop is woken at most once per batch, so a
   burst costs one wake-up and each client gets the whole batch in one socket write.
 
 A client that keeps up receives every small message in order; only a slow client's own
-outbox replaces its unsent values with newer ones. A closed channel drops what is posted
+outbox replaces its unsent values with newer ones. Behind means its kernel holds more
+than `session.KERNEL_UNSENT_BYTES` unsent (TCP_NOTSENT_LOWAT): beyond what its own socket
+buffer and the network hold, a client's backlog is the newest value of each device. A closed channel drops what is posted
 through it, so a callback still running when its bridge is removed cannot bring the
 device back.
 """

@@ -66,6 +66,8 @@ CommandHandler = Callable[[Message, "ClientSession"], None]
 HEAVY_BODY_BYTES = 64 * 1024
 # What one loop turn writes to one client from its outbox before others get a turn.
 FLUSH_TURN_BYTES = 4 * WRITE_CHUNK
+KERNEL_UNSENT_BYTES = 16 * 1024  # TCP_NOTSENT_LOWAT: about 100 poses
+MAX_HANDED = 1024  # stream values handed to the loop for one client before coalescing
 # Message types that are not data for a device: commands, statuses, queries, replies.
 _CONTROL_TYPES = ("COMMAND", "STATUS", "GET_", "RTS_", "STT_", "STP_")
 
@@ -75,8 +77,10 @@ _CONTROL_TYPES = ("COMMAND", "STATUS", "GET_", "RTS_", "STT_", "STP_")
 class SessionLimits:
     max_message_bytes: int = 64 * 1024 * 1024
     max_oneshot_bytes: int = 256 * 1024 * 1024
-    # Above this many bytes in the kernel-side transport buffer, frames wait in the outbox.
-    write_high_water: int = 256 * 1024
+    # Above this many bytes in the transport's own buffer (what the kernel did not take),
+    # frames wait in the outbox, where a stream's newer value replaces its older one. 0: a
+    # client's backlog is never a queue of stale stream values, only the newest of each.
+    write_high_water: int = 0
     # How long a new client may take to show it reads header v2 (3D Slicer sends a STATUS
     # at once) before it gets the current state as v1; OpenIGTLink 1.11 peers never send.
     negotiation_grace_s: float = 0.25
@@ -132,7 +136,10 @@ class ClientSession(asyncio.Protocol):
         self._wlock = threading.Lock()
         self._direct: Optional[socket.socket] = None  # a dup of the transport's socket
         self._stash: Optional[bytes] = None  # the rest of a partial direct write
-        self._handed = 0  # frames handed to the loop and not written yet
+        # Stream values `write_direct` refused, in order, for the loop to send; `_handed` is
+        # set while the loop has yet to take them (one wake-up for any number handed).
+        self._handed_frames: list[tuple[str, Frame]] = []
+        self._handed = False
         self._sent_direct = 0
         self._unrouted_warned: set[str] = set()
         self._bad_log = RateLimitedLog(log)
@@ -153,6 +160,11 @@ class ClientSession(asyncio.Protocol):
             # Latency matters more than packet count: no Nagle delay. A dead peer is found
             # in seconds, and what its send buffer held is dropped, not delivered late.
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            if hasattr(socket, "TCP_NOTSENT_LOWAT"):
+                # The kernel takes little beyond what is in flight: the rest of a backlog
+                # waits in the outbox, coalesced, not in the kernel as a queue of old poses.
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NOTSENT_LOWAT,
+                                KERNEL_UNSENT_BYTES)
             for level, option, value in socket_options():
                 sock.setsockopt(level, option, value)
         transport.set_write_buffer_limits(high=self._limits.write_high_water)
@@ -638,17 +650,37 @@ class ClientSession(asyncio.Protocol):
 
     def hand_over(self, device: str, frame: Frame) -> None:
         """A stream frame `write_direct` refused: the loop sends it, after any handed before
-        it, and until then this client gets no direct write."""
+        it, and until then this client gets no direct write. The loop is woken once for
+        all that are handed meanwhile; past `MAX_HANDED` of them only the newest of each
+        device is kept (the loop is that far behind)."""
         with self._wlock:
-            self._handed += 1
-        self._hub.call_soon(self._take_handed, device, frame)
+            handed = self._handed_frames
+            handed.append((device, frame))
+            if len(handed) > MAX_HANDED:
+                seen: set[str] = set()
+                newest = [(d, f) for d, f in reversed(handed) if not (d in seen or seen.add(d))]
+                handed[:] = newest[::-1]  # each device's newest value, in their order
+            if self._handed:
+                return
+            self._handed = True
+        self._hub.call_soon(self._take_handed)
 
-    def _take_handed(self, device: str, frame: Frame) -> None:
-        try:
-            self.send_stream(device, frame)
-        finally:
+    def _take_handed(self) -> None:
+        while True:
             with self._wlock:
-                self._handed -= 1
+                frames = self._handed_frames
+                if not frames:
+                    self._handed = False
+                    return
+                self._handed_frames = []
+            try:
+                for device, frame in frames:
+                    self.send_stream(device, frame)
+            except Exception:
+                with self._wlock:  # never left refusing direct writes for good
+                    self._handed_frames.clear()
+                    self._handed = False
+                raise
 
     def _write_stash(self) -> None:
         with self._wlock:
