@@ -24,9 +24,10 @@ executor thread and hand values over through a `StreamChannel` (`post_frame`):
 A client that keeps up receives every small message in order; only a slow client's own
 outbox replaces its unsent values with newer ones. Behind means its kernel holds more
 than `session.KERNEL_UNSENT_BYTES` unsent (TCP_NOTSENT_LOWAT): beyond what its own socket
-buffer and the network hold, a client's backlog is the newest value of each device. A closed channel drops what is posted
-through it, so a callback still running when its bridge is removed cannot bring the
-device back.
+buffer and the network hold, a client's backlog is the newest value of each device.
+
+A closed channel drops what is posted through it, so a callback still running when its
+bridge is removed cannot bring the device back.
 """
 
 from __future__ import annotations
