@@ -90,35 +90,49 @@ class SharedFrame(Frame):
 
 class BulkFrame(Frame):
     """A large message (an image, a point cloud) kept, once encoded, as its header-v2
-    bytes alone.
+    wire parts alone (`protocol.framing.encode_parts`: header, content, metadata), never
+    joined: a video frame's pixels are copied once, into the content that is sent.
 
     The hub keeps each device's newest value for clients that connect later: holding the
     body's arrays beside their encoding would keep a 20 MB cloud twice. v2 bytes carry
     everything (metadata too), so a v1 peer's bytes or the `Message` (a GET_ query) are
     made from them again when asked for, which is rare, and not kept."""
 
-    __slots__ = ()
+    __slots__ = ("_parts",)
     _KEPT_VERSION = 2
+
+    def __init__(self, message: Message) -> None:
+        super().__init__(message)
+        self._parts: Optional[tuple[bytes, Buffer, bytes]] = None
 
     @property
     def message(self) -> Message:
         if self._message is not None:
             return self._message
-        data = self._encoded[self._KEPT_VERSION]
+        data = self.encoded(self._KEPT_VERSION)
         decoder = Decoder(max_body_size=len(data))
         decoder.feed(data)
         message = decoder.next_message()
         assert message is not None, "a frame's own bytes decode"
         return message
 
-    def encoded(self, header_version: int) -> bytes:
-        kept = self._encoded.get(self._KEPT_VERSION)
-        if kept is None:
-            kept = encode(self._stamped(self._message), header_version=self._KEPT_VERSION)
-            self._encoded[self._KEPT_VERSION] = kept
+    def _kept_parts(self) -> tuple[bytes, Buffer, bytes]:
+        parts = self._parts
+        if parts is None:
+            parts = self._parts = encode_parts(self._stamped(self._message),
+                                               header_version=self._KEPT_VERSION)
             self._message = None  # type: ignore[assignment]
+        return parts
+
+    def encoded_parts(self, header_version: int) -> tuple[Buffer, ...]:
         if header_version == self._KEPT_VERSION:
-            return kept
+            return self._kept_parts()
+        return (self.encoded(header_version),)
+
+    def encoded(self, header_version: int) -> bytes:
+        if header_version == self._KEPT_VERSION:
+            return b"".join(self._kept_parts())  # rare: a GET_ query, a batch
+        self._kept_parts()
         return encode(self.message, header_version=header_version)
 
 

@@ -67,6 +67,9 @@ HEAVY_BODY_BYTES = 64 * 1024
 # What one loop turn writes to one client from its outbox before others get a turn.
 FLUSH_TURN_BYTES = 4 * WRITE_CHUNK
 KERNEL_UNSENT_BYTES = 16 * 1024  # TCP_NOTSENT_LOWAT: about 100 poses
+# While a large frame (a video frame, a model) is written, the kernel may take that much of
+# it at once: 16 KB at a time cost a VGA frame about 1.4 ms of loop turns.
+LARGE_KERNEL_UNSENT_BYTES = 4 * 1024 * 1024
 MAX_HANDED = 1024  # stream values handed to the loop for one client before coalescing
 # Message types that are not data for a device: commands, statuses, queries, replies.
 _CONTROL_TYPES = ("COMMAND", "STATUS", "GET_", "RTS_", "STT_", "STP_")
@@ -145,6 +148,7 @@ class ClientSession(asyncio.Protocol):
         self._bad_log = RateLimitedLog(log)
         self.peer = "?"
         self.on_loopback = False  # a loopback link cannot be pulled (protocol/liveness.py)
+        self._kernel_unsent = 0  # TCP_NOTSENT_LOWAT as set (0: not yet)
         self.received = 0
         self._sent = 0
 
@@ -160,11 +164,9 @@ class ClientSession(asyncio.Protocol):
             # Latency matters more than packet count: no Nagle delay. A dead peer is found
             # in seconds, and what its send buffer held is dropped, not delivered late.
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            if hasattr(socket, "TCP_NOTSENT_LOWAT"):
-                # The kernel takes little beyond what is in flight: the rest of a backlog
-                # waits in the outbox, coalesced, not in the kernel as a queue of old poses.
-                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NOTSENT_LOWAT,
-                                KERNEL_UNSENT_BYTES)
+            # The kernel takes little beyond what is in flight: the rest of a backlog
+            # waits in the outbox, coalesced, not in the kernel as a queue of old poses.
+            self._limit_kernel_unsent(KERNEL_UNSENT_BYTES)
             for level, option, value in socket_options():
                 sock.setsockopt(level, option, value)
         transport.set_write_buffer_limits(high=self._limits.write_high_water)
@@ -472,7 +474,20 @@ class ClientSession(asyncio.Protocol):
             gathered, self._batch = self._batch, []
             self._transport_write(b"".join(gathered))
         self._outbox.put_once(*parts)  # the outbox was empty: within any bound
+        self._limit_kernel_unsent(LARGE_KERNEL_UNSENT_BYTES)  # until the outbox is empty
         self._flush()
+
+    def _limit_kernel_unsent(self, nbytes: int) -> None:
+        """How much the kernel may hold unsent for this client (TCP_NOTSENT_LOWAT)."""
+        sock = self._tcp_socket()
+        if sock is None or not hasattr(socket, "TCP_NOTSENT_LOWAT") \
+                or nbytes == self._kernel_unsent:
+            return
+        try:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NOTSENT_LOWAT, nbytes)
+        except OSError:
+            return
+        self._kernel_unsent = nbytes
 
     def send_message(self, message: Message) -> None:
         self.send_once(Frame(message))
@@ -611,6 +626,7 @@ class ClientSession(asyncio.Protocol):
                 return
             data = self._outbox.pop(WRITE_CHUNK)
             if data is None:
+                self._limit_kernel_unsent(KERNEL_UNSENT_BYTES)  # a large frame went
                 return
             self._sent += 1
             written += len(data)

@@ -48,7 +48,7 @@ from protocol.header import (
     unpack_metadata,
     unpack_raw,
 )
-from protocol.messages import Message, PolyData, RawBody, unpack_body
+from protocol.messages import Image, Message, PolyData, RawBody, unpack_body
 
 __all__ = ["DEFAULT_MAX_BODY_SIZE", "DEFAULT_UNCOUNTED_BODY_BYTES", "Decoder", "RawFrame",
            "ReceiveBudget", "StreamTemplate", "encode", "encode_parts"]
@@ -87,8 +87,8 @@ def encode_parts(message: Message, *, header_version: int = 1,
     content: Buffer
     if isinstance(body, RawBody):
         content = body.data
-    elif isinstance(body, PolyData):
-        content = body.pack_view()  # a model of tens of MB: no final copy
+    elif isinstance(body, (PolyData, Image)):
+        content = body.pack_view()  # a model of tens of MB, a video frame: no final copy
     else:
         content = body.pack()
     if header_version == 1:

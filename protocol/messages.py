@@ -774,7 +774,8 @@ class Image:
 
     __eq__ = _dataclass_eq
 
-    def pack(self) -> bytes:
+    def _head_and_pixels(self) -> tuple[bytes, AnyArray]:
+        """The IMAGE header's bytes and the pixels (as given), checked."""
         pixels = np.asarray(self.pixels)
         if pixels.ndim != 4:
             raise EncodeError("IMAGE pixels", "4 dimensions (slices, rows, columns, components)",
@@ -809,8 +810,23 @@ class Image:
             *axes[:, 0], *axes[:, 1], *axes[:, 2], *centre,
             0, 0, 0, i, j, k,
         )
+        return head, pixels
+
+    def pack(self) -> bytes:
+        head, pixels = self._head_and_pixels()
         little = pixels.dtype.newbyteorder("<")
         return head + np.ascontiguousarray(pixels, dtype=little).tobytes()
+
+    def pack_view(self) -> memoryview:
+        """`pack`'s bytes with the pixels copied once, into the buffer that is sent (a
+        video frame: no second copy and no joining), as a read-only view."""
+        head, pixels = self._head_and_pixels()
+        out = np.empty(len(head) + pixels.nbytes, dtype=np.uint8)
+        out[:len(head)] = np.frombuffer(head, dtype=np.uint8)
+        little = pixels.dtype.newbyteorder("<")
+        out[len(head):].view(little).reshape(pixels.shape)[...] = pixels
+        view = memoryview(out)
+        return view.toreadonly()
 
     @classmethod
     def unpack(cls, content: bytes) -> Image:

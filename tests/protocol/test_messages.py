@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import dataclasses
 import random
 import struct
 from pathlib import Path
@@ -103,6 +104,17 @@ def test_polydata_roundtrip(body: PolyData) -> None:
 @given(strat.points)
 def test_point_roundtrip(body: Point) -> None:
     assert roundtrip(body) == body
+
+
+@settings(max_examples=60, deadline=None)
+@given(strat.images())
+def test_image_pack_view_is_pack_s_bytes_with_the_pixels_copied_once(body: Image) -> None:
+    view = body.pack_view()
+    assert view.readonly and bytes(view) == body.pack()
+    # Big-endian and strided pixels too: written little-endian, in order.
+    swapped = dataclasses.replace(body, pixels=body.pixels.astype(
+        body.pixels.dtype.newbyteorder(">"))[..., ::-1][..., ::-1])
+    assert bytes(swapped.pack_view()) == body.pack()
 
 
 @settings(max_examples=60, deadline=None)
