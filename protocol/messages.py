@@ -825,8 +825,7 @@ class Image:
         out[:len(head)] = np.frombuffer(head, dtype=np.uint8)
         little = pixels.dtype.newbyteorder("<")
         out[len(head):].view(little).reshape(pixels.shape)[...] = pixels
-        view = memoryview(out)
-        return view.toreadonly()
+        return out.data.toreadonly()
 
     @classmethod
     def unpack(cls, content: bytes) -> Image:
