@@ -81,9 +81,11 @@ class SessionLimits:
     max_message_bytes: int = 64 * 1024 * 1024
     max_oneshot_bytes: int = 256 * 1024 * 1024
     # Above this many bytes in the transport's own buffer (what the kernel did not take),
-    # frames wait in the outbox, where a stream's newer value replaces its older one. 0: a
+    # frames wait in the outbox, where a stream's newer value replaces its older one. 1: a
     # client's backlog is never a queue of stale stream values, only the newest of each.
-    write_high_water: int = 0
+    # (Not 0: asyncio's TLS transport pauses at `size >= high`, so at 0 it would pause
+    # with nothing buffered and never resume.)
+    write_high_water: int = 1
     # How long a new client may take to show it reads header v2 (3D Slicer sends a STATUS
     # at once) before it gets the current state as v1; OpenIGTLink 1.11 peers never send.
     negotiation_grace_s: float = 0.25

@@ -9,6 +9,7 @@ import re
 import stat
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -17,6 +18,7 @@ import pytest
 import slicer_client
 from protocol.auth import proof
 from protocol.commands import ErrorCode
+from protocol.liveness import DEAD_AFTER_S
 from protocol.messages import Message, Status, StatusCode, String
 from slicer_client.connection import CommandRefusedError, Connection
 from support import (REPO, Child, Processes, RunningDaemon, assert_clean_exit, scaled,
@@ -192,7 +194,14 @@ def test_the_tls_port_serves_clients_that_check_its_certificate(
                                     key_file=str(key_file))
         try:
             assert ros.may_write
+            lost: list[str] = []
+            ros.on_connection_change(lambda up, reason: None if up else lost.append(reason))
             ros.command("create_publisher", {"topic": "/over_tls", "type": STRING})
+            assert any(b.get("topic") == "/over_tls" for b in ros.list_bridges()["bridges"])
+            # Heartbeats keep coming over TLS (a transport paused with nothing buffered
+            # once held them back: the client took the link for dead after 3 s).
+            time.sleep(DEAD_AFTER_S + 1.5)
+            assert not lost, lost
             assert any(b.get("topic") == "/over_tls" for b in ros.list_bridges()["bridges"])
         finally:
             ros.close()
