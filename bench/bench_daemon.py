@@ -17,6 +17,12 @@ time of each message's last byte; and the baselines:
   bare EventsExecutor subscriber of the same /tf writing the same bytes to 8 clients, with
   no tf work. The daemon's figure minus it is what its tf work costs.
 
+Real traffic as well as steady streams: the burst rate published evenly and in bursts of
+10 back to back (a driver that batches), beside the floor and the naive relay; and the
+isolation phase: 32 raw clients with a facade client (slicer_client, decoding every
+message in Python), then the same with one more client that stops reading for 5 s, the
+32's figures side by side and what the stopped one read when it read again.
+
 Each relay runs alone while it is measured. Every pose subscriber (floor, daemon, naive
 relay) keeps the last 5,000 messages (peers.POSE_DEPTH). CPU is the relay process's user +
 system time (/proc/PID/stat) over the phase, as a share of one core; "per kHz" divides it by the
