@@ -83,9 +83,11 @@ class SessionLimits:
     # Above this many bytes in the transport's own buffer (what the kernel did not take),
     # frames wait in the outbox, where a stream's newer value replaces its older one. 1: a
     # client's backlog is never a queue of stale stream values, only the newest of each.
-    # (Not 0: asyncio's TLS transport pauses at `size >= high`, so at 0 it would pause
-    # with nothing buffered and never resume.)
     write_high_water: int = 1
+    # The same for a TLS connection (a project client, which drops late values itself):
+    # asyncio's TLS transport with a high water of 0 or 1 left clients' replies and
+    # heartbeats waiting for a resume_writing that never came.
+    tls_write_high_water: int = 256 * 1024
     # How long a new client may take to show it reads header v2 (3D Slicer sends a STATUS
     # at once) before it gets the current state as v1; OpenIGTLink 1.11 peers never send.
     negotiation_grace_s: float = 0.25
@@ -151,6 +153,7 @@ class ClientSession(asyncio.Protocol):
         self.peer = "?"
         self.on_loopback = False  # a loopback link cannot be pulled (protocol/liveness.py)
         self._kernel_unsent = 0  # TCP_NOTSENT_LOWAT as set (0: not yet)
+        self._manages_unsent = False  # a plain TCP client's (TLS keeps the kernel's own)
         self.received = 0
         self._sent = 0
 
@@ -166,13 +169,17 @@ class ClientSession(asyncio.Protocol):
             # Latency matters more than packet count: no Nagle delay. A dead peer is found
             # in seconds, and what its send buffer held is dropped, not delivered late.
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            # The kernel takes little beyond what is in flight: the rest of a backlog
-            # waits in the outbox, coalesced, not in the kernel as a queue of old poses.
-            self._limit_kernel_unsent(KERNEL_UNSENT_BYTES)
             for level, option, value in socket_options():
                 sock.setsockopt(level, option, value)
-        transport.set_write_buffer_limits(high=self._limits.write_high_water)
-        if sock is not None and transport.get_extra_info("sslcontext") is None:
+        tls = transport.get_extra_info("sslcontext") is not None
+        transport.set_write_buffer_limits(high=self._limits.tls_write_high_water if tls
+                                          else self._limits.write_high_water)
+        if not tls:
+            # The kernel takes little beyond what is in flight: the rest of a backlog
+            # waits in the outbox, coalesced, not in the kernel as a queue of old poses.
+            self._manages_unsent = True
+            self._limit_kernel_unsent(KERNEL_UNSENT_BYTES)
+        if sock is not None and not tls:
             # Its own descriptor: closed in connection_lost, under the write lock, before
             # the transport closes its own, so a direct write can never reach a reused fd.
             direct = socket.socket(fileno=os.dup(sock.fileno()))
@@ -482,8 +489,8 @@ class ClientSession(asyncio.Protocol):
     def _limit_kernel_unsent(self, nbytes: int) -> None:
         """How much the kernel may hold unsent for this client (TCP_NOTSENT_LOWAT)."""
         sock = self._tcp_socket()
-        if sock is None or not hasattr(socket, "TCP_NOTSENT_LOWAT") \
-                or nbytes == self._kernel_unsent:
+        if sock is None or not self._manages_unsent or nbytes == self._kernel_unsent \
+                or not hasattr(socket, "TCP_NOTSENT_LOWAT"):
             return
         try:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NOTSENT_LOWAT, nbytes)
