@@ -583,7 +583,9 @@ def test_pythonic_client_follows_markers(daemon: RunningDaemon, peer: Peer) -> N
         np.testing.assert_allclose(markers.points_in_fixed_frame(text), [[100, 200, 800]])
         peer.send(markers=[{"ns": "py", "id": 1, "action": DELETE}])
         markers.wait_for_markers(lambda m: len(m) == 1, timeout=scaled(10))
-        assert markers.find("py", 1) is None and "deleted" in events
+        assert markers.find("py", 1) is None
+        # Callbacks run on the client's callback thread, after the state changed.
+        wait_until(lambda: "deleted" in events, 10, "the 'deleted' callback")
         assert len(found) == 2
         # The CamelCase facade wraps the same resource.
         node = ros.GetDefaultROS2Node().CreateAndAddMarkerSubscriberNode(

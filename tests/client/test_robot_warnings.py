@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import logging
+import threading
 from pathlib import Path
 
 import pytest
@@ -29,14 +30,23 @@ def test_a_missing_mesh_reaches_the_user(processes: Processes, tmp_path: Path,
     urdf.write_text(URDF)
     daemon = start_daemon(processes, "--robot-dir", str(tmp_path))
     seen: list[tuple[str, str, object]] = []
+    warned = threading.Event()
+
+    def on_change(kind: str, link: str, value: object) -> None:
+        seen.append((kind, link, value))
+        if kind == "warning":
+            warned.set()
+
     with caplog.at_level(logging.WARNING, logger="slicer_client"), \
             slicer_client.connect("127.0.0.1", daemon.port) as ros:
         robot = ros.robot("warned", source={"kind": "file", "path": str(urdf)},
-                          callback=lambda kind, link, value: seen.append((kind, link, value)))
+                          callback=on_change)
         assert robot.info["warnings"] == robot.warnings
         (warning,) = robot.warnings
         assert "meshes/missing.stl" in warning and "arm" in warning
-        assert ("warning", "", warning) in seen
+        # Callbacks run on the client's callback thread, not in the call that loaded.
+        assert warned.wait(30), "no warning callback within 30 s"
+        assert [entry for entry in seen if entry[0] == "warning"] == [("warning", "", warning)]
         assert [r.getMessage() for r in caplog.records
                 if r.name == "slicer_client"] == [f"robot warned: {warning}"]
         robot._wait(lambda: robot.mesh_count() == 1, 30, "the box's mesh")
