@@ -426,6 +426,7 @@ class Dispatcher:
                 and not self._policy.read_only:
             client.challenge = auth["challenge"] = new_challenge()
         reply["auth"] = auth
+        client.reads_stamps = request.stamps
         if request.heartbeat is not None:
             client.start_heartbeat(request.heartbeat)
             reply["heartbeat"] = request.heartbeat

@@ -87,6 +87,7 @@ class Replier(Protocol):
 
     grant: WriteGrant  # may it change ROS, and why not
     challenge: Optional[str]  # the one its hello reply gave, until a key answers it
+    reads_stamps: bool  # its hello said it drops late stream values itself
 
     def send_status(self, device: str, code: int, text: str) -> None: ...
     def send_message(self, message: Message) -> None: ...

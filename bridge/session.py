@@ -118,6 +118,9 @@ class ClientSession(asyncio.Protocol):
         self.grant = grant
         self.challenge: Optional[str] = None  # the hello reply's, until a key answers it
         self._heartbeat: Optional[asyncio.TimerHandle] = None
+        # Its hello said it drops late stream values by their stamps (a project client);
+        # a plain connector shows whatever arrives, so its dead link is cut sooner.
+        self.reads_stamps = False
         self._commands = commands
         self._limits = limits
         self._on_close: Optional[Callable[[ClientSession], None]] = on_close
@@ -528,12 +531,6 @@ class ClientSession(asyncio.Protocol):
             self._heartbeat = loop.call_later(interval, beat)
 
         self._heartbeat = loop.call_later(interval, beat)
-
-    @property
-    def reads_stamps(self) -> bool:
-        """It asked for the heartbeat: a project client, which watches its link and drops
-        late values by their freshness stamps (a plain connector shows what arrives)."""
-        return self._heartbeat is not None
 
     def _tcp_socket(self) -> Optional[socket.socket]:
         transport = self._transport

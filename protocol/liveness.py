@@ -7,7 +7,7 @@ set of timings the daemon and its clients share.
   `link_is_dead` decides): while data waits for the peer and the peer has acknowledged
   nothing, the link is dead, and the sender resets the connection, so that what sat in its
   send buffer goes with it instead of arriving late as if it were new.
-  - A client that reads the freshness stamps (it asked for the heartbeat, so it drops late
+  - A client that reads the freshness stamps (its hello said `stamps`: it drops late
     values itself) is cut after ``PEER_SILENT_AFTER_S``.
   - A plain client (3D Slicer's connector shows whatever arrives) is cut sooner, under the
     freshness bound: after ``PLAIN_SILENT_AFTER_S`` with TCP retransmitting, unless it is on

@@ -154,7 +154,8 @@ class Client:
     def on_connected(self, command: CommandFn, first: bool) -> None:
         """Re-create everything (in order) on a new connection, then tell the user."""
         hello = c.Hello(client="slicer_client 0.1", heartbeat=HEARTBEAT_INTERVAL_S
-                        if self._transport.watches_silence else None)
+                        if self._transport.watches_silence else None,
+                        stamps=self._transport.drops_late_values)
         self.daemon_info = command(hello.op, hello.to_args())
         self._valued = set()
         clock = self.daemon_info.get("clock_ms")

@@ -25,7 +25,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 import numpy as np
 
 from protocol import commands as c
-from protocol.messages import Message, String, Transform
+from protocol.messages import Message, Status, String, Transform
 from slicer_client.connection import (CommandRefusedError, CommandTimeoutError,
                                       ConnectionClosedError)
 from slicer_client.scene_plan import metadata_from_attributes
@@ -94,10 +94,16 @@ def parse_reply(op: str, response_text: str, *, expired: bool = False,
 
 def message_from_node(device: str, attributes: Mapping[str, str], *,
                       text: Optional[str] = None,
-                      matrix: Optional[Any] = None) -> Optional[Message]:
+                      matrix: Optional[Any] = None,
+                      status: Optional[Tuple[int, str, str]] = None) -> Optional[Message]:
     """A connector node's content -> the Message it came from (text node: STRING,
-    transform node: TRANSFORM); None for anything else."""
+    transform node: TRANSFORM, status node: STATUS from its code, error name and
+    text); None for anything else."""
     metadata = metadata_from_attributes(attributes)
+    if status is not None:
+        code, error_name, status_text = status
+        return Message(device, Status(code=int(code), error_name=error_name,
+                                      text=status_text), metadata=metadata)
     if matrix is not None:
         return Message(device, Transform(np.array(matrix, dtype=np.float64)),
                        metadata=metadata)

@@ -12,7 +12,7 @@ name after a reconnect, so renaming would duplicate them.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from protocol.naming import (KEY_CHILD, KEY_LINK, KEY_MARKER_ID, KEY_MARKER_NS,
                              KEY_MARKER_TYPE, KEY_NODE, KEY_PARENT, KEY_PARENT_DEVICE,
@@ -215,12 +215,11 @@ def describe_bridges(result: Mapping[str, Any]) -> List[str]:
     return lines
 
 
-def stale_lines(result: Mapping[str, Any]) -> List[str]:
-    """list_bridges' result -> one line per stale stream (its publisher gone, or silent
+def stale_lines(resources: Iterable[Any]) -> List[str]:
+    """A client's resources -> one line per stale stream (its publisher gone, or silent
     past its period), for the module's warning label; empty while all are live."""
-    return [f"{b.get('topic', b.get('device', '?'))} is stale: {b['stale']}"
-            for b in result.get("bridges", []) or []
-            if isinstance(b, dict) and b.get("stale")]
+    return [f"{r.topic} is stale: {r.stale}" for r in resources
+            if getattr(r, "stale", "") and hasattr(r, "topic")]
 
 
 def robot_status_lines(robots: Sequence[Any]) -> List[str]:

@@ -53,9 +53,11 @@ class TransportListener(Protocol):
 
 class Transport(Protocol):
     address: str
-    # Can it take a heartbeat's silence for a dead link (`expect_data_within`)? 3D Slicer's
-    # connector cannot: its data comes through MRML nodes, not every message.
+    # Does it take a heartbeat's silence for a dead link (`expect_data_within`)?
     watches_silence: bool
+    # Does each stream value reach the client (which drops late ones by their stamps)?
+    # 3D Slicer's connector puts values into the scene itself: it shows what arrives.
+    drops_late_values: bool
 
     @property
     def connected(self) -> bool: ...
@@ -77,6 +79,7 @@ class ReconnectingTransport:
     """A TCP connection to the daemon that comes back by itself."""
 
     watches_silence = True
+    drops_late_values = True
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  reconnect: bool = True, retry_interval: float = 0.5,

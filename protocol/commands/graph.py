@@ -19,10 +19,14 @@ class Hello(Op, op="hello", writes=False):
     """Handshake: the reply says the daemon's schema, version, node name and ops, whether
     this connection may write and, when the daemon has a key, the challenge to answer with
     `Authenticate`. ``heartbeat``: send this connection a STATUS every that many seconds
-    (protocol/liveness.py), so that it notices a dead link."""
+    (protocol/liveness.py), so that it notices a dead link. ``stamps``: this client drops
+    stream values that come late by their freshness stamps (protocol/freshness.py); a
+    client that shows whatever arrives (3D Slicer's connector) leaves it false, and the
+    daemon cuts its dead link before a backlog could age past the bound."""
 
     client: str | None = None
     heartbeat: float | None = None
+    stamps: bool = False
 
     def resources(self) -> tuple[Resource, ...]:
         return ()
@@ -30,7 +34,8 @@ class Hello(Op, op="hello", writes=False):
     @classmethod
     def from_args(cls, a: Args) -> Hello:
         return cls(client=a.opt_str("client", max_len=MAX_NAME),
-                   heartbeat=a.opt_float("heartbeat", None, low=0.1, high=60.0))
+                   heartbeat=a.opt_float("heartbeat", None, low=0.1, high=60.0),
+                   stamps=a.opt_bool("stamps", False))
 
 
 @dataclass(frozen=True)

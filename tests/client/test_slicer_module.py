@@ -39,168 +39,21 @@ def test_module_sources_compile_and_find_the_repository_root() -> None:
     assert (root / "protocol").is_dir() and (root / "slicer_client").is_dir()
 
 
-# --- the module against a stand-in of the verified Slicer API -----------------------------
-# Only the calls checked in SlicerOpenIGTLink / OpenIGTLinkIO / Slicer sources exist on these
-# stand-ins (see slicer_client/README.md, "Verified against"), so a misspelt or invented
-# call (GetStatus instead of GetCommandStatus...) fails here although Slicer is absent.
+# --- the module against stand-ins of the verified Slicer API (tests/slicer_standin.py) -----
 import types  # noqa: E402
 
 from protocol import commands as c  # noqa: E402
-from protocol.messages import Message, String  # noqa: E402
-
-
-class _Observable:
-    def __init__(self) -> None:
-        self._observers: dict = {}
-        self._next = 1
-
-    def AddObserver(self, event, callback, priority=0.0):  # noqa: N802
-        self._next += 1
-        self._observers[self._next] = (event, callback)
-        return self._next
-
-    def RemoveObserver(self, tag):  # noqa: N802
-        self._observers.pop(tag, None)
-
-    def InvokeEvent(self, event):  # noqa: N802
-        for ev, callback in list(self._observers.values()):
-            if ev == event:
-                callback(self, event)
-
-
-class _TextNode(_Observable):
-    TextModifiedEvent = 51000
-    _ids = 0
-
-    def __init__(self, name: str) -> None:
-        super().__init__()
-        _TextNode._ids += 1
-        self._id, self._name, self._text, self._enc = f"vtkMRMLTextNode{self._ids}", name, "", 1
-        self._disabled, self._pending = 0, {}
-
-    def GetID(self): return self._id  # noqa: E704, N802
-    def GetName(self): return self._name  # noqa: E704, N802
-    def IsA(self, name): return name in ("vtkMRMLTextNode", "vtkMRMLNode")  # noqa: E704, N802
-
-    def StartModify(self):  # noqa: N802
-        was, self._disabled = self._disabled, 1
-        return was
-
-    def EndModify(self, was):  # noqa: N802
-        self._disabled = was
-        pending, self._pending = self._pending, {}
-        if not was:
-            for event in pending:
-                self.InvokeEvent(event)
-        return sum(pending.values())
-
-    def GetCustomModifiedEventPending(self, event):  # noqa: N802
-        return self._pending.get(event, 0)
-
-    def SetText(self, text, encoding=-1):  # noqa: N802
-        if encoding >= 0 and encoding != self._enc:
-            self._enc = encoding
-            self._pending[self.TextModifiedEvent] = 1
-        if text != self._text:
-            self._text = text
-            self._pending[self.TextModifiedEvent] = 1
-        if not self._disabled:
-            self.EndModify(0)
-
-
-class _Command:
-    script: list = []
-
-    def __init__(self) -> None:
-        self.name = self.content = ""
-        self.timeout, self.blocking, self.status, self.response = 0.0, False, 0, ""
-
-    def SetName(self, name): self.name = name  # noqa: E704, N802
-    def SetCommandContent(self, text): self.content = text  # noqa: E704, N802
-    def SetTimeoutSec(self, seconds): self.timeout = seconds  # noqa: E704, N802
-    def SetBlocking(self, on): self.blocking = on  # noqa: E704, N802
-    def GetResponseContent(self): return self.response  # noqa: E704, N802
-    def GetCommandStatus(self): return self.status  # noqa: E704, N802
-    def GetErrorMessage(self): return ""  # noqa: E704, N802
-
-
-class _Connector(_Observable):
-    ConnectedEvent, DisconnectedEvent = 118944, 118945
-    StateOff, StateWaitConnection, StateConnected = 0, 1, 2
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.state, self.sent, self.pushed, self.outgoing = 2, [], [], []
-
-    def GetState(self): return self.state  # noqa: E704, N802
-    def GetServerHostname(self): return "127.0.0.1"  # noqa: E704, N802
-    def GetServerPort(self): return 18944  # noqa: E704, N802
-    def GetNumberOfOutgoingMRMLNodes(self): return len(self.outgoing)  # noqa: E704, N802
-    def GetOutgoingMRMLNode(self, i): return self.outgoing[i]  # noqa: E704, N802
-
-    def RegisterOutgoingMRMLNode(self, node, devType=None):  # noqa: N802
-        self.outgoing.append(node)  # the connector then pushes on TextModifiedEvent
-        node.AddObserver(_TextNode.TextModifiedEvent, lambda n, e: self.pushed.append(n._text))
-        return 1
-
-    def PushNode(self, node):  # noqa: N802
-        self.pushed.append(node._text)
-        return 0
-
-    def SendCommand(self, command):  # noqa: N802
-        self.sent.append((command.name, command.content, command.blocking, command.timeout))
-        command.status, command.response = _Command.script.pop(0)
-
-
-class _Scene:
-    StartSaveEvent, StartCloseEvent, EndCloseEvent = 1, 2, 3
-
-    def __init__(self) -> None:
-        self.nodes: list = []
-
-    def GetFirstNode(self, name, cls):  # noqa: N802
-        return next((n for n in self.nodes if n.GetName() == name and n.IsA(cls)), None)
-
-    def AddNewNodeByClass(self, cls, name):  # noqa: N802
-        assert cls == "vtkMRMLTextNode"
-        self.nodes.append(_TextNode(name))
-        return self.nodes[-1]
-
-    def AddObserver(self, *args): return 1  # noqa: E704, N802
-
-
-def _fake_slicer(monkeypatch: pytest.MonkeyPatch) -> types.ModuleType:
-    slicer = types.ModuleType("slicer")
-    slicer.mrmlScene = _Scene()
-    slicer.vtkMRMLIGTLConnectorNode = _Connector
-    slicer.vtkSlicerOpenIGTLinkCommand = _Command
-    slicer.vtkMRMLTextNode = _TextNode
-    slicer.vtkMRMLTransformNode = types.SimpleNamespace(TransformModifiedEvent=15000)
-    slm = types.ModuleType("slicer.ScriptedLoadableModule")
-    for name in ("ScriptedLoadableModule", "ScriptedLoadableModuleLogic",
-                 "ScriptedLoadableModuleWidget", "ScriptedLoadableModuleTest"):
-        setattr(slm, name, type(name, (), {"__init__": lambda self, *a: None}))
-    pnw = types.ModuleType("slicer.parameterNodeWrapper")
-    pnw.parameterNodeWrapper = lambda cls: cls
-    pnw.WithinRange = lambda lo, hi: (lo, hi)
-    util = types.ModuleType("slicer.util")
-    util.VTKObservationMixin = type("VTKObservationMixin", (), {})
-    slicer.ScriptedLoadableModule, slicer.parameterNodeWrapper, slicer.util = slm, pnw, util
-    for name, module in (("slicer", slicer), ("slicer.ScriptedLoadableModule", slm),
-                         ("slicer.parameterNodeWrapper", pnw), ("slicer.util", util),
-                         ("qt", types.ModuleType("qt")), ("vtk", types.ModuleType("vtk")),
-                         ("ctk", types.ModuleType("ctk"))):
-        monkeypatch.setitem(sys.modules, name, module)
-    return slicer
+from protocol.liveness import stream_condition  # noqa: E402
+from protocol.messages import Message, Status, String  # noqa: E402
+from slicer_standin import Command as _Command  # noqa: E402
+from slicer_standin import Connector as _Connector  # noqa: E402
+from slicer_standin import Observable as _Observable  # noqa: E402
+from slicer_standin import StatusNode, load_module  # noqa: E402
+from slicer_standin import TextNode as _TextNode  # noqa: E402
 
 
 def _load_module(monkeypatch: pytest.MonkeyPatch):
-    _fake_slicer(monkeypatch)
-    import importlib.util as iu
-    spec = iu.spec_from_file_location("ROS2Bridge_under_test", MODULE)
-    module = iu.module_from_spec(spec)
-    spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return module
+    return load_module(lambda name, module: monkeypatch.setitem(sys.modules, name, module))
 
 
 def test_connector_transport_commands_use_the_slicer_command_api(
@@ -332,3 +185,51 @@ def test_the_module_s_defaults_fit_the_demo(monkeypatch: pytest.MonkeyPatch) -> 
     demo_runner = (REPO / "bridge" / "robots" / "demo_runner.py").read_text()
     assert module.ROS2BridgeParameterNode.robotName == "demo"
     assert '"create_robot", {"name": "demo"' in demo_runner
+
+
+def test_a_silent_heartbeat_is_a_lost_link_and_its_return_restores_it(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 23: a pulled cable leaves the connector's socket "connected"; the daemon's
+    heartbeat (a STATUS node the connector modifies per message) going silent says it."""
+    from slicer_client.connection import ConnectionClosedError
+    module = _load_module(monkeypatch)
+    connector = _Connector()
+    now = [100.0]
+    transport = module.ConnectorTransport(connector, clock=lambda: now[0])
+    assert transport.watches_silence and not transport.drops_late_values
+    seen: list = []
+    messages: list = []
+    listener = types.SimpleNamespace(
+        on_connected=lambda command, first: (seen.append(("up", first)),
+                                             transport.expect_data_within(3.0)),
+        on_disconnected=lambda reason: seen.append(("down", reason)),
+        on_message=messages.append)
+    transport.set_listener(listener)
+    heartbeat = StatusNode("heartbeat")
+    stream = StatusNode("or_pose")  # a stream's stale/live condition: handed to the client
+    stream.code, stream.error_name, stream.text = 13, "stale", "no publisher of /or_pose"
+    connector.incoming.extend([heartbeat, stream])
+    for t in (101.0, 102.0, 103.0):
+        now[0] = t
+        heartbeat.Modified()
+        transport.poll()
+    assert seen == [("up", True)] and transport.connected
+    assert messages == [Message("or_pose", Status(code=13, error_name="stale",
+                                                  text="no publisher of /or_pose"))]
+    stream.error_name, stream.text, stream.code = "live", "", 1
+    stream.Modified()
+    assert stream_condition(messages[-1]) == "" and len(messages) == 2
+    now[0] = 106.1
+    transport.poll()
+    assert seen[-1][0] == "down" and "no heartbeat from the daemon for 3.1 s" in seen[-1][1]
+    assert not transport.connected and transport.silent
+    with pytest.raises(ConnectionClosedError, match="no heartbeat"):
+        transport.command("list_bridges")
+    assert connector.sent == []  # refused at once: the GUI never waits on a dead link
+    now[0] = 108.0
+    transport.poll()
+    assert [event[0] for event in seen] == ["up", "down"]  # said once
+    heartbeat.Modified()  # the same socket carries data again
+    transport.poll()
+    assert seen[-1] == ("up", False) and transport.connected and not transport.silent
+    assert connector.periodic == 6  # each poll reads what came before judging silence

@@ -19,7 +19,7 @@ from typing import Iterator
 import pytest
 
 from netns import Hosts
-from protocol.liveness import PEER_SILENT_AFTER_S
+from protocol.liveness import DEAD_AFTER_S, PEER_SILENT_AFTER_S
 from support import REPO, Child, Processes, pick_free_port, scaled, wait_until
 
 pytestmark = pytest.mark.ros
@@ -180,10 +180,47 @@ def plain_reader_on(room: Room, processes: Processes, name: str) -> Child:
     return child
 
 
+def module_reader_on(room: Room, processes: Processes, name: str) -> Child:
+    """The ROS2Bridge module's transport and client over a stand-in of Slicer's connector
+    with a real socket (tests/peers/module_link_reader.py)."""
+    child = processes.start(name, room.net.argv("slicer", [
+        sys.executable, "-u", str(REPO / "tests/peers/module_link_reader.py"),
+        room.net.address("bridge", "slicer"), str(room.port), TOPIC]), env=room.env)
+    child.wait_for_output("READY", timeout=60)
+    wait_until(lambda: len(lines(child, "POSE")) >= 50, 60, "50 poses in the module's scene")
+    return child
+
+
 def daemon_cut_times(room: Room, since: float) -> list[float]:
     return [log_time(entry) for entry in room.daemon.output().splitlines()
             if re.search(r"client 10\.77\.0\.2:\d+ has acknowledged nothing", entry)
             and log_time(entry) > since]
+
+
+@dataclass
+class Outage:
+    pulled: float  # time.time() when the BRIDGE-SLICER cable was pulled
+    plugged: float
+    daemon_noticed: float  # s after the pull: the daemon reset the reader's link
+    reconnected: float  # s after the plug: the reader connected again
+    after: list[float]  # ages (ms) of the poses it showed after the plug
+
+
+def pull_for(room: Room, reader: Child, outage_s: float) -> Outage:
+    """Pull the reader's cable for `outage_s`, then wait for it to show 50 poses again."""
+    pulled = time.time()
+    room.net.pull("bridge", "slicer")
+    wait_until(lambda: bool(daemon_cut_times(room, pulled - 1)), 60, "the daemon noticing")
+    daemon_noticed = daemon_cut_times(room, pulled - 1)[0] - pulled
+    time.sleep(max(0.0, pulled + outage_s - time.time()))
+    room.net.plug("bridge", "slicer")
+    plugged = time.time()
+    wait_until(lambda: any(t > plugged for t, _ in lines(reader, "CONNECTED")), 60,
+               "the reader connected again")
+    reconnected = min(t for t, _ in lines(reader, "CONNECTED") if t > plugged) - plugged
+    wait_until(lambda: len(shown_ages(reader, plugged)) >= 50, 60,
+               "50 poses after the cable is back")
+    return Outage(pulled, plugged, daemon_noticed, reconnected, shown_ages(reader, plugged))
 
 
 @pytest.mark.parametrize("outage_s", [2.5, 7.0])
@@ -192,25 +229,35 @@ def test_a_plain_connector_s_dead_link_is_reset_and_no_old_pose_comes_back(
     """3D Slicer's connector reads no stamps and never sends: the daemon resets its dead
     link under the freshness bound, and knocks that reset through once the cable is back."""
     reader = plain_reader_on(room, processes, f"plain-{outage_s:g}")
-    pulled = time.time()
-    room.net.pull("bridge", "slicer")
-    wait_until(lambda: bool(daemon_cut_times(room, pulled - 1)), 60, "the daemon noticing")
-    daemon_noticed = daemon_cut_times(room, pulled - 1)[0] - pulled
-    time.sleep(max(0.0, pulled + outage_s - time.time()))  # longer than the bound
-    room.net.plug("bridge", "slicer")
-    plugged = time.time()
-    wait_until(lambda: any(t > plugged for t, _ in lines(reader, "CONNECTED")), 60,
-               "the plain reader reconnected")
-    reconnected = min(t for t, _ in lines(reader, "CONNECTED") if t > plugged) - plugged
-    wait_until(lambda: len(shown_ages(reader, plugged)) >= 50, 60,
-               "50 poses after the cable is back")
-    after = shown_ages(reader, plugged)
+    out = pull_for(room, reader, outage_s)  # longer than the bound
     print(f"\nplain connector, cable out {outage_s:g} s: the daemon reset the link after "
-          f"{daemon_noticed:.2f} s; the reader was reset and reconnected "
-          f"{reconnected:.2f} s after the cable came back; {len(after)} poses after it, "
-          f"the oldest {max(after):.0f} ms old")
-    assert daemon_noticed < 10 and reconnected < 10
-    assert max(after) < FRESHNESS_S * 1000 + 1000  # no pose from before the pull
+          f"{out.daemon_noticed:.2f} s; the reader was reset and reconnected "
+          f"{out.reconnected:.2f} s after the cable came back; {len(out.after)} poses after "
+          f"it, the oldest {max(out.after):.0f} ms old")
+    assert out.daemon_noticed < 10 and out.reconnected < 10
+    assert max(out.after) < FRESHNESS_S * 1000 + 1000  # no pose from before the pull
+
+
+def test_the_slicer_module_notices_a_pulled_cable_and_shows_no_old_pose(
+        room: Room, processes: Processes) -> None:
+    """The ROS2Bridge module's own transport, over a stand-in of Slicer's connector with a
+    real socket (tests/peers/module_link_reader.py): the connector's socket looks connected
+    while the cable is out; the daemon's heartbeat going silent tells the module, and the
+    daemon cuts its end as for any plain connector."""
+    reader = module_reader_on(room, processes, "module")
+    out = pull_for(room, reader, DEAD_AFTER_S + 2.0)
+    noticed = [(t - out.pulled, rest) for t, rest in lines(reader, "LOST")
+               if out.pulled < t < out.plugged]
+    assert noticed, "the module did not notice while the cable was out"
+    module_noticed, why = noticed[0]
+    print(f"\nthe Slicer module, cable out {out.plugged - out.pulled:.1f} s: the module "
+          f"noticed after {module_noticed:.2f} s ({why}), the daemon after "
+          f"{out.daemon_noticed:.2f} s; connected again {out.reconnected:.2f} s after the "
+          f"cable came back; {len(out.after)} poses after it, the oldest "
+          f"{max(out.after):.0f} ms old")
+    assert "no heartbeat from the daemon" in why
+    assert module_noticed < 10 and out.daemon_noticed < 10 and out.reconnected < 10
+    assert max(out.after) < FRESHNESS_S * 1000 + 1000  # no pose from before the pull
 
 
 def test_a_short_stall_s_backlog_is_dropped_not_shown(room: Room,
@@ -234,16 +281,20 @@ def test_a_short_stall_s_backlog_is_dropped_not_shown(room: Room,
     assert late > 0 or lost, "the backlog was neither dropped nor cut with the connection"
 
 
+@pytest.mark.parametrize("kind", ["slicer_client", "module"])
 def test_a_robot_gone_from_the_network_is_stale_at_the_client_within_2_s(
-        room: Room, processes: Processes) -> None:
-    client = slicer_client_on(room, processes, "slicer-stale")
-    wait_until(lambda: len(lines(client, "POSE")) >= 50, 60, "50 poses at the client")
+        room: Room, processes: Processes, kind: str) -> None:
+    if kind == "module":  # its label of stale streams
+        client = module_reader_on(room, processes, "module-stale")
+    else:
+        client = slicer_client_on(room, processes, "slicer-stale")
+        wait_until(lambda: len(lines(client, "POSE")) >= 50, 60, "50 poses at the client")
     pulled = time.time()
     room.net.pull("robot", "bridge")  # the DDS cable: the daemon keeps its client link
     try:
         wait_until(lambda: bool(lines(client, "STALE")), 60, "the stream marked stale")
         noticed = lines(client, "STALE")[0][0] - pulled
-        print(f"\nrobot cable pulled: stale at the client after {noticed:.2f} s "
+        print(f"\nrobot cable pulled: stale at the {kind} after {noticed:.2f} s "
               f"({lines(client, 'STALE')[0][1]})")
         assert noticed < 2.0
     finally:

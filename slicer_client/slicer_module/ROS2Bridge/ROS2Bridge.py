@@ -68,6 +68,7 @@ from slicer.ScriptedLoadableModule import (ScriptedLoadableModule,  # noqa: E402
                                            ScriptedLoadableModuleWidget)
 from slicer.util import VTKObservationMixin  # noqa: E402
 
+from protocol.liveness import HEARTBEAT_DEVICE  # noqa: E402
 from slicer_client.bridge_state import BridgeState  # noqa: E402
 from slicer_client.client import Client, read_key_file  # noqa: E402
 from slicer_client.connection import CommandTimeoutError, ConnectionClosedError  # noqa: E402
@@ -140,29 +141,51 @@ class ROS2BridgeParameterNode:
 class ConnectorTransport:
     """slicer_client's Transport over an OpenIGTLinkIF connector node (see transport.py).
 
-    Commands block the GUI thread: a blocking `SendCommand` loops on the IO connector's
-    PeriodicProcess every 5 ms, so replies (and incoming data) keep being read meanwhile.
-    Received data comes from the connector's nodes, observed here and handed to the client
-    as Messages. The connector reconnects by itself; its Connected/Disconnected events are
-    only delivered while it is connected (the OpenIGTLinkIF logic's 5 ms timer skips
+    Commands block the GUI thread (only a user's action sends one): `SendCommand` loops on
+    the IO connector's PeriodicProcess every 5 ms, so replies (and incoming data) keep
+    being read meanwhile; on a link found dead they are refused at once. Received data
+    comes from the connector's nodes, observed here and handed to the client as Messages.
+    The connector reconnects by itself; its Connected/Disconnected events are only
+    delivered while it is connected (the OpenIGTLinkIF logic's 5 ms timer skips
     unconnected connectors), so a loss is also noticed by `poll()` from the module's timer.
+
+    A pulled cable: the connector's socket has no keepalive and never sends, so it stays
+    "connected". The daemon's heartbeat is a STATUS whose node the connector modifies once
+    per message; `poll()` takes `DEAD_AFTER_S` without one for a dead link. The connector
+    keeps its socket: the daemon resets its end and knocks it once the cable is back
+    (bridge/knock.py), and the connector then reconnects at once. (Restarting the connector
+    here would start a blocking connect() with no timeout, which a later Stop() waits for.)
     """
 
-    # The connector's data reaches us through its MRML nodes: a heartbeat's silence could
-    # not be told from a quiet stream here (the daemon watches this link from its side).
-    watches_silence = False
+    watches_silence = True
+    # The connector puts each value into the scene itself, whatever its age: the daemon
+    # cuts a dead link before its backlog ages past the freshness bound.
+    drops_late_values = False
 
-    def __init__(self, connector):
+    def __init__(self, connector, clock=time.monotonic):
         self.connector = connector
         self.address = f"{connector.GetServerHostname()}:{connector.GetServerPort()}"
+        self._clock = clock
         self._listener = None
         self._node_observers = {}  # node id -> (node, tag)
         self._connector_tags = []
         self._first = True
         self._up_now = False  # the listener was told "connected" and not "lost" since
+        self._dead_after = 0.0  # seconds without a heartbeat that mean a dead link (0: off)
+        self._heard = 0.0  # when the last heartbeat came (clock)
+        self._silent_since = None  # clock, while the heartbeat is missing on a live socket
+        self._heartbeat = None  # (node, tag) of the heartbeat's STATUS node
 
     @property
     def connected(self):
+        return self._socket_up() and self._silent_since is None
+
+    @property
+    def silent(self):
+        """The heartbeat stopped on a socket the connector still holds."""
+        return self._silent_since is not None
+
+    def _socket_up(self):
         return self.connector.GetState() == slicer.vtkMRMLIGTLConnectorNode.StateConnected
 
     def set_listener(self, listener):
@@ -178,42 +201,99 @@ class ConnectorTransport:
     def _up(self):
         first, self._first = self._first, False
         self._up_now = True
+        self._silent_since = None
         self._listener.on_connected(self.command, first)
 
     def _onConnectedEvent(self, caller=None, event=None):
         if self._up_now or self._listener is None:
             return
+        self._silent_since = None  # a new socket
         try:
             self._up()
         except Exception:  # noqa: BLE001 - inside a VTK callback: log, keep the connector
             log.exception("re-creating the bridges on %s failed", self.address)
 
     def _onDisconnectedEvent(self, caller=None, event=None):
-        self._down()
+        self._down("the connector lost the daemon (it retries itself)")
+
+    def expect_data_within(self, seconds):
+        """The daemon sends this connection a heartbeat (hello asked for it)."""
+        self._dead_after = max(0.0, float(seconds))
+        self._heard = self._clock()
+
+    def _watchStatusNodes(self):
+        """Observe the STATUS nodes the connector makes: the heartbeat's (counted), and
+        each stream's stale/live condition (handed to the client, which marks the
+        subscriber stale as slicer_client does)."""
+        for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
+            node = self.connector.GetIncomingMRMLNode(i)
+            if node is None or not node.IsA("vtkMRMLIGTLStatusNode"):
+                continue
+            if node.GetName() != HEARTBEAT_DEVICE:
+                self.watch(node)
+            elif self._heartbeat is None or self._heartbeat[0] is not node:
+                if self._heartbeat is not None:
+                    self._heartbeat[0].RemoveObserver(self._heartbeat[1])
+                tag = node.AddObserver(vtk.vtkCommand.ModifiedEvent, self._onHeartbeat)
+                self._heartbeat = (node, tag)
+
+    def _onHeartbeat(self, caller=None, event=None):
+        self._heard = self._clock()
 
     def poll(self):
-        """Called from the module's timer: report a loss the connector has not yet sent."""
-        if self._up_now and not self.connected:
-            self._down()
+        """Called from the module's timer: report a loss the connector has not yet sent,
+        or a heartbeat gone missing; and a heartbeat back on the same socket."""
+        if not self._socket_up():
+            self._silent_since = None
+            self._down("the connector lost the daemon (it retries itself)")
+            return
+        if self._listener is None:
+            return
+        self.connector.PeriodicProcess()  # what has come is counted before judging silence
+        self._watchStatusNodes()
+        if not self._dead_after:
+            return
+        now = self._clock()
+        if self._silent_since is not None:
+            if self._heard > self._silent_since:  # the same socket carries data again
+                try:
+                    self._up()
+                except Exception:  # noqa: BLE001 - the next loss or reconnect retries
+                    log.exception("re-creating the bridges on %s failed", self.address)
+            return
+        silence = now - self._heard
+        if self._up_now and silence > self._dead_after:
+            self._silent_since = now
+            self._down(f"no heartbeat from the daemon for {silence:.1f} s: the link to "
+                       f"{self.address} is down (a pulled cable?); the connector reconnects "
+                       "when it is back")
 
-    def _down(self):
+    def _down(self, reason):
         if not self._up_now or self._listener is None:
             return
         self._up_now = False
-        self._listener.on_disconnected("the connector lost the daemon (it retries itself)")
+        log.warning("%s", reason)
+        self._listener.on_disconnected(reason)
+
+    def _requireConnected(self, what):
+        if self._silent_since is not None:
+            raise ConnectionClosedError(
+                f"{what}: no heartbeat from the daemon at {self.address} for more than "
+                f"{self._dead_after:g} s (the link is down)")
+        if not self._socket_up():
+            raise ConnectionClosedError(
+                f"{what}: 3D Slicer's connector is not connected to the daemon at "
+                f"{self.address} (it keeps retrying; start it with `slicer-ros2-bridge run`)")
 
     def command(self, op, arguments=None, *, timeout=5.0):
         name, text = build_command(op, arguments)
-        if not self.connected:
-            raise ConnectionClosedError(
-                f"{op}: 3D Slicer's connector is not connected to the daemon at "
-                f"{self.address} (it keeps retrying; start it with `slicer-ros2-bridge run`)")
+        self._requireConnected(op)  # a silent link: refused at once, the GUI never waits
         cmd = slicer.vtkSlicerOpenIGTLinkCommand()
         cmd.SetName(name)
         cmd.SetCommandContent(text)
         cmd.SetTimeoutSec(float(timeout))
-        cmd.SetBlocking(True)  # returns once replied, expired, or at once if not sent
-        self.connector.SendCommand(cmd)
+        cmd.SetBlocking(True)
+        self.connector.SendCommand(cmd)  # returns once replied, expired, or at once if not sent
         return parse_reply(op, cmd.GetResponseContent() or "", status=cmd.GetCommandStatus(),
                            timeout=timeout, error_message=cmd.GetErrorMessage() or "")
 
@@ -223,10 +303,7 @@ class ConnectorTransport:
         observes TransformModifiedEvent / TextModifiedEvent); an unchanged content is
         pushed here, so every call sends exactly one message."""
         class_name, payload = outgoing_content(message)  # raises for what cannot go
-        if not self.connected:
-            raise ConnectionClosedError(
-                f"sending to {message.device_name!r}: 3D Slicer's connector is not "
-                f"connected to the daemon at {self.address}")
+        self._requireConnected(f"sending to {message.device_name!r}")
         node = self._outgoing(class_name, message.device_name)
         if class_name == "vtkMRMLLinearTransformNode":
             event = slicer.vtkMRMLTransformNode.TransformModifiedEvent
@@ -253,10 +330,7 @@ class ConnectorTransport:
         control points' world positions and labels (POINT). One push per call: the
         connector pushes a registered node on its own modified event when EndModify
         fires one, else PushNode does it here."""
-        if not self.connected:
-            raise ConnectionClosedError(
-                f"sending to {device!r}: 3D Slicer's connector is not connected to the "
-                f"daemon at {self.address}")
+        self._requireConnected(f"sending to {device!r}")
         out = self._outgoing(plan.outgoing_class, device)
         if plan.outgoing_class == "vtkMRMLModelNode":
             event = slicer.vtkMRMLModelNode.MeshModifiedEvent
@@ -319,6 +393,9 @@ class ConnectorTransport:
             message = message_from_node(node.GetName(), attributes, matrix=values)
         elif node.IsA("vtkMRMLTextNode"):
             message = message_from_node(node.GetName(), attributes, text=node.GetText())
+        elif node.IsA("vtkMRMLIGTLStatusNode"):
+            message = message_from_node(node.GetName(), attributes, status=(
+                node.GetCode(), node.GetErrorName() or "", node.GetStatusString() or ""))
         else:
             return
         if message is not None and self._listener is not None:
@@ -331,6 +408,9 @@ class ConnectorTransport:
         for tag in self._connector_tags:
             self.connector.RemoveObserver(tag)
         self._connector_tags = []
+        if self._heartbeat is not None:
+            self._heartbeat[0].RemoveObserver(self._heartbeat[1])
+            self._heartbeat = None
         for node, tag in self._node_observers.values():
             node.RemoveObserver(tag)
         self._node_observers.clear()
@@ -424,8 +504,16 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.client = None
 
     def isConnected(self):
+        """Connected, and the daemon's heartbeat comes (a pulled cable leaves the
+        connector's socket looking connected)."""
+        if self.transport is not None:
+            return self.transport.connected
         return (self.connector is not None and self.connector.GetState()
                 == slicer.vtkMRMLIGTLConnectorNode.StateConnected)
+
+    def isLinkSilent(self):
+        """The connector's socket looks connected but the daemon's heartbeat stopped."""
+        return self.transport is not None and self.transport.silent
 
     def isActive(self):
         """The connector runs (connected or retrying)."""
@@ -648,11 +736,12 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         return describe_bridges(self.requireClient().list_bridges())
 
     def staleLines(self):
-        """The streams the daemon says are stale, for the GUI: a frozen robot must not
-        look live."""
-        if self.client is None or not self.isConnected():
+        """This client's streams that the daemon says are stale, for the GUI: a frozen
+        robot must not look live. The daemon pushes each change as a STATUS on the
+        stream's device (no listing, no command)."""
+        if self.client is None:
             return []
-        return stale_lines(self.client.list_bridges())
+        return stale_lines(self.client.resources())
 
     def robotLines(self):
         """Load progress and warnings of every robot, for the GUI (not only the log)."""
@@ -881,7 +970,6 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                          self.onSceneStartClose)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.EndCloseEvent, self.onSceneEndClose)
         self.initializeParameterNode()
-        self._statusTicks = 0
         self._statusTimer = qt.QTimer()
         self._statusTimer.setInterval(500)
         self._statusTimer.connect("timeout()", self.updateStatus)
@@ -926,18 +1014,16 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
             self.statusLabel.text = (f"Connected to {info.get('node', 'the daemon')} "
                                      f"({self.logic.transport.address})"
                                      if self.logic.transport else "Connected")
+        elif self.logic.isLinkSilent():
+            self.statusLabel.text = ("LINK LOST: no heartbeat from the daemon; what is shown "
+                                     "is not live (waiting for the link to come back)")
         elif self.logic.isActive():
             self.statusLabel.text = "Waiting for the daemon (retrying)..."
         else:
             self.statusLabel.text = "Not connected"
         self.robotStatusLabel.text = "\n".join(self.logic.robotLines())
         self.problemsLabel.text = "\n".join(self.logic.problems[-5:])
-        self._statusTicks += 1
-        if self._statusTicks % 4 == 0:  # every 2 s: a listing is a command to the daemon
-            try:
-                self.staleLabel.text = "\n".join(self.logic.staleLines())
-            except Exception as error:  # noqa: BLE001 - a lost link: the status line says it
-                self.staleLabel.text = f"stream status unknown ({error})"
+        self.staleLabel.text = "\n".join(self.logic.staleLines())
         active = self.logic.isActive()
         if self.connectButton.checked != active:  # e.g. after a scene close
             wasBlocked = self.connectButton.blockSignals(True)
