@@ -23,6 +23,7 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String as StringMsg
 
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
+from bridge.codecs.base import Encoded
 from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
 from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
@@ -163,6 +164,8 @@ class SubscriberBridge:
                                                               values, transform_body))
             self._post_whole(None, data)
             return
+        if self._filter is None and self._encode_serialized(data):
+            return
         try:
             msg = deserialize_message(data, self.codec.message_class)
         except Exception as error:  # noqa: BLE001 - bytes rclpy cannot read: one line, go on
@@ -189,13 +192,36 @@ class SubscriberBridge:
             msg = deserialize_message(data, self.codec.message_class)
         stream.post(self._hub, msg, self.count)
 
+    def _encode_serialized(self, data: bytes) -> bool:
+        """Sent (or refused) straight from the bytes, if the codec reads them (images)."""
+        try:
+            encoded: Encoded | CodecError | None = self.codec.encode_serialized(data)
+        except CodecError as error:
+            encoded = error
+        if encoded is None:
+            return False
+        self._keep(data)
+        self.count += 1
+        if isinstance(encoded, CodecError):
+            self._refused(encoded)
+        else:
+            self._post(encoded)
+        self._post_whole(None, data)
+        return True
+
+    def _refused(self, error: CodecError) -> None:
+        self._bad.warning("convert", None, "cannot convert a %s from %s, not sent: %s",
+                          self.codec.ros_type, self.topic, error)
+
     def _convert(self, msg: Any) -> None:
         try:
             encoded = self.codec.encode(msg)
         except CodecError as error:
-            self._bad.warning("convert", None, "cannot convert a %s from %s, not sent: %s",
-                              self.codec.ros_type, self.topic, error)
+            self._refused(error)
             return
+        self._post(encoded)
+
+    def _post(self, encoded: Encoded) -> None:
         stamp = igtl_stamp_or_now(*encoded.stamp) if encoded.stamp else igtl_timestamp_now()
         metadata = dict(self._metadata)
         metadata.update(encoded.metadata)

@@ -165,6 +165,16 @@ class TypeCodec:
     def encode(self, msg: Any) -> Encoded:
         """ROS message -> body, metadata and stamp. Raises `CodecError` only."""
         self._check_message(msg)
+        return self._encode_checked(msg)
+
+    def encode_serialized(self, data: bytes) -> Encoded | None:
+        """The message's serialized bytes -> as `encode`, without rclpy's deserialization,
+        for a type with a reader of its bytes (bridge/codecs/cdr.py); None when this type
+        has none or the bytes are not the plain CDR it reads (deserialize them then)."""
+        return None
+
+    def _encode_checked(self, msg: Any) -> Encoded:
+        """`encode` of a message (or a reader's view with its fields) of this type."""
         try:
             body, meta = self._to_igtl(msg)
         except ProtocolError as exc:

@@ -28,7 +28,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from bridge.codecs.base import KEY_ENCODING, Body, TypeCodec
+from bridge.codecs.base import KEY_ENCODING, Body, Encoded, TypeCodec
+from bridge.codecs.cdr import CdrError, read_image
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import numeric_array
 from protocol.messages import Image
@@ -148,6 +149,15 @@ class ImageCodec(TypeCodec):
     """sensor_msgs/Image <-> IMAGE (one slice, 1 mm pixels, upright in Slicer's Red view)."""
 
     bulk: ClassVar[bool] = True
+
+    def encode_serialized(self, data: bytes) -> Encoded | None:
+        """The pixels are read where they lie in the serialized message: the one copy left
+        is into the frame that is sent."""
+        try:
+            raw = read_image(data)
+        except CdrError:
+            return None
+        return self._encode_checked(raw)
 
     def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         pixels, _ = image_pixels(msg)
