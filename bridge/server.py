@@ -152,10 +152,9 @@ class BridgeServer:
 
     def _check_links(self) -> None:
         """Close the clients whose link is dead (a pulled cable): their slot and buffers
-        are free within seconds, and nothing they held arrives late. (Each session also
-        watches whether its reader has stopped.)"""
+        are free within seconds, and nothing they held arrives late."""
         for session in tuple(self.sessions):
-            if session.check_link():
+            if session.link_is_dead():
                 ends = session.abort_dead()
                 self.sessions.discard(session)
                 if ends is not None and not session.reads_stamps:

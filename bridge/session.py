@@ -53,8 +53,8 @@ from protocol.crc64 import Buffer
 from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
 from protocol.framing import Decoder, RawFrame, ReceiveBudget
 from protocol.freshness import daemon_clock_ms
-from protocol.liveness import (HEARTBEAT_DEVICE, TCP_INFO_BYTES, LinkState, ReaderWatch,
-                                link_is_dead, peer_window, read_link, socket_options)
+from protocol.liveness import (HEARTBEAT_DEVICE, TCP_INFO_BYTES, LinkState, link_is_dead,
+                                read_link, socket_options)
 from protocol.messages import Message, Status, StatusCode
 from protocol.negotiation import HeaderVersionNegotiator
 
@@ -70,7 +70,6 @@ KERNEL_UNSENT_BYTES = 16 * 1024  # TCP_NOTSENT_LOWAT: about 100 poses
 # While a large frame (a video frame, a model) is written, the kernel may take that much of
 # it at once: 16 KB at a time cost a VGA frame about 1.4 ms of loop turns.
 LARGE_KERNEL_UNSENT_BYTES = 4 * 1024 * 1024
-READER_RECHECK_S = 0.01  # while a client's reader is taken for stopped
 MAX_HANDED = 1024  # stream values handed to the loop for one client before coalescing
 # Message types that are not data for a device: commands, statuses, queries, replies.
 _CONTROL_TYPES = ("COMMAND", "STATUS", "GET_", "RTS_", "STT_", "STP_")
@@ -138,11 +137,6 @@ class ClientSession(asyncio.Protocol):
         self.frame_started: Optional[float] = None  # loop time of an unfinished frame's start
         self._transport: Optional[asyncio.Transport] = None
         self._paused = False
-        # Its reader has stopped (protocol/liveness.py, ReaderWatch): streams keep their
-        # newest value, and nothing is written, until it reads again.
-        self._reader = ReaderWatch()
-        self._held = False
-        self._recheck: Optional[asyncio.TimerHandle] = None
         self._closing = False
         self._attached = False
         self._attach_timer: Optional[asyncio.TimerHandle] = None
@@ -226,10 +220,10 @@ class ClientSession(asyncio.Protocol):
 
     def _release(self) -> None:
         """Drop what the session holds (buffers, budget, timers) at once. Idempotent."""
-        for timer in (self._attach_timer, self._frame_timer, self._heartbeat, self._recheck):
+        for timer in (self._attach_timer, self._frame_timer, self._heartbeat):
             if timer is not None:
                 timer.cancel()
-        self._attach_timer = self._frame_timer = self._heartbeat = self._recheck = None
+        self._attach_timer = self._frame_timer = self._heartbeat = None
         self.frame_started = None
         self._decoder.close()
         self._outbox.clear()
@@ -461,7 +455,7 @@ class ClientSession(asyncio.Protocol):
     def send_stream(self, device: str, frame: Frame) -> None:
         if self._closing:
             return
-        if self._paused or self._held or len(self._outbox):
+        if self._paused or len(self._outbox):
             self._outbox.put_latest(device, frame)
             return
         parts = frame.encoded_parts(self.header_version)
@@ -474,7 +468,7 @@ class ClientSession(asyncio.Protocol):
         if self._closing:
             return
         parts = frame.encoded_parts(self.header_version)
-        if self._paused or self._held or len(self._outbox):
+        if self._paused or len(self._outbox):
             try:
                 self._outbox.put_once(*parts)
             except OutboxOverflow as error:
@@ -545,50 +539,21 @@ class ClientSession(asyncio.Protocol):
             return None
         return sock
 
-    def _tcp_info(self) -> Optional[bytes]:
+    def link_state(self) -> Optional[LinkState]:
+        """What waits for the peer's acknowledgement (None: nothing, or not a TCP socket):
+        see protocol/liveness.py."""
         sock = self._tcp_socket()
         if sock is None or not hasattr(socket, "TCP_INFO"):
             return None
         try:
-            return sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, TCP_INFO_BYTES)
+            return read_link(sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO,
+                                             TCP_INFO_BYTES))
         except OSError:
             return None
 
-    def link_state(self) -> Optional[LinkState]:
-        """What waits for the peer's acknowledgement (None: nothing, or not a TCP socket):
-        see protocol/liveness.py."""
-        info = self._tcp_info()
-        return None if info is None else read_link(info)
-
-    def check_link(self) -> bool:
-        """The server's periodic look at this client's TCP state: whether its link is dead
-        (it must be reset); and whether its reader has stopped, which holds its streams at
-        their newest value until it reads again."""
-        info = self._tcp_info()
-        if info is None:
-            return False
-        self._watch_reader(info)
-        return link_is_dead(read_link(info), reads_stamps=self.reads_stamps,
+    def link_is_dead(self) -> bool:
+        return link_is_dead(self.link_state(), reads_stamps=self.reads_stamps,
                             loopback=self.on_loopback)
-
-    def _watch_reader(self, info: bytes) -> None:
-        stopped = self._reader.update(peer_window(info))
-        if stopped != self._held:
-            with self._wlock:  # write_direct reads it on the executor thread
-                self._held = stopped
-            if not stopped:
-                self._flush()  # each held stream's newest value, then what follows
-        if stopped and self._recheck is None and not self._closing:
-            # Looked at more often while held: a reader that was only mid-way through a
-            # large frame is released within milliseconds.
-            self._recheck = asyncio.get_running_loop().call_later(READER_RECHECK_S,
-                                                                  self._recheck_reader)
-
-    def _recheck_reader(self) -> None:
-        self._recheck = None
-        info = self._tcp_info()
-        if info is not None and not self._closing:
-            self._watch_reader(info)
 
     def abort_dead(self) -> Optional[tuple[tuple[str, int], tuple[str, int]]]:
         """The link is dead: reset the connection now, dropping what waits in the kernel
@@ -659,7 +624,7 @@ class ClientSession(asyncio.Protocol):
         otherwise keep the loop (every other client's replies and streams) for as long."""
         self._flush_scheduled = False
         written = 0
-        while not self._paused and not self._held and not self._closing:
+        while not self._paused and not self._closing:
             if written >= FLUSH_TURN_BYTES:
                 if self._outbox:
                     self._flush_scheduled = True
@@ -685,8 +650,8 @@ class ClientSession(asyncio.Protocol):
             direct = self._direct
             transport = self._transport
             if (direct is None or transport is None or self._closing or self._paused
-                    or self._held or self._handed or self._stash is not None
-                    or self._batch is not None or len(self._outbox) or transport.is_closing()
+                    or self._handed or self._stash is not None or self._batch is not None
+                    or len(self._outbox) or transport.is_closing()
                     or transport.get_write_buffer_size()):
                 return False
             try:
@@ -749,7 +714,7 @@ class ClientSession(asyncio.Protocol):
         return {"peer": self.peer, "header_version": self.header_version,
                 "received": self.received, "sent": self.sent,
                 "coalesced": self._outbox.coalesced, "waiting": self._outbox.frames_waiting,
-                "waiting_bytes": self._outbox.pending_bytes, "reader_stopped": self._held,
+                "waiting_bytes": self._outbox.pending_bytes,
                 "receiving_bytes": self._decoder.buffered, "decoding": self._decoding}
 
 

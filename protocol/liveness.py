@@ -40,9 +40,8 @@ from protocol.messages import Message, Status, StatusCode
 __all__ = ["LIVE", "STALE", "condition_status", "stream_condition",
            "DEAD_AFTER_S", "HEARTBEAT_DEVICE", "HEARTBEAT_INTERVAL_S", "KEEPALIVE_COUNT",
            "KEEPALIVE_IDLE_S", "KEEPALIVE_INTERVAL_S",
-           "LinkState", "PEER_SILENT_AFTER_S", "PLAIN_SILENT_AFTER_S", "ReaderWatch",
-           "STOPPED_READER_BYTES", "TCP_INFO_BYTES", "link_is_dead", "peer_window", "read_link",
-           "socket_options"]
+           "LinkState", "PEER_SILENT_AFTER_S", "PLAIN_SILENT_AFTER_S", "TCP_INFO_BYTES",
+           "link_is_dead", "read_link", "socket_options"]
 
 KEEPALIVE_IDLE_S = 2
 KEEPALIVE_INTERVAL_S = 1
@@ -88,14 +87,11 @@ def stream_condition(message: Message) -> Optional[str]:
 
 # Linux's struct tcp_info: 8 one-byte fields (tcpi_retransmits, the RTO's unanswered
 # retransmissions, is the 3rd), then u32s: tcpi_unacked is the 5th, tcpi_last_ack_recv (ms
-# since the last ACK came) the 13th; tcpi_snd_wnd (the peer's advertised receive window,
-# Linux 5.4 and later) at byte 228. An older kernel answers shorter: no window then.
-TCP_INFO_BYTES = 232
-_LINK_BYTES = 60
+# since the last ACK came) the 13th.
+TCP_INFO_BYTES = 60
 _RETRANSMITS_AT = 2
 _UNACKED_AT = 8 + 4 * 4
 _LAST_ACK_RECV_AT = 8 + 12 * 4
-_SND_WND_AT = 228
 
 
 @dataclass(frozen=True)
@@ -109,7 +105,7 @@ class LinkState:
 def read_link(tcp_info: bytes) -> Optional[LinkState]:
     """The kernel's ``TCP_INFO`` read; None when nothing waits for the peer (or the
     kernel's answer is too short)."""
-    if len(tcp_info) < _LINK_BYTES:
+    if len(tcp_info) < TCP_INFO_BYTES:
         return None
     unacked = int.from_bytes(tcp_info[_UNACKED_AT:_UNACKED_AT + 4], sys.byteorder)
     if not unacked:
@@ -128,45 +124,3 @@ def link_is_dead(state: Optional[LinkState], *, reads_stamps: bool, loopback: bo
         return True
     return (not reads_stamps and not loopback and state.retransmitting
             and state.silent_s >= PLAIN_SILENT_AFTER_S)
-
-
-# A reader this far behind its own advertised window has stopped reading (3D Slicer
-# rendering, a script busy elsewhere): about 400 poses.
-STOPPED_READER_BYTES = 64 * 1024
-
-
-def peer_window(tcp_info: bytes) -> Optional[int]:
-    """The peer's advertised receive window in bytes (None where the kernel does not say)."""
-    if len(tcp_info) < _SND_WND_AT + 4:
-        return None
-    return int.from_bytes(tcp_info[_SND_WND_AT:_SND_WND_AT + 4], sys.byteorder)
-
-
-class ReaderWatch:
-    """Whether a client has stopped reading, from its advertised receive window at each
-    link check. A reader's window stays near its peak (what it has not read yet is all
-    that is missing); one that stops reading sees it shrink by all that reached it.
-
-    Stopped: the window is `STOPPED_READER_BYTES` below its peak. Reading again: the window
-    grew since the last check (only reading grows it: nothing is sent to a stopped
-    reader). Meanwhile its streams keep only their newest value, so what its own socket
-    buffer holds when it reads again is bounded, not seconds of stale values."""
-
-    def __init__(self) -> None:
-        self.peak = 0
-        self.last: Optional[int] = None
-        self.stopped = False
-
-    def update(self, window: Optional[int]) -> bool:
-        """The window now (None: unknown, nothing changes); whether the reader is stopped."""
-        if window is None:
-            return self.stopped
-        grew = self.last is not None and window > self.last
-        self.last = window
-        if self.stopped:
-            if grew:
-                self.stopped, self.peak = False, window
-            return self.stopped
-        self.peak = max(self.peak, window)
-        self.stopped = self.peak - window >= STOPPED_READER_BYTES
-        return self.stopped

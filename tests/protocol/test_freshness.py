@@ -55,8 +55,7 @@ def test_read_link_reads_the_kernel_s_tcp_info() -> None:
         return bytes([1, 0, retransmits]) + bytes(5) + struct.pack(f"{order}13I", *u32s) \
             + bytes(40)
 
-    # 100 bytes: what a kernel older than 5.4 answers to the TCP_INFO_BYTES asked for.
-    assert len(info(0, 0)) < TCP_INFO_BYTES
+    assert len(info(0, 0)) >= TCP_INFO_BYTES
     # data waits, nothing acknowledged for 6.5 s
     assert read_link(info(3, 6_500)) == LinkState(silent_s=6.5, retransmitting=False)
     assert read_link(info(3, 450, retransmits=2)) == LinkState(0.45, retransmitting=True)
@@ -85,31 +84,3 @@ def test_a_plain_remote_client_is_cut_under_the_freshness_bound_others_after_5_s
         for loopback in (True, False):
             assert link_is_dead(LinkState(5.0, retransmitting=False),
                                 reads_stamps=reads_stamps, loopback=loopback)
-
-
-def test_the_peer_s_window_says_when_its_reader_stopped_and_when_it_reads_again() -> None:
-    import struct
-    import sys
-
-    from protocol.liveness import STOPPED_READER_BYTES, ReaderWatch, peer_window
-
-    order = "<" if sys.byteorder == "little" else ">"
-    assert peer_window(bytes(228) + struct.pack(f"{order}I", 133_120)) == 133_120
-    assert peer_window(bytes(60)) is None  # an older kernel: no window, never held
-    watch = ReaderWatch()
-    # A reader: its window stays near its peak (what it has not read yet is missing).
-    for window in (65_536, 133_120, 120_000, 133_120, 211_968):
-        assert watch.update(window) is False
-    assert watch.update(None) is False
-    # It stops: the window shrinks by all that reaches it.
-    assert watch.update(211_968 - STOPPED_READER_BYTES + 1) is False
-    assert watch.update(211_968 - STOPPED_READER_BYTES) is True
-    assert watch.update(10_000) is True
-    assert watch.update(0) is True
-    assert watch.update(None) is True  # unknown: nothing changes
-    assert watch.update(0) is True
-    # Any read grows it (nothing is sent to a stopped reader): reading again.
-    assert watch.update(4_096) is False
-    assert watch.peak == 4_096  # judged from here on: a smaller buffer is no stop
-    assert watch.update(5_792_768) is False
-    assert watch.update(5_792_768 - STOPPED_READER_BYTES) is True
