@@ -171,24 +171,25 @@ def test_a_pulled_cable_is_noticed_by_both_sides_and_no_old_pose_comes_back(
     assert max(after) < FRESHNESS_S * 1000 + 1000  # the bound, plus a busy machine's slack
 
 
-def plain_reader_on(room: Room, processes: Processes, name: str) -> Child:
+def reader_on(room: Room, processes: Processes, name: str, peer: str) -> Child:
+    """A reader on the workstation (`peer`, in tests/peers), once it shows 50 poses."""
     child = processes.start(name, room.net.argv("slicer", [
-        sys.executable, "-u", str(REPO / "tests/peers/plain_pose_reader.py"),
+        sys.executable, "-u", str(REPO / "tests/peers" / peer),
         room.net.address("bridge", "slicer"), str(room.port), TOPIC]), env=room.env)
     child.wait_for_output("READY", timeout=60)
-    wait_until(lambda: len(lines(child, "POSE")) >= 50, 60, "50 poses at the plain reader")
+    wait_until(lambda: len(lines(child, "POSE")) >= 50, 60, f"50 poses at {name}")
     return child
+
+
+def plain_reader_on(room: Room, processes: Processes, name: str) -> Child:
+    """A plain connector, as 3D Slicer's OpenIGTLinkIF is."""
+    return reader_on(room, processes, name, "plain_pose_reader.py")
 
 
 def module_reader_on(room: Room, processes: Processes, name: str) -> Child:
     """The ROS2Bridge module's transport and client over a stand-in of Slicer's connector
-    with a real socket (tests/peers/module_link_reader.py)."""
-    child = processes.start(name, room.net.argv("slicer", [
-        sys.executable, "-u", str(REPO / "tests/peers/module_link_reader.py"),
-        room.net.address("bridge", "slicer"), str(room.port), TOPIC]), env=room.env)
-    child.wait_for_output("READY", timeout=60)
-    wait_until(lambda: len(lines(child, "POSE")) >= 50, 60, "50 poses in the module's scene")
-    return child
+    with a real socket."""
+    return reader_on(room, processes, name, "module_link_reader.py")
 
 
 def daemon_cut_times(room: Room, since: float) -> list[float]:
