@@ -6,6 +6,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from sensor_msgs.msg import Image as RosImage
 
 from bridge.codecs import CodecError, codec_for
@@ -221,3 +223,25 @@ def test_a_bad_serialized_image_is_refused_or_left_to_rclpy() -> None:
         codec.encode_serialized(serialize_message(msg))
     assert err.value.field == "step"
     assert codec_for("String").encode_serialized(data) is None  # no reader of its bytes
+
+
+@settings(max_examples=300, deadline=None)
+@given(cut=st.integers(0, 200), flips=st.lists(st.tuples(st.integers(0, 120), st.integers(0, 255)),
+                                                max_size=6))
+def test_damaged_serialized_images_are_refused_or_left_to_rclpy(
+        cut: int, flips: list[tuple[int, int]]) -> None:
+    """A peer's bytes: a cut or altered message never raises anything but CodecError."""
+    from rclpy.serialization import serialize_message
+    msg = _ros_image("rgb8", _pixels("u1", 3), pad=1)
+    msg.header.frame_id = "camera"
+    data = bytearray(serialize_message(msg))
+    for at, value in flips:
+        if at < len(data):
+            data[at] = value
+    damaged = bytes(data[:len(data) - cut])
+    try:
+        encoded = codec_for("Image").encode_serialized(damaged)
+    except CodecError:
+        return
+    if encoded is not None:
+        assert isinstance(encoded.body, Image)

@@ -97,7 +97,7 @@ goal_ids = st.uuids().map(lambda u: u.hex)
 
 STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.Hello: st.builds(c.Hello, client=st.none() | st.text(min_size=1, max_size=30),
-                       heartbeat=st.none() | st.floats(0.1, 60.0)),
+                       heartbeat=st.none() | st.floats(0.1, 60.0), stamps=st.booleans()),
     c.Authenticate: st.builds(c.Authenticate, nonce=st.from_regex(r"[0-9a-f]{32,64}",
                                                                   fullmatch=True),
                               proof=st.from_regex(r"[0-9a-f]{64}", fullmatch=True)),
