@@ -175,6 +175,7 @@ class ConnectorTransport:
         self._heard = 0.0  # when the last heartbeat came (clock)
         self._silent_since = None  # clock, while the heartbeat is missing on a live socket
         self._heartbeat = None  # (node, tag) of the heartbeat's STATUS node
+        self.heartbeats = 0  # heard on this transport
 
     @property
     def connected(self):
@@ -239,6 +240,7 @@ class ConnectorTransport:
 
     def _onHeartbeat(self, caller=None, event=None):
         self._heard = self._clock()
+        self.heartbeats += 1
 
     def poll(self):
         """Called from the module's timer: report a loss the connector has not yet sent,
@@ -1187,6 +1189,14 @@ class ROS2BridgeTest(ScriptedLoadableModuleTest):
                 if sub.GetLastMessage() == "hello from Slicer":
                     break
             self.assertEqual(sub.GetLastMessage(), "hello from Slicer")
+            # The daemon's heartbeat reaches the module as a STATUS node's modifications.
+            deadline = time.monotonic() + 10.0
+            while logic.transport.heartbeats < 2 and time.monotonic() < deadline:
+                slicer.app.processEvents()
+                logic.transport.poll()
+                time.sleep(0.05)
+            self.assertGreaterEqual(logic.transport.heartbeats, 2)
+            self.assertTrue(logic.isConnected() and not logic.isLinkSilent())
             self.assertIn("subscriber: /selftest_string [std_msgs/msg/String] as "
                           "selftest_string", logic.bridgeLines())
             state = json.loads(BridgeState.from_json(logic.client.state().to_json()).to_json())
