@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Union
 
 from protocol.errors import BodyError, EncodeError, HeaderError
@@ -241,11 +242,21 @@ def pack_metadata(metadata: dict[str, str]) -> tuple[bytes, bytes]:
     return b"".join(entries), b"".join(payload)
 
 
+# A stream sends the same metadata with every value: small metadata read once is reused.
+_CACHED_METADATA_BYTES = 1024
+
+
 def unpack_metadata(meta_header: Buffer, meta: Buffer, type_name: str = "") -> dict[str, str]:
     """Parse metadata header + key/value bytes; `BodyError` names the inconsistent field."""
-    result: dict[str, str] = {}
+    if len(meta_header) + len(meta) <= _CACHED_METADATA_BYTES:
+        return dict(_cached_metadata(bytes(meta_header), bytes(meta), type_name))
+    return dict(_metadata_items(meta_header, meta, type_name))
+
+
+def _metadata_items(meta_header: Buffer, meta: Buffer,
+                    type_name: str) -> tuple[tuple[str, str], ...]:
     if len(meta_header) == 0:
-        return result  # some writers omit even INDEX_COUNT when there is no metadata
+        return ()  # some writers omit even INDEX_COUNT when there is no metadata
     if len(meta_header) < 2:
         raise BodyError("META_HEADER_SIZE", ">= 2 (INDEX_COUNT)", len(meta_header),
                         type_name=type_name)
@@ -262,6 +273,7 @@ def unpack_metadata(meta_header: Buffer, meta: Buffer, type_name: str = "") -> d
                         type_name=type_name)
     view = memoryview(meta)
     pos = 0
+    result: dict[str, str] = {}  # a repeated key: the last value, as a dict reads them
     for index, (key_size, encoding, value_size) in enumerate(entries):
         key = decode_text(view[pos:pos + key_size], ENCODING_UTF8, f"metadata key #{index}",
                           type_name)
@@ -269,4 +281,8 @@ def unpack_metadata(meta_header: Buffer, meta: Buffer, type_name: str = "") -> d
         result[key] = decode_text(view[pos:pos + value_size], encoding, f"metadata[{key!r}]",
                                   type_name)
         pos += value_size
-    return result
+    return tuple(result.items())
+
+
+# Bounded (a peer sending new metadata each time only evicts); errors are not kept.
+_cached_metadata = lru_cache(maxsize=256)(_metadata_items)

@@ -507,3 +507,18 @@ def test_a_large_body_is_received_apart_and_the_stream_goes_on() -> None:
         assert [m.device_name for m in got] == ["big", "small"], chunk
         assert bytes(got[0].body.data) == bytes(big.body.data)
         assert got[1].body.text == "after" and decoder.buffered == 0
+
+
+def test_metadata_read_again_is_a_dict_of_its_own_and_errors_are_never_kept() -> None:
+    """A stream repeats its metadata with each value: what was read once is reused."""
+    from protocol.errors import BodyError
+    from protocol.header import unpack_metadata
+
+    head = struct.pack(">HHHI", 1, 1, 3, 2)  # one entry: key 1 byte, UTF-8, value 2 bytes
+    first = unpack_metadata(head, b"kvv")
+    first["k"] = "changed by its reader"
+    assert unpack_metadata(head, b"kvv") == {"k": "vv"}
+    for _ in range(2):  # bad bytes are refused every time, not only the first
+        with pytest.raises(BodyError, match="META_SIZE"):
+            unpack_metadata(head, b"kv")
+    assert unpack_metadata(b"", b"") == {}
