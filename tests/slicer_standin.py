@@ -70,6 +70,7 @@ class Node(Observable):
     def GetAttributeNames(self): return list(self.attributes)  # noqa: E704, N802
     def GetAttribute(self, name): return self.attributes.get(name)  # noqa: E704, N802
     def SetAttribute(self, name, value): self.attributes[name] = value  # noqa: E704, N802
+    def SetHideFromEditors(self, hide): self.hidden = bool(hide)  # noqa: E704, N802
 
 
 class TextNode(Node):

@@ -216,6 +216,7 @@ def test_a_silent_heartbeat_is_a_lost_link_and_its_return_restores_it(
     # The first modification came before the node was observed (the connector makes the
     # node with it); the daemon's next heartbeat is a second later.
     assert seen == [("up", True)] and transport.connected and transport.heartbeats == 2
+    assert heartbeat.hidden and not hasattr(stream, "hidden")  # the stream's stays shown
     assert messages == [Message("or_pose", Status(code=13, error_name="stale",
                                                   text="no publisher of /or_pose"))]
     stream.error_name, stream.text, stream.code = "live", "", 1

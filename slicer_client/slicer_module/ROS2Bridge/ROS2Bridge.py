@@ -237,6 +237,7 @@ class ConnectorTransport:
                     self._heartbeat[0].RemoveObserver(self._heartbeat[1])
                 tag = node.AddObserver(vtk.vtkCommand.ModifiedEvent, self._onHeartbeat)
                 self._heartbeat = (node, tag)
+                node.SetHideFromEditors(True)  # plumbing, not data for the user
 
     def _onHeartbeat(self, caller=None, event=None):
         self._heard = self._clock()
