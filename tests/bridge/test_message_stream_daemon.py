@@ -107,9 +107,12 @@ def test_a_parameter_client_keeps_every_change_when_asked(client: Connection,
         "label": {"type": "string", "value": "changed"}}})
     assert set_reply["results"]["label"]["ok"], set_reply
     # The observed value is fetched once the node's services answer (at once, or on the
-    # daemon's next readiness check when discovery is slow): wait for both.
-    streamed = client.wait_for(device, lambda m: {"label", "count"} <= set(
-        json.loads(m.body.text)["values"]), timeout=20)
+    # daemon's next readiness check when discovery is slow): wait for both. The node's
+    # declarations are events too, and DDS may deliver them late (after a repair), so the
+    # label's declared value may be streamed first: wait for the change itself.
+    changed = {"type": "string", "value": "changed"}
+    streamed = client.wait_for(device, lambda m: "count" in (values := json.loads(
+        m.body.text)["values"]) and values.get("label") == changed, timeout=20)
     values = json.loads(streamed.body.text)["values"]
-    assert values["label"] == {"type": "string", "value": "changed"}
+    assert values["label"] == changed
     assert values["count"] == {"type": "integer", "value": 3}  # the observed one, fetched
