@@ -9,7 +9,7 @@ import logging
 import os
 import sys
 from pathlib import Path
-from typing import Awaitable, Callable, TypeVar
+from typing import Any, Callable, Coroutine, TypeVar
 
 from bridge import graph_inspect
 from bridge.allocator import keep_large_buffers_returnable
@@ -40,7 +40,7 @@ def _positive(kind: Callable[[str], T]) -> Callable[[str], T]:
             value = kind(text)
         except ValueError:
             value = None
-        if value is None or not value > 0:  # type: ignore[operator]
+        if value is None or not value > 0:
             raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
         return value
     parse.__name__ = kind.__name__  # argparse names the type in its own errors
@@ -225,7 +225,7 @@ def _configure_logging(level: str) -> None:
 
 
 def run_with_config(args: argparse.Namespace,
-                    main: Callable[[DaemonConfig], Awaitable[None]]) -> int:
+                    main: Callable[[DaemonConfig], Coroutine[Any, Any, None]]) -> int:
     """Build the config from the options, set up logging, run `main(config)`; what stops
     the start (bad config, port in use, a bad start-up bridge) is one line and exit 2."""
     from bridge.daemon import StartupError
@@ -257,7 +257,8 @@ def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.Argume
     raise LookupError(command)
 
 
-def _add_build_interfaces_parser(commands: argparse._SubParsersAction) -> None:
+def _add_build_interfaces_parser(
+        commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     build = commands.add_parser(
         "build-interfaces", help="build ROS 2 interface packages (msg/srv/action) into this "
                                  "environment; without PATH, the ones the daemon ships",

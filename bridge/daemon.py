@@ -76,16 +76,17 @@ class Daemon:
         self.services.add_call_guard(self.actions.sender.judge_service_call)
         # The daemon node's own parameters obey server_set_parameter's rule there too.
         self.services.add_call_guard(self.parameters.judge_service_call)
+        package_paths = {name: Path(folder) for name, folder in config.package_paths}
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
                                    parameters=self.parameters,
-                                   package_paths=dict(config.package_paths),
+                                   package_paths=package_paths,
                                    frame_rules=policy.frames,
                                    mesh_roots=tuple(Path(d) for d in policy.robot_dirs))
         # Markers read meshes only inside the same roots as a client's robot.
         self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
                                      frame_rules=policy.frames,
                                      mesh_roots=tuple(Path(d) for d in policy.robot_dirs),
-                                     package_paths=dict(config.package_paths),
+                                     package_paths=package_paths,
                                      max_model_bytes=policy.max_marker_bytes)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,

@@ -158,10 +158,14 @@ def _echo(out: TextIO, ros: RosNode, topic: str, type_name: Optional[str],
     # As `ros2 topic echo`: match what the discovered publishers offer (latched ones too).
     # With none discovered, BEST_AVAILABLE would ask for the most (reliable, transient
     # local) and never match a volatile publisher found later: ask for the least then.
-    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_AVAILABLE,
-                     durability=DurabilityPolicy.BEST_AVAILABLE) if publishers else \
-        QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
-                   durability=DurabilityPolicy.VOLATILE)
+    if publishers:
+        qos = QoSProfile(
+            depth=10, reliability=ReliabilityPolicy.BEST_AVAILABLE,
+            durability=DurabilityPolicy.BEST_AVAILABLE)
+    else:
+        qos = QoSProfile(
+            depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.VOLATILE)
     ros.node.create_subscription(cls, full, on_message, qos)
     if not done.wait(timeout):
         if timeout is not None and printed == 0:

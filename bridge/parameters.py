@@ -128,7 +128,9 @@ def _explain_refusal(node: str, name: str, reason: str) -> str:
 
 
 def _rclpy_parameter(name: str, value: ParameterValue) -> Parameter:
-    return Parameter.from_parameter_msg(RosParameter(name=name, value=to_ros_value(value)))
+    # rclpy leaves from_parameter_msg unannotated.
+    return Parameter.from_parameter_msg(  # type: ignore[no-any-return]
+        RosParameter(name=name, value=to_ros_value(value)))
 
 
 # ---------------------------------------------------------------------------- clients
@@ -357,13 +359,12 @@ class ParameterBridges:
             own.value = self._own_value(name)
             self.watches.append(own)
             return own, own.value
-        watch = ParameterWatch(node, name, on_change,
-                               self._ros.node.create_client(GetParametersSrv,
-                                                            f"{node}/get_parameters"))
+        get_client = self._ros.node.create_client(GetParametersSrv, f"{node}/get_parameters")
+        watch = ParameterWatch(node, name, on_change, get_client)
         self.watches.append(watch)
         self._update_watched()
         try:
-            ready = await wait_until_ready(watch.get_client, self._ready_wait_s)
+            ready = await wait_until_ready(get_client, self._ready_wait_s)
             if watch not in self.watches:  # unwatched meanwhile
                 return watch, None
             value = None
@@ -671,7 +672,8 @@ class ParameterBridges:
 
     def _server_value(self, name: str) -> ParameterValue:
         try:
-            ros_value = self._ros.node.get_parameter(name).get_parameter_value()
+            parameter = self._ros.node.get_parameter(name)
+            ros_value = parameter.get_parameter_value()
         except ParameterException:  # declared, no value yet
             return ParameterValue("not_set")
         return from_ros_value(ros_value, "value")

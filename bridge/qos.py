@@ -36,9 +36,9 @@ def default_depth(bulk: bool) -> int:
 
 def qos_profile(qos: QoS) -> QoSProfile:
     depth = DEFAULT_DEPTH if qos.depth is None else qos.depth
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      reliability=_RELIABILITY[qos.reliability],
-                      durability=_DURABILITY[qos.durability])
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=_RELIABILITY[qos.reliability],
+        durability=_DURABILITY[qos.durability])
 
 
 def qos_to_dict(profile: QoSProfile) -> dict[str, Any]:

@@ -77,7 +77,8 @@ class RawReader:
                 for topic in self._topics:
                     check_is_valid_msg_type(topic.msg_type)
                     self._subscriptions.append(_rclpy.Subscription(
-                        node.handle, topic.msg_type, topic.topic, topic.qos.get_c_qos_profile()))
+                        node.handle, topic.msg_type, topic.topic,
+                        topic.qos.get_c_qos_profile()))
             self._reader = _rcl_reader.RawReader(context, self._subscriptions, self._wake)
         except Exception:
             self._destroy_handles()

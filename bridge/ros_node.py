@@ -31,12 +31,13 @@ import rclpy
 from rclpy.client import Client
 from rclpy.context import Context
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
-from rclpy.experimental import EventsExecutor
+from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.service import Service
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
+from rclpy.utilities import try_shutdown
 
 from bridge.raw_reader import RawReader, RawTopic
 from bridge.raw_reader import available as raw_reader_available
@@ -96,7 +97,7 @@ class RosNode:
                                     start_parameter_services=False,
                                     cli_args=_topic_remaps(options.ros_args))
         except Exception as error:
-            rclpy.try_shutdown(context=self.context)
+            try_shutdown(context=self.context)
             if options.ros_args and type(error).__name__ in ("UnknownROSArgsError",
                                                              "RCLError", "InvalidHandle"):
                 raise RosArgumentsError(f"--ros-args {' '.join(options.ros_args)}: "
@@ -198,7 +199,7 @@ class RosNode:
             self.node.destroy_node()
             self.stream_node.destroy_node()
         finally:
-            rclpy.try_shutdown(context=self.context)
+            try_shutdown(context=self.context)
 
     def subscriber_count(self, topic: str) -> int:
         return self.node.count_subscribers(topic)

@@ -432,16 +432,26 @@ class SecurityPolicy:
         if settings.get("key_file") is not None:
             policy = replace(policy, key=read_key_file(settings["key_file"],
                                                        f"{where}.key_file"))
-        for kind in ("topics", "services", "actions", "parameters", "frames"):
-            rules = NameRules(allow=_globs(settings, f"allow_{kind}", where),
-                              deny=_globs(settings, f"deny_{kind}", where))
-            policy = replace(policy, **{kind: rules})
+        # Fields named one by one (not **{kind: ...}): mypy checks each against its type.
+        rules = {kind: NameRules(allow=_globs(settings, f"allow_{kind}", where),
+                                 deny=_globs(settings, f"deny_{kind}", where))
+                 for kind in ("topics", "services", "actions", "parameters", "frames")}
+        policy = replace(policy, topics=rules["topics"], services=rules["services"],
+                         actions=rules["actions"], parameters=rules["parameters"],
+                         frames=rules["frames"])
         dirs = _globs(settings, "robot_dirs", where)
         policy = replace(policy, robot_dirs=tuple(dirs))
-        for key in ("max_clients", "max_bridges_per_client", "max_bridges",
-                    "max_marker_bytes"):
-            if settings.get(key) is not None:
-                policy = replace(policy, **{key: positive_int(settings[key], f"{where}.{key}")})
+
+        def limit(key: str, default: int) -> int:
+            if settings.get(key) is None:
+                return default
+            return positive_int(settings[key], f"{where}.{key}")
+
+        policy = replace(policy, max_clients=limit("max_clients", policy.max_clients),
+                         max_bridges_per_client=limit("max_bridges_per_client",
+                                                      policy.max_bridges_per_client),
+                         max_bridges=limit("max_bridges", policy.max_bridges),
+                         max_marker_bytes=limit("max_marker_bytes", policy.max_marker_bytes))
         return policy
 
     def grant_summary(self) -> str:

@@ -123,7 +123,8 @@ async def call_ros_service(hub: Hub, client: Client, request: Any, *, timeout: f
         ros_future = client.call_async(request)
         sent.append(ros_future)
         # Runs in the executor thread (or at once if already done): hand off only.
-        ros_future.add_done_callback(lambda done: hub.call_soon(_transfer, done, outcome))
+        ros_future.add_done_callback(
+            lambda done: hub.call_soon(_transfer, done, outcome))
 
     try:
         if not await wait_until_ready(client, min(timeout, ready_wait)):
@@ -157,9 +158,9 @@ def _transfer(ros_future: RosFuture, outcome: asyncio.Future[Any]) -> None:
         outcome.set_exception(CommandFailedError("service", "a response", "a cancelled call",
                                                  code=ErrorCode.ROS_ERROR))
     elif ros_future.exception() is not None:
-        outcome.set_exception(CommandFailedError("service", "a response",
-                                                 str(ros_future.exception()),
-                                                 code=ErrorCode.ROS_ERROR))
+        outcome.set_exception(CommandFailedError(
+            "service", "a response", str(ros_future.exception()),
+            code=ErrorCode.ROS_ERROR))
     else:
         outcome.set_result(ros_future.result())
 

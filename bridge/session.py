@@ -534,7 +534,8 @@ class ClientSession(asyncio.Protocol):
 
     def _tcp_socket(self) -> Optional[socket.socket]:
         transport = self._transport
-        sock = transport.get_extra_info("socket") if transport is not None else None
+        sock: Optional[socket.socket] = (transport.get_extra_info("socket")
+                                         if transport is not None else None)
         if sock is None or sock.family not in (socket.AF_INET, socket.AF_INET6):
             return None
         return sock
@@ -680,7 +681,11 @@ class ClientSession(asyncio.Protocol):
             handed.append((device, frame))
             if len(handed) > MAX_HANDED:
                 seen: set[str] = set()
-                newest = [(d, f) for d, f in reversed(handed) if not (d in seen or seen.add(d))]
+                newest: list[tuple[str, Frame]] = []
+                for d, f in reversed(handed):
+                    if d not in seen:
+                        seen.add(d)
+                        newest.append((d, f))
                 handed[:] = newest[::-1]  # each device's newest value, in their order
             if self._handed:
                 return

@@ -17,7 +17,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, cast
 
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String as StringMsg
@@ -27,7 +27,7 @@ from bridge.codecs.base import Encoded
 from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
 from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
-from bridge.dispatch import Handler
+from bridge.dispatch import Handler, Result
 from bridge.graph_types import refuse_other_type
 from bridge.heavy import OffLoop
 from bridge.hub import (LARGE_MESSAGE_BYTES, Hub, Replier, StreamChannel, Subscriber,
@@ -570,7 +570,7 @@ class TopicBridges:
         self._names.release(NameKey.publisher(topic))
         return {"topic": topic, "device": bridge.device}
 
-    def publish(self, request: Publish) -> OffLoop[dict[str, Any]]:
+    def publish(self, request: Publish) -> OffLoop[Result]:
         topic = self._resolve(request.topic)
         bridge = self.publishers.get(topic)
         if bridge is None:
@@ -612,7 +612,9 @@ class TopicBridges:
 
     def handlers(self) -> dict[type[Op], Handler]:
         return {
-            CreateSubscriber: lambda request, client: self.create_subscriber(request, client),
+            # The client is its session, a Subscriber as well as a Replier.
+            CreateSubscriber: lambda request, client: self.create_subscriber(
+                request, cast(Optional[Subscriber], client)),
             RemoveSubscriber: lambda request, _: self.remove_subscriber(request),
             CreatePublisher: lambda request, _: self.create_publisher(request),
             RemovePublisher: lambda request, _: self.remove_publisher(request),
@@ -633,7 +635,9 @@ class TopicBridges:
         return described
 
     def close(self) -> None:
-        for bridge in [*self.subscribers.values(), *self.publishers.values()]:
+        bridges: list[SubscriberBridge | PublisherBridge] = [*self.subscribers.values(),
+                                                            *self.publishers.values()]
+        for bridge in bridges:
             bridge.close()
         self.subscribers.clear()
         self.publishers.clear()

@@ -24,7 +24,7 @@ import ssl
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Set, Tuple, TypeVar, cast
 
 import numpy as np
 
@@ -48,6 +48,8 @@ from slicer_client.transport import CommandFn, Transport, open_transport
 __all__ = ["Client", "connect"]
 
 log = logging.getLogger(__name__)
+
+_R = TypeVar("_R", bound=Resource)
 
 # Earlier names of the modes: "thread" ran callbacks on the receive thread (now a dispatcher
 # thread), "queue" left them to process_events (now Spin).
@@ -76,7 +78,7 @@ class Client:
         # Stream values that came later than `freshness` seconds (a stalled link's
         # backlog): never made current (protocol/freshness.py). Counted in `late_dropped`.
         self._freshness = Freshness(freshness)
-        self._valued: set = set()  # devices with a value on this connection
+        self._valued: Set[str] = set()  # devices with a value on this connection
         self.late_dropped = 0
         self._logic: Any = None
         self._types: Dict[Tuple[str, str], c.TypeDescription] = {}
@@ -241,12 +243,14 @@ class Client:
         for message in early:
             resource._handle(message)
 
-    def _add(self, resource: Resource) -> Any:
+    def _add(self, resource: _R) -> _R:
         key = resource.spec.key
         with self._lock:
             existing = self._resources.get(key)
         if existing is not None and existing.spec.args == resource.spec.args:
-            return existing  # creating is idempotent, as on the daemon
+            # Creating is idempotent, as on the daemon. The key starts with the op, and each
+            # op has one resource class: `existing` is a `_R` too.
+            return cast(_R, existing)
         self._apply(resource, self.command)
         with self._lock:
             self._resources[key] = resource

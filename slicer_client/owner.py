@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from typing import Any, Callable, Dict, List, Mapping, Optional, Protocol, Tuple
 
+import numpy as np
+
 from protocol.messages import Message
 
 __all__ = ["ResourceOwner"]
@@ -25,7 +27,7 @@ class ResourceOwner(Protocol):
     def send(self, message: Message) -> None: ...
 
     def lookup_transform(self, parent: str, child: str, *, timeout: float = 0.5,
-                         stamp: Optional[Tuple[int, int]] = None) -> Any: ...
+                         stamp: Optional[Tuple[int, int]] = None) -> np.ndarray: ...
 
     def emit(self, callback: Callable[..., None], *args: Any) -> None:
         """Deliver a callback where the client delivers events (thread or queue)."""

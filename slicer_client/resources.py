@@ -14,7 +14,7 @@ import json
 import logging
 import threading
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -475,7 +475,8 @@ class TfLookup(Resource):
                                                          or bool(predicate(self.matrix))),
                    timeout, f"tf {self.parent} -> {self.child}")
         assert self.matrix is not None
-        return self.matrix.copy()
+        matrix: np.ndarray = self.matrix.copy()  # mypy's 3.10 target reads numpy's Self as Any
+        return matrix
 
     def lookup(self, timeout: float = 0.5) -> np.ndarray:
         """One lookup now (waits up to `timeout` s daemon-side for tf to connect)."""
@@ -639,6 +640,7 @@ class Robot(Resource):
         link_name = meta.get(KEY_LINK) or (known[0] if known else "")
         if not link_name:
             return
+        value: Union[np.ndarray, PolyData]  # a link matrix or mesh, as `kind` says
         with self._changed:
             link = self.links.setdefault(link_name, RobotLink(link_name))
             if isinstance(message.body, Transform) and meta.get(KEY_ROLE, "robot_link") \

@@ -17,16 +17,11 @@ import logging
 import ssl
 import threading
 from collections import deque
-from typing import Any, Callable, Deque, Dict, Mapping, Optional
+from typing import Any, Callable, Deque, Dict, Mapping, Optional, Protocol
 
 from protocol.messages import Message
 from slicer_client.connection import (DEFAULT_HOST, DEFAULT_PORT, ConnectionClosedError,
                                       Connection, DaemonUnreachableError, NotTheDaemonError)
-
-try:  # Protocol is in typing from 3.8; keep the import local to typing users
-    from typing import Protocol
-except ImportError:  # pragma: no cover
-    Protocol = object  # type: ignore[assignment,misc]
 
 __all__ = ["CommandFn", "ReconnectingTransport", "Transport", "TransportListener",
            "open_transport"]

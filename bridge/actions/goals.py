@@ -29,8 +29,7 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any, Callable, Optional
 
-from rclpy.action import ActionClient
-from rclpy.action.client import ClientGoalHandle
+from rclpy.action.client import ActionClient, ClientGoalHandle
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.qos import QoSProfile
 from rclpy.task import Future as RosFuture
@@ -82,11 +81,11 @@ class _StatusWatchingClient(ActionClient):
     (executor thread; it must only hand off)."""
 
     def __init__(self, *args: Any, on_status: Callable[[Any], None], **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
+        super().__init__(*args, **kwargs)  # type: ignore[no-untyped-call]  # rclpy: unannotated
         self._on_status = on_status
 
     async def execute(self, taken_data: Any) -> None:
-        await super().execute(taken_data)
+        await super().execute(taken_data)  # type: ignore[no-untyped-call]  # rclpy: unannotated
         if "status" in taken_data:
             self._on_status(taken_data["status"])
 
@@ -199,9 +198,10 @@ class GoalSender:
                 raise LimitReachedError("action", f"at most {self._max_called} actions with "
                                         f"goals in flight at once", f"a goal to {action} more")
             self._drop_client(idle)
+        feedback_qos = QoSProfile(depth=_FEEDBACK_DEPTH)
         client = _StatusWatchingClient(
             self._ros.node, cls, action, callback_group=self._group,
-            feedback_sub_qos_profile=QoSProfile(depth=_FEEDBACK_DEPTH),
+            feedback_sub_qos_profile=feedback_qos,
             on_status=lambda message: self._hub.call_soon(self._on_status, entry, message))
         entry = CalledAction(action, ros_type, cls, client, last_used=now)
         self.called[(action, ros_type)] = entry
@@ -279,8 +279,9 @@ class GoalSender:
         def on_feedback(message: Any) -> None:  # executor thread: hand off only
             self._hub.call_soon(self._on_feedback, sent, message)
 
-        response = self._in_executor(lambda: client.send_goal_async(
-            goal, feedback_callback=on_feedback, goal_uuid=_uuid_msg(sent.goal_id)))
+        response = self._in_executor(
+            lambda: client.send_goal_async(
+                goal, feedback_callback=on_feedback, goal_uuid=_uuid_msg(sent.goal_id)))
         sent.listed = loop.create_future()
         done, _ = await asyncio.wait((response, sent.listed),
                                      timeout=max(0.0, start + timeout - loop.time()),
@@ -293,15 +294,16 @@ class GoalSender:
             log.warning("goal %s of %s: the server's answer was lost; the action's status "
                         "topic lists the goal, so it was accepted", sent.goal_id, sent.action)
             response.add_done_callback(lambda late: self._late_answer(sent, late))
-            return ClientGoalHandle(client, _uuid_msg(sent.goal_id), _accepted(sent.called.cls))
+            return ClientGoalHandle(
+                client, _uuid_msg(sent.goal_id), _accepted(sent.called.cls))
         else:
             # The server may have accepted it and only its answer be lost (Fast DDS drops a
             # response to a reader it has not matched yet), or accept it later: either way
             # the goal would run unwatched, so it is cancelled by its id, and again if an
             # acceptance comes late.
-            self._cancel_soon(ClientGoalHandle(client, _uuid_msg(sent.goal_id),
-                                               _accepted(sent.called.cls)),
-                              "its send_goal timed out")
+            self._cancel_soon(ClientGoalHandle(
+                client, _uuid_msg(sent.goal_id), _accepted(sent.called.cls)),
+                "its send_goal timed out")
             response.add_done_callback(self._cancel_late)
             raise CommandFailedError("action", f"{what} to accept or reject the goal within "
                                      f"{timeout:g} s", "no answer; the daemon asked the "
@@ -532,8 +534,8 @@ def _settle_loop(outcome: asyncio.Future[Any], done: Optional[RosFuture],
         outcome.set_exception(CommandFailedError("action", "an answer", "a cancelled request",
                                                  code=ErrorCode.ROS_ERROR))
     elif done.exception() is not None:
-        outcome.set_exception(CommandFailedError("action", "an answer",
-                                                 str(done.exception()),
-                                                 code=ErrorCode.ROS_ERROR))
+        outcome.set_exception(CommandFailedError(
+            "action", "an answer", str(done.exception()),
+            code=ErrorCode.ROS_ERROR))
     else:
         outcome.set_result(done.result())

@@ -181,7 +181,9 @@ def message_to_dict(msg: Any, *, bytes_as: str = "base64") -> dict[str, JsonValu
     """
     if not is_message(msg):
         raise CodecError(field="message", expected="a ROS message", got=type(msg).__name__)
-    return {f.name: _value_out(f, getattr(msg, f.name), bytes_as) for f in _plan(type(msg))}
+    # (mypy does not take a class for Hashable, which @cache's arguments must be.)
+    return {f.name: _value_out(f, getattr(msg, f.name), bytes_as)
+            for f in _plan(type(msg))}  # type: ignore[arg-type]
 
 
 def message_to_json(msg: Any) -> str:

@@ -172,7 +172,8 @@ def multiarray_to_ndarray(msg: Any) -> np.ndarray:
     dims = list(msg.layout.dim)
     offset = int(msg.layout.data_offset)
     if not dims:
-        return flat[offset:].copy()
+        whole: np.ndarray = flat[offset:].copy()  # mypy reads numpy's ndarray.copy() as Any
+        return whole
     shape = tuple(int(d.size) for d in dims)
     strides_el = [int(d.stride) for d in dims[1:]] + [1]
     if all(int(d.stride) == 0 for d in dims):

@@ -93,7 +93,7 @@ from bridge.security import DEFAULT_MAX_MARKER_BYTES, NameRules, strip_frame
 from bridge.tf.buffer import TfBuffer
 from bridge.tf.capability import TfBridges
 from bridge.tf.errors import ExtrapolationError, TfError
-from bridge.tf.math import Tf7, compose, quat_normalize
+from bridge.tf.math import Quat, Tf7, Vec3, compose, quat_normalize
 from bridge.tf.lookups import LookupKey
 from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
                                ListMarkers, Op, OutOfRangeError, RemoveMarkerSubscriber)
@@ -132,8 +132,9 @@ def place_unlocked(spec: MarkerSpec, fixed_frame: str, buffer: TfBuffer,
     frame = spec.frame.lstrip("/")
     if not frame or frame == fixed_frame:
         return None
-    orientation = tuple(float(v) for v in spec.orientation)
-    position = tuple(float(v) for v in spec.position)
+    # A spec holds 4 orientation values (x, y, z, w) and 3 position values (convert.py).
+    orientation = cast(Quat, tuple(float(v) for v in spec.orientation))
+    position = cast(Vec3, tuple(float(v) for v in spec.position))
     if not all(math.isfinite(v) for v in orientation + position):
         return None
     stamp_ns = max(spec.stamp[0] * 1_000_000_000 + spec.stamp[1], 0)

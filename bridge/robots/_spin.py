@@ -26,6 +26,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import ok, try_shutdown  # = rclpy.ok, rclpy.try_shutdown (re-exported)
 
 from bridge.shutdown import STOP_SIGNALS, Watchdog, default_action_from_now
 
@@ -93,7 +94,7 @@ class ros_session:  # noqa: N801 - used as a context manager, like open()
         return self
 
     def __exit__(self, *exc: object) -> None:
-        rclpy.try_shutdown()
+        try_shutdown()
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)  # type: ignore[arg-type]
 
@@ -108,7 +109,7 @@ def spin_until_signal(session: ros_session, nodes: Sequence[Node],
     if on_ready is not None:
         on_ready()
     try:
-        while not session.stop.is_set() and not session.parent_gone() and rclpy.ok():
+        while not session.stop.is_set() and not session.parent_gone() and ok():
             executor.spin_once(timeout_sec=POLL_S)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -86,12 +86,12 @@ _JOINT_STATES_TYPE = "sensor_msgs/msg/JointState"
 _DESCRIPTION_TYPE = "std_msgs/msg/String"
 # robot_state_publisher's own profile for robot_description: a late subscriber gets it.
 # As joint_states publishers do (robot_state_publisher subscribes reliable, depth 10).
-_JOINT_STATES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                               reliability=ReliabilityPolicy.RELIABLE,
-                               durability=DurabilityPolicy.VOLATILE)
-_DESCRIPTION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                              reliability=ReliabilityPolicy.RELIABLE,
-                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
+_JOINT_STATES_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE)
+_DESCRIPTION_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 @dataclass
@@ -274,9 +274,12 @@ class RobotBridges:
         loop = asyncio.get_running_loop()
         robot.first_description = loop.create_future()
         refuse_other_type(self._ros, source.topic, _DESCRIPTION_TYPE, "source.topic")
+
+        def on_message(msg: StringMsg) -> None:  # on an executor thread
+            self._hub.call_soon(self._on_topic, robot, msg.data)
+
         robot.subscription = self._ros.node.create_subscription(
-            StringMsg, source.topic, lambda msg: self._hub.call_soon(
-                self._on_topic, robot, msg.data), _DESCRIPTION_QOS)
+            StringMsg, source.topic, on_message, _DESCRIPTION_QOS)
         try:
             return await asyncio.wait_for(asyncio.shield(robot.first_description),
                                           self._topic_wait_s)

@@ -223,7 +223,7 @@ def _geometry(raw: Any, what: str) -> Geometry:
             s3 = (s, s, s)
         else:
             s3 = _floats(scale, 3, f"{what} <mesh> scale")  # type: ignore[assignment]
-        return Geometry("mesh", filename=str(filename), scale=s3)  # type: ignore[arg-type]
+        return Geometry("mesh", filename=str(filename), scale=s3)
     if raw.box is not None:
         size = _floats(raw.box.size, 3, f"{what} <box> size")
         return Geometry("box", size=size)  # type: ignore[arg-type]

@@ -123,7 +123,7 @@ class Kinematics:
 
     def local_transforms(self, q: F64) -> F64:
         """(J, 4, 4) parent->child transforms of every joint for positions ``q``."""
-        motion = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
+        motion: F64 = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
         rot = np.flatnonzero(self._kind == _ROTATE)
         if len(rot):
             a = self._axes[rot]
@@ -144,7 +144,7 @@ class Kinematics:
         slide = np.flatnonzero(self._kind == _SLIDE)
         if len(slide):
             motion[slide, :3, 3] = self._axes[slide] * q[slide, None]
-        return np.matmul(self._origins, motion)
+        return self._origins @ motion  # np.matmul, typed by numpy's operator stubs
 
     def joint_transforms(self, joint_positions: Mapping[str, float],
                          joints: Optional[Iterable[str]] = None) -> dict[str, F64]:

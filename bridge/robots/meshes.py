@@ -115,13 +115,15 @@ def _merge_exact(vertices: F64, triangles: U32, colours: Optional[U8]
 
 def _visual_colours(geom: trimesh.Trimesh) -> Optional[U8]:
     """(N, 4) uint8 colours of a trimesh geometry, or None when its file gives none."""
-    visual = geom.visual
+    # Dispatched on `kind` as the file gave it, not on trimesh's visual classes.
+    visual: Any = geom.visual
     kind = getattr(visual, "kind", None)
     if kind is None:
         return None
     try:
         if kind == "texture":
-            material = getattr(visual, "material", None)
+            # None: `material.main_color` below fails like any broken material (caught).
+            material: Any = getattr(visual, "material", None)
             image = getattr(material, "image", None) or getattr(material, "baseColorTexture",
                                                                  None)
             uv = getattr(visual, "uv", None)
@@ -394,11 +396,11 @@ def decimate(vertices: F64, triangles: U32, max_triangles: int,
     weights = np.bincount(cluster, minlength=count).astype(np.float64)
     new_vertices = np.stack([np.bincount(cluster, vertices[:, k], minlength=count)
                              for k in range(3)], axis=1) / weights[:, None]
-    new_colours = None
+    new_colours: Optional[U8] = None
     if colours is not None:
-        new_colours = np.stack([np.bincount(cluster, colours[:, k].astype(np.float64),
-                                            minlength=count) for k in range(4)], axis=1)
-        new_colours = np.clip(np.rint(new_colours / weights[:, None]), 0, 255).astype(np.uint8)
+        sums = np.stack([np.bincount(cluster, colours[:, k].astype(np.float64),
+                                     minlength=count) for k in range(4)], axis=1)
+        new_colours = np.clip(np.rint(sums / weights[:, None]), 0, 255).astype(np.uint8)
     # Drop clusters no surviving triangle uses.
     used = np.zeros(count, dtype=bool)
     used[tris.ravel()] = True
@@ -423,7 +425,7 @@ def vertex_normals(vertices: npt.ArrayLike, triangles: npt.ArrayLike
     rep = np.repeat(face, 3, axis=0)
     acc = np.stack([np.bincount(idx, rep[:, k], minlength=len(v)) for k in range(3)], axis=1)
     norm = np.linalg.norm(acc, axis=1, keepdims=True)
-    out = np.divide(acc, norm, out=np.zeros_like(acc), where=norm > 0)
+    out: F64 = np.divide(acc, norm, out=np.zeros_like(acc), where=norm > 0)
     return out.astype(np.float32)
 
 

@@ -54,9 +54,9 @@ __all__ = ["DEFAULT_NODE_NAME", "StatePublisherNode", "transforms_message", "mai
 DEFAULT_NODE_NAME = "robot_state_publisher"
 
 # Best effort accepts reliable and best-effort publishers alike (as robot_state_publisher).
-JOINT_STATES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                              reliability=ReliabilityPolicy.BEST_EFFORT,
-                              durability=DurabilityPolicy.VOLATILE)
+JOINT_STATES_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
+    durability=DurabilityPolicy.VOLATILE)
 
 
 def transforms_message(description: RobotDescription, transforms: Mapping[str, np.ndarray],
@@ -107,7 +107,7 @@ class StatePublisherNode(Node):
                                  JOINT_STATES_QOS)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         for warning in self._description.warnings:
-            self.get_logger().warning(warning)
+            self.get_logger().warning(warning)  # type: ignore[no-untyped-call]
         self._publish_description()
 
     @property
@@ -121,7 +121,7 @@ class StatePublisherNode(Node):
         static = self._kinematics.fixed_joint_transforms()
         self._static_pub.publish(transforms_message(
             self._description, static, self.get_clock().now().to_msg(), self._frame_prefix))
-        self.get_logger().info(
+        self.get_logger().info(  # type: ignore[no-untyped-call]  # rclpy: unannotated
             f"robot {self._description.name!r}: {len(self._description.links)} links, "
             f"{len(self._kinematics.moving_joints)} moving joints, {len(static)} static "
             f"transforms on /tf_static")
@@ -164,7 +164,7 @@ class StatePublisherNode(Node):
     def _warn_once(self, key: str, text: str) -> None:
         if key not in self._warned:
             self._warned.add(key)
-            self.get_logger().warning(text)
+            self.get_logger().warning(text)  # type: ignore[no-untyped-call]
 
     # ------------------------------------------------------------------ parameters
 

@@ -234,11 +234,11 @@ class TfBuffer:
         A transform the compiled store refuses is judged again by `_check`, the one place
         that words the reasons.
         """
-        insert_cdr = getattr(self._store, "insert_cdr", None)
-        if insert_cdr is None:
+        store = self._store
+        if isinstance(store, FrameStore):  # the pure Python store reads no CDR
             return None
         with self._lock:
-            stored = insert_cdr(data, static)
+            stored = store.insert_cdr(data, static)
         if stored is None:
             return None
         changed, refused = stored
@@ -484,7 +484,7 @@ class TfBuffer:
 
 # ---------------------------------------------------------------------- stores
 
-_Store = Union[FrameStore, "CompiledFrameStore"]
+_Store = Union[FrameStore, "_compiled_store.CompiledFrameStore"]
 
 
 def _make_store(window_ns: int, compiled: Optional[bool], max_frames: int,

@@ -210,7 +210,7 @@ class FrameStore:
     def lookup(self, target: str, source: str, t: int) -> Result:
         """target<-source at ``t`` (0: the latest common time), or a TfError."""
         t, value = self._lookup(target, source, t, None)
-        return t, value[:3], value[3:]  # type: ignore[return-value]
+        return t, value[:3], value[3:]
 
     def latest_many(self, pairs: Sequence[Tuple[str, str]]) -> List[LatestResult]:
         """`lookup(target, source, 0)` for each pair, a result or the error it raised; links
@@ -223,7 +223,7 @@ class FrameStore:
             except TfError as error:
                 out.append(error)
                 continue
-            out.append((t, value[:3], value[3:]))  # type: ignore[arg-type]
+            out.append((t, value[:3], value[3:]))
         return out
 
     def chain_frames(self, target: str, source: str) -> frozenset[str]:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import base64
 import binascii
 import threading
-from typing import Any, Callable, ClassVar, Dict, List, Mapping
+from typing import Any, Callable, ClassVar, Dict, List, Mapping, Type, cast
 
 import numpy as np
 
@@ -90,7 +90,7 @@ class MessageObject:
         return self._types.to_ros(self)
 
     def __eq__(self, other: object) -> bool:
-        return type(other) is type(self) and self.to_ros() == other.to_ros()  # type: ignore[attr-defined]
+        return type(other) is type(self) and self.to_ros() == other.to_ros()
 
     __hash__ = None  # type: ignore[assignment]  # mutable
 
@@ -106,7 +106,7 @@ class MessageTypes:
         self._describe = describe
         self.values = values
         self._messages: Dict[str, MessageDescription] = {}
-        self._classes: Dict[str, type] = {}
+        self._classes: Dict[str, Type[MessageObject]] = {}
         self._lock = threading.Lock()
 
     # --- types ----------------------------------------------------------------------------
@@ -118,7 +118,7 @@ class MessageTypes:
                 self._messages.setdefault(name, message)
         return described
 
-    def message_class(self, ros_type: str) -> type:
+    def message_class(self, ros_type: str) -> Type[MessageObject]:
         """The class of a message type (``pkg/msg/Type``, or a service or action part such
         as ``turtlesim/srv/Spawn_Request``), described first if need be."""
         cls = self._classes.get(ros_type)
@@ -145,9 +145,9 @@ class MessageTypes:
 
     def new(self, ros_type: str) -> MessageObject:
         """A message of `ros_type` with every field at its default (a blank message)."""
-        return self.message_class(ros_type)()  # type: ignore[no-any-return]
+        return self.message_class(ros_type)()
 
-    def _make_class(self, description: MessageDescription) -> type:
+    def _make_class(self, description: MessageDescription) -> Type[MessageObject]:
         namespace: Dict[str, Any] = {"__slots__": (), "_description": description,
                                      "_types": self}
         for f in description.fields:
@@ -156,7 +156,9 @@ class MessageTypes:
             namespace[f"Set{stem}"] = _setter(self, f)
         for name, value in description.constants.items():
             namespace.setdefault(name, value)
-        return type(vtk_class_name(description.type), (MessageObject,), namespace)
+        # type() with 3 arguments is typed as plain `type`; its only base is MessageObject.
+        return cast(Type[MessageObject],
+                    type(vtk_class_name(description.type), (MessageObject,), namespace))
 
     # --- blank values ------------------------------------------------------------------------
     def _blank_fields(self, description: MessageDescription) -> Dict[str, Any]:

@@ -178,6 +178,9 @@ class _Node(_Observable):
     def IsAddedToROS2Node(self) -> bool:  # noqa: N802
         return not getattr(self.resource, "removed", False)
 
+    def GetName(self) -> str:  # noqa: N802
+        raise NotImplementedError  # each kind names its nodes as the reference does
+
 
 def _matrix_of(value: Any) -> Any:
     """A Slicer transform node's matrix, or the value itself."""
@@ -731,8 +734,8 @@ class ServiceClientNode(_Node):
                                 f"{type(request).__name__}")
 
     def _received(self, response: Dict[str, Any]) -> Any:
-        obj = self._types.from_ros(self._description.parts["response"], response)
-        obj = obj if self._adapter is None else self._adapter.response(obj)
+        message = self._types.from_ros(self._description.parts["response"], response)
+        obj = message if self._adapter is None else self._adapter.response(message)
         with self._lock:
             self._last, self._last_ok = obj, True
         return obj

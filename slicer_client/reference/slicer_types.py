@@ -329,7 +329,7 @@ def _matrix_like(value: Any) -> bool:
     if is_vtk_matrix(value) or hasattr(value, "GetMatrixTransformToParent"):
         return True
     try:
-        return np.shape(value) == (4, 4)
+        return bool(np.shape(value) == (4, 4))  # np.shape of Any is typed Any
     except ValueError:
         return False
 

@@ -8,7 +8,7 @@ the methods both share, so nothing else needs to know which one it holds.
 
 from __future__ import annotations
 
-from typing import Any, Callable, List, Optional, Sequence
+from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 from slicer_client.matrices import Matrix4x4
 
@@ -74,7 +74,7 @@ class _DataArray:
         self._values.append(self._convert(value))
         return len(self._values) - 1
 
-    def GetTuple(self, i: int) -> tuple:  # noqa: N802
+    def GetTuple(self, i: int) -> Tuple[float, ...]:  # noqa: N802
         n = self._components
         return tuple(float(v) for v in self._values[int(i) * n:(int(i) + 1) * n])
 
@@ -146,7 +146,7 @@ class Points:
     """vtkPoints' point API: 3-D points (mm)."""
 
     def __init__(self) -> None:
-        self._points: List[tuple] = []
+        self._points: List[Tuple[float, float, float]] = []
 
     def GetClassName(self) -> str:  # noqa: N802
         return "vtkPoints"
@@ -164,7 +164,7 @@ class Points:
     def SetPoint(self, i: int, x: float, y: float = 0.0, z: float = 0.0) -> None:  # noqa: N802
         self._points[int(i)] = _xyz(x, y, z)
 
-    def GetPoint(self, i: int) -> tuple:  # noqa: N802
+    def GetPoint(self, i: int) -> Tuple[float, float, float]:  # noqa: N802
         return self._points[int(i)]
 
     def Reset(self) -> None:  # noqa: N802
@@ -174,7 +174,7 @@ class Points:
         pass  # a list grows by itself
 
 
-def _xyz(x: Any, y: float, z: float) -> tuple:
+def _xyz(x: Any, y: float, z: float) -> Tuple[float, float, float]:
     if isinstance(x, (tuple, list)):  # InsertNextPoint((x, y, z)) as VTK's Python takes it
         x, y, z = x
     return (float(x), float(y), float(z))

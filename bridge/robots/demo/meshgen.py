@@ -148,8 +148,8 @@ def _shoulder() -> bytes:
 def _upper_arm() -> bytes:
     # Millimetres on purpose: many CAD exports are, and the URDF's scale fixes it.
     mesh = trimesh.creation.capsule(height=300.0, radius=45.0, count=[24, 24])
-    text = trimesh.exchange.obj.export_obj(mesh, include_normals=False, include_color=False,
-                                           include_texture=False, header=None)
+    text = trimesh.exchange.obj.export_obj(  # type: ignore[no-untyped-call]  # trimesh: unannotated
+        mesh, include_normals=False, include_color=False, include_texture=False, header=None)
     return str(text).encode("utf-8")
 
 

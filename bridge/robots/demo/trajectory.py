@@ -98,7 +98,7 @@ def create_trajectory_server(node: Any, hold: MotionHold, actuated: Sequence[str
     published; the joint motion node calls the returned object's `advance(now)` before it
     computes a joint state and `report(now, published)` after publishing it."""
     from control_msgs.action import FollowJointTrajectory
-    from rclpy.action import ActionServer, CancelResponse, GoalResponse
+    from rclpy.action.server import ActionServer, CancelResponse, GoalResponse
     from rclpy.task import Future
     from trajectory_msgs.msg import JointTrajectoryPoint
 
@@ -109,9 +109,9 @@ def create_trajectory_server(node: Any, hold: MotionHold, actuated: Sequence[str
             self.started = 0.0
             self.done: Optional[Future] = None
             self.release_at: Optional[float] = None
-            self.server = ActionServer(node, FollowJointTrajectory, action,
-                                       execute_callback=self.execute,
-                                       goal_callback=self.check, cancel_callback=self.cancel)
+            self.server = ActionServer(
+                node, FollowJointTrajectory, action, execute_callback=self.execute,
+                goal_callback=self.check, cancel_callback=self.cancel)
 
         def _plan(self, goal: Any) -> TrajectoryRun:
             trajectory = goal.trajectory
@@ -132,8 +132,9 @@ def create_trajectory_server(node: Any, hold: MotionHold, actuated: Sequence[str
 
         async def execute(self, goal_handle: Any) -> Any:
             result = FollowJointTrajectory.Result()
+            # A new goal preempts the running one.
             if self.done is not None and not self.done.done():
-                self.done.set_result(False)  # a new goal preempts the running one
+                self.done.set_result(False)
             run = self._plan(goal_handle.request)  # from where the arm is now
             now = node.get_clock().now().nanoseconds * 1e-9
             self.run, self.handle, self.started = run, goal_handle, now

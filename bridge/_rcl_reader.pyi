@@ -1,0 +1,20 @@
+"""Types of the compiled rcl reader (_rcl_reader.pyx). Keep in step with the .pyx (and its
+INTERFACE)."""
+
+from collections.abc import Collection
+from typing import Any
+
+from typing_extensions import Self, disjoint_base
+
+INTERFACE: int
+
+class ReaderError(RuntimeError): ...
+
+@disjoint_base
+class RawReader:
+    # rclpy's _rclpy handles (Context, Subscription, GuardCondition), of which the reader
+    # reads `pointer`: untyped C++ objects (rclpy's ContextHandle protocol omits `pointer`).
+    # __cinit__ takes the arguments: at run time they are __new__'s.
+    def __new__(cls, context: Any, subscriptions: Collection[Any], wake: Any) -> Self: ...
+    def take(self, timeout_s: float) -> tuple[int, memoryview] | None: ...
+    def close(self) -> None: ...
