@@ -15,13 +15,18 @@ message); Connected/Disconnected events from there too; a blocking `SendCommand`
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import importlib.util
+import inspect
 import socket
+import sys
 import threading
 import time
 import types
 from collections import deque
 from pathlib import Path
+from xml.etree import ElementTree as ET
 from typing import Any, Callable, Deque, Dict, Optional, Tuple
 
 import numpy as np
@@ -212,39 +217,286 @@ def install_slicer(setitem: Callable[[str, types.ModuleType], None]) -> types.Mo
     (``setitem(name, module)``: sys.modules' own, or a test's monkeypatch)."""
     slicer = types.ModuleType("slicer")
     slicer.mrmlScene = Scene()
+    slicer.app = Signals()  # startupCompleted()
     slicer.vtkMRMLIGTLConnectorNode = Connector
     slicer.vtkSlicerOpenIGTLinkCommand = Command
     slicer.vtkMRMLTextNode = TextNode
     slicer.vtkMRMLTransformNode = types.SimpleNamespace(
         TransformModifiedEvent=TRANSFORM_MODIFIED_EVENT)
     slm = types.ModuleType("slicer.ScriptedLoadableModule")
-    for name in ("ScriptedLoadableModule", "ScriptedLoadableModuleLogic",
-                 "ScriptedLoadableModuleWidget", "ScriptedLoadableModuleTest"):
-        setattr(slm, name, type(name, (), {"__init__": lambda self, *a: None}))
+    slm.ScriptedLoadableModule = ScriptedLoadableModule
+    slm.ScriptedLoadableModuleLogic = ScriptedLoadableModuleLogic
+    slm.ScriptedLoadableModuleWidget = ScriptedLoadableModuleWidget
+    slm.ScriptedLoadableModuleTest = type("ScriptedLoadableModuleTest", (), {})
     pnw = types.ModuleType("slicer.parameterNodeWrapper")
-    pnw.parameterNodeWrapper = lambda cls: cls
+    pnw.parameterNodeWrapper = parameter_node_wrapper
     pnw.WithinRange = lambda lo, hi: (lo, hi)
     util = types.ModuleType("slicer.util")
-    util.VTKObservationMixin = type("VTKObservationMixin", (), {})
+    util.VTKObservationMixin = VTKObservationMixin
+    util.loadUI, util.childWidgetVariables = load_ui, child_widget_variables
+    util.errors = []  # what tryWithErrorDisplay showed
+    util.tryWithErrorDisplay = functools.partial(try_with_error_display, util.errors)
     slicer.ScriptedLoadableModule, slicer.parameterNodeWrapper, slicer.util = slm, pnw, util
     vtk = types.ModuleType("vtk")
     vtk.vtkCommand = types.SimpleNamespace(ModifiedEvent=MODIFIED_EVENT)
+    qt = types.ModuleType("qt")
+    qt.QTimer = Timer
+    ctk = types.ModuleType("ctk")
+    ctk.ctkSliderWidget = lambda: UiWidget("ctkSliderWidget", "", {}, {})
     for name, module in (("slicer", slicer), ("slicer.ScriptedLoadableModule", slm),
                          ("slicer.parameterNodeWrapper", pnw), ("slicer.util", util),
-                         ("qt", types.ModuleType("qt")), ("vtk", vtk),
-                         ("ctk", types.ModuleType("ctk"))):
+                         ("qt", qt), ("vtk", vtk), ("ctk", ctk)):
         setitem(name, module)
     return slicer
 
 
 def load_module(setitem: Callable[[str, types.ModuleType], None]) -> Any:
-    """ROS2Bridge.py, imported over the stand-ins."""
+    """ROS2Bridge.py, imported over the stand-ins. Its folder goes on sys.path, as Slicer
+    puts it there when it loads the module (qSlicerScriptedLoadableModuleFactory.cxx), and
+    ROS2BridgeLib is imported afresh, over these stand-ins rather than an earlier test's."""
     install_slicer(setitem)
+    if str(MODULE.parent) not in sys.path:
+        sys.path.insert(0, str(MODULE.parent))
+    for name in [name for name in sys.modules if name.split(".")[0] == "ROS2BridgeLib"]:
+        del sys.modules[name]
     spec = importlib.util.spec_from_file_location("ROS2Bridge_under_test", MODULE)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+# --- the module's classes and GUI: ScriptedLoadableModule.py, util.py, parameterNodeWrapper ---
+class Signals:
+    """PythonQt's `connect("signal(args)", slot)`; `emit` is the test's hand on the widget."""
+
+    def __init__(self) -> None:
+        self.slots: Dict[str, list] = {}
+        self.blocked = False
+
+    def connect(self, signal: str, slot: Callable[..., Any]) -> bool:
+        self.slots.setdefault(signal, []).append(slot)
+        return True
+
+    def blockSignals(self, block: bool) -> bool:  # noqa: N802
+        was, self.blocked = self.blocked, bool(block)
+        return was
+
+    def emit(self, signal: str, *args: Any) -> None:
+        """Calls each slot with as many of the signal's arguments as it takes, as PythonQt
+        does (Slicer's template connects clicked(bool) to a slot without arguments)."""
+        if self.blocked:
+            return
+        for slot in list(self.slots.get(signal, [])):
+            try:
+                parameters = inspect.signature(slot).parameters.values()
+            except (TypeError, ValueError):  # a builtin: give it everything
+                slot(*args)
+                continue
+            if any(p.kind is p.VAR_POSITIONAL for p in parameters):
+                slot(*args)
+            else:
+                slot(*args[:sum(p.default is p.empty for p in parameters)])
+
+
+class Timer(Signals):
+    """qt.QTimer: never fires by itself here (a test calls the slot)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.interval, self.active = 0, False
+
+    def setInterval(self, ms: int) -> None: self.interval = ms  # noqa: E704, N802
+    def start(self) -> None: self.active = True  # noqa: E704
+    def stop(self) -> None: self.active = False  # noqa: E704
+
+
+class FormLayout:
+    """QFormLayout's rows (rowCount, removeRow, addRow: Qt 5.8+)."""
+
+    def __init__(self) -> None:
+        self.rows: list = []
+
+    def rowCount(self) -> int: return len(self.rows)  # noqa: E704, N802
+    def removeRow(self, row: int) -> None: del self.rows[row]  # noqa: E704, N802
+    def addRow(self, label: Any, field: Any = None) -> None: self.rows.append((label, field))  # noqa: E704, E501, N802
+
+
+class UiWidget(Signals):
+    """A widget of a .ui file: its designer properties as attributes (text, checked...),
+    its dynamic ones (stdset="0", e.g. SlicerParameterName) through `property()`, and the
+    few methods the module calls on combo boxes, lists, node selectors and containers."""
+
+    def __init__(self, class_name: str, name: str, properties: Dict[str, Any],
+                 dynamic: Dict[str, Any], items: Optional[list] = None) -> None:
+        super().__init__()
+        self.class_name, self.name, self._dynamic = class_name, name, dynamic
+        self.text, self.checked, self.value = "", False, 0
+        self.__dict__.update(properties)
+        self.items = list(items or [])
+        self.currentText = self.items[0] if self.items else ""
+        self.form = FormLayout()
+        self.scene: Any = None
+        self.current_node: Any = None
+
+    def property(self, name: str) -> Any: return self._dynamic.get(name)  # noqa: E704
+    def layout(self) -> FormLayout: return self.form  # noqa: E704
+    def currentNode(self) -> Any: return self.current_node  # noqa: E704, N802
+
+    def addItem(self, text: str) -> None:  # noqa: N802
+        self.items.append(text)
+        self.currentText = self.currentText or text
+
+    def clear(self) -> None:
+        self.items, self.currentText = [], ""
+
+    def setMRMLScene(self, scene: Any) -> None:  # noqa: N802
+        self.scene = scene  # qMRMLWidget passes it on: mrmlSceneChanged(vtkMRMLScene*)
+        self.emit("mrmlSceneChanged(vtkMRMLScene*)", scene)
+
+
+def _designer_value(prop: ET.Element) -> Any:
+    value = prop[0]
+    if value.tag == "bool":
+        return value.text == "true"
+    if value.tag == "number":
+        return int(value.text or 0)
+    if value.tag == "stringlist":
+        return [item.text or "" for item in value]
+    return value.text or ""
+
+
+def load_ui(path: str) -> UiWidget:
+    """slicer.util.loadUI: the .ui's widgets, each one named; the top one's `children`
+    are all the others; the file's signal/slot connections made."""
+    root = ET.parse(path).getroot()
+    made: Dict[str, UiWidget] = {}
+    for element in root.iter("widget"):
+        properties: Dict[str, Any] = {}
+        dynamic: Dict[str, Any] = {}
+        for prop in element.findall("property"):
+            target = dynamic if prop.get("stdset") == "0" else properties
+            target[prop.get("name", "")] = _designer_value(prop)
+        items = [_designer_value(item.find("property")) for item in element.findall("item")]
+        made[element.get("name", "")] = UiWidget(element.get("class", ""), element.get("name", ""),
+                                                 properties, dynamic, items)
+    for connection in root.iter("connection"):
+        receiver = made[connection.findtext("receiver", "")]
+        slot = connection.findtext("slot", "").split("(")[0]
+        made[connection.findtext("sender", "")].connect(connection.findtext("signal", ""),
+                                                       getattr(receiver, slot))
+    top = made[root.find("widget").get("name", "")]  # type: ignore[union-attr]
+    top.children = list(made.values())  # type: ignore[attr-defined]
+    return top
+
+
+def child_widget_variables(widget: UiWidget) -> Any:
+    """slicer.util.childWidgetVariables: every named widget (the top one included)."""
+    return types.SimpleNamespace(**{w.name: w for w in widget.children})  # type: ignore
+
+
+def try_with_error_display(shown: list, message: str, show: bool = True,
+                           waitCursor: bool = False) -> Any:  # noqa: N803
+    """slicer.util.tryWithErrorDisplay: shows the message, then re-raises."""
+    @contextlib.contextmanager
+    def guard() -> Any:
+        try:
+            yield
+        except Exception as error:
+            shown.append(f"{message} {error}")
+            raise
+    return guard()
+
+
+class VTKObservationMixin:
+    """slicer.util.VTKObservationMixin: observers kept as (object, event, method, tag)."""
+
+    def __init__(self) -> None:
+        self.Observations: list = []
+
+    def addObserver(self, obj: Any, event: Any, method: Any, priority: float = 0.0) -> None:  # noqa: N802
+        self.Observations.append((obj, event, method, obj.AddObserver(event, method)))
+
+    def removeObservers(self, method: Any = None) -> None:  # noqa: N802
+        self.Observations = [o for o in self.Observations
+                             if method is not None and o[2] != method]
+
+
+class ScriptedLoadableModule:
+    def __init__(self, parent: Any) -> None:
+        self.parent = parent
+
+
+class ScriptedLoadableModuleLogic:
+    """getParameterNode: the scene's one parameter node of the module (a plain dict here)."""
+
+    def __init__(self) -> None:
+        pass
+
+    def getParameterNode(self) -> Dict[str, Any]:  # noqa: N802
+        import slicer
+        return slicer.mrmlScene.__dict__.setdefault("parameterNode", {})
+
+
+class ScriptedLoadableModuleWidget:
+    """The widget's parent, its layout, and resourcePath (the module folder's Resources)."""
+
+    def __init__(self, parent: Any = None) -> None:
+        self.parent = parent or types.SimpleNamespace(isEntered=True)
+        self.layout = types.SimpleNamespace(widgets=[])
+        self.layout.addWidget = self.layout.widgets.append
+
+    def setup(self) -> None:
+        pass
+
+    def resourcePath(self, filename: str) -> str:  # noqa: N802
+        return str(MODULE.parent / "Resources" / filename)
+
+
+def parameter_node_wrapper(cls: type) -> type:
+    """parameterNodeWrapper: typed attributes stored in the parameter node (defaults from
+    the class), and connectGui over widgets carrying a SlicerParameterName property:
+    QLineEdit <-> str (textChanged), QSpinBox <-> int (valueChanged); an unknown name raises."""
+    names = list(cls.__annotations__)
+    defaults = {name: getattr(cls, name) for name in names}
+    gui_field = {"QLineEdit": ("text", "textChanged(QString)"),
+                 "QSpinBox": ("value", "valueChanged(int)")}
+
+    def init(self: Any, node: Dict[str, Any]) -> None:
+        object.__setattr__(self, "_node", node)
+        node.setdefault("_guis", {})
+
+    def get(self: Any, name: str) -> Any:
+        return self._node.get(name, defaults[name])
+
+    def set_(self: Any, name: str, value: Any) -> None:
+        self._node[name] = value
+        for gui in self._node["_guis"].values():  # the GUI follows the parameter node
+            if name in gui:
+                setattr(gui[name], gui_field[gui[name].class_name][0], value)
+
+    def connect_gui(self: Any, ui: Any) -> int:
+        widgets = {w.property("SlicerParameterName"): w for w in vars(ui).values()
+                   if w.property("SlicerParameterName")}
+        for name, widget in widgets.items():
+            if name not in names:
+                raise ValueError(f"no parameter {name!r}")
+            attribute, signal = gui_field[widget.class_name]
+            setattr(widget, attribute, get(self, name))
+            widget.connect(signal, functools.partial(lambda n, v: set_(self, n, v), name))
+        tag = len(self._node["_guis"]) + 1
+        self._node["_guis"][tag] = widgets
+        return tag
+
+    def disconnect_gui(self: Any, tag: int) -> None:
+        self._node["_guis"].pop(tag, None)
+
+    attributes: Dict[str, Any] = {
+        name: property(functools.partial(lambda n, self: get(self, n), name),
+                       functools.partial(lambda n, self, v: set_(self, n, v), name))
+        for name in names}
+    attributes.update(__init__=init, connectGui=connect_gui, disconnectGui=disconnect_gui)
+    return type(cls.__name__, (), attributes)
 
 
 class TransformNode(Node):

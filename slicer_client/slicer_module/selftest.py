@@ -2,6 +2,8 @@
 
     Slicer --no-main-window --python-script slicer_client/slicer_module/selftest.py
 
+The module's client packages must be installed as for the module itself (the extension,
+or the client wheel: see the module's docstring); without them the import below says how.
 Optional: start the daemon first (`slicer-ros2-bridge run --port 18944`) and set
 ROS2BRIDGE_TEST_PORT=18944 to also test the round trip through Slicer's connector.
 Exit code 0 = every test passed, 1 = a failure (printed), 2 = not run inside Slicer.
@@ -21,9 +23,10 @@ def main() -> int:
         print("selftest.py runs inside 3D Slicer: Slicer --no-main-window --python-script "
               f"{os.path.abspath(__file__)}", file=sys.stderr)
         return 2
+    # The module's folder, as Slicer puts it on sys.path when it loads the module itself.
     module_dir = os.path.join(HERE, "ROS2Bridge")
     sys.path.insert(0, module_dir)
-    import ROS2Bridge  # noqa: E402  (puts the repository root on sys.path)
+    import ROS2Bridge  # noqa: E402
 
     try:
         ROS2Bridge.ROS2BridgeTest().runTest()

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.integration  # starts processes
+
 REPO = Path(__file__).resolve().parents[2]
 MODULE = REPO / "slicer_client" / "slicer_module" / "ROS2Bridge"
 
@@ -92,6 +94,11 @@ def test_the_module_is_built_with_its_icon_and_its_test(recorded: list[str]) -> 
     assert "module ROS2Bridge" in recorded
     assert "module-script ROS2Bridge.py" in recorded
     assert "module-resource Resources/Icons/ROS2Bridge.png" in recorded
+    assert "module-resource Resources/UI/ROS2Bridge.ui" in recorded
+    # The module's code package ships with it: every file of ROS2BridgeLib, nothing else.
+    lib = {f"module-script ROS2BridgeLib/{path.name}"
+           for path in (MODULE / "ROS2BridgeLib").glob("*.py")}
+    assert lib == {line for line in recorded if line.startswith("module-script ROS2BridgeLib/")}
     assert "unittest ROS2Bridge.py" in recorded
 
 

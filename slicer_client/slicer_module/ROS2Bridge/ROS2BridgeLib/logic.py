@@ -1,0 +1,461 @@
+"""ROS2BridgeLogic: all of the ROS2Bridge module's networking and scene work, usable from
+scripts without its GUI (`slicer.util.getModuleLogic('ROS2Bridge')`, or made directly).
+It owns Slicer's connector node, the slicer_client Client bound to it through
+`ConnectorTransport`, the placing of what arrives (as slicer_client/scene_plan.py says),
+the saved bridges, and the reference SlicerROS2 logic's methods."""
+
+import logging
+import time
+from typing import Any, Mapping, Optional, Sequence
+
+import numpy as np
+import qt
+import slicer
+import vtk
+from slicer.ScriptedLoadableModule import ScriptedLoadableModuleLogic
+from slicer.util import VTKObservationMixin
+
+from slicer_client.bridge_state import BridgeState
+from slicer_client.client import Client, read_key_file
+from slicer_client.joint_sliders import JointSlider, joint_sliders, slider_positions
+from slicer_client.reference.logic import ROS2Logic
+from slicer_client.reference.nodes import ROS2Node, RobotNode
+from slicer_client.resources import MarkerSubscriber, Publisher, Robot
+from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER, NodePlan,
+                                      describe_bridges, metadata_from_attributes, plan_node,
+                                      robot_status_lines, stale_lines, stale_marker_nodes)
+from slicer_client.send_plan import KIND_ORDER, plan_send
+
+from .parameters import ROS2BridgeParameterNode
+from .transport import ConnectorTransport
+
+__all__ = ["CONNECTOR_NAME", "CONNECT_WAIT_S", "SPIN_INTERVAL_MS", "ROS2BridgeLogic",
+           "nodeKind"]
+
+CONNECTOR_NAME = "ROS2BridgeConnector"
+SPIN_INTERVAL_MS = 20  # the reference spins its node at 50 Hz
+CONNECT_WAIT_S = 10.0  # a script's first reference call waits this long for the daemon
+log = logging.getLogger("ROS2Bridge")
+
+
+def nodeKind(node: Any) -> str:
+    """The "Send to ROS" kind of a node (send_plan.KIND_ORDER, most specific first)."""
+    for kind in KIND_ORDER:
+        if node.IsA(kind):
+            return kind
+    return str(node.GetClassName())
+
+
+class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
+    """All networking: the connector, the slicer_client Client bound to it, the scene
+    builder and the saved bridges."""
+
+    def __init__(self) -> None:
+        ScriptedLoadableModuleLogic.__init__(self)
+        VTKObservationMixin.__init__(self)
+        self.connector: Any = None  # Slicer's vtkMRMLIGTLConnectorNode, once connect() made it
+        self.transport: Optional[ConnectorTransport] = None
+        self.client: Optional[Client] = None
+        self._key: Optional[bytes] = None  # the writers' key, when connect() was given one
+        self.problems: list[str] = []  # errors met outside a button's handler, shown in the GUI
+        self._planned: set[str] = set()  # node ids already placed
+        self._timer = qt.QTimer()
+        self._timer.setInterval(200)  # new connector nodes are placed within 0.2 s
+        self._timer.connect("timeout()", self._onTimer)
+        self._spinTimer = qt.QTimer()
+        self._spinTimer.setInterval(SPIN_INTERVAL_MS)
+        self._spinTimer.connect("timeout()", self.Spin)
+        self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartSaveEvent, self._onSave)
+        self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
+                         self._onSceneStartClose)
+
+    def getParameterNode(self) -> ROS2BridgeParameterNode:
+        return ROS2BridgeParameterNode(super().getParameterNode())
+
+    def cleanup(self) -> None:
+        """Disconnect and stop observing the scene (tests, module unload)."""
+        self.disconnect()
+        self.removeObservers()
+
+    # --- connection ---------------------------------------------------------------------
+    def connect(self, host: str, port: int, keyFile: str = "") -> None:
+        self._key = read_key_file(keyFile) if keyFile else None  # a bad file: said now
+        if self.connector is None:
+            self.connector = slicer.mrmlScene.GetFirstNode(CONNECTOR_NAME,
+                                                           "vtkMRMLIGTLConnectorNode")
+        if self.connector is None:
+            self.connector = slicer.mrmlScene.AddNewNodeByClass("vtkMRMLIGTLConnectorNode",
+                                                                CONNECTOR_NAME)
+        self.connector.Stop()  # returns 0 when it was not running
+        self.connector.SetTypeClient(str(host), int(port))
+        if not self.connector.Start():
+            raise RuntimeError(f"3D Slicer's connector did not start (client of {host}:{port})")
+        self.removeObservers(self._onConnected)
+        self.addObserver(self.connector, slicer.vtkMRMLIGTLConnectorNode.ConnectedEvent,
+                         self._onConnected)
+        self._timer.start()
+        self._spinTimer.start()
+        if self.isConnected():
+            self._onConnected()
+
+    def disconnect(self) -> None:
+        self._timer.stop()
+        self._spinTimer.stop()
+        if self.connector is not None:
+            self.removeObservers(self._onConnected)
+            self.connector.Stop()
+        if self.transport is not None:
+            self.transport.close()
+        self.transport = None
+        self.client = None
+
+    def isConnected(self) -> bool:
+        """Connected, and the daemon's heartbeat comes (a pulled cable leaves the
+        connector's socket looking connected)."""
+        if self.transport is not None:
+            return self.transport.connected
+        return bool(self.connector is not None and self.connector.GetState()
+                    == slicer.vtkMRMLIGTLConnectorNode.StateConnected)
+
+    def isLinkSilent(self) -> bool:
+        """The connector's socket looks connected but the daemon's heartbeat stopped."""
+        return self.transport is not None and self.transport.silent
+
+    def isActive(self) -> bool:
+        """The connector runs (connected or retrying)."""
+        return bool(self.connector is not None and self.connector.GetState()
+                    != slicer.vtkMRMLIGTLConnectorNode.StateOff)
+
+    def _onConnected(self, caller: Any = None, event: Any = None) -> None:
+        if self.client is not None:
+            return  # the transport re-syncs the existing client itself
+        transport = ConnectorTransport(self.connector)
+        try:
+            # Callbacks wait for this module's spin: they run on the main thread.
+            client = Client(transport, callbacks="spin",
+                            key=self._key)  # sends hello (and the key)
+        except Exception as error:
+            transport.close()
+            if caller is None:
+                raise
+            log.exception("the daemon at %s did not answer hello", transport.address)
+            self.problems.append(f"The daemon at {transport.address} did not answer: {error}")
+            return
+        self.transport, self.client = transport, client
+        saved = self.getParameterNode().bridgeState
+        if saved:
+            try:
+                client.restore(BridgeState.from_json(saved))
+            except Exception as error:  # noqa: BLE001 - a bad saved bridge must not stop the rest
+                log.exception("restoring the saved bridges failed")
+                self.problems.append(f"Restoring the scene's saved bridges failed: {error}")
+
+    def requireClient(self) -> Client:
+        if self.client is None:
+            raise RuntimeError("not connected to the slicer-ros2-bridge daemon: press Connect "
+                               "(and start the daemon with `slicer-ros2-bridge run`)")
+        return self.client
+
+    # --- the reference's logic (vtkSlicerROS2Logic) -------------------------------------------
+    def referenceLogic(self) -> ROS2Logic:
+        """The reference's logic over this module's client; a script that calls it before
+        Connect gets connected to the settings' host and port (waiting up to 10 s)."""
+        if self.client is None and not self.isActive():
+            parameters = self.getParameterNode()
+            self.connect(parameters.host, parameters.port)
+        deadline = time.monotonic() + CONNECT_WAIT_S
+        while self.client is None and time.monotonic() < deadline:
+            slicer.app.processEvents()  # runs the connector's timer: it connects
+            time.sleep(0.01)
+        logic: ROS2Logic = self.requireClient().logic
+        return logic
+
+    def Spin(self) -> None:  # noqa: N802
+        """Run the callbacks of what arrived (the spin timer calls it every 20 ms)."""
+        if self.client is not None:
+            self.client.Spin()
+
+    def GetDefaultROS2Node(self) -> ROS2Node:  # noqa: N802 - the reference's name
+        return self.referenceLogic().GetDefaultROS2Node()
+
+    def CreateROS2Node(self, name: str = "") -> ROS2Node:  # noqa: N802
+        return self.referenceLogic().CreateROS2Node(name)
+
+    def AddRobot(self, robotName: str, parameterNodeName: str,  # noqa: N802,N803
+                 parameterName: str = "robot_description",  # noqa: N803
+                 fixedFrame: str = "", tfPrefix: str = "") -> RobotNode:  # noqa: N803
+        return self.referenceLogic().AddRobot(robotName, parameterNodeName, parameterName,
+                                              fixedFrame, tfPrefix)
+
+    def RemoveRobot(self, robotName: str) -> bool:  # noqa: N802,N803
+        return self.referenceLogic().RemoveRobot(robotName)
+
+    # --- robots and bridges -------------------------------------------------------------
+    def loadRobot(self, name: str, node: str, parameter: str) -> Robot:
+        robot = self.requireClient().robot(name, node=node, parameter=parameter)
+        self._saveState()
+        self.updateScene()
+        return robot
+
+    def removeRobot(self, name: str) -> None:
+        robot = self.requireClient().find("create_robot", name)
+        if robot is not None:
+            robot.remove()
+        for node in list(slicer.util.getNodesByClass("vtkMRMLNode")):
+            if node.GetScene() is None or node.GetAttribute("OpenIGTLink.ros2.robot") != name:
+                continue
+            self._removeNode(node)
+        sh = slicer.vtkMRMLSubjectHierarchyNode.GetSubjectHierarchyNode(slicer.mrmlScene)
+        folder = sh.GetItemByName(f"robot {name}")
+        if folder:
+            sh.RemoveItem(folder)
+        self._saveState()
+
+    def _removeNode(self, node: Any) -> None:
+        label = slicer.mrmlScene.GetFirstNode(f"{node.GetName()} label",
+                                              "vtkMRMLMarkupsFiducialNode")
+        if label is not None and node.IsA("vtkMRMLTextNode"):
+            self._removeNode(label)  # a text marker's labelled point goes with it
+        if self.transport is not None:
+            self.transport.unwatch(node)
+        self._planned.discard(node.GetID())
+        displays: list[Any] = []
+        if node.IsA("vtkMRMLDisplayableNode"):
+            displays = [node.GetNthDisplayNode(i) for i in range(node.GetNumberOfDisplayNodes())]
+        slicer.mrmlScene.RemoveNode(node)  # display nodes are not removed with it
+        for display in displays:
+            if display is not None:
+                slicer.mrmlScene.RemoveNode(display)
+
+    # --- markers ------------------------------------------------------------------------
+    def addMarkers(self, topic: str, type: str, fixed_frame: str) -> MarkerSubscriber:
+        """Show a Marker/MarkerArray/Path/PolygonStamped/PointStamped topic as models
+        placed by tf in `fixed_frame` (models under "ROS2 markers")."""
+        markers = self.requireClient().markers(topic, type, fixed_frame)
+        self._saveState()
+        self.updateScene()
+        return markers
+
+    def removeMarkers(self, topic: str) -> None:
+        client = self.requireClient()
+        markers = client.find("create_marker_subscriber", topic)
+        resolved = (markers.resolved_topic if isinstance(markers, MarkerSubscriber)
+                    else "/" + topic.lstrip("/"))
+        client.remove_bridge("create_marker_subscriber", topic)  # ours or another client's
+        for node in list(slicer.util.getNodesByClass("vtkMRMLNode")):
+            if node.GetScene() is not None and node.GetAttribute("OpenIGTLink.ros2.role") \
+                    in ("marker", "marker_topic") \
+                    and node.GetAttribute("OpenIGTLink.ros2.topic") == resolved:
+                self._removeNode(node)
+        self._saveState()
+
+    def _removeStaleMarkers(self) -> None:
+        """Remove the model nodes of markers the daemon deleted (its topic's list of live
+        markers no longer holds them: DELETE, DELETEALL, lifetime)."""
+        if self.client is None:
+            return
+        live = {r.resolved_topic: r.live for r in self.client.resources()
+                if isinstance(r, MarkerSubscriber) and r.live is not None}
+        if not live:
+            return
+        nodes: dict[str, dict[str, str]] = {}
+        by_name: dict[str, Any] = {}
+        for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
+            node = self.connector.GetIncomingMRMLNode(i)
+            if node is None or node.GetAttribute("OpenIGTLink.ros2.role") != "marker":
+                continue
+            attributes = {n: node.GetAttribute(n) for n in node.GetAttributeNames()}
+            nodes[node.GetName()] = metadata_from_attributes(attributes)
+            by_name[node.GetName()] = node
+        for device in stale_marker_nodes(nodes, live):
+            self._removeNode(by_name[device])
+
+    def _placeLabel(self, node: Any, plan: NodePlan,
+                    position: tuple[float, float, float]) -> None:
+        """A text marker (a text node) as a markups point labelled with its text, under
+        its frame's transform; updated each tick, since the text node's content changes."""
+        name = f"{node.GetName()} label"
+        label = slicer.mrmlScene.GetFirstNode(name, "vtkMRMLMarkupsFiducialNode")
+        if label is None:
+            label = slicer.mrmlScene.AddNewNodeByClass("vtkMRMLMarkupsFiducialNode", name)
+            label.SetDescription(plan.display_name)
+        if plan.label_parent is not None:
+            parent = slicer.mrmlScene.GetFirstNode(plan.label_parent,
+                                                   "vtkMRMLLinearTransformNode")
+            if parent is not None and label.GetTransformNodeID() != parent.GetID():
+                label.SetAndObserveTransformNodeID(parent.GetID())
+        x, y, z = position
+        text = node.GetText() or ""
+        if label.GetNumberOfControlPoints() == 0:
+            label.AddControlPoint(vtk.vtkVector3d(x, y, z), text)
+        else:
+            label.SetNthControlPointPosition(0, x, y, z)
+            label.SetNthControlPointLabel(0, text)
+        display = label.GetDisplayNode()
+        if display is not None and plan.colour is not None:
+            display.SetSelectedColor(*plan.colour)
+
+    def _updateMarkerLabels(self) -> None:
+        for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
+            node = self.connector.GetIncomingMRMLNode(i)
+            if node is None or not node.IsA("vtkMRMLTextNode") \
+                    or node.GetAttribute("OpenIGTLink.ros2.role") != "marker":
+                continue
+            attributes = {n: node.GetAttribute(n) for n in node.GetAttributeNames()}
+            plan = plan_node(node.GetName(), metadata_from_attributes(attributes))
+            if plan.label_position is not None:
+                self._placeLabel(node, plan, plan.label_position)
+
+    # --- Slicer -> ROS ------------------------------------------------------------------
+    def sendToROS(self, node: Any, topic: str, frame: str,
+                  rosType: Optional[str] = None) -> Publisher:
+        """Publish a model or markups node on ``topic`` in ``frame`` (metres in ROS):
+        creates the publisher (the daemon judges the topic and the frame) and pushes the
+        node's data once. Returns the Publisher."""
+        if node is None:
+            raise ValueError("select a model or markups node to send")
+        plan = plan_send(nodeKind(node), topic, rosType or None)
+        client = self.requireClient()
+        publisher = client.publisher(topic, plan.ros_type, frame=frame or None,
+                                     labels_topic=plan.labels_topic)
+        assert self.transport is not None  # made together with the client
+        self.transport.sendNode(publisher.device, plan, node)
+        self._saveState()
+        return publisher
+
+    # --- moving a robot -----------------------------------------------------------------
+    def _robot(self, robotName: str) -> Robot:
+        robot = self.requireClient().find("create_robot", robotName)
+        if not isinstance(robot, Robot):
+            raise RuntimeError(f"no robot {robotName!r}: load it first")
+        return robot
+
+    def jointSliders(self, robotName: str) -> list[JointSlider]:
+        """One slider spec per actuated joint of a loaded robot (mimic joints follow)."""
+        return joint_sliders(self._robot(robotName).joints(refresh=True)["joints"])
+
+    def setJoints(self, robotName: str, sliders: Sequence[JointSlider],
+                  values: Mapping[str, float]) -> dict[str, float]:
+        """Publish the joint state the sliders say (display units: degrees, mm); the
+        daemon checks the URDF limits and adds the mimic joints."""
+        return self._robot(robotName).set_joints(slider_positions(sliders, values))
+
+    def robotNames(self) -> list[str]:
+        if self.client is None:
+            return []
+        return [r.name for r in self.client.resources() if isinstance(r, Robot)]
+
+    def bridgeLines(self) -> list[str]:
+        return describe_bridges(self.requireClient().list_bridges())
+
+    def staleLines(self) -> list[str]:
+        """This client's streams that the daemon says are stale, for the GUI: a frozen
+        robot must not look live. The daemon pushes each change as a STATUS on the
+        stream's device (no listing, no command)."""
+        if self.client is None:
+            return []
+        return stale_lines(self.client.resources())
+
+    def robotLines(self) -> list[str]:
+        """Load progress and warnings of every robot, for the GUI (not only the log)."""
+        if self.client is None:
+            return []
+        return robot_status_lines([r for r in self.client.resources()
+                                   if isinstance(r, Robot)])
+
+    # --- scene building -----------------------------------------------------------------
+    def _onTimer(self) -> None:
+        if self.transport is not None:
+            self.transport.poll()
+        self.updateScene()
+
+    def updateScene(self) -> None:
+        """Place the connector's new nodes as the scene planner says."""
+        if self.connector is None or self.connector.GetScene() is None:
+            return
+        link_devices: dict[tuple[str, str], str] = {}
+        if self.client is not None:
+            for robot in self.client.resources():
+                if not isinstance(robot, Robot):
+                    continue
+                for link in robot.links.values():
+                    if link.device:
+                        link_devices[(robot.name, link.name)] = link.device
+        for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
+            node = self.connector.GetIncomingMRMLNode(i)
+            if node is None or node.GetID() in self._planned:
+                continue
+            attributes = {n: node.GetAttribute(n) for n in node.GetAttributeNames()}
+            metadata = metadata_from_attributes(attributes)
+            if "ros2.role" not in metadata:
+                continue  # attributes not there yet: next tick
+            plan = plan_node(node.GetName(), metadata, rgba_mean=self._rgbaMean(node),
+                             link_devices=link_devices)
+            if plan.parent_device is not None and node.IsA("vtkMRMLTransformableNode"):
+                parent = slicer.mrmlScene.GetFirstNode(plan.parent_device,
+                                                       "vtkMRMLLinearTransformNode")
+                if parent is None:
+                    continue  # its link transform has not arrived yet: next tick
+                node.SetAndObserveTransformNodeID(parent.GetID())
+            self._apply(node, plan)
+            if self.transport is not None:
+                self.transport.watch(node)
+            self._planned.add(node.GetID())
+        self._removeStaleMarkers()
+        self._updateMarkerLabels()
+
+    @staticmethod
+    def _rgbaMean(node: Any) -> Optional[list[float]]:
+        if not node.IsA("vtkMRMLModelNode") or node.GetPolyData() is None:
+            return None
+        array = node.GetPolyData().GetPointData().GetArray("RGBA")
+        if array is None or array.GetNumberOfTuples() == 0:
+            return None
+        mean = np.asarray(slicer.util.arrayFromModelPointData(node, "RGBA")).mean(axis=0)
+        return [float(value) for value in mean]
+
+    def _apply(self, node: Any, plan: NodePlan) -> None:
+        node.SetDescription(plan.display_name)  # node names stay = device names (see planner)
+        if plan.colour is not None and node.IsA("vtkMRMLModelNode"):
+            display = node.GetDisplayNode()
+            if display is None:
+                node.CreateDefaultDisplayNodes()
+                display = node.GetDisplayNode()
+            display.SetColor(*plan.colour)
+            display.SetOpacity(plan.opacity)
+            if plan.point_colours:  # per-point marker colours, shown as they are (0..1)
+                display.SetActiveScalar("RGBA", vtk.vtkAssignAttribute.POINT_DATA)
+                display.SetScalarRangeFlagFromString("UseDirectMapping")
+                display.SetScalarVisibility(True)
+            else:
+                display.SetScalarVisibility(False)
+        if plan.folder:
+            sh = slicer.vtkMRMLSubjectHierarchyNode.GetSubjectHierarchyNode(slicer.mrmlScene)
+            top_name = (ROBOTS_FOLDER if plan.kind.startswith("robot") else
+                        MARKERS_FOLDER if plan.kind in ("marker", "marker_text") else None)
+            top = sh.GetItemByName(top_name) if top_name else None
+            if top_name and not top:
+                top = sh.CreateFolderItem(sh.GetSceneItemID(), top_name)
+            parent = top or sh.GetSceneItemID()
+            folder = sh.GetItemChildWithName(parent, plan.folder)
+            if not folder:
+                folder = sh.CreateFolderItem(parent, plan.folder)
+            item = sh.GetItemByDataNode(node)
+            if item:
+                sh.SetItemParent(item, folder)
+
+    # --- saving -------------------------------------------------------------------------
+    def _saveState(self) -> None:
+        if self.client is not None:
+            self.getParameterNode().bridgeState = self.client.state().to_json()
+
+    def _onSave(self, caller: Any = None, event: Any = None) -> None:
+        self._saveState()
+
+    def _onSceneStartClose(self, caller: Any = None, event: Any = None) -> None:
+        # The connector node leaves the scene; no timer would process it any more.
+        self.disconnect()
+        self.connector = None
+        self._planned.clear()
+
+

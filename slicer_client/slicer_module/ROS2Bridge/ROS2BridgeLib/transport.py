@@ -1,0 +1,326 @@
+"""slicer_client's Transport over 3D Slicer's OpenIGTLinkIF connector node (client mode):
+the ROS2Bridge module's only link to the daemon. Slicer's objects (connector, nodes,
+commands) are untyped wrappers here: typed `Any`, what is taken from them is typed."""
+
+import logging
+import time
+from typing import Any, Callable, Mapping, Optional
+
+import slicer
+import vtk
+
+from protocol.liveness import HEARTBEAT_DEVICE
+from protocol.messages import Message
+from slicer_client.connection import ConnectionClosedError
+from slicer_client.connector_codec import (SLICER_TEXT_ENCODING, build_command,
+                                           message_from_node, outgoing_content, parse_reply)
+from slicer_client.send_plan import SendPlan
+from slicer_client.transport import TransportListener
+
+__all__ = ["ConnectorTransport"]
+
+log = logging.getLogger("ROS2Bridge")  # the module's logger, as before the split
+
+Observer = tuple[Any, int]  # (VTK object, observer tag)
+
+
+class ConnectorTransport:
+    """slicer_client's Transport over an OpenIGTLinkIF connector node (see transport.py).
+
+    Commands block the GUI thread (only a user's action sends one): `SendCommand` loops on
+    the IO connector's PeriodicProcess every 5 ms, so replies (and incoming data) keep
+    being read meanwhile; on a link found dead they are refused at once. Received data
+    comes from the connector's nodes, observed here and handed to the client as Messages.
+    The connector reconnects by itself; its Connected/Disconnected events are only
+    delivered while it is connected (the OpenIGTLinkIF logic's 5 ms timer skips
+    unconnected connectors), so a loss is also noticed by `poll()` from the module's timer.
+
+    A pulled cable: the connector's socket has no keepalive and never sends, so it stays
+    "connected". The daemon's heartbeat is a STATUS whose node the connector modifies once
+    per message; `poll()` takes `DEAD_AFTER_S` without one for a dead link. The connector
+    keeps its socket: the daemon resets its end and knocks it once the cable is back
+    (bridge/knock.py), and the connector then reconnects at once. (Restarting the connector
+    here would start a blocking connect() with no timeout, which a later Stop() waits for.)
+    """
+
+    watches_silence = True
+    # The connector puts each value into the scene itself, whatever its age: the daemon
+    # cuts a dead link before its backlog ages past the freshness bound.
+    drops_late_values = False
+
+    def __init__(self, connector: Any, clock: Callable[[], float] = time.monotonic) -> None:
+        self.connector = connector
+        self.address = f"{connector.GetServerHostname()}:{connector.GetServerPort()}"
+        self._clock = clock
+        self._listener: Optional[TransportListener] = None
+        self._node_observers: dict[str, Observer] = {}  # node id -> (node, tag)
+        self._connector_tags: list[int] = []
+        self._first = True
+        self._up_now = False  # the listener was told "connected" and not "lost" since
+        self._dead_after = 0.0  # seconds without a heartbeat that mean a dead link (0: off)
+        self._heard = 0.0  # when the last heartbeat came (clock)
+        # When the heartbeat went missing on a socket still up (clock); None while heard.
+        self._silent_since: Optional[float] = None
+        self._heartbeat: Optional[Observer] = None  # (node, tag) of the heartbeat's STATUS node
+        self.heartbeats = 0  # heard on this transport
+
+    @property
+    def connected(self) -> bool:
+        return self._socket_up() and self._silent_since is None
+
+    @property
+    def silent(self) -> bool:
+        """The heartbeat stopped on a socket the connector still holds."""
+        return self._silent_since is not None
+
+    def _socket_up(self) -> bool:
+        return bool(self.connector.GetState() == slicer.vtkMRMLIGTLConnectorNode.StateConnected)
+
+    def set_listener(self, listener: TransportListener) -> None:
+        self._listener = listener
+        for event, handler in ((slicer.vtkMRMLIGTLConnectorNode.ConnectedEvent,
+                                self._onConnectedEvent),
+                               (slicer.vtkMRMLIGTLConnectorNode.DisconnectedEvent,
+                                self._onDisconnectedEvent)):
+            self._connector_tags.append(self.connector.AddObserver(event, handler))
+        if self.connected:
+            self._up()  # errors reach whoever made the Client
+
+    def _up(self) -> None:
+        assert self._listener is not None  # only called with a listener set
+        first, self._first = self._first, False
+        self._up_now = True
+        self._silent_since = None
+        self._listener.on_connected(self.command, first)
+
+    def _onConnectedEvent(self, caller: Any = None, event: Any = None) -> None:
+        if self._up_now or self._listener is None:
+            return
+        self._silent_since = None  # a new socket
+        try:
+            self._up()
+        except Exception:  # noqa: BLE001 - inside a VTK callback: log, keep the connector
+            log.exception("re-creating the bridges on %s failed", self.address)
+
+    def _onDisconnectedEvent(self, caller: Any = None, event: Any = None) -> None:
+        self._down("the connector lost the daemon (it retries itself)")
+
+    def expect_data_within(self, seconds: float) -> None:
+        """The daemon sends this connection a heartbeat (hello asked for it)."""
+        self._dead_after = max(0.0, float(seconds))
+        self._heard = self._clock()
+
+    def _watchStatusNodes(self) -> None:
+        """Observe the STATUS nodes the connector makes: the heartbeat's (counted), and
+        each stream's stale/live condition (handed to the client, which marks the
+        subscriber stale as slicer_client does)."""
+        for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
+            node = self.connector.GetIncomingMRMLNode(i)
+            if node is None or not node.IsA("vtkMRMLIGTLStatusNode"):
+                continue
+            if node.GetName() != HEARTBEAT_DEVICE:
+                self.watch(node)
+            elif self._heartbeat is None or self._heartbeat[0] is not node:
+                if self._heartbeat is not None:
+                    self._heartbeat[0].RemoveObserver(self._heartbeat[1])
+                tag = node.AddObserver(vtk.vtkCommand.ModifiedEvent, self._onHeartbeat)
+                self._heartbeat = (node, tag)
+                node.SetHideFromEditors(True)  # plumbing, not data for the user
+
+    def _onHeartbeat(self, caller: Any = None, event: Any = None) -> None:
+        self._heard = self._clock()
+        self.heartbeats += 1
+
+    def poll(self) -> None:
+        """Called from the module's timer: report a loss the connector has not yet sent,
+        or a heartbeat gone missing; and a heartbeat back on the same socket."""
+        if not self._socket_up():
+            self._silent_since = None
+            self._down("the connector lost the daemon (it retries itself)")
+            return
+        if self._listener is None:
+            return
+        self.connector.PeriodicProcess()  # what has come is counted before judging silence
+        self._watchStatusNodes()
+        if not self._dead_after:
+            return
+        now = self._clock()
+        if self._silent_since is not None:
+            if self._heard > self._silent_since:  # the same socket carries data again
+                try:
+                    self._up()
+                except Exception:  # noqa: BLE001 - the next loss or reconnect retries
+                    log.exception("re-creating the bridges on %s failed", self.address)
+            return
+        silence = now - self._heard
+        if self._up_now and silence > self._dead_after:
+            self._silent_since = now
+            self._down(f"no heartbeat from the daemon for {silence:.1f} s: the link to "
+                       f"{self.address} is down (a pulled cable?); the connector reconnects "
+                       "when it is back")
+
+    def _down(self, reason: str) -> None:
+        if not self._up_now or self._listener is None:
+            return
+        self._up_now = False
+        log.warning("%s", reason)
+        self._listener.on_disconnected(reason)
+
+    def _requireConnected(self, what: str) -> None:
+        if self._silent_since is not None:
+            raise ConnectionClosedError(
+                f"{what}: no heartbeat from the daemon at {self.address} for more than "
+                f"{self._dead_after:g} s (the link is down)")
+        if not self._socket_up():
+            raise ConnectionClosedError(
+                f"{what}: 3D Slicer's connector is not connected to the daemon at "
+                f"{self.address} (it keeps retrying; start it with `slicer-ros2-bridge run`)")
+
+    def command(self, op: str, arguments: Optional[Mapping[str, Any]] = None, *,
+                timeout: float = 5.0) -> dict[str, Any]:
+        name, text = build_command(op, arguments)
+        self._requireConnected(op)  # a silent link: refused at once, the GUI never waits
+        cmd = slicer.vtkSlicerOpenIGTLinkCommand()
+        cmd.SetName(name)
+        cmd.SetCommandContent(text)
+        cmd.SetTimeoutSec(float(timeout))
+        cmd.SetBlocking(True)
+        self.connector.SendCommand(cmd)  # returns once replied, expired, or at once if not sent
+        return parse_reply(op, cmd.GetResponseContent() or "", status=cmd.GetCommandStatus(),
+                           timeout=timeout, error_message=cmd.GetErrorMessage() or "")
+
+    def send(self, message: Message) -> None:
+        """Stream a TRANSFORM or STRING under its device name through an outgoing node.
+        The connector pushes a registered node itself when its content changes (it
+        observes TransformModifiedEvent / TextModifiedEvent); an unchanged content is
+        pushed here, so every call sends exactly one message."""
+        class_name, payload = outgoing_content(message)  # raises for what cannot go
+        self._requireConnected(f"sending to {message.device_name!r}")
+        node = self._outgoing(class_name, message.device_name)
+        if class_name == "vtkMRMLLinearTransformNode":
+            event = slicer.vtkMRMLTransformNode.TransformModifiedEvent
+        else:
+            event = slicer.vtkMRMLTextNode.TextModifiedEvent
+        was_modifying = node.StartModify()
+        if class_name == "vtkMRMLLinearTransformNode":
+            matrix = vtk.vtkMatrix4x4()
+            for i in range(4):
+                for j in range(4):
+                    matrix.SetElement(i, j, float(payload[i][j]))
+            node.SetMatrixTransformToParent(matrix)
+        else:
+            node.SetText(payload, SLICER_TEXT_ENCODING)
+        pushes_itself = not was_modifying and node.GetCustomModifiedEventPending(event) > 0
+        node.EndModify(was_modifying)
+        if not pushes_itself:
+            self.connector.PushNode(node)
+
+    def sendNode(self, device: str, plan: SendPlan, node: Any) -> None:
+        """Push ``node``'s data to the daemon under ``device`` as ``plan`` says
+        (slicer_client/send_plan.py): a model node with a world-space, triangulated copy
+        of the surface or the curve's polyline (POLYDATA), or a point-list node with the
+        control points' world positions and labels (POINT). One push per call: the
+        connector pushes a registered node on its own modified event when EndModify
+        fires one, else PushNode does it here."""
+        self._requireConnected(f"sending to {device!r}")
+        out = self._outgoing(plan.outgoing_class, device)
+        if plan.outgoing_class == "vtkMRMLModelNode":
+            event = slicer.vtkMRMLModelNode.MeshModifiedEvent
+        else:
+            event = slicer.vtkMRMLMarkupsNode.PointModifiedEvent
+        was_modifying = out.StartModify()
+        if plan.source == "control_points":
+            out.RemoveAllControlPoints()
+            position: list[float] = [0.0, 0.0, 0.0]
+            for index in range(node.GetNumberOfControlPoints()):
+                node.GetNthControlPointPositionWorld(index, position)
+                out.AddControlPoint(position[0], position[1], position[2],
+                                    node.GetNthControlPointLabel(index))
+        else:
+            polydata = vtk.vtkPolyData()
+            polydata.DeepCopy(node.GetCurveWorld() if plan.source == "curve"
+                              else _worldSurface(node))
+            out.SetAndObservePolyData(polydata)
+        pushes_itself = not was_modifying and out.GetCustomModifiedEventPending(event) > 0
+        out.EndModify(was_modifying)
+        if not pushes_itself:
+            self.connector.PushNode(out)
+
+    def _outgoing(self, class_name: str, device: str) -> Any:
+        node = slicer.mrmlScene.GetFirstNode(device, class_name)
+        if node is None:
+            node = slicer.mrmlScene.AddNewNodeByClass(class_name, device)
+        registered = {self.connector.GetOutgoingMRMLNode(i).GetID()
+                      for i in range(self.connector.GetNumberOfOutgoingMRMLNodes())
+                      if self.connector.GetOutgoingMRMLNode(i) is not None}
+        if node.GetID() not in registered and not self.connector.RegisterOutgoingMRMLNode(node):
+            raise RuntimeError(f"3D Slicer's connector refused {class_name} {device!r} as an "
+                               "outgoing node")
+        return node
+
+    def watch(self, node: Any) -> None:
+        """Forward a connector node's updates to the client as Messages. The connector
+        ends its node modification once per received message, so ModifiedEvent (text) and
+        TransformModifiedEvent (transforms) fire once per message, or once per batch for
+        messages read during a blocking command."""
+        if node.GetID() in self._node_observers:
+            return
+        event = (slicer.vtkMRMLTransformNode.TransformModifiedEvent
+                 if node.IsA("vtkMRMLTransformNode") else vtk.vtkCommand.ModifiedEvent)
+        tag = node.AddObserver(event, lambda caller, _event: self._forward(caller))
+        self._node_observers[node.GetID()] = (node, tag)
+        self._forward(node)
+
+    def unwatch(self, node: Any) -> None:
+        entry = self._node_observers.pop(node.GetID(), None)
+        if entry is not None:
+            entry[0].RemoveObserver(entry[1])
+
+    def _forward(self, node: Any) -> None:
+        attributes = {name: node.GetAttribute(name) for name in node.GetAttributeNames()}
+        if node.IsA("vtkMRMLLinearTransformNode"):
+            matrix = vtk.vtkMatrix4x4()
+            node.GetMatrixTransformToParent(matrix)
+            values = [[matrix.GetElement(i, j) for j in range(4)] for i in range(4)]
+            message = message_from_node(node.GetName(), attributes, matrix=values)
+        elif node.IsA("vtkMRMLTextNode"):
+            message = message_from_node(node.GetName(), attributes, text=node.GetText())
+        elif node.IsA("vtkMRMLIGTLStatusNode"):
+            message = message_from_node(node.GetName(), attributes, status=(
+                node.GetCode(), node.GetErrorName() or "", node.GetStatusString() or ""))
+        else:
+            return
+        if message is not None and self._listener is not None:
+            try:
+                self._listener.on_message(message)
+            except Exception:  # noqa: BLE001 - inside a VTK callback
+                log.exception("handling %s failed", node.GetName())
+
+    def close(self) -> None:
+        for tag in self._connector_tags:
+            self.connector.RemoveObserver(tag)
+        self._connector_tags = []
+        if self._heartbeat is not None:
+            self._heartbeat[0].RemoveObserver(self._heartbeat[1])
+            self._heartbeat = None
+        for node, tag in self._node_observers.values():
+            node.RemoveObserver(tag)
+        self._node_observers.clear()
+        self._listener = None
+
+
+def _worldSurface(modelNode: Any) -> Any:
+    """A model's surface in world coordinates (its parent transforms applied), as
+    triangles: the daemon's Mesh/Marker codecs refuse triangle strips."""
+    transform = vtk.vtkGeneralTransform()
+    slicer.vtkMRMLTransformNode.GetTransformBetweenNodes(
+        modelNode.GetParentTransformNode(), None, transform)
+    toWorld = vtk.vtkTransformPolyDataFilter()
+    toWorld.SetTransform(transform)
+    toWorld.SetInputData(modelNode.GetPolyData())
+    triangles = vtk.vtkTriangleFilter()
+    triangles.SetInputConnection(toWorld.GetOutputPort())
+    triangles.Update()
+    return triangles.GetOutput()
+
+
