@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo run test bench fuzz lint clean wheel client-wheel
+.PHONY: setup demo run test test-fast bench fuzz lint clean wheel client-wheel
 
 setup:
 	@$(PYTHON) tools/setup_env.py
@@ -19,6 +19,11 @@ run: setup
 
 test: setup
 	$(BIN)/python -m pytest
+
+# The unit and in-process tiers only (no daemon, ROS peer or build is started): for working
+# in a loop. `make test` is the whole suite, as CI runs it.
+test-fast: setup
+	$(BIN)/python -m pytest -m "not integration"
 
 bench: setup
 	@for script in bench/bench_*.py; do echo "== $$script"; $(BIN)/python $$script || exit 1; done

@@ -10,6 +10,9 @@
   starts, built once into a cache (interface_builds.py); skips where they cannot be built.
 - every test fails if it leaves a child process of the test runner behind.
 - property tests (hypothesis) have no per-example deadline.
+- tiers: a test that starts processes (the daemon, ROS peers, Debian's C++ examples, a
+  build) is marked `integration`; the rest, unit and in-process tests, are the fast tier
+  that `make test-fast` runs (`-m "not integration"`).
 """
 
 from __future__ import annotations
@@ -47,6 +50,20 @@ settings.load_profile("suite")
 def pytest_report_header(config: pytest.Config) -> str:
     return (f"ROS_DOMAIN_ID={_DOMAIN_ID} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST "
             f"ROS_LOG_DIR={os.environ['ROS_LOG_DIR']}")
+
+
+# A test that uses one of these starts processes, as does every packaging test (builds,
+# installs); a test that starts them otherwise says so itself (`pytest.mark.integration`).
+_PROCESS_FIXTURES = frozenset({"processes", "module_processes", "turtlesim_interfaces"})
+_PACKAGING = Path(__file__).parent / "packaging"
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        fixtures = set(getattr(item, "fixturenames", ()))
+        if (fixtures & _PROCESS_FIXTURES or item.get_closest_marker("interop") is not None
+                or _PACKAGING in item.path.parents):
+            item.add_marker(pytest.mark.integration)
 
 
 @pytest.fixture

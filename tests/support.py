@@ -35,6 +35,8 @@ def scaled(seconds: float) -> float:
 
 
 def pick_free_port() -> int:
+    """A port nobody listens on now. Another process may take it before the caller binds
+    it: where the daemon may choose (`start_daemon`), it binds port 0 instead."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
@@ -195,10 +197,13 @@ class RunningDaemon:
 
 
 def start_daemon(processes: Processes, *args: str) -> RunningDaemon:
-    port = pick_free_port()
-    child = processes.bridge("run", "--port", str(port), *args)
-    child.wait_for_output("listening on", timeout=30)
-    return RunningDaemon(child, port)
+    # The kernel picks the port as the daemon binds it: a port picked here and bound later
+    # could be taken in between by any other process of a busy machine.
+    child = processes.bridge("run", "--port", "0", *args)
+    line = child.wait_for_output(" (OpenIGTLink); ROS node", timeout=30)
+    listening = re.search(r"listening on \S+:(\d+) \(OpenIGTLink\)", line)
+    assert listening, line
+    return RunningDaemon(child, int(listening.group(1)))
 
 
 def assert_clean_exit(daemon: RunningDaemon) -> None:

@@ -1,12 +1,16 @@
-"""The code stays lint-clean (ruff: pyflakes, pycodestyle, bugbear) and `protocol/` stays
-type-clean under mypy --strict, as configured in pyproject.toml."""
+"""The code stays lint-clean (ruff: pyflakes, pycodestyle, bugbear) and type-clean under
+mypy --strict (protocol/, bridge/ and slicer_client/, as configured in pyproject.toml)."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 
+import pytest
+
 from support import REPO
+
+pytestmark = pytest.mark.integration  # starts processes
 
 
 def run_tool(*argv: str) -> subprocess.CompletedProcess[str]:
@@ -20,7 +24,7 @@ def test_ruff_finds_nothing() -> None:
     assert result.returncode == 0, result.stdout + result.stderr
 
 
-def test_protocol_is_mypy_strict_clean() -> None:
+def test_the_packages_are_mypy_strict_clean() -> None:
     result = run_tool("mypy")
     assert result.returncode == 0, result.stdout + result.stderr
     assert "Success" in result.stdout

@@ -8,7 +8,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from support import REPO, Processes, assert_clean_exit, pick_free_port, start_daemon
+
+pytestmark = pytest.mark.integration  # starts processes
 
 
 def test_run_listens_and_stops_on_sigint(processes: Processes) -> None:

@@ -272,6 +272,7 @@ print(" ".join(texts) or "nothing", flush=True)
 """
 
 
+@pytest.mark.integration
 def test_bursts_reach_a_client_that_keeps_up_whole_and_in_order(served: _Served) -> None:
     # The client reads in a process of its own, as a real one does, and keeps up: bursts
     # of 300 (a driver's batch), 10 ms apart, reach it whole and in order. (A client whose

@@ -55,6 +55,7 @@ def test_a_remapped_topic_is_bridged_from_where_ros_puts_it(processes: Processes
     (["-p", "read_only:=3"], "-p read_only: expected true or false, got 3"),
     (["-p", f"port:={pick_free_port()}", "--no-such-ros-flag"], "--no-such-ros-flag"),
 ])
+@pytest.mark.integration
 def test_bad_ros_args_are_one_line_and_exit_2(ros_args: list[str], says: str) -> None:
     # No --port here: it would win over -p port and hide the bad value.
     result = subprocess.run([sys.executable, "-m", "bridge.cli", "run", "--ros-args", *ros_args],

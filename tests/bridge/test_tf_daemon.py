@@ -153,14 +153,18 @@ def test_lookup_is_sent_only_when_the_transform_changes(
     p = fresh("quiet")
     device = client.command("create_tf_lookup",
                             {"parent": p + "world", "child": p + "tool"})["device"]
-    chain = processes.python("chain", "tf_chain_publisher.py", p, "--rate", "100",
-                             "--count", "150")
+    processes.python("chain", "tf_chain_publisher.py", p, "--rate", "100",
+                     "--count", "150", "--then-step")
     client.wait_for(device, is_matrix(WORLD_TOOL), timeout=20)
-    chain.wait_for_output("DONE", timeout=20)
-    # 150 /tf messages with new stamps and the same values: one TRANSFORM, no repeats.
-    # (The reference re-sends every 20 ms whatever happens.) Then a quiet second.
-    time.sleep(1.0)
-    assert len(counter.of(device)) == 1, [m.type_name for m in counter.of(device)]
+    # 150 /tf messages with new stamps and the same values, then a 10 mm step: one
+    # TRANSFORM for the 150, none repeated (the reference re-sends every 20 ms whatever
+    # happens), then the step's. The step comes last from the same writer, so once it is
+    # here every message before it was read: the count is not a matter of waiting long.
+    stepped = WORLD_BASE @ BASE_LINK1 @ link1_tool(260.0)
+    wait_until(lambda: any(is_matrix(stepped)(m) for m in counter.of(device)), timeout=20,
+               what="the step's TRANSFORM")
+    assert [is_matrix(WORLD_TOOL)(m) for m in counter.of(device)] == [True, False], \
+        [m.type_name for m in counter.of(device)]
 
 
 def test_a_moving_chain_streams_every_change_and_a_rate_cap_holds(
@@ -257,7 +261,8 @@ def test_disconnected_trees_report_one_status_not_one_per_update(
         processes: Processes) -> None:
     client, counter = counted
     p, q = fresh("tree"), fresh("tree")
-    processes.python("tree1", "tf_chain_publisher.py", p, "--rate", "50", "--no-static")
+    processes.python("tree1", "tf_chain_publisher.py", p, "--rate", "50", "--no-static",
+                     "--moving")
     processes.python("tree2", "tf_chain_publisher.py", q, "--rate", "50", "--no-static")
     for prefix in (p, q):
         client.command("lookup_transform", {"parent": prefix + "base", "child": prefix + "tool",
@@ -271,8 +276,14 @@ def test_disconnected_trees_report_one_status_not_one_per_update(
         f"Could not find a connection between '{p}tool' and '{q}tool' because they are not"
         " part of the same tree.Tf has two or more unconnected trees.")
     assert status.metadata["ros2.parent"] == p + "tool"
-    # Both trees keep updating at 50 Hz: still that one STATUS.
-    time.sleep(1.0)
+    # Both trees keep updating at 50 Hz: still that one STATUS. A lookup within the moving
+    # tree witnesses the updates the daemon has read since (each moves its tool).
+    witness = client.command("create_tf_lookup",
+                             {"parent": p + "base", "child": p + "tool"})["device"]
+    client.wait_for(witness, timeout=10)
+    seen = len(counter.of(witness))
+    wait_until(lambda: len(counter.of(witness)) >= seen + 25, timeout=20,
+               what="25 more updates of the moving tree")
     assert len(counter.of(device)) == 1
     listed = [b for b in client.command("list_bridges")["bridges"] if b.get("device") == device]
     assert listed[0]["state"] == "error" and "unconnected trees" in listed[0]["error"]

@@ -17,6 +17,8 @@ from interface_builds import BuiltInterfaces
 from reference_suite import SUITE, as_the_suite, ros2, stop_group
 from support import Child, Processes, wait_until
 
+pytestmark = pytest.mark.integration  # starts processes
+
 def group_members(pgid: int) -> list[int]:
     members = []
     for entry in filter(str.isdigit, os.listdir("/proc")):

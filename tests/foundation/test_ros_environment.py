@@ -71,6 +71,7 @@ def test_tf2_msgs_error_constants_match_upstream() -> None:
     assert error.error == 2 and error.error_string == "no path"
 
 
+@pytest.mark.integration
 def test_cli_help_lists_the_commands() -> None:
     result = subprocess.run([sys.executable, "-m", "bridge.cli", "--help"], cwd=REPO,
                             capture_output=True, text=True, timeout=60)

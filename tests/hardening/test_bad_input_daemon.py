@@ -1,5 +1,5 @@
 """Bad input against a running daemon: one client sends malformed bytes over a raw socket
-while another keeps receiving a tf stream. The other keeps its rate, the daemon keeps
+while another keeps receiving a tf stream. The other keeps receiving, the daemon keeps
 answering, every bad message gets a typed STATUS, and nothing is logged as a bug."""
 
 from __future__ import annotations
@@ -17,10 +17,11 @@ from hardening_tools import (RawClient, command_bytes, framing_breakers, header,
                              malformed_inputs, read_until_closed, transform_bytes)
 from protocol.messages import Message, StatusCode
 from slicer_client.connection import Connection
-from support import Processes, RunningDaemon, assert_clean_exit, start_daemon
+from support import Processes, RunningDaemon, assert_clean_exit, start_daemon, wait_until
 
 pytestmark = pytest.mark.ros
 RATE_HZ = 200
+ATTACK_ROUNDS = 10
 
 
 @pytest.fixture(scope="module")
@@ -40,11 +41,6 @@ class Counter:
         if message.device_name == self.device:
             with self.lock:
                 self.count += 1
-
-    def rate_over(self, seconds: float) -> float:
-        start = self.count
-        time.sleep(seconds)  # a measurement window, not synchronisation
-        return (self.count - start) / seconds
 
 
 def attack_once(port: int, devices: list[str]) -> None:
@@ -91,19 +87,17 @@ def test_malformed_input_from_one_client_does_not_disturb_another(
                                 str(RATE_HZ), "--prefix", "bi_", "--seconds", "60")
         peer.wait_for_output("READY", timeout=30)
         fast.wait_for(counter.device, timeout=20)
-        before = counter.rate_over(2.0)
-        assert before > 0.25 * RATE_HZ, f"only {before:.0f}/s before the attack"
-
-        start, attacks = counter.count, 0
-        began = time.monotonic()
-        while time.monotonic() - began < 4.0:
+        # The stream goes on through every round: after each, newer values still arrive.
+        # (How fast it goes under attack is a figure for bench/, not a test's assertion.)
+        began, start = time.monotonic(), counter.count
+        for _ in range(ATTACK_ROUNDS):
+            reached = counter.count
             attack_once(daemon.port, [pose, tf])
-            attacks += 1
-        during = (counter.count - start) / (time.monotonic() - began)
-        print(f"\nstream {before:.0f}/s before, {during:.0f}/s during {attacks} attack rounds "
-              f"({len(malformed_inputs()) + 6} bad messages, {len(framing_breakers())} "
-              f"framing breakers and 4 mid-message disconnects each)")
-        assert during > 0.8 * before, f"{during:.0f}/s during the attack, {before:.0f} before"
+            wait_until(lambda reached=reached: counter.count > reached, timeout=10,
+                       what="the other client's stream after an attack round")
+        print(f"\nstream {(counter.count - start) / (time.monotonic() - began):.0f}/s during "
+              f"{ATTACK_ROUNDS} attack rounds ({len(malformed_inputs()) + 6} bad messages, "
+              f"{len(framing_breakers())} framing breakers and 4 mid-message disconnects each)")
         assert fast.command("hello")["version"]
         assert not fast.closed
     finally:

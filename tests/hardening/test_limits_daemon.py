@@ -11,6 +11,8 @@ import sys
 import time
 from typing import Any
 
+import pytest
+
 from hardening_tools import RawClient, command_bytes, header, is_reply, read_until_closed
 from protocol.messages import StatusCode
 from slicer_client.connection import Connection
@@ -156,6 +158,7 @@ def test_half_sent_bodies_share_one_budget(processes: Processes) -> None:
     assert "Traceback" not in daemon.child.output()
 
 
+@pytest.mark.integration
 def test_a_budget_below_the_message_size_is_refused_at_start() -> None:
     result = subprocess.run([sys.executable, "-m", "bridge.cli", "run", "--port",
                              str(pick_free_port()), "--max-message-bytes", "1000",

@@ -65,6 +65,7 @@ def keyed_daemon(module_processes: Processes, key_file: Path,
     assert_clean_exit(running)
 
 
+@pytest.mark.integration
 def test_keygen_writes_an_owner_only_key_and_never_replaces_one(tmp_path: Path) -> None:
     path = tmp_path / "k"
     made = keygen(path)

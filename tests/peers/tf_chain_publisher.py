@@ -3,11 +3,13 @@ published once) and PREFIXbase -> PREFIXlink1 -> PREFIXtool (dynamic, /tf, one T
 holding both links per tick).
 
 usage: tf_chain_publisher.py PREFIX [--rate HZ] [--count N] [--no-static] [--static-only]
-                             [--moving]
+                             [--moving] [--then-step]
 static  world -> base : translation (0.1, 0.2, 0.3) m, identity rotation
 dynamic base -> link1 : translation (0.0, 0.0, 0.5) m, 90 degrees about z
 dynamic link1 -> tool : translation (0.25 + n * 1e-4 if --moving else 0.25, 0.0, 0.0) m,
                         90 degrees about x   (n = 1, 2, ... the tick number)
+--then-step: after the --count ticks, one more with link1 -> tool at x = 0.26 m (a 10 mm
+step): a reader that sees it knows every tick before it was read (one writer, in order).
 Stamps are the node clock's now. Waits (up to 20 s) for a /tf subscriber before the first
 tick. Prints READY, SENT <n> every 100 ticks, then SENT <n> DONE after --count ticks, and
 stays alive (quiet) until stopped.
@@ -43,6 +45,7 @@ def main() -> None:
     parser.add_argument("--no-static", action="store_true")
     parser.add_argument("--static-only", action="store_true")
     parser.add_argument("--moving", action="store_true")
+    parser.add_argument("--then-step", action="store_true")
     args = parser.parse_args()
     p = args.prefix
     rclpy.init()
@@ -69,10 +72,13 @@ def main() -> None:
         period = 1.0 / args.rate
         next_time = time.monotonic()
         n = 0
-        while rclpy.ok() and (not args.count or n < args.count):
+        ticks = args.count + 1 if args.count and args.then_step else args.count
+        while rclpy.ok() and (not ticks or n < ticks):
             n += 1
             stamp = node.get_clock().now().to_msg()
             x = 0.25 + (n * 1e-4 if args.moving else 0.0)
+            if args.then_step and n > args.count:
+                x = 0.26
             dynamic_pub.publish(TFMessage(transforms=[
                 transform(stamp, p + "base", p + "link1", (0.0, 0.0, 0.5), (0.0, 0.0, HALF, HALF)),
                 transform(stamp, p + "link1", p + "tool", (x, 0.0, 0.0), (HALF, 0.0, 0.0, HALF)),
