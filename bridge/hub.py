@@ -3,11 +3,11 @@
 Bridges are daemon-wide, as with an OpenIGTLink server in 3D Slicer: every client receives
 every streamed device (except a device with an audience: a client's own message stream
 goes to the clients that joined it, `join`), and a client that connects gets the current
-state at once (the
-newest value of each streamed device, and every persistent one-shot such as a robot mesh),
-except what a late ROS subscriber would not get either: the newest image or point cloud of
-a volatile topic is not kept once sent (`keep_latest`), as it may be tens of MB and the next
-one is on its way.
+state at once (the newest value of each streamed device, and every persistent one-shot such
+as a robot mesh), except what a late ROS subscriber would not get either: a large value
+(an image, a point cloud) of a volatile topic is not kept once sent (`set_volatile`), as it
+may be tens of MB and the next one is on its way. Whether a message is large is decided in
+one place, `frame_for`.
 
 Threads: the asyncio loop owns the clients and their buffers. ROS callbacks run in an
 executor thread and hand values over through a `StreamChannel` (`post_frame`):
@@ -40,7 +40,7 @@ from collections import deque
 from contextlib import contextmanager
 from typing import Callable, Iterator, Optional, Protocol
 
-from bridge.outbox import Frame
+from bridge.outbox import BulkFrame, Frame
 from bridge.security import WriteGrant
 from protocol.freshness import daemon_clock_ms
 from protocol.messages import Message
@@ -52,6 +52,15 @@ MAX_PENDING = 4096
 # Larger messages (images, point clouds) are not queued: while the loop is behind, a newer
 # one replaces the one waiting for its device, as a stale frame is not worth its encoding.
 LARGE_MESSAGE_BYTES = 64 * 1024
+
+
+def frame_for(message: Message) -> Frame:
+    """The frame `message` is sent as: the one place that decides whether a message is
+    large (a `BulkFrame`: never queued behind another, kept as wire parts, not kept for
+    later clients of a volatile device) or small."""
+    if approximate_size(message) > LARGE_MESSAGE_BYTES:
+        return BulkFrame(message)
+    return Frame(message)
 
 
 def approximate_size(message: Message) -> int:
@@ -108,7 +117,7 @@ class Hub:
         self.clients: set[Subscriber] = set()
         self._client_tuple: tuple[Subscriber, ...] = ()  # what other threads iterate
         self._latest: dict[str, Frame] = {}
-        self._not_kept: set[str] = set()  # devices whose newest value is not kept
+        self._volatile: set[str] = set()  # devices whose newest large value is not kept
         self._persistent: dict[str, Frame] = {}
         # A device's condition while it is not normal (a stale stream's STATUS): sent to
         # its clients when it changes, and to a client that connects or joins later.
@@ -198,7 +207,7 @@ class Hub:
     # --- outbound (loop thread) ------------------------------------------------------------
     def stream(self, message: Message) -> None:
         """Send the newest value of a streamed device to every client, respecting its cap."""
-        self.stream_frame(message.device_name, Frame(message))
+        self.stream_frame(message.device_name, frame_for(message))
 
     def stream_frame(self, device: str, frame: Frame) -> None:
         """`stream` for a value already made into a `Frame` (a hot path's `TemplateFrame`)."""
@@ -215,7 +224,9 @@ class Hub:
                     self._held[device] = frame
                     return
                 self._last_sent[device] = now
-        if device not in self._not_kept:
+        if isinstance(frame, BulkFrame) and device in self._volatile:
+            self._latest.pop(device, None)  # a later client gets no stale copy of it either
+        else:
             self._latest[device] = frame
         self.streamed += 1
         for client in self._recipients(device):
@@ -261,13 +272,17 @@ class Hub:
         for client in self._recipients(device):
             client.send_once(sent)
 
-    def keep_latest(self, device: str, keep: bool) -> None:
-        """Whether clients that connect later get ``device``'s newest value (default)."""
-        if keep:
-            self._not_kept.discard(device)
+    def set_volatile(self, device: str, volatile: bool) -> None:
+        """A volatile device (a volatile ROS topic's) keeps its newest value for clients
+        that connect later only while it is small: a large one (an image, a cloud; tens of
+        MB, and the next is on its way) is not kept, as a late ROS subscriber would not
+        get it either. Devices are not volatile by default."""
+        if volatile:
+            self._volatile.add(device)
+            if isinstance(self._latest.get(device), BulkFrame):
+                self._latest.pop(device, None)
         else:
-            self._not_kept.add(device)
-            self._latest.pop(device, None)
+            self._volatile.discard(device)
 
     def set_rate_cap(self, device: str, max_hz: float | None) -> None:
         if max_hz:
@@ -286,7 +301,7 @@ class Hub:
         self._persistent.pop(device, None)
         self._condition.pop(device, None)
         self._audience.pop(device, None)
-        self._not_kept.discard(device)
+        self._volatile.discard(device)
         self._held.pop(device, None)
         self._min_interval.pop(device, None)
         self._last_sent.pop(device, None)
@@ -354,10 +369,9 @@ class Hub:
 
     def post(self, message: Message) -> None:
         """Thread-safe `stream` (see `post_frame`)."""
-        self._post(message.device_name, Frame(message),
-                   approximate_size(message) > LARGE_MESSAGE_BYTES, None)
+        self._post(message.device_name, frame_for(message), None)
 
-    def post_frame(self, channel: StreamChannel, frame: Frame, *, large: bool = False) -> None:
+    def post_frame(self, channel: StreamChannel, frame: Frame) -> None:
         """Thread-safe `stream_frame` through an open channel.
 
         A small value, when nothing is waiting for the loop, is written at once from this
@@ -369,14 +383,15 @@ class Hub:
         device = channel.device
         if not frame.clock:
             frame.clock = daemon_clock_ms()
-        if (self._direct_writes and not large and device not in self._min_interval):
+        if (self._direct_writes and not isinstance(frame, BulkFrame)
+                and device not in self._min_interval):
             with self._lock:
                 if channel.closed:
                     return
                 if not (self._wake_pending or self._draining):
                     self._write_direct(device, frame)
                     return
-        self._post(device, frame, large, channel)
+        self._post(device, frame, channel)
 
     def post_frames(self, frames: list[tuple[str, Frame]]) -> None:
         """Thread-safe `stream_frame` of several small values at once (one tf update of
@@ -395,7 +410,7 @@ class Hub:
                     self._write_direct_many(frames)
                     return
         for device, frame in frames:
-            self._post(device, frame, False, None)
+            self._post(device, frame, None)
 
     def _write_direct_many(self, frames: list[tuple[str, Frame]]) -> None:
         # Under self._lock, with nothing queued for the loop (see _write_direct).
@@ -422,14 +437,13 @@ class Hub:
             if not client.write_direct(frame.encoded(client.header_version)):
                 client.hand_over(device, frame)
 
-    def _post(self, device: str, frame: Frame, large: bool,
-              channel: StreamChannel | None) -> None:
+    def _post(self, device: str, frame: Frame, channel: StreamChannel | None) -> None:
         if not frame.clock:
             frame.clock = daemon_clock_ms()
         with self._lock:
             if channel is not None and channel.closed:
                 return  # the bridge is gone: its device must not come back
-            if large:
+            if isinstance(frame, BulkFrame):
                 if self._incoming_large.pop(device, None) is not None:
                     self.dropped += 1
                 self._incoming_large[device] = frame

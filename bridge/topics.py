@@ -30,11 +30,10 @@ from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_
 from bridge.dispatch import Handler, Result
 from bridge.graph_types import refuse_other_type
 from bridge.heavy import OffLoop
-from bridge.hub import (LARGE_MESSAGE_BYTES, Hub, Replier, StreamChannel, Subscriber,
-                        approximate_size)
+from bridge.hub import Hub, Replier, StreamChannel, Subscriber, frame_for
 from bridge.logging_limits import RateLimitedLog
 from bridge.message_guards import MessageGuard
-from bridge.outbox import BulkFrame, Frame, TemplateFrame
+from bridge.outbox import TemplateFrame
 from bridge.qos import default_depth, qos_profile
 from bridge.ros_node import RosNode
 from bridge.security import SecurityPolicy
@@ -110,7 +109,7 @@ class SubscriberBridge:
         hub.set_rate_cap(device, max_rate_hz)
         # A volatile image or cloud is not kept for clients that connect later (a late ROS
         # subscriber would not get it either): 20 MB clouds would stay in memory for good.
-        hub.keep_latest(device, not codec.bulk or qos.durability == "transient_local")
+        hub.set_volatile(device, qos.durability != "transient_local")
         # A filtered stream needs the message itself: only unfiltered poses go raw.
         self._fast = (RawPoseStream(codec, device, metadata)
                       if has_fast_path(codec.ros_type) and message_filter is None else None)
@@ -227,9 +226,7 @@ class SubscriberBridge:
         metadata.update(encoded.metadata)
         message = Message(device_name=self.device, body=encoded.body, timestamp=stamp,
                           metadata=metadata)
-        large = approximate_size(message) > LARGE_MESSAGE_BYTES
-        self._hub.post_frame(self._channel, BulkFrame(message) if large else Frame(message),
-                             large=large)
+        self._hub.post_frame(self._channel, frame_for(message))
 
     def info(self) -> TopicInfo:
         return TopicInfo("subscriber", self.topic, self.codec.ros_type, self.device,
@@ -259,9 +256,7 @@ class _MessageStream:
                      else igtl_timestamp_now())
         message = Message(device_name=self.channel.device, body=Json(message_to_json(msg)),
                           timestamp=timestamp, metadata=metadata)
-        large = approximate_size(message) > LARGE_MESSAGE_BYTES
-        hub.post_frame(self.channel, BulkFrame(message) if large else Frame(message),
-                       large=large)
+        hub.post_frame(self.channel, frame_for(message))
 
 
 class PublisherBridge:

@@ -149,8 +149,9 @@ class TypeCodec:
 
     ros_type: str  # "geometry_msgs/msg/PoseStamped"
     igtl_type: str  # "TRANSFORM", "STRING", "IMAGE", "POLYDATA"
-    # Bulk data (images, point clouds): only the newest value matters, so bridges keep a
-    # history of one by default (`bridge.qos.default_depth`).
+    # A type for bulk data (images, point clouds): only the newest value matters, so its
+    # subscriptions keep a history of one by default (`bridge.qos.default_depth`). This is
+    # about the type, before any message; whether one message is large is `hub.frame_for`.
     bulk: ClassVar[bool] = False
     # A POLYDATA from a client may take this codec up to about a second (a model of
     # hundreds of thousands of triangles): publisher bridges convert it off the loop.

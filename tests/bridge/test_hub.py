@@ -5,7 +5,8 @@ from __future__ import annotations
 import asyncio
 import threading
 
-from bridge.hub import Hub
+from bridge.hub import Hub, frame_for
+from bridge.outbox import BulkFrame
 from protocol.messages import Message, String
 
 
@@ -101,5 +102,31 @@ def test_a_device_with_an_audience_reaches_only_the_clients_that_joined() -> Non
         assert b.got == [("x", "shared"), ("msg:x", "for a")]
         hub.forget("msg:x")  # a removed bridge's device goes to everyone again if reused
         assert hub.has_audience("msg:x")
+    finally:
+        loop.close()
+
+
+def test_a_volatile_device_keeps_its_small_values_for_later_clients_not_its_large_ones() -> None:
+    loop = asyncio.new_event_loop()
+    try:
+        hub = Hub(loop)
+        big = "x" * 70_000  # over LARGE_MESSAGE_BYTES: a BulkFrame
+        assert isinstance(frame_for(_text("v", big)), BulkFrame)
+        assert not isinstance(frame_for(_text("v", "small")), BulkFrame)
+        hub.set_volatile("v", True)
+        hub.stream(_text("v", "small"))
+        kept = hub.latest("v")
+        assert kept is not None and kept.body.text == "small"
+        hub.stream(_text("v", big))  # sent, then not kept: nor is the older small one
+        assert hub.latest("v") is None
+        hub.stream(_text("durable", big))  # not volatile (transient local): kept
+        durable = hub.latest("durable")
+        assert durable is not None and durable.body.text == big
+        hub.stream(_text("v", big))
+        hub.set_volatile("v", False)
+        hub.stream(_text("v", big))
+        assert hub.latest("v") is not None
+        hub.set_volatile("v", True)  # made volatile again: its large value goes at once
+        assert hub.latest("v") is None
     finally:
         loop.close()
