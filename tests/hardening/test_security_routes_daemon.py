@@ -195,6 +195,40 @@ def test_parameter_events_show_only_allowed_parameters(parameters_daemon: Runnin
     assert "/guarded_node.count" not in named, named
 
 
+def test_a_parameter_event_publisher_refuses_denied_parameters(
+        parameters_daemon: RunningDaemon, processes: Processes) -> None:
+    """A client that publishes on /parameter_events could tell every node's watchers that a
+    denied parameter changed: the event is judged parameter by parameter, as every other
+    parameter route, and only an event naming allowed parameters reaches ROS."""
+    echo = processes.python("echo-events", "echo_subscriber.py", "/parameter_events",
+                            "rcl_interfaces/msg/ParameterEvent")
+    echo.wait_for_output("READY")
+
+    def event(*names: str) -> dict[str, Any]:
+        return {"node": "/guarded_node", "changed_parameters": [
+            {"name": name, "value": {"type": 3, "double_value": 2.5}} for name in names]}
+
+    def forged() -> list[str]:  # parameters of the events the witness saw from us
+        return [p["name"] for m in echoed(echo) if m["node"] == "/guarded_node"
+                for p in m["changed_parameters"]]
+
+    with parameters_daemon.connect() as client:
+        client.command("create_publisher", {"topic": "/parameter_events",
+                                            "type": "rcl_interfaces/msg/ParameterEvent"})
+        error = refusal(client, "publish", {"topic": "/parameter_events",
+                                            "value": event("ratio", "count")})
+        assert error.code == ErrorCode.FORBIDDEN
+        assert error.field == "value.changed_parameters"
+        assert "/guarded_node.count" in str(error)
+        # The allowed one reaches ROS (the witness is not deaf): sent until it is seen, as
+        # the publisher may not have matched the witness yet.
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and "ratio" not in forged():
+            client.command("publish", {"topic": "/parameter_events", "value": event("ratio")})
+            time.sleep(0.1)
+    assert set(forged()) == {"ratio"}, forged()
+
+
 # ---------------------------------------------------------------------------- files
 
 STL = ("solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
