@@ -380,7 +380,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(ours)
     if args.command in ("run", "demo"):
         try:
-            apply_parameters(_subparser(parser, args.command), args, ours, ros_args.parameters)
+            node = ros_args.node_name(args.node_name, args.namespace)
+            apply_parameters(_subparser(parser, args.command), args, ours,
+                             ros_args.parameters_for(node))
         except RosArgsError as error:
             print(f"slicer-ros2-bridge: --ros-args: {error}", file=sys.stderr)
             return 2

@@ -7,7 +7,12 @@ works as a ROS user expects:
   the ROS arguments go to the daemon's node, which rcl applies (`RosOptions.ros_args`);
 - parameters (`-p name:=value`, `--param`, `--params-file FILE`) whose name is one of the
   daemon's options (`port`, `host`, `config`, `read_only`, `allow_topic`, ...: the option's
-  long name with `_` for `-`) set that option. Values are YAML, as rcl reads them.
+  long name with `_` for `-`) set that option. Values are YAML, as rcl reads them. Of a
+  params file, only the sections rcl gives the daemon's node count: `/**`, its name, its
+  namespace and name (flat `/ns/name:` or nested), `*` and `**` wildcards; another node's
+  section (robot_state_publisher's `frame_prefix`) does not. The node is named by the
+  command line (`--node-name`, `--namespace`, `-r __node:=`, `-r __ns:=`), not by a
+  parameter. Later parameters win over earlier ones, as in rcl.
 
 Precedence, highest first: an option given on the command line, then a ROS parameter, then
 the `--config` file's `security:` section, then the default.
@@ -16,6 +21,7 @@ the `--config` file's `security:` section, then the default.
 from __future__ import annotations
 
 import argparse
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,7 +44,28 @@ class RosArgs:
     """What followed `--ros-args`: everything for rcl, and the parameters read from it."""
 
     argv: list[str] = field(default_factory=list)
-    parameters: dict[str, Any] = field(default_factory=dict)
+    # (node name pattern, parameters) in command-line order; `-p` gives every node ("/**").
+    sources: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
+
+    def parameters_for(self, node: str) -> dict[str, Any]:
+        """The parameters rcl gives the node of fully qualified name `node`."""
+        found: dict[str, Any] = {}
+        for pattern, parameters in self.sources:
+            if _node_pattern(pattern).fullmatch(node):
+                found.update(parameters)
+        return found
+
+    def node_name(self, name: str, namespace: str) -> str:
+        """The daemon node's fully qualified name: `name` and `namespace` (its options),
+        unless a `__node`/`__name`/`__ns` remap of these arguments says otherwise."""
+        for flag, rule in zip(self.argv, self.argv[1:]):
+            if flag in ("-r", "--remap"):
+                key, sep, value = rule.partition(":=")
+                if sep and key in ("__node", "__name"):
+                    name = value
+                elif sep and key == "__ns":
+                    namespace = value
+        return "/" + "/".join(part for part in (*namespace.split("/"), name) if part)
 
 
 def split_ros_args(argv: Sequence[str]) -> tuple[list[str], RosArgs]:
@@ -63,10 +90,10 @@ def split_ros_args(argv: Sequence[str]) -> tuple[list[str], RosArgs]:
                 ros.argv.append(value)
                 i += 1
                 if item == "--params-file":
-                    ros.parameters.update(_params_file(Path(value)))
+                    ros.sources.extend(_params_file(Path(value)))
                 else:
                     name, value_text = _parameter(value)
-                    ros.parameters[name] = value_text
+                    ros.sources.append(("/**", {name: value_text}))
         else:
             ours.append(item)
         i += 1
@@ -80,24 +107,44 @@ def _parameter(text: str) -> tuple[str, Any]:
     try:
         return name, yaml.safe_load(value)
     except yaml.YAMLError as error:
-        raise RosArgsError(f"-p {name}: expected a YAML value, got {value!r} ({error})") \
+        raise RosArgsError(f"-p {name}: expected a YAML value, got {value!r} "
+                           f"({' '.join(str(error).split())})") \
             from None
 
 
-def _params_file(path: Path) -> dict[str, Any]:
-    """The parameters a ROS params file gives every node (`/**`) or any node of ours: the
-    daemon takes what names its options and leaves the rest to rcl."""
+def _params_file(path: Path) -> list[tuple[str, dict[str, Any]]]:
+    """The sections of a ROS params file: (node name pattern, its ``ros__parameters``), the
+    pattern joined from nested keys (``/lab: {arm: {ros__parameters: ...}}`` is
+    ``/lab/arm``) and absolute (``arm`` is ``/arm``, as rcl reads it)."""
     try:
         data = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as error:
+        # One line: a YAML error's text spans several (the line, a caret).
         raise RosArgsError(f"--params-file: expected a readable YAML file, got {path} "
-                           f"({error})") from None
-    found: dict[str, Any] = {}
+                           f"({' '.join(str(error).split())})") from None
+    found: list[tuple[str, dict[str, Any]]] = []
+
+    def walk(prefix: str, mapping: dict[Any, Any]) -> None:
+        for key, value in mapping.items():
+            if not isinstance(value, dict):
+                continue
+            if key == "ros__parameters":
+                found.append((prefix or "/", value))
+            else:
+                walk(f"{prefix.rstrip('/')}/{str(key).strip('/')}", value)
+
     if isinstance(data, dict):
-        for section in data.values():
-            if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
-                found.update(section["ros__parameters"])
+        walk("", data)
     return found
+
+
+def _node_pattern(pattern: str) -> re.Pattern[str]:
+    """rcl's node name wildcards as a regular expression: ``*`` one name part, ``**`` any
+    number of them (``/**`` every node)."""
+    parts = [part for part in pattern.split("/") if part]
+    regex = "".join("(/[^/]+)*" if part == "**"
+                    else "/" + re.escape(part).replace(r"\*", "[^/]+") for part in parts)
+    return re.compile(regex or "/")
 
 
 def apply_parameters(parser: argparse.ArgumentParser, args: argparse.Namespace,

@@ -390,7 +390,14 @@ def decimate(vertices: F64, triangles: U32, max_triangles: int,
         else:
             hi = mid
     if best is None:
-        best = _cluster(vertices, triangles, 1)
+        coarse = _cluster(vertices, triangles, 1)
+        if not 0 < len(coarse[1]) <= max_triangles:
+            # Even the coarsest grid misses the budget, or leaves nothing of the mesh: a
+            # mesh over budget or a silently empty visual would both be wrong.
+            needed = min(n for n in (len(coarse[1]), len(tris)) if n > 0)
+            raise MeshError("max_triangles", f"at least {needed} for this mesh of "
+                            f"{len(triangles)} triangles", max_triangles)
+        best = coarse
     cluster, tris = best
     count = int(cluster.max()) + 1
     weights = np.bincount(cluster, minlength=count).astype(np.float64)
