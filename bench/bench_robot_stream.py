@@ -150,10 +150,7 @@ def time_load(client: Connection, recorder: Recorder, arguments: dict[str, Any],
 
 
 def tf_received(client: Connection) -> int:
-    for bridge in client.command("list_bridges")["bridges"]:
-        if bridge.get("kind") == "tf_buffer":
-            return int(bridge["received"]["tf"])
-    return 0
+    return int(client.command("list_bridges")["tf_buffer"]["received"].get("tf", 0))
 
 
 def measure_cpu(daemon: Child, client: Connection, recorder: Recorder,

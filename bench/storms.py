@@ -266,9 +266,9 @@ def tf_frames(port: int, env: dict[str, str], logs: Path, seconds: float,
         took = []
         for _ in range(20):
             start = time.monotonic()
-            bridges = lister.command("list_bridges", {}, timeout=120)["bridges"]
+            listed = lister.command("list_bridges", {}, timeout=120)
             took.append(time.monotonic() - start)
-        frames = next(b for b in bridges if b["kind"] == "tf_buffer")["frames"]
+        frames = listed["tf_buffer"]["frames"]
         return {"frames_listed": len(frames), "longest_frame": max(map(len, frames)),
                 "list_bridges_s_max": round(max(took), 3)}
     finally:
@@ -301,9 +301,8 @@ def service_slots(port: int, env: dict[str, str], logs: Path, seconds: float,
         start = time.monotonic()
         waiting = -1
         while time.monotonic() - start < seconds:
-            bridges = other.command("list_bridges", {})["bridges"]
-            waiting = sum(b.get("waiting", 0) for b in bridges
-                          if b["kind"] == "service_client")
+            clients = other.command("list_bridges", {})["service_clients"]
+            waiting = sum(c.get("waiting", 0) for c in clients)
             if waiting == 0:
                 break
             time.sleep(0.2)

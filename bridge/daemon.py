@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Awaitable, Callable, Optional
 
 from bridge.actions import ActionBridges
+from bridge.client_replies import ClientReplies
 from bridge.config import DaemonConfig
 from bridge.dispatch import Dispatcher
 from bridge.heavy import HeavyWork
@@ -70,8 +71,11 @@ class Daemon:
         self.tf = TfBridges(self.ros, self.hub, names, frame_prefix=config.frame_prefix,
                             frame_rules=policy.frames)
         self.parameters = ParameterBridges(self.ros, self.hub, names, policy=policy)
-        self.services = ServiceBridges(self.ros, self.hub, names, policy=policy)
-        self.actions = ActionBridges(self.ros, self.hub, names)
+        # One correlator for the COMMANDs sent to clients: its command ids never collide.
+        replies = ClientReplies(self.hub)
+        self.services = ServiceBridges(self.ros, self.hub, names, policy=policy,
+                                       replies=replies)
+        self.actions = ActionBridges(self.ros, self.hub, names, replies=replies)
         # An action's hidden cancel service obeys cancel_goal's ownership rule.
         self.services.add_call_guard(self.actions.sender.judge_service_call)
         # The daemon node's own parameters obey server_set_parameter's rule there too.

@@ -36,7 +36,7 @@ from protocol.auth import new_challenge, verify
 from protocol.freshness import daemon_clock_ms
 from protocol import commands as c
 from protocol.commands import (CommandError, CommandFailedError, ErrorCode, ForbiddenError,
-                               Op, OutOfRangeError, Reply)
+                               Op, Reply)
 from protocol.messages import Command, Message, RtsCommand
 
 log = logging.getLogger(__name__)
@@ -59,14 +59,20 @@ class Capability(Protocol):
         ...
 
     def describe(self) -> list[dict[str, Any]]:
-        """Its live bridges, for `list_bridges`."""
+        """Its live bridges, for `list_bridges`: each names its ``kind``, a bridge kind an
+        op declares (`protocol.commands.bridge_kinds`)."""
+        ...
+
+    def state(self) -> Mapping[str, Any]:
+        """What it holds that is not a bridge (the tf buffer, goals in flight, cached ROS
+        clients), each under its own key of the `list_bridges` reply."""
         ...
 
     def close(self) -> None: ...
 
 
-# Identity fields by what they name: resolved the way the capabilities resolve them.
-_NAME_FIELDS = ("topic", "service", "action", "node")
+# Identity fields that name tf frames: resolved as the tf capability keeps them (ROS names
+# come resolved: `Op.with_names`).
 _FRAME_FIELDS = ("parent", "child")
 _KINDS = c.bridge_kinds()
 
@@ -265,7 +271,10 @@ class Dispatcher:
             raise CommandFailedError("op", "an op this daemon serves: " +
                                      ", ".join(sorted(self._handlers)), request.op,
                                      code=ErrorCode.NOT_SUPPORTED)
-        self._policy.check_request(request, self._resolve, self._ros.fully_qualified_name,
+        # Names are resolved here, once: the policy, the bridge's identity and the handler
+        # all see the fully qualified ones.
+        request = request.with_names(self._ros.resolve_name)
+        self._policy.check_request(request, self._ros.fully_qualified_name,
                                    self._resolve_frame, from_client=client is not None,
                                    resolve_file=self._resolve_file,
                                    grant=client.grant if client is not None else WRITES)
@@ -352,8 +361,8 @@ class Dispatcher:
                 self._quota.release(owner)
 
     def _bridge_key(self, request: c.Request) -> Optional[BridgeKey]:
-        """(kind, identity) of the bridge a create or remove request names, with names
-        resolved as the capabilities keep them (so ``cmd`` and ``/cmd`` are one bridge)."""
+        """(kind, identity) of the bridge a create or remove request names, as the
+        capabilities keep them (names resolved, so ``cmd`` and ``/cmd`` are one bridge)."""
         cls = type(request)
         kind = cls.creates.kind if cls.creates is not None else cls.removes
         if kind is None:
@@ -363,16 +372,8 @@ class Dispatcher:
             value = str(getattr(request, name))
             if name in _FRAME_FIELDS:
                 value = self._resolve_frame(value)
-            elif name in _NAME_FIELDS:
-                value = self._resolve(value, name)
             values.append(value)
         return kind, tuple(values)
-
-    def _resolve(self, name: str, field: str) -> str:
-        try:
-            return self._ros.resolve_topic(name)
-        except Exception as error:  # rclpy raises several name-validation exceptions
-            raise OutOfRangeError(field, "a valid ROS name", f"{name!r} ({error})") from None
 
     async def _finish(self, outcome: Awaitable[Result], client: Replier,
                       message: Message) -> None:
@@ -458,11 +459,24 @@ class Dispatcher:
         return {"writes": client.grant.writes}
 
     def _list_bridges(self, request: c.ListBridges, client: Replier | None) -> Result:
-        bridges = [bridge for capability in self._capabilities
-                   for bridge in capability.describe()]
-        return LargeResult(bridges=bridges, devices=self._hub.devices(),
-                           clients=[client.describe() for client in self._hub.clients],
-                           hub_dropped=self._hub.dropped)
+        """The bridges (declared kinds only), each capability's other state under its own
+        key, and the hub's devices and clients."""
+        reply: dict[str, Any] = {"bridges": [], "devices": self._hub.devices(),
+                                 "clients": [client.describe() for client in self._hub.clients],
+                                 "hub_dropped": self._hub.dropped}
+        for capability in self._capabilities:
+            for bridge in capability.describe():
+                if bridge.get("kind") not in _KINDS:
+                    raise TypeError(f"{type(capability).__name__}.describe(): expected bridges "
+                                    f"of a declared kind ({', '.join(sorted(_KINDS))}), got "
+                                    f"kind {bridge.get('kind')!r}")
+                reply["bridges"].append(bridge)
+            for key, value in capability.state().items():
+                if key in reply:
+                    raise TypeError(f"{type(capability).__name__}.state(): expected a key of "
+                                    f"its own in the list_bridges reply, got {key!r} (taken)")
+                reply[key] = value
+        return LargeResult(reply)
 
     def _list_topics(self, request: c.ListTopics, client: Replier | None) -> Result:
         return LargeResult(topics=[{"topic": name, "types": list(types)} for name, types

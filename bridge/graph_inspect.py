@@ -124,10 +124,12 @@ def _echo(out: TextIO, ros: RosNode, topic: str, type_name: Optional[str],
     from bridge.codecs import CodecError, message_to_yaml
     from bridge.codecs.registry import message_class
 
+    from protocol.commands import OutOfRangeError
+
     try:
-        full = ros.resolve_topic(topic)
-    except Exception as error:  # rclpy raises several name-validation exceptions
-        raise GraphInspectError(f"expected a ROS topic name, got {topic!r} ({error})") from None
+        full = ros.resolve_name(topic, "topic")
+    except OutOfRangeError as error:
+        raise GraphInspectError(str(error)) from None
 
     def installed(ros_type: str) -> Any:
         try:

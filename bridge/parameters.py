@@ -42,7 +42,7 @@ from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
 from bridge.security import SecurityPolicy, parameter_service
-from bridge.services import call_ros_service, resolve_name, wait_until_ready
+from bridge.services import call_ros_service, wait_until_ready
 from protocol.commands import (Op, CommandError, CommandFailedError, CreateParameterClient,
                                ErrorCode, ForbiddenError, GetParameters, ListParameters,
                                ObserveParameters,
@@ -212,7 +212,7 @@ class ParameterBridges:
 
     # --- parameter clients -----------------------------------------------------------------
     async def create_parameter_client(self, request: CreateParameterClient) -> dict[str, Any]:
-        node = resolve_name(self._ros, request.node, "node")
+        node = request.node
         existing = self.clients.get(node)
         if existing is not None:
             return self._describe_client(existing, existed=True)
@@ -296,8 +296,7 @@ class ParameterBridges:
                 "ready": bool(client.ready),
                 "values": {n: v.to_dict() for n, v in client.values.items()}}
 
-    def _client(self, node_name: str) -> ParameterClient:
-        node = resolve_name(self._ros, node_name, "node")
+    def _client(self, node: str) -> ParameterClient:
         client = self.clients.get(node)
         if client is None:
             raise CommandFailedError("node", "a node with a parameter client "
@@ -749,11 +748,13 @@ class ParameterBridges:
         return out
 
     def describe(self) -> list[dict[str, Any]]:
-        out = [self._describe_client(client) for client in self.clients.values()]
-        if self.declared:
-            out.append({"kind": "parameter_server", "node": self._server_node,
-                        "device": self._server_device, "parameters": list(self.declared)})
-        return out
+        return [self._describe_client(client) for client in self.clients.values()]
+
+    def state(self) -> dict[str, Any]:
+        """The daemon node's own parameters clients declared (null while there are none)."""
+        return {"parameter_server": {"node": self._server_node, "device": self._server_device,
+                                     "parameters": list(self.declared)}
+                if self.declared else None}
 
     def close(self) -> None:
         if self._check_timer is not None:

@@ -40,6 +40,7 @@ from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
 
 from bridge.raw_reader import RawReader, RawTopic
+from protocol.commands import OutOfRangeError
 from bridge.raw_reader import available as raw_reader_available
 
 log = logging.getLogger(__name__)
@@ -210,6 +211,15 @@ class RosNode:
             if name == topic:
                 return list(types)
         return []
+
+    def resolve_name(self, name: str, field: str) -> str:
+        """A topic, service, action or node name -> fully qualified; relative names resolve
+        under the daemon's namespace (``PSM1/x`` with namespace ``/lab`` -> ``/lab/PSM1/x``).
+        The one place a client's name is resolved: an invalid one is refused naming `field`."""
+        try:
+            return self.resolve_topic(name)
+        except Exception as error:  # rclpy raises several name-validation exceptions
+            raise OutOfRangeError(field, "a valid ROS name", f"{name!r} ({error})") from None
 
     def resolve_topic(self, topic: str) -> str:
         """The fully qualified name of `topic` for this node (namespace, ~ expansion);

@@ -53,7 +53,6 @@ __all__ = ["WRITES", "DEFAULT_MAX_BRIDGES", "WriteGrant", "read_key_file",
 log = logging.getLogger(__name__)
 
 Network = Union[ipaddress.IPv4Network, ipaddress.IPv6Network]
-NameResolver = Callable[[str, str], str]  # (name, field) -> fully qualified name
 FrameResolver = Callable[[str], str]  # a client's frame id -> the tf buffer's
 FileResolver = Callable[[str], "os.PathLike[str] | str"]  # a robot file source -> its path
 
@@ -246,15 +245,15 @@ class SecurityPolicy:
         return not self.allowed_networks or _in_networks(address, self.allowed_networks)
 
     # --- per request ---------------------------------------------------------------------
-    def check_request(self, request: Op, resolve: NameResolver, own_node: str,
+    def check_request(self, request: Op, own_node: str,
                       resolve_frame: FrameResolver = strip_frame, *,
                       from_client: bool = True,
                       resolve_file: Optional[FileResolver] = None,
                       grant: WriteGrant = WRITES) -> None:
         """Raise `ForbiddenError` if the policy refuses this parsed request.
 
-        `resolve(name, field)` makes a topic, service or node name fully qualified (so
-        ``cmd_vel`` cannot slip past a deny glob on ``/cmd_vel``); `own_node` is the
+        The request's ROS names come fully qualified (`Op.with_names`, in the dispatcher),
+        so ``cmd_vel`` cannot slip past a deny glob on ``/cmd_vel``; `own_node` is the
         daemon's node, owner of the ``server_*`` parameters; `resolve_frame` turns a
         client's frame id into the one the tf buffer uses (the daemon passes the tf
         capability's, so ``--frame-prefix`` cannot be used to slip past a frame glob);
@@ -274,20 +273,19 @@ class SecurityPolicy:
                 raise ForbiddenError("op", f"an op that only receives ({refusal.why})",
                                      cls.op)
         for use in request.resources():
-            self._judge(use, resolve, own_node, resolve_frame, from_client, resolve_file)
+            self._judge(use, own_node, resolve_frame, from_client, resolve_file)
 
-    def _judge(self, use: Resource, resolve: NameResolver, own_node: str,
+    def _judge(self, use: Resource, own_node: str,
                resolve_frame: FrameResolver, from_client: bool,
                resolve_file: Optional[FileResolver]) -> None:
         if isinstance(use, TopicUse):
-            self._judge_topic(use, resolve(use.name, use.field))
+            self._judge_topic(use, use.name)
         elif isinstance(use, ServiceUse):
-            self._judge_service(use, resolve(use.name, use.field))
+            self._judge_service(use, use.name)
         elif isinstance(use, ActionUse):
-            self._judge_action(use.field, resolve(use.name, use.field))
+            self._judge_action(use.field, use.name)
         elif isinstance(use, ParameterUse):
-            node = (resolve(use.node, use.node_field or use.field) if use.node is not None
-                    else own_node)
+            node = use.node if use.node is not None else own_node
             self._judge_parameters(node, use.names, use.field)
         elif isinstance(use, FrameUse):
             if self.frames.active:

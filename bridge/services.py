@@ -10,34 +10,34 @@ callback group); the coroutine hands the request to the loop, which sends the ad
 client a `service_request` COMMAND and waits for its RTS_COMMAND. The client's answer (or a
 default response after the timeout) completes an rclpy future and wakes the executor.
 
-`call_ros_service` and `resolve_name` are shared with the parameter bridges;
+`call_ros_service` is shared with the parameter bridges;
 `message_from_json` and `client_answer` with the action bridges.
 """
 
 from __future__ import annotations
 
 import asyncio
-import itertools
 import logging
-from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Optional
+from typing import Any, Callable, Iterable, Mapping, Optional, Protocol, TypeVar
 
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.client import Client
 from rclpy.exceptions import InvalidHandle
 from rclpy.task import Future as RosFuture
 
+from bridge.client_replies import ClientReplies
 from bridge.codecs import CodecError, dict_to_message, message_to_dict
-from bridge.codecs.registry import service_class
+from bridge.codecs.registry import SERVICE
 from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
+from bridge.interface_types import installed_class
+from bridge.ros_clients import RosClientCache
 from bridge.ros_node import RosNode
 from bridge.security import SecurityPolicy
 from protocol.commands import (Op, AdvertiseService, CallService, CommandError, CommandFailedError,
-                               ErrorCode, LimitReachedError, OutOfRangeError, Reply, ServiceRequest,
+                               ErrorCode, LimitReachedError, Reply, ServiceRequest,
                                UnadvertiseService, WrongTypeError, loads)
-from protocol.messages import Command, Message, RtsCommand
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
 
 log = logging.getLogger(__name__)
@@ -47,15 +47,6 @@ _READY_POLL_S = 0.05
 
 
 # ---------------------------------------------------------------------------- shared helpers
-
-
-def resolve_name(ros: RosNode, name: str, field: str) -> str:
-    """A topic, service or node name -> fully qualified; relative names resolve under the
-    daemon's namespace (``PSM1/x`` with namespace ``/lab`` -> ``/lab/PSM1/x``)."""
-    try:
-        return ros.resolve_topic(name)
-    except Exception as error:  # rclpy raises several name-validation exceptions
-        raise OutOfRangeError(field, "a valid ROS name", f"{name!r} ({error})") from None
 
 
 def connected_client(client: Optional[Replier], field: str, why: str) -> Replier:
@@ -85,6 +76,29 @@ def already_served(kind: str, name: str, ros_type: str, client: Replier,
                                      f"{name} ({', '.join(types)})",
                                      code=ErrorCode.ALREADY_EXISTS)
     return False
+
+
+class Advertised(Protocol):
+    """A ROS service or action a client serves: who advertised it."""
+
+    @property
+    def owner(self) -> Replier: ...
+
+
+A = TypeVar("A", bound=Advertised)
+
+
+def advertised_by(served: Mapping[str, A], kind: str, name: str,
+                  client: Optional[Replier]) -> A:
+    """The ``kind`` (service, action) `name` of `served` that `client` advertises (the
+    operator's config: whoever does); NOT_FOUND naming the field ``kind`` otherwise. The one
+    rule of who may unadvertise."""
+    entry = served.get(name)
+    if entry is None or (client is not None and entry.owner is not client):
+        raise CommandFailedError(kind, f"{'an' if kind[0] in 'aeiou' else 'a'} {kind} this "
+                                 "client advertises", name,
+                                 code=ErrorCode.NOT_FOUND)
+    return entry
 
 
 async def wait_until_ready(client: Client, wait_s: float) -> bool:
@@ -189,15 +203,6 @@ def client_answer(text: str) -> dict[str, Any]:
     return data
 
 
-def _service_class(type_name: str, ros_type: str) -> Any:
-    try:
-        return service_class(ros_type)
-    except CodecError as error:
-        raise CommandFailedError("type", "a service type installed in the daemon's environment",
-                                 f"{type_name!r} ({error})",
-                                 code=ErrorCode.UNKNOWN_ROS_TYPE) from None
-
-
 # ---------------------------------------------------------------------------- bridges
 
 
@@ -211,15 +216,8 @@ class CalledService:
     device: str
     key: NameKey
     calls: int = 0
-    in_flight: int = 0  # calls waiting for their answer: the client must not go meanwhile
+    in_use: int = 0  # calls waiting for their answer: the client must not go meanwhile
     last_used: float = 0.0  # loop time
-
-
-@dataclass
-class _PendingAnswer:
-    served: ServedService
-    future: RosFuture
-    timer: asyncio.TimerHandle
 
 
 @dataclass
@@ -260,7 +258,8 @@ class ServiceBridges:
                  policy: Optional[SecurityPolicy] = None,
                  max_service_clients: int = MAX_SERVICE_CLIENTS,
                  max_calls_per_client: int = MAX_CALLS_PER_CLIENT,
-                 idle_client_s: float = IDLE_SERVICE_CLIENT_S) -> None:
+                 idle_client_s: float = IDLE_SERVICE_CLIENT_S,
+                 replies: Optional[ClientReplies] = None) -> None:
         self._ros = ros
         # A parameter listing through call_service shows what the parameter globs allow.
         self._policy = policy or SecurityPolicy()
@@ -270,22 +269,20 @@ class ServiceBridges:
         # Served coroutines wait for a client without holding a mutually exclusive group
         # (the node's default group also runs every subscription).
         self._group = ReentrantCallbackGroup()
-        self._ids = itertools.count(1)
-        # call_service's rclpy clients, least recently used first: each is a ROS entity
-        # (and discovery traffic), so at most `max_service_clients`, and none kept idle.
-        self.called: OrderedDict[tuple[str, str], CalledService] = OrderedDict()
-        self._max_called = max_service_clients
-        self._idle_s = idle_client_s
-        self._idle_timer: Optional[asyncio.TimerHandle] = None
-        self._idle_due = 0.0  # loop time the idle timer fires
+        # call_service's rclpy clients: at most `max_service_clients`, none kept idle.
+        self.called: RosClientCache[CalledService] = RosClientCache(
+            capacity=max_service_clients, idle_s=idle_client_s, destroy=self._destroy_client,
+            refusal=lambda service: LimitReachedError(
+                "service", f"at most {max_service_clients} services called at once",
+                f"a call to {service} more"))
         # The calls each client is waiting for (their tasks): a slot a client holds goes
         # with it, and no client holds more than `max_calls_per_client`.
         self._calls: dict[Replier, set[asyncio.Task[Any]]] = {}
         self._max_calls_per_client = max_calls_per_client
         self._call_guards: list[CallGuard] = []
         self.served: dict[str, ServedService] = {}
-        self._pending: dict[tuple[Replier, int], _PendingAnswer] = {}
-        hub.add_reply_listener(self._on_reply)
+        # Calls of served services wait for their client's answer here.
+        self._replies = replies if replies is not None else ClientReplies(hub)
         hub.add_closed_listener(self._on_client_closed)
 
     # --- call_service ----------------------------------------------------------------------
@@ -297,9 +294,9 @@ class ServiceBridges:
 
     async def call_service(self, request: CallService,
                            client: Optional[Replier] = None) -> dict[str, Any]:
-        service = resolve_name(self._ros, request.service, "service")
+        service = request.service
         ros_type = request.ros_type
-        srv = _service_class(request.type, ros_type)
+        srv = installed_class(SERVICE, request.type, ros_type)
         ros_request = message_from_json(srv.Request, request.request, "request")
         for guard in self._call_guards:
             guard(service, ros_type, ros_request, client)
@@ -308,11 +305,12 @@ class ServiceBridges:
             raise LimitReachedError("service", f"at most {self._max_calls_per_client} calls "
                                     f"waiting for an answer per client", f"a call to "
                                     f"{service} more")
-        entry = self._client_for(service, ros_type, srv)
+        entry = self.called.client((service, ros_type),
+                                   lambda: self._new_client(service, ros_type, srv))
         task = asyncio.current_task()
         if client is not None and task is not None:
             self._calls.setdefault(client, set()).add(task)
-        entry.in_flight += 1
+        self.called.take(entry)
         try:
             # The whole timeout may go to discovery: a server missed by the first
             # announcements is found at the next round (Fast DDS: every 3 s, later under load).
@@ -321,9 +319,7 @@ class ServiceBridges:
                                               ready_wait=request.timeout,
                                               what=f"service {service}", field="service")
         finally:
-            entry.in_flight -= 1
-            entry.last_used = asyncio.get_running_loop().time()
-            self._schedule_idle_check()
+            self.called.release(entry)
             if client is not None and task is not None:
                 self._forget_call(client, task)
         entry.calls += 1
@@ -331,29 +327,14 @@ class ServiceBridges:
                 self._policy.filter_service_response(service, ros_type,
                                                      message_to_dict(response))}
 
-    def _client_for(self, service: str, ros_type: str, srv: Any) -> CalledService:
-        now = asyncio.get_running_loop().time()
-        entry = self.called.get((service, ros_type))
-        if entry is not None:
-            self.called.move_to_end((service, ros_type))
-            entry.last_used = now
-            return entry
-        if len(self.called) >= self._max_called:
-            idle = next((k for k, e in self.called.items() if e.in_flight == 0), None)
-            if idle is None:
-                raise LimitReachedError("service", f"at most {self._max_called} services called "
-                                        f"at once", f"a call to {service} more")
-            self._drop_client(idle)
+    def _new_client(self, service: str, ros_type: str, srv: Any) -> CalledService:
         client = self._ros.node.create_client(srv, service, callback_group=self._group)
         key = NameKey.service_client(service)
-        entry = CalledService(service, ros_type, client, self._names.register(key), key,
-                              last_used=now)
-        self.called[(service, ros_type)] = entry
-        self._schedule_idle_check()
-        return entry
+        return CalledService(service, ros_type, client, self._names.register(key), key)
 
-    def _drop_client(self, key: tuple[str, str]) -> None:
-        entry = self.called.pop(key)
+    def _destroy_client(self, entry: CalledService) -> None:
+        """A client the cache dropped: destroyed, its device name released once no client
+        of another type of the same service holds it."""
         self._ros.destroy(entry.client)
         if not any(e.key == entry.key for e in self.called.values()):
             self._names.release(entry.key)
@@ -365,37 +346,13 @@ class ServiceBridges:
             if not mine:
                 del self._calls[client]
 
-    def _schedule_idle_check(self) -> None:
-        """Arm the timer for the moment the first idle client has been unused for
-        `idle_client_s` (a client waiting for an answer is not idle)."""
-        idle = [e.last_used for e in self.called.values() if e.in_flight == 0]
-        if not idle:
-            return
-        due = min(idle) + self._idle_s
-        if self._idle_timer is not None:
-            if self._idle_due <= due:
-                return
-            self._idle_timer.cancel()
-        loop = asyncio.get_running_loop()
-        self._idle_timer = loop.call_later(max(0.0, due - loop.time()), self._drop_idle)
-        self._idle_due = due
-
-    def _drop_idle(self) -> None:
-        """A client not used for `idle_client_s` goes: the next call makes a new one."""
-        self._idle_timer = None
-        deadline = asyncio.get_running_loop().time() - self._idle_s
-        for key in [k for k, e in self.called.items()
-                    if e.in_flight == 0 and e.last_used <= deadline]:
-            self._drop_client(key)
-        self._schedule_idle_check()
-
     # --- advertise_service -----------------------------------------------------------------
     def advertise_service(self, request: AdvertiseService,
                           client: Optional[Replier]) -> dict[str, Any]:
         client = connected_client(client, "service", "answers the calls")
-        service = resolve_name(self._ros, request.service, "service")
+        service = request.service
         ros_type = request.ros_type
-        srv = _service_class(request.type, ros_type)
+        srv = installed_class(SERVICE, request.type, ros_type)
         existing = self.served.get(service)
         if already_served("service", service, ros_type, client,
                           existing.owner if existing else None,
@@ -414,11 +371,8 @@ class ServiceBridges:
 
     def unadvertise_service(self, request: UnadvertiseService,
                             client: Optional[Replier]) -> dict[str, Any]:
-        service = resolve_name(self._ros, request.service, "service")
-        served = self.served.get(service)
-        if served is None or (client is not None and served.owner is not client):
-            raise CommandFailedError("service", "a service this client advertises", service,
-                                     code=ErrorCode.NOT_FOUND)
+        service = request.service
+        served = advertised_by(self.served, "service", service, client)
         self._unadvertise(served)
         return {"service": service, "device": served.device}
 
@@ -450,34 +404,28 @@ class ServiceBridges:
             self._settle(answer, None)
             return
         served.calls += 1
-        command_id = next(self._ids)
+
+        def silence(timed_out: bool) -> None:
+            if timed_out:
+                log.warning("client %s did not answer a call of %s within %g s; the caller "
+                            "gets a default response", getattr(served.owner, "peer", "?"),
+                            served.service, self._answer_timeout_s)
+            self._settle(answer, None)
+
         try:
-            text = ServiceRequest(service=served.service, type=served.ros_type,
-                                  request=message_to_dict(request),
-                                  timeout=self._answer_timeout_s).to_json()
+            self._replies.ask(
+                served.owner, served.device,
+                ServiceRequest(service=served.service, type=served.ros_type,
+                               request=message_to_dict(request),
+                               timeout=self._answer_timeout_s),
+                metadata_for(served.key, ros_type=served.ros_type),
+                timeout=self._answer_timeout_s, about=served,
+                on_answer=lambda text: self._settle(answer, self._response_from(served, text)),
+                on_silence=silence)
         except (CodecError, CommandError) as error:
             log.warning("cannot forward a call of %s to its client (%s); the caller gets a "
                         "default response", served.service, error)
             self._settle(answer, None)
-            return
-        timer = asyncio.get_running_loop().call_later(
-            self._answer_timeout_s, self._expire, served.owner, command_id)
-        self._pending[(served.owner, command_id)] = _PendingAnswer(served, answer, timer)
-        served.owner.send_message(Message(
-            device_name=served.device,
-            body=Command(command_id=command_id, name=ServiceRequest.op, text=text),
-            metadata=metadata_for(served.key, ros_type=served.ros_type)))
-
-    def _on_reply(self, message: Message, client: Replier) -> None:
-        body = message.body
-        if not isinstance(body, RtsCommand):
-            return
-        pending = self._pending.pop((client, body.command_id), None)
-        if pending is None:
-            return  # not ours, or it came after the timeout
-        pending.timer.cancel()
-        response = self._response_from(pending.served, body.text)
-        self._settle(pending.future, response)
 
     def _response_from(self, served: ServedService, text: str) -> Any:
         """The client's answer -> a Response, judged by its JSON (3D Slicer's Status
@@ -493,15 +441,6 @@ class ServiceBridges:
                         "response", served.service, error)
             return None
 
-    def _expire(self, owner: Replier, command_id: int) -> None:
-        pending = self._pending.pop((owner, command_id), None)
-        if pending is None:
-            return
-        log.warning("client %s did not answer a call of %s within %g s; the caller gets a "
-                    "default response", getattr(owner, "peer", "?"), pending.served.service,
-                    self._answer_timeout_s)
-        self._settle(pending.future, None)
-
     def _settle(self, answer: RosFuture, response: Any) -> None:
         if not answer.done():
             answer.set_result(response)
@@ -511,11 +450,7 @@ class ServiceBridges:
     def _unadvertise(self, served: ServedService) -> None:
         served.closed = True
         self.served.pop(served.service, None)
-        for key, pending in list(self._pending.items()):
-            if pending.served is served:
-                del self._pending[key]
-                pending.timer.cancel()
-                self._settle(pending.future, None)
+        self._replies.withdraw(served)  # its callers waiting for an answer get a default one
         self._names.release(served.key)
         self._hub.forget(served.device)
         # Destroyed in the executor thread once no call is being answered: rclpy sends the
@@ -551,30 +486,27 @@ class ServiceBridges:
         }
 
     def describe(self) -> list[dict[str, Any]]:
-        out = [_describe_served(served) for served in self.served.values()]
-        out += [{"kind": "service_client", "service": entry.service, "type": entry.ros_type,
-                 "device": entry.device, "calls": entry.calls, "waiting": entry.in_flight,
-                 "ready": entry.client.service_is_ready()} for entry in self.called.values()]
-        return out
+        return [_describe_served(served) for served in self.served.values()]
+
+    def state(self) -> dict[str, Any]:
+        """call_service's cached clients (not bridges: the daemon makes and drops them)."""
+        return {"service_clients": [
+            {"service": entry.service, "type": entry.ros_type, "device": entry.device,
+             "calls": entry.calls, "waiting": entry.in_use,
+             "ready": entry.client.service_is_ready()} for entry in self.called.values()]}
 
     def close(self) -> None:
         # The node (and its services and clients) is destroyed right after; only make sure
         # no ROS caller waits for a client that is gone.
         for served in list(self.served.values()):
             served.closed = True
-        for pending in self._pending.values():
-            pending.timer.cancel()
-            self._settle(pending.future, None)
-        self._pending.clear()
+            self._replies.withdraw(served)
         self.served.clear()
-        self.called.clear()
-        if self._idle_timer is not None:
-            self._idle_timer.cancel()
-            self._idle_timer = None
+        self.called.close()
 
 
 def _describe_served(served: ServedService, existed: bool | None = None) -> dict[str, Any]:
-    out: dict[str, Any] = {"kind": "service_server", "service": served.service,
+    out: dict[str, Any] = {"kind": "served_service", "service": served.service,
                            "type": served.ros_type, "device": served.device,
                            "calls": served.calls}
     if existed is not None:

@@ -40,7 +40,7 @@ from bridge.security import SecurityPolicy
 from bridge.stream_health import Arrivals, StreamHealth
 from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
                                CreateSubscriber, ErrorCode, ForbiddenError, GetLastMessage, Op,
-                               OutOfRangeError, Publish, QoS, RemovePublisher, RemoveSubscriber,
+                               Publish, QoS, RemovePublisher, RemoveSubscriber,
                                WrongTypeError)
 from protocol.conversions import igtl_stamp_or_now, igtl_timestamp_now
 from protocol.messages import Json, Message, PolyData, StatusCode
@@ -443,13 +443,6 @@ class TopicBridges:
         self.subscribers: dict[str, SubscriberBridge] = {}
         self.publishers: dict[str, PublisherBridge] = {}
 
-    def _resolve(self, topic: str) -> str:
-        try:
-            return self._ros.resolve_topic(topic)
-        except Exception as error:  # rclpy raises several name-validation exceptions
-            raise OutOfRangeError("topic", "a valid ROS topic name", f"{topic!r} ({error})") \
-                from None
-
     def _codec(self, type_name: str, ros_type: str) -> TypeCodec:
         try:
             return codec_for(ros_type)
@@ -476,7 +469,7 @@ class TopicBridges:
 
     def create_subscriber(self, request: CreateSubscriber,
                           client: Optional[Subscriber] = None) -> dict[str, Any]:
-        topic = self._resolve(request.topic)
+        topic = request.topic
         ros_type = request.ros_type
         codec = self._codec(request.type, ros_type)
         if self._check_existing(self.subscribers.get(topic), topic, ros_type):
@@ -516,7 +509,7 @@ class TopicBridges:
         return None if guard is None else guard.filter
 
     def remove_subscriber(self, request: RemoveSubscriber) -> dict[str, Any]:
-        topic = self._resolve(request.topic)
+        topic = request.topic
         bridge = self.subscribers.pop(topic, None)
         if bridge is None:
             raise CommandFailedError("topic", "a topic with a subscriber bridge", topic,
@@ -529,11 +522,10 @@ class TopicBridges:
         return {"topic": topic, "device": bridge.device}
 
     def create_publisher(self, request: CreatePublisher) -> dict[str, Any]:
-        topic = self._resolve(request.topic)
+        topic = request.topic
         ros_type = request.ros_type
         codec = self._codec(request.type, ros_type)
-        labels = (self._resolve(request.labels_topic) if request.labels_topic is not None
-                  else None)
+        labels = request.labels_topic
         existing = self.publishers.get(topic)
         if self._check_existing(existing, topic, ros_type):
             assert existing is not None
@@ -556,7 +548,7 @@ class TopicBridges:
         return _describe(bridge.info(), existed=False)
 
     def remove_publisher(self, request: RemovePublisher) -> dict[str, Any]:
-        topic = self._resolve(request.topic)
+        topic = request.topic
         bridge = self.publishers.pop(topic, None)
         if bridge is None:
             raise CommandFailedError("topic", "a topic with a publisher bridge", topic,
@@ -566,7 +558,7 @@ class TopicBridges:
         return {"topic": topic, "device": bridge.device}
 
     def publish(self, request: Publish) -> OffLoop[Result]:
-        topic = self._resolve(request.topic)
+        topic = request.topic
         bridge = self.publishers.get(topic)
         if bridge is None:
             raise CommandFailedError("topic", "a topic with a publisher bridge (create_publisher "
@@ -586,7 +578,7 @@ class TopicBridges:
         return OffLoop(work)
 
     def get_last_message(self, request: GetLastMessage) -> dict[str, Any]:
-        topic = self._resolve(request.topic)
+        topic = request.topic
         bridge = self.subscribers.get(topic)
         if bridge is None:
             raise CommandFailedError("topic", "a topic with a subscriber bridge", topic,
@@ -628,6 +620,9 @@ class TopicBridges:
                 entry["stale"] = stale
             described.append(entry)
         return described
+
+    def state(self) -> dict[str, Any]:
+        return {}
 
     def close(self) -> None:
         bridges: list[SubscriberBridge | PublisherBridge] = [*self.subscribers.values(),

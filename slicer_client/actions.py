@@ -34,6 +34,7 @@ from protocol import commands as c
 from protocol.messages import Command, Message, RtsCommand, String
 from protocol.naming import KEY_GOAL_ID
 from slicer_client.owner import ResourceOwner
+from slicer_client.transport import CommandFn, request_with
 
 __all__ = ["Accept", "Action", "ActionGoalError", "GoalHandle", "ServedAction", "TERMINAL_STATUSES"]
 
@@ -109,10 +110,10 @@ class GoalHandle:
     def cancel(self, timeout: float = 4.0) -> bool:
         """Ask the server to cancel; True if it accepted (the end still comes as the
         result, status ``canceled``)."""
-        reply = self.action._client.command("cancel_goal", {
-            "action": self.action.name, "goal_id": self.goal_id, "timeout": timeout},
+        reply = self.action._client.request(c.CancelGoal(
+            action=self.action.name, goal_id=self.goal_id, timeout=timeout),
             timeout=timeout + 2.0)
-        return bool(reply.get("accepted"))
+        return reply.accepted
 
     def __repr__(self) -> str:
         return f"<GoalHandle {self.action.name} {self.goal_id} {self.status}>"
@@ -139,18 +140,16 @@ class Action:
         handle = GoalHandle(self, uuid.uuid4().hex, feedback)
         with self._lock:
             self._router[handle.goal_id] = handle
-        args: Dict[str, Any] = {"action": self.name, "type": self.type,
-                                "goal": dict(goal or {}), "timeout": timeout,
-                                "goal_id": handle.goal_id}
-        if result_timeout is not None:
-            args["result_timeout"] = result_timeout
+        request = c.SendGoal(action=self.name, type=self.type, goal=dict(goal or {}),
+                             timeout=timeout, result_timeout=result_timeout,
+                             goal_id=handle.goal_id)
         try:
-            reply = self._client.command("send_goal", args, timeout=timeout + 2.0)
+            reply = self._client.request(request, timeout=timeout + 2.0)
         except BaseException:
             with self._lock:
                 self._router.pop(handle.goal_id, None)
             raise
-        handle.device = str(reply.get("device", ""))
+        handle.device = reply.device
         if not handle.done:
             handle.status = "accepted"
         return handle
@@ -197,14 +196,14 @@ class ServedAction:
         self.goals = 0
         self.device = ""
 
-    def advertise(self, command: Callable[..., Dict[str, Any]]) -> None:
-        reply = command("advertise_action", {"action": self.name, "type": self.type,
-                                             "goal_timeout": self.goal_timeout,
-                                             "decides": self._accept is not None})
-        self.device = str(reply.get("device", ""))
+    def advertise(self, command: CommandFn) -> None:
+        reply = request_with(command, c.AdvertiseAction(
+            action=self.name, type=self.type, goal_timeout=self.goal_timeout,
+            decides=self._accept is not None))
+        self.device = reply.device
 
     def unadvertise(self) -> None:
-        self._client.command("unadvertise_action", {"action": self.name})
+        self._client.request(c.UnadvertiseAction(action=self.name))
 
     def _on_command(self, message: Message) -> None:  # receive thread: hand off
         body = message.body
@@ -230,9 +229,8 @@ class ServedAction:
         flag = self._cancelled[request.goal_id]
 
         def feedback(fields: Mapping[str, Any]) -> None:
-            self._client.command("action_feedback", {"action": self.name,
-                                                     "goal_id": request.goal_id,
-                                                     "feedback": dict(fields)})
+            self._client.request(c.ActionFeedback(action=self.name, goal_id=request.goal_id,
+                                                  feedback=dict(fields)))
         try:
             status, result = self._execute(dict(request.goal), feedback, flag.is_set)
             reply = c.Reply.success(c.ActionGoal.op, {"status": status, "result": dict(result)})

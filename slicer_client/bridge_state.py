@@ -9,6 +9,7 @@ command schema when read, so a hand-edited or truncated scene fails with the fie
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Mapping, Tuple
@@ -41,11 +42,27 @@ def _validated(op: str, args: Mapping[str, Any], where: str) -> Dict[str, Any]:
     return dict(args)
 
 
+def _chosen(request: c.Op, f: dataclasses.Field[Any]) -> bool:
+    if f.default is not dataclasses.MISSING:
+        return bool(getattr(request, f.name) != f.default)
+    if f.default_factory is not dataclasses.MISSING:
+        return bool(getattr(request, f.name) != f.default_factory())
+    return True  # a required field
+
+
 @dataclass(frozen=True)
 class BridgeSpec:
     op: str
     args: Dict[str, Any]
     then: Tuple[Tuple[str, Dict[str, Any]], ...] = ()
+
+    @classmethod
+    def of(cls, request: c.Op) -> BridgeSpec:
+        """The spec of a create request, built from the protocol's op class: its required
+        fields and those set to other than their defaults (what a saved scene keeps)."""
+        chosen = {f.name for f in dataclasses.fields(request) if _chosen(request, f)}
+        args = request.to_args()
+        return cls(request.op, {k: v for k, v in args.items() if k in chosen})
 
     @property
     def key(self) -> Tuple[str, ...]:

@@ -24,7 +24,8 @@ import ssl
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Mapping, Optional, Set, Tuple, TypeVar, cast
+from typing import (Any, Callable, Dict, List, Mapping, Optional, Set, Tuple, TypeVar, cast,
+                    overload)
 
 import numpy as np
 
@@ -43,13 +44,14 @@ from slicer_client.events import EventDispatcher
 from slicer_client.matrices import as_numpy
 from slicer_client.resources import (MarkerSubscriber, ParameterClient, Publisher, Resource,
                                      Robot, Service, Subscriber, TfBroadcaster, TfLookup)
-from slicer_client.transport import CommandFn, Transport, open_transport
+from slicer_client.transport import CommandFn, Transport, open_transport, request_with
 
 __all__ = ["Client", "connect"]
 
 log = logging.getLogger(__name__)
 
 _R = TypeVar("_R", bound=Resource)
+_Result = TypeVar("_Result", bound=c.Result)
 
 # Earlier names of the modes: "thread" ran callbacks on the receive thread (now a dispatcher
 # thread), "queue" left them to process_events (now Spin).
@@ -108,7 +110,7 @@ class Client:
             self._latest[message.device_name] = message
             resource = self._by_device.get(message.device_name)
             if resource is None and message.metadata.get(KEY_ROBOT):
-                resource = self._resources.get(("create_robot",
+                resource = self._resources.get((c.CreateRobot.op,
                                                 message.metadata[KEY_ROBOT]))
             # Marker devices come and go with the markers: routed by their metadata.
             markers = [] if resource is not None or not message.metadata.get(
@@ -158,14 +160,14 @@ class Client:
         hello = c.Hello(client="slicer_client 0.1", heartbeat=HEARTBEAT_INTERVAL_S
                         if self._transport.watches_silence else None,
                         stamps=self._transport.drops_late_values)
-        self.daemon_info = command(hello.op, hello.to_args())
+        self.daemon_info = command(hello.op, hello.to_args())  # kept whole: the module shows it
+        greeting = hello.parse_result(self.daemon_info)
         self._valued = set()
-        clock = self.daemon_info.get("clock_ms")
-        if isinstance(clock, int) and not isinstance(clock, bool) and 0 < clock < 1 << 32:
-            self._freshness.reset(clock, time.monotonic_ns() // 1_000_000)
-        if self.daemon_info.get("heartbeat"):
+        if greeting.clock_ms:
+            self._freshness.reset(greeting.clock_ms, time.monotonic_ns() // 1_000_000)
+        if greeting.heartbeat:
             self._transport.expect_data_within(DEAD_AFTER_S)
-        self._authenticate(command)
+        self._authenticate(command, greeting)
         with self._lock:
             resources = list(self._resources.values())
             self._by_device.clear()
@@ -177,20 +179,19 @@ class Client:
             for callback in list(self._connection_callbacks):
                 self.emit(callback, True, "")
 
-    def _authenticate(self, command: CommandFn) -> None:
+    def _authenticate(self, command: CommandFn, greeting: c.HelloResult) -> None:
         """Present the key if the daemon asks for one; `may_write` says what came of it."""
-        auth = dict(self.daemon_info.get("auth") or {})
-        self.may_write = bool(auth.get("writes", True))
-        challenge = auth.get("challenge")
+        self.may_write = greeting.writes
+        challenge = greeting.challenge
         if self._key is None or not challenge:
             if self._key is not None:
                 log.warning("the daemon at %s takes no key: this connection %s", self.address,
                             "writes" if self.may_write else "is read-only")
             return
         nonce = secrets.token_hex(16)
-        request = c.Authenticate(nonce=nonce, proof=proof(self._key, str(challenge), nonce))
+        request = c.Authenticate(nonce=nonce, proof=proof(self._key, challenge, nonce))
         try:
-            self.may_write = bool(command(request.op, request.to_args()).get("writes", False))
+            self.may_write = request_with(command, request).writes
         except CommandRefusedError as error:  # a wrong key: read-only, and said why
             log.warning("the daemon at %s refused this client's key: the connection is "
                         "read-only (%s)", self.address, error)
@@ -403,7 +404,7 @@ class Client:
         PolygonStamped or PointStamped topic as models placed by tf in `fixed_frame`.
         `callback(kind, ...)`: see `MarkerSubscriber`."""
         with self._lock:
-            existed = ("create_marker_subscriber", topic) in self._resources
+            existed = (c.CreateMarkerSubscriber.op, topic) in self._resources
         resource: MarkerSubscriber = self._add(MarkerSubscriber(self, topic, type, fixed_frame,
                                                                 qos=qos))
         if callback is not None:
@@ -469,31 +470,31 @@ class Client:
     def _from_spec(self, spec: BridgeSpec) -> Resource:
         a = spec.args
         resource: Resource
-        if spec.op == "create_subscriber":
+        if spec.op == c.CreateSubscriber.op:
             resource = self.subscribe(a["topic"], a["type"], qos=a.get("qos"),
                                       rate_hz=a.get("rate_hz"),
                                       messages=bool(a.get("messages", False)))
-        elif spec.op == "create_publisher":
+        elif spec.op == c.CreatePublisher.op:
             resource = self.publisher(a["topic"], a["type"], qos=a.get("qos"),
                                       frame=a.get("frame"), labels_topic=a.get("labels_topic"))
-        elif spec.op == "create_parameter_client":
+        elif spec.op == c.CreateParameterClient.op:
             params = self.parameters(a["node"])
             for op, args in spec.then:
-                if op == "observe_parameters":
+                if op == c.ObserveParameters.op:
                     params.observe(args.get("names", []),
                                    all_changes=bool(args.get("all_changes", False)))
             resource = params
-        elif spec.op == "create_tf_lookup":
+        elif spec.op == c.CreateTfLookup.op:
             resource = self.tf_lookup(a["parent"], a["child"], rate_hz=a.get("rate_hz"))
-        elif spec.op == "create_tf_broadcaster":
+        elif spec.op == c.CreateTfBroadcaster.op:
             resource = self.tf_broadcaster(a["parent"], a["child"],
                                            static=bool(a.get("static", False)))
-        elif spec.op == "create_robot":
+        elif spec.op == c.CreateRobot.op:
             resource = self.robot(a["name"], source=a.get("source"),
                                   fixed_frame=a.get("fixed_frame"),
                                   tf_prefix=a.get("tf_prefix", ""),
                                   namespace=a.get("namespace", ""))
-        elif spec.op == "create_marker_subscriber":
+        elif spec.op == c.CreateMarkerSubscriber.op:
             resource = self.markers(a["topic"], a["type"], a["fixed_frame"], qos=a.get("qos"))
         else:  # a bridge kind without a Pythonic class yet: its spec alone re-creates it
             resource = self._add(Resource(self, spec))
@@ -517,9 +518,15 @@ class Client:
         """Any op of protocol/README.md; returns its result or raises a typed error."""
         return self._transport.command(op, arguments, timeout=timeout)
 
-    def request(self, request: c.Op, *, timeout: float = 10.0) -> Dict[str, Any]:
-        """Send a request built from the protocol's op classes; returns its result."""
-        return self.command(request.op, request.to_args(), timeout=timeout)
+    @overload
+    def request(self, request: c.Answered[_Result], *, timeout: float = 10.0) -> _Result: ...
+    @overload
+    def request(self, request: c.Op, *, timeout: float = 10.0) -> Dict[str, Any]: ...
+    def request(self, request: Any, *, timeout: float = 10.0) -> Any:
+        """Send a request built from the protocol's op classes (``c.Publish(topic=...,
+        value=...)``): its typed result if the op declares one (`c.Answered`), else the
+        reply's result object. Raises as `command` does, or `c.ResultFormatError`."""
+        return request_with(self.command, request, timeout=timeout)
 
     def describe_type(self, type_name: str, kind: str = "message") -> c.TypeDescription:
         """What an interface type installed in the daemon's environment is made of (kept:
@@ -536,22 +543,21 @@ class Client:
         self._transport.send(message)
 
     def list_bridges(self) -> Dict[str, Any]:
-        return self.command("list_bridges")
+        return self.request(c.ListBridges())
 
     def list_topics(self) -> List[Dict[str, Any]]:
-        return list(self.command("list_topics").get("topics", []))
+        return list(self.request(c.ListTopics()).topics)
 
     def list_services(self) -> List[Dict[str, Any]]:
-        return list(self.command("list_services").get("services", []))
+        return list(self.request(c.ListServices()).services)
 
     def lookup_transform(self, parent: str, child: str, *, timeout: float = 0.5,
                          stamp: Optional[Tuple[int, int]] = None) -> np.ndarray:
         """parent -> child now (or at `stamp`), 4x4 mm; waits up to `timeout` s for tf."""
-        args: Dict[str, Any] = {"parent": parent, "child": child, "timeout": timeout}
-        if stamp is not None:
-            args["time"] = {"sec": int(stamp[0]), "nanosec": int(stamp[1])}
-        result = self.command("lookup_transform", args, timeout=timeout + 5.0)
-        return as_numpy(result["matrix"], field="lookup_transform.matrix", rigid=False)
+        at = None if stamp is None else c.Stamp(sec=int(stamp[0]), nanosec=int(stamp[1]))
+        result = self.request(c.LookupTransform(parent=parent, child=child, time=at,
+                                                timeout=timeout), timeout=timeout + 5.0)
+        return as_numpy(result.matrix, field="lookup_transform.matrix", rigid=False)
 
     def latest(self, device: str) -> Optional[Message]:
         with self._lock:

@@ -4,13 +4,16 @@ direction only (client -> resources -> owner)."""
 
 from __future__ import annotations
 
-from typing import Any, Callable, Dict, List, Mapping, Optional, Protocol, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Protocol, Tuple, TypeVar, overload
 
 import numpy as np
 
+from protocol import commands as c
 from protocol.messages import Message
 
 __all__ = ["ResourceOwner"]
+
+_R = TypeVar("_R", bound=c.Result)
 
 
 class ResourceOwner(Protocol):
@@ -23,6 +26,11 @@ class ResourceOwner(Protocol):
 
     def command(self, op: str, arguments: Optional[Mapping[str, Any]] = None, *,
                 timeout: float = 10.0) -> Dict[str, Any]: ...
+
+    @overload
+    def request(self, request: c.Answered[_R], *, timeout: float = 10.0) -> _R: ...
+    @overload
+    def request(self, request: c.Op, *, timeout: float = 10.0) -> Dict[str, Any]: ...
 
     def send(self, message: Message) -> None: ...
 

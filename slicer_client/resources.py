@@ -19,6 +19,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from protocol import commands as c
+from protocol.commands.fields import Args
 from protocol.messages import (Message, Point, PointElement, PolyData, Status, StatusCode,
                                String, Transform, cells_from_array)
 from protocol.naming import (KEY_COLOR, KEY_COUNT, KEY_FRAME, KEY_LINK, KEY_LINK_COUNT,
@@ -29,6 +30,7 @@ from slicer_client.bridge_state import BridgeSpec
 from slicer_client.errors import PointsError, RobotNotLoadedError
 from slicer_client.matrices import as_numpy, as_rows
 from slicer_client.owner import ResourceOwner
+from slicer_client.transport import CommandFn, request_with
 from slicer_client.values import value_from_message
 
 __all__ = ["MarkerItem", "MarkerSubscriber", "ParameterClient", "Publisher", "Resource",
@@ -39,15 +41,8 @@ Callback = Callable[..., None]
 log = logging.getLogger("slicer_client")
 
 
-def _qos_dict(qos: Optional[Mapping[str, Any]]) -> Optional[Dict[str, Any]]:
-    if qos is None:
-        return None
-    known = c.QoS(**dict(qos))  # TypeError names an unknown field
-    return known.to_dict()
-
-
-def _drop_none(args: Dict[str, Any]) -> Dict[str, Any]:
-    return {k: v for k, v in args.items() if v is not None}
+def _qos(qos: Optional[Mapping[str, Any]]) -> c.QoS:
+    return c.QoS(**dict(qos or {}))  # TypeError names an unknown field
 
 
 class Resource:
@@ -121,9 +116,8 @@ class Subscriber(Resource):
     def __init__(self, client: ResourceOwner, topic: str, type: str, *,
                  qos: Optional[Mapping[str, Any]] = None,
                  rate_hz: Optional[float] = None, messages: bool = False) -> None:
-        super().__init__(client, BridgeSpec("create_subscriber", _drop_none(
-            {"topic": topic, "type": type, "qos": _qos_dict(qos), "rate_hz": rate_hz,
-             "messages": True if messages else None})))
+        super().__init__(client, BridgeSpec.of(c.CreateSubscriber(
+            topic=topic, type=type, qos=_qos(qos), rate_hz=rate_hz, messages=messages)))
         self.topic = topic
         self.type = type
         self.count = 0  # messages this client received (the daemon may coalesce a burst)
@@ -212,14 +206,14 @@ class Subscriber(Resource):
 
     def last_message_yaml(self, timeout: float = 10.0) -> str:
         """The daemon's last message as YAML (`ros2 topic echo` style); "" before any."""
-        return str(self._last("yaml", timeout).get("text", ""))
+        return self._last_yaml(timeout).text
 
     def daemon_count(self, timeout: float = 10.0) -> int:
         """How many messages the daemon's subscription received (exact, not coalesced)."""
-        return int(self._last("yaml", timeout).get("count", 0))
+        return self._last_yaml(timeout).count
 
-    def _last(self, fmt: str, timeout: float) -> Dict[str, Any]:
-        return self._client.command("get_last_message", {"topic": self.topic, "format": fmt},
+    def _last_yaml(self, timeout: float) -> c.GetLastMessageResult:
+        return self._client.request(c.GetLastMessage(topic=self.topic, format="yaml"),
                                     timeout=timeout)
 
 
@@ -231,9 +225,8 @@ class Publisher(Resource):
     def __init__(self, client: ResourceOwner, topic: str, type: str, *,
                  qos: Optional[Mapping[str, Any]] = None, frame: Optional[str] = None,
                  labels_topic: Optional[str] = None) -> None:
-        super().__init__(client, BridgeSpec("create_publisher", _drop_none(
-            {"topic": topic, "type": type, "qos": _qos_dict(qos), "frame": frame,
-             "labels_topic": labels_topic})))
+        super().__init__(client, BridgeSpec.of(c.CreatePublisher(
+            topic=topic, type=type, qos=_qos(qos), frame=frame, labels_topic=labels_topic)))
         self.topic = topic
         self.type = type
         self.frame = frame
@@ -245,20 +238,19 @@ class Publisher(Resource):
         `value`: the message as a dict of its fields, or a bare value for one-field types
         (str, bool, int, float, lists/tables), or a 4x4 matrix (numpy, lists or
         vtkMatrix4x4, mm) for Pose/PoseStamped/Transform types."""
-        result = self._client.command("publish", {"topic": self.topic,
-                                                  "value": _json_value(value)},
+        result = self._client.request(c.Publish(topic=self.topic, value=_json_value(value)),
                                       timeout=timeout)
         self.sent += 1
-        return int(result.get("subscribers", 0))
+        return result.subscribers
 
     def publish_message(self, message: Mapping[str, Any], timeout: float = 10.0) -> int:
         """Publish one whole message given as generic JSON in ROS units (metres,
         quaternions; as a subscriber's `last_whole` holds it); returns the number of ROS
         subscribers. An empty header stamp is stamped now by the daemon."""
-        request = c.Publish(topic=self.topic, message=dict(message))
-        result = self._client.command(request.op, request.to_args(), timeout=timeout)
+        result = self._client.request(c.Publish(topic=self.topic, message=dict(message)),
+                                      timeout=timeout)
         self.sent += 1
-        return int(result.get("subscribers", 0))
+        return result.subscribers
 
     def send(self, body: Any, metadata: Optional[Mapping[str, str]] = None) -> None:
         """Stream an OpenIGTLink body (Transform, String, Image, PolyData...) to this
@@ -365,18 +357,17 @@ class ParameterClient(Resource):
     """Another ROS node's parameters: list, get, set, observe (typed values)."""
 
     def __init__(self, client: ResourceOwner, node: str) -> None:
-        super().__init__(client, BridgeSpec("create_parameter_client", {"node": node}))
+        super().__init__(client, BridgeSpec.of(c.CreateParameterClient(node=node)))
         self.node = node
         self.observed: Tuple[str, ...] = ()
         self.all_changes = False
         self.values: Dict[str, c.ParameterValue] = {}  # last known, kept by observe/get
         self.ready = False  # the node's parameter services answered (observe's reply)
 
-    def _restore(self, command: Callable[..., Dict[str, Any]]) -> None:
+    def _restore(self, command: CommandFn) -> None:
         if self.observed or self.all_changes:
-            request = c.ObserveParameters(node=self.node, names=self.observed,
-                                          all_changes=self.all_changes)
-            command(request.op, request.to_args())
+            request_with(command, c.ObserveParameters(node=self.node, names=self.observed,
+                                                      all_changes=self.all_changes))
 
     def _handle(self, message: Message) -> None:
         if not isinstance(message.body, String):
@@ -395,16 +386,13 @@ class ParameterClient(Resource):
             self._notify(name, parameter_to_python(value))
 
     def list(self, timeout: float = 10.0) -> List[str]:
-        return list(self._client.command("list_parameters", {"node": self.node},
-                                         timeout=timeout).get("names", []))
+        return list(self._client.request(c.ListParameters(node=self.node),
+                                         timeout=timeout).names)
 
     def get_typed(self, names: Sequence[str], timeout: float = 10.0
                   ) -> Dict[str, c.ParameterValue]:
-        result = self._client.command("get_parameters", {"node": self.node,
-                                                         "names": list(names)},
-                                      timeout=timeout)
-        values = {name: c.ParameterValue.from_json_value(raw, f"values.{name}")
-                  for name, raw in dict(result.get("values", {})).items()}
+        values = self._client.request(c.GetParameters(node=self.node, names=tuple(names)),
+                                      timeout=timeout).values
         with self._changed:
             self.values.update(values)
         return values
@@ -418,12 +406,12 @@ class ParameterClient(Resource):
         """Set one parameter; `type` (e.g. "double") overrides the inferred one. Raises
         `ParameterRejectedError` with the node's reason if the node refuses."""
         typed = c.ParameterValue(type, value) if type else c.ParameterValue.infer(value)
-        result = self._client.command("set_parameters", {
-            "node": self.node, "values": {name: typed.to_dict()}}, timeout=timeout)
-        outcome = dict(result.get("results", {})).get(name, {"ok": True})
-        if not outcome.get("ok", False):
+        result = self._client.request(c.SetParameters(node=self.node, values={name: typed}),
+                                      timeout=timeout)
+        outcome = result.results.get(name, c.ParameterOutcome(ok=True))
+        if not outcome.ok:
             from slicer_client.errors import ParameterRejectedError
-            raise ParameterRejectedError(self.node, name, str(outcome.get("reason", "")))
+            raise ParameterRejectedError(self.node, name, outcome.reason)
 
     def observe(self, names: Sequence[str], timeout: float = 10.0, *,
                 all_changes: bool = False) -> bool:
@@ -433,11 +421,10 @@ class ParameterClient(Resource):
         (name, value). Returns whether the node is there now."""
         request = c.ObserveParameters(node=self.node, names=tuple(names),
                                       all_changes=all_changes)
-        result = self._client.command(request.op, request.to_args(), timeout=timeout)
-        self.ready = bool(result.get("ready", False))
+        result = self._client.request(request, timeout=timeout)
+        self.ready = result.ready
         with self._changed:
-            for name, raw in dict(result.get("values", {})).items():
-                self.values[name] = c.ParameterValue.from_json_value(raw, f"values.{name}")
+            self.values.update(result.values)
         self.observed = tuple(names)
         self.all_changes = all_changes
         self.spec = BridgeSpec(self.spec.op, self.spec.args, (
@@ -452,8 +439,8 @@ class TfLookup(Resource):
 
     def __init__(self, client: ResourceOwner, parent: str, child: str, *,
                  rate_hz: Optional[float] = None) -> None:
-        super().__init__(client, BridgeSpec("create_tf_lookup", _drop_none(
-            {"parent": parent, "child": child, "rate_hz": rate_hz})))
+        super().__init__(client, BridgeSpec.of(c.CreateTfLookup(parent=parent, child=child,
+                                                                 rate_hz=rate_hz)))
         self.parent = parent
         self.child = child
         self.matrix: Optional[np.ndarray] = None
@@ -486,9 +473,8 @@ class TfLookup(Resource):
 class TfBroadcaster(Resource):
     def __init__(self, client: ResourceOwner, parent: str, child: str, *,
                  static: bool = False) -> None:
-        super().__init__(client, BridgeSpec("create_tf_broadcaster",
-                                            {"parent": parent, "child": child,
-                                             "static": static}))
+        super().__init__(client, BridgeSpec.of(c.CreateTfBroadcaster(parent=parent, child=child,
+                                                                      static=static)))
         self.parent = parent
         self.child = child
         self.count = 0
@@ -497,11 +483,10 @@ class TfBroadcaster(Resource):
                   timeout: float = 10.0) -> None:
         """Broadcast parent -> child (a rigid 4x4 in mm: numpy, lists or vtkMatrix4x4);
         the daemon stamps it now unless `stamp` (sec, nanosec) is given."""
-        args: Dict[str, Any] = {"parent": self.parent, "child": self.child,
-                                "matrix": as_rows(matrix_mm)}
-        if stamp is not None:
-            args["stamp"] = {"sec": int(stamp[0]), "nanosec": int(stamp[1])}
-        self._client.command("broadcast_transform", args, timeout=timeout)
+        at = None if stamp is None else c.Stamp(sec=int(stamp[0]), nanosec=int(stamp[1]))
+        self._client.request(c.BroadcastTransform(
+            parent=self.parent, child=self.child, stamp=at,
+            matrix=c.matrix_from(as_rows(matrix_mm), "matrix")), timeout=timeout)
         self.count += 1
 
     def send(self, matrix_mm: Any) -> None:
@@ -523,11 +508,10 @@ class Service:
              ) -> Dict[str, Any]:
         """Call and wait; returns the response fields. The daemon gives up after `timeout`
         (TIMEOUT refusal); this client waits a little longer for that answer."""
-        result = self._client.command("call_service", {
-            "service": self.service, "type": self.type,
-            "request": _json_value(dict(request or {})), "timeout": timeout},
-            timeout=timeout + 2.0)
-        return dict(result.get("response", {}))
+        result = self._client.request(c.CallService(
+            service=self.service, type=self.type, request=_json_value(dict(request or {})),
+            timeout=timeout), timeout=timeout + 2.0)
+        return dict(result.response)
 
     def call_async(self, request: Optional[Mapping[str, Any]],
                    callback: Callable[[Optional[Dict[str, Any]], Optional[Exception]], None],
@@ -570,11 +554,11 @@ class Robot(Resource):
                  parameter: str = "robot_description", fixed_frame: Optional[str] = None,
                  tf_prefix: str = "", namespace: str = "",
                  source: Optional[Mapping[str, Any]] = None) -> None:
-        src = dict(source) if source is not None else {"kind": "parameter", "node": node,
-                                                        "parameter": parameter}
-        super().__init__(client, BridgeSpec("create_robot", _drop_none({
-            "name": name, "source": src, "fixed_frame": fixed_frame or None,
-            "tf_prefix": tf_prefix or None, "namespace": namespace or None})))
+        src = c.RobotSource(node=node, parameter=parameter) if source is None else \
+            c.RobotSource.from_args(Args(dict(source), "source."))
+        super().__init__(client, BridgeSpec.of(c.CreateRobot(
+            name=name, source=src, fixed_frame=fixed_frame or None, tf_prefix=tf_prefix,
+            namespace=namespace)))
         self.name = name
         self.links: Dict[str, RobotLink] = {}
         self._devices: Dict[str, Tuple[str, Optional[int]]] = {}
@@ -687,8 +671,8 @@ class Robot(Resource):
         ``joints`` with type, limits, mimic, ``actuated``; ``joint_states_topic``). Kept
         until `refresh` (a reloaded description may change them)."""
         if self._joints is None or refresh:
-            self._joints = self._client.command("describe_robot_joints", {"name": self.name},
-                                                timeout=timeout)
+            request = c.DescribeRobotJoints(name=self.name)  # the table as it came: public
+            self._joints = self._client.command(request.op, request.to_args(), timeout=timeout)
         return self._joints
 
     def set_joints(self, positions: Mapping[str, float], *, topic: Optional[str] = None,
@@ -697,11 +681,13 @@ class Robot(Resource):
         on the robot's joint-states topic (or ``topic``). The daemon checks names and
         limits from the URDF (an out-of-limit value raises `CommandRefusedError` naming
         the joint and its limit) and adds the mimic joints; returns what it published."""
-        target = topic or str(self.joints(timeout)["joint_states_topic"])
-        result = self._client.command("set_robot_joints", {
-            "name": self.name, "topic": target,
-            "positions": {str(k): float(v) for k, v in positions.items()}}, timeout=timeout)
-        return {str(k): float(v) for k, v in result.get("positions", {}).items()}
+        target = topic or c.DescribeRobotJoints(name=self.name).parse_result(
+            self.joints(timeout)).joint_states_topic
+        result = self._client.request(c.SetRobotJoints(
+            name=self.name, topic=target,
+            positions=tuple((str(k), float(v)) for k, v in positions.items())),
+            timeout=timeout)
+        return result.positions
 
     def wait_until_loaded(self, timeout: float = 30.0) -> None:
         """Wait until every link named in the create reply has a transform and every
@@ -755,9 +741,8 @@ class MarkerSubscriber(Resource):
     def __init__(self, client: ResourceOwner, topic: str, type: str, fixed_frame: str, *,
                  qos: Optional[Mapping[str, Any]] = None) -> None:
         c.marker_source_type(type)  # fail early on a type the daemon refuses
-        super().__init__(client, BridgeSpec("create_marker_subscriber", _drop_none(
-            {"topic": topic, "type": type, "fixed_frame": fixed_frame,
-             "qos": _qos_dict(qos)})))
+        super().__init__(client, BridgeSpec.of(c.CreateMarkerSubscriber(
+            topic=topic, type=type, fixed_frame=fixed_frame, qos=_qos(qos))))
         self.topic = topic
         self.type = type
         self.fixed_frame = fixed_frame

@@ -182,19 +182,11 @@ def plan_node(device: str, metadata: Mapping[str, str], *,
 
 
 def describe_bridges(result: Mapping[str, Any]) -> List[str]:
-    """list_bridges' result -> one readable line per bridge, for the module's list.
-    Accepts the daemon's ``{"bridges": [{"kind": ...}]}`` and the per-kind lists of
-    protocol/README.md."""
+    """list_bridges' result (``{"bridges": [{"kind": ...}], ...}``, protocol/README.md) ->
+    one readable line per bridge, for the module's list."""
     lines: List[str] = []
-    items: List[Mapping[str, Any]] = []
-    if isinstance(result.get("bridges"), list):
-        items = [b for b in result["bridges"] if isinstance(b, dict)]
-    else:
-        for kind in ("subscribers", "publishers", "tf_lookups", "tf_broadcasters", "robots",
-                     "parameter_clients", "services"):
-            for entry in result.get(kind, []) or []:
-                if isinstance(entry, dict):
-                    items.append({"kind": kind.rstrip("s"), **entry})
+    bridges = result.get("bridges")
+    items = [b for b in bridges if isinstance(b, dict)] if isinstance(bridges, list) else []
     for b in items:
         kind = str(b.get("kind", "?"))
         if "topic" in b:
@@ -207,8 +199,10 @@ def describe_bridges(result: Mapping[str, Any]) -> List[str]:
             what = str(b["node"])
         elif "service" in b:
             what = str(b["service"])
+        elif "action" in b:
+            what = str(b["action"])
         else:
-            continue  # daemon-internal entries (the shared tf buffer...)
+            what = "?"
         device = f" as {b['device']}" if b.get("device") else ""
         stale = f" (STALE: {b['stale']})" if b.get("stale") else ""
         lines.append(f"{kind}: {what}{device}{stale}")

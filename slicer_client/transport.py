@@ -17,18 +17,35 @@ import logging
 import ssl
 import threading
 from collections import deque
-from typing import Any, Callable, Deque, Dict, Mapping, Optional, Protocol
+from typing import Any, Callable, Deque, Dict, Mapping, Optional, Protocol, TypeVar, overload
 
+from protocol import commands as c
 from protocol.messages import Message
 from slicer_client.connection import (DEFAULT_HOST, DEFAULT_PORT, ConnectionClosedError,
                                       Connection, DaemonUnreachableError, NotTheDaemonError)
 
 __all__ = ["CommandFn", "ReconnectingTransport", "Transport", "TransportListener",
-           "open_transport"]
+           "open_transport", "request_with"]
 
 log = logging.getLogger(__name__)
 
 CommandFn = Callable[..., Dict[str, Any]]  # (op, args=None, *, timeout=...) -> result
+_R = TypeVar("_R", bound=c.Result)
+
+
+@overload
+def request_with(command: CommandFn, request: c.Answered[_R], *,
+                 timeout: Optional[float] = None) -> _R: ...
+@overload
+def request_with(command: CommandFn, request: c.Op, *,
+                 timeout: Optional[float] = None) -> Dict[str, Any]: ...
+def request_with(command: CommandFn, request: Any, *, timeout: Optional[float] = None) -> Any:
+    """Send a request built from the protocol's op classes through `command` (the raw
+    ``(op, args)`` route). An op that declares its result (`c.Answered`) gets it typed;
+    any other gets the reply's result object. No `timeout`: `command`'s own default."""
+    result = command(request.op, request.to_args(),
+                     **({} if timeout is None else {"timeout": timeout}))
+    return request.parse_result(result) if isinstance(request, c.Answered) else result
 
 # Bound on messages kept for a listener not attached yet: a whole robot's meshes and more.
 _MAX_EARLY_MESSAGES = 10_000

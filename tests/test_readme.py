@@ -20,6 +20,7 @@ which the test prints.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -28,11 +29,13 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import pytest
 import yaml
 
+from protocol.commands import bridge_kinds
+from slicer_client.connection import CommandRefusedError
 from support import (REPO, Child, Processes, assert_clean_exit, pick_free_port, scaled,
                      start_daemon)
 
@@ -200,3 +203,65 @@ def test_the_block_runs_against_the_demo(block: Block, demo: Demo, processes: Pr
     output = result.stdout + result.stderr
     assert result.returncode == 0, f"{block.name} exited {result.returncode}:\n{output[-4000:]}"
     assert "Traceback" not in output, output[-4000:]
+
+
+# --- protocol/README.md's list_bridges row against a live reply ----------------------------
+def _documented_result(op: str) -> dict[str, Any]:
+    """The ``← result`` example of ``op``'s row in protocol/README.md's op tables (the
+    first backticked JSON object of its third cell)."""
+    for line in (REPO / "protocol" / "README.md").read_text().splitlines():
+        if line.startswith(f"| `{op}` |"):
+            cells = [cell.strip() for cell in line.strip("|").split(" | ")]
+            example = re.match(r"`(\{[^`]*\})`", cells[2])
+            assert example, f"{op}'s result cell: expected a backticked JSON object first, " \
+                            f"got {cells[2][:80]!r}"
+            return dict(json.loads(example.group(1)))
+    raise AssertionError(f"protocol/README.md: expected a row for {op}, found none")
+
+
+def _same_shape(documented: Any, live: Any, where: str) -> None:
+    """Documented and live JSON of one kind: objects with the same keys (the documented
+    ones all present, in entries of a list: an entry's extra keys are its kind's own), lists
+    compared by their first entries of the same kind."""
+    if documented is None or live is None:
+        return  # null means absent for now (parameter_server)
+    assert type(documented) is type(live) or {type(documented), type(live)} <= {int, float}, \
+        f"{where}: documented {type(documented).__name__}, live {type(live).__name__}"
+    if isinstance(documented, dict) and where.endswith("]"):
+        missing = set(documented) - set(live)
+        assert not missing, f"{where}: documented keys {sorted(missing)} not in the reply"
+    elif isinstance(documented, dict):
+        assert set(documented) == set(live), f"{where}: documented {sorted(documented)}, " \
+                                             f"live {sorted(live)}"
+    if isinstance(documented, dict):
+        for key in documented:
+            _same_shape(documented[key], live[key], f"{where}.{key}")
+    elif isinstance(documented, list):
+        for entry in documented:
+            same = [e for e in live if not isinstance(entry, dict)
+                    or e.get("kind") == entry.get("kind")]
+            if same:
+                _same_shape(entry, same[0], f"{where}[]")
+
+
+def test_the_documented_list_bridges_reply_is_the_daemon_s(processes: Processes) -> None:
+    """protocol/README.md's list_bridges row: the reply's keys, and each documented entry's
+    keys in a live entry of its kind (a subscriber, a served service, cached ROS clients)."""
+    documented = _documented_result("list_bridges")
+    daemon = start_daemon(processes)
+    with daemon.connect() as client:
+        client.command("create_subscriber", {"topic": "/readme_tool",
+                                             "type": "geometry_msgs/msg/PoseStamped"})
+        client.command("advertise_service", {"service": "/readme/reset",
+                                             "type": "std_srvs/srv/Trigger"})
+        with pytest.raises(CommandRefusedError):
+            client.command("call_service", {"service": "/readme/absent",
+                                            "type": "std_srvs/srv/Trigger", "timeout": 0.1})
+        with pytest.raises(CommandRefusedError):
+            client.command("send_goal", {"action": "/readme/absent", "timeout": 0.1,
+                                         "type": "control_msgs/action/GripperCommand",
+                                         "goal": {}})
+        live = client.command("list_bridges")
+    assert {b["kind"] for b in live["bridges"]} <= set(bridge_kinds())
+    _same_shape(documented, live, "list_bridges")
+    assert_clean_exit(daemon)

@@ -30,6 +30,7 @@ from rclpy.node import NodeNameNonExistentError
 
 from bridge.actions.goals import GoalSender
 from bridge.actions.served import ServedActions
+from bridge.client_replies import ClientReplies
 from bridge.dispatch import Handler
 from bridge.hub import Hub, Replier
 from bridge.ros_node import RosNode
@@ -46,12 +47,12 @@ class ActionBridges:
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
                  max_action_clients: int = 32, max_goals_per_client: int = 32,
                  idle_client_s: float = 60.0, lost_server_s: float = 1.0,
-                 linger_s: float = 10.0) -> None:
+                 linger_s: float = 10.0, replies: Optional[ClientReplies] = None) -> None:
         self._ros = ros
         self.sender = GoalSender(ros, hub, names, max_action_clients=max_action_clients,
                                  max_goals_per_client=max_goals_per_client,
                                  idle_client_s=idle_client_s, lost_server_s=lost_server_s)
-        self.servers = ServedActions(ros, hub, names, linger_s=linger_s)
+        self.servers = ServedActions(ros, hub, names, linger_s=linger_s, replies=replies)
 
     def list_actions(self, request: ListActions, client: Optional[Replier]) -> dict[str, Any]:
         """The actions some node serves: a goal can be sent to them. (The graph's action
@@ -80,7 +81,10 @@ class ActionBridges:
         }
 
     def describe(self) -> list[dict[str, Any]]:
-        return self.servers.describe() + self.sender.describe()
+        return self.servers.describe()
+
+    def state(self) -> dict[str, Any]:
+        return self.sender.state()
 
     def close(self) -> None:
         self.servers.close()

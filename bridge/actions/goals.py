@@ -25,7 +25,6 @@ from __future__ import annotations
 import asyncio
 import logging
 import uuid
-from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any, Callable, Optional
 
@@ -35,12 +34,15 @@ from rclpy.qos import QoSProfile
 from rclpy.task import Future as RosFuture
 from unique_identifier_msgs.msg import UUID
 
-from bridge.actions.common import action_class_of, destroy_quietly
+from bridge.actions.common import destroy_quietly
 from bridge.codecs import CodecError, message_to_dict
+from bridge.codecs.registry import ACTION
 from bridge.hub import Hub, Replier
+from bridge.interface_types import installed_class
+from bridge.ros_clients import RosClientCache
 from bridge.ros_node import RosNode
 from bridge.security import hidden_action
-from bridge.services import connected_client, message_from_json, resolve_name
+from bridge.services import connected_client, message_from_json
 from protocol import commands as c
 from protocol.commands import (CancelGoal, CommandError, CommandFailedError, ErrorCode,
                                ForbiddenError, LimitReachedError, SendGoal)
@@ -98,7 +100,7 @@ class CalledAction:
     ros_type: str
     cls: Any  # the action class
     client: ActionClient
-    goals: int = 0  # goals sent through it that have not ended
+    in_use: int = 0  # goals sent through it that have not ended
     last_used: float = 0.0  # loop time
     gone_since: Optional[float] = None  # loop time its server was first seen missing
 
@@ -131,15 +133,17 @@ class GoalSender:
         self._hub = hub
         self._names = names
         self._group = ReentrantCallbackGroup()
-        # send_goal's action clients, least recently used first: each is five ROS entities
-        # (three service clients, two subscriptions), so at most `max_action_clients`.
-        self.called: OrderedDict[tuple[str, str], CalledAction] = OrderedDict()
-        self._max_called = max_action_clients
+        # send_goal's action clients: each is five ROS entities (three service clients, two
+        # subscriptions), so at most `max_action_clients`, none kept idle.
+        self.called: RosClientCache[CalledAction] = RosClientCache(
+            capacity=max_action_clients, idle_s=idle_client_s, destroy=self._destroy_client,
+            refusal=lambda action: LimitReachedError(
+                "action", f"at most {max_action_clients} actions with goals in flight at "
+                f"once", f"a goal to {action} more"))
         # A quarter of the action clients per client: one client waiting on absent
         # servers cannot take every slot from the others.
         self._max_actions_per_client = max(1, max_action_clients // 4)
         self._max_goals = max_goals_per_client
-        self._idle_s = idle_client_s
         self._lost_s = lost_server_s
         self.goals: dict[str, SentGoal] = {}
         self._watch: Optional[asyncio.TimerHandle] = None
@@ -185,40 +189,25 @@ class GoalSender:
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
-    def _client_for(self, action: str, ros_type: str, cls: Any) -> CalledAction:
-        now = asyncio.get_running_loop().time()
-        entry = self.called.get((action, ros_type))
-        if entry is not None:
-            self.called.move_to_end((action, ros_type))
-            entry.last_used = now
-            return entry
-        if len(self.called) >= self._max_called:
-            idle = next((k for k, e in self.called.items() if e.goals == 0), None)
-            if idle is None:
-                raise LimitReachedError("action", f"at most {self._max_called} actions with "
-                                        f"goals in flight at once", f"a goal to {action} more")
-            self._drop_client(idle)
+    def _new_client(self, action: str, ros_type: str, cls: Any) -> CalledAction:
         feedback_qos = QoSProfile(depth=_FEEDBACK_DEPTH)
         client = _StatusWatchingClient(
             self._ros.node, cls, action, callback_group=self._group,
             feedback_sub_qos_profile=feedback_qos,
             on_status=lambda message: self._hub.call_soon(self._on_status, entry, message))
-        entry = CalledAction(action, ros_type, cls, client, last_used=now)
-        self.called[(action, ros_type)] = entry
-        self._schedule_watch()
+        entry = CalledAction(action, ros_type, cls, client)
         return entry
 
-    def _drop_client(self, key: tuple[str, str]) -> None:
-        entry = self.called.pop(key)
+    def _destroy_client(self, entry: CalledAction) -> None:
         # Destroyed in the executor thread, between two waits (see RosNode.destroy).
         self._ros.executor.create_task(destroy_quietly, entry.client, entry.action)
 
     # --- send_goal -------------------------------------------------------------------------
     async def send_goal(self, request: SendGoal, client: Optional[Replier]) -> dict[str, Any]:
         client = connected_client(client, "action", "gets the feedback and the result")
-        action = resolve_name(self._ros, request.action, "action")
+        action = request.action
         ros_type = request.ros_type
-        cls = action_class_of(request.type, ros_type)
+        cls = installed_class(ACTION, request.type, ros_type)
         goal = message_from_json(cls.Goal, request.goal, "goal")
         mine = sum(1 for g in self.goals.values() if g.owner is client)
         if mine >= self._max_goals:
@@ -233,13 +222,14 @@ class GoalSender:
         if goal_id in self.goals:
             raise CommandFailedError("goal_id", "a goal id not in use", goal_id,
                                      code=ErrorCode.ALREADY_EXISTS)
-        entry = self._client_for(action, ros_type, cls)
+        entry = self.called.client((action, ros_type),
+                                   lambda: self._new_client(action, ros_type, cls))
         key = NameKey.action_goal(action, goal_id)
         sent = SentGoal(goal_id, action, ros_type, client, key, self._names.register(key),
                         entry)
         # Recorded before the goal leaves: feedback may come before the acceptance does.
         self.goals[goal_id] = sent
-        entry.goals += 1
+        self.called.take(entry)
         try:
             handle = await self._send(sent, goal, request.timeout)
         except BaseException:
@@ -399,8 +389,7 @@ class GoalSender:
         if sent.timer is not None:
             sent.timer.cancel()
         self.goals.pop(sent.goal_id, None)
-        sent.called.goals -= 1
-        sent.called.last_used = asyncio.get_running_loop().time()
+        self.called.release(sent.called)
         self._names.release(sent.key)
 
     def _result_overdue(self, sent: SentGoal, seconds: float) -> None:
@@ -412,20 +401,17 @@ class GoalSender:
                                                 f"(result_timeout); the daemon asked "
                                                 f"{sent.action} to cancel the goal"})
 
-    # --- the watchdog: lost servers, idle clients -------------------------------------------
+    # --- the watchdog: lost servers (the cache drops idle clients) ---------------------------
     def _schedule_watch(self) -> None:
-        if self._watch is None and self.called:
-            interval = min(self._lost_s / 2, self._idle_s)
-            self._watch = asyncio.get_running_loop().call_later(interval, self._look)
+        if self._watch is None and any(e.in_use for e in self.called.values()):
+            self._watch = asyncio.get_running_loop().call_later(self._lost_s / 2, self._look)
 
     def _look(self) -> None:
         self._watch = None
         now = asyncio.get_running_loop().time()
         for key, entry in list(self.called.items()):
-            if entry.goals == 0:
+            if entry.in_use == 0:
                 entry.gone_since = None
-                if now - entry.last_used >= self._idle_s:
-                    self._drop_client(key)
                 continue
             if entry.client.server_is_ready():
                 entry.gone_since = None
@@ -437,8 +423,8 @@ class GoalSender:
                              if g.called is entry and g.handle is not None]:
                     self._finish(sent, "lost", {"error": f"the action server of {entry.action} "
                                                 f"went away before the result (no result)"})
-                if entry.goals == 0:
-                    self._drop_client(key)  # its pending requests go with it
+                if entry.in_use == 0:
+                    self.called.drop(key)  # its pending requests go with it
         self._schedule_watch()
 
     # --- cancel_goal -----------------------------------------------------------------------
@@ -479,7 +465,7 @@ class GoalSender:
 
     async def cancel_goal(self, request: CancelGoal, client: Optional[Replier]
                           ) -> dict[str, Any]:
-        action = resolve_name(self._ros, request.action, "action")
+        action = request.action
         sent = self._owned(action, request.goal_id, client, "goal_id")
         if sent.handle is None:
             raise CommandFailedError("goal_id", "a goal the server has accepted",
@@ -505,18 +491,19 @@ class GoalSender:
             log.info("goal %s of %s canceled: its client left", sent.goal_id, sent.action)
             self._forget(sent)
 
-    def describe(self) -> list[dict[str, Any]]:
-        out = [{"kind": "action_client", "action": e.action, "type": e.ros_type,
-                "goals": e.goals} for e in self.called.values()]
-        out += [{"kind": "goal", "action": g.action, "goal_id": g.goal_id, "device": g.device,
-                 "feedbacks": g.feedbacks} for g in self.goals.values()]
-        return out
+    def state(self) -> dict[str, Any]:
+        """send_goal's cached clients and the goals in flight (not bridges: a goal ends by
+        itself, and the daemon makes and drops its clients)."""
+        return {"action_clients": [{"action": e.action, "type": e.ros_type, "goals": e.in_use}
+                                   for e in self.called.values()],
+                "goals": [{"action": g.action, "goal_id": g.goal_id, "device": g.device,
+                           "feedbacks": g.feedbacks} for g in self.goals.values()]}
 
     def close(self) -> None:
         for task in tuple(self._tasks):
             task.cancel()
         self.goals.clear()
-        self.called.clear()
+        self.called.close()
         if self._watch is not None:
             self._watch.cancel()
             self._watch = None

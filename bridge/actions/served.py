@@ -15,7 +15,6 @@ to the client as an `action_decide` COMMAND and answers ROS with the client's ve
 from __future__ import annotations
 
 import asyncio
-import itertools
 import logging
 from dataclasses import dataclass, field
 from typing import Any, Optional
@@ -25,18 +24,20 @@ from rclpy.action.graph import get_action_names_and_types
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.task import Future as RosFuture
 
-from bridge.actions.common import action_class_of, destroy_quietly
+from bridge.actions.common import destroy_quietly
+from bridge.client_replies import ClientReplies
 from bridge.codecs import CodecError, message_to_dict
+from bridge.codecs.registry import ACTION
 from bridge.hub import Hub, Replier
+from bridge.interface_types import installed_class
 from bridge.ros_node import RosNode
-from bridge.services import (already_served, client_answer, connected_client,
-                             message_from_json, resolve_name)
+from bridge.services import (advertised_by, already_served, client_answer,
+                             connected_client, message_from_json)
 from protocol import commands as c
 from protocol.commands import (ActionCancel, ActionDecide, ActionFeedback, ActionGoal,
                                AdvertiseAction,
                                CommandError, CommandFailedError, ErrorCode, UnadvertiseAction,
                                WrongTypeError)
-from protocol.messages import Command, Message, RtsCommand
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
 
 __all__ = ["DECISION_TIMEOUT_S", "ServedAction", "ServedActions"]
@@ -54,16 +55,7 @@ class _ServedGoal:
     goal_id: str
     handle: Any  # rclpy ServerGoalHandle
     answer: RosFuture
-    command_id: int = 0
-    timer: Optional[asyncio.TimerHandle] = None
     feedbacks: int = 0
-
-
-@dataclass
-class _Decision:
-    served: ServedAction
-    answer: RosFuture  # True: accepted
-    timer: Optional[asyncio.TimerHandle] = None
 
 
 @dataclass
@@ -92,12 +84,13 @@ class ServedActions:
     """`advertise_action`, `unadvertise_action`, `action_feedback`: actions clients serve."""
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
-                 linger_s: float) -> None:
+                 linger_s: float, replies: Optional[ClientReplies] = None) -> None:
         self._ros = ros
         self._hub = hub
         self._names = names
         self._group = ReentrantCallbackGroup()
-        self._ids = itertools.count(1)
+        # Goals and decisions wait for their client's answer here.
+        self._replies = replies if replies is not None else ClientReplies(hub)
         # An unadvertised server lives this long after its last goal ended, so the ROS
         # client's get_result request (sent or answered after the end) still gets the result,
         # and the status topic (transient local) reaches a ROS client that matches late.
@@ -106,18 +99,15 @@ class ServedActions:
         # Unadvertised, not destroyed yet: advertised again (a client reconnecting), the
         # same server serves on: a second one of the same name would split the ROS goals.
         self._lingering: dict[str, ServedAction] = {}
-        self._pending: dict[tuple[Replier, int], _ServedGoal] = {}
-        self._deciding: dict[tuple[Replier, int], _Decision] = {}
-        hub.add_reply_listener(self._on_reply)
         hub.add_closed_listener(self._on_client_closed)
 
     # --- advertise_action ------------------------------------------------------------------
     def advertise_action(self, request: AdvertiseAction, client: Optional[Replier]
                          ) -> dict[str, Any]:
         client = connected_client(client, "action", "executes the goals")
-        action = resolve_name(self._ros, request.action, "action")
+        action = request.action
         ros_type = request.ros_type
-        cls = action_class_of(request.type, ros_type)
+        cls = installed_class(ACTION, request.type, ros_type)
         existing = self.served.get(action)
         lingering = self._lingering.get(action)
         if lingering is not None and lingering.ros_type != ros_type:
@@ -172,11 +162,8 @@ class ServedActions:
 
     def unadvertise_action(self, request: UnadvertiseAction, client: Optional[Replier]
                            ) -> dict[str, Any]:
-        action = resolve_name(self._ros, request.action, "action")
-        served = self.served.get(action)
-        if served is None or (client is not None and served.owner is not client):
-            raise CommandFailedError("action", "an action this client advertises", action,
-                                     code=ErrorCode.NOT_FOUND)
+        action = request.action
+        served = advertised_by(self.served, "action", action, client)
         self._unadvertise(served)
         return {"action": action, "device": served.device}
 
@@ -236,34 +223,30 @@ class ServedActions:
 
     def _forward_decision(self, served: ServedAction, goal: Any, answer: RosFuture) -> None:
         """Put a goal to its deciding client (loop thread)."""
-        decision = _Decision(served, answer)
         if served.closed:
-            self._decided(decision, False)
+            self._decided(answer, False)
             return
+
+        def silence(timed_out: bool) -> None:
+            if timed_out:
+                log.warning("client %s did not accept or reject a goal of %s within %g s; "
+                            "it is rejected", getattr(served.owner, "peer", "?"),
+                            served.action, DECISION_TIMEOUT_S)
+            self._decided(answer, False)
+
         try:
-            text = ActionDecide(action=served.action, type=served.ros_type,
-                                goal=message_to_dict(goal), timeout=DECISION_TIMEOUT_S).to_json()
+            self._replies.ask(
+                served.owner, served.device,
+                ActionDecide(action=served.action, type=served.ros_type,
+                             goal=message_to_dict(goal), timeout=DECISION_TIMEOUT_S),
+                metadata_for(served.key, ros_type=served.ros_type),
+                timeout=DECISION_TIMEOUT_S, about=served,
+                on_answer=lambda text: self._decided(answer, self._verdict(served, text)),
+                on_silence=silence)
         except (CodecError, CommandError) as error:
             log.warning("cannot put a goal of %s to its client (%s); it is rejected",
                         served.action, error)
-            self._decided(decision, False)
-            return
-        command_id = next(self._ids)
-        decision.timer = asyncio.get_running_loop().call_later(
-            DECISION_TIMEOUT_S, self._decision_overdue, served.owner, command_id)
-        self._deciding[(served.owner, command_id)] = decision
-        served.owner.send_message(Message(
-            device_name=served.device,
-            body=Command(command_id=command_id, name=ActionDecide.op, text=text),
-            metadata=metadata_for(served.key, ros_type=served.ros_type)))
-
-    def _decision_overdue(self, owner: Replier, command_id: int) -> None:
-        decision = self._deciding.pop((owner, command_id), None)
-        if decision is not None:
-            log.warning("client %s did not accept or reject a goal of %s within %g s; it is "
-                        "rejected", getattr(owner, "peer", "?"), decision.served.action,
-                        DECISION_TIMEOUT_S)
-            self._decided(decision, False)
+            self._decided(answer, False)
 
     def _verdict(self, served: ServedAction, text: str) -> bool:
         """The client's answer to `action_decide` -> accepted; unusable answers reject."""
@@ -281,11 +264,9 @@ class ServedActions:
                      str(data.get("reason", ""))[:200] or "no reason given")
         return accept
 
-    def _decided(self, decision: _Decision, accepted: bool) -> None:
-        if decision.timer is not None:
-            decision.timer.cancel()
-        if not decision.answer.done():
-            decision.answer.set_result(accepted)
+    def _decided(self, answer: RosFuture, accepted: bool) -> None:
+        if not answer.done():
+            answer.set_result(accepted)
         self._ros.executor.wake()
 
     def _cancel_for(self, served: ServedAction) -> Any:
@@ -303,38 +284,40 @@ class ServedActions:
             self._settle(goal, None)
             return
         served.received += 1
+
+        def silence(timed_out: bool) -> None:
+            if timed_out:
+                log.warning("client %s did not end a goal of %s within %g s; it is aborted",
+                            getattr(served.owner, "peer", "?"), served.action,
+                            served.goal_timeout)
+            self._settle(goal, None)
+
         try:
-            text = ActionGoal(action=served.action, type=served.ros_type, goal_id=goal_id,
-                              goal=message_to_dict(handle.request),
-                              timeout=served.goal_timeout).to_json()
+            self._replies.ask(
+                served.owner, served.device,
+                ActionGoal(action=served.action, type=served.ros_type, goal_id=goal_id,
+                           goal=message_to_dict(handle.request), timeout=served.goal_timeout),
+                metadata_for(served.key, ros_type=served.ros_type),
+                timeout=served.goal_timeout, about=served,
+                on_answer=lambda text: self._settle(goal, self._outcome_from(served, text)),
+                on_silence=silence)
         except (CodecError, CommandError) as error:
             log.warning("cannot forward a goal of %s to its client (%s); it is aborted",
                         served.action, error)
             self._settle(goal, None)
             return
-        goal.command_id = next(self._ids)
-        goal.timer = asyncio.get_running_loop().call_later(
-            served.goal_timeout, self._expire, served.owner, goal.command_id)
-        self._pending[(served.owner, goal.command_id)] = goal
         served.goals[goal_id] = goal
-        served.owner.send_message(Message(
-            device_name=served.device,
-            body=Command(command_id=goal.command_id, name=ActionGoal.op, text=text),
-            metadata=metadata_for(served.key, ros_type=served.ros_type)))
 
     def _forward_cancel(self, served: ServedAction, goal_id: str) -> None:
-        goal = served.goals.get(goal_id)
-        if served.closed or goal is None:
+        if served.closed or goal_id not in served.goals:
             return
-        text = ActionCancel(action=served.action, goal_id=goal_id).to_json()
-        served.owner.send_message(Message(
-            device_name=served.device,
-            body=Command(command_id=next(self._ids), name=ActionCancel.op, text=text),
-            metadata=metadata_for(served.key, ros_type=served.ros_type)))
+        self._replies.tell(served.owner, served.device,
+                           ActionCancel(action=served.action, goal_id=goal_id),
+                           metadata_for(served.key, ros_type=served.ros_type))
 
     def action_feedback(self, request: ActionFeedback, client: Optional[Replier]
                         ) -> dict[str, Any]:
-        action = resolve_name(self._ros, request.action, "action")
+        action = request.action
         served = self.served.get(action)
         goal = served.goals.get(request.goal_id) if served is not None else None
         if served is None or goal is None or (client is not None and served.owner is not client):
@@ -346,19 +329,6 @@ class ServedActions:
         # is thread-safe; the goal handle's own lock guards against its destruction).
         goal.handle.publish_feedback(feedback)
         return {"action": action, "goal_id": goal.goal_id, "feedbacks": goal.feedbacks}
-
-    def _on_reply(self, message: Message, client: Replier) -> None:
-        body = message.body
-        if not isinstance(body, RtsCommand):
-            return
-        decision = self._deciding.pop((client, body.command_id), None)
-        if decision is not None:
-            self._decided(decision, self._verdict(decision.served, body.text))
-            return
-        goal = self._pending.get((client, body.command_id))
-        if goal is None:
-            return  # not ours (a service's), or it came after the timeout
-        self._settle(goal, self._outcome_from(goal.served, body.text))
 
     def _outcome_from(self, served: ServedAction, text: str) -> Optional[tuple[str, Any]]:
         """The client's answer -> (status, Result), judged by its JSON; None (abort) with a
@@ -379,19 +349,8 @@ class ServedActions:
                         served.action, error)
             return None
 
-    def _expire(self, owner: Replier, command_id: int) -> None:
-        goal = self._pending.get((owner, command_id))
-        if goal is None:
-            return
-        log.warning("client %s did not end a goal of %s within %g s; it is aborted",
-                    getattr(owner, "peer", "?"), goal.served.action, goal.served.goal_timeout)
-        self._settle(goal, None)
-
     def _settle(self, goal: _ServedGoal, outcome: Optional[tuple[str, Any]]) -> None:
-        self._pending.pop((goal.served.owner, goal.command_id), None)
         goal.served.goals.pop(goal.goal_id, None)
-        if goal.timer is not None:
-            goal.timer.cancel()
         if not goal.answer.done():
             goal.answer.set_result(outcome)
         # The executor resumes a waiting coroutine only when something wakes it.
@@ -400,12 +359,7 @@ class ServedActions:
     def _unadvertise(self, served: ServedAction) -> None:
         served.closed = True
         self.served.pop(served.action, None)
-        for goal in list(served.goals.values()):
-            self._settle(goal, None)
-        for key, decision in list(self._deciding.items()):
-            if decision.served is served:
-                del self._deciding[key]
-                self._decided(decision, False)
+        self._replies.withdraw(served)  # its goals abort, its undecided goals are rejected
         self._names.release(served.key)
         self._destroy_later(served)
         log.info("no longer serving action %s", served.action)
@@ -450,28 +404,17 @@ class ServedActions:
         # executing goal waits for a client that is gone.
         for served in list(self.served.values()):
             served.closed = True
-            for goal in list(served.goals.values()):
-                if goal.timer is not None:
-                    goal.timer.cancel()
-                if not goal.answer.done():
-                    goal.answer.set_result(None)
-        for decision in self._deciding.values():
-            if decision.timer is not None:
-                decision.timer.cancel()
-            if not decision.answer.done():
-                decision.answer.set_result(False)
+            self._replies.withdraw(served)
         for served in self._lingering.values():
             if served.linger is not None:
                 served.linger.cancel()
         self._ros.executor.wake()
-        self._pending.clear()
-        self._deciding.clear()
         self.served.clear()
         self._lingering.clear()
 
 
 def _describe_served(served: ServedAction, existed: bool | None = None) -> dict[str, Any]:
-    out: dict[str, Any] = {"kind": "action_server", "action": served.action,
+    out: dict[str, Any] = {"kind": "served_action", "action": served.action,
                            "type": served.ros_type, "device": served.device,
                            "goals": served.received, "decides": served.decides}
     if existed is not None:

@@ -14,6 +14,7 @@ import importlib
 import os
 import re
 import sys
+from dataclasses import dataclass
 from functools import cache, lru_cache
 from typing import Any
 
@@ -21,14 +22,14 @@ from bridge.codecs.errors import CodecError
 from protocol.commands import (REFERENCE_TYPE_NAMES, OutOfRangeError, resolve_message_type,
                                resolve_service_type)
 
-__all__ = ["REFERENCE_SHORT_NAMES", "action_class", "installed_types", "message_class",
+__all__ = ["ACTION", "MESSAGE", "REFERENCE_SHORT_NAMES", "SERVICE", "InterfaceKind",
+           "action_class", "installed_types", "interface_class", "message_class",
            "resolve_service", "resolve_type", "ros_type_of", "service_class"]
 
 # The reference's short names: one table, in the protocol (clients resolve them too).
 REFERENCE_SHORT_NAMES = REFERENCE_TYPE_NAMES
 
 _IDENT = r"[A-Za-z][A-Za-z0-9_]*"
-_CANONICAL = re.compile(rf"^({_IDENT})/msg/({_IDENT})$")
 _IMPORT_LINES = {kind: re.compile(rf"^from\s+({_IDENT})\.{kind}\.\w+\s+import\s+({_IDENT})",
                                   re.MULTILINE) for kind in ("msg", "srv")}
 
@@ -37,63 +38,59 @@ def _unknown(name: str, why: str) -> CodecError:
     return CodecError(field="type", expected=why, got=repr(name))
 
 
+@dataclass(frozen=True)
+class InterfaceKind:
+    """What a ROS interface kind is to the class lookup: its folder in a package (``msg``,
+    ``srv``, ``action``), its name in errors, and the attributes its class has."""
+
+    folder: str
+    noun: str
+    parts: tuple[str, ...]
+
+    @property
+    def one(self) -> str:
+        """``a message``, ``an action``: the noun with its article, for errors."""
+        return f"{'an' if self.noun[0] in 'aeiou' else 'a'} {self.noun}"
+
+
+MESSAGE = InterfaceKind("msg", "message", ("get_fields_and_field_types",))
+SERVICE = InterfaceKind("srv", "service", ("Request", "Response"))
+ACTION = InterfaceKind("action", "action", ("Goal", "Result", "Feedback"))
+
+
 @cache
+def interface_class(kind: InterfaceKind, ros_type: str) -> Any:
+    """The rclpy class of a canonical ``pkg/<folder>/Type`` of ``kind``; `CodecError` naming
+    what was expected if it is not installed."""
+    m = re.match(rf"^({_IDENT})/{kind.folder}/({_IDENT})$", ros_type)
+    if m is None:
+        raise _unknown(ros_type, f"{kind.one} type 'pkg/{kind.folder}/Type'")
+    pkg, name = m.groups()
+    try:
+        module = importlib.import_module(f"{pkg}.{kind.folder}")
+    except ImportError:
+        raise _unknown(ros_type, f"an installed interface package with {kind.noun}s "
+                       f"({pkg!r} has none here)") from None
+    cls = getattr(module, name, None)
+    if cls is None or not all(hasattr(cls, part) for part in kind.parts):
+        raise _unknown(ros_type, f"{kind.one} of package {pkg!r} ({name!r} is not "
+                       "one)")
+    return cls
+
+
 def message_class(ros_type: str) -> Any:
-    """The rclpy message class of a canonical ``pkg/msg/Type``; `CodecError` if not installed."""
-    m = _CANONICAL.match(ros_type)
-    if m is None:
-        raise _unknown(ros_type, "a message type 'pkg/msg/Type'")
-    pkg, name = m.groups()
-    try:
-        module = importlib.import_module(f"{pkg}.msg")
-    except ImportError:
-        raise _unknown(ros_type, f"an installed interface package ({pkg!r} is not)") from None
-    cls = getattr(module, name, None)
-    if cls is None or not hasattr(cls, "get_fields_and_field_types"):
-        raise _unknown(ros_type, f"a message of package {pkg!r} ({name!r} is not one)")
-    return cls
+    """The rclpy message class of ``pkg/msg/Type`` (`interface_class`)."""
+    return interface_class(MESSAGE, ros_type)
 
 
-_SERVICE = re.compile(rf"^({_IDENT})/srv/({_IDENT})$")
-
-
-@cache
 def service_class(ros_type: str) -> Any:
-    """The rclpy service class of a canonical ``pkg/srv/Type``; `CodecError` if not installed."""
-    m = _SERVICE.match(ros_type)
-    if m is None:
-        raise _unknown(ros_type, "a service type 'pkg/srv/Type'")
-    pkg, name = m.groups()
-    try:
-        module = importlib.import_module(f"{pkg}.srv")
-    except ImportError:
-        raise _unknown(ros_type, f"an installed interface package ({pkg!r} is not)") from None
-    cls = getattr(module, name, None)
-    if cls is None or not hasattr(cls, "Request") or not hasattr(cls, "Response"):
-        raise _unknown(ros_type, f"a service of package {pkg!r} ({name!r} is not one)")
-    return cls
+    """The rclpy service class of ``pkg/srv/Type`` (`interface_class`)."""
+    return interface_class(SERVICE, ros_type)
 
 
-_ACTION = re.compile(rf"^({_IDENT})/action/({_IDENT})$")
-
-
-@cache
 def action_class(ros_type: str) -> Any:
-    """The rclpy action class of a canonical ``pkg/action/Type``; `CodecError` if not
-    installed."""
-    m = _ACTION.match(ros_type)
-    if m is None:
-        raise _unknown(ros_type, "an action type 'pkg/action/Type'")
-    pkg, name = m.groups()
-    try:
-        module = importlib.import_module(f"{pkg}.action")
-    except ImportError:
-        raise _unknown(ros_type, f"an installed interface package with actions ({pkg!r} "
-                       f"has none here)") from None
-    cls = getattr(module, name, None)
-    if cls is None or not all(hasattr(cls, part) for part in ("Goal", "Result", "Feedback")):
-        raise _unknown(ros_type, f"an action of package {pkg!r} ({name!r} is not one)")
-    return cls
+    """The rclpy action class of ``pkg/action/Type`` (`interface_class`)."""
+    return interface_class(ACTION, ros_type)
 
 
 def ros_type_of(msg_or_class: Any) -> str:

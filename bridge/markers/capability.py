@@ -96,7 +96,7 @@ from bridge.tf.errors import ExtrapolationError, TfError
 from bridge.tf.math import Quat, Tf7, Vec3, compose, quat_normalize
 from bridge.tf.lookups import LookupKey
 from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
-                               ListMarkers, Op, OutOfRangeError, RemoveMarkerSubscriber)
+                               ListMarkers, Op, RemoveMarkerSubscriber)
 from protocol.conversions import igtl_stamp_or_now
 from protocol.messages import Message, StatusCode, String
 from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_FORMAT, KEY_MARKER_TYPE, KEY_MARKERS,
@@ -552,7 +552,7 @@ class MarkerBridges:
 
     def create(self, request: CreateMarkerSubscriber,
                client: Optional[Replier] = None) -> dict[str, Any]:
-        topic = self._resolve(request.topic)
+        topic = request.topic
         ros_type = request.ros_type
         existing = self.subscriptions.get(topic)
         if existing is not None:
@@ -625,18 +625,10 @@ class MarkerBridges:
             if sub.audience is not None:
                 sub.audience.discard(client)
 
-    def _resolve(self, topic: str) -> str:
-        try:
-            return self._ros.resolve_topic(topic)
-        except Exception as error:  # rclpy raises several name-validation exceptions
-            raise OutOfRangeError("topic", "a valid ROS topic name",
-                                  f"{topic!r} ({error})") from None
-
     def _find(self, topic: str) -> _Subscription:
-        resolved = self._resolve(topic)
-        sub = self.subscriptions.get(resolved)
+        sub = self.subscriptions.get(topic)
         if sub is None:
-            raise CommandFailedError("topic", "a topic with a marker subscriber", resolved,
+            raise CommandFailedError("topic", "a topic with a marker subscriber", topic,
                                      code=ErrorCode.NOT_FOUND)
         return sub
 
@@ -955,6 +947,9 @@ class MarkerBridges:
 
     def describe(self) -> list[dict[str, Any]]:
         return [self._describe(sub) for sub in self.subscriptions.values()]
+
+    def state(self) -> dict[str, Any]:
+        return {}
 
     def close(self) -> None:
         if self._timer is not None:

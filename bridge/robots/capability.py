@@ -60,7 +60,6 @@ from bridge.robots.joints import describe_joints, joint_positions
 from bridge.robots.resources import PackageResolver
 from bridge.ros_node import RosNode
 from bridge.security import NameRules
-from bridge.services import resolve_name
 from bridge.tf.capability import TfBridges
 from bridge.tf.lookups import LookupKey
 from bridge.hub import Hub, Replier
@@ -200,7 +199,8 @@ class RobotBridges:
         except NamingError as error:
             raise OutOfRangeError("name", "a robot name usable as a device name",
                                   f"{request.name!r} ({error})") from None
-        robot = _Robot(request.name, request, self._resolve_source(request),
+        # The request's source comes placed and resolved (CreateRobot.with_names).
+        robot = _Robot(request.name, request, request.source,
                        request.tf_prefix, description_key, description_device,
                        mesh_roots=None if client is None and request.source.kind == "file"
                        else self._mesh_roots)
@@ -241,19 +241,6 @@ class RobotBridges:
         return {"robots": [self._summary(robot) for robot in self.robots.values()]}
 
     # ------------------------------------------------------------------ sources
-
-    def _resolve_source(self, request: CreateRobot) -> RobotSource:
-        """Names as the ROS graph has them: the request's placed source
-        (`CreateRobot.placed_source`: its namespace applied), resolved in the daemon's."""
-        source = request.placed_source()
-        if source.kind == "parameter":
-            return RobotSource("parameter", node=resolve_name(self._ros, source.node,
-                                                              "source.node"),
-                               parameter=source.parameter)
-        if source.kind == "topic":
-            return RobotSource("topic", topic=resolve_name(self._ros, source.topic,
-                                                           "source.topic"))
-        return source
 
     async def _first_description(self, robot: _Robot) -> Optional[str]:
         """The URDF text now, or None (then ``robot.reason`` says what it waits for)."""
@@ -572,8 +559,8 @@ class RobotBridges:
             base = source.topic.rsplit("/", 1)[0]
         else:
             namespace = robot.request.namespace.strip("/")
-            return resolve_name(self._ros, f"{namespace}/joint_states" if namespace
-                                else "joint_states", "topic")
+            return self._ros.resolve_name(f"{namespace}/joint_states" if namespace
+                                          else "joint_states", "topic")
         return f"{base}/joint_states"
 
     def describe_robot_joints(self, request: DescribeRobotJoints) -> dict[str, Any]:
@@ -585,7 +572,7 @@ class RobotBridges:
     def set_robot_joints(self, request: SetRobotJoints) -> dict[str, Any]:
         robot, model = self._loaded(request.name)
         positions = joint_positions(model.joints, request.positions)
-        topic = resolve_name(self._ros, request.topic, "topic")
+        topic = request.topic
         if robot.joint_publisher is None or robot.joint_topic != topic:
             if robot.joint_publisher is not None:
                 self._ros.destroy(robot.joint_publisher)
@@ -636,6 +623,9 @@ class RobotBridges:
 
     def describe(self) -> list[dict[str, Any]]:
         return [self._summary(robot) for robot in self.robots.values()]
+
+    def state(self) -> dict[str, Any]:
+        return {}
 
     def close(self) -> None:
         for task in tuple(self._tasks):

@@ -675,12 +675,14 @@ class TfBridges:
         out: list[dict[str, Any]] = [self._describe_lookup(lookup)
                                      for lookup in self.lookups.values()]
         out.extend(self._describe_broadcaster(b) for b in self.broadcasters.values())
-        out.append({"kind": "tf_buffer", "topics": [self._tf_topic, self._tf_static_topic],
-                    "frame_prefix": self._prefix,
-                    "frames": [f for f in self.buffer.frames() if self._frame_rules.permits(f)],
-                    "received": dict(self.received),
-                    "cache_time_s": self.buffer.cache_time_s})
         return out
+
+    def state(self) -> dict[str, Any]:
+        """The shared tf buffer (not a bridge: every lookup reads it)."""
+        return {"tf_buffer": {
+            "topics": [self._tf_topic, self._tf_static_topic], "frame_prefix": self._prefix,
+            "frames": [f for f in self.buffer.frames() if self._frame_rules.permits(f)],
+            "received": dict(self.received), "cache_time_s": self.buffer.cache_time_s}}
 
     def _describe_lookup(self, lookup: _Lookup, existed: Optional[bool] = None,
                          ) -> dict[str, Any]:

@@ -17,6 +17,7 @@ The package, by job:
     fields      the field reader (`Args`)
     values      QoS, Stamp, ParameterValue, RobotSource, matrices
     types       the one grammar of ROS type names
+    results     the typed results of the ops a client reads (`Answered`), parsed in one place
     op          the op base class, its declarations and the registry; parsing
     graph, topics, parameters, tf, robots, services, markers, actions, interfaces
                 the ops, by area (adding an op: a class in one of these, and a handler)
@@ -35,6 +36,8 @@ from protocol.commands.values import *  # noqa: F403
 from protocol.commands.values import __all__ as _values
 from protocol.commands.types import *  # noqa: F403
 from protocol.commands.types import __all__ as _types
+from protocol.commands.results import *  # noqa: F403
+from protocol.commands.results import __all__ as _results
 from protocol.commands.op import *  # noqa: F403
 from protocol.commands.op import __all__ as _op
 from protocol.commands.graph import *  # noqa: F403
@@ -58,7 +61,7 @@ from protocol.commands.interfaces import __all__ as _interfaces
 from protocol.commands.replies import *  # noqa: F403
 from protocol.commands.replies import __all__ as _replies
 
-__all__ = [*_errors, *_wire, *_values, *_types, *_op, *_graph, *_topics, *_parameters,
+__all__ = [*_errors, *_wire, *_values, *_types, *_results, *_op, *_graph, *_topics, *_parameters,
            *_tf, *_robots, *_services, *_markers, *_actions, *_interfaces, *_replies]
 
 bridge_kinds()  # noqa: F405 - a create op without its remove op fails here, at import

@@ -24,6 +24,8 @@ from typing import Any, Optional, cast
 from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import MISSING, Args
 from protocol.commands.op import ActionUse, Bridge, Op, Resource
+from protocol.commands.results import (AdvertiseActionResult, Answered, CancelGoalResult,
+                                       SendGoalResult)
 from protocol.commands.types import resolve_action_type
 from protocol.commands.wire import json_type
 
@@ -80,7 +82,7 @@ class ListActions(Op, op="list_actions", writes=False):
 
 
 @dataclass(frozen=True)
-class SendGoal(Op, op="send_goal", writes=True):
+class SendGoal(Op, Answered[SendGoalResult], op="send_goal", ros_names=("action",), writes=True):
     """Send a goal to a ROS action server. ``timeout``: for the server to be found and to
     accept (keep it below the client's own command timeout); ``result_timeout``: if set,
     the daemon cancels the goal when no result came by then (the goal ends ``timeout``).
@@ -115,7 +117,8 @@ class SendGoal(Op, op="send_goal", writes=True):
 
 
 @dataclass(frozen=True)
-class CancelGoal(Op, op="cancel_goal", writes=True):
+class CancelGoal(Op, Answered[CancelGoalResult], op="cancel_goal",
+                 ros_names=("action",), writes=True):
     """Ask the server to cancel a goal this client sent (its end still arrives as the
     goal's result event, status ``canceled`` if the server honours it)."""
 
@@ -135,7 +138,8 @@ class CancelGoal(Op, op="cancel_goal", writes=True):
 
 
 @dataclass(frozen=True)
-class AdvertiseAction(Op, op="advertise_action", writes=True,
+class AdvertiseAction(Op, Answered[AdvertiseActionResult], op="advertise_action",
+                      ros_names=("action",), writes=True,
                       creates=Bridge("served_action", ("action",), per_connection=True)):
     """Offer a ROS action served by this client: each goal reaches it as an `ActionGoal`
     COMMAND. ``goal_timeout``: how long a goal may run before the daemon aborts it.
@@ -163,7 +167,7 @@ class AdvertiseAction(Op, op="advertise_action", writes=True,
 
 
 @dataclass(frozen=True)
-class UnadvertiseAction(Op, op="unadvertise_action", writes=False,
+class UnadvertiseAction(Op, op="unadvertise_action", ros_names=("action",), writes=False,
                         removes="served_action"):
     action: str
 
@@ -176,7 +180,7 @@ class UnadvertiseAction(Op, op="unadvertise_action", writes=False,
 
 
 @dataclass(frozen=True)
-class ActionFeedback(Op, op="action_feedback", writes=True):
+class ActionFeedback(Op, op="action_feedback", ros_names=("action",), writes=True):
     """Feedback of a goal this client serves, published to the ROS client that sent it."""
 
     action: str
@@ -194,7 +198,7 @@ class ActionFeedback(Op, op="action_feedback", writes=True):
 
 
 @dataclass(frozen=True)
-class ActionGoal(Op, op="action_goal", writes=False, to_client=True):
+class ActionGoal(Op, op="action_goal", ros_names=("action",), writes=False, to_client=True):
     """Sent by the daemon to the client that advertised ``action``: one goal to execute
     within ``timeout`` seconds. Answer: ``{"status": ..., "result": {...}}``."""
 
@@ -217,7 +221,7 @@ class ActionGoal(Op, op="action_goal", writes=False, to_client=True):
 
 
 @dataclass(frozen=True)
-class ActionDecide(Op, op="action_decide", writes=False, to_client=True):
+class ActionDecide(Op, op="action_decide", ros_names=("action",), writes=False, to_client=True):
     """Sent by the daemon to a client that advertised ``action`` with ``decides``: a ROS
     client sent this goal; answer ``{"accept": bool, "reason": str}`` within ``timeout``
     seconds (no answer in time: the goal is rejected). An accepted goal then comes as an
@@ -240,7 +244,7 @@ class ActionDecide(Op, op="action_decide", writes=False, to_client=True):
 
 
 @dataclass(frozen=True)
-class ActionCancel(Op, op="action_cancel", writes=False, to_client=True):
+class ActionCancel(Op, op="action_cancel", ros_names=("action",), writes=False, to_client=True):
     """Sent by the daemon to the serving client: a ROS client asks to cancel a goal. The
     client ends the goal (its `ActionGoal` answer, status ``canceled``) when it can."""
 

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 from protocol.auth import NONCE
 from protocol.commands.fields import MAX_NAME, Args
 from protocol.commands.op import Op, Resource
+from protocol.commands.results import (Answered, AuthenticateResult, HelloResult,
+                                       ListServicesResult, ListTopicsResult)
 
 _PROOF = re.compile(r"[0-9a-f]{64}\Z")
 
@@ -15,7 +17,7 @@ __all__ = ["Authenticate", "Hello", "ListBridges", "ListServices", "ListTopics"]
 
 
 @dataclass(frozen=True)
-class Hello(Op, op="hello", writes=False):
+class Hello(Op, Answered[HelloResult], op="hello", writes=False):
     """Handshake: the reply says the daemon's schema, version, node name and ops, whether
     this connection may write and, when the daemon has a key, the challenge to answer with
     `Authenticate`. ``heartbeat``: send this connection a STATUS every that many seconds
@@ -39,7 +41,7 @@ class Hello(Op, op="hello", writes=False):
 
 
 @dataclass(frozen=True)
-class Authenticate(Op, op="authenticate", writes=False):
+class Authenticate(Op, Answered[AuthenticateResult], op="authenticate", writes=False):
     """Present the daemon's key (protocol/auth.py): a fresh ``nonce`` of this client's (32
     to 128 hex digits) and ``proof``, the HMAC of the challenge `hello` gave with it. Once
     accepted, this connection may write (ops that write, data sent to publishers)."""
@@ -69,7 +71,7 @@ class ListBridges(Op, op="list_bridges", writes=False):
 
 
 @dataclass(frozen=True)
-class ListTopics(Op, op="list_topics", writes=False):
+class ListTopics(Op, Answered[ListTopicsResult], op="list_topics", writes=False):
     """The ROS graph's topics and their types."""
 
     def resources(self) -> tuple[Resource, ...]:
@@ -81,7 +83,7 @@ class ListTopics(Op, op="list_topics", writes=False):
 
 
 @dataclass(frozen=True)
-class ListServices(Op, op="list_services", writes=False):
+class ListServices(Op, Answered[ListServicesResult], op="list_services", writes=False):
     """The ROS graph's services and their types."""
 
     def resources(self) -> tuple[Resource, ...]:

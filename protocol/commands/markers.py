@@ -55,7 +55,7 @@ def _fixed_frame(a: Args) -> str:
 
 
 @dataclass(frozen=True)
-class CreateMarkerSubscriber(Op, op="create_marker_subscriber", writes=False,
+class CreateMarkerSubscriber(Op, op="create_marker_subscriber", ros_names=("topic",), writes=False,
                              creates=Bridge("marker_subscriber", ("topic",),
                                             section="marker_subscribers")):
     """Subscribe to ``topic`` (``type``: Marker, MarkerArray, Path, PolygonStamped or
@@ -89,7 +89,7 @@ class CreateMarkerSubscriber(Op, op="create_marker_subscriber", writes=False,
 
 
 @dataclass(frozen=True)
-class RemoveMarkerSubscriber(Op, op="remove_marker_subscriber", writes=False,
+class RemoveMarkerSubscriber(Op, op="remove_marker_subscriber", ros_names=("topic",), writes=False,
                              removes="marker_subscriber"):
     topic: str
 
@@ -102,7 +102,7 @@ class RemoveMarkerSubscriber(Op, op="remove_marker_subscriber", writes=False,
 
 
 @dataclass(frozen=True)
-class ListMarkers(Op, op="list_markers", writes=False):
+class ListMarkers(Op, op="list_markers", ros_names=("topic",), writes=False):
     """The live markers of a marker subscriber: device, ns, id, type, frame, expiry."""
 
     topic: str

@@ -13,6 +13,10 @@ fields, everything the rest of the daemon derives from it.
 * ``writes``: whether it changes the ROS graph or its state (``--read-only`` refuses it);
 * ``creates`` / ``removes`` / ``follows``: the bridge it creates (its kind, the fields that
   identify one, its section in the YAML config), removes, or restores state of;
+* ``ros_names``: the fields holding ROS names (topics, services, actions, nodes; ``a.b`` for a
+  field of a nested value): the dispatcher makes them fully qualified once
+  (`Op.with_names`), so the policy, the bridge's identity and the handler all see the
+  same name (``cmd`` and ``/cmd`` are one topic);
 * ``resources()``: what it touches (topics, services, actions, parameters, tf frames, files); the
   security policy judges these, never op names.
 
@@ -25,17 +29,20 @@ all derived from the registry below (`REQUEST_TYPES`, `bridge_kinds`).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
-from typing import Any, ClassVar, Optional, TypeVar, Union, cast
+from dataclasses import dataclass, fields, replace
+from typing import Any, Callable, ClassVar, Optional, TypeVar, Union, cast
 
 from protocol.commands.errors import TooLargeError, UnknownOpError, UnsupportedSchemaError
 from protocol.commands.errors import WrongTypeError
 from protocol.commands.fields import Args
 from protocol.commands.wire import MAX_OP_NAME_BYTES, SCHEMA_VERSION, dumps, json_type, loads
 
-__all__ = ["REQUEST_TYPES", "ActionUse", "Bridge", "BridgeKind", "FileUse", "FrameUse", "Op",
-           "ParameterUse", "Request", "Resource", "ServiceUse", "TopicUse", "bridge_kinds",
-           "encode_request", "parse_request"]
+__all__ = ["REQUEST_TYPES", "ActionUse", "Bridge", "BridgeKind", "FileUse", "FrameUse",
+           "NameResolver", "Op", "ParameterUse", "Request", "Resource", "ServiceUse", "TopicUse",
+           "bridge_kinds", "encode_request", "parse_request"]
+
+# (name, field path) -> the fully qualified name; raises a CommandError naming the field.
+NameResolver = Callable[[str, str], str]
 
 
 # ---------------------------------------------------------------------------- resources
@@ -165,11 +172,12 @@ class Op:
     follows: ClassVar[Optional[str]] = None
     # Sent by the daemon to a client, never the other way (service_request).
     to_client: ClassVar[bool] = False
+    ros_names: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, *, op: str = "", writes: Optional[bool] = None,
                           creates: Optional[Bridge] = None, removes: Optional[str] = None,
                           follows: Optional[str] = None, to_client: bool = False,
-                          **kwargs: Any) -> None:
+                          ros_names: tuple[str, ...] = (), **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         name = cls.__name__
         if not op:
@@ -188,13 +196,31 @@ class Op:
             missing = [f for f in creates.identity if f not in annotations]
             if missing:
                 raise TypeError(f"{name} ({op}): identity field {missing[0]!r} is not a field")
-        cls.op, cls.writes, cls.to_client = op, writes, to_client
+        unknown = [n for n in ros_names if n.partition(".")[0] not in annotations]
+        if unknown:
+            raise TypeError(f"{name} ({op}): ROS name field {unknown[0]!r} is not a field")
+        cls.op, cls.writes, cls.to_client, cls.ros_names = op, writes, to_client, ros_names
         cls.creates, cls.removes, cls.follows = creates, removes, follows
         REQUEST_TYPES[op] = cls
 
     def resources(self) -> tuple[Resource, ...]:
         """What this request touches, for the security policy."""
         raise NotImplementedError  # pragma: no cover - every op defines its own
+
+    def with_names(self: R, resolve: NameResolver) -> R:
+        """This request with each of its `ros_names` made fully qualified by `resolve` (an
+        empty or absent optional name is left as it is)."""
+        changes: dict[str, Any] = {}
+        for path in type(self).ros_names:
+            head, _, inner = path.partition(".")
+            value = changes.get(head, getattr(self, head))
+            if inner:
+                name = getattr(value, inner, None)
+                if name:
+                    changes[head] = replace(value, **{inner: resolve(name, path)})
+            elif value:
+                changes[head] = resolve(value, path)
+        return replace(self, **changes) if changes else self
 
     def to_args(self) -> dict[str, Any]:
         out: dict[str, Any] = {"schema": SCHEMA_VERSION}

@@ -9,6 +9,8 @@ from typing import cast
 from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import MAX_NAME, MAX_TEXT, PARAM_NAME, Args, check_str
 from protocol.commands.op import Bridge, Op, ParameterUse, Resource
+from protocol.commands.results import (Answered, GetParametersResult, ListParametersResult,
+                                       ObserveParametersResult, SetParametersResult)
 from protocol.commands.values import ParameterValue
 
 __all__ = ["CreateParameterClient", "GetParameters", "ListParameters", "ObserveParameters",
@@ -17,7 +19,7 @@ __all__ = ["CreateParameterClient", "GetParameters", "ListParameters", "ObserveP
 
 
 @dataclass(frozen=True)
-class CreateParameterClient(Op, op="create_parameter_client", writes=False,
+class CreateParameterClient(Op, op="create_parameter_client", ros_names=("node",), writes=False,
                             creates=Bridge("parameter_client", ("node",),
                                            section="parameter_clients")):
     """Watch another node's parameters (``/robot_state_publisher`` or ``ns/node``)."""
@@ -34,7 +36,8 @@ class CreateParameterClient(Op, op="create_parameter_client", writes=False,
 
 @dataclass(frozen=True)
 class RemoveParameterClient(
-        Op, op="remove_parameter_client", writes=False, removes="parameter_client"):
+        Op, op="remove_parameter_client", ros_names=("node",), writes=False,
+        removes="parameter_client"):
     node: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -46,7 +49,8 @@ class RemoveParameterClient(
 
 
 @dataclass(frozen=True)
-class ListParameters(Op, op="list_parameters", writes=False):
+class ListParameters(Op, Answered[ListParametersResult], op="list_parameters", ros_names=("node",),
+                     writes=False):
     node: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -58,7 +62,8 @@ class ListParameters(Op, op="list_parameters", writes=False):
 
 
 @dataclass(frozen=True)
-class GetParameters(Op, op="get_parameters", writes=False):
+class GetParameters(Op, Answered[GetParametersResult], op="get_parameters", ros_names=("node",),
+                    writes=False):
     """Values of a remote node's parameters (unknown ones come back ``not_set``)."""
 
     node: str
@@ -85,7 +90,8 @@ def _param_values(a: Args, name: str) -> dict[str, ParameterValue]:
 
 
 @dataclass(frozen=True)
-class SetParameters(Op, op="set_parameters", writes=True):
+class SetParameters(Op, Answered[SetParametersResult], op="set_parameters", ros_names=("node",),
+                    writes=True):
     """Set a remote node's parameters; the reply gives each one's outcome."""
 
     node: str
@@ -100,7 +106,9 @@ class SetParameters(Op, op="set_parameters", writes=True):
 
 
 @dataclass(frozen=True)
-class ObserveParameters(Op, op="observe_parameters", writes=False, follows="parameter_client"):
+class ObserveParameters(Op, Answered[ObserveParametersResult],
+                        op="observe_parameters", ros_names=("node",), writes=False,
+                        follows="parameter_client"):
     """Replace the set of a parameter client's parameters whose values are fetched and whose
     changes are pushed to the client (a STRING message under the client's device name);
     ``[]`` stops. ``all_changes``: also push every other parameter of the node that is

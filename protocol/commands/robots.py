@@ -3,14 +3,16 @@ transforms."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, cast
 
 from protocol.commands.errors import TooLargeError
 from protocol.commands.fields import (MAX_NAME, ROBOT_NAME, ROS_NAME, ROS_NAME_DESC, Args,
                                       check_float, check_str)
-from protocol.commands.op import (Bridge, FileUse, FrameUse, Op, ParameterUse, Resource,
-                                  TopicUse)
+from protocol.commands.op import (Bridge, FileUse, FrameUse, NameResolver, Op, ParameterUse,
+                                  Resource, TopicUse)
+from protocol.commands.results import (Answered, DescribeRobotJointsResult,
+                                       SetRobotJointsResult)
 from protocol.commands.values import RobotSource
 
 __all__ = ["JOINT_STATE_TYPE", "MAX_JOINTS", "CreateRobot", "DescribeRobotJoints",
@@ -22,7 +24,7 @@ _ROBOT_DESC = "a robot name of letters, digits and _"
 
 
 @dataclass(frozen=True)
-class CreateRobot(Op, op="create_robot", writes=False,
+class CreateRobot(Op, op="create_robot", ros_names=("source.node", "source.topic"), writes=False,
                   creates=Bridge("robot", ("name",), section="robots")):
     """Load a robot from its URDF: one model per link visual, placed by tf lookups from
     ``fixed_frame`` (omitted = the URDF's root link) to ``tf_prefix`` + link.
@@ -35,6 +37,16 @@ class CreateRobot(Op, op="create_robot", writes=False,
     fixed_frame: str | None = None
     tf_prefix: str = ""
     namespace: str = ""
+
+    def with_names(self, resolve: NameResolver) -> CreateRobot:
+        # Relative source names live in the robot's namespace: placed first, then resolved;
+        # only the name its kind reads (the others keep their defaults).
+        source = self.placed_source()
+        if source.kind == "parameter":
+            source = replace(source, node=resolve(source.node, "source.node"))
+        elif source.kind == "topic":
+            source = replace(source, topic=resolve(source.topic, "source.topic"))
+        return replace(self, source=source)
 
     def placed_source(self) -> RobotSource:
         """The source with the robot's ``namespace`` applied to relative names and to the
@@ -108,7 +120,8 @@ class ListRobots(Op, op="list_robots", writes=False):
 
 
 @dataclass(frozen=True)
-class DescribeRobotJoints(Op, op="describe_robot_joints", writes=False):
+class DescribeRobotJoints(Op, Answered[DescribeRobotJointsResult],
+                          op="describe_robot_joints", writes=False):
     """The joints of a loaded robot, from its URDF: type, limits, mimic (leader, multiplier,
     offset), whether a client sets it (``actuated``: moving and not a mimic), and the
     joint-states topic its state publisher listens to by default."""
@@ -124,7 +137,9 @@ class DescribeRobotJoints(Op, op="describe_robot_joints", writes=False):
 
 
 @dataclass(frozen=True)
-class SetRobotJoints(Op, op="set_robot_joints", writes=True):
+class SetRobotJoints(Op, Answered[SetRobotJointsResult], op="set_robot_joints",
+                     ros_names=("topic",),
+                     writes=True):
     """Publish one sensor_msgs/JointState for a loaded robot on ``topic`` (relative names
     resolve in the daemon's namespace; `DescribeRobotJoints` gives the robot's). Names and
     limits come from the robot's URDF: an unknown, fixed or mimic joint, or a position

@@ -9,6 +9,7 @@ from typing import Any, cast
 from protocol.commands.errors import WrongTypeError
 from protocol.commands.fields import MISSING, Args
 from protocol.commands.op import Bridge, Op, Resource, ServiceUse
+from protocol.commands.results import Answered, CallServiceResult
 from protocol.commands.types import resolve_service_type
 from protocol.commands.wire import json_type
 
@@ -22,7 +23,8 @@ def _srv_type(a: Args) -> str:
 
 
 @dataclass(frozen=True)
-class CallService(Op, op="call_service", writes=True):
+class CallService(Op, Answered[CallServiceResult], op="call_service", ros_names=("service",),
+                  writes=True):
     """Call a ROS service. Keep ``timeout`` below the client's own command timeout
     (3D Slicer's default is 5 s) so the daemon's TIMEOUT reply arrives first."""
 
@@ -52,7 +54,7 @@ class CallService(Op, op="call_service", writes=True):
 
 
 @dataclass(frozen=True)
-class AdvertiseService(Op, op="advertise_service", writes=True,
+class AdvertiseService(Op, op="advertise_service", ros_names=("service",), writes=True,
                        creates=Bridge("served_service", ("service",), per_connection=True)):
     """Offer a ROS service served by this client: each call reaches the client as a
     `ServiceRequest` COMMAND, answered with an RTS_COMMAND reply ``{"response": {...}}``."""
@@ -73,7 +75,8 @@ class AdvertiseService(Op, op="advertise_service", writes=True,
 
 
 @dataclass(frozen=True)
-class UnadvertiseService(Op, op="unadvertise_service", writes=False, removes="served_service"):
+class UnadvertiseService(Op, op="unadvertise_service", ros_names=("service",),
+                         writes=False, removes="served_service"):
     service: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -85,7 +88,8 @@ class UnadvertiseService(Op, op="unadvertise_service", writes=False, removes="se
 
 
 @dataclass(frozen=True)
-class ServiceRequest(Op, op="service_request", writes=False, to_client=True):
+class ServiceRequest(Op, op="service_request",
+                     ros_names=("service",), writes=False, to_client=True):
     """Sent by the daemon to the client that advertised ``service``: one ROS call to serve
     within ``timeout`` seconds."""
 

@@ -7,6 +7,7 @@ from typing import cast
 
 from protocol.commands.fields import Args
 from protocol.commands.op import Bridge, FrameUse, Op, Resource
+from protocol.commands.results import Answered, LookupTransformResult
 from protocol.commands.values import Matrix4, Stamp, matrix_from
 
 __all__ = ["BroadcastTransform", "CreateTfBroadcaster", "CreateTfLookup", "LookupTransform",
@@ -49,7 +50,7 @@ class RemoveTfLookup(Op, op="remove_tf_lookup", writes=False, removes="tf_lookup
 
 
 @dataclass(frozen=True)
-class LookupTransform(Op, op="lookup_transform", writes=False):
+class LookupTransform(Op, Answered[LookupTransformResult], op="lookup_transform", writes=False):
     """One tf lookup; ``time`` omitted = latest; waits up to ``timeout`` seconds."""
 
     parent: str

@@ -8,6 +8,7 @@ from typing import Any
 from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import MISSING, ROS_NAME, ROS_NAME_DESC, Args
 from protocol.commands.op import Bridge, FrameUse, Op, Resource, TopicUse
+from protocol.commands.results import Answered, GetLastMessageResult, PublishResult
 from protocol.commands.types import resolve_message_type
 from protocol.commands.values import QoS
 from protocol.commands.wire import json_type
@@ -32,7 +33,7 @@ def _msg_type(a: Args) -> str:
 
 
 @dataclass(frozen=True)
-class CreateSubscriber(Op, op="create_subscriber", writes=False,
+class CreateSubscriber(Op, op="create_subscriber", ros_names=("topic",), writes=False,
                        creates=Bridge("subscriber", ("topic",), section="subscribers")):
     """Subscribe to a ROS topic; messages then flow to clients as OpenIGTLink messages.
 
@@ -62,7 +63,8 @@ class CreateSubscriber(Op, op="create_subscriber", writes=False,
 
 
 @dataclass(frozen=True)
-class RemoveSubscriber(Op, op="remove_subscriber", writes=False, removes="subscriber"):
+class RemoveSubscriber(Op, op="remove_subscriber", ros_names=("topic",),
+                       writes=False, removes="subscriber"):
     topic: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -74,7 +76,7 @@ class RemoveSubscriber(Op, op="remove_subscriber", writes=False, removes="subscr
 
 
 @dataclass(frozen=True)
-class CreatePublisher(Op, op="create_publisher", writes=True,
+class CreatePublisher(Op, op="create_publisher", ros_names=("topic", "labels_topic"), writes=True,
                       creates=Bridge("publisher", ("topic",), section="publishers")):
     """Create a ROS publisher; clients feed it with `Publish` or by sending OpenIGTLink
     messages under the device name the reply gives.
@@ -115,7 +117,8 @@ class CreatePublisher(Op, op="create_publisher", writes=True,
 
 
 @dataclass(frozen=True)
-class RemovePublisher(Op, op="remove_publisher", writes=False, removes="publisher"):
+class RemovePublisher(Op, op="remove_publisher", ros_names=("topic",),
+                      writes=False, removes="publisher"):
     topic: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -127,7 +130,7 @@ class RemovePublisher(Op, op="remove_publisher", writes=False, removes="publishe
 
 
 @dataclass(frozen=True)
-class Publish(Op, op="publish", writes=True):
+class Publish(Op, Answered[PublishResult], op="publish", ros_names=("topic",), writes=True):
     """Publish one message on an existing publisher. Either ``value``: the message as a JSON
     object of its fields, or a bare value for one-field types (String: "text", Int: 3, a
     4x4 mm matrix for Pose/PoseStamped/Transform...); or ``message``: the whole message as
@@ -162,7 +165,9 @@ class Publish(Op, op="publish", writes=True):
 
 
 @dataclass(frozen=True)
-class GetLastMessage(Op, op="get_last_message", writes=False):
+class GetLastMessage(Op, Answered[GetLastMessageResult], op="get_last_message",
+                     ros_names=("topic",),
+                     writes=False):
     """The last message a subscriber received, as YAML or JSON text, and the count."""
 
     topic: str

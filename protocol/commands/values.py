@@ -228,7 +228,8 @@ class RobotSource:
 Matrix4 = tuple[tuple[float, float, float, float], ...]
 
 
-def matrix_from(value: Any, path: str) -> Matrix4:
+def matrix_from(value: Any, path: str, *, rigid: bool = True) -> Matrix4:
+    """4 rows of 4 finite numbers; with `rigid`, a rigid transform (as a request's)."""
     if not isinstance(value, list) or len(value) != 4:
         raise WrongTypeError(path, "4 rows of 4 numbers (mm)", json_type(value))
     rows = []
@@ -238,7 +239,8 @@ def matrix_from(value: Any, path: str) -> Matrix4:
         rows.append(tuple(check_float(v, f"{path}[{i}][{j}]", -math.inf, math.inf, False)
                           for j, v in enumerate(row)))
     try:
-        validate_matrix(rows, field=path)
+        if rigid:
+            validate_matrix(rows, field=path)
     except ConversionError as exc:
         raise OutOfRangeError(exc.field, exc.expected, exc.got) from None
     return cast(Matrix4, tuple(rows))

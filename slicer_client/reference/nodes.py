@@ -974,7 +974,7 @@ class ROS2Node:
             return False
         old_key = node.resource.spec.key
         lookup = isinstance(node, Tf2LookupNode)
-        new_key = ("create_tf_lookup" if lookup else "create_tf_broadcaster", parent, child)
+        new_key = (c.CreateTfLookup.op if lookup else c.CreateTfBroadcaster.op, parent, child)
         if new_key == old_key:
             return True
         if new_key in self._nodes:
@@ -1030,16 +1030,16 @@ class ROS2Node:
         return self._keep(pub, make)  # type: ignore[no-any-return]
 
     def GetSubscriberNodeByTopic(self, topic: str) -> Optional[SubscriberNode]:  # noqa: N802
-        return self._get("create_subscriber", topic)  # type: ignore[no-any-return]
+        return self._get(c.CreateSubscriber.op, topic)  # type: ignore[no-any-return]
 
     def GetPublisherNodeByTopic(self, topic: str) -> Optional[PublisherNode]:  # noqa: N802
-        return self._get("create_publisher", topic)  # type: ignore[no-any-return]
+        return self._get(c.CreatePublisher.op, topic)  # type: ignore[no-any-return]
 
     def RemoveAndDeleteSubscriberNode(self, topic: str) -> bool:  # noqa: N802
-        return self._drop("create_subscriber", topic)
+        return self._drop(c.CreateSubscriber.op, topic)
 
     def RemoveAndDeletePublisherNode(self, topic: str) -> bool:  # noqa: N802
-        return self._drop("create_publisher", topic)
+        return self._drop(c.CreatePublisher.op, topic)
 
     # --- parameters ---------------------------------------------------------------------------
     def CreateAndAddParameterNode(self, nodeName: str) -> ParameterNode:  # noqa: N802,N803
@@ -1047,10 +1047,10 @@ class ROS2Node:
         return self._keep(params, lambda: ParameterNode(self, params))  # type: ignore[no-any-return]
 
     def GetParameterNodeByNode(self, nodeName: str) -> Optional[ParameterNode]:  # noqa: N802,N803
-        return self._get("create_parameter_client", nodeName)  # type: ignore[no-any-return]
+        return self._get(c.CreateParameterClient.op, nodeName)  # type: ignore[no-any-return]
 
     def RemoveAndDeleteParameterNode(self, nodeName: str) -> bool:  # noqa: N802,N803
-        return self._drop("create_parameter_client", nodeName)
+        return self._drop(c.CreateParameterClient.op, nodeName)
 
     # --- tf2 ----------------------------------------------------------------------------------
     def CreateAndAddTf2BroadcasterNode(self, parent_id: str, child_id: str  # noqa: N802
@@ -1066,17 +1066,17 @@ class ROS2Node:
 
     def GetTf2BroadcasterNodeByParentChild(self, parent_id: str, child_id: str  # noqa: N802
                                            ) -> Optional[Tf2BroadcasterNode]:
-        return self._get("create_tf_broadcaster", parent_id, child_id)  # type: ignore[no-any-return]
+        return self._get(c.CreateTfBroadcaster.op, parent_id, child_id)  # type: ignore[no-any-return]
 
     def GetTf2LookupNodeByParentChild(self, parent_id: str, child_id: str  # noqa: N802
                                       ) -> Optional[Tf2LookupNode]:
-        return self._get("create_tf_lookup", parent_id, child_id)  # type: ignore[no-any-return]
+        return self._get(c.CreateTfLookup.op, parent_id, child_id)  # type: ignore[no-any-return]
 
     def RemoveAndDeleteTf2BroadcasterNode(self, parent_id: str, child_id: str) -> bool:  # noqa: N802
-        return self._drop("create_tf_broadcaster", parent_id, child_id)
+        return self._drop(c.CreateTfBroadcaster.op, parent_id, child_id)
 
     def RemoveAndDeleteTf2LookupNode(self, parent_id: str, child_id: str) -> bool:  # noqa: N802
-        return self._drop("create_tf_lookup", parent_id, child_id)
+        return self._drop(c.CreateTfLookup.op, parent_id, child_id)
 
     # --- robots -------------------------------------------------------------------------------
     def CreateAndAddRobotNode(self, robotName: str,  # noqa: N802,N803
@@ -1088,10 +1088,10 @@ class ROS2Node:
         return self._keep(robot, lambda: RobotNode(self, robot))  # type: ignore[no-any-return]
 
     def GetRobotNodeByName(self, robotName: str) -> Optional[RobotNode]:  # noqa: N802,N803
-        return self._get("create_robot", robotName)  # type: ignore[no-any-return]
+        return self._get(c.CreateRobot.op, robotName)  # type: ignore[no-any-return]
 
     def RemoveAndDeleteRobotNode(self, robotName: str) -> bool:  # noqa: N802,N803
-        return self._drop("create_robot", robotName)
+        return self._drop(c.CreateRobot.op, robotName)
 
     # --- markers (not in the reference) -------------------------------------------------------
     def CreateAndAddMarkerSubscriberNode(self, className: str, topic: str,  # noqa: N802,N803
@@ -1103,10 +1103,10 @@ class ROS2Node:
 
     def GetMarkerSubscriberNodeByTopic(self, topic: str  # noqa: N802
                                        ) -> Optional[MarkerSubscriberNode]:
-        return self._get("create_marker_subscriber", topic)  # type: ignore[no-any-return]
+        return self._get(c.CreateMarkerSubscriber.op, topic)  # type: ignore[no-any-return]
 
     def RemoveAndDeleteMarkerSubscriberNode(self, topic: str) -> bool:  # noqa: N802
-        return self._drop("create_marker_subscriber", topic)
+        return self._drop(c.CreateMarkerSubscriber.op, topic)
 
     # --- services -----------------------------------------------------------------------------
     def CreateAndAddServiceClientNode(self, className: str, service: str  # noqa: N802,N803

@@ -77,7 +77,7 @@ def test_service_clients_are_cached_bounded_and_dropped_when_idle(processes: Pro
             # Unused for longer than idle_client_s: every client is destroyed.
             await _until(lambda: not services.called and not list(ros.node.clients),
                          "idle clients dropped", timeout=30)
-            assert [d for d in services.describe() if d["kind"] == "service_client"] == []
+            assert services.state() == {"service_clients": []}
 
     asyncio.run(scenario())
 

@@ -160,7 +160,7 @@ def test_advertised_service_answered_by_the_client(processes: Processes, client:
                                                  "message": f"slicer saw {request['data']}"})
     result = answerer.connection.command("advertise_service", {
         "service": "/slicer/toggle", "type": "std_srvs/srv/SetBool"})
-    assert result == {"kind": "service_server", "service": "/slicer/toggle",
+    assert result == {"kind": "served_service", "service": "/slicer/toggle",
                       "type": "std_srvs/srv/SetBool", "device": "srv:slicer/toggle",
                       "calls": 0, "existed": False}
     caller = processes.python("caller", "service_caller.py", "/slicer/toggle",
@@ -172,7 +172,7 @@ def test_advertised_service_answered_by_the_client(processes: Processes, client:
     services = {s["service"]: s for s in client.command("list_services")["services"]}
     assert services["/slicer/toggle"]["types"] == ["std_srvs/srv/SetBool"]
     bridges = client.command("list_bridges")["bridges"]
-    assert {"kind": "service_server", "service": "/slicer/toggle",
+    assert {"kind": "served_service", "service": "/slicer/toggle",
             "type": "std_srvs/srv/SetBool", "device": "srv:slicer/toggle",
             "calls": 1} in bridges
     # Another client cannot take it over; the owner advertising again is idempotent.

@@ -131,11 +131,11 @@ def test_chain_lookup_streams_the_composed_matrix_in_mm(
     # Creating it again is idempotent; list_bridges shows it and the buffer's frames.
     again = client.command("create_tf_lookup", {"parent": p + "world", "child": p + "tool"})
     assert again["existed"] is True and again["device"] == device
-    bridges = client.command("list_bridges")["bridges"]
-    mine = [b for b in bridges if b.get("device") == device]
+    listed = client.command("list_bridges")
+    mine = [b for b in listed["bridges"] if b.get("device") == device]
     assert len(mine) == 1 and mine[0]["kind"] == "tf_lookup"
     assert mine[0]["state"] == "streaming"
-    buffer_info = next(b for b in bridges if b["kind"] == "tf_buffer")
+    buffer_info = listed["tf_buffer"]
     assert {p + f for f in ("world", "base", "link1", "tool")} <= set(buffer_info["frames"])
     # A client that joins later gets the latest value at once.
     with daemon.connect() as late:
@@ -304,8 +304,7 @@ def test_static_data_published_before_the_daemon_started_reaches_it(
                                                     "timeout": 15}, timeout=20)
         np.testing.assert_allclose(reply["matrix"], WORLD_BASE, atol=1e-9)
         assert reply["stamp"] == {"sec": 0, "nanosec": 0}  # static data holds at every time
-        topics = next(b for b in client.command("list_bridges")["bridges"]
-                      if b["kind"] == "tf_buffer")["topics"]
+        topics = client.command("list_bridges")["tf_buffer"]["topics"]
         assert topics == ["/tf", "/tf_static"]
 
 

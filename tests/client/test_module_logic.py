@@ -73,18 +73,20 @@ def test_unknown_nodes_are_left_alone() -> None:
     assert (plan.kind, plan.folder, plan.colour) == ("other", None, None)
 
 
-def test_bridge_lines_from_both_list_shapes() -> None:
-    daemon_shape = {"bridges": [
+def test_bridge_lines_name_each_bridge_and_nothing_else() -> None:
+    """One line per entry of ``bridges``; the reply's other keys (the tf buffer, goals,
+    cached ROS clients) are not bridges."""
+    reply = {"bridges": [
         {"kind": "subscriber", "topic": "/tool", "type": "geometry_msgs/msg/PoseStamped",
          "device": "tool"},
-        {"kind": "tf_buffer", "topics": ["/tf"]},
-        {"kind": "tf_lookup", "parent": "world", "child": "tool", "device": "tf:world>tool"}]}
-    assert describe_bridges(daemon_shape) == [
+        {"kind": "tf_lookup", "parent": "world", "child": "tool", "device": "tf:world>tool"},
+        {"kind": "robot", "name": "PSM1", "links": 7},
+        {"kind": "served_action", "action": "/plan", "device": "act:plan"}],
+        "tf_buffer": {"topics": ["/tf"]}, "goals": [{"action": "/fjt", "goal_id": "ab"}]}
+    assert describe_bridges(reply) == [
         "subscriber: /tool [geometry_msgs/msg/PoseStamped] as tool",
-        "tf_lookup: world -> tool as tf:world>tool"]
-    readme_shape = {"robots": [{"name": "PSM1", "links": 7}],
-                    "parameter_clients": [{"node": "/rsp", "device": "param:rsp"}]}
-    assert describe_bridges(readme_shape) == ["robot: PSM1", "parameter_client: /rsp as param:rsp"]
+        "tf_lookup: world -> tool as tf:world>tool", "robot: PSM1",
+        "served_action: /plan as act:plan"]
 
 
 # --- bridge state -------------------------------------------------------------------------

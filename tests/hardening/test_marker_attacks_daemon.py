@@ -37,8 +37,7 @@ def test_a_denied_frame_does_not_leak_through_a_marker_on_a_prefixed_daemon(
                            ["world", "PSM1/visible", 0.0, 0.0, 1.0]])
 
         def frames() -> list[str]:
-            bridges = ask(client, "list_bridges", {}, 2)["result"]["bridges"]
-            return next(b["frames"] for b in bridges if b["kind"] == "tf_buffer")
+            return list(ask(client, "list_bridges", {}, 2)["result"]["tf_buffer"]["frames"])
         wait_until(lambda: "PSM1/visible" in frames(), timeout=10, what="the static frames")
         assert "PSM1/secret" not in frames()
         cube = {"type": CUBE, "scale": [0.01, 0.01, 0.01], "ns": "leak"}

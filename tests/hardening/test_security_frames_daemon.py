@@ -275,8 +275,7 @@ def test_frame_prefix_makes_relative_frames_the_robot_instance(processes: Proces
         other = client.command("lookup_transform", {"parent": "/PSM2/base",
                                                     "child": "/PSM2/link1", "timeout": 10})
         np.testing.assert_allclose(other["matrix"], BASE_LINK1, atol=1e-3)
-        tf_buffer = next(b for b in client.command("list_bridges")["bridges"]
-                         if b["kind"] == "tf_buffer")
+        tf_buffer = client.command("list_bridges")["tf_buffer"]
         assert tf_buffer["frame_prefix"] == "PSM1/"
     assert_clean_exit(daemon)
 

@@ -19,8 +19,13 @@ def resolve(name: str, field: str) -> str:
     return name if name.startswith("/") else "/lab/" + name
 
 
+def parsed(op: str, args: dict) -> c.Request:
+    """A request as the dispatcher hands it to the policy: its ROS names resolved."""
+    return c.parse_request(op, c.dumps(args)).with_names(resolve)
+
+
 def check(policy: SecurityPolicy, op: str, args: dict) -> None:
-    policy.check_request(c.parse_request(op, c.dumps(args)), resolve, "/lab/slicer_bridge")
+    policy.check_request(parsed(op, args), "/lab/slicer_bridge")
 
 
 def test_deny_wins_and_any_allow_glob_makes_an_allow_list() -> None:
@@ -152,7 +157,7 @@ def test_a_request_class_the_schema_does_not_declare_is_refused() -> None:
             return ()
 
     with pytest.raises(ForbiddenError) as refused:
-        SecurityPolicy().check_request(Fake(), resolve, "/n")  # type: ignore[arg-type]
+        SecurityPolicy().check_request(Fake(), "/n")  # type: ignore[arg-type]
     assert refused.value.field == "op" and refused.value.got == "Fake"
     # ... and the daemon's own messages to clients are not ops a client may send
     with pytest.raises(ForbiddenError):
@@ -318,11 +323,12 @@ def test_frames_are_judged_as_the_tf_buffer_resolves_them() -> None:
         return frame.lstrip("/") if frame.startswith("/") else "PSM1/" + frame
 
     policy = SecurityPolicy(frames=NameRules(allow=("PSM1/*",)))
-    policy.check_request(c.parse_request("create_tf_lookup", c.dumps(
-        {"parent": "base", "child": "/PSM1/tool"})), resolve, "/n", with_prefix)
+    policy.check_request(parsed("create_tf_lookup", {"parent": "base", "child": "/PSM1/tool"}),
+                         "/n", with_prefix)
     with pytest.raises(ForbiddenError) as refused:
-        policy.check_request(c.parse_request("lookup_transform", c.dumps(
-            {"parent": "base", "child": "/PSM2/tool"})), resolve, "/n", with_prefix)
+        policy.check_request(parsed("lookup_transform", {"parent": "base",
+                                                         "child": "/PSM2/tool"}),
+                             "/n", with_prefix)
     assert (refused.value.field, refused.value.got) == ("child", "PSM2/tool")
     # Without a prefix, /world and world are one frame.
     assert strip_frame("/world") == strip_frame("world") == "world"
@@ -491,8 +497,8 @@ def test_robot_files_refused_and_missing_get_one_answer(tmp_path: Path) -> None:
     policy = SecurityPolicy(robot_dirs=(str(inside),))
 
     def judge(path: Path, from_client: bool = True) -> None:
-        policy.check_request(c.parse_request("create_robot", c.dumps(
-            {"name": "r", "source": {"kind": "file", "path": str(path)}})), resolve, "/n",
+        policy.check_request(parsed("create_robot", {
+            "name": "r", "source": {"kind": "file", "path": str(path)}}), "/n",
             from_client=from_client, resolve_file=lambda spec: spec)
 
     judge(inside / "a.urdf")

@@ -43,8 +43,8 @@ def test_a_client_calling_absent_services_leaves_slots_to_others_and_frees_its_o
         hog.close()
 
     def waiting() -> int:
-        bridges = ask(other, "list_bridges", {}, 2)["result"]["bridges"]
-        return sum(b["waiting"] for b in bridges if b["kind"] == "service_client")
+        clients = ask(other, "list_bridges", {}, 2)["result"]["service_clients"]
+        return sum(c["waiting"] for c in clients)
 
     wait_until(lambda: waiting() == 0, timeout=10, what="the hog's calls ended with it")
     other.close()

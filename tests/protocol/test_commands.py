@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
-from typing import Any
+from contextlib import contextmanager
+from typing import Any, Iterator
+from unittest.mock import patch
 
 import pytest
 from hypothesis import given, settings
@@ -28,6 +30,7 @@ from protocol.commands import (
     WrongTypeError,
     parse_request,
 )
+from protocol.commands.fields import ROS_NAME, Args
 from protocol.errors import ProtocolError
 
 # ---------------------------------------------------------------- strategies
@@ -212,6 +215,66 @@ def test_to_json_parse_round_trip(cls: type, data: st.DataObject) -> None:
 
 
 # ---------------------------------------------------------------- specific requests
+
+@contextmanager
+def _ros_name_reads() -> Iterator[set[str]]:
+    """The field paths parsing reads as ROS names (the ROS_NAME pattern), while inside."""
+    read: set[str] = set()
+    req_str, opt_str = Args.req_str, Args.opt_str
+
+    def recording(method: Any) -> Any:
+        def wrapper(self: Args, name: str, *args: Any, **kwargs: Any) -> Any:
+            if kwargs.get("pattern") is ROS_NAME:
+                read.add(self.path(name))
+            return method(self, name, *args, **kwargs)
+        return wrapper
+
+    with patch.object(Args, "req_str", recording(req_str)), \
+            patch.object(Args, "opt_str", recording(opt_str)):
+        yield read
+
+
+# A robot's namespace is a prefix for its names (placed_source), not a name of its own.
+_PREFIXES = {c.CreateRobot: {"namespace"}}
+
+
+@pytest.mark.parametrize("cls", list(STRATEGIES), ids=lambda k: k.op)
+@settings(max_examples=30, deadline=None)
+@given(data=st.data())
+def test_the_ros_names_a_request_parses_are_declared_and_resolved(
+        cls: type, data: st.DataObject) -> None:
+    """The dispatcher resolves exactly the declared `ros_names`: a name field left out
+    would reach the policy and the handler unresolved (``cmd`` beside ``/cmd``)."""
+    request = data.draw(STRATEGIES[cls])
+    with _ros_name_reads() as read:
+        parse_request(*c.encode_request(request))
+    assert read <= set(cls.ros_names) | _PREFIXES.get(cls, set())
+    resolved = request.with_names(lambda name, field: f"/resolved/{field}")
+    for path in cls.ros_names:
+        if path in read and _value_at(request, path):
+            assert _value_at(resolved, path) == f"/resolved/{path}"
+
+
+def _value_at(request: Any, path: str) -> Any:
+    head, _, inner = path.partition(".")
+    value = getattr(request, head)
+    return getattr(value, inner, None) if inner else value
+
+
+def test_with_names_places_a_robot_s_relative_source_in_its_namespace_first() -> None:
+    request = c.parse_request("create_robot", json.dumps({
+        "name": "psm", "namespace": "PSM1", "source": {"kind": "topic", "topic": "desc"}}))
+    seen: list[tuple[str, str]] = []
+
+    def resolve(name: str, field: str) -> str:
+        seen.append((name, field))
+        return "/" + name
+
+    resolved = request.with_names(resolve)
+    assert seen == [("PSM1/desc", "source.topic")]
+    assert resolved.source.topic == "/PSM1/desc"
+    assert resolved.with_names(lambda name, field: name) == resolved  # placed once only
+
 
 def test_create_subscriber_defaults_and_type_resolution() -> None:
     req = c.CreateSubscriber.from_json('{"topic": "/tool", "type": "PoseStamped"}')

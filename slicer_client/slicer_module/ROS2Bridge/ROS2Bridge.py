@@ -74,6 +74,7 @@ from ROS2BridgeLib.logic import ROS2BridgeLogic, nodeKind
 from ROS2BridgeLib.parameters import DEFAULT_FRAME, ROS2BridgeParameterNode
 from ROS2BridgeLib.reference import installReferenceEntryPoints
 from ROS2BridgeLib.transport import ConnectorTransport
+from protocol import commands as c
 from slicer_client.bridge_state import BridgeState
 from slicer_client.connection import CommandTimeoutError
 from slicer_client.joint_sliders import JointSlider
@@ -386,7 +387,7 @@ class ROS2BridgeTest(ScriptedLoadableModuleTest):
             state = json.loads(BridgeState.from_json(client.state().to_json()).to_json())
             self.assertEqual(len(state["bridges"]), 2)
             try:
-                client.command("list_bridges", timeout=5.0)
+                client.request(c.ListBridges(), timeout=5.0)
             except CommandTimeoutError:
                 self.fail("list_bridges through the connector timed out")
         finally:

@@ -15,6 +15,7 @@ import vtk
 from slicer.ScriptedLoadableModule import ScriptedLoadableModuleLogic
 from slicer.util import VTKObservationMixin
 
+from protocol import commands as c
 from slicer_client.bridge_state import BridgeState
 from slicer_client.client import Client, read_key_file
 from slicer_client.joint_sliders import JointSlider, joint_sliders, slider_positions
@@ -198,7 +199,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         return robot
 
     def removeRobot(self, name: str) -> None:
-        robot = self.requireClient().find("create_robot", name)
+        robot = self.requireClient().find(c.CreateRobot.op, name)
         if robot is not None:
             robot.remove()
         for node in list(slicer.util.getNodesByClass("vtkMRMLNode")):
@@ -238,10 +239,10 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
 
     def removeMarkers(self, topic: str) -> None:
         client = self.requireClient()
-        markers = client.find("create_marker_subscriber", topic)
+        markers = client.find(c.CreateMarkerSubscriber.op, topic)
         resolved = (markers.resolved_topic if isinstance(markers, MarkerSubscriber)
                     else "/" + topic.lstrip("/"))
-        client.remove_bridge("create_marker_subscriber", topic)  # ours or another client's
+        client.remove_bridge(c.CreateMarkerSubscriber.op, topic)  # ours or another client's
         for node in list(slicer.util.getNodesByClass("vtkMRMLNode")):
             if node.GetScene() is not None and node.GetAttribute("OpenIGTLink.ros2.role") \
                     in ("marker", "marker_topic") \
@@ -325,7 +326,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
 
     # --- moving a robot -----------------------------------------------------------------
     def _robot(self, robotName: str) -> Robot:
-        robot = self.requireClient().find("create_robot", robotName)
+        robot = self.requireClient().find(c.CreateRobot.op, robotName)
         if not isinstance(robot, Robot):
             raise RuntimeError(f"no robot {robotName!r}: load it first")
         return robot
