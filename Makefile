@@ -52,5 +52,5 @@ lint: setup
 
 clean:
 	rm -rf $(VENV) build dist .cache .pytest_cache .hypothesis bridge/tf/_compiled_store.c \
-		bridge/_rcl_reader.c bridge/_rcl_reader.*.so \
+		bridge/ros/_rcl_reader.c bridge/ros/_rcl_reader.*.so \
 		bridge/tf/_compiled_store.*.so

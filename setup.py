@@ -38,7 +38,7 @@ def compiled_modules() -> list:
 
 
 def rcl_reader() -> list:
-    """The reader that takes /tf without the interpreter's lock (bridge/_rcl_reader.pyx),
+    """The reader that takes /tf without the interpreter's lock (bridge/ros/_rcl_reader.pyx),
     where rcl's headers are found: beside this Python (ROS 2 from PyPI) or in a sourced ROS
     prefix. Linked by name only: at run time rclpy has loaded the same libraries."""
     prefixes = [Path(sys.prefix), *(Path(p) for p in
@@ -48,7 +48,7 @@ def rcl_reader() -> list:
         include = prefix / "include"
         if (include / "rcl" / "rcl" / "rcl.h").is_file():
             dirs = sorted(str(d) for d in include.iterdir() if (d / d.name).is_dir())
-            return [Extension("bridge._rcl_reader", ["bridge/_rcl_reader.pyx"],
+            return [Extension("bridge.ros._rcl_reader", ["bridge/ros/_rcl_reader.pyx"],
                               include_dirs=dirs, library_dirs=[str(prefix / "lib")],
                               libraries=["rcl", "rmw", "rcutils"], extra_compile_args=["-O2"],
                               optional=True)]

@@ -12,15 +12,15 @@ from pathlib import Path
 from typing import Any, Callable, Coroutine, TypeVar
 
 from bridge import graph_inspect
-from bridge.allocator import keep_large_buffers_returnable
 from bridge.config import (DEFAULT_HOST, DEFAULT_PORT, DEFAULT_TLS_PORT, ConfigError,
                            DaemonConfig, TlsListener)
 from bridge.config import ConfigFile, build_security, load_config_file
+from bridge.core.allocator import keep_large_buffers_returnable
 from bridge.interfaces import missing_runtime_line
 from protocol.auth import new_key_text
-from bridge.ros_args import RosArgsError, apply_parameters, split_ros_args
-from bridge.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_CLIENT,
-                             DEFAULT_MAX_CLIENTS)
+from bridge.core.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_CLIENT,
+                                  DEFAULT_MAX_CLIENTS)
+from bridge.ros.ros_args import RosArgsError, apply_parameters, split_ros_args
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 
@@ -228,9 +228,9 @@ def run_with_config(args: argparse.Namespace,
                     main: Callable[[DaemonConfig], Coroutine[Any, Any, None]]) -> int:
     """Build the config from the options, set up logging, run `main(config)`; what stops
     the start (bad config, port in use, a bad start-up bridge) is one line and exit 2."""
+    from bridge.core.server import PortInUseError
     from bridge.daemon import StartupError
-    from bridge.ros_node import RosArgumentsError
-    from bridge.server import PortInUseError
+    from bridge.ros.ros_node import RosArgumentsError
 
     try:
         config = _config_from(args)

@@ -30,8 +30,8 @@ from typing import Any, Mapping, Optional
 
 import yaml
 
-from bridge.security import PolicyError, SecurityPolicy, positive_int
-from bridge.session import SessionLimits
+from bridge.core.security import PolicyError, SecurityPolicy, positive_int
+from bridge.core.session import SessionLimits
 from protocol.commands import bridge_kinds
 
 # Section name in the YAML file -> the command each of its entries is: every creating op

@@ -1,5 +1,5 @@
 """Wires the daemon together and runs it until SIGINT, SIGTERM or SIGHUP (then it exits
-within ``--stop-timeout`` whatever ROS's teardown does: see `bridge.shutdown`).
+within ``--stop-timeout`` whatever ROS's teardown does: see `bridge.core.shutdown`).
 
     ROS executor thread                     asyncio loop (main thread)
     ───────────────────                     ──────────────────────────
@@ -19,23 +19,23 @@ from pathlib import Path
 from typing import Awaitable, Callable, Optional
 
 from bridge.actions import ActionBridges
-from bridge.client_replies import ClientReplies
 from bridge.config import DaemonConfig
-from bridge.dispatch import Dispatcher
-from bridge.heavy import HeavyWork
-from bridge.hub import Hub
-from bridge.interface_types import InterfaceTypes
+from bridge.core.client_replies import ClientReplies
+from bridge.core.dispatch import Dispatcher
+from bridge.core.heavy import HeavyWork
+from bridge.core.hub import Hub
+from bridge.core.security import is_loopback_host
+from bridge.core.server import BridgeServer
+from bridge.core.shutdown import StopSignals
+from bridge.core.stream_health import StreamHealth
 from bridge.markers.capability import MarkerBridges
-from bridge.parameters import ParameterBridges
+from bridge.parameters.capability import ParameterBridges
 from bridge.robots.capability import RobotBridges
-from bridge.ros_node import RosNode, RosOptions
-from bridge.security import is_loopback_host
-from bridge.server import BridgeServer
-from bridge.shutdown import StopSignals
-from bridge.stream_health import StreamHealth
-from bridge.services import ServiceBridges
+from bridge.ros.interface_types import InterfaceTypes
+from bridge.ros.ros_node import RosNode, RosOptions
+from bridge.services.capability import ServiceBridges
 from bridge.tf.capability import TfBridges
-from bridge.topics import TopicBridges
+from bridge.topics.capability import TopicBridges
 from protocol.naming import DeviceNameRegistry
 from protocol.errors import ProtocolError
 

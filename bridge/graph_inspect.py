@@ -16,7 +16,7 @@ import time
 from typing import TYPE_CHECKING, Any, Callable, Optional, TextIO
 
 if TYPE_CHECKING:  # rclpy is imported only when a subcommand runs: --help stays quick
-    from bridge.ros_node import RosNode
+    from bridge.ros.ros_node import RosNode
 
 # Discovery is not instant, and on a busy machine it takes seconds. DDS never says it is
 # done: a list is read once the graph has not changed for SETTLED_S (at most --wait), and
@@ -80,7 +80,7 @@ class _Inspector:
     """A node of its own, spinning in its thread, stopped on exit."""
 
     def __enter__(self) -> RosNode:
-        from bridge.ros_node import RosNode, RosOptions
+        from bridge.ros.ros_node import RosNode, RosOptions
 
         name = f"{INSPECTOR_PREFIX}{time.time_ns() % 10**9}"
         self._ros = RosNode(RosOptions(node_name=name))

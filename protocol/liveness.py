@@ -13,7 +13,7 @@ set of timings the daemon and its clients share.
     freshness bound: after ``PLAIN_SILENT_AFTER_S`` with TCP retransmitting, unless it is on
     this machine (a loopback link cannot be pulled, and a busy local reader's kernel can
     leave data unacknowledged that long). Its connector never sends, so the reset is
-    delivered by a knock once the link is back (bridge/knock.py), and it reconnects.
+    delivered by a knock once the link is back (bridge/core/knock.py), and it reconnects.
   A peer that is alive but not reading (a stalled GUI) closes its receive window: nothing
   is in flight, so it is not taken for dead. (``TCP_USER_TIMEOUT`` cannot tell the two
   apart: it also ends a connection whose reader paused for that long.)

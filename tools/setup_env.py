@@ -51,7 +51,7 @@ SUPPORTED_PYTHONS = ((3, 10), (3, 11), (3, 12), (3, 13))
 # Inputs whose change means the environment must be rebuilt (the install builds the compiled
 # tf store from its .pyx, so an edit of it is one).
 STAMP_INPUTS = ("pyproject.toml", "setup.py", "tools/setup_env.py",
-                "bridge/tf/_compiled_store.pyx", "bridge/_rcl_reader.pyx")
+                "bridge/tf/_compiled_store.pyx", "bridge/ros/_rcl_reader.pyx")
 
 
 class SetupError(Exception):

@@ -30,10 +30,10 @@ from rclpy.node import NodeNameNonExistentError
 
 from bridge.actions.goals import GoalSender
 from bridge.actions.served import ServedActions
-from bridge.client_replies import ClientReplies
-from bridge.dispatch import Handler
-from bridge.hub import Hub, Replier
-from bridge.ros_node import RosNode
+from bridge.core.client_replies import ClientReplies
+from bridge.core.dispatch import Handler
+from bridge.core.hub import Hub, Replier
+from bridge.ros.ros_node import RosNode
 from protocol.commands import (ActionFeedback, AdvertiseAction, CancelGoal, ListActions, Op,
                                SendGoal, UnadvertiseAction)
 from protocol.naming import DeviceNameRegistry

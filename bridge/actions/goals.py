@@ -37,12 +37,12 @@ from unique_identifier_msgs.msg import UUID
 from bridge.actions.common import destroy_quietly
 from bridge.codecs import CodecError, message_to_dict
 from bridge.codecs.registry import ACTION
-from bridge.hub import Hub, Replier
-from bridge.interface_types import installed_class
-from bridge.ros_clients import RosClientCache
-from bridge.ros_node import RosNode
-from bridge.security import hidden_action
-from bridge.services import connected_client, message_from_json
+from bridge.core.hub import Hub, Replier
+from bridge.core.security import hidden_action
+from bridge.ros.interface_types import installed_class
+from bridge.ros.ros_clients import RosClientCache
+from bridge.ros.ros_node import RosNode
+from bridge.services.capability import connected_client, message_from_json
 from protocol import commands as c
 from protocol.commands import (CancelGoal, CommandError, CommandFailedError, ErrorCode,
                                ForbiddenError, LimitReachedError, SendGoal)

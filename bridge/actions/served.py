@@ -25,14 +25,14 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.task import Future as RosFuture
 
 from bridge.actions.common import destroy_quietly
-from bridge.client_replies import ClientReplies
 from bridge.codecs import CodecError, message_to_dict
 from bridge.codecs.registry import ACTION
-from bridge.hub import Hub, Replier
-from bridge.interface_types import installed_class
-from bridge.ros_node import RosNode
-from bridge.services import (advertised_by, already_served, client_answer,
-                             connected_client, message_from_json)
+from bridge.core.client_replies import ClientReplies
+from bridge.core.hub import Hub, Replier
+from bridge.ros.interface_types import installed_class
+from bridge.ros.ros_node import RosNode
+from bridge.services.capability import (advertised_by, already_served, client_answer,
+                                        connected_client, message_from_json)
 from protocol import commands as c
 from protocol.commands import (ActionCancel, ActionDecide, ActionFeedback, ActionGoal,
                                AdvertiseAction,

@@ -150,7 +150,7 @@ class TypeCodec:
     ros_type: str  # "geometry_msgs/msg/PoseStamped"
     igtl_type: str  # "TRANSFORM", "STRING", "IMAGE", "POLYDATA"
     # A type for bulk data (images, point clouds): only the newest value matters, so its
-    # subscriptions keep a history of one by default (`bridge.qos.default_depth`). This is
+    # subscriptions keep a history of one by default (`bridge.ros.qos.default_depth`). This is
     # about the type, before any message; whether one message is large is `hub.frame_for`.
     bulk: ClassVar[bool] = False
     # A POLYDATA from a client may take this codec up to about a second (a model of

@@ -76,25 +76,25 @@ import numpy as np
 from rclpy.serialization import deserialize_message
 
 from bridge.codecs import CodecError, codec_for
-from bridge.dispatch import Handler
-from bridge.graph_types import refuse_other_type
-from bridge.heavy import LargeResult
-from bridge.hub import Hub, Replier, Subscriber
-from bridge.logging_limits import RateLimitedLog
-from bridge.outbox import SharedFrame
 from bridge.codecs.cdr import CdrError
+from bridge.core.dispatch import Handler
+from bridge.core.heavy import LargeResult
+from bridge.core.hub import Hub, Replier, Subscriber
+from bridge.core.logging_limits import RateLimitedLog
+from bridge.core.outbox import SharedFrame
+from bridge.core.security import DEFAULT_MAX_MARKER_BYTES, NameRules, strip_frame
 from bridge.markers.cdr import layout_supported, read_marker, read_marker_array
 from bridge.markers.convert import ADD, DELETE, DELETEALL, MarkerEvent, events_of
 from bridge.markers.geometry import (MarkerError, MarkerModel, MarkerSpec, build_model,
                                      model_bytes, packed, warm_up)
-from bridge.qos import qos_profile
-from bridge.ros_node import RosNode
-from bridge.security import DEFAULT_MAX_MARKER_BYTES, NameRules, strip_frame
+from bridge.ros.graph_types import refuse_other_type
+from bridge.ros.qos import qos_profile
+from bridge.ros.ros_node import RosNode
 from bridge.tf.buffer import TfBuffer
 from bridge.tf.capability import TfBridges
 from bridge.tf.errors import ExtrapolationError, TfError
-from bridge.tf.math import Quat, Tf7, Vec3, compose, quat_normalize
 from bridge.tf.lookups import LookupKey
+from bridge.tf.math import Quat, Tf7, Vec3, compose, quat_normalize
 from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
                                ListMarkers, Op, RemoveMarkerSubscriber)
 from protocol.conversions import igtl_stamp_or_now

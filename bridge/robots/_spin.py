@@ -28,7 +28,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import ok, try_shutdown  # = rclpy.ok, rclpy.try_shutdown (re-exported)
 
-from bridge.shutdown import STOP_SIGNALS, Watchdog, default_action_from_now
+from bridge.core.shutdown import STOP_SIGNALS, Watchdog, default_action_from_now
 
 __all__ = ["PARENT_PID_ENV", "inherited_parent_pid", "ros_session", "spin_until_signal"]
 

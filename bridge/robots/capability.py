@@ -52,17 +52,17 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String as StringMsg
 
-from bridge.dispatch import Handler
-from bridge.graph_types import refuse_other_type
-from bridge.parameters import ParameterBridges, ParameterWatch
+from bridge.core.dispatch import Handler
+from bridge.core.hub import Hub, Replier
+from bridge.core.security import NameRules
+from bridge.parameters.capability import ParameterBridges, ParameterWatch
 from bridge.robots.errors import RobotError
 from bridge.robots.joints import describe_joints, joint_positions
 from bridge.robots.resources import PackageResolver
-from bridge.ros_node import RosNode
-from bridge.security import NameRules
+from bridge.ros.graph_types import refuse_other_type
+from bridge.ros.ros_node import RosNode
 from bridge.tf.capability import TfBridges
 from bridge.tf.lookups import LookupKey
-from bridge.hub import Hub, Replier
 from protocol.commands import (CommandFailedError, CreateRobot, DescribeRobotJoints, ErrorCode,
                                ForbiddenError, ListRobots, Op, OutOfRangeError, ParameterValue,
                                RemoveRobot, RobotSource, SetRobotJoints)

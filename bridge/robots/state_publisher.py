@@ -41,12 +41,12 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 
-from bridge.qos import LATCHED_QOS, TF_QOS
 from bridge.robots._spin import inherited_parent_pid, ros_session, spin_until_signal
 from bridge.robots.description import RobotDescription, parse_urdf
 from bridge.robots.errors import RobotError
 from bridge.robots.kinematics import Kinematics
 from bridge.robots.resources import PackageResolver, parse_package_path_option
+from bridge.ros.qos import LATCHED_QOS, TF_QOS
 from protocol.conversions import rotation_to_quaternion
 
 __all__ = ["DEFAULT_NODE_NAME", "StatePublisherNode", "transforms_message", "main"]

@@ -44,20 +44,20 @@ from typing import Any, Awaitable, Optional, Union
 import numpy as np
 import numpy.typing as npt
 from geometry_msgs.msg import TransformStamped
-from bridge.qos import LATCHED_QOS, TF_QOS, TF_STATIC_SUBSCRIBER_QOS
+from bridge.ros.qos import LATCHED_QOS, TF_QOS, TF_STATIC_SUBSCRIBER_QOS
 from rclpy.serialization import deserialize_message
 from tf2_msgs.msg import TFMessage
 
 from bridge.codecs.cdr import CdrError, read_tf_message
 from bridge.codecs.fast import pack_transform, transform_body
 
-from bridge.dispatch import Handler
-from bridge.hub import Hub, Replier
-from bridge.logging_limits import RateLimitedLog
-from bridge.outbox import Frame, TemplateFrame
-from bridge.raw_reader import RawTopic
-from bridge.ros_node import RosNode
-from bridge.security import NameRules
+from bridge.core.dispatch import Handler
+from bridge.core.hub import Hub, Replier
+from bridge.core.logging_limits import RateLimitedLog
+from bridge.core.outbox import Frame, TemplateFrame
+from bridge.core.security import NameRules
+from bridge.ros.raw_reader import RawTopic
+from bridge.ros.ros_node import RosNode
 from bridge.tf.buffer import StampedTransform, TfBuffer
 from bridge.tf.errors import (
     ConnectivityError,
@@ -287,7 +287,7 @@ class TfBridges:
         # six Python objects per transform (most of the daemon's CPU in a 1 kHz robot).
         # Where the compiled rcl reader is built, /tf is taken without the interpreter's
         # lock (rclpy held it about 20 ms for a peer's 10 MB TFMessage, stalling every
-        # client's stream): bridge/raw_reader.py.
+        # client's stream): bridge/ros/raw_reader.py.
         self._reader = ros.raw_reader([
             RawTopic(self._tf_topic, TFMessage, TF_QOS, self._on_tf),
             RawTopic(self._tf_static_topic, TFMessage, TF_STATIC_SUBSCRIBER_QOS,

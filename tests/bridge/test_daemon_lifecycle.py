@@ -42,7 +42,7 @@ def test_port_in_use_is_one_line_and_exit_code_2(processes: Processes) -> None:
 
 
 def test_a_second_bridge_on_a_running_bridge_s_port_is_refused(processes: Processes) -> None:
-    # The bridge's listener shares its port for knocks (bridge/knock.py); another bridge of
+    # The bridge's listener shares its port for knocks (bridge/core/knock.py); another bridge of
     # the same user must still be told the port is taken, not share its clients.
     daemon = start_daemon(processes)
     result = subprocess.run([sys.executable, "-m", "bridge.cli", "run", "--port",

@@ -11,7 +11,7 @@ from typing import Callable
 
 import pytest
 
-from bridge.heavy import HeavyWork, LaneFullError
+from bridge.core.heavy import HeavyWork, LaneFullError
 from support import scaled
 
 

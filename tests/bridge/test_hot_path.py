@@ -24,9 +24,9 @@ from rclpy.serialization import deserialize_message, serialize_message
 from bridge.codecs import codec_for
 from bridge.codecs.cdr import CdrError, read_pose, read_pose_stamped, read_transform_stamped
 from bridge.codecs.fast import NotFast, RawPoseStream, transform_body
-from bridge.hub import Hub
-from bridge.outbox import Frame, TemplateFrame
-from bridge.session import ClientSession, SessionLimits
+from bridge.core.hub import Hub
+from bridge.core.outbox import Frame, TemplateFrame
+from bridge.core.session import ClientSession, SessionLimits
 from protocol.conversions import igtl_timestamp_from_ros
 from protocol.framing import Decoder, encode
 from protocol.messages import Message, String
@@ -455,8 +455,8 @@ def test_a_subscriber_callback_running_when_its_bridge_closes_does_not_bring_it_
     from std_msgs.msg import String as RosString
 
     from protocol.commands import QoS
-    from bridge.ros_node import RosNode, RosOptions
-    from bridge.topics import SubscriberBridge
+    from bridge.ros.ros_node import RosNode, RosOptions
+    from bridge.topics.capability import SubscriberBridge
 
     served = _Served(direct_writes=True)
     ros = RosNode(RosOptions(node_name="hot_path_race"))
@@ -535,7 +535,7 @@ def test_a_tf_update_reaches_each_client_whole_in_one_write() -> None:
 def test_a_removed_lookup_never_comes_back_while_tf_keeps_arriving() -> None:
     """tf lookups are evaluated and written on the thread /tf arrives on: removing one on
     the loop while that thread delivers must leave its device gone for good."""
-    from bridge.ros_node import RosNode, RosOptions
+    from bridge.ros.ros_node import RosNode, RosOptions
     from bridge.tf.buffer import StampedTransform
     from bridge.tf.capability import TfBridges
     from protocol.commands import CreateTfLookup, RemoveTfLookup
@@ -591,8 +591,8 @@ def test_bytes_rclpy_cannot_read_are_dropped_with_a_warning(
     """A subscriber takes every type serialized: bytes that do not deserialize must cost
     one warning, not an exception in the streams thread (which would pause every stream)."""
     from bridge.codecs import codec_for
-    from bridge.ros_node import RosNode, RosOptions
-    from bridge.topics import SubscriberBridge
+    from bridge.ros.ros_node import RosNode, RosOptions
+    from bridge.topics.capability import SubscriberBridge
     from protocol.commands import QoS
 
     served = _Served(direct_writes=True)
@@ -601,7 +601,7 @@ def test_bytes_rclpy_cannot_read_are_dropped_with_a_warning(
         bridge = SubscriberBridge(ros, served.hub, topic="/hot_path_bad_bytes",
                                   codec=codec_for("sensor_msgs/msg/Image"), qos=QoS(),
                                   device="bad", metadata={})
-        with caplog.at_level("WARNING", logger="bridge.topics"):
+        with caplog.at_level("WARNING", logger="bridge.topics.capability"):
             bridge._on_raw(b"\x00\x01\x00\x00\xff")  # a CDR header, then nothing usable
         assert bridge.count == 0 and bridge.last_message is None
         assert "bad" not in served.call(_devices(served.hub))

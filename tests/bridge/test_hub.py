@@ -5,8 +5,8 @@ from __future__ import annotations
 import asyncio
 import threading
 
-from bridge.hub import Hub, frame_for
-from bridge.outbox import BulkFrame
+from bridge.core.hub import Hub, frame_for
+from bridge.core.outbox import BulkFrame
 from protocol.messages import Message, String
 
 

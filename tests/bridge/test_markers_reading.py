@@ -130,7 +130,7 @@ def test_a_namespace_no_device_name_can_hold_is_refused_not_raised() -> None:
     import asyncio
     import json
 
-    from bridge.hub import Hub
+    from bridge.core.hub import Hub
     from bridge.markers.capability import MarkerBridges, _Show, _Subscription
     from protocol.commands import CreateMarkerSubscriber
     from protocol.naming import DeviceNameRegistry, NameKey

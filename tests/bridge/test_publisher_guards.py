@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from bridge.codecs import codec_for
-from bridge.security import NameRules, SecurityPolicy
+from bridge.core.security import NameRules, SecurityPolicy
 from protocol import commands as c
 from protocol.commands import ForbiddenError
 

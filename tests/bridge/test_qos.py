@@ -7,7 +7,7 @@ import json
 import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 
-from bridge.qos import qos_profile, qos_to_dict
+from bridge.ros.qos import qos_profile, qos_to_dict
 from protocol.commands import CommandError, CreateSubscriber, QoS
 
 

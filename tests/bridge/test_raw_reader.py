@@ -1,4 +1,4 @@
-"""The raw reader (bridge/raw_reader.py): subscriptions taken without the interpreter's lock,
+"""The raw reader (bridge/ros/raw_reader.py): subscriptions taken without the interpreter's lock,
 fed by real publishers in other processes. What it saves (the lock rclpy held about 20 ms for
 each 10 MB message) is measured by bench/attacks.py's tf_frames storm, not here."""
 
@@ -13,10 +13,10 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.serialization import deserialize_message
 from tf2_msgs.msg import TFMessage
 
-from bridge import raw_reader
-from bridge.qos import TF_QOS
-from bridge.raw_reader import RawTopic
-from bridge.ros_node import RosNode, RosOptions
+from bridge.ros import raw_reader
+from bridge.ros.qos import TF_QOS
+from bridge.ros.raw_reader import RawTopic
+from bridge.ros.ros_node import RosNode, RosOptions
 from support import Processes, scaled, wait_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.skipif(
@@ -89,7 +89,7 @@ def test_a_failing_callback_is_logged_and_the_reader_goes_on(
             healthy.set()
         raise ValueError("a callback bug")
 
-    with caplog.at_level(logging.ERROR, logger="bridge.raw_reader"):
+    with caplog.at_level(logging.ERROR, logger="bridge.ros.raw_reader"):
         reader = ros.raw_reader([RawTopic("/rr_failing", PoseStamped, TF_QOS, failing)],
                                 name="rr-failing")
         assert reader is not None

@@ -10,7 +10,7 @@ import time
 import pytest
 from std_msgs.msg import String
 
-from bridge.ros_node import RosNode, RosOptions
+from bridge.ros.ros_node import RosNode, RosOptions
 from support import scaled
 
 pytestmark = pytest.mark.ros
@@ -32,7 +32,7 @@ def test_a_failing_callback_is_logged_and_the_executor_goes_on(
 
     ros.node.create_timer(0.01, failing)
     ros.node.create_timer(0.01, counting)
-    with caplog.at_level(logging.ERROR, logger="bridge.ros_node"):
+    with caplog.at_level(logging.ERROR, logger="bridge.ros.ros_node"):
         ros.start()
         try:
             assert healthy.wait(scaled(10)), f"the executor stopped after {len(ticks)} ticks"

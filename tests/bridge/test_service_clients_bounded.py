@@ -11,9 +11,9 @@ import os
 
 import pytest
 
-from bridge.hub import Hub
-from bridge.ros_node import RosNode, RosOptions
-from bridge.services import ServiceBridges
+from bridge.core.hub import Hub
+from bridge.ros.ros_node import RosNode, RosOptions
+from bridge.services.capability import ServiceBridges
 from protocol import commands as c
 from protocol.naming import DeviceNameRegistry
 from support import Processes, scaled

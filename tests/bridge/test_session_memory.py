@@ -16,9 +16,9 @@ from typing import Awaitable, Callable, Iterator
 
 import pytest
 
-from bridge.hub import Hub
-from bridge.server import BridgeServer
-from bridge.session import ClientSession, SessionLimits
+from bridge.core.hub import Hub
+from bridge.core.server import BridgeServer
+from bridge.core.session import ClientSession, SessionLimits
 from protocol.framing import Decoder, encode
 from protocol.header import HEADER_SIZE
 from protocol.messages import Image, Message, RawBody, StatusCode
@@ -163,7 +163,7 @@ def test_a_bulk_frame_keeps_one_encoding_and_gives_the_same_bytes(
     """The hub's newest value of an image or a cloud is held once (its v2 wire parts, not
     joined), not as body arrays and bytes; other versions and the message come back from
     those bytes."""
-    from bridge.outbox import BulkFrame, Frame
+    from bridge.core.outbox import BulkFrame, Frame
 
     message = make()
     bulk, plain = BulkFrame(message), Frame(message)

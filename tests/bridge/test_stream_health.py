@@ -10,7 +10,7 @@ from typing import Iterator
 import pytest
 
 import slicer_client
-from bridge.stream_health import SILENCE_FLOOR_S, STALE_PERIODS, Arrivals, stale_reason
+from bridge.core.stream_health import SILENCE_FLOOR_S, STALE_PERIODS, Arrivals, stale_reason
 from protocol.liveness import stream_condition
 from slicer_client.scene_plan import describe_bridges, stale_lines
 from protocol.messages import Status, StatusCode

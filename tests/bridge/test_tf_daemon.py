@@ -453,8 +453,8 @@ def test_bad_broadcast_requests_get_error_replies_naming_the_field(
 
 def test_frame_prefix_maps_relative_frames_and_leaves_absolute_ones() -> None:
     """The tf_prefix-style option (in process: the CLI does not expose it yet)."""
-    from bridge.hub import Hub
-    from bridge.ros_node import RosNode, RosOptions
+    from bridge.core.hub import Hub
+    from bridge.ros.ros_node import RosNode, RosOptions
     from bridge.tf.capability import TfBridges
     from protocol.commands import CreateTfLookup
     from protocol.naming import DeviceNameRegistry
@@ -485,7 +485,7 @@ def test_a_daemon_serves_lookups_on_either_tf_store(processes: Processes, pure_p
     CDR itself, the pure Python one (where the compiled store was not built) lets the
     capability read it; and takes /tf either way: without the interpreter's lock (the rcl
     reader) or through rclpy. All stream the same composed lookup."""
-    from bridge.raw_reader import _rcl_reader
+    from bridge.ros.raw_reader import _rcl_reader
     from bridge.tf.buffer import CompiledFrameStore
 
     if not pure_python and CompiledFrameStore is None:

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from bridge.config import ConfigError, build_security, load_config_file
-from bridge.security import (OPERATOR, BridgeOwners, BridgeQuota, NameRules, SecurityPolicy,
-                             is_loopback_host, strip_frame)
+from bridge.core.security import (OPERATOR, BridgeOwners, BridgeQuota, NameRules, SecurityPolicy,
+                                  is_loopback_host, strip_frame)
 from protocol import commands as c
 from protocol.commands import ErrorCode, ForbiddenError, LimitReachedError
 

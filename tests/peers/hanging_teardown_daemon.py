@@ -10,7 +10,7 @@ import ctypes
 import sys
 
 from bridge import cli
-from bridge.ros_node import RosNode
+from bridge.ros.ros_node import RosNode
 
 
 def main() -> int:

@@ -39,7 +39,7 @@ class ConnectorTransport:
     "connected". The daemon's heartbeat is a STATUS whose node the connector modifies once
     per message; `poll()` takes `DEAD_AFTER_S` without one for a dead link. The connector
     keeps its socket: the daemon resets its end and knocks it once the cable is back
-    (bridge/knock.py), and the connector then reconnects at once. (Restarting the connector
+    (bridge/core/knock.py), and the connector then reconnects at once. (Restarting the connector
     here would start a blocking connect() with no timeout, which a later Stop() waits for.)
     """
 

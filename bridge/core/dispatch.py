@@ -8,7 +8,7 @@ Capabilities register one handler per request class. What the dispatcher does ar
 handler comes from the op's declarations (`protocol.commands.op`): the security policy
 judges its resources, a creation is counted against its client's quota and recorded with
 who made it (the operator's start-up config or a client), and a removal is allowed by the
-ownership rules (`bridge.security.BridgeOwners`).
+ownership rules (`bridge.core.security.BridgeOwners`).
 
 Creations and removals of one bridge (its kind and identity) run one at a time, in the
 order they came (`BridgeLocks`): a removal that arrives while an asynchronous creation of
@@ -26,12 +26,12 @@ from collections import deque
 from typing import (Any, Awaitable, Callable, Mapping, Optional, Protocol, Sequence, Union,
                     cast)
 
-from bridge.heavy import HeavyWork, LargeResult, OffLoop
-from bridge.hub import Hub, Replier
-from bridge.ros_node import RosNode
-from bridge.logging_limits import RateLimitedLog
-from bridge.security import (OPERATOR, WRITES, BridgeKey, BridgeOwners, BridgeQuota,
-                             FileResolver, FrameResolver, SecurityPolicy, strip_frame)
+from bridge.core.heavy import HeavyWork, LargeResult, OffLoop
+from bridge.core.hub import Hub, Replier
+from bridge.core.logging_limits import RateLimitedLog
+from bridge.core.security import (OPERATOR, WRITES, BridgeKey, BridgeOwners, BridgeQuota,
+                                  FileResolver, FrameResolver, SecurityPolicy, strip_frame)
+from bridge.ros.ros_node import RosNode
 from protocol.auth import new_challenge, verify
 from protocol.freshness import daemon_clock_ms
 from protocol import commands as c

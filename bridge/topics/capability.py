@@ -24,20 +24,20 @@ from std_msgs.msg import String as StringMsg
 
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
 from bridge.codecs.base import Encoded
+from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
 from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
-from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
-from bridge.dispatch import Handler, Result
-from bridge.graph_types import refuse_other_type
-from bridge.heavy import OffLoop
-from bridge.hub import Hub, Replier, StreamChannel, Subscriber, frame_for
-from bridge.logging_limits import RateLimitedLog
-from bridge.message_guards import MessageGuard
-from bridge.outbox import TemplateFrame
-from bridge.qos import default_depth, qos_profile
-from bridge.ros_node import RosNode
-from bridge.security import SecurityPolicy
-from bridge.stream_health import Arrivals, StreamHealth
+from bridge.core.dispatch import Handler, Result
+from bridge.core.heavy import OffLoop
+from bridge.core.hub import Hub, Replier, StreamChannel, Subscriber, frame_for
+from bridge.core.logging_limits import RateLimitedLog
+from bridge.core.message_guards import MessageGuard
+from bridge.core.outbox import TemplateFrame
+from bridge.core.security import SecurityPolicy
+from bridge.core.stream_health import Arrivals, StreamHealth
+from bridge.ros.graph_types import refuse_other_type
+from bridge.ros.qos import default_depth, qos_profile
+from bridge.ros.ros_node import RosNode
 from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
                                CreateSubscriber, ErrorCode, ForbiddenError, GetLastMessage, Op,
                                Publish, QoS, RemovePublisher, RemoveSubscriber,

@@ -16,7 +16,7 @@ from bridge.codecs.generic import describe_message
 from bridge.codecs.registry import (InterfaceKind, action_class, interface_class,
                                     message_class, resolve_service, resolve_type,
                                     service_class)
-from bridge.dispatch import Handler
+from bridge.core.dispatch import Handler
 from protocol.commands import (CommandFailedError, DescribeType, ErrorCode, MessageDescription,
                                Op, OutOfRangeError, TypeDescription, resolve_action_type)
 

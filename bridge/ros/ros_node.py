@@ -14,7 +14,7 @@ Two nodes, two executors:
   only for the callback (about 0.05 ms). Jazzy's EventsExecutor cannot run coroutine
   service callbacks (ros2/rclpy#1473, fixed after 7.1.x), hence the split.
 
-Raw readers (`raw_reader`, bridge/raw_reader.py) take some of ``stream_node``'s raw
+Raw readers (`raw_reader`, bridge/ros/raw_reader.py) take some of ``stream_node``'s raw
 subscriptions (/tf) in threads of their own, without the interpreter's lock; `stop` closes
 them before the nodes go.
 """
@@ -39,9 +39,9 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
 
-from bridge.raw_reader import RawReader, RawTopic
+from bridge.ros.raw_reader import RawReader, RawTopic
 from protocol.commands import OutOfRangeError
-from bridge.raw_reader import available as raw_reader_available
+from bridge.ros.raw_reader import available as raw_reader_available
 
 log = logging.getLogger(__name__)
 
@@ -148,7 +148,7 @@ class RosNode:
 
     def raw_reader(self, topics: list[RawTopic], name: str) -> Optional[RawReader]:
         """`topics` subscribed raw on ``stream_node`` and read without the interpreter's
-        lock in the thread ``name`` (bridge/raw_reader.py); None where the compiled reader
+        lock in the thread ``name`` (bridge/ros/raw_reader.py); None where the compiled reader
         is not built (then subscribe through rclpy). Closed by `stop` at the latest."""
         if not raw_reader_available():
             return None

@@ -11,7 +11,7 @@ share one `ReceiveBudget` for partly received bodies.
 
 Every `LINK_CHECK_INTERVAL_S` each client's link is checked (protocol/liveness.py); a dead
 one is reset, and a plain client's reset is delivered by knocking once its link is back
-(bridge/knock.py). The listeners share their port for that (``SO_REUSEPORT``), so the port
+(bridge/core/knock.py). The listeners share their port for that (``SO_REUSEPORT``), so the port
 is first claimed without it: another daemon's listener still makes this one fail to start.
 """
 
@@ -25,12 +25,12 @@ import time
 from typing import Optional
 
 from bridge.config import TlsListener
-from bridge.heavy import HeavyWork
-from bridge.hub import Hub
-from bridge.knock import KNOCKS, Knocker
-from bridge.logging_limits import RateLimitedLog
-from bridge.security import SecurityPolicy, is_loopback_host
-from bridge.session import ClientSession, CommandHandler, SessionLimits
+from bridge.core.heavy import HeavyWork
+from bridge.core.hub import Hub
+from bridge.core.knock import KNOCKS, Knocker
+from bridge.core.logging_limits import RateLimitedLog
+from bridge.core.security import SecurityPolicy, is_loopback_host
+from bridge.core.session import ClientSession, CommandHandler, SessionLimits
 from protocol.framing import ReceiveBudget
 from protocol.framing import encode
 from protocol.messages import Message, Status, StatusCode

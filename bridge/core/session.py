@@ -44,11 +44,11 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Callable, Optional
 
-from bridge.heavy import HeavyWork
-from bridge.hub import Hub
-from bridge.logging_limits import RateLimitedLog
-from bridge.outbox import WRITE_CHUNK, Frame, Outbox, OutboxOverflow
-from bridge.security import WRITES, WriteGrant, is_loopback_host
+from bridge.core.heavy import HeavyWork
+from bridge.core.hub import Hub
+from bridge.core.logging_limits import RateLimitedLog
+from bridge.core.outbox import WRITE_CHUNK, Frame, Outbox, OutboxOverflow
+from bridge.core.security import WRITES, WriteGrant, is_loopback_host
 from protocol.crc64 import Buffer
 from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
 from protocol.framing import Decoder, RawFrame, ReceiveBudget

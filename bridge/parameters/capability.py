@@ -38,11 +38,11 @@ from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_parameter_events
 
-from bridge.dispatch import Handler
-from bridge.hub import Hub, Replier
-from bridge.ros_node import RosNode
-from bridge.security import SecurityPolicy, parameter_service
-from bridge.services import call_ros_service, wait_until_ready
+from bridge.core.dispatch import Handler
+from bridge.core.hub import Hub, Replier
+from bridge.core.security import SecurityPolicy, parameter_service
+from bridge.ros.ros_node import RosNode
+from bridge.services.capability import call_ros_service, wait_until_ready
 from protocol.commands import (Op, CommandError, CommandFailedError, CreateParameterClient,
                                ErrorCode, ForbiddenError, GetParameters, ListParameters,
                                ObserveParameters,

@@ -15,7 +15,7 @@ import itertools
 from dataclasses import dataclass
 from typing import Callable, Mapping, Optional
 
-from bridge.hub import Hub, Replier
+from bridge.core.hub import Hub, Replier
 from protocol.commands import Op
 from protocol.messages import Command, Message, RtsCommand
 

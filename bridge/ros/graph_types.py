@@ -9,7 +9,7 @@ way the client is told, before anything is created, which type the topic already
 
 from __future__ import annotations
 
-from bridge.ros_node import RosNode
+from bridge.ros.ros_node import RosNode
 from protocol.commands import CommandFailedError, ErrorCode
 
 __all__ = ["refuse_other_type"]

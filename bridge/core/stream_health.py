@@ -23,8 +23,8 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Optional
 
-from bridge.hub import Hub
-from bridge.outbox import Frame
+from bridge.core.hub import Hub
+from bridge.core.outbox import Frame
 from protocol.liveness import condition_status
 from protocol.messages import Message
 

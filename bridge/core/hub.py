@@ -40,8 +40,8 @@ from collections import deque
 from contextlib import contextmanager
 from typing import Callable, Iterator, Optional, Protocol
 
-from bridge.outbox import BulkFrame, Frame
-from bridge.security import WriteGrant
+from bridge.core.outbox import BulkFrame, Frame
+from bridge.core.security import WriteGrant
 from protocol.freshness import daemon_clock_ms
 from protocol.messages import Message
 

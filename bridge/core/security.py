@@ -33,10 +33,10 @@ from dataclasses import dataclass, field, replace
 from fnmatch import fnmatchcase
 from typing import Any, Callable, Optional, Union
 
-from bridge.logging_limits import RateLimitedLog
+from bridge.core.logging_limits import RateLimitedLog
 from protocol.auth import KeyFileError, read_key_text
-from bridge.message_guards import (PARAMETER_EVENT_TYPE, TF_MESSAGE_TYPE, HeaderFrameGuard,
-                                   MessageGuard, ParameterEventGuard, TfMessageGuard)
+from bridge.core.message_guards import (PARAMETER_EVENT_TYPE, TF_MESSAGE_TYPE, HeaderFrameGuard,
+                                        MessageGuard, ParameterEventGuard, TfMessageGuard)
 from protocol.commands import (REQUEST_TYPES, ActionUse, FileUse, ForbiddenError, FrameUse,
                                LimitReachedError, Op, OutOfRangeError, ParameterUse, Resource,
                                ServiceUse, TopicUse, resolve_message_type, resolve_service_type)

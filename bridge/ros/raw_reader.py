@@ -3,7 +3,7 @@
 rclpy takes each raw message holding the lock: a peer's 10 MB TFMessage kept every other
 thread of the daemon waiting about 20 ms (bench/attacks.py's tf_frames storm). A
 `RawReader` waits for and takes its subscriptions' messages with rcl's own wait set and take,
-the lock released (the compiled `bridge._rcl_reader`), and hands each to its topic's callback
+the lock released (the compiled `bridge.ros._rcl_reader`), and hands each to its topic's callback
 as a read-only view, valid during the call.
 
 The subscriptions are real ones on the given node (the ROS graph lists them), made outside
@@ -32,7 +32,7 @@ _WAIT_S = 0.1  # at most this long between waits: a wake-up rcl missed costs no 
 _ERROR_LOG_INTERVAL_S = 5.0
 
 try:  # imported after rclpy (above), which has loaded the rcl libraries it links to
-    from bridge import _rcl_reader
+    from bridge.ros import _rcl_reader
 except ImportError:
     _rcl_reader = None  # type: ignore[assignment]
 

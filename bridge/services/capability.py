@@ -26,15 +26,15 @@ from rclpy.client import Client
 from rclpy.exceptions import InvalidHandle
 from rclpy.task import Future as RosFuture
 
-from bridge.client_replies import ClientReplies
 from bridge.codecs import CodecError, dict_to_message, message_to_dict
 from bridge.codecs.registry import SERVICE
-from bridge.dispatch import Handler
-from bridge.hub import Hub, Replier
-from bridge.interface_types import installed_class
-from bridge.ros_clients import RosClientCache
-from bridge.ros_node import RosNode
-from bridge.security import SecurityPolicy
+from bridge.core.client_replies import ClientReplies
+from bridge.core.dispatch import Handler
+from bridge.core.hub import Hub, Replier
+from bridge.core.security import SecurityPolicy
+from bridge.ros.interface_types import installed_class
+from bridge.ros.ros_clients import RosClientCache
+from bridge.ros.ros_node import RosNode
 from protocol.commands import (Op, AdvertiseService, CallService, CommandError, CommandFailedError,
                                ErrorCode, LimitReachedError, Reply, ServiceRequest,
                                UnadvertiseService, WrongTypeError, loads)
