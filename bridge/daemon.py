@@ -31,7 +31,7 @@ from bridge.core.stream_health import StreamHealth
 from bridge.markers.capability import MarkerBridges
 from bridge.parameters.capability import ParameterBridges
 from bridge.robots.capability import RobotBridges
-from bridge.ros.interface_types import InterfaceTypes
+from bridge.types import InterfaceTypes
 from bridge.ros.ros_node import RosNode, RosOptions
 from bridge.services.capability import ServiceBridges
 from bridge.tf.capability import TfBridges

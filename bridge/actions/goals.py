@@ -39,7 +39,7 @@ from bridge.codecs import CodecError, message_to_dict
 from bridge.codecs.registry import ACTION
 from bridge.core.hub import Hub, Replier
 from bridge.core.security import hidden_action
-from bridge.ros.interface_types import installed_class
+from bridge.codecs.registry import installed_class
 from bridge.ros.ros_clients import RosClientCache
 from bridge.ros.ros_node import RosNode
 from bridge.services.capability import connected_client, message_from_json

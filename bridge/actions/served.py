@@ -29,7 +29,7 @@ from bridge.codecs import CodecError, message_to_dict
 from bridge.codecs.registry import ACTION
 from bridge.core.client_replies import ClientReplies
 from bridge.core.hub import Hub, Replier
-from bridge.ros.interface_types import installed_class
+from bridge.codecs.registry import installed_class
 from bridge.ros.ros_node import RosNode
 from bridge.services.capability import (advertised_by, already_served, client_answer,
                                         connected_client, message_from_json)

@@ -19,11 +19,12 @@ from functools import cache, lru_cache
 from typing import Any
 
 from bridge.codecs.errors import CodecError
-from protocol.commands import (REFERENCE_TYPE_NAMES, OutOfRangeError, resolve_message_type,
-                               resolve_service_type)
+from protocol.commands import (REFERENCE_TYPE_NAMES, CommandFailedError, ErrorCode,
+                               OutOfRangeError, resolve_message_type, resolve_service_type)
 
 __all__ = ["ACTION", "MESSAGE", "REFERENCE_SHORT_NAMES", "SERVICE", "InterfaceKind",
-           "action_class", "installed_types", "interface_class", "message_class",
+           "action_class", "installed_class", "installed_types", "interface_class",
+           "message_class",
            "resolve_service", "resolve_type", "ros_type_of", "service_class"]
 
 # The reference's short names: one table, in the protocol (clients resolve them too).
@@ -173,3 +174,14 @@ def resolve_service(name: str) -> str:
         raise _unknown(str(name).strip(), error.expected) from None
     service_class(ros_type)
     return ros_type
+
+
+def installed_class(kind: InterfaceKind, type_name: str, ros_type: str) -> Any:
+    """The rclpy class of ``ros_type`` for a request that named it ``type_name``;
+    UNKNOWN_ROS_TYPE naming the field ``type`` if it is not installed."""
+    try:
+        return interface_class(kind, ros_type)
+    except CodecError as error:
+        raise CommandFailedError("type", f"{kind.one} type installed in the daemon's "
+                                 "environment", f"{type_name!r} ({error})",
+                                 code=ErrorCode.UNKNOWN_ROS_TYPE) from None

@@ -22,9 +22,8 @@ import logging
 import socket
 import ssl
 import time
-from typing import Optional
+from typing import Optional, Protocol
 
-from bridge.config import TlsListener
 from bridge.core.heavy import HeavyWork
 from bridge.core.hub import Hub
 from bridge.core.knock import KNOCKS, Knocker
@@ -43,6 +42,15 @@ STALLED_FRAME_EVICT_S = 1.0
 LINK_CHECK_INTERVAL_S = 0.1  # how often clients' links are checked for a dead peer
 
 
+class TlsEndpoint(Protocol):
+    """What the server needs of a TLS listener (`bridge.config.TlsListener` is one): its
+    port, and its context (checked at start-up)."""
+
+    @property
+    def port(self) -> int: ...
+    def context(self) -> ssl.SSLContext: ...
+
+
 class PortInUseError(OSError):
     """The address is taken: another daemon (or 3D Slicer's own server) listens there."""
 
@@ -50,7 +58,7 @@ class PortInUseError(OSError):
 class BridgeServer:
     def __init__(self, hub: Hub, commands: CommandHandler, *, host: str, port: int,
                  limits: SessionLimits, policy: SecurityPolicy | None = None,
-                 heavy: HeavyWork | None = None, tls: TlsListener | None = None) -> None:
+                 heavy: HeavyWork | None = None, tls: TlsEndpoint | None = None) -> None:
         self._hub = hub
         self._heavy = heavy  # decodes clients' heavy bodies off the loop
         self._commands = commands

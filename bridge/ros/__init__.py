@@ -8,5 +8,4 @@
 - ros_clients.py: the cached rclpy service and action clients.
 - ros_args.py: `--ros-args` mapped onto the daemon's own options.
 - graph_types.py: one topic, one type: the check before a subscription or a publisher.
-- interface_types.py: installed message, service and action types, and `describe_type`.
 """

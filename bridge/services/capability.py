@@ -32,7 +32,7 @@ from bridge.core.client_replies import ClientReplies
 from bridge.core.dispatch import Handler
 from bridge.core.hub import Hub, Replier
 from bridge.core.security import SecurityPolicy
-from bridge.ros.interface_types import installed_class
+from bridge.codecs.registry import installed_class
 from bridge.ros.ros_clients import RosClientCache
 from bridge.ros.ros_node import RosNode
 from protocol.commands import (Op, AdvertiseService, CallService, CommandError, CommandFailedError,

@@ -16,7 +16,7 @@ from slicer_client.reference.slicer_types import slicer_type_for
 from slicer_client.reference.vtk_values import SlicerValues, array_values, table_columns
 
 pytestmark = pytest.mark.ros
-interface_types = pytest.importorskip("bridge.ros.interface_types",
+interface_types = pytest.importorskip("bridge.types.capability",
                                       reason="describes types with rclpy's introspection")
 
 

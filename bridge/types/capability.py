@@ -13,14 +13,13 @@ from typing import Any, Mapping
 
 from bridge.codecs import CodecError
 from bridge.codecs.generic import describe_message
-from bridge.codecs.registry import (InterfaceKind, action_class, interface_class,
-                                    message_class, resolve_service, resolve_type,
+from bridge.codecs.registry import (action_class, message_class, resolve_service, resolve_type,
                                     service_class)
 from bridge.core.dispatch import Handler
 from protocol.commands import (CommandFailedError, DescribeType, ErrorCode, MessageDescription,
                                Op, OutOfRangeError, TypeDescription, resolve_action_type)
 
-__all__ = ["InterfaceTypes", "installed_class"]
+__all__ = ["InterfaceTypes", "describe_type"]
 
 
 class InterfaceTypes:
@@ -37,17 +36,6 @@ class InterfaceTypes:
 
     def close(self) -> None:
         pass
-
-
-def installed_class(kind: InterfaceKind, type_name: str, ros_type: str) -> Any:
-    """The rclpy class of ``ros_type`` for a request that named it ``type_name``;
-    UNKNOWN_ROS_TYPE naming the field ``type`` if it is not installed."""
-    try:
-        return interface_class(kind, ros_type)
-    except CodecError as error:
-        raise CommandFailedError("type", f"{kind.one} type installed in the daemon's "
-                                 "environment", f"{type_name!r} ({error})",
-                                 code=ErrorCode.UNKNOWN_ROS_TYPE) from None
 
 
 @lru_cache(maxsize=512)
