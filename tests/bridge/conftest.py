@@ -6,6 +6,8 @@ from typing import Iterator
 
 import pytest
 
+import slicer_client
+from slicer_client.client import Client
 from slicer_client.connection import Connection
 from support import Processes, RunningDaemon, assert_clean_exit, start_daemon
 
@@ -22,6 +24,14 @@ def client(daemon: RunningDaemon) -> Iterator[Connection]:
     connection = daemon.connect()
     yield connection
     connection.close()
+
+
+@pytest.fixture
+def ros(daemon: RunningDaemon) -> Iterator[Client]:
+    """The Pythonic client on the module's daemon (no reconnect: a test ends with it)."""
+    client = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
+    yield client
+    client.close()
 
 
 @pytest.fixture(params=["compiled", "pure Python"])

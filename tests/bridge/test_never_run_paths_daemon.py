@@ -10,34 +10,19 @@ import json
 import re
 import threading
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import pytest
 
-import slicer_client
 from protocol.commands import ErrorCode
 from slicer_client.client import Client
 from slicer_client.connection import CommandRefusedError
-from support import Processes, RunningDaemon, assert_clean_exit, scaled, start_daemon
+from support import Processes, RunningDaemon, assert_clean_exit, scaled
 
 pytestmark = pytest.mark.ros
 
 GRIPPER = "control_msgs/action/GripperCommand"
 DECISION_TIMEOUT_S = 10  # bridge.actions.served.DECISION_TIMEOUT_S, as the daemon logs it
-
-
-@pytest.fixture(scope="module")
-def daemon(module_processes: Processes) -> Iterator[RunningDaemon]:
-    running = start_daemon(module_processes)
-    yield running
-    assert_clean_exit(running)
-
-
-@pytest.fixture
-def ros(daemon: RunningDaemon) -> Iterator[Client]:
-    client = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
-    yield client
-    client.close()
 
 
 def result_of(line: str) -> dict[str, Any]:

@@ -6,6 +6,10 @@ Waits up to 20 s for the server; prints ACCEPTED or REJECTED (NO_RESPONSE if nei
 in time), `FEEDBACK <position>` for each feedback, then
 `RESULT {"status": n, "position": p, "reached_goal": b}` and exits.
 --cancel-after K: asks to cancel after the K-th feedback (prints CANCEL <return code>).
+--feedbacks N: also reads the action's feedback topic itself (`FEEDBACK_TOPIC <position>`)
+and, after the result, stays until N of those came: rclpy's ActionClient drops a goal's
+feedback once its result is in, and takes a ready result before a ready feedback, so
+feedback published just before the end may never reach `feedback_callback`.
 
 Fast DDS can drop a service response when the server has not yet matched the client's reply
 reader (rmw_fastrtps sends nothing and reports success); on a loaded machine that hits the
@@ -58,6 +62,7 @@ def main() -> None:
     parser.add_argument("position", type=float)
     parser.add_argument("--effort", type=float, default=1.0)
     parser.add_argument("--cancel-after", type=int, default=0)
+    parser.add_argument("--feedbacks", type=int, default=0)
     args = parser.parse_args()
     rclpy.init()
     node = rclpy.create_node("test_gripper_action_client")
@@ -99,6 +104,16 @@ def main() -> None:
 
         node.create_subscription(GoalStatusArray, args.action + "/_action/status", on_status,
                                  qos_profile_action_status_default)
+        on_topic: list[float] = []
+
+        def on_feedback_topic(message) -> None:  # type: ignore[no-untyped-def]
+            if message.goal_id.uuid.tolist() == goal_uuid.uuid.tolist():
+                on_topic.append(message.feedback.position)
+                print(f"FEEDBACK_TOPIC {message.feedback.position}", flush=True)
+
+        if args.feedbacks:  # the topic and QoS rclpy's action server publishes feedback on
+            node.create_subscription(GripperCommand.Impl.FeedbackMessage,
+                                     args.action + "/_action/feedback", on_feedback_topic, 10)
         sent = client.send_goal_async(goal, feedback_callback=on_feedback,
                                       goal_uuid=goal_uuid)
         deadline = time.monotonic() + 30.0 * TIME_SCALE
@@ -124,6 +139,9 @@ def main() -> None:
                                       "position": response.result.position,
                                       "reached_goal": response.result.reached_goal}),
               flush=True)
+        deadline = time.monotonic() + 30.0 * TIME_SCALE
+        while len(on_topic) < args.feedbacks and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.1)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
