@@ -28,6 +28,7 @@ from bridge.actions.common import destroy_quietly
 from bridge.codecs import CodecError, message_to_dict
 from bridge.codecs.registry import ACTION
 from bridge.core.client_replies import ClientReplies
+from bridge.core.dispatch import Created
 from bridge.core.hub import Hub, Replier
 from bridge.codecs.registry import installed_class
 from bridge.ros.ros_node import RosNode
@@ -103,7 +104,7 @@ class ServedActions:
 
     # --- advertise_action ------------------------------------------------------------------
     def advertise_action(self, request: AdvertiseAction, client: Optional[Replier]
-                         ) -> dict[str, Any]:
+                         ) -> Created:
         client = connected_client(client, "action", "executes the goals")
         action = request.action
         ros_type = request.ros_type
@@ -121,7 +122,7 @@ class ServedActions:
                           existing.owner if existing else None,
                           existing.ros_type if existing else "", graph):
             assert existing is not None
-            return _describe_served(existing, existed=True)
+            return Created(_describe_served(existing), existed=True)
         key = NameKey.action_server(action)
         if lingering is not None:
             served = self._revive(lingering, client, request)
@@ -137,7 +138,7 @@ class ServedActions:
         log.info("serving action %s (%s) for client %s%s", action, ros_type,
                  getattr(client, "peer", "?"),
                  " (its server, still there from an earlier client)" if lingering else "")
-        return _describe_served(served, existed=False)
+        return Created(_describe_served(served), existed=False)
 
     def _revive(self, served: ServedAction, client: Replier,
                 request: AdvertiseAction) -> ServedAction:
@@ -413,10 +414,8 @@ class ServedActions:
         self._lingering.clear()
 
 
-def _describe_served(served: ServedAction, existed: bool | None = None) -> dict[str, Any]:
+def _describe_served(served: ServedAction) -> dict[str, Any]:
     out: dict[str, Any] = {"kind": "served_action", "action": served.action,
                            "type": served.ros_type, "device": served.device,
                            "goals": served.received, "decides": served.decides}
-    if existed is not None:
-        out["existed"] = existed
     return out

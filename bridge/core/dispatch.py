@@ -23,6 +23,7 @@ import inspect
 import logging
 import time
 from collections import deque
+from dataclasses import dataclass
 from typing import (Any, Awaitable, Callable, Mapping, Optional, Protocol, Sequence, Union,
                     cast)
 
@@ -42,9 +43,21 @@ from protocol.messages import Command, Message, RtsCommand
 log = logging.getLogger(__name__)
 
 Result = Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class Created:
+    """What a create op's handler returns: its reply, and whether the bridge was there
+    already (then the client's quota slot goes back). The reply gets ``existed`` here."""
+
+    reply: Result
+    existed: bool
+
+
 # A handler gets the parsed request and the client that sent it (None for start-up config).
 Handler = Callable[[Any, Union[Replier, None]],
-                   Union[Result, Awaitable[Result], "OffLoop[Result]"]]
+                   Union[Result, Created, Awaitable[Result], Awaitable[Created],
+                         "OffLoop[Result]"]]
 
 DAEMON_VERSION = "0.1.0"
 # A command text longer than this is parsed off the loop (in its client's lane).
@@ -75,6 +88,19 @@ class Capability(Protocol):
 # come resolved: `Op.with_names`).
 _FRAME_FIELDS = ("parent", "child")
 _KINDS = c.bridge_kinds()
+
+
+def _created(request: c.Request, outcome: Any) -> tuple[Result, bool]:
+    """A handler's outcome -> (the reply, whether its bridge was there already). A create
+    op's handler says so by returning `Created`; nothing else may."""
+    creates = type(request).creates is not None
+    if isinstance(outcome, Created) != creates:
+        raise TypeError(f"the {request.op} handler returned {type(outcome).__name__}: "
+                        f"{'a create op' if creates else 'an op that creates nothing'} "
+                        f"returns {'Created' if creates else 'its reply'}")
+    if isinstance(outcome, Created):
+        return {**outcome.reply, "existed": outcome.existed}, outcome.existed
+    return cast(Result, outcome), False
 
 
 def _identity_fields(request: c.Request) -> tuple[str, ...]:
@@ -320,13 +346,15 @@ class Dispatcher:
             outcome = handler(request, client)
             if isinstance(outcome, OffLoop):
                 outcome = self._off_loop(outcome, client)
+            if not inspect.isawaitable(outcome):
+                result, existed = _created(request, outcome)
         except BaseException:
-            self._settle(request, client, key, reserved, None)
+            self._settle(request, client, key, reserved, None, False)
             raise
         if inspect.isawaitable(outcome):
             return self._counted(outcome, request, client, key, reserved)
-        self._settle(request, client, key, reserved, outcome)
-        return outcome
+        self._settle(request, client, key, reserved, result, existed)
+        return result
 
     def _off_loop(self, outcome: OffLoop[Result],
                   client: Replier | None) -> Result | Awaitable[Result]:
@@ -336,21 +364,23 @@ class Dispatcher:
             return outcome.work()
         return self._heavy.run(client, outcome.work)  # LaneFullError: LIMIT_REACHED
 
-    async def _counted(self, outcome: Awaitable[Result], request: c.Request,
+    async def _counted(self, outcome: Awaitable[Result | Created], request: c.Request,
                        client: Replier | None, key: Optional[BridgeKey],
                        reserved: bool) -> Result:
         result: Result | None = None
+        existed = False
         try:
-            result = await outcome
+            result, existed = _created(request, await outcome)
             return result
         finally:
-            self._settle(request, client, key, reserved, result)
+            self._settle(request, client, key, reserved, result, existed)
 
     def _settle(self, request: c.Request, client: Replier | None, key: Optional[BridgeKey],
-                reserved: bool, result: Optional[Result]) -> None:
+                reserved: bool, result: Optional[Result], existed: bool) -> None:
         """After a handler: count the client's bridges, record who made or removed one."""
         if client is not None:
-            self._quota.settle(client, reserved, result)
+            self._quota.settle(client, reserved, succeeded=result is not None,
+                               existed=existed)
         if key is None or result is None:
             return
         if type(request).creates is not None:

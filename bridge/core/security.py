@@ -639,10 +639,10 @@ class BridgeQuota:
         self.total += 1
         return True
 
-    def settle(self, client: object, reserved: bool,
-               result: Optional[Mapping[str, Any]]) -> None:
-        """After a creation for `client` finished (`result` None: it failed)."""
-        if reserved and (result is None or result.get("existed") is True):
+    def settle(self, client: object, reserved: bool, *, succeeded: bool,
+               existed: bool) -> None:
+        """After a creation for `client` finished: the slot goes back unless it made one."""
+        if reserved and (not succeeded or existed):
             self.release(client)
 
     def forget(self, client: object) -> None:

@@ -77,7 +77,7 @@ from rclpy.serialization import deserialize_message
 
 from bridge.codecs import CodecError, codec_for
 from bridge.codecs.cdr import CdrError
-from bridge.core.dispatch import Handler
+from bridge.core.dispatch import Created, Handler
 from bridge.core.heavy import LargeResult
 from bridge.core.hub import Hub, Replier, Subscriber
 from bridge.core.logging_limits import RateLimitedLog
@@ -551,7 +551,7 @@ class MarkerBridges:
     # ------------------------------------------------------------------ ops
 
     def create(self, request: CreateMarkerSubscriber,
-               client: Optional[Replier] = None) -> dict[str, Any]:
+               client: Optional[Replier] = None) -> Created:
         topic = request.topic
         ros_type = request.ros_type
         existing = self.subscriptions.get(topic)
@@ -559,7 +559,7 @@ class MarkerBridges:
             if existing.request == request:  # a reconnecting client re-creates what it had
                 if client is not None:  # or another subscribes: it gets the topic's too
                     self._join(existing, client)
-                return self._describe(existing, existed=True)
+                return Created(self._describe(existing), existed=True)
             raise CommandFailedError("topic", "a topic without a marker subscriber "
                                      "(remove_marker_subscriber first, or repeat the same "
                                      "request)", topic, code=ErrorCode.ALREADY_EXISTS)
@@ -594,7 +594,7 @@ class MarkerBridges:
         self._index(sub, [])
         log.info("markers from %s (%s) in fixed frame %s: status device %r", topic, ros_type,
                  sub.fixed_frame, device)
-        return self._describe(sub, existed=False)
+        return Created(self._describe(sub), existed=False)
 
     # ------------------------------------------------------------------ audiences
 
@@ -929,8 +929,7 @@ class MarkerBridges:
             ListMarkers: lambda request, _: self.list_markers(request),
         }
 
-    def _describe(self, sub: _Subscription, existed: Optional[bool] = None
-                  ) -> dict[str, Any]:
+    def _describe(self, sub: _Subscription) -> dict[str, Any]:
         worker = sub.worker
         out: dict[str, Any] = {
             "kind": "marker_subscriber", "topic": sub.topic, "type": sub.ros_type,
@@ -941,8 +940,6 @@ class MarkerBridges:
             "dropped": worker.dropped if worker is not None else 0,
             "meshed": worker.meshed if worker is not None else 0,
             "model_bytes": self.budget.of_topic(sub.topic)}
-        if existed is not None:
-            out["existed"] = existed
         return out
 
     def describe(self) -> list[dict[str, Any]]:

@@ -38,7 +38,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_parameter_events
 
-from bridge.core.dispatch import Handler
+from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
 from bridge.core.security import SecurityPolicy, parameter_service
 from bridge.ros.ros_node import RosNode
@@ -211,11 +211,11 @@ class ParameterBridges:
         ros.node.add_post_set_parameters_callback(self._on_server_set_ros)
 
     # --- parameter clients -----------------------------------------------------------------
-    async def create_parameter_client(self, request: CreateParameterClient) -> dict[str, Any]:
+    async def create_parameter_client(self, request: CreateParameterClient) -> Created:
         node = request.node
         existing = self.clients.get(node)
         if existing is not None:
-            return self._describe_client(existing, existed=True)
+            return Created(self._describe_client(existing), existed=True)
         key = NameKey.parameter_client(node)
         ros_node = self._ros.node
         client = ParameterClient(
@@ -233,7 +233,7 @@ class ParameterBridges:
         self._schedule_check()
         log.info("parameter client for %s (device %r, %s)", node, client.device,
                  "ready" if client.ready else "not ready")
-        return self._describe_client(client, existed=False)
+        return Created(self._describe_client(client), existed=False)
 
     def remove_parameter_client(self, request: RemoveParameterClient) -> dict[str, Any]:
         client = self._client(request.node)
@@ -738,13 +738,10 @@ class ParameterBridges:
             ServerUndeclareParameter: lambda r, _: self.server_undeclare_parameter(r),
         }
 
-    def _describe_client(self, client: ParameterClient,
-                         existed: bool | None = None) -> dict[str, Any]:
+    def _describe_client(self, client: ParameterClient) -> dict[str, Any]:
         out: dict[str, Any] = {"kind": "parameter_client", "node": client.node,
                                "device": client.device, "ready": bool(client.ready),
                                "observed": list(client.observed)}
-        if existed is not None:
-            out["existed"] = existed
         return out
 
     def describe(self) -> list[dict[str, Any]]:

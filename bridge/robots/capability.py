@@ -52,7 +52,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String as StringMsg
 
-from bridge.core.dispatch import Handler
+from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
 from bridge.core.security import NameRules
 from bridge.parameters.capability import ParameterBridges, ParameterWatch
@@ -181,7 +181,7 @@ class RobotBridges:
     # ------------------------------------------------------------------ ops
 
     async def create_robot(self, request: CreateRobot,
-                           client: Optional[Replier] = None) -> dict[str, Any]:
+                           client: Optional[Replier] = None) -> Created:
         """`client` None: the operator's start-up robot. Only a URDF file the operator's
         config names is trusted to read meshes anywhere; a description from a parameter or
         a topic can be changed by any client or ROS peer, so it reads meshes only inside
@@ -189,7 +189,7 @@ class RobotBridges:
         existing = self.robots.get(request.name)
         if existing is not None:
             if existing.request == request:  # a reconnecting client re-creates what it had
-                return self._describe(existing, existed=True)
+                return Created(self._describe(existing), existed=True)
             raise CommandFailedError("name", "a robot name not in use (remove_robot first, "
                                      "or repeat the same request)", request.name,
                                      code=ErrorCode.ALREADY_EXISTS)
@@ -215,7 +215,7 @@ class RobotBridges:
         except BaseException:
             self._drop(robot)
             raise
-        return self._describe(robot, existed=False)
+        return Created(self._describe(robot), existed=False)
 
     def remove_robot(self, request: RemoveRobot) -> dict[str, Any]:
         robot = self.robots.get(request.name)
@@ -235,7 +235,7 @@ class RobotBridges:
             await asyncio.wait_for(robot.loaded.wait(), timeout)
         except asyncio.TimeoutError:
             pass
-        return self._describe(robot, existed=True)
+        return self._describe(robot)
 
     def list_robots(self, request: ListRobots) -> dict[str, Any]:
         return {"robots": [self._summary(robot) for robot in self.robots.values()]}
@@ -603,7 +603,7 @@ class RobotBridges:
             out["reason"] = robot.reason
         return out
 
-    def _describe(self, robot: _Robot, existed: bool) -> dict[str, Any]:
+    def _describe(self, robot: _Robot) -> dict[str, Any]:
         model = robot.model
         out: dict[str, Any] = {
             "name": robot.name, "state": robot.state, "source": robot.source.to_dict(),
@@ -616,7 +616,7 @@ class RobotBridges:
             "visuals": [info.to_dict() for info in robot.visuals.values()],
             "withheld": [{"link": name, "frame": robot.tf_prefix + name, "reason": why}
                          for name, why in robot.withheld.items()],
-            "warnings": list(robot.warnings), "existed": existed}
+            "warnings": list(robot.warnings)}
         if robot.reason:
             out["reason"] = robot.reason
         return out

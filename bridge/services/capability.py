@@ -29,7 +29,7 @@ from rclpy.task import Future as RosFuture
 from bridge.codecs import CodecError, dict_to_message, message_to_dict
 from bridge.codecs.registry import SERVICE
 from bridge.core.client_replies import ClientReplies
-from bridge.core.dispatch import Handler
+from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
 from bridge.core.security import SecurityPolicy
 from bridge.codecs.registry import installed_class
@@ -348,7 +348,7 @@ class ServiceBridges:
 
     # --- advertise_service -----------------------------------------------------------------
     def advertise_service(self, request: AdvertiseService,
-                          client: Optional[Replier]) -> dict[str, Any]:
+                          client: Optional[Replier]) -> Created:
         client = connected_client(client, "service", "answers the calls")
         service = request.service
         ros_type = request.ros_type
@@ -359,7 +359,7 @@ class ServiceBridges:
                           existing.ros_type if existing else "",
                           self._ros.node.get_service_names_and_types()):
             assert existing is not None
-            return _describe_served(existing, existed=True)
+            return Created(_describe_served(existing), existed=True)
         key = NameKey.service_server(service)
         served = ServedService(service, ros_type, srv, client, key, self._names.register(key))
         served.handle = self._ros.node.create_service(srv, service, self._callback_for(served),
@@ -367,7 +367,7 @@ class ServiceBridges:
         self.served[service] = served
         log.info("serving %s (%s) for client %s", service, ros_type,
                  getattr(client, "peer", "?"))
-        return _describe_served(served, existed=False)
+        return Created(_describe_served(served), existed=False)
 
     def unadvertise_service(self, request: UnadvertiseService,
                             client: Optional[Replier]) -> dict[str, Any]:
@@ -505,10 +505,8 @@ class ServiceBridges:
         self.called.close()
 
 
-def _describe_served(served: ServedService, existed: bool | None = None) -> dict[str, Any]:
+def _describe_served(served: ServedService) -> dict[str, Any]:
     out: dict[str, Any] = {"kind": "served_service", "service": served.service,
                            "type": served.ros_type, "device": served.device,
                            "calls": served.calls}
-    if existed is not None:
-        out["existed"] = existed
     return out

@@ -51,7 +51,7 @@ from tf2_msgs.msg import TFMessage
 from bridge.codecs.cdr import CdrError, read_tf_message
 from bridge.codecs.fast import pack_transform, transform_body
 
-from bridge.core.dispatch import Handler
+from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.outbox import Frame, TemplateFrame
@@ -473,7 +473,7 @@ class TfBridges:
             if self._by_key.pop(handle, None) is not None:
                 self.registry.remove(handle)
 
-    def create_lookup(self, request: CreateTfLookup) -> dict[str, Any]:
+    def create_lookup(self, request: CreateTfLookup) -> Created:
         pair = self._pair(request.parent, request.child)
         existing = self.lookups.get(pair)
         if existing is not None:
@@ -481,7 +481,7 @@ class TfBridges:
             self.registry.add(pair[0], pair[1], rate_hz=request.rate_hz)
             existing.rate_hz = request.rate_hz
             self._arm()
-            return self._describe_lookup(existing, existed=True)
+            return Created(self._describe_lookup(existing), existed=True)
         name_key = NameKey.tf_lookup(*pair)
         device = self._names.register(name_key)
         with self._deliver_lock:  # the streams thread must not evaluate it unregistered
@@ -493,7 +493,7 @@ class TfBridges:
             self._by_key[key] = lookup
         self._arm()  # the first result comes from registry.due, on the next loop turn
         log.info("tf lookup %s -> %s streams as device %r", pair[0], pair[1], device)
-        return self._describe_lookup(lookup, existed=False)
+        return Created(self._describe_lookup(lookup), existed=False)
 
     def remove_lookup(self, request: RemoveTfLookup) -> dict[str, Any]:
         pair = self._pair(request.parent, request.child)
@@ -549,7 +549,7 @@ class TfBridges:
 
     # ------------------------------------------------------------------ broadcasters
 
-    def create_broadcaster(self, request: CreateTfBroadcaster) -> dict[str, Any]:
+    def create_broadcaster(self, request: CreateTfBroadcaster) -> Created:
         pair = self._pair(request.parent, request.child)
         if pair[0] == pair[1]:
             raise OutOfRangeError("child", "a frame other than the parent", repr(request.child))
@@ -560,7 +560,7 @@ class TfBridges:
                     "static", f"{str(existing.static).lower()} (the broadcaster {pair[0]} -> "
                     f"{pair[1]} has it; remove it first)", str(request.static).lower(),
                     code=ErrorCode.ALREADY_EXISTS)
-            return self._describe_broadcaster(existing, existed=True)
+            return Created(self._describe_broadcaster(existing), existed=True)
         name_key = NameKey.tf_broadcaster(*pair)
         device = self._names.register(name_key)
         broadcaster = _Broadcaster(pair[0], pair[1], request.static, device,
@@ -571,7 +571,7 @@ class TfBridges:
         self._hub.route(device, self._on_igtl)
         log.info("tf broadcaster %s -> %s (%s); clients send TRANSFORM to device %r",
                  pair[0], pair[1], broadcaster.topic, device)
-        return self._describe_broadcaster(broadcaster, existed=False)
+        return Created(self._describe_broadcaster(broadcaster), existed=False)
 
     def remove_broadcaster(self, request: RemoveTfBroadcaster) -> dict[str, Any]:
         pair = self._pair(request.parent, request.child)
@@ -684,8 +684,7 @@ class TfBridges:
             "frames": [f for f in self.buffer.frames() if self._frame_rules.permits(f)],
             "received": dict(self.received), "cache_time_s": self.buffer.cache_time_s}}
 
-    def _describe_lookup(self, lookup: _Lookup, existed: Optional[bool] = None,
-                         ) -> dict[str, Any]:
+    def _describe_lookup(self, lookup: _Lookup) -> dict[str, Any]:
         last = self.registry.last_sent(lookup.key)
         if isinstance(last, StampedTransform):
             state = "streaming"
@@ -701,18 +700,13 @@ class TfBridges:
             out["error"] = last.message
         if lookup.rate_hz:
             out["rate_hz"] = lookup.rate_hz
-        if existed is not None:
-            out["existed"] = existed
         return out
 
-    def _describe_broadcaster(self, broadcaster: _Broadcaster,
-                              existed: Optional[bool] = None) -> dict[str, Any]:
+    def _describe_broadcaster(self, broadcaster: _Broadcaster) -> dict[str, Any]:
         out: dict[str, Any] = {"kind": "tf_broadcaster", "parent": broadcaster.parent,
                                "child": broadcaster.child, "device": broadcaster.device,
                                "igtl_type": Transform.TYPE, "static": broadcaster.static,
                                "topic": broadcaster.topic, "messages": broadcaster.messages}
-        if existed is not None:
-            out["existed"] = existed
         return out
 
     def close(self) -> None:

@@ -27,7 +27,7 @@ from bridge.codecs.base import Encoded
 from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
 from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
-from bridge.core.dispatch import Handler, Result
+from bridge.core.dispatch import Created, Handler, Result
 from bridge.core.heavy import OffLoop
 from bridge.core.hub import Hub, Replier, StreamChannel, Subscriber, frame_for
 from bridge.core.logging_limits import RateLimitedLog
@@ -468,13 +468,14 @@ class TopicBridges:
         return True
 
     def create_subscriber(self, request: CreateSubscriber,
-                          client: Optional[Subscriber] = None) -> dict[str, Any]:
+                          client: Optional[Subscriber] = None) -> Created:
         topic = request.topic
         ros_type = request.ros_type
         codec = self._codec(request.type, ros_type)
         if self._check_existing(self.subscribers.get(topic), topic, ros_type):
-            return self._with_messages(request, client, self.subscribers[topic],
-                                       _describe(self.subscribers[topic].info(), existed=True))
+            return Created(self._with_messages(request, client, self.subscribers[topic],
+                                               _describe(self.subscribers[topic].info())),
+                           existed=True)
         self._check_graph(topic, ros_type)
         key = NameKey.subscriber(topic)
         device = self._names.register(key)
@@ -489,8 +490,8 @@ class TopicBridges:
             self._health.watch(device, topic, bridge.arrivals,
                                lambda: node.count_publishers(topic))
         log.info("subscribed to %s (%s) as device %r", topic, ros_type, device)
-        return self._with_messages(request, client, bridge,
-                                   _describe(bridge.info(), existed=False))
+        return Created(self._with_messages(request, client, bridge, _describe(bridge.info())),
+                       existed=False)
 
     def _with_messages(self, request: CreateSubscriber, client: Optional[Subscriber],
                        bridge: SubscriberBridge, reply: dict[str, Any]) -> dict[str, Any]:
@@ -521,7 +522,7 @@ class TopicBridges:
         self._names.release(NameKey.subscriber_messages(topic))
         return {"topic": topic, "device": bridge.device}
 
-    def create_publisher(self, request: CreatePublisher) -> dict[str, Any]:
+    def create_publisher(self, request: CreatePublisher) -> Created:
         topic = request.topic
         ros_type = request.ros_type
         codec = self._codec(request.type, ros_type)
@@ -534,7 +535,7 @@ class TopicBridges:
                                          f"topic {existing.labels_topic} (the bridge on "
                                          f"{topic} has them)", f"{request.frame or ''!r} and "
                                          f"{labels}", code=ErrorCode.ALREADY_EXISTS)
-            return _describe(existing.info(), existed=True)
+            return Created(_describe(existing.info()), existed=True)
         self._check_graph(topic, ros_type)
         if labels is not None:
             self._check_graph(labels, LABELS_TYPE)
@@ -545,7 +546,7 @@ class TopicBridges:
                                  guard=self._policy.publish_guard(topic, ros_type))
         self.publishers[topic] = bridge
         log.info("publishing %s (%s); clients send to device %r", topic, ros_type, device)
-        return _describe(bridge.info(), existed=False)
+        return Created(_describe(bridge.info()), existed=False)
 
     def remove_publisher(self, request: RemovePublisher) -> dict[str, Any]:
         topic = request.topic
@@ -633,13 +634,11 @@ class TopicBridges:
         self.publishers.clear()
 
 
-def _describe(info: TopicInfo, existed: bool | None = None) -> dict[str, Any]:
+def _describe(info: TopicInfo) -> dict[str, Any]:
     out: dict[str, Any] = {"kind": info.kind, "topic": info.topic, "type": info.ros_type,
                            "device": info.device, "igtl_type": info.igtl_type, "qos": info.qos,
                            "messages": info.messages}
     if info.max_rate_hz:
         out["rate_hz"] = info.max_rate_hz
     out.update(info.extra)
-    if existed is not None:
-        out["existed"] = existed
     return out

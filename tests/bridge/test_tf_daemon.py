@@ -13,7 +13,7 @@ import json
 import math
 import threading
 import time
-from typing import Any, Iterator
+from typing import Any, Iterator, Mapping
 
 import numpy as np
 import pytest
@@ -466,8 +466,8 @@ def test_frame_prefix_maps_relative_frames_and_leaves_absolute_ones() -> None:
         assert tf.resolve_frame("base") == "robot1/base"
         assert tf.resolve_frame("/world") == "world"
 
-        async def create() -> dict[str, Any]:
-            return tf.create_lookup(CreateTfLookup(parent="/world", child="tool"))
+        async def create() -> Mapping[str, Any]:
+            return tf.create_lookup(CreateTfLookup(parent="/world", child="tool")).reply
 
         created = loop.run_until_complete(create())
         assert (created["parent"], created["child"]) == ("world", "robot1/tool")

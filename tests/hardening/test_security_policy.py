@@ -189,14 +189,14 @@ def test_quota_counts_live_bridges_per_client() -> None:
     a, b = object(), object()
     for _ in range(2):
         reserved = quota.reserve(a, "create_subscriber")
-        quota.settle(a, reserved, {"existed": False})
+        quota.settle(a, reserved, succeeded=True, existed=False)
     with pytest.raises(LimitReachedError) as refused:
         quota.reserve(a, "create_tf_lookup")
     assert refused.value.error_code == ErrorCode.LIMIT_REACHED
     assert "at most 2 bridges per client" in str(refused.value)
     assert "--max-bridges-per-client" in str(refused.value)
-    quota.settle(b, quota.reserve(b, "create_robot"), None)  # failed: free
-    quota.settle(b, quota.reserve(b, "create_robot"), {"existed": True})
+    quota.settle(b, quota.reserve(b, "create_robot"), succeeded=False, existed=False)  # free
+    quota.settle(b, quota.reserve(b, "create_robot"), succeeded=True, existed=True)
     assert quota.count(b) == 0
     assert not quota.reserve(a, "remove_subscriber")  # a removal takes no slot...
     quota.release(a)  # ... and frees one of the bridge's maker, whoever removed it
