@@ -96,7 +96,7 @@ class Daemon:
                                                           self.services, self.actions,
                                                           self.robots, self.markers,
                                                           InterfaceTypes()],
-                                     policy=policy, resolve_frame=self.tf.resolve_frame,
+                                     policy=policy, resolve_frame=self.tf.resolve_client_frame,
                                      resolve_file=self.robots.file_path, heavy=self.heavy)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,
                                    port=config.port, limits=config.limits,

@@ -31,13 +31,13 @@ from bridge.core.heavy import HeavyWork, LargeResult, OffLoop
 from bridge.core.hub import Hub, Replier
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.security import (OPERATOR, WRITES, BridgeKey, BridgeOwners, BridgeQuota,
-                                  FileResolver, FrameResolver, SecurityPolicy, strip_frame)
+                                  FileResolver, SecurityPolicy, strip_frame)
 from bridge.ros.ros_node import RosNode
 from protocol.auth import new_challenge, verify
 from protocol.freshness import daemon_clock_ms
 from protocol import commands as c
 from protocol.commands import (CommandError, CommandFailedError, ErrorCode, ForbiddenError,
-                               Op, Reply)
+                               NameResolver, Op, Reply)
 from protocol.messages import Command, Message, RtsCommand
 
 log = logging.getLogger(__name__)
@@ -84,10 +84,11 @@ class Capability(Protocol):
     def close(self) -> None: ...
 
 
-# Identity fields that name tf frames: resolved as the tf capability keeps them (ROS names
-# come resolved: `Op.with_names`).
-_FRAME_FIELDS = ("parent", "child")
 _KINDS = c.bridge_kinds()
+
+
+def _as_given(frame: str, field: str) -> str:
+    return strip_frame(frame)
 
 
 def _created(request: c.Request, outcome: Any) -> tuple[Result, bool]:
@@ -154,7 +155,7 @@ class BridgeLocks:
 class Dispatcher:
     def __init__(self, ros: RosNode, hub: Hub, capabilities: Sequence[Capability], *,
                  policy: SecurityPolicy | None = None,
-                 resolve_frame: FrameResolver = strip_frame,
+                 resolve_frame: NameResolver = _as_given,
                  resolve_file: FileResolver | None = None,
                  heavy: HeavyWork | None = None) -> None:
         self._ros = ros
@@ -165,8 +166,8 @@ class Dispatcher:
         self._capabilities = tuple(capabilities)
         # Security is checked here, by request fields, so no capability needs to know it.
         self._policy = policy or SecurityPolicy()
-        # The tf capability's own frame resolution (--frame-prefix), so frame globs judge
-        # the frame that is really looked up or broadcast.
+        # The tf capability's mapping of a client's frame ids (--frame-prefix), so frame
+        # globs judge the frame that is really looked up or broadcast.
         self._resolve_frame = resolve_frame
         self._resolve_file = resolve_file
         self._quota = BridgeQuota(self._policy.max_bridges_per_client,
@@ -297,11 +298,11 @@ class Dispatcher:
             raise CommandFailedError("op", "an op this daemon serves: " +
                                      ", ".join(sorted(self._handlers)), request.op,
                                      code=ErrorCode.NOT_SUPPORTED)
-        # Names are resolved here, once: the policy, the bridge's identity and the handler
-        # all see the fully qualified ones.
-        request = request.with_names(self._ros.resolve_name)
+        # Names and frame ids are resolved here, once: the policy, the bridge's identity and
+        # the handler all see the fully qualified ones.
+        request = request.with_names(self._ros.resolve_name).with_frames(self._resolve_frame)
         self._policy.check_request(request, self._ros.fully_qualified_name,
-                                   self._resolve_frame, from_client=client is not None,
+                                   from_client=client is not None,
                                    resolve_file=self._resolve_file,
                                    grant=client.grant if client is not None else WRITES)
         key = self._bridge_key(request)
@@ -397,13 +398,7 @@ class Dispatcher:
         kind = cls.creates.kind if cls.creates is not None else cls.removes
         if kind is None:
             return None
-        values = []
-        for name in _identity_fields(request):
-            value = str(getattr(request, name))
-            if name in _FRAME_FIELDS:
-                value = self._resolve_frame(value)
-            values.append(value)
-        return kind, tuple(values)
+        return kind, tuple(str(getattr(request, name)) for name in _identity_fields(request))
 
     async def _finish(self, outcome: Awaitable[Result], client: Replier,
                       message: Message) -> None:

@@ -53,7 +53,6 @@ __all__ = ["WRITES", "DEFAULT_MAX_BRIDGES", "WriteGrant", "read_key_file",
 log = logging.getLogger(__name__)
 
 Network = Union[ipaddress.IPv4Network, ipaddress.IPv6Network]
-FrameResolver = Callable[[str], str]  # a client's frame id -> the tf buffer's
 FileResolver = Callable[[str], "os.PathLike[str] | str"]  # a robot file source -> its path
 
 # Who made a bridge that no client made: the operator's start-up config.
@@ -245,19 +244,17 @@ class SecurityPolicy:
         return not self.allowed_networks or _in_networks(address, self.allowed_networks)
 
     # --- per request ---------------------------------------------------------------------
-    def check_request(self, request: Op, own_node: str,
-                      resolve_frame: FrameResolver = strip_frame, *,
+    def check_request(self, request: Op, own_node: str, *,
                       from_client: bool = True,
                       resolve_file: Optional[FileResolver] = None,
                       grant: WriteGrant = WRITES) -> None:
         """Raise `ForbiddenError` if the policy refuses this parsed request.
 
-        The request's ROS names come fully qualified (`Op.with_names`, in the dispatcher),
-        so ``cmd_vel`` cannot slip past a deny glob on ``/cmd_vel``; `own_node` is the
-        daemon's node, owner of the ``server_*`` parameters; `resolve_frame` turns a
-        client's frame id into the one the tf buffer uses (the daemon passes the tf
-        capability's, so ``--frame-prefix`` cannot be used to slip past a frame glob);
-        `resolve_file` turns a robot's file source into the path the daemon would read.
+        The request's ROS names come fully qualified and its client frame ids as the tf
+        buffer holds them (`Op.with_names`, `Op.with_frames`, in the dispatcher), so
+        ``cmd_vel`` cannot slip past a deny glob on ``/cmd_vel``, nor ``--frame-prefix``
+        past a frame glob; `own_node` is the daemon's node, owner of the ``server_*``
+        parameters; `resolve_file` turns a robot's file source into the path the daemon would read.
         `from_client` is False for the operator's own start-up config, whose file paths are
         trusted; `grant` is what the requesting connection may do (`grant_at_accept`).
         """
@@ -273,10 +270,10 @@ class SecurityPolicy:
                 raise ForbiddenError("op", f"an op that only receives ({refusal.why})",
                                      cls.op)
         for use in request.resources():
-            self._judge(use, own_node, resolve_frame, from_client, resolve_file)
+            self._judge(use, own_node, from_client, resolve_file)
 
     def _judge(self, use: Resource, own_node: str,
-               resolve_frame: FrameResolver, from_client: bool,
+               from_client: bool,
                resolve_file: Optional[FileResolver]) -> None:
         if isinstance(use, TopicUse):
             self._judge_topic(use, use.name)
@@ -290,7 +287,7 @@ class SecurityPolicy:
         elif isinstance(use, FrameUse):
             if self.frames.active:
                 # Judged as the buffer holds it; an empty result is the tf capability's error.
-                frame = strip_frame(resolve_frame(use.frame) if use.client_frame else use.frame)
+                frame = strip_frame(use.frame)
                 if frame and not self.frames.permits(frame):
                     raise ForbiddenError(use.field, "a tf frame this daemon exposes: "
                                          + self.frames.why_not(frame), frame)

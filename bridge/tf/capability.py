@@ -443,12 +443,12 @@ class TfBridges:
             return frame.lstrip("/")
         return self._prefix + frame
 
-    def _pair(self, parent: str, child: str) -> tuple[str, str]:
-        resolved = (self.resolve_frame(parent), self.resolve_frame(child))
-        for name, frame, given in (("parent", resolved[0], parent),
-                                   ("child", resolved[1], child)):
-            if not frame:
-                raise OutOfRangeError(name, "a non-empty frame id", repr(given))
+    def resolve_client_frame(self, frame: str, field: str) -> str:
+        """A request's frame id (`Op.client_frames`) -> the buffer's; the dispatcher maps
+        each request's frames once with it. An id that maps to nothing is refused."""
+        resolved = self.resolve_frame(frame)
+        if not resolved:
+            raise OutOfRangeError(field, "a non-empty frame id", repr(frame))
         return resolved
 
     # ------------------------------------------------------------------ lookups
@@ -474,7 +474,7 @@ class TfBridges:
                 self.registry.remove(handle)
 
     def create_lookup(self, request: CreateTfLookup) -> Created:
-        pair = self._pair(request.parent, request.child)
+        pair = (request.parent, request.child)  # mapped by the dispatcher
         existing = self.lookups.get(pair)
         if existing is not None:
             # Idempotent (a reconnecting client re-creates what it had); the cap may change.
@@ -496,7 +496,7 @@ class TfBridges:
         return Created(self._describe_lookup(lookup), existed=False)
 
     def remove_lookup(self, request: RemoveTfLookup) -> dict[str, Any]:
-        pair = self._pair(request.parent, request.child)
+        pair = (request.parent, request.child)  # mapped by the dispatcher
         lookup = self.lookups.pop(pair, None)
         if lookup is None:
             raise CommandFailedError("child", "a lookup created by create_tf_lookup",
@@ -511,7 +511,7 @@ class TfBridges:
     def lookup_transform(self, request: LookupTransform,
                          ) -> Union[dict[str, Any], Awaitable[dict[str, Any]]]:
         """One lookup; with ``timeout`` it waits (without blocking the loop) for tf data."""
-        pair = self._pair(request.parent, request.child)
+        pair = (request.parent, request.child)  # mapped by the dispatcher
         time_ns = _stamp_ns(request.time)
         try:
             return self._lookup_once(pair, time_ns)
@@ -550,7 +550,7 @@ class TfBridges:
     # ------------------------------------------------------------------ broadcasters
 
     def create_broadcaster(self, request: CreateTfBroadcaster) -> Created:
-        pair = self._pair(request.parent, request.child)
+        pair = (request.parent, request.child)  # mapped by the dispatcher
         if pair[0] == pair[1]:
             raise OutOfRangeError("child", "a frame other than the parent", repr(request.child))
         existing = self.broadcasters.get(pair)
@@ -574,7 +574,7 @@ class TfBridges:
         return Created(self._describe_broadcaster(broadcaster), existed=False)
 
     def remove_broadcaster(self, request: RemoveTfBroadcaster) -> dict[str, Any]:
-        pair = self._pair(request.parent, request.child)
+        pair = (request.parent, request.child)  # mapped by the dispatcher
         broadcaster = self.broadcasters.pop(pair, None)
         if broadcaster is None:
             raise CommandFailedError("child", "a broadcaster created by create_tf_broadcaster",
@@ -590,7 +590,7 @@ class TfBridges:
         return {"parent": pair[0], "child": pair[1], "device": broadcaster.device}
 
     def broadcast(self, request: BroadcastTransform) -> dict[str, Any]:
-        pair = self._pair(request.parent, request.child)
+        pair = (request.parent, request.child)  # mapped by the dispatcher
         broadcaster = self.broadcasters.get(pair)
         if broadcaster is None:
             raise CommandFailedError("child", "a broadcaster (create_tf_broadcaster first)",

@@ -17,6 +17,8 @@ fields, everything the rest of the daemon derives from it.
   field of a nested value): the dispatcher makes them fully qualified once
   (`Op.with_names`), so the policy, the bridge's identity and the handler all see the
   same name (``cmd`` and ``/cmd`` are one topic);
+* ``client_frames``: the fields holding a client's tf frame ids, which the daemon maps to the
+  buffer's (``--frame-prefix``) once, in the dispatcher too (`Op.with_frames`);
 * ``resources()``: what it touches (topics, services, actions, parameters, tf frames, files); the
   security policy judges these, never op names.
 
@@ -173,11 +175,13 @@ class Op:
     # Sent by the daemon to a client, never the other way (service_request).
     to_client: ClassVar[bool] = False
     ros_names: ClassVar[tuple[str, ...]] = ()
+    client_frames: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, *, op: str = "", writes: Optional[bool] = None,
                           creates: Optional[Bridge] = None, removes: Optional[str] = None,
                           follows: Optional[str] = None, to_client: bool = False,
-                          ros_names: tuple[str, ...] = (), **kwargs: Any) -> None:
+                          ros_names: tuple[str, ...] = (),
+                          client_frames: tuple[str, ...] = (), **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         name = cls.__name__
         if not op:
@@ -196,10 +200,12 @@ class Op:
             missing = [f for f in creates.identity if f not in annotations]
             if missing:
                 raise TypeError(f"{name} ({op}): identity field {missing[0]!r} is not a field")
-        unknown = [n for n in ros_names if n.partition(".")[0] not in annotations]
+        unknown = [n for n in (*ros_names, *client_frames)
+                   if n.partition(".")[0] not in annotations]
         if unknown:
-            raise TypeError(f"{name} ({op}): ROS name field {unknown[0]!r} is not a field")
+            raise TypeError(f"{name} ({op}): name field {unknown[0]!r} is not a field")
         cls.op, cls.writes, cls.to_client, cls.ros_names = op, writes, to_client, ros_names
+        cls.client_frames = client_frames
         cls.creates, cls.removes, cls.follows = creates, removes, follows
         REQUEST_TYPES[op] = cls
 
@@ -220,6 +226,13 @@ class Op:
                     changes[head] = replace(value, **{inner: resolve(name, path)})
             elif value:
                 changes[head] = resolve(value, path)
+        return replace(self, **changes) if changes else self
+
+    def with_frames(self: R, resolve: NameResolver) -> R:
+        """This request with each of its `client_frames` mapped by `resolve(frame, field)`
+        to the frame id the tf buffer holds."""
+        changes = {field: resolve(getattr(self, field), field)
+                   for field in type(self).client_frames}
         return replace(self, **changes) if changes else self
 
     def to_args(self) -> dict[str, Any]:

@@ -20,7 +20,7 @@ def _stamp(a: Args, name: str) -> Stamp | None:
 
 
 @dataclass(frozen=True)
-class CreateTfLookup(Op, op="create_tf_lookup", writes=False,
+class CreateTfLookup(Op, op="create_tf_lookup", client_frames=("parent", "child"), writes=False,
                      creates=Bridge("tf_lookup", ("parent", "child"), section="tf_lookups")):
     """Stream parent->child as a TRANSFORM (mm) whenever it changes, at most ``rate_hz``."""
 
@@ -37,7 +37,8 @@ class CreateTfLookup(Op, op="create_tf_lookup", writes=False,
 
 
 @dataclass(frozen=True)
-class RemoveTfLookup(Op, op="remove_tf_lookup", writes=False, removes="tf_lookup"):
+class RemoveTfLookup(Op, op="remove_tf_lookup",
+                     client_frames=("parent", "child"), writes=False, removes="tf_lookup"):
     parent: str
     child: str
 
@@ -50,7 +51,8 @@ class RemoveTfLookup(Op, op="remove_tf_lookup", writes=False, removes="tf_lookup
 
 
 @dataclass(frozen=True)
-class LookupTransform(Op, Answered[LookupTransformResult], op="lookup_transform", writes=False):
+class LookupTransform(Op, Answered[LookupTransformResult], op="lookup_transform",
+                      client_frames=("parent", "child"), writes=False):
     """One tf lookup; ``time`` omitted = latest; waits up to ``timeout`` seconds."""
 
     parent: str
@@ -68,7 +70,8 @@ class LookupTransform(Op, Answered[LookupTransformResult], op="lookup_transform"
 
 
 @dataclass(frozen=True)
-class CreateTfBroadcaster(Op, op="create_tf_broadcaster", writes=True,
+class CreateTfBroadcaster(Op, op="create_tf_broadcaster",
+                          client_frames=("parent", "child"), writes=True,
                           creates=Bridge("tf_broadcaster", ("parent", "child"),
                                          section="tf_broadcasters")):
     """Broadcast parent->child; ``static`` uses /tf_static (latched)."""
@@ -87,7 +90,9 @@ class CreateTfBroadcaster(Op, op="create_tf_broadcaster", writes=True,
 
 
 @dataclass(frozen=True)
-class RemoveTfBroadcaster(Op, op="remove_tf_broadcaster", writes=False, removes="tf_broadcaster"):
+class RemoveTfBroadcaster(Op, op="remove_tf_broadcaster",
+                          client_frames=("parent", "child"), writes=False,
+                          removes="tf_broadcaster"):
     parent: str
     child: str
 
@@ -100,7 +105,8 @@ class RemoveTfBroadcaster(Op, op="remove_tf_broadcaster", writes=False, removes=
 
 
 @dataclass(frozen=True)
-class BroadcastTransform(Op, op="broadcast_transform", writes=True):
+class BroadcastTransform(Op, op="broadcast_transform",
+                         client_frames=("parent", "child"), writes=True):
     """Broadcast one parent->child transform given as a rigid 4x4 matrix in mm (rows);
     ``stamp`` omitted = the daemon's current time."""
 

@@ -466,8 +466,9 @@ def test_frame_prefix_maps_relative_frames_and_leaves_absolute_ones() -> None:
         assert tf.resolve_frame("base") == "robot1/base"
         assert tf.resolve_frame("/world") == "world"
 
-        async def create() -> Mapping[str, Any]:
-            return tf.create_lookup(CreateTfLookup(parent="/world", child="tool")).reply
+        async def create() -> Mapping[str, Any]:  # mapped as the dispatcher maps it
+            request = CreateTfLookup(parent="/world", child="tool")
+            return tf.create_lookup(request.with_frames(tf.resolve_client_frame)).reply
 
         created = loop.run_until_complete(create())
         assert (created["parent"], created["child"]) == ("world", "robot1/tool")

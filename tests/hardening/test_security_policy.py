@@ -318,17 +318,18 @@ def test_every_tf_op_judges_both_frames_deny_wins_and_allow_lists() -> None:
 
 
 def test_frames_are_judged_as_the_tf_buffer_resolves_them() -> None:
-    # What the daemon passes with --frame-prefix PSM1/: TfBridges.resolve_frame.
-    def with_prefix(frame: str) -> str:
+    # What the dispatcher maps a request's frames with under --frame-prefix PSM1/
+    # (TfBridges.resolve_client_frame), before the policy sees them.
+    def with_prefix(frame: str, field: str) -> str:
         return frame.lstrip("/") if frame.startswith("/") else "PSM1/" + frame
 
     policy = SecurityPolicy(frames=NameRules(allow=("PSM1/*",)))
-    policy.check_request(parsed("create_tf_lookup", {"parent": "base", "child": "/PSM1/tool"}),
-                         "/n", with_prefix)
+    policy.check_request(parsed("create_tf_lookup", {"parent": "base", "child": "/PSM1/tool"})
+                         .with_frames(with_prefix), "/n")
     with pytest.raises(ForbiddenError) as refused:
         policy.check_request(parsed("lookup_transform", {"parent": "base",
-                                                         "child": "/PSM2/tool"}),
-                             "/n", with_prefix)
+                                                         "child": "/PSM2/tool"})
+                             .with_frames(with_prefix), "/n")
     assert (refused.value.field, refused.value.got) == ("child", "PSM2/tool")
     # Without a prefix, /world and world are one frame.
     assert strip_frame("/world") == strip_frame("world") == "world"

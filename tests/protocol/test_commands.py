@@ -261,6 +261,24 @@ def _value_at(request: Any, path: str) -> Any:
     return getattr(value, inner, None) if inner else value
 
 
+def test_with_frames_maps_each_client_frame_of_the_tf_ops_once() -> None:
+    seen: list[tuple[str, str]] = []
+
+    def resolve(frame: str, field: str) -> str:
+        seen.append((frame, field))
+        return "PSM1/" + frame
+
+    for cls in REQUEST_TYPES.values():
+        assert cls.client_frames in ((), ("parent", "child")), cls.op
+    request = c.parse_request("lookup_transform", json.dumps({"parent": "base",
+                                                              "child": "tool"}))
+    mapped = request.with_frames(resolve)
+    assert (mapped.parent, mapped.child) == ("PSM1/base", "PSM1/tool")
+    assert seen == [("base", "parent"), ("tool", "child")]
+    subscribe = c.parse_request("create_subscriber", json.dumps({"topic": "/a", "type": "String"}))
+    assert subscribe.with_frames(resolve) is subscribe  # no client frames: untouched
+
+
 def test_with_names_places_a_robot_s_relative_source_in_its_namespace_first() -> None:
     request = c.parse_request("create_robot", json.dumps({
         "name": "psm", "namespace": "PSM1", "source": {"kind": "topic", "topic": "desc"}}))
