@@ -5,10 +5,12 @@ what was expected and what came. Nothing a request does can take the daemon down
 unexpected exception is logged as a bug and answered as INTERNAL.
 
 Capabilities register one handler per request class. What the dispatcher does around a
-handler comes from the op's declarations (`protocol.commands.op`): the security policy
-judges its resources, a creation is counted against its client's quota and recorded with
-who made it (the operator's start-up config or a client), and a removal is allowed by the
-ownership rules (`bridge.core.security.BridgeOwners`).
+handler comes from the op's declarations (`protocol.commands.op`): its ROS names and a
+client's frame ids are resolved once (`Op.with_names`, `Op.with_frames`), the security
+policy judges its resources, a creation (its handler returns `Created`) is counted against
+its client's quota and recorded with who made it (the operator's start-up config or a
+client), and a removal is allowed by the ownership rules
+(`bridge.core.security.BridgeOwners`).
 
 Creations and removals of one bridge (its kind and identity) run one at a time, in the
 order they came (`BridgeLocks`): a removal that arrives while an asynchronous creation of
