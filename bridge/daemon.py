@@ -66,15 +66,14 @@ class Daemon:
         self.policy = policy
         # Streams that go stale (publisher gone, silent past their period) are said so.
         self.health = StreamHealth(self.hub, loop)
-        self.topics = TopicBridges(self.ros, self.hub, names, policy=policy,
-                                   health=self.health)
-        self.tf = TfBridges(self.ros, self.hub, names, frame_prefix=config.frame_prefix,
-                            frame_rules=policy.frames)
-        self.parameters = ParameterBridges(self.ros, self.hub, names, policy=policy)
+        # No capability gets the policy: the dispatcher judges each request and hands a
+        # handler the guard for the content its op declares (bridge.core.content_guards).
+        self.topics = TopicBridges(self.ros, self.hub, names, health=self.health)
+        self.tf = TfBridges(self.ros, self.hub, names, frame_prefix=config.frame_prefix)
+        self.parameters = ParameterBridges(self.ros, self.hub, names)
         # One correlator for the COMMANDs sent to clients: its command ids never collide.
         replies = ClientReplies(self.hub)
-        self.services = ServiceBridges(self.ros, self.hub, names, policy=policy,
-                                       replies=replies)
+        self.services = ServiceBridges(self.ros, self.hub, names, replies=replies)
         self.actions = ActionBridges(self.ros, self.hub, names, replies=replies)
         # An action's hidden cancel service obeys cancel_goal's ownership rule.
         self.services.add_call_guard(self.actions.sender.judge_service_call)
@@ -84,11 +83,9 @@ class Daemon:
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
                                    parameters=self.parameters,
                                    package_paths=package_paths,
-                                   frame_rules=policy.frames,
                                    mesh_roots=tuple(Path(d) for d in policy.robot_dirs))
         # Markers read meshes only inside the same roots as a client's robot.
         self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
-                                     frame_rules=policy.frames,
                                      mesh_roots=tuple(Path(d) for d in policy.robot_dirs),
                                      package_paths=package_paths,
                                      max_model_bytes=policy.max_marker_bytes)

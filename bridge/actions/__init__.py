@@ -31,6 +31,7 @@ from rclpy.node import NodeNameNonExistentError
 from bridge.actions.goals import GoalSender
 from bridge.actions.served import ServedActions
 from bridge.core.client_replies import ClientReplies
+from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Handler
 from bridge.core.hub import Hub, Replier
 from bridge.ros.ros_node import RosNode
@@ -83,7 +84,7 @@ class ActionBridges:
     def describe(self) -> list[dict[str, Any]]:
         return self.servers.describe()
 
-    def state(self) -> dict[str, Any]:
+    def state(self, guard: ContentGuard) -> dict[str, Any]:
         return self.sender.state()
 
     def close(self) -> None:

@@ -9,7 +9,8 @@ It reaches ROS only through bridge/ros/.
 - outbox.py: a client's bounded send buffer (newest value per streamed device).
 - dispatch.py: a client's COMMAND -> the op's handler -> an RTS_COMMAND reply.
 - security.py: the security policy: who may connect and what a client may do.
-- message_guards.py: the policy applied inside messages that name frames or parameters.
+- content_guards.py: the policy inside content (messages, results) that names frames or
+  parameters, as each op declares it; handed to handlers by the dispatcher.
 - knock.py: a reset delivered to a plain client whose link died, once the link is back.
 - heavy.py: heavy work (decoding, encoding) off the event loop, one lane per client.
 - stream_health.py: tells clients when a stream goes stale and when it comes back.

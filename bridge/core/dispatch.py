@@ -7,7 +7,9 @@ unexpected exception is logged as a bug and answered as INTERNAL.
 Capabilities register one handler per request class. What the dispatcher does around a
 handler comes from the op's declarations (`protocol.commands.op`): its ROS names and a
 client's frame ids are resolved once (`Op.with_names`, `Op.with_frames`), the security
-policy judges its resources, a creation (its handler returns `Created`) is counted against
+policy judges its resources, the content it declares gets its guard (the handler's third
+argument, `ContentGuard`: capabilities apply the policy inside messages and results without
+knowing it), a creation (its handler returns `Created`) is counted against
 its client's quota and recorded with who made it (the operator's start-up config or a
 client), and a removal is allowed by the ownership rules
 (`bridge.core.security.BridgeOwners`).
@@ -29,6 +31,7 @@ from dataclasses import dataclass
 from typing import (Any, Awaitable, Callable, Mapping, Optional, Protocol, Sequence, Union,
                     cast)
 
+from bridge.core.content_guards import ContentGuard
 from bridge.core.heavy import HeavyWork, LargeResult, OffLoop
 from bridge.core.hub import Hub, Replier
 from bridge.core.logging_limits import RateLimitedLog
@@ -56,10 +59,11 @@ class Created:
     existed: bool
 
 
-# A handler gets the parsed request and the client that sent it (None for start-up config).
-Handler = Callable[[Any, Union[Replier, None]],
-                   Union[Result, Created, Awaitable[Result], Awaitable[Created],
-                         "OffLoop[Result]"]]
+Outcome = Union[Result, Created, Awaitable[Result], Awaitable[Created], "OffLoop[Result]"]
+# A handler gets the parsed request, the client that sent it (None for start-up config) and,
+# when its op declares content (`Op.content`), the `ContentGuard` for it: (request, client,
+# guard). The arity is checked when the dispatcher is built.
+Handler = Callable[..., Outcome]
 
 DAEMON_VERSION = "0.1.0"
 # A command text longer than this is parsed off the loop (in its client's lane).
@@ -78,9 +82,10 @@ class Capability(Protocol):
         op declares (`protocol.commands.bridge_kinds`)."""
         ...
 
-    def state(self) -> Mapping[str, Any]:
+    def state(self, guard: ContentGuard) -> Mapping[str, Any]:
         """What it holds that is not a bridge (the tf buffer, goals in flight, cached ROS
-        clients), each under its own key of the `list_bridges` reply."""
+        clients), each under its own key of the `list_bridges` reply; `guard` judges the
+        frames it names."""
         ...
 
     def close(self) -> None: ...
@@ -104,6 +109,19 @@ def _created(request: c.Request, outcome: Any) -> tuple[Result, bool]:
     if isinstance(outcome, Created):
         return {**outcome.reply, "existed": outcome.existed}, outcome.existed
     return cast(Result, outcome), False
+
+
+def _check_arity(cls: type[Op], handler: Handler) -> None:
+    """A handler takes (request, client), and the guard too when its op declares content."""
+    wanted = 3 if cls.content else 2
+    try:
+        taken = len(inspect.signature(handler).parameters)
+    except (TypeError, ValueError):  # a builtin: trust it
+        return
+    if taken != wanted:
+        raise TypeError(f"the {cls.op} handler takes {taken} arguments: expected (request, "
+                        f"client{', guard' if cls.content else ''}), as the op declares "
+                        f"content={cls.content!r}")
 
 
 def _identity_fields(request: c.Request) -> tuple[str, ...]:
@@ -195,6 +213,7 @@ class Dispatcher:
                     raise ValueError(f"{cls.__name__} is not a client op of the schema")
                 if cls.op in self._handlers:
                     raise ValueError(f"two handlers for {cls.op!r}")
+                _check_arity(cls, handler)
                 self._handlers[cls.op] = handler
 
     # --- entry points -------------------------------------------------------------------
@@ -346,7 +365,10 @@ class Dispatcher:
             self._owners.check_removal(key, _identity_fields(request)[0], client)
         reserved = client is not None and self._quota.reserve(client, request.op)
         try:
-            outcome = handler(request, client)
+            if type(request).content:
+                outcome = handler(request, client, self._policy.content_guard(request))
+            else:
+                outcome = handler(request, client)
             if isinstance(outcome, OffLoop):
                 outcome = self._off_loop(outcome, client)
             if not inspect.isawaitable(outcome):
@@ -485,7 +507,8 @@ class Dispatcher:
         log.info("a client presented the key: it may write")
         return {"writes": client.grant.writes}
 
-    def _list_bridges(self, request: c.ListBridges, client: Replier | None) -> Result:
+    def _list_bridges(self, request: c.ListBridges, client: Replier | None,
+                      guard: ContentGuard) -> Result:
         """The bridges (declared kinds only), each capability's other state under its own
         key, and the hub's devices and clients."""
         reply: dict[str, Any] = {"bridges": [], "devices": self._hub.devices(),
@@ -498,7 +521,7 @@ class Dispatcher:
                                     f"of a declared kind ({', '.join(sorted(_KINDS))}), got "
                                     f"kind {bridge.get('kind')!r}")
                 reply["bridges"].append(bridge)
-            for key, value in capability.state().items():
+            for key, value in capability.state(guard).items():
                 if key in reply:
                     raise TypeError(f"{type(capability).__name__}.state(): expected a key of "
                                     f"its own in the list_bridges reply, got {key!r} (taken)")

@@ -9,10 +9,10 @@ The policy judges resources, never op names: each request declares what it touch
 (`protocol.commands.op`: topics, services, actions, parameters, tf frames, files) and whether it
 writes, and every declared resource is judged by the rules of its kind. A request class the
 schema does not declare cannot be judged, and is refused (fail closed). Some resources are
-named inside messages rather than requests: a tf topic's transforms, a parameter service's
-or a parameter event's parameters; `message_guard`, `visible_parameters` and
-`filter_service_response` apply the same rules there, so no route reaches a resource that
-another route refuses.
+named inside content rather than requests: a tf topic's transforms, a robot's links, a
+parameter service's or a parameter event's parameters. An op declares that content
+(`Op.content`) and `content_guard` applies the same rules there, so no route reaches a
+resource that another route refuses.
 
 Name rules follow rosbridge / foxglove_bridge: shell-style globs on fully qualified names
 (``*`` also matches ``/``); a deny glob always wins; once any allow glob is given for a
@@ -35,8 +35,9 @@ from typing import Any, Callable, Optional, Union
 
 from bridge.core.logging_limits import RateLimitedLog
 from protocol.auth import KeyFileError, read_key_text
-from bridge.core.message_guards import (PARAMETER_EVENT_TYPE, TF_MESSAGE_TYPE, HeaderFrameGuard,
-                                        MessageGuard, ParameterEventGuard, TfMessageGuard)
+from bridge.core.content_guards import (PARAMETER_EVENT_TYPE, TF_MESSAGE_TYPE, ContentGuard,
+                                        HeaderFrameGuard, MessageGuard, ParameterEventGuard,
+                                        TfMessageGuard)
 from protocol.commands import (REQUEST_TYPES, ActionUse, FileUse, ForbiddenError, FrameUse,
                                LimitReachedError, Op, OutOfRangeError, ParameterUse, Resource,
                                ServiceUse, TopicUse, resolve_message_type, resolve_service_type)
@@ -370,40 +371,38 @@ class SecurityPolicy:
         if not inside(real, self.robot_dirs) or not os.path.isfile(real):
             raise refused
 
-    # --- inside messages -------------------------------------------------------------------
-    def message_guard(self, topic: str, ros_type: str) -> Optional[MessageGuard]:
-        """The guard a topic bridge of `ros_type` on `topic` (fully qualified) applies to
-        each message, or None when nothing in its messages is judged."""
+    # --- inside content ------------------------------------------------------------------
+    def content_guard(self, request: Op) -> ContentGuard:
+        """The guard for what `request`'s op declares it carries (`Op.content`), judged by
+        the same rules as the request's own names, so no route reaches a name another
+        route refuses. Its names are resolved already (the dispatcher)."""
+        cls = type(request)
+        declared = cls.content
+        guard = ContentGuard(cls.op, declared, frames=self.frames, parameters=self.parameters)
+        uses = request.resources()
+        if "messages" in declared:
+            topic = next(use for use in uses if isinstance(use, TopicUse))
+            guard = replace(guard, messages=self._message_guard(
+                topic.name, _resolved(resolve_message_type, topic.type) or "", topic.writes))
+        if "parameters" in declared:
+            for use in uses:
+                if isinstance(use, ServiceUse):
+                    found = parameter_service(use.name,
+                                              _resolved(resolve_service_type, use.type))
+                    if found is not None and found[1] == "list_parameters":
+                        guard = replace(guard, lists_parameters_of=found[0])
+        return guard
+
+    def _message_guard(self, topic: str, ros_type: str, writes: bool) -> Optional[MessageGuard]:
+        """What a topic bridge judges in each message: by its type (tf frames, parameter
+        events); a publisher, with frame globs set, also the frame its header names."""
         if self.frames.active and (ros_type == TF_MESSAGE_TYPE or topic in _TF_TOPICS):
             return TfMessageGuard(self.frames.permits, self.frames.why_not)
         if self.parameters.active and ros_type == PARAMETER_EVENT_TYPE:
             return ParameterEventGuard(self.parameters.permits, self.parameters.why_not)
+        if writes and self.frames.active:
+            return HeaderFrameGuard(self.frames.permits, self.frames.why_not)
         return None
-
-    def publish_guard(self, topic: str, ros_type: str) -> Optional[MessageGuard]:
-        """The guard a publisher bridge applies to each message a client publishes: the
-        `message_guard` of its type, else (frame globs set) the frame its header names."""
-        guard = self.message_guard(topic, ros_type)
-        if guard is None and self.frames.active:
-            guard = HeaderFrameGuard(self.frames.permits, self.frames.why_not)
-        return guard
-
-    def visible_parameters(self, node: str, names: Iterable[str]) -> list[str]:
-        """Of `node`'s parameter `names`, those the parameter globs let a client see."""
-        return [n for n in names if self.parameters.permits(f"{node}.{n}")]
-
-    def filter_service_response(self, service: str, ros_type: str,
-                                response: dict[str, Any]) -> dict[str, Any]:
-        """A `call_service` response as a client may see it: a node's parameter listing
-        keeps only the names the globs allow (the call itself was judged before)."""
-        found = parameter_service(service, ros_type)
-        if found is None or not self.parameters.active or found[1] != "list_parameters":
-            return response
-        result = dict(response.get("result") or {})
-        result["names"] = self.visible_parameters(found[0], result.get("names") or ())
-        result["prefixes"] = []  # a prefix can name a parameter the globs hide
-        return {**response, "result": result}
-
 
     # --- construction --------------------------------------------------------------------
     @classmethod

@@ -77,12 +77,13 @@ from rclpy.serialization import deserialize_message
 
 from bridge.codecs import CodecError, codec_for
 from bridge.codecs.cdr import CdrError
+from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Created, Handler
 from bridge.core.heavy import LargeResult
 from bridge.core.hub import Hub, Replier, Subscriber
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.outbox import SharedFrame
-from bridge.core.security import DEFAULT_MAX_MARKER_BYTES, NameRules, strip_frame
+from bridge.core.security import DEFAULT_MAX_MARKER_BYTES, strip_frame
 from bridge.markers.cdr import layout_supported, read_marker, read_marker_array
 from bridge.markers.convert import ADD, DELETE, DELETEALL, MarkerEvent, events_of
 from bridge.markers.geometry import (MarkerError, MarkerModel, MarkerSpec, build_model,
@@ -486,6 +487,7 @@ class _Subscription:
     topic_key: NameKey
     device: str
     owner: MarkerBridges
+    guard: ContentGuard  # which marker frames a client may see (from its create request)
     markers: dict[MarkerKey, _Live] = field(default_factory=dict)
     withheld: dict[MarkerKey, str] = field(default_factory=dict)
     errors: dict[MarkerKey, str] = field(default_factory=dict)
@@ -515,7 +517,6 @@ class MarkerBridges:
     """Marker subscribers: models per marker, a TRANSFORM per frame, lifetimes."""
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: TfBridges,
-                 frame_rules: Optional[NameRules] = None,
                  mesh_roots: tuple[Path, ...] = (),
                  package_paths: Optional[Mapping[str, Path]] = None,
                  max_model_bytes: int = DEFAULT_MAX_MARKER_BYTES) -> None:
@@ -523,7 +524,6 @@ class MarkerBridges:
         self._hub = hub
         self._names = names
         self._tf = tf
-        self._frame_rules = frame_rules or NameRules()
         self._mesh_roots = tuple(Path(p) for p in mesh_roots)
         self._package_paths = {k: Path(v) for k, v in (package_paths or {}).items()}
         self.subscriptions: dict[str, _Subscription] = {}
@@ -550,8 +550,8 @@ class MarkerBridges:
 
     # ------------------------------------------------------------------ ops
 
-    def create(self, request: CreateMarkerSubscriber,
-               client: Optional[Replier] = None) -> Created:
+    def create(self, request: CreateMarkerSubscriber, client: Optional[Replier],
+               guard: ContentGuard) -> Created:
         topic = request.topic
         ros_type = request.ros_type
         existing = self.subscriptions.get(topic)
@@ -573,7 +573,7 @@ class MarkerBridges:
         topic_key = NameKey.marker_topic(topic)
         device = self._names.register(topic_key)
         sub = _Subscription(topic, ros_type, request, request.fixed_frame.lstrip("/"),
-                            topic_key, device, self, message_class=message_class,
+                            topic_key, device, self, guard, message_class=message_class,
                             audience=None if client is None else {client})
         self._limit(sub, device)
         # Markers are read from their bytes when the installed Marker is the one the CDR
@@ -699,10 +699,8 @@ class MarkerBridges:
         key = update.key
         frame = update.frame or sub.fixed_frame
         parent = update.parent or sub.fixed_frame
-        rules = self._frame_rules
-        if rules.active and not rules.permits(frame):
-            reason = f"frame {frame!r} refused by the frame policy: expected " \
-                     f"{rules.why_not(frame)}"
+        reason = sub.guard.frame_refusal(frame)
+        if reason is not None:
             if sub.withheld.get(key) != reason:
                 sub.withheld[key] = reason
                 self._refusals.warning(f"{sub.topic} {frame}", None, "markers on %s: %s",
@@ -945,7 +943,7 @@ class MarkerBridges:
     def describe(self) -> list[dict[str, Any]]:
         return [self._describe(sub) for sub in self.subscriptions.values()]
 
-    def state(self) -> dict[str, Any]:
+    def state(self, guard: ContentGuard) -> dict[str, Any]:
         return {}
 
     def close(self) -> None:

@@ -40,7 +40,8 @@ from rclpy.qos import qos_profile_parameter_events
 
 from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
-from bridge.core.security import SecurityPolicy, parameter_service
+from bridge.core.content_guards import ContentGuard
+from bridge.core.security import parameter_service
 from bridge.ros.ros_node import RosNode
 from bridge.services.capability import call_ros_service, wait_until_ready
 from protocol.commands import (Op, CommandError, CommandFailedError, CreateParameterClient,
@@ -149,8 +150,9 @@ class ParameterClient:
     types_client: Client
     ready: Optional[bool] = None  # None until the first check
     observed: tuple[str, ...] = ()
-    # Also stream every other parameter a /parameter_events message declares or changes.
-    all_changes: bool = False
+    # Set: also stream every other parameter a /parameter_events message declares or changes,
+    # as far as this guard (from observe_parameters) lets a client see it.
+    all_changes: Optional[ContentGuard] = None
     values: dict[str, ParameterValue] = field(default_factory=dict)
     # name -> serial of the last event that changed it: a fetch that started earlier must
     # not overwrite what an event reported meanwhile.
@@ -182,12 +184,8 @@ class ParameterBridges:
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
                  request_timeout_s: float = 4.0, ready_wait_s: float = 2.0,
-                 check_interval_s: float = 0.5,
-                 policy: Optional[SecurityPolicy] = None) -> None:
+                 check_interval_s: float = 0.5) -> None:
         self._ros = ros
-        # A listing shows only the names the parameter globs allow (the dispatcher judged
-        # every request that names parameters; a listing names none).
-        self._policy = policy or SecurityPolicy()
         self._hub = hub
         self._names = names
         self._request_timeout_s = request_timeout_s
@@ -245,11 +243,14 @@ class ParameterBridges:
         self._names.release(client.key)
         return {"node": client.node, "device": client.device}
 
-    async def list_parameters(self, request: ListParameters) -> dict[str, Any]:
+    async def list_parameters(self, request: ListParameters,
+                              guard: ContentGuard) -> dict[str, Any]:
+        """The node's parameters a client may see (``guard``: a listing names none
+        beforehand, so the dispatcher could not judge them)."""
         client = self._client(request.node)
         listed = await self._call(client, client.list_client,
                                   ListParametersSrv.Request(prefixes=[], depth=0))
-        names = sorted(self._policy.visible_parameters(client.node, listed.result.names))
+        names = sorted(guard.visible_parameters(client.node, listed.result.names))
         types: dict[str, str] = {}
         if names:
             typed = await self._call(client, client.types_client,
@@ -281,10 +282,11 @@ class ParameterBridges:
                                    "reason": _explain_refusal(client.node, name, result.reason)}
                             for name, result in zip(names, reply.results)}}
 
-    async def observe_parameters(self, request: ObserveParameters) -> dict[str, Any]:
+    async def observe_parameters(self, request: ObserveParameters,
+                                 guard: ContentGuard) -> dict[str, Any]:
         client = self._client(request.node)
         client.observed = tuple(dict.fromkeys(request.names))
-        client.all_changes = request.all_changes
+        client.all_changes = guard if request.all_changes else None
         if not client.all_changes:
             client.values = {n: v for n, v in client.values.items() if n in client.observed}
         self._update_watched()
@@ -554,7 +556,8 @@ class ParameterBridges:
         updates += [(p.name, RosParameterValue()) for p in event.deleted_parameters]
         for name, ros_value in updates:
             if name not in client.observed and not (
-                    client.all_changes and self._policy.visible_parameters(client.node, [name])):
+                    client.all_changes and client.all_changes.visible_parameters(client.node,
+                                                                                 [name])):
                 continue
             try:
                 value = from_ros_value(ros_value, name)
@@ -728,10 +731,10 @@ class ParameterBridges:
         return {
             CreateParameterClient: lambda r, _: self.create_parameter_client(r),
             RemoveParameterClient: lambda r, _: self.remove_parameter_client(r),
-            ListParameters: lambda r, _: self.list_parameters(r),
+            ListParameters: lambda r, _, guard: self.list_parameters(r, guard),
             GetParameters: lambda r, _: self.get_parameters(r),
             SetParameters: self.set_parameters,
-            ObserveParameters: lambda r, _: self.observe_parameters(r),
+            ObserveParameters: lambda r, _, guard: self.observe_parameters(r, guard),
             ServerDeclareParameter: lambda r, _: self.server_declare_parameter(r),
             ServerSetParameter: self.server_set_parameter,
             ServerGetParameters: lambda r, _: self.server_get_parameters(r),
@@ -747,7 +750,7 @@ class ParameterBridges:
     def describe(self) -> list[dict[str, Any]]:
         return [self._describe_client(client) for client in self.clients.values()]
 
-    def state(self) -> dict[str, Any]:
+    def state(self, guard: ContentGuard) -> dict[str, Any]:
         """The daemon node's own parameters clients declared (null while there are none)."""
         return {"parameter_server": {"node": self._server_node, "device": self._server_device,
                                      "parameters": list(self.declared)}

@@ -52,9 +52,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String as StringMsg
 
+from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
-from bridge.core.security import NameRules
 from bridge.parameters.capability import ParameterBridges, ParameterWatch
 from bridge.robots.errors import RobotError
 from bridge.robots.joints import describe_joints, joint_positions
@@ -129,6 +129,7 @@ class _Robot:
     tf_prefix: str
     description_key: NameKey
     description_device: str
+    guard: ContentGuard  # which of its frames a client may see (from its create request)
     state: str = "waiting"  # waiting | loaded | error
     reason: str = ""  # why waiting, or the last load error
     model: Optional[RobotModel] = None
@@ -161,13 +162,11 @@ class RobotBridges:
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: TfBridges,
                  parameters: ParameterBridges,
                  package_paths: Mapping[str, Path] | None = None,
-                 frame_rules: Optional[NameRules] = None,
                  mesh_roots: tuple[Path, ...] = (),
                  topic_wait_s: float = _TOPIC_WAIT_S) -> None:
         self._ros = ros
         # Where a client's robot may read meshes: --robot-dir and --package-path folders.
         self._mesh_roots = tuple(Path(folder) for folder in mesh_roots)
-        self._frame_rules = frame_rules or NameRules()  # frame globs: allow all by default
         self._hub = hub
         self._names = names
         self._tf = tf
@@ -180,8 +179,8 @@ class RobotBridges:
 
     # ------------------------------------------------------------------ ops
 
-    async def create_robot(self, request: CreateRobot,
-                           client: Optional[Replier] = None) -> Created:
+    async def create_robot(self, request: CreateRobot, client: Optional[Replier],
+                           guard: ContentGuard) -> Created:
         """`client` None: the operator's start-up robot. Only a URDF file the operator's
         config names is trusted to read meshes anywhere; a description from a parameter or
         a topic can be changed by any client or ROS peer, so it reads meshes only inside
@@ -201,7 +200,7 @@ class RobotBridges:
                                   f"{request.name!r} ({error})") from None
         # The request's source comes placed and resolved (CreateRobot.with_names).
         robot = _Robot(request.name, request, request.source,
-                       request.tf_prefix, description_key, description_device,
+                       request.tf_prefix, description_key, description_device, guard,
                        mesh_roots=None if client is None and request.source.kind == "file"
                        else self._mesh_roots)
         self.robots[robot.name] = robot
@@ -356,11 +355,11 @@ class RobotBridges:
             return  # removed, or a newer description is being loaded
         robot.loading_digest = ""
         fixed = _fixed_frame(robot, model)
-        if self._frame_rules.active and not self._frame_rules.permits(fixed):
-            refused = ForbiddenError("fixed_frame", "a tf frame this daemon exposes: "
-                                     + self._frame_rules.why_not(fixed), fixed)
+        try:
+            robot.guard.check_frame("fixed_frame", fixed)
+        except ForbiddenError as refused:
             if initial:
-                raise refused
+                raise
             self._load_failed(robot, str(refused))
             return
         self._apply(robot, model, text)
@@ -389,13 +388,10 @@ class RobotBridges:
         """Publish the meshes and (re)wire the link lookups of a freshly loaded model."""
         prefix = robot.tf_prefix
         fixed = _fixed_frame(robot, model)
-        rules = self._frame_rules
         if fixed != robot.fixed_frame:  # every lookup starts from the fixed frame: redo all
             self._forget_links(robot, set(robot.links))
-        robot.withheld = {name: f"frame {prefix + name!r} refused by the frame policy: "
-                                f"expected {rules.why_not(prefix + name)}"
-                          for name in model.links
-                          if rules.active and not rules.permits(prefix + name)}
+        refusals = {name: robot.guard.frame_refusal(prefix + name) for name in model.links}
+        robot.withheld = {name: why for name, why in refusals.items() if why is not None}
         wanted = set(model.links) - set(robot.withheld)
         self._forget_links(robot, set(robot.links) - wanted)
         robot.fixed_frame = fixed
@@ -624,7 +620,7 @@ class RobotBridges:
     def describe(self) -> list[dict[str, Any]]:
         return [self._summary(robot) for robot in self.robots.values()]
 
-    def state(self) -> dict[str, Any]:
+    def state(self, guard: ContentGuard) -> dict[str, Any]:
         return {}
 
     def close(self) -> None:

@@ -29,9 +29,9 @@ from rclpy.task import Future as RosFuture
 from bridge.codecs import CodecError, dict_to_message, message_to_dict
 from bridge.codecs.registry import SERVICE
 from bridge.core.client_replies import ClientReplies
+from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
-from bridge.core.security import SecurityPolicy
 from bridge.codecs.registry import installed_class
 from bridge.ros.ros_clients import RosClientCache
 from bridge.ros.ros_node import RosNode
@@ -255,14 +255,11 @@ class ServiceBridges:
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
                  answer_timeout_s: float = 4.0,
-                 policy: Optional[SecurityPolicy] = None,
                  max_service_clients: int = MAX_SERVICE_CLIENTS,
                  max_calls_per_client: int = MAX_CALLS_PER_CLIENT,
                  idle_client_s: float = IDLE_SERVICE_CLIENT_S,
                  replies: Optional[ClientReplies] = None) -> None:
         self._ros = ros
-        # A parameter listing through call_service shows what the parameter globs allow.
-        self._policy = policy or SecurityPolicy()
         self._hub = hub
         self._names = names
         self._answer_timeout_s = answer_timeout_s
@@ -292,14 +289,15 @@ class ServiceBridges:
         service (an action's hidden services) then hold on this route too."""
         self._call_guards.append(guard)
 
-    async def call_service(self, request: CallService,
-                           client: Optional[Replier] = None) -> dict[str, Any]:
+    async def call_service(self, request: CallService, client: Optional[Replier],
+                           guard: ContentGuard) -> dict[str, Any]:
+        """``guard``: a parameter listing's reply shows what the parameter globs allow."""
         service = request.service
         ros_type = request.ros_type
         srv = installed_class(SERVICE, request.type, ros_type)
         ros_request = message_from_json(srv.Request, request.request, "request")
-        for guard in self._call_guards:
-            guard(service, ros_type, ros_request, client)
+        for judge in self._call_guards:
+            judge(service, ros_type, ros_request, client)
         mine = self._calls.get(client) if client is not None else None
         if mine is not None and len(mine) >= self._max_calls_per_client:
             raise LimitReachedError("service", f"at most {self._max_calls_per_client} calls "
@@ -324,8 +322,7 @@ class ServiceBridges:
                 self._forget_call(client, task)
         entry.calls += 1
         return {"service": service, "type": ros_type, "response":
-                self._policy.filter_service_response(service, ros_type,
-                                                     message_to_dict(response))}
+                guard.service_reply(message_to_dict(response))}
 
     def _new_client(self, service: str, ros_type: str, srv: Any) -> CalledService:
         client = self._ros.node.create_client(srv, service, callback_group=self._group)
@@ -488,7 +485,7 @@ class ServiceBridges:
     def describe(self) -> list[dict[str, Any]]:
         return [_describe_served(served) for served in self.served.values()]
 
-    def state(self) -> dict[str, Any]:
+    def state(self, guard: ContentGuard) -> dict[str, Any]:
         """call_service's cached clients (not bridges: the daemon makes and drops them)."""
         return {"service_clients": [
             {"service": entry.service, "type": entry.ros_type, "device": entry.device,

@@ -51,11 +51,11 @@ from tf2_msgs.msg import TFMessage
 from bridge.codecs.cdr import CdrError, read_tf_message
 from bridge.codecs.fast import pack_transform, transform_body
 
+from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.outbox import Frame, TemplateFrame
-from bridge.core.security import NameRules
 from bridge.ros.raw_reader import RawTopic
 from bridge.ros.ros_node import RosNode
 from bridge.tf.buffer import StampedTransform, TfBuffer
@@ -249,11 +249,8 @@ class TfBridges:
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
                  frame_prefix: str = "", cache_time_s: float = 10.0,
-                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static",
-                 frame_rules: Optional[NameRules] = None) -> None:
+                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static") -> None:
         self._ros = ros
-        # list_bridges names the buffer's frames: only those the frame globs expose.
-        self._frame_rules = frame_rules or NameRules()
         self._hub = hub
         self._names = names
         self._prefix = frame_prefix.lstrip("/")
@@ -677,11 +674,12 @@ class TfBridges:
         out.extend(self._describe_broadcaster(b) for b in self.broadcasters.values())
         return out
 
-    def state(self) -> dict[str, Any]:
-        """The shared tf buffer (not a bridge: every lookup reads it)."""
+    def state(self, guard: ContentGuard) -> dict[str, Any]:
+        """The shared tf buffer (not a bridge: every lookup reads it), naming only the
+        frames ``guard`` lets a client see."""
         return {"tf_buffer": {
             "topics": [self._tf_topic, self._tf_static_topic], "frame_prefix": self._prefix,
-            "frames": [f for f in self.buffer.frames() if self._frame_rules.permits(f)],
+            "frames": guard.visible_frames(self.buffer.frames()),
             "received": dict(self.received), "cache_time_s": self.buffer.cache_time_s}}
 
     def _describe_lookup(self, lookup: _Lookup) -> dict[str, Any]:

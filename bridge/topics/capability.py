@@ -31,9 +31,8 @@ from bridge.core.dispatch import Created, Handler, Result
 from bridge.core.heavy import OffLoop
 from bridge.core.hub import Hub, Replier, StreamChannel, Subscriber, frame_for
 from bridge.core.logging_limits import RateLimitedLog
-from bridge.core.message_guards import MessageGuard
+from bridge.core.content_guards import ContentGuard
 from bridge.core.outbox import TemplateFrame
-from bridge.core.security import SecurityPolicy
 from bridge.core.stream_health import Arrivals, StreamHealth
 from bridge.ros.graph_types import refuse_other_type
 from bridge.ros.qos import default_depth, qos_profile
@@ -262,7 +261,7 @@ class _MessageStream:
 class PublisherBridge:
     def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QoS,
                  device: str, frame_id: str = "",
-                 guard: Optional[MessageGuard] = None,
+                 check: Optional[Callable[[Any], None]] = None,
                  labels_topic: Optional[str] = None) -> None:
         self.topic = topic
         self.codec = codec
@@ -270,7 +269,7 @@ class PublisherBridge:
         self.device = device
         self.frame_id = frame_id
         self.labels_topic = labels_topic
-        self._guard = guard  # the security policy on what a message writes (tf frames...)
+        self._guard = check  # the policy on what a message writes (tf frames...): raises
         self._refusals = RateLimitedLog(log)
         self.count = 0
         self._ros = ros
@@ -322,7 +321,7 @@ class PublisherBridge:
 
     def _check(self, msg: Any) -> None:
         if self._guard is not None:
-            self._guard.check(msg)
+            self._guard(msg)
 
     def on_igtl(self, message: Message, client: Replier) -> None:
         """A client sent data to this publisher's device (loop thread). A body may become
@@ -432,14 +431,11 @@ class TopicBridges:
     """The daemon's subscriber and publisher bridges, one of each kind per topic."""
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
-                 policy: Optional[SecurityPolicy] = None,
                  health: Optional[StreamHealth] = None) -> None:
         self._ros = ros
         self._hub = hub
         self._health = health  # tells clients when a stream goes stale (None: nobody)
         self._names = names
-        # Judges what messages name (a tf topic's frames); the dispatcher judged the request.
-        self._policy = policy or SecurityPolicy()
         self.subscribers: dict[str, SubscriberBridge] = {}
         self.publishers: dict[str, PublisherBridge] = {}
 
@@ -467,8 +463,10 @@ class TopicBridges:
                                      code=ErrorCode.ALREADY_EXISTS)
         return True
 
-    def create_subscriber(self, request: CreateSubscriber,
-                          client: Optional[Subscriber] = None) -> Created:
+    def create_subscriber(self, request: CreateSubscriber, client: Optional[Subscriber],
+                          guard: ContentGuard) -> Created:
+        """``guard`` judges what its messages name (a tf topic's frames) on their way to
+        clients; an existing bridge keeps its own (the policy is the daemon's: the same)."""
         topic = request.topic
         ros_type = request.ros_type
         codec = self._codec(request.type, ros_type)
@@ -483,7 +481,7 @@ class TopicBridges:
             self._ros, self._hub, topic=topic, codec=codec,
             qos=request.qos.with_default_depth(default_depth(codec.bulk)),
             device=device, metadata=metadata_for(key, ros_type=ros_type),
-            max_rate_hz=request.rate_hz, message_filter=self._filter_for(topic, ros_type))
+            max_rate_hz=request.rate_hz, message_filter=guard.message_filter())
         self.subscribers[topic] = bridge
         if self._health is not None:
             node = self._ros.node
@@ -505,10 +503,6 @@ class TopicBridges:
         self._hub.join(device, client)
         return {**reply, "message_device": device}
 
-    def _filter_for(self, topic: str, ros_type: str) -> Optional[Callable[[Any], Any]]:
-        guard = self._policy.message_guard(topic, ros_type)
-        return None if guard is None else guard.filter
-
     def remove_subscriber(self, request: RemoveSubscriber) -> dict[str, Any]:
         topic = request.topic
         bridge = self.subscribers.pop(topic, None)
@@ -522,7 +516,7 @@ class TopicBridges:
         self._names.release(NameKey.subscriber_messages(topic))
         return {"topic": topic, "device": bridge.device}
 
-    def create_publisher(self, request: CreatePublisher) -> Created:
+    def create_publisher(self, request: CreatePublisher, guard: ContentGuard) -> Created:
         topic = request.topic
         ros_type = request.ros_type
         codec = self._codec(request.type, ros_type)
@@ -543,7 +537,7 @@ class TopicBridges:
         bridge = PublisherBridge(self._ros, self._hub, topic=topic, codec=codec,
                                  qos=request.qos.with_default_depth(default_depth(codec.bulk)),
                                  device=device, frame_id=request.frame or "", labels_topic=labels,
-                                 guard=self._policy.publish_guard(topic, ros_type))
+                                 check=guard.message_check())
         self.publishers[topic] = bridge
         log.info("publishing %s (%s); clients send to device %r", topic, ros_type, device)
         return Created(_describe(bridge.info()), existed=False)
@@ -601,10 +595,10 @@ class TopicBridges:
     def handlers(self) -> dict[type[Op], Handler]:
         return {
             # The client is its session, a Subscriber as well as a Replier.
-            CreateSubscriber: lambda request, client: self.create_subscriber(
-                request, cast(Optional[Subscriber], client)),
+            CreateSubscriber: lambda request, client, guard: self.create_subscriber(
+                request, cast(Optional[Subscriber], client), guard),
             RemoveSubscriber: lambda request, _: self.remove_subscriber(request),
-            CreatePublisher: lambda request, _: self.create_publisher(request),
+            CreatePublisher: lambda request, _, guard: self.create_publisher(request, guard),
             RemovePublisher: lambda request, _: self.remove_publisher(request),
             Publish: lambda request, _: self.publish(request),
             GetLastMessage: lambda request, _: self.get_last_message(request),
@@ -622,7 +616,7 @@ class TopicBridges:
             described.append(entry)
         return described
 
-    def state(self) -> dict[str, Any]:
+    def state(self, guard: ContentGuard) -> dict[str, Any]:
         return {}
 
     def close(self) -> None:

@@ -15,6 +15,7 @@ from bridge.codecs import CodecError
 from bridge.codecs.generic import describe_message
 from bridge.codecs.registry import (action_class, message_class, resolve_service, resolve_type,
                                     service_class)
+from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Handler
 from protocol.commands import (CommandFailedError, DescribeType, ErrorCode, MessageDescription,
                                Op, OutOfRangeError, TypeDescription, resolve_action_type)
@@ -31,7 +32,7 @@ class InterfaceTypes:
     def describe(self) -> list[dict[str, Any]]:
         return []
 
-    def state(self) -> dict[str, Any]:
+    def state(self, guard: ContentGuard) -> dict[str, Any]:
         return {}
 
     def close(self) -> None:

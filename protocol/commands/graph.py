@@ -59,7 +59,7 @@ class Authenticate(Op, Answered[AuthenticateResult], op="authenticate", writes=F
 
 
 @dataclass(frozen=True)
-class ListBridges(Op, op="list_bridges", writes=False):
+class ListBridges(Op, op="list_bridges", writes=False, content=("frames",)):
     """Everything this daemon currently bridges, with device names."""
 
     def resources(self) -> tuple[Resource, ...]:

@@ -19,6 +19,10 @@ fields, everything the rest of the daemon derives from it.
   same name (``cmd`` and ``/cmd`` are one topic);
 * ``client_frames``: the fields holding a client's tf frame ids, which the daemon maps to the
   buffer's (``--frame-prefix``) once, in the dispatcher too (`Op.with_frames`);
+* ``content``: what a client sees or writes inside its results or its bridge's data, which
+  the security policy judges item by item (`CONTENT`): the ``messages`` of its topic, the tf
+  ``frames`` or the ``parameters`` they name. The dispatcher hands its handler a guard built
+  for exactly these, so no capability needs to know the policy;
 * ``resources()``: what it touches (topics, services, actions, parameters, tf frames, files); the
   security policy judges these, never op names.
 
@@ -39,9 +43,12 @@ from protocol.commands.errors import WrongTypeError
 from protocol.commands.fields import Args
 from protocol.commands.wire import MAX_OP_NAME_BYTES, SCHEMA_VERSION, dumps, json_type, loads
 
-__all__ = ["REQUEST_TYPES", "ActionUse", "Bridge", "BridgeKind", "FileUse", "FrameUse",
+__all__ = ["CONTENT", "REQUEST_TYPES", "ActionUse", "Bridge", "BridgeKind", "FileUse", "FrameUse",
            "NameResolver", "Op", "ParameterUse", "Request", "Resource", "ServiceUse", "TopicUse",
            "bridge_kinds", "encode_request", "parse_request"]
+
+# What an op's content may name, judged item by item (`Op.content`).
+CONTENT = ("messages", "frames", "parameters")
 
 # (name, field path) -> the fully qualified name; raises a CommandError naming the field.
 NameResolver = Callable[[str, str], str]
@@ -176,12 +183,14 @@ class Op:
     to_client: ClassVar[bool] = False
     ros_names: ClassVar[tuple[str, ...]] = ()
     client_frames: ClassVar[tuple[str, ...]] = ()
+    content: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, *, op: str = "", writes: Optional[bool] = None,
                           creates: Optional[Bridge] = None, removes: Optional[str] = None,
                           follows: Optional[str] = None, to_client: bool = False,
                           ros_names: tuple[str, ...] = (),
-                          client_frames: tuple[str, ...] = (), **kwargs: Any) -> None:
+                          client_frames: tuple[str, ...] = (),
+                          content: tuple[str, ...] = (), **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         name = cls.__name__
         if not op:
@@ -204,8 +213,12 @@ class Op:
                    if n.partition(".")[0] not in annotations]
         if unknown:
             raise TypeError(f"{name} ({op}): name field {unknown[0]!r} is not a field")
+        odd = [kind for kind in content if kind not in CONTENT]
+        if odd:
+            raise TypeError(f"{name} ({op}): content {odd[0]!r} is not one of "
+                            f"{', '.join(CONTENT)}")
         cls.op, cls.writes, cls.to_client, cls.ros_names = op, writes, to_client, ros_names
-        cls.client_frames = client_frames
+        cls.client_frames, cls.content = client_frames, content
         cls.creates, cls.removes, cls.follows = creates, removes, follows
         REQUEST_TYPES[op] = cls
 

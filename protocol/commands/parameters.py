@@ -50,6 +50,7 @@ class RemoveParameterClient(
 
 @dataclass(frozen=True)
 class ListParameters(Op, Answered[ListParametersResult], op="list_parameters", ros_names=("node",),
+                     content=("parameters",),
                      writes=False):
     node: str
 
@@ -108,6 +109,7 @@ class SetParameters(Op, Answered[SetParametersResult], op="set_parameters", ros_
 @dataclass(frozen=True)
 class ObserveParameters(Op, Answered[ObserveParametersResult],
                         op="observe_parameters", ros_names=("node",), writes=False,
+                        content=("parameters",),
                         follows="parameter_client"):
     """Replace the set of a parameter client's parameters whose values are fetched and whose
     changes are pushed to the client (a STRING message under the client's device name);

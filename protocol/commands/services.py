@@ -24,6 +24,7 @@ def _srv_type(a: Args) -> str:
 
 @dataclass(frozen=True)
 class CallService(Op, Answered[CallServiceResult], op="call_service", ros_names=("service",),
+                  content=("parameters",),
                   writes=True):
     """Call a ROS service. Keep ``timeout`` below the client's own command timeout
     (3D Slicer's default is 5 s) so the daemon's TIMEOUT reply arrives first."""

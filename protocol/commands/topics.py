@@ -34,6 +34,7 @@ def _msg_type(a: Args) -> str:
 
 @dataclass(frozen=True)
 class CreateSubscriber(Op, op="create_subscriber", ros_names=("topic",), writes=False,
+                       content=("messages",),
                        creates=Bridge("subscriber", ("topic",), section="subscribers")):
     """Subscribe to a ROS topic; messages then flow to clients as OpenIGTLink messages.
 
@@ -77,6 +78,7 @@ class RemoveSubscriber(Op, op="remove_subscriber", ros_names=("topic",),
 
 @dataclass(frozen=True)
 class CreatePublisher(Op, op="create_publisher", ros_names=("topic", "labels_topic"), writes=True,
+                      content=("messages",),
                       creates=Bridge("publisher", ("topic",), section="publishers")):
     """Create a ROS publisher; clients feed it with `Publish` or by sending OpenIGTLink
     messages under the device name the reply gives.

@@ -131,6 +131,7 @@ def test_a_namespace_no_device_name_can_hold_is_refused_not_raised() -> None:
     import json
 
     from bridge.core.hub import Hub
+    from bridge.core.security import SecurityPolicy
     from bridge.markers.capability import MarkerBridges, _Show, _Subscription
     from protocol.commands import CreateMarkerSubscriber
     from protocol.naming import DeviceNameRegistry, NameKey
@@ -147,7 +148,8 @@ def test_a_namespace_no_device_name_can_hold_is_refused_not_raised() -> None:
         markers = MarkerBridges(None, hub, DeviceNameRegistry(), tf=Tf())  # type: ignore[arg-type]
         request = CreateMarkerSubscriber(topic="/m", type="Marker", fixed_frame="world")
         sub = _Subscription("/m", "visualization_msgs/msg/Marker", request, "world",
-                            NameKey.marker_topic("/m"), "mks:m", markers)
+                            NameKey.marker_topic("/m"), "mks:m", markers,
+                            SecurityPolicy().content_guard(request))
         markers.subscriptions["/m"] = sub
         spec = MarkerSpec(kind="cube", ns="a\x00b", scale=np.ones(3), frame="base")
         good = MarkerSpec(kind="cube", ns="ok", scale=np.ones(3), frame="base")

@@ -44,18 +44,23 @@ def test_set_robot_joints_is_a_write_judged_on_its_topic() -> None:
 
 
 def test_the_publish_guard_judges_header_and_path_frames() -> None:
-    assert SecurityPolicy().publish_guard("/m", "visualization_msgs/msg/Marker") is None
-    guard = SecurityPolicy(frames=NameRules(deny=("secret*",))).publish_guard(
-        "/path", "nav_msgs/msg/Path")
-    assert guard is not None
+    def publish_check(policy: SecurityPolicy, topic: str, ros_type: str):
+        request = c.parse_request("create_publisher", c.dumps({"topic": topic,
+                                                               "type": ros_type}))
+        return policy.content_guard(request).message_check()
+
+    assert publish_check(SecurityPolicy(), "/m", "visualization_msgs/msg/Marker") is None
+    check = publish_check(SecurityPolicy(frames=NameRules(deny=("secret*",))), "/path",
+                          "nav_msgs/msg/Path")
+    assert check is not None
     path = codec_for("nav_msgs/msg/Path").from_value(
         {"poses": [{"header": {"frame_id": "ras"}}, {"header": {"frame_id": "secret"}}]},
         frame_id="")
     with pytest.raises(ForbiddenError) as caught:
-        guard.check(path)
+        check(path)
     assert caught.value.field == "value.poses[1].header.frame_id"
     path.poses[1].header.frame_id = "ras"
-    guard.check(path)
+    check(path)
     path.header.frame_id = "/secret_room"  # judged as tf holds it: no leading '/'
     with pytest.raises(ForbiddenError, match="secret_room"):
-        guard.check(path)
+        check(path)

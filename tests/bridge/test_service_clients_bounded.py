@@ -12,6 +12,7 @@ import os
 import pytest
 
 from bridge.core.hub import Hub
+from bridge.core.security import SecurityPolicy
 from bridge.ros.ros_node import RosNode, RosOptions
 from bridge.services.capability import ServiceBridges
 from protocol import commands as c
@@ -24,6 +25,14 @@ pytestmark = pytest.mark.ros
 def _call(service: str, srv_type: str, request: dict, timeout: float = 20.0) -> c.Request:
     return c.parse_request("call_service", json.dumps(
         {"service": service, "type": srv_type, "request": request, "timeout": timeout}))
+
+
+_OPEN = SecurityPolicy()
+
+
+def _called(services: ServiceBridges, request: c.Request):
+    """call_service as the dispatcher runs it (no client: the operator's; no globs)."""
+    return services.call_service(request, None, _OPEN.content_guard(request))
 
 
 @contextlib.asynccontextmanager
@@ -56,12 +65,13 @@ def test_service_clients_are_cached_bounded_and_dropped_when_idle(processes: Pro
     async def scenario() -> None:
         async with _services("bounds", max_service_clients=2,
                              idle_client_s=scaled(1.5)) as (ros, services):
-            await services.call_service(_call("/sb/trigger", "std_srvs/srv/Trigger", {}))
-            await services.call_service(_call("/sb/set_enabled", "std_srvs/srv/SetBool",
+            await _called(services, _call("/sb/trigger", "std_srvs/srv/Trigger", {}))
+            await _called(services, _call("/sb/set_enabled", "std_srvs/srv/SetBool",
                                               {"data": True}))
             assert len(services.called) == 2 and len(list(ros.node.clients)) == 2
             # A third service: the least recently used idle client makes room.
-            slow = asyncio.ensure_future(services.call_service(
+            slow = asyncio.ensure_future(_called(
+                services,
                 _call("/sb/slow", "std_srvs/srv/Trigger", {})))
             await _until(lambda: ("/sb/slow", "std_srvs/srv/Trigger") in services.called,
                          "the slow call's client")
@@ -69,7 +79,7 @@ def test_service_clients_are_cached_bounded_and_dropped_when_idle(processes: Pro
                                              ("/sb/slow", "std_srvs/srv/Trigger")]
             await _until(lambda: len(list(ros.node.clients)) == 2, "the evicted client destroyed")
             # While the slow call waits for its answer its client is never the one evicted.
-            await services.call_service(_call("/sb/trigger", "std_srvs/srv/Trigger", {}))
+            await _called(services, _call("/sb/trigger", "std_srvs/srv/Trigger", {}))
             assert list(services.called) == [("/sb/slow", "std_srvs/srv/Trigger"),
                                              ("/sb/trigger", "std_srvs/srv/Trigger")]
             response = await slow
@@ -77,7 +87,8 @@ def test_service_clients_are_cached_bounded_and_dropped_when_idle(processes: Pro
             # Unused for longer than idle_client_s: every client is destroyed.
             await _until(lambda: not services.called and not list(ros.node.clients),
                          "idle clients dropped", timeout=30)
-            assert services.state() == {"service_clients": []}
+            listing = _OPEN.content_guard(c.ListBridges())
+            assert services.state(listing) == {"service_clients": []}
 
     asyncio.run(scenario())
 
@@ -89,11 +100,12 @@ def test_with_every_client_busy_a_new_service_is_refused(processes: Processes) -
 
     async def scenario() -> None:
         async with _services("busy", max_service_clients=1) as (ros, services):
-            slow = asyncio.ensure_future(services.call_service(
+            slow = asyncio.ensure_future(_called(
+                services,
                 _call("/sb2/slow", "std_srvs/srv/Trigger", {})))
             await _until(lambda: len(services.called) == 1, "the slow call's client")
             with pytest.raises(c.LimitReachedError, match="at most 1 services called at once"):
-                await services.call_service(_call("/sb2/trigger", "std_srvs/srv/Trigger", {}))
+                await _called(services, _call("/sb2/trigger", "std_srvs/srv/Trigger", {}))
             assert (await slow)["response"]["success"] is True
             assert len(list(ros.node.clients)) == 1
 
@@ -111,7 +123,7 @@ def test_an_idle_client_goes_idle_client_s_after_its_last_call(processes: Proces
     async def scenario() -> None:
         async with _services("idle", idle_client_s=idle) as (ros, services):
             loop = asyncio.get_running_loop()
-            await services.call_service(_call("/sb3/trigger", "std_srvs/srv/Trigger", {}))
+            await _called(services, _call("/sb3/trigger", "std_srvs/srv/Trigger", {}))
             (entry,) = services.called.values()
             await _until(lambda: not services.called, "the idle client dropped")
             lived = loop.time() - entry.last_used

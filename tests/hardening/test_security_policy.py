@@ -446,9 +446,13 @@ def test_any_nodes_parameter_services_are_judged_by_the_parameter_globs() -> Non
     # listing is allowed; its response shows only the allowed names
     check(policy, "call_service", call("/arm/list_parameters", "ListParameters", {}))
     response = {"result": {"names": ["speed", "limit"], "prefixes": ["lim"]}}
-    assert policy.filter_service_response("/arm/list_parameters",
-                                          "rcl_interfaces/srv/ListParameters", response) == \
+    listing = c.parse_request("call_service", c.dumps(
+        call("/arm/list_parameters", "ListParameters", {})))
+    assert policy.content_guard(listing).service_reply(response) == \
         {"result": {"names": ["speed"], "prefixes": []}}
+    other = c.parse_request("call_service", c.dumps(call("/arm/get_parameters", "GetParameters",
+                                                         {"names": ["speed"]})))
+    assert policy.content_guard(other).service_reply(response) == response  # not a listing
     with pytest.raises(ForbiddenError):  # serving a node's parameters: all of them
         check(policy, "advertise_service", {"service": "/ghost/get_parameters",
                                             "type": "rcl_interfaces/srv/GetParameters"})
@@ -469,17 +473,25 @@ class _TfMessage:
 
 def test_tf_topics_are_judged_transform_by_transform() -> None:
     policy = SecurityPolicy(frames=NameRules(allow=("PSM1/*", "world")))
-    guard = policy.message_guard("/robot/tf", "tf2_msgs/msg/TFMessage")  # by type
-    assert guard is not None and policy.message_guard("/tf", "any") is not None  # by name
-    assert policy.message_guard("/x", "std_msgs/msg/String") is None
-    assert SecurityPolicy().message_guard("/tf", "tf2_msgs/msg/TFMessage") is None
+    def messages(policy: SecurityPolicy, op: str, topic: str, ros_type: str):
+        request = c.parse_request(op, c.dumps({"topic": topic, "type": ros_type}))
+        guard = policy.content_guard(request)
+        return guard.message_filter(), guard.message_check()
+
+    keep, sent = messages(policy, "create_publisher", "/robot/tf",
+                          "tf2_msgs/msg/TFMessage")  # by type
+    assert keep is not None and sent is not None
+    assert messages(policy, "create_subscriber", "/tf", "std_msgs/msg/String")[0] is not None
+    assert messages(policy, "create_subscriber", "/x", "std_msgs/msg/String") == (None, None)
+    assert messages(SecurityPolicy(), "create_subscriber", "/tf",
+                    "tf2_msgs/msg/TFMessage") == (None, None)
     allowed, denied = _Stamped("world", "PSM1/tool"), _Stamped("/world", "PSM2/tool")
-    kept = guard.filter(_TfMessage([allowed, denied]))
+    kept = keep(_TfMessage([allowed, denied]))
     assert kept is not None and kept.transforms == [allowed]
-    assert guard.filter(_TfMessage([denied])) is None
-    guard.check(_TfMessage([allowed]))
+    assert keep(_TfMessage([denied])) is None
+    sent(_TfMessage([allowed]))
     with pytest.raises(ForbiddenError) as refused:
-        guard.check(_TfMessage([allowed, denied]))
+        sent(_TfMessage([allowed, denied]))
     assert (refused.value.field, refused.value.got) == \
         ("value.transforms[1].child_frame_id", "PSM2/tool")
     # only a TFMessage can be judged on a tf topic
