@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo run test test-fast bench fuzz lint clean wheel client-wheel
+.PHONY: setup demo run test test-fast coverage bench fuzz lint clean wheel client-wheel
 
 setup:
 	@$(PYTHON) tools/setup_env.py
@@ -24,6 +24,18 @@ test: setup
 # in a loop. `make test` is the whole suite, as CI runs it.
 test-fast: setup
 	$(BIN)/python -m pytest -m "not integration"
+
+# The suite under coverage (the daemons and scripts it starts included, see
+# [tool.coverage.run] in pyproject.toml), then one report of bridge/ and slicer_client/.
+# PYTEST_ARGS: what to run instead of the whole suite, e.g. PYTEST_ARGS="tests/bridge -x".
+# Data in .cache/coverage; the report is printed even when a test fails (make still fails).
+PYTEST_ARGS ?=
+coverage: setup
+	$(BIN)/python -m coverage erase
+	@mkdir -p .cache/coverage
+	$(BIN)/python -m coverage run -m pytest $(PYTEST_ARGS); status=$$?; \
+		$(BIN)/python -m coverage combine --quiet && $(BIN)/python -m coverage report \
+		&& exit $$status
 
 bench: setup
 	@for script in bench/bench_*.py; do echo "== $$script"; $(BIN)/python $$script || exit 1; done

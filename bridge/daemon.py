@@ -82,11 +82,8 @@ class Daemon:
         package_paths = {name: Path(folder) for name, folder in config.package_paths}
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
                                    parameters=self.parameters,
-                                   package_paths=package_paths,
-                                   mesh_roots=tuple(Path(d) for d in policy.robot_dirs))
-        # Markers read meshes only inside the same roots as a client's robot.
+                                   package_paths=package_paths)
         self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
-                                     mesh_roots=tuple(Path(d) for d in policy.robot_dirs),
                                      package_paths=package_paths,
                                      max_model_bytes=policy.max_marker_bytes)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,

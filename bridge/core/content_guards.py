@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable, Optional, Protocol
 
 from protocol.commands import ForbiddenError
@@ -168,6 +169,9 @@ class ContentGuard:
     messages: Optional[MessageGuard] = None
     # A call_service to this node's list_parameters: its reply lists parameter names.
     lists_parameters_of: Optional[str] = None
+    # Folders the files its content names may be read from; None: anywhere (the operator's
+    # own file).
+    file_roots: Optional[tuple[str, ...]] = ()
 
     def _need(self, content: str) -> None:
         if content not in self.declared:
@@ -205,6 +209,12 @@ class ContentGuard:
     def visible_frames(self, frames: Iterable[str]) -> list[str]:
         self._need("frames")
         return [f for f in frames if self.frames.permits(f)]
+
+    # --- files ---------------------------------------------------------------------------
+    def readable_roots(self) -> Optional[tuple[Path, ...]]:
+        """The folders a mesh its content names may be read from (None: anywhere)."""
+        self._need("files")
+        return None if self.file_roots is None else tuple(Path(r) for r in self.file_roots)
 
     # --- parameters ----------------------------------------------------------------------
     def visible_parameters(self, node: str, names: Iterable[str]) -> list[str]:

@@ -366,7 +366,8 @@ class Dispatcher:
         reserved = client is not None and self._quota.reserve(client, request.op)
         try:
             if type(request).content:
-                outcome = handler(request, client, self._policy.content_guard(request))
+                guard = self._policy.content_guard(request, from_client=client is not None)
+                outcome = handler(request, client, guard)
             else:
                 outcome = handler(request, client)
             if isinstance(outcome, OffLoop):

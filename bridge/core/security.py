@@ -372,14 +372,19 @@ class SecurityPolicy:
             raise refused
 
     # --- inside content ------------------------------------------------------------------
-    def content_guard(self, request: Op) -> ContentGuard:
+    def content_guard(self, request: Op, *, from_client: bool = True) -> ContentGuard:
         """The guard for what `request`'s op declares it carries (`Op.content`), judged by
         the same rules as the request's own names, so no route reaches a name another
-        route refuses. Its names are resolved already (the dispatcher)."""
+        route refuses. Its names are resolved already (the dispatcher). Files named by
+        content are read only inside the robot folders, unless the content is a file the
+        operator's own config names (`from_client` False): a description from a parameter or
+        a topic can be changed by any client or ROS peer."""
         cls = type(request)
         declared = cls.content
-        guard = ContentGuard(cls.op, declared, frames=self.frames, parameters=self.parameters)
         uses = request.resources()
+        operators_file = not from_client and any(isinstance(use, FileUse) for use in uses)
+        guard = ContentGuard(cls.op, declared, frames=self.frames, parameters=self.parameters,
+                             file_roots=None if operators_file else self.robot_dirs)
         if "messages" in declared:
             topic = next(use for use in uses if isinstance(use, TopicUse))
             guard = replace(guard, messages=self._message_guard(

@@ -286,7 +286,7 @@ class _Folded:
 class _Worker:
     """One topic's reader: a bounded queue of messages, one thread that meshes them."""
 
-    def __init__(self, sub: _Subscription, mesh_roots: tuple[Path, ...],
+    def __init__(self, sub: _Subscription, mesh_roots: Optional[tuple[Path, ...]],
                  package_paths: Mapping[str, Path], *, budget: Optional[ModelBudget] = None,
                  gate: Optional[threading.Lock] = None) -> None:
         self._sub = sub
@@ -517,14 +517,12 @@ class MarkerBridges:
     """Marker subscribers: models per marker, a TRANSFORM per frame, lifetimes."""
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: TfBridges,
-                 mesh_roots: tuple[Path, ...] = (),
                  package_paths: Optional[Mapping[str, Path]] = None,
                  max_model_bytes: int = DEFAULT_MAX_MARKER_BYTES) -> None:
         self._ros = ros
         self._hub = hub
         self._names = names
         self._tf = tf
-        self._mesh_roots = tuple(Path(p) for p in mesh_roots)
         self._package_paths = {k: Path(v) for k, v in (package_paths or {}).items()}
         self.subscriptions: dict[str, _Subscription] = {}
         self._frames: dict[tuple[str, str], _FrameRef] = {}
@@ -580,7 +578,7 @@ class MarkerBridges:
         # reader knows (a 1000-marker array: a few ms instead of ~100 through rclpy).
         sub.raw = ros_type in (MARKER_TYPE, MARKER_ARRAY_TYPE) and layout_supported(
             codec_for(MARKER_TYPE).message_class.get_fields_and_field_types())
-        sub.worker = _Worker(sub, self._mesh_roots, self._package_paths, budget=self.budget,
+        sub.worker = _Worker(sub, guard.readable_roots(), self._package_paths, budget=self.budget,
                              gate=self._meshing)
         try:
             sub.subscription = self._ros.stream_node.create_subscription(

@@ -162,11 +162,8 @@ class RobotBridges:
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: TfBridges,
                  parameters: ParameterBridges,
                  package_paths: Mapping[str, Path] | None = None,
-                 mesh_roots: tuple[Path, ...] = (),
                  topic_wait_s: float = _TOPIC_WAIT_S) -> None:
         self._ros = ros
-        # Where a client's robot may read meshes: --robot-dir and --package-path folders.
-        self._mesh_roots = tuple(Path(folder) for folder in mesh_roots)
         self._hub = hub
         self._names = names
         self._tf = tf
@@ -181,10 +178,9 @@ class RobotBridges:
 
     async def create_robot(self, request: CreateRobot, client: Optional[Replier],
                            guard: ContentGuard) -> Created:
-        """`client` None: the operator's start-up robot. Only a URDF file the operator's
-        config names is trusted to read meshes anywhere; a description from a parameter or
-        a topic can be changed by any client or ROS peer, so it reads meshes only inside
-        the mesh roots, whoever made the robot, and so does every robot of a client."""
+        """`client` None: the operator's start-up robot. ``guard`` says which of its frames
+        a client may see and where its meshes may be read from (anywhere only for a URDF
+        file the operator's config names: `SecurityPolicy.content_guard`)."""
         existing = self.robots.get(request.name)
         if existing is not None:
             if existing.request == request:  # a reconnecting client re-creates what it had
@@ -201,8 +197,7 @@ class RobotBridges:
         # The request's source comes placed and resolved (CreateRobot.with_names).
         robot = _Robot(request.name, request, request.source,
                        request.tf_prefix, description_key, description_device, guard,
-                       mesh_roots=None if client is None and request.source.kind == "file"
-                       else self._mesh_roots)
+                       mesh_roots=guard.readable_roots())
         self.robots[robot.name] = robot
         try:
             text = await self._first_description(robot)

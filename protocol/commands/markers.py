@@ -56,7 +56,7 @@ def _fixed_frame(a: Args) -> str:
 
 @dataclass(frozen=True)
 class CreateMarkerSubscriber(Op, op="create_marker_subscriber", ros_names=("topic",), writes=False,
-                             content=("frames",),
+                             content=("frames", "files"),
                              creates=Bridge("marker_subscriber", ("topic",),
                                             section="marker_subscribers")):
     """Subscribe to ``topic`` (``type``: Marker, MarkerArray, Path, PolygonStamped or

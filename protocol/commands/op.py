@@ -21,7 +21,8 @@ fields, everything the rest of the daemon derives from it.
   buffer's (``--frame-prefix``) once, in the dispatcher too (`Op.with_frames`);
 * ``content``: what a client sees or writes inside its results or its bridge's data, which
   the security policy judges item by item (`CONTENT`): the ``messages`` of its topic, the tf
-  ``frames`` or the ``parameters`` they name. The dispatcher hands its handler a guard built
+  ``frames`` or the ``parameters`` they name, the ``files`` they make the daemon read (a
+  URDF's meshes). The dispatcher hands its handler a guard built
   for exactly these, so no capability needs to know the policy;
 * ``resources()``: what it touches (topics, services, actions, parameters, tf frames, files); the
   security policy judges these, never op names.
@@ -48,7 +49,7 @@ __all__ = ["CONTENT", "REQUEST_TYPES", "ActionUse", "Bridge", "BridgeKind", "Fil
            "bridge_kinds", "encode_request", "parse_request"]
 
 # What an op's content may name, judged item by item (`Op.content`).
-CONTENT = ("messages", "frames", "parameters")
+CONTENT = ("messages", "frames", "parameters", "files")
 
 # (name, field path) -> the fully qualified name; raises a CommandError naming the field.
 NameResolver = Callable[[str, str], str]

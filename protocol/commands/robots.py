@@ -25,7 +25,7 @@ _ROBOT_DESC = "a robot name of letters, digits and _"
 
 @dataclass(frozen=True)
 class CreateRobot(Op, op="create_robot", ros_names=("source.node", "source.topic"), writes=False,
-                  content=("frames",),
+                  content=("frames", "files"),
                   creates=Bridge("robot", ("name",), section="robots")):
     """Load a robot from its URDF: one model per link visual, placed by tf lookups from
     ``fixed_frame`` (omitted = the URDF's root link) to ``tf_prefix`` + link.

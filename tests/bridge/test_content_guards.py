@@ -45,7 +45,7 @@ def test_the_guard_serves_only_what_its_op_declares() -> None:
     robot = c.parse_request("create_robot", c.dumps(
         {"name": "r", "source": {"kind": "parameter", "node": "/rsp"}}))
     guard = POLICY.content_guard(robot)
-    assert guard.declared == ("frames",)
+    assert guard.declared == ("frames", "files")
     assert guard.frame_refusal("base") is None
     assert guard.frame_refusal("secret_room") == ("frame 'secret_room' refused by the frame "
                                                   "policy: expected a name not matching the "
@@ -129,3 +129,25 @@ def test_no_capability_holds_the_policy() -> None:
     for capability in CAPABILITIES:
         taken = set(inspect.signature(capability.__init__).parameters)
         assert not taken & {"policy", "frame_rules"}, capability.__name__
+
+
+def test_files_content_names_are_read_inside_the_robot_folders_unless_the_operators_own() -> None:
+    """A URDF from a parameter or a topic, or a marker's mesh, can be changed by any client
+    or ROS peer: its meshes are read only inside the robot folders, whoever asked. Only a
+    URDF file the operator's config names is trusted to name meshes anywhere."""
+    policy = SecurityPolicy(robot_dirs=("/opt/robots", "/ws/src"))
+    by_file = c.parse_request("create_robot", c.dumps(
+        {"name": "r", "source": {"kind": "file", "path": "/opt/robots/r.urdf"}}))
+    by_parameter = c.parse_request("create_robot", c.dumps(
+        {"name": "r", "source": {"kind": "parameter", "node": "/rsp"}}))
+    markers = c.parse_request("create_marker_subscriber", c.dumps(
+        {"topic": "/m", "type": "MarkerArray", "fixed_frame": "world"}))
+    roots = (Path("/opt/robots"), Path("/ws/src"))
+    assert policy.content_guard(by_file, from_client=False).readable_roots() is None
+    assert policy.content_guard(by_file, from_client=True).readable_roots() == roots
+    assert policy.content_guard(by_parameter, from_client=False).readable_roots() == roots
+    assert policy.content_guard(markers, from_client=False).readable_roots() == roots
+    assert SecurityPolicy().content_guard(markers).readable_roots() == ()  # none: no file
+    listing = c.parse_request("list_parameters", c.dumps({"node": "/arm"}))
+    with pytest.raises(TypeError, match="files"):
+        policy.content_guard(listing).readable_roots()

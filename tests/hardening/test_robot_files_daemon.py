@@ -14,6 +14,8 @@ from slicer_client.connection import CommandRefusedError, Connection
 from support import Processes, RunningDaemon, assert_clean_exit, start_daemon
 
 ONE_LINK = "<robot name='{name}'><link name='base'/></robot>"
+STL = ("solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
+       "endloop\nendfacet\nendsolid t\n")
 
 
 @pytest.fixture(scope="module")
@@ -70,11 +72,24 @@ def test_other_files_are_forbidden_and_named(daemon: RunningDaemon, folders: dic
 def test_the_operators_start_up_config_is_trusted(processes: Processes,
                                                   folders: dict[str, Path],
                                                   tmp_path: Path) -> None:
+    """The operator's URDF file may name meshes anywhere; a client's, even one inside the
+    robot folders, reads meshes only inside them (SecurityPolicy.content_guard)."""
+    mesh = folders["outside"] / "secret.stl"
+    mesh.write_text(STL)
+    with_mesh = ("<robot name='m'><link name='base'><visual><geometry><mesh filename='%s'/>"
+                 "</geometry></visual></link></robot>" % mesh.as_uri())
+    (folders["outside"] / "meshy.urdf").write_text(with_mesh)
+    (folders["allowed"] / "meshy.urdf").write_text(with_mesh)
     config = tmp_path / "bridges.yaml"
     config.write_text("robots:\n  - {name: secret, source: {kind: file, path: '%s'}}\n"
-                      % (folders["outside"] / "secret.urdf"))
-    daemon = start_daemon(processes, "--config", str(config))
+                      "  - {name: meshy, source: {kind: file, path: '%s'}}\n"
+                      % (folders["outside"] / "secret.urdf", folders["outside"] / "meshy.urdf"))
+    daemon = start_daemon(processes, "--config", str(config),
+                          "--robot-dir", str(folders["allowed"]))
     with daemon.connect() as client:
-        (robot,) = client.command("list_robots")["robots"]
-        assert (robot["name"], robot["state"]) == ("secret", "loaded")
+        create(client, "clients", str(folders["allowed"] / "meshy.urdf"))
+        robots = {robot["name"]: robot for robot in client.command("list_robots")["robots"]}
+        assert (robots["secret"]["state"], robots["meshy"]["state"]) == ("loaded", "loaded")
+        assert robots["meshy"]["visuals"] == 1  # the operator's: read from outside
+        assert (robots["clients"]["visuals"], robots["clients"]["warnings"]) == (0, 1)
     assert_clean_exit(daemon)
