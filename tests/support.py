@@ -58,6 +58,12 @@ class Child:
     def output(self) -> str:
         return self.log.read_text(errors="replace")
 
+    def lines(self) -> list[str]:
+        """The output's complete lines: one the child is still writing is left out (the
+        file can be read between two of its writes)."""
+        text = self.output()
+        return text[:text.rfind("\n") + 1].splitlines()
+
     def wait_for_output(self, needle: str, timeout: float = 20.0) -> str:
         """Wait until `needle` appears in the output after what earlier waits consumed;
         return the line holding it. ``timeout`` is scaled (`scaled`)."""

@@ -275,7 +275,7 @@ def test_an_action_served_by_the_client(ros: Client, processes: Processes) -> No
     assert result == {"status": 4, "position": 0.3, "reached_goal": True}  # SUCCEEDED
 
     def feedback(prefix: str) -> list[float]:
-        return [round(float(x.split()[1]), 6) for x in caller.output().splitlines()
+        return [round(float(x.split()[1]), 6) for x in caller.lines()
                 if x.startswith(prefix + " ")]
 
     # Every feedback reaches ROS, in order. rclpy's ActionClient may still drop the last

@@ -64,7 +64,7 @@ def joint_states(echo: Child, *, idle: Optional[bool] = None) -> list[dict[str, 
     """The positions of each joint state the echo printed; ``idle`` True: only the idle
     motion's (they carry velocities), False: only held or moved ones (no velocities)."""
     out = []
-    for line in echo.output().splitlines():
+    for line in echo.lines():
         if line.startswith("MSG "):
             msg = json.loads(line[4:])
             if idle is None or bool(msg["velocity"]) == idle:

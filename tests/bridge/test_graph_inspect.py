@@ -30,7 +30,7 @@ def test_topics_lists_names_and_types_as_ros2_topic_list_t(processes: Processes,
     def listed() -> bool:
         child = processes.bridge("topics", "--wait", "1")
         assert _finished(child) == 0, child.output()
-        return "/gi_pose [geometry_msgs/msg/PoseStamped]" in child.output().splitlines()
+        return "/gi_pose [geometry_msgs/msg/PoseStamped]" in child.lines()
     wait_until(listed, timeout=60, what="/gi_pose in the topic list")
 
 
@@ -99,7 +99,7 @@ def test_services_lists_no_inspector_s_services(processes: Processes) -> None:
     def listed() -> list[str]:
         child = processes.bridge("services")
         assert _finished(child) == 0, child.output()
-        return child.output().splitlines()
+        return child.lines()
     lines: list[str] = []
 
     def both_seen() -> bool:

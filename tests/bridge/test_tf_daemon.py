@@ -84,7 +84,7 @@ def counted(daemon: RunningDaemon) -> Iterator[tuple[Connection, Counter]]:
 def ros_transforms(echo: Child) -> list[dict[str, Any]]:
     """Every TransformStamped the echo peer printed so far."""
     out = []
-    for line in echo.output().splitlines():
+    for line in echo.lines():
         if line.startswith("MSG "):
             out.extend(json.loads(line[4:])["transforms"])
     return out
@@ -365,7 +365,7 @@ def test_static_broadcasts_reach_a_subscriber_started_after_them(
     echo.wait_for_output("READY")
 
     def both() -> bool:
-        for line in echo.output().splitlines():
+        for line in echo.lines():
             if line.startswith("MSG "):
                 children = {t["child_frame_id"]: t for t in json.loads(line[4:])["transforms"]}
                 if p + "needle" in children and p + "probe" in children:

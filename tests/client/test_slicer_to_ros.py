@@ -55,7 +55,7 @@ def _echo(processes: Processes, topic: str, ros_type: str) -> Child:
 
 
 def _messages(child: Child) -> list[dict[str, Any]]:
-    return [json.loads(line[4:]) for line in child.output().splitlines()
+    return [json.loads(line[4:]) for line in child.lines()
             if line.startswith("MSG ")]
 
 
@@ -349,7 +349,7 @@ def test_the_demo_motion_yields_to_joints_set_from_slicer(
     def yield_starts() -> list[float]:
         """When the motion got a state of ours and began to yield (its clock, the stamps')."""
         return [float(line.rsplit("(at ", 1)[1].rstrip(")"))
-                for line in motion.output().splitlines()
+                for line in motion.lines()
                 if "joint motion yields for 2 s" in line]
 
     def motion_stamps() -> list[float]:

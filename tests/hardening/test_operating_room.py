@@ -41,7 +41,7 @@ class Room:
 def lines(child: Child, word: str) -> list[tuple[float, str]]:
     """(time, rest) of each output line `<time> WORD rest`."""
     found = []
-    for line in child.output().splitlines():
+    for line in child.lines():
         parts = line.split(" ", 2)
         if len(parts) >= 2 and parts[1] == word:
             found.append((float(parts[0]), parts[2] if len(parts) > 2 else ""))
@@ -150,7 +150,7 @@ def test_a_pulled_cable_is_noticed_by_both_sides_and_no_old_pose_comes_back(
     client_noticed = lines(client, "LOST")[0][0] - pulled
 
     def daemon_saw() -> list[float]:
-        return [log_time(entry) for entry in room.daemon.output().splitlines()
+        return [log_time(entry) for entry in room.daemon.lines()
                 if re.search(r"client 10\.77\.0\.2:\d+ disconnected", entry)
                 and log_time(entry) > pulled]
 
@@ -193,7 +193,7 @@ def module_reader_on(room: Room, processes: Processes, name: str) -> Child:
 
 
 def daemon_cut_times(room: Room, since: float) -> list[float]:
-    return [log_time(entry) for entry in room.daemon.output().splitlines()
+    return [log_time(entry) for entry in room.daemon.lines()
             if re.search(r"client 10\.77\.0\.2:\d+ has acknowledged nothing", entry)
             and log_time(entry) > since]
 

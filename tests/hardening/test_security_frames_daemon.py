@@ -45,7 +45,7 @@ def is_matrix(expected: np.ndarray):
 
 def ros_transforms(echo: Child) -> list[dict[str, Any]]:
     """Every TransformStamped the echo peer printed so far."""
-    return [t for line in echo.output().splitlines() if line.startswith("MSG ")
+    return [t for line in echo.lines() if line.startswith("MSG ")
             for t in json.loads(line[4:])["transforms"]]
 
 

@@ -27,7 +27,7 @@ def refusal(client: Any, op: str, args: dict[str, Any]) -> CommandRefusedError:
 
 
 def echoed(echo: Child) -> list[dict[str, Any]]:
-    return [json.loads(line[4:]) for line in echo.output().splitlines()
+    return [json.loads(line[4:]) for line in echo.lines()
             if line.startswith("MSG ")]
 
 

@@ -36,7 +36,7 @@ def keygen(path: Path, *extra: str) -> subprocess.CompletedProcess[str]:
 
 
 def received(echo: Child) -> list[str]:
-    return [json.loads(line[4:])["data"] for line in echo.output().splitlines()
+    return [json.loads(line[4:])["data"] for line in echo.lines()
             if line.startswith("MSG ")]
 
 
