@@ -106,10 +106,6 @@ class ConfigFile:
     name: str = ""
 
 
-def load_startup_commands(path: Path) -> tuple[StartupCommand, ...]:
-    return load_config_file(path).startup
-
-
 def load_config_file(path: Path) -> ConfigFile:
     try:
         text = path.read_text(encoding="utf-8")

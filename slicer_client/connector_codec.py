@@ -25,7 +25,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 import numpy as np
 
 from protocol import commands as c
-from protocol.messages import Message, Status, String, Transform
+from protocol.messages import Message, PolyData, Status, String, Transform
 from slicer_client.connection import (CommandRefusedError, CommandTimeoutError,
                                       ConnectionClosedError)
 from slicer_client.scene_plan import metadata_from_attributes
@@ -95,11 +95,18 @@ def parse_reply(op: str, response_text: str, *, expired: bool = False,
 def message_from_node(device: str, attributes: Mapping[str, str], *,
                       text: Optional[str] = None,
                       matrix: Optional[Any] = None,
-                      status: Optional[Tuple[int, str, str]] = None) -> Optional[Message]:
+                      status: Optional[Tuple[int, str, str]] = None,
+                      model: Optional[Tuple[Any, Any]] = None) -> Optional[Message]:
     """A connector node's content -> the Message it came from (text node: STRING,
     transform node: TRANSFORM, status node: STATUS from its code, error name and
-    text); None for anything else."""
+    text, model node: POLYDATA from its points (N, 3) in mm and its polygons as
+    ``[n, i0..i(n-1), ...]``); None for anything else."""
     metadata = metadata_from_attributes(attributes)
+    if model is not None:
+        points, polygons = model
+        return Message(device, PolyData(points=np.asarray(points, dtype=np.float32),
+                                        polygons=np.asarray(polygons, dtype=np.uint32)),
+                       metadata=metadata)
     if status is not None:
         code, error_name, status_text = status
         return Message(device, Status(code=int(code), error_name=error_name,

@@ -362,7 +362,8 @@ class ParameterClient(Resource):
         self.observed: Tuple[str, ...] = ()
         self.all_changes = False
         self.values: Dict[str, c.ParameterValue] = {}  # last known, kept by observe/get
-        self.ready = False  # the node's parameter services answered (observe's reply)
+        # The node's parameter services answered (observe's reply, then each update's).
+        self.ready = False
 
     def _restore(self, command: CommandFn) -> None:
         if self.observed or self.all_changes:
@@ -381,6 +382,7 @@ class ParameterClient(Resource):
             return
         with self._changed:
             self.values.update(values)
+            self.ready = bool(data.get("ready", self.ready))
             self._changed.notify_all()
         for name, value in values.items():
             self._notify(name, parameter_to_python(value))

@@ -70,6 +70,9 @@ class Transport(Protocol):
     # Does each stream value reach the client (which drops late ones by their stamps)?
     # 3D Slicer's connector puts values into the scene itself: it shows what arrives.
     drops_late_values: bool
+    # Can it carry the daemon's whole-message streams (a JSON body)? 3D Slicer's connector
+    # imports only OpenIGTLink's standard types: a subscriber then reads its native stream.
+    carries_whole_messages: bool
 
     @property
     def connected(self) -> bool: ...
@@ -92,6 +95,7 @@ class ReconnectingTransport:
 
     watches_silence = True
     drops_late_values = True
+    carries_whole_messages = True
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  reconnect: bool = True, retry_interval: float = 0.5,

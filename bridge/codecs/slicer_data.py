@@ -76,13 +76,6 @@ def _polydata(body: Body, ros_type: str) -> PolyData:
     return body
 
 
-def _point_body(body: Body, ros_type: str) -> PointBody:
-    if not isinstance(body, PointBody):
-        raise CodecError(field="body", expected=f"an OpenIGTLink POINT (for {ros_type})",
-                         got=type(body).__name__)
-    return body
-
-
 def points_in_metres(points_mm: Any, field: str, limit: int) -> np.ndarray:
     """(N, 3) millimetres from Slicer -> (N, 3) float64 metres; NaN/inf and more than
     ``limit`` points raise `CodecError` naming the first bad point."""

@@ -519,7 +519,8 @@ class ParameterBridges:
     def _stream_values(self, client: ParameterClient) -> None:
         values = {n: v.to_dict() for n, v in client.values.items()
                   if client.all_changes or n in client.observed}
-        text = dumps({"node": client.node, "values": values})
+        # "ready": whether the node's services answered, which changes after observe's reply.
+        text = dumps({"node": client.node, "ready": bool(client.ready), "values": values})
         self._stream_text(client.device, client.key, text)
 
     def _stream_text(self, device: str, key: NameKey, text: str) -> None:

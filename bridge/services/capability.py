@@ -244,6 +244,10 @@ CallGuard = Callable[[str, str, Any, Optional[Replier]], None]
 
 # call_service's cached rclpy clients: how many at most, and how long one may sit unused.
 MAX_SERVICE_CLIENTS = 64
+# A withdrawn service lives this long after its last answer: rclpy sends a response after
+# the handler returns (another executor thread may run first), and a destroyed service's
+# writer drops a reliable response its caller has not taken yet.
+SERVICE_LINGER_S = 1.0
 IDLE_SERVICE_CLIENT_S = 60.0
 # Calls one client may have waiting at once: a quarter of the clients above, so that one
 # client calling absent services cannot take every slot from the others.
@@ -391,8 +395,8 @@ class ServiceBridges:
             finally:
                 served.inflight -= 1
                 if served.destroy_pending and not served.inflight:
-                    # After this step rclpy sends the response; destroy only then.
-                    self._ros.executor.create_task(self._destroy_if_idle, served)
+                    # rclpy sends the response after this step: destroy well after it.
+                    self._hub.call_soon(self._destroy_later, served)
         return serve
 
     def _forward(self, served: ServedService, request: Any, answer: RosFuture) -> None:
@@ -450,10 +454,16 @@ class ServiceBridges:
         self._replies.withdraw(served)  # its callers waiting for an answer get a default one
         self._names.release(served.key)
         self._hub.forget(served.device)
-        # Destroyed in the executor thread once no call is being answered: rclpy sends the
-        # response after the coroutine returns, and a destroyed handle would stop the executor.
-        self._ros.executor.create_task(self._destroy_if_idle, served)
+        # Destroyed in the executor thread once no call is being answered, and a while after
+        # the last answer (SERVICE_LINGER_S); a destroyed handle would stop the executor.
+        self._destroy_later(served)
         log.info("no longer serving %s", served.service)
+
+    def _destroy_later(self, served: ServedService) -> None:
+        """(loop thread) `_destroy_if_idle` in the executor, SERVICE_LINGER_S from now."""
+        asyncio.get_running_loop().call_later(
+            SERVICE_LINGER_S, lambda: self._ros.executor.create_task(self._destroy_if_idle,
+                                                                     served))
 
     def _destroy_if_idle(self, served: ServedService) -> None:
         if served.inflight:

@@ -29,8 +29,8 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
-from protocol.messages import Image, Message, PolyData
-from slicer_client.matrices import is_vtk_matrix
+from protocol.messages import Image, Message, PolyData, String, Transform
+from slicer_client.matrices import fill_vtk, is_vtk_matrix
 from slicer_client.reference.messages import (MessageObject, MessageTypes, MessageValueError,
                                               array_of_vector6, matrix_of_pose, pose_of_matrix,
                                               vector6_of)
@@ -48,7 +48,9 @@ _CLASS_NAME = re.compile(r"vtkMRMLROS2(?:Subscriber|Publisher)([A-Za-z0-9]+)Node
 
 class SlicerType:
     """One name's Slicer value: made from a whole message (`whole`) or from its native
-    stream's IMAGE / POLYDATA, and turned back into what `publish` takes."""
+    stream (IMAGE / POLYDATA; and, where no whole message comes, as over 3D Slicer's
+    connector, the STRING / TRANSFORM of the simple types), and turned back into what
+    `publish` takes."""
 
     whole = True
 
@@ -60,7 +62,10 @@ class SlicerType:
         raise NotImplementedError
 
     def from_native(self, message: Message) -> Any:
-        raise NotImplementedError
+        raise MessageValueError(
+            f"GetLastMessage: a {self.ros_type} comes whole only in the daemon's message "
+            f"stream, which 3D Slicer's connector does not carry (it imports OpenIGTLink's "
+            f"standard types only); read it with slicer_client.connect() in Slicer's Python")
 
     def to_publish(self, value: Any) -> Publication:
         raise NotImplementedError
@@ -71,6 +76,9 @@ class SlicerType:
 
 class _Empty(SlicerType):
     def from_ros(self, data: Mapping[str, Any]) -> Any:
+        return ""
+
+    def from_native(self, message: Message) -> Any:
         return ""
 
     def to_publish(self, value: Any) -> Publication:
@@ -89,6 +97,19 @@ class _Scalar(SlicerType):
 
     def from_ros(self, data: Mapping[str, Any]) -> Any:
         return self.kind(data["data"])
+
+    def from_native(self, message: Message) -> Any:
+        """Its STRING text, as the daemon writes it (bridge/codecs/scalars.py): lossless."""
+        body = message.body
+        if not isinstance(body, String):
+            raise MessageValueError(f"GetLastMessage: expected a STRING for "
+                                    f"{self.ros_type}, got {message.type_name}")
+        text = body.text
+        if self.kind is str:
+            return text
+        if self.kind is bool:
+            return text.strip().lower() == "true"
+        return self.kind(text.strip())
 
     def to_publish(self, value: Any) -> Publication:
         kind = self.kind
@@ -178,6 +199,14 @@ class _Matrix(SlicerType):
 
     def from_ros(self, data: Mapping[str, Any]) -> Any:
         return matrix_of_pose(self.values, data, self.where, self.how)
+
+    def from_native(self, message: Message) -> Any:
+        """Its TRANSFORM, already a 4x4 matrix in mm."""
+        body = message.body
+        if not isinstance(body, Transform):
+            raise MessageValueError(f"GetLastMessage: expected a TRANSFORM for "
+                                    f"{self.ros_type}, got {message.type_name}")
+        return fill_vtk(np.asarray(body.matrix), self.values.matrix())
 
     def to_publish(self, value: Any) -> Publication:
         return "message", pose_of_matrix(value, self.where, self.how, path="Publish")

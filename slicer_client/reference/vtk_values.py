@@ -81,6 +81,10 @@ class _DataArray:
     def Initialize(self) -> None:  # noqa: N802
         self._values = []
 
+    def DeepCopy(self, other: Any) -> None:  # noqa: N802
+        self._values = [self._convert(v) for v in array_values(other)]
+        self._components = int(other.GetNumberOfComponents())
+
     def __repr__(self) -> str:
         return f"{self._class_name}({self._values})"
 
@@ -138,6 +142,13 @@ class Table:
     def SetValue(self, row: int, column: int, value: Any) -> None:  # noqa: N802
         self._columns[int(column)].SetValue(int(row), value)
 
+    def DeepCopy(self, other: Any) -> None:  # noqa: N802
+        self._columns = []
+        for i in range(other.GetNumberOfColumns()):
+            column = type(other.GetColumn(i))()
+            column.DeepCopy(other.GetColumn(i))
+            self._columns.append(column)
+
     def __repr__(self) -> str:
         return f"vtkTable({[array_values(c) for c in self._columns]})"
 
@@ -172,6 +183,9 @@ class Points:
 
     def Allocate(self, n: int) -> None:  # noqa: N802
         pass  # a list grows by itself
+
+    def DeepCopy(self, other: Any) -> None:  # noqa: N802
+        self._points = [_xyz(*other.GetPoint(i)) for i in range(other.GetNumberOfPoints())]
 
 
 def _xyz(x: Any, y: float, z: float) -> Tuple[float, float, float]:

@@ -11,6 +11,8 @@ import vtk
 
 from protocol.liveness import HEARTBEAT_DEVICE
 from protocol.messages import Message
+from protocol.naming import KEY_ROBOT
+from slicer_client.scene_plan import ATTRIBUTE_PREFIX
 from slicer_client.connection import ConnectionClosedError
 from slicer_client.connector_codec import (SLICER_TEXT_ENCODING, build_command,
                                            message_from_node, outgoing_content, parse_reply)
@@ -20,6 +22,8 @@ from slicer_client.transport import TransportListener
 __all__ = ["ConnectorTransport"]
 
 log = logging.getLogger("ROS2Bridge")  # the module's logger, as before the split
+# The connector's attribute for a message's ros2.robot metadata: a robot's mesh.
+ROBOT_ATTRIBUTE = ATTRIBUTE_PREFIX + KEY_ROBOT
 
 Observer = tuple[Any, int]  # (VTK object, observer tag)
 
@@ -47,6 +51,8 @@ class ConnectorTransport:
     # The connector puts each value into the scene itself, whatever its age: the daemon
     # cuts a dead link before its backlog ages past the freshness bound.
     drops_late_values = False
+    # Its connector imports standard OpenIGTLink types only, not the daemon's JSON bodies.
+    carries_whole_messages = False
 
     def __init__(self, connector: Any, clock: Callable[[], float] = time.monotonic) -> None:
         self.connector = connector
@@ -110,12 +116,16 @@ class ConnectorTransport:
         self._dead_after = max(0.0, float(seconds))
         self._heard = self._clock()
 
-    def _watchStatusNodes(self) -> None:
+    def _watchIncomingNodes(self) -> None:
         """Observe the STATUS nodes the connector makes: the heartbeat's (counted), and
         each stream's stale/live condition (handed to the client, which marks the
-        subscriber stale as slicer_client does)."""
+        subscriber stale as slicer_client does); and a robot's meshes (the client counts
+        its load done), placed or not yet."""
         for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
             node = self.connector.GetIncomingMRMLNode(i)
+            if node is not None and node.IsA("vtkMRMLModelNode") \
+                    and node.GetAttribute(ROBOT_ATTRIBUTE):
+                self.watch(node)
             if node is None or not node.IsA("vtkMRMLIGTLStatusNode"):
                 continue
             if node.GetName() != HEARTBEAT_DEVICE:
@@ -141,7 +151,7 @@ class ConnectorTransport:
         if self._listener is None:
             return
         self.connector.PeriodicProcess()  # what has come is counted before judging silence
-        self._watchStatusNodes()
+        self._watchIncomingNodes()
         if not self._dead_after:
             return
         now = self._clock()
@@ -266,7 +276,9 @@ class ConnectorTransport:
         if node.GetID() in self._node_observers:
             return
         event = (slicer.vtkMRMLTransformNode.TransformModifiedEvent
-                 if node.IsA("vtkMRMLTransformNode") else vtk.vtkCommand.ModifiedEvent)
+                 if node.IsA("vtkMRMLTransformNode") else
+                 slicer.vtkMRMLModelNode.MeshModifiedEvent if node.IsA("vtkMRMLModelNode")
+                 else vtk.vtkCommand.ModifiedEvent)
         tag = node.AddObserver(event, lambda caller, _event: self._forward(caller))
         self._node_observers[node.GetID()] = (node, tag)
         self._forward(node)
@@ -288,6 +300,11 @@ class ConnectorTransport:
         elif node.IsA("vtkMRMLIGTLStatusNode"):
             message = message_from_node(node.GetName(), attributes, status=(
                 node.GetCode(), node.GetErrorName() or "", node.GetStatusString() or ""))
+        elif node.IsA("vtkMRMLModelNode"):  # a robot's mesh: the client counts it in
+            model = _modelArrays(node.GetPolyData())
+            if model is None:
+                return
+            message = message_from_node(node.GetName(), attributes, model=model)
         else:
             return
         if message is not None and self._listener is not None:
@@ -307,6 +324,17 @@ class ConnectorTransport:
             node.RemoveObserver(tag)
         self._node_observers.clear()
         self._listener = None
+
+
+def _modelArrays(polydata: Any) -> Optional[tuple[Any, Any]]:
+    """A model's points (N, 3) and polygons as ``[n, i0..i(n-1), ...]``, as the connector
+    received them; None while it has no points."""
+    if polydata is None or polydata.GetNumberOfPoints() == 0:
+        return None
+    from vtk.util.numpy_support import vtk_to_numpy
+    legacy = vtk.vtkIdTypeArray()
+    polydata.GetPolys().ExportLegacyFormat(legacy)
+    return vtk_to_numpy(polydata.GetPoints().GetData()), vtk_to_numpy(legacy)
 
 
 def _worldSurface(modelNode: Any) -> Any:
