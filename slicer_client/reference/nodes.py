@@ -1026,7 +1026,9 @@ class ROS2Node:
 
         def make() -> PublisherNode:
             ros_type = str(pub.info.get("type", c.resolve_message_type(className)))
-            return PublisherNode(self, pub, self._slicer_type(className, ros_type))
+            # As the subscriber of the same name: Publish takes what GetLastMessage gives.
+            return PublisherNode(self, pub, self._slicer_type(
+                className, ros_type, str(pub.info.get("igtl_type", ""))))
         return self._keep(pub, make)  # type: ignore[no-any-return]
 
     def GetSubscriberNodeByTopic(self, topic: str) -> Optional[SubscriberNode]:  # noqa: N802

@@ -180,29 +180,27 @@ def test_uint8_image_both_ways(rosLogic: Any, processes: Processes) -> None:
 
 
 def test_image_by_its_ros_name_is_numpy_pixels(rosLogic: Any, processes: Processes) -> None:
-    """A name the reference does not have (sensor_msgs/msg/Image): the publisher takes a
-    message object, the subscriber (whose daemon streams images natively, not whole) gives
-    the Pythonic API's pixels, a (rows, columns, channels) uint8 array."""
+    """A name the reference does not have (sensor_msgs/msg/Image): the subscriber (whose
+    daemon streams images natively, not whole) gives the Pythonic API's pixels, a (rows,
+    columns, channels) uint8 array, and the publisher of the same name takes them."""
     rosNode = rosLogic.GetDefaultROS2Node()  # noqa: N806
-    pub = rosNode.CreateAndAddPublisherNode("sensor_msgs/msg/Image", "/tt_rgb")
+    pub = rosNode.CreateAndAddPublisherNode("sensor_msgs/msg/Image", "/tt_rgb", "camera")
     sub = rosNode.CreateAndAddSubscriberNode("sensor_msgs/msg/Image", "/tt_rgb")
+    blank = pub.GetBlankMessage()
+    assert isinstance(blank, np.ndarray) and blank.dtype == np.uint8
     pixels = np.arange(2 * 4 * 3, dtype=np.uint8).reshape(2, 4, 3)
-    message = pub.GetBlankMessage()
-    message.GetHeader().SetFrameId("camera")
-    message.SetHeight(2)
-    message.SetWidth(4)
-    message.SetEncoding("rgb8")
-    message.SetStep(12)
-    message.SetData(pixels.reshape(-1).tolist())
     peer = echo(processes, "/tt_rgb", "sensor_msgs/msg/Image")
-    received = until_received(lambda: pub.Publish(message), peer)
+    received = until_received(lambda: pub.Publish(pixels), peer)
     assert (received["height"], received["width"], received["encoding"]) == (2, 4, "rgb8")
+    assert received["header"]["frame_id"] == "camera"
     assert received["data"] == pixels.reshape(-1).tolist()
-    got = until_got(pub, message, sub, "the pixels back")
+    got = until_got(pub, pixels, sub, "the pixels back")
     assert isinstance(got, np.ndarray)
     np.testing.assert_array_equal(got.reshape(2, 4, 3), pixels)
     yaml = sub.GetLastMessageYAML()
     assert "frame_id: camera" in yaml and "encoding: rgb8" in yaml
+    with pytest.raises(ValueError, match=r"expected uint8 pixels .* got shape \(2, 4, 2\)"):
+        pub.Publish(np.zeros((2, 4, 2), dtype=np.uint8))
 
 
 def test_point_clouds_as_vtk_points(rosLogic: Any, processes: Processes) -> None:
