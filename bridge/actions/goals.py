@@ -184,7 +184,7 @@ class GoalSender:
                 await self._cancel(handle)
             except (asyncio.TimeoutError, CommandError) as error:
                 log.warning("cancelling goal %s (%s) failed: %s",
-                            bytes(handle.goal_id.uuid).hex(), why, error or "no answer")
+                            bytes(handle.goal_id.uuid).hex(), why, str(error) or "no answer")
         task = asyncio.ensure_future(run())
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
