@@ -282,6 +282,9 @@ class ServiceBridges:
         self._max_calls_per_client = max_calls_per_client
         self._call_guards: list[CallGuard] = []
         self.served: dict[str, ServedService] = {}
+        # Withdrawn services still lingering (SERVICE_LINGER_S), by name: advertised again,
+        # the old one goes at once, so that it answers no call of the new one's.
+        self._lingering: dict[str, ServedService] = {}
         # Calls of served services wait for their client's answer here.
         self._replies = replies if replies is not None else ClientReplies(hub)
         hub.add_closed_listener(self._on_client_closed)
@@ -354,11 +357,15 @@ class ServiceBridges:
         service = request.service
         ros_type = request.ros_type
         srv = installed_class(SERVICE, request.type, ros_type)
+        graph = self._ros.node.get_service_names_and_types()
+        lingering = self._lingering.pop(service, None)
+        if lingering is not None:  # ours, withdrawn: it goes now, and is no other's server
+            self._ros.executor.create_task(self._destroy_if_idle, lingering)
+            graph = [(name, types) for name, types in graph if name != service]
         existing = self.served.get(service)
         if already_served("service", service, ros_type, client,
                           existing.owner if existing else None,
-                          existing.ros_type if existing else "",
-                          self._ros.node.get_service_names_and_types()):
+                          existing.ros_type if existing else "", graph):
             assert existing is not None
             return Created(_describe_served(existing), existed=True)
         key = NameKey.service_server(service)
@@ -452,6 +459,7 @@ class ServiceBridges:
         served.closed = True
         self.served.pop(served.service, None)
         self._replies.withdraw(served)  # its callers waiting for an answer get a default one
+        self._lingering[served.service] = served
         self._names.release(served.key)
         self._hub.forget(served.device)
         # Destroyed in the executor thread once no call is being answered, and a while after
@@ -470,6 +478,8 @@ class ServiceBridges:
             served.destroy_pending = True
             return
         served.destroy_pending = False
+        if self._lingering.get(served.service) is served:  # (the loop may replace it)
+            self._lingering.pop(served.service, None)
         if served.handle is not None:
             try:
                 self._ros.node.destroy_service(served.handle)

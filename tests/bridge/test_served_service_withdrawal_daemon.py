@@ -2,9 +2,10 @@
 stops while a client still serves one: a real daemon, a real rclpy caller in another process
 (tests/peers/service_caller.py), a real TCP client that advertises and never answers.
 
-The daemon stops cleanly with services still served. The waiting caller should get the
-default response at once (not after the answer timeout) and the service go from the ROS
-graph: that test is an expected failure for now (a suspected race, see its reason)."""
+The daemon stops cleanly with services still served. The waiting caller gets the default
+response at once (not after the answer timeout: the withdrawn service lingers a second, so
+rclpy sends that response before the service is destroyed) and the service leaves the ROS
+graph."""
 
 from __future__ import annotations
 

@@ -189,6 +189,24 @@ def test_advertised_service_answered_by_the_client(processes: Processes, client:
         "the unadvertised service to leave the graph")
 
 
+def test_a_service_advertised_again_right_after_its_withdrawal_answers_as_the_new_one(
+        processes: Processes, answerer_factory: Callable[..., Answerer]) -> None:
+    """A withdrawn service lingers a second (its last answers must reach their callers);
+    advertised again meanwhile (a client that reconnects), the old one goes at once, so
+    no call gets its default answer instead of the new server's."""
+    old = answerer_factory(lambda request: {"success": False, "message": "old"})
+    new = answerer_factory(lambda request: {"success": True, "message": "new"})
+    args = {"service": "/slicer/again", "type": "std_srvs/srv/Trigger"}
+    old.connection.command("advertise_service", args)
+    old.connection.command("unadvertise_service", {"service": "/slicer/again"})
+    assert new.connection.command("advertise_service", args)["existed"] is False
+    for _ in range(3):
+        caller = processes.python("caller", "service_caller.py", "/slicer/again",
+                                  "std_srvs/srv/Trigger", "{}")
+        assert response_of(caller) == {"success": True, "message": "new"}
+    assert old.seen == [] and len(new.seen) == 3
+
+
 def test_concurrent_calls_of_an_advertised_trigger(processes: Processes,
                                                    answerer_factory: Callable[..., Answerer]
                                                    ) -> None:
