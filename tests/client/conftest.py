@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Iterator
+from typing import Any, Iterator
 
 import pytest
 
@@ -23,3 +23,9 @@ def ros(daemon: RunningDaemon) -> Iterator[slicer_client.Client]:
     client = slicer_client.connect("127.0.0.1", daemon.port)
     yield client
     client.close()
+
+
+@pytest.fixture
+def rosLogic(ros: slicer_client.Client) -> Any:  # noqa: N802 - the reference's name
+    """The reference's logic over a Pythonic client (`ros.logic`)."""
+    return ros.logic

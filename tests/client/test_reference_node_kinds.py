@@ -11,7 +11,7 @@ import json
 import logging
 import threading
 import time
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 import numpy as np
 import pytest
@@ -20,7 +20,8 @@ import slicer_client
 from jointy_urdf import JOINTY_URDF
 from slicer_client.matrices import as_numpy
 from slicer_client.reference.messages import MessageValueError
-from support import Processes, RunningDaemon, scaled, start_daemon, wait_until
+from ros_echo import echo, until_received
+from support import Processes, scaled, start_daemon, wait_until
 
 pytestmark = pytest.mark.ros
 vtk = pytest.importorskip("vtk", reason="the reference's out-arguments and transforms are "
@@ -29,32 +30,10 @@ vtk = pytest.importorskip("vtk", reason="the reference's out-arguments and trans
 GRIPPER = "control_msgs/action/GripperCommand"
 
 
-@pytest.fixture
-def rosLogic(daemon: RunningDaemon) -> Iterator[Any]:  # noqa: N802 - the reference's name
-    client = slicer_client.connect("127.0.0.1", daemon.port)
-    try:
-        yield client.logic
-    finally:
-        client.close()
 
 
-def echo(processes: Processes, topic: str, msg_type: str) -> Any:
-    child = processes.python(f"echo{topic.replace('/', '_')}", "echo_subscriber.py", topic,
-                             msg_type)
-    child.wait_for_output("READY", timeout=30)
-    return child
 
 
-def until_received(act: Callable[[], Any], child: Any, timeout: float = 20.0) -> dict:
-    deadline = time.monotonic() + scaled(timeout)
-    while True:
-        act()
-        try:
-            line = child.wait_for_output("MSG ", timeout=0.2)
-            return json.loads(line.split("MSG ", 1)[1])  # type: ignore[no-any-return]
-        except AssertionError:
-            if time.monotonic() > deadline:
-                raise
 
 
 def spin_until(rosLogic: Any, predicate: Callable[[], bool], what: str) -> None:  # noqa: N803

@@ -6,9 +6,7 @@ another process (the witness), and read back from a facade subscriber."""
 
 from __future__ import annotations
 
-import json
-import time
-from typing import Any, Callable, Iterator
+from typing import Any, Iterator
 
 import numpy as np
 import pytest
@@ -19,7 +17,8 @@ from slicer_client.reference.logic import ROS2Logic
 from slicer_client.reference.messages import MessageValueError
 from slicer_client.reference.vtk_values import (DoubleArray, IntArray, Points, Table,
                                                 TypeUInt8Array)
-from support import Processes, RunningDaemon, scaled, wait_until
+from ros_echo import echo, until_received, until_got
+from support import Processes, RunningDaemon
 
 pytestmark = pytest.mark.ros
 
@@ -33,29 +32,10 @@ def rosNode(daemon: RunningDaemon) -> Iterator[Any]:  # noqa: N802 - the referen
         client.close()
 
 
-def echo(processes: Processes, topic: str, msg_type: str) -> Any:
-    child = processes.python(f"echo{topic.replace('/', '_')}", "echo_subscriber.py", topic,
-                             msg_type)
-    child.wait_for_output("READY", timeout=30)
-    return child
 
 
-def until_received(publish: Callable[[], Any], child: Any, timeout: float = 20.0) -> dict:
-    deadline = time.monotonic() + scaled(timeout)
-    while True:
-        publish()
-        try:
-            line = child.wait_for_output("MSG ", timeout=0.2)
-            return json.loads(line.split("MSG ", 1)[1])  # type: ignore[no-any-return]
-        except AssertionError:
-            if time.monotonic() > deadline:
-                raise
 
 
-def until_got(pub: Any, value: Any, sub: Any, what: str) -> Any:
-    wait_until(lambda: pub.Publish(value) >= 1 and sub.GetLastMessage() is not None,
-               timeout=20, what=what)
-    return sub.GetLastMessage()
 
 
 def test_int_array_filled_as_a_vtk_array_is(rosNode: Any, processes: Processes) -> None:  # noqa: N803

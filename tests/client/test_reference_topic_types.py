@@ -7,56 +7,26 @@ another type, a ragged table."""
 
 from __future__ import annotations
 
-import json
-import time
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
 
-import slicer_client
 from slicer_client.reference.messages import MessageValueError
-from support import Processes, RunningDaemon, scaled, wait_until
+from ros_echo import echo, until_received, until_got
+from support import Processes
 
 pytestmark = pytest.mark.ros
 vtk = pytest.importorskip("vtk", reason="Slicer hands the facade VTK objects; the test "
                           "extra installs vtk")
 
 
-@pytest.fixture
-def rosLogic(daemon: RunningDaemon) -> Iterator[Any]:  # noqa: N802 - the reference's name
-    client = slicer_client.connect("127.0.0.1", daemon.port)
-    try:
-        yield client.logic
-    finally:
-        client.close()
 
 
-def echo(processes: Processes, topic: str, msg_type: str) -> Any:
-    child = processes.python(f"echo{topic.replace('/', '_')}", "echo_subscriber.py", topic,
-                             msg_type)
-    child.wait_for_output("READY", timeout=30)
-    return child
 
 
-def until_received(publish: Callable[[], Any], child: Any, timeout: float = 20.0) -> dict:
-    """Publish until the rclpy echo prints a message (discovery races); that message."""
-    deadline = time.monotonic() + scaled(timeout)
-    while True:
-        publish()
-        try:
-            line = child.wait_for_output("MSG ", timeout=0.2)
-            return json.loads(line.split("MSG ", 1)[1])  # type: ignore[no-any-return]
-        except AssertionError:
-            if time.monotonic() > deadline:
-                raise
 
 
-def until_got(pub: Any, value: Any, sub: Any, what: str) -> Any:
-    """Publish `value` until the facade subscriber `sub` has a message; that message."""
-    wait_until(lambda: pub.Publish(value) >= 1 and sub.GetLastMessage() is not None,
-               timeout=20, what=what)
-    return sub.GetLastMessage()
 
 
 def test_wrench_publisher_and_subscriber(rosLogic: Any, processes: Processes) -> None:
