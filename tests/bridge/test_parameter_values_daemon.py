@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import itertools
 import json
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 import pytest
 
@@ -16,24 +16,10 @@ from protocol import commands as c
 from protocol.commands import ErrorCode
 from protocol.messages import Status, StatusCode, String
 from slicer_client.connection import CommandRefusedError, Connection
-from support import Child, Processes, RunningDaemon, assert_clean_exit, start_daemon
+from support import Child, Processes, RunningDaemon
 
 _nodes = itertools.count()
 NAN = float("nan")
-
-
-@pytest.fixture(scope="module")
-def daemon(module_processes: Processes) -> Iterator[RunningDaemon]:
-    running = start_daemon(module_processes)
-    yield running
-    assert_clean_exit(running)
-
-
-@pytest.fixture
-def client(daemon: RunningDaemon) -> Iterator[Connection]:
-    connection = daemon.connect()
-    yield connection
-    connection.close()
 
 
 def refused(call: Callable[[], Any]) -> c.ErrorInfo:

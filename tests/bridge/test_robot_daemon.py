@@ -190,13 +190,6 @@ def daemon(module_processes: Processes, demo_package: tuple[Path, dict[str, Path
     assert_clean_exit(running)
 
 
-@pytest.fixture
-def client(daemon: RunningDaemon) -> Iterator[Connection]:
-    connection = daemon.connect()
-    yield connection
-    connection.close()
-
-
 @pytest.fixture(scope="module")
 def omni(module_processes: Processes, daemon: RunningDaemon) -> dict[str, Any]:
     """The Omni's state publisher (default node /robot_state_publisher) and a joint-state

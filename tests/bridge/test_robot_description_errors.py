@@ -36,13 +36,6 @@ def daemon(module_processes: Processes, robot_dir: Path) -> Iterator[RunningDaem
     assert_clean_exit(running)
 
 
-@pytest.fixture
-def client(daemon: RunningDaemon) -> Iterator[Connection]:
-    connection = daemon.connect()
-    yield connection
-    connection.close()
-
-
 def robot(body: str, name: str = "r") -> str:
     return f'<?xml version="1.0"?>\n<robot name="{name}">{body}</robot>\n'
 

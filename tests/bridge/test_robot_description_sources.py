@@ -42,13 +42,6 @@ def daemon(module_processes: Processes) -> Iterator[RunningDaemon]:
     assert_clean_exit(running)
 
 
-@pytest.fixture
-def client(daemon: RunningDaemon) -> Iterator[Connection]:
-    connection = daemon.connect()
-    yield connection
-    connection.close()
-
-
 def publish(processes: Processes, topic: str, text: str) -> Child:
     child = processes.python("description", "publish_json.py", topic, "std_msgs/msg/String",
                              json.dumps({"data": text}), "--transient-local")
