@@ -393,24 +393,29 @@ class Hub:
                     return
         self._post(device, frame, channel)
 
-    def post_frames(self, frames: list[tuple[str, Frame]]) -> None:
+    def post_frames(self, frames: list[tuple[str, Frame]],
+                    channel: StreamChannel | None = None) -> None:
         """Thread-safe `stream_frame` of several small values at once (one tf update of
-        many lookups): each client that keeps up gets them in one socket write from this
-        thread; otherwise they go through the loop, in order, as `post_frame`'s do. The
-        caller keeps removed devices out (the tf capability's delivery lock)."""
+        many lookups, a burst of one stream's messages taken together): each client that
+        keeps up gets them in one socket write from this thread; otherwise they go through
+        the loop, in order, as `post_frame`'s do. With `channel` (all of them its device's),
+        nothing is sent once it is closed; without, the caller keeps removed devices out
+        (the tf capability's delivery lock)."""
         if not frames:
             return
         clock = daemon_clock_ms()
         for _, frame in frames:
             frame.clock = frame.clock or clock
         if self._direct_writes and not any(d in self._min_interval or d in self._audience
-                                           for d, _ in frames):
+                                           or isinstance(f, BulkFrame) for d, f in frames):
             with self._lock:
+                if channel is not None and channel.closed:
+                    return
                 if not (self._wake_pending or self._draining):
                     self._write_direct_many(frames)
                     return
         for device, frame in frames:
-            self._post(device, frame, None)
+            self._post(device, frame, channel)
 
     def _write_direct_many(self, frames: list[tuple[str, Frame]]) -> None:
         # Under self._lock, with nothing queued for the loop (see _write_direct).

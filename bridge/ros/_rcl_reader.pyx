@@ -12,13 +12,14 @@ them under ``sys.prefix/include``); imported only after rclpy, which has loaded 
 libraries this module needs. Elsewhere the daemon takes /tf through rclpy, as before.
 """
 
+from cpython.bytes cimport PyBytes_FromStringAndSize
 from cpython.memoryview cimport PyMemoryView_FromMemory
 from cpython.buffer cimport PyBUF_READ
 from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport calloc, free
 
-# Bump with `bridge.tf.reader.READER_INTERFACE`: a module from an older build is not used.
-INTERFACE = 1
+# Bump with `bridge.ros.raw_reader.READER_INTERFACE`: a module from an older build is not used.
+INTERFACE = 2
 
 
 cdef extern from "rcl/rcl.h" nogil:
@@ -165,6 +166,32 @@ cdef class RawReader:
             return None
         rcutils_reset_error()
         raise ReaderError(f"rcl returned {ret} while waiting for or taking a message")
+
+    def take_more(self, size_t index, size_t max_count, size_t max_bytes):
+        """The messages of subscription ``index`` already waiting, in order, each copied
+        to bytes, without waiting: at most ``max_count``, and none after the one that
+        brings the total to ``max_bytes``. The view `take` gave is invalid afterwards."""
+        cdef rcl_ret_t ret = RCL_RET_OK
+        cdef rmw_message_info_t info
+        cdef size_t total = 0
+        if not self._open:
+            raise ReaderError("the reader is closed")
+        if index >= self._count:
+            raise IndexError(f"index: expected below {self._count}, got {index}")
+        taken = []
+        while <size_t>len(taken) < max_count and total < max_bytes:
+            with nogil:
+                ret = rcl_take_serialized_message(self._subscriptions[index], &self._message,
+                                                  &info, NULL)
+            if ret != RCL_RET_OK:
+                break
+            total += self._message.buffer_length
+            taken.append(PyBytes_FromStringAndSize(<char *>self._message.buffer,
+                                                   <Py_ssize_t>self._message.buffer_length))
+        if ret != RCL_RET_OK and ret != RCL_RET_SUBSCRIPTION_TAKE_FAILED:
+            rcutils_reset_error()
+            raise ReaderError(f"rcl returned {ret} while taking a message")
+        return taken
 
     cdef rcl_ret_t _wait(self, int64_t timeout_ns) noexcept nogil:
         cdef size_t i

@@ -4,7 +4,8 @@ rclpy takes each raw message holding the lock: a peer's 10 MB TFMessage kept eve
 thread of the daemon waiting about 20 ms (bench/attacks.py's tf_frames storm). A
 `RawReader` waits for and takes its subscriptions' messages with rcl's own wait set and take,
 the lock released (the compiled `bridge.ros._rcl_reader`), and hands each to its topic's callback
-as a read-only view, valid during the call.
+as a read-only view, valid during the call (`RawTopic`), or, for a `BatchTopic`, every message
+of that topic waiting at once, as one list: a burst costs one callback.
 
 The subscriptions are real ones on the given node (the ROS graph lists them), made outside
 rclpy's `Node.create_subscription`, so no executor waits on them too. `available()` says
@@ -19,7 +20,7 @@ import os
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence, Union
 
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -27,7 +28,7 @@ from rclpy.qos import QoSProfile
 log = logging.getLogger(__name__)
 
 # The compiled module's interface this wrapper expects (`_rcl_reader.INTERFACE`).
-READER_INTERFACE = 1
+READER_INTERFACE = 2
 _WAIT_S = 0.1  # at most this long between waits: a wake-up rcl missed costs no more
 _ERROR_LOG_INTERVAL_S = 5.0
 
@@ -56,12 +57,30 @@ class RawTopic:
     callback: Callable[[memoryview], None]  # runs in the reader's thread
 
 
+# A batch: at most this many messages, and none after the one that passes the byte bound.
+BATCH_MAX_MESSAGES = 256
+BATCH_MAX_BYTES = 1024 * 1024
+
+
+@dataclass(frozen=True)
+class BatchTopic:
+    """A topic whose callback gets every message waiting, copied, in order (a list of at
+    least one; see `BATCH_MAX_MESSAGES`), in the reader's thread."""
+
+    topic: str
+    msg_type: Any
+    qos: QoSProfile
+    callback: Callable[[list[bytes]], None]
+
+
 class RawReader:
     """Subscribes raw to `topics` on `node` and calls each one's callback, in the thread
-    ``name``, with each message's bytes. `close` stops the thread and destroys the
-    subscriptions; it must run before the node is destroyed (RosNode.stop sees to it)."""
+    ``name``, with each message's bytes (a `BatchTopic`'s: with those waiting together).
+    `close` stops the thread and destroys the subscriptions; it must run before the node is
+    destroyed (RosNode.stop sees to it)."""
 
-    def __init__(self, node: Node, topics: list[RawTopic], name: str) -> None:
+    def __init__(self, node: Node, topics: Sequence[Union[RawTopic, BatchTopic]],
+                 name: str) -> None:
         if not available():
             raise RuntimeError("the compiled rcl reader is not built here")
         from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -102,8 +121,19 @@ class RawReader:
             if taken is None:
                 continue
             index, view = taken
+            topic = self._topics[index]
             try:
-                self._topics[index].callback(view)
+                if isinstance(topic, BatchTopic):
+                    first = view.tobytes()
+                    view.release()
+                    topic.callback([first, *self._reader.take_more(
+                        index, BATCH_MAX_MESSAGES - 1, max(0, BATCH_MAX_BYTES - len(first)))])
+                else:
+                    topic.callback(view)
+            except _rcl_reader.ReaderError:
+                if not self._stopping.is_set():
+                    log.exception("the raw reader of %s stopped", topic.topic)
+                return
             except Exception:
                 # One failing message must not stop the topic: log it and go on.
                 now = time.monotonic()
@@ -120,6 +150,10 @@ class RawReader:
                 except BufferError:  # a callback kept a view: a bug, the buffer is reused
                     log.error("a callback of %s kept a view on the reader's buffer",
                               self._topics[index].topic)
+
+    @property
+    def closed(self) -> bool:
+        return self._thread is None
 
     def close(self) -> None:
         """Stop the thread (a wait in progress ends at once), then free the reader and

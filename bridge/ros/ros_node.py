@@ -15,8 +15,8 @@ Two nodes, two executors:
   service callbacks (ros2/rclpy#1473, fixed after 7.1.x), hence the split.
 
 Raw readers (`raw_reader`, bridge/ros/raw_reader.py) take some of ``stream_node``'s raw
-subscriptions (/tf) in threads of their own, without the interpreter's lock; `stop` closes
-them before the nodes go.
+subscriptions (/tf, streamed poses) in threads of their own, without the interpreter's lock;
+`stop` closes them before the nodes go.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Optional, Union
+from typing import Optional, Sequence, Union
 
 import rclpy
 from rclpy.client import Client
@@ -39,7 +39,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
 
-from bridge.ros.raw_reader import RawReader, RawTopic
+from bridge.ros.raw_reader import BatchTopic, RawReader, RawTopic
 from protocol.commands import OutOfRangeError
 from bridge.ros.raw_reader import available as raw_reader_available
 
@@ -146,13 +146,16 @@ class RosNode:
                     unlogged += 1
                 time.sleep(_ERROR_PAUSE_S)
 
-    def raw_reader(self, topics: list[RawTopic], name: str) -> Optional[RawReader]:
+    def raw_reader(self, topics: Sequence[Union[RawTopic, BatchTopic]],
+                   name: str) -> Optional[RawReader]:
         """`topics` subscribed raw on ``stream_node`` and read without the interpreter's
         lock in the thread ``name`` (bridge/ros/raw_reader.py); None where the compiled reader
         is not built (then subscribe through rclpy). Closed by `stop` at the latest."""
         if not raw_reader_available():
             return None
         reader = RawReader(self.stream_node, topics, name)
+        # Those closed by their owners meanwhile are forgotten: a bridge each, made and removed.
+        self._raw_readers = [r for r in self._raw_readers if not r.closed]
         self._raw_readers.append(reader)
         return reader
 

@@ -32,10 +32,11 @@ from bridge.core.heavy import OffLoop
 from bridge.core.hub import Hub, Replier, StreamChannel, Subscriber, frame_for
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.content_guards import ContentGuard
-from bridge.core.outbox import TemplateFrame
+from bridge.core.outbox import Frame, TemplateFrame
 from bridge.core.stream_health import Arrivals, StreamHealth
 from bridge.ros.graph_types import refuse_other_type
 from bridge.ros.qos import default_depth, qos_profile
+from bridge.ros.raw_reader import BatchTopic
 from bridge.ros.ros_node import RosNode
 from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
                                CreateSubscriber, ErrorCode, ForbiddenError, GetLastMessage, Op,
@@ -113,9 +114,17 @@ class SubscriberBridge:
         self._fast = (RawPoseStream(codec, device, metadata)
                       if has_fast_path(codec.ros_type) and message_filter is None else None)
         # Taken serialized whatever the type: the size is known before anything is kept,
-        # and the last message stays as its bytes (deserialized only when asked for).
-        self._subscription = ros.stream_node.create_subscription(
-            codec.message_class, topic, self._on_raw, qos_profile(qos), raw=True)
+        # and the last message stays as its bytes (deserialized only when asked for). Hot
+        # poses are taken by a raw reader of their own, without the interpreter's lock, a
+        # burst at a time (bridge/ros/raw_reader.py); the rest through the executor.
+        self._reader = (ros.raw_reader([BatchTopic(topic, codec.message_class,
+                                                   qos_profile(qos), self._on_batch)],
+                                       name=f"stream {device}")
+                        if self._fast is not None else None)
+        self._subscription = (None if self._reader is not None else
+                              ros.stream_node.create_subscription(
+                                  codec.message_class, topic, self._on_raw, qos_profile(qos),
+                                  raw=True))
 
     @property
     def last_message(self) -> Any:
@@ -145,23 +154,37 @@ class SubscriberBridge:
             self._messages = _MessageStream(self._hub.open_channel(device), metadata)
         return self._messages.channel.device
 
-    def _on_raw(self, data: bytes) -> None:  # ROS executor thread: convert, hand off
+    def _on_raw(self, data: bytes) -> None:  # ROS executor thread
+        self._on_batch([data])
+
+    def _on_batch(self, messages: list[bytes]) -> None:  # a ROS thread: convert, hand off
+        """Messages taken together, in order (one, from the executor). Hot poses become
+        `TemplateFrame`s that reach each client in one write; the rest go one by one."""
         if self._channel.closed:
             return
         self.arrivals.note(time.monotonic())
         fast = self._fast
-        if fast is not None:
-            self.count += 1
-            self._keep(data)
+        if fast is None:
+            for data in messages:
+                self._on_message(data)
+            return
+        frames: list[tuple[str, Frame]] = []
+        for data in messages:
             try:
                 template, content, timestamp, values = fast.convert(data)
-            except NotFast:
-                self._convert(deserialize_message(data, self.codec.message_class))
-                return
-            self._hub.post_frame(self._channel, TemplateFrame(template, content, timestamp,
-                                                              values, transform_body))
+            except NotFast:  # the ordinary way says what is wrong with it, after those before
+                self._hub.post_frames(frames, self._channel)
+                frames = []
+                self._on_message(data)
+                continue
+            self.count += 1
+            frames.append((self.device, TemplateFrame(template, content, timestamp, values,
+                                                      transform_body)))
             self._post_whole(None, data)
-            return
+        self._keep(messages[-1])
+        self._hub.post_frames(frames, self._channel)
+
+    def _on_message(self, data: bytes) -> None:
         if self._filter is None and self._encode_serialized(data):
             return
         try:
@@ -235,7 +258,10 @@ class SubscriberBridge:
         self._hub.close_channel(self._channel)
         if self._messages is not None:
             self._hub.close_channel(self._messages.channel)
-        self._ros.destroy(self._subscription)
+        if self._reader is not None:
+            self._reader.close()
+        if self._subscription is not None:
+            self._ros.destroy(self._subscription)
 
 
 @dataclass

@@ -612,3 +612,69 @@ def test_bytes_rclpy_cannot_read_are_dropped_with_a_warning(
     finally:
         ros.stop()
         served.close()
+
+
+# ---------------------------------------------------------------------------- pose bursts
+
+
+def _pose_bytes(n: int, frame: str = "world") -> bytes:
+    from geometry_msgs.msg import PoseStamped
+
+    msg = PoseStamped()
+    msg.header.frame_id = frame
+    msg.header.stamp.sec = 1_700_000_000
+    msg.pose.position.x = n * 1e-3
+    msg.pose.orientation.w = 1.0
+    return bytes(serialize_message(msg))
+
+
+@pytest.mark.ros
+def test_a_burst_of_poses_taken_together_reaches_each_client_in_one_write_in_order() -> None:
+    """A pose subscriber's raw reader hands on the messages waiting together: each client
+    that keeps up gets the whole burst in one socket write from that thread, in order; a
+    message the fast path cannot convert takes the ordinary way in its place in the order."""
+    from bridge.codecs import codec_for
+    from bridge.ros.ros_node import RosNode, RosOptions
+    from bridge.topics.capability import SubscriberBridge
+    from protocol.commands import QoS
+
+    served = _Served(direct_writes=True)
+    ros = RosNode(RosOptions(node_name="hot_path_pose_burst"))
+    try:
+        peers = [served.connect() for _ in range(2)]
+        bridge = SubscriberBridge(ros, served.hub, topic="/hot_path_pose_burst",
+                                  codec=codec_for("geometry_msgs/msg/PoseStamped"),
+                                  qos=QoS(), device="pose", metadata={})
+        burst = [_pose_bytes(n) for n in range(1, 11)]
+        poster = threading.Thread(target=bridge._on_batch, args=(burst,))
+        poster.start()
+        poster.join()
+        for peer in peers:
+            got = peer.read_until(10)
+            assert [round(m.body.matrix[0][3]) for m in got] == list(range(1, 11))  # mm
+        assert [s._sent_direct for s in served.sessions] == [1, 1]
+        assert bridge.count == 10
+        assert bridge.last_message.pose.position.x == pytest.approx(0.010)
+
+        # A zero quaternion is not the fast path's: the ordinary codec sends it (no rotation,
+        # at the origin here), in its place in the order.
+        from geometry_msgs.msg import PoseStamped
+
+        bad = PoseStamped()
+        bad.header.frame_id = "world"
+        with_bad = [_pose_bytes(11), bytes(serialize_message(bad)), _pose_bytes(12)]
+        poster = threading.Thread(target=bridge._on_batch, args=(with_bad,))
+        poster.start()
+        poster.join()
+        for peer in peers:
+            got = peer.read_until(3)
+            assert [round(m.body.matrix[0][3]) for m in got] == [11, 0, 12]
+        assert bridge.count == 13
+        bridge.close()
+        poster = threading.Thread(target=bridge._on_batch, args=([_pose_bytes(13)],))
+        poster.start()
+        poster.join()
+        assert "pose" not in served.call(_devices(served.hub))
+    finally:
+        ros.stop()
+        served.close()

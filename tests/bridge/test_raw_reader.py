@@ -10,12 +10,13 @@ from typing import Iterator
 
 import pytest
 from geometry_msgs.msg import PoseStamped
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from tf2_msgs.msg import TFMessage
 
 from bridge.ros import raw_reader
 from bridge.ros.qos import TF_QOS
-from bridge.ros.raw_reader import RawTopic
+from bridge.ros.raw_reader import BatchTopic, RawTopic
 from bridge.ros.ros_node import RosNode, RosOptions
 from support import Processes, scaled, wait_until
 
@@ -119,3 +120,70 @@ def test_rclpy_take_rules_the_reader_out(monkeypatch: pytest.MonkeyPatch) -> Non
     assert not raw_reader.available()
     monkeypatch.setenv(raw_reader.RCLPY_TAKE_ENV, "0")
     assert raw_reader.available()
+
+
+def _deep_reliable() -> QoSProfile:
+    return QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                      history=HistoryPolicy.KEEP_LAST)
+
+
+def _batched(ros: RosNode, processes: Processes, topic: str,
+             count: int) -> list[list[float]]:
+    """The batches a `BatchTopic` reader hands on while `count` poses are published back to
+    back; the first callback holds until all of them were published, so that the rest wait
+    in the subscription together."""
+    batches: list[list[float]] = []
+    published = threading.Event()
+    threads: set[str] = set()
+
+    def on_batch(messages: list[bytes]) -> None:
+        threads.add(threading.current_thread().name)
+        assert all(isinstance(m, bytes) for m in messages)
+        batches.append([deserialize_message(m, PoseStamped).pose.position.x
+                        for m in messages])
+        if len(batches) == 1:
+            published.wait(scaled(30))
+
+    reader = ros.raw_reader([BatchTopic(topic, PoseStamped, _deep_reliable(), on_batch)],
+                            name="rr-batch")
+    assert reader is not None
+    publisher = processes.python("poses", "stream_publisher.py", topic, "100000",
+                                 "--count", str(count))
+    publisher.wait_for_output(f"SENT {count} DONE", timeout=30)
+    published.set()
+    wait_until(lambda: sum(len(b) for b in batches) >= count, timeout=30,
+               what=f"{count} poses")
+    assert threads == {"rr-batch"}
+    reader.close()
+    return batches
+
+
+def test_a_batch_topic_gets_the_waiting_messages_together_in_order(
+        ros: RosNode, processes: Processes) -> None:
+    batches = _batched(ros, processes, "/rr_batch", 200)
+    poses = [x for batch in batches for x in batch]
+    # stream_publisher.py: the n-th pose has x = n * 1e-6 m; none lost, none repeated.
+    assert [round(x * 1e6) for x in poses] == list(range(1, 201))
+    assert all(batches)
+    assert len(batches) < 200 and max(len(b) for b in batches) > 1, [len(b) for b in batches]
+
+
+def test_a_batch_is_bounded(ros: RosNode, processes: Processes,
+                            monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(raw_reader, "BATCH_MAX_MESSAGES", 4)
+    batches = _batched(ros, processes, "/rr_batch_bounded", 60)
+    assert [round(x * 1e6) for b in batches for x in b] == list(range(1, 61))
+    assert max(len(b) for b in batches) == 4, [len(b) for b in batches]
+
+
+def test_take_more_refuses_an_index_it_does_not_have(ros: RosNode) -> None:
+    reader = ros.raw_reader([RawTopic("/rr_index", PoseStamped, TF_QOS, lambda view: None)],
+                            name="rr-index")
+    assert reader is not None
+    with pytest.raises(IndexError, match="index: expected below 1, got 3"):
+        reader._reader.take_more(3, 10, 1000)
+    assert reader._reader.take_more(0, 10, 1000) == []  # nothing waits: none, at once
+    reader.close()
+    assert reader.closed
+    with pytest.raises(raw_reader._rcl_reader.ReaderError, match="closed"):
+        reader._reader.take_more(0, 10, 1000)
