@@ -85,10 +85,13 @@ def encode_parts(message: Message, *, header_version: int = 1,
     type_name = message.type_name
     body = message.body
     content: Buffer
+    lead = b""  # the content's first bytes, sent with the header (an image's own header)
     if isinstance(body, RawBody):
         content = body.data
-    elif isinstance(body, (PolyData, Image)):
-        content = body.pack_view()  # a model of tens of MB, a video frame: no final copy
+    elif isinstance(body, Image):
+        lead, content = body.pack_parts()  # a video frame's pixels, where they lie
+    elif isinstance(body, PolyData):
+        content = body.pack_view()  # a model of tens of MB: no final copy
     else:
         content = body.pack()
     if header_version == 1:
@@ -103,8 +106,9 @@ def encode_parts(message: Message, *, header_version: int = 1,
         tail = meta_header + meta
     else:
         raise EncodeError("header_version", "1 or 2", header_version)
-    size = len(ext) + len(content) + len(tail)
-    crc = (crc64_continue(crc64(ext), content) if content_crc is None
+    size = len(ext) + len(lead) + len(content) + len(tail)
+    # ``content_crc`` is the whole content's (lead included).
+    crc = (crc64_continue(crc64_continue(crc64(ext), lead), content) if content_crc is None
            else content_crc.after(crc64(ext)))
     crc = crc64_continue(crc, tail)
     timestamp = message.timestamp
@@ -117,7 +121,7 @@ def encode_parts(message: Message, *, header_version: int = 1,
         # Raises the EncodeError that says what is wrong.
         header = Header(header_version, type_name, message.device_name, timestamp, size,
                         crc).pack()
-    return header + ext, content, tail
+    return header + ext + lead, content, tail
 
 
 # Streams repeat the same metadata and names thousands of times a second: their packed

@@ -813,19 +813,18 @@ class Image:
         return head, pixels
 
     def pack(self) -> bytes:
-        head, pixels = self._head_and_pixels()
-        little = pixels.dtype.newbyteorder("<")
-        return head + np.ascontiguousarray(pixels, dtype=little).tobytes()
+        head, pixels = self.pack_parts()
+        return head + bytes(pixels)
 
-    def pack_view(self) -> memoryview:
-        """`pack`'s bytes with the pixels copied once, into the buffer that is sent (a
-        video frame: no second copy and no joining), as a read-only view."""
+    def pack_parts(self) -> tuple[bytes, memoryview]:
+        """`pack`'s bytes as the image header and the pixels. Pixels already laid out as
+        sent (contiguous rows, little-endian) are not copied: a video frame read where it
+        lies in its ROS message goes from there to the socket. Others are packed once."""
         head, pixels = self._head_and_pixels()
-        out = np.empty(len(head) + pixels.nbytes, dtype=np.uint8)
-        out[:len(head)] = np.frombuffer(head, dtype=np.uint8)
         little = pixels.dtype.newbyteorder("<")
-        out[len(head):].view(little).reshape(pixels.shape)[...] = pixels
-        return out.data.toreadonly()
+        if pixels.dtype != little or not pixels.flags.c_contiguous:
+            pixels = np.ascontiguousarray(pixels, dtype=little)
+        return head, pixels.reshape(-1).view(np.uint8).data.toreadonly()
 
     @classmethod
     def unpack(cls, content: bytes) -> Image:

@@ -245,3 +245,31 @@ def test_damaged_serialized_images_are_refused_or_left_to_rclpy(
         return
     if encoded is not None:
         assert isinstance(encoded.body, Image)
+
+
+@pytest.mark.parametrize("encoding, dtype, channels", [("rgb8", "uint8", 3),
+                                                       ("mono16", "uint16", 1)])
+def test_a_video_frame_goes_from_its_ros_bytes_to_the_wire_parts_without_a_copy(
+        encoding: str, dtype: str, channels: int) -> None:
+    """The frame that is sent holds the pixels where they lie in the serialized message:
+    no copy of them is made in Python between the ROS bytes and the socket."""
+    from rclpy.serialization import serialize_message
+
+    from bridge.core.hub import frame_for
+    from protocol.framing import Decoder
+    from protocol.messages import Message
+
+    pixels = RNG.integers(0, 255, size=(240, 320, channels)).astype(dtype)  # a large frame
+    data = bytes(serialize_message(_ros_image(encoding, pixels)))
+    encoded = codec_for("sensor_msgs/msg/Image").encode_serialized(data)
+    assert encoded is not None and not isinstance(encoded, CodecError)
+    frame = frame_for(Message(device_name="camera", body=encoded.body, timestamp=1,
+                              metadata=encoded.metadata))
+    head, content, tail = frame.encoded_parts(2)
+    assert np.shares_memory(np.frombuffer(content, dtype=np.uint8),
+                            np.frombuffer(data, dtype=np.uint8))
+    decoder = Decoder()
+    decoder.feed(b"".join((head, content, tail)))  # and the bytes are a valid IMAGE
+    message = decoder.next_message()
+    assert message is not None and isinstance(message.body, Image)
+    np.testing.assert_array_equal(message.body.pixels[0], pixels)
