@@ -57,6 +57,9 @@ cdef extern from "rcl/rcl.h" nogil:
                                 size_t services, size_t events, rcl_context_t *context,
                                 rcl_allocator_t allocator)
     rcl_ret_t rcl_wait_set_fini(rcl_wait_set_t *wait_set)
+    rcl_ret_t rcl_wait_set_resize(rcl_wait_set_t *wait_set, size_t subscriptions,
+                                  size_t guard_conditions, size_t timers, size_t clients,
+                                  size_t services, size_t events)
     rcl_ret_t rcl_wait_set_clear(rcl_wait_set_t *wait_set)
     rcl_ret_t rcl_wait_set_add_subscription(rcl_wait_set_t *wait_set,
                                             const rcl_subscription_t *subscription,
@@ -102,14 +105,7 @@ cdef class RawReader:
         cdef rcl_ret_t ret
         self._open = False
         self._count = len(subscriptions)
-        if self._count == 0:
-            raise ValueError("subscriptions: expected at least one, got none")
-        self._subscriptions = <const rcl_subscription_t **>calloc(
-            self._count, sizeof(rcl_subscription_t *))
-        if self._subscriptions == NULL:
-            raise MemoryError()
-        for i, subscription in enumerate(subscriptions):
-            self._subscriptions[i] = <const rcl_subscription_t *><size_t>subscription.pointer
+        self._subscriptions = _pointers(subscriptions)
         self._wake = <const rcl_guard_condition_t *><size_t>wake.pointer
         self._allocator = rcl_get_default_allocator()
         self._wait_set = rcl_get_zero_initialized_wait_set()
@@ -167,6 +163,22 @@ cdef class RawReader:
         rcutils_reset_error()
         raise ReaderError(f"rcl returned {ret} while waiting for or taking a message")
 
+    def set_subscriptions(self, subscriptions):
+        """Take ``subscriptions`` (any number, none too) from now on, in place of those
+        before. Called by the thread that calls `take`, between two takes."""
+        if not self._open:
+            raise ReaderError("the reader is closed")
+        cdef size_t count = len(subscriptions)
+        cdef const rcl_subscription_t **pointers = _pointers(subscriptions)
+        if rcl_wait_set_resize(&self._wait_set, count, 1, 0, 0, 0, 0) != RCL_RET_OK:
+            free(pointers)
+            rcutils_reset_error()
+            raise ReaderError("rcl_wait_set_resize failed")
+        free(self._subscriptions)
+        self._subscriptions = pointers
+        self._count = count
+        self._next = 0
+
     def take_more(self, size_t index, size_t max_count, size_t max_bytes):
         """The messages of subscription ``index`` already waiting, in order, each copied
         to bytes, without waiting: at most ``max_count``, and none after the one that
@@ -219,3 +231,21 @@ cdef class RawReader:
         if self._subscriptions != NULL:
             free(self._subscriptions)
             self._subscriptions = NULL
+
+
+cdef const rcl_subscription_t **_pointers(subscriptions) except? NULL:
+    """The rcl subscriptions of rclpy's handles, in a new array (NULL for none)."""
+    cdef size_t count = len(subscriptions)
+    if count == 0:
+        return NULL
+    cdef const rcl_subscription_t **pointers = <const rcl_subscription_t **>calloc(
+        count, sizeof(rcl_subscription_t *))
+    if pointers == NULL:
+        raise MemoryError()
+    try:
+        for i, subscription in enumerate(subscriptions):
+            pointers[i] = <const rcl_subscription_t *><size_t>subscription.pointer
+    except BaseException:
+        free(pointers)
+        raise
+    return pointers

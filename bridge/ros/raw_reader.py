@@ -73,32 +73,47 @@ class BatchTopic:
     callback: Callable[[list[bytes]], None]
 
 
+Topic = Union[RawTopic, BatchTopic]
+
+
+class RawSubscription:
+    """One topic a reader takes (`RawReader.add`); `close` ends it."""
+
+    def __init__(self, reader: RawReader, topic: Topic, handle: Any) -> None:
+        self.reader = reader
+        self.topic = topic
+        self.handle = handle
+
+    def close(self) -> None:
+        self.reader.remove(self)
+
+
 class RawReader:
     """Subscribes raw to `topics` on `node` and calls each one's callback, in the thread
     ``name``, with each message's bytes (a `BatchTopic`'s: with those waiting together).
-    `close` stops the thread and destroys the subscriptions; it must run before the node is
-    destroyed (RosNode.stop sees to it)."""
+    More topics come and go while it runs (`add`, `remove`). `close` stops the thread and
+    destroys the subscriptions; it must run before the node is destroyed (RosNode.stop sees
+    to it)."""
 
-    def __init__(self, node: Node, topics: Sequence[Union[RawTopic, BatchTopic]],
-                 name: str) -> None:
+    def __init__(self, node: Node, topics: Sequence[Topic], name: str) -> None:
         if not available():
             raise RuntimeError("the compiled rcl reader is not built here")
         from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-        from rclpy.type_support import check_is_valid_msg_type
 
-        self._topics = list(topics)
-        self._subscriptions: list[Any] = []
+        self._node = node
+        self._taken: list[RawSubscription] = []  # in the compiled reader's order
+        # Changes to what is taken, applied by the reader's thread between two takes.
+        self._lock = threading.Lock()
+        self._adding: list[RawSubscription] = []
+        self._removing: dict[RawSubscription, threading.Event] = {}
         context = node.context.handle
         assert context is not None
         self._wake = _rclpy.GuardCondition(context)
         try:
-            with node.handle:
-                for topic in self._topics:
-                    check_is_valid_msg_type(topic.msg_type)
-                    self._subscriptions.append(_rclpy.Subscription(
-                        node.handle, topic.msg_type, topic.topic,
-                        topic.qos.get_c_qos_profile()))
-            self._reader = _rcl_reader.RawReader(context, self._subscriptions, self._wake)
+            for topic in topics:
+                self._taken.append(RawSubscription(self, topic, self._subscribe(topic)))
+            self._reader = _rcl_reader.RawReader(context, [s.handle for s in self._taken],
+                                                 self._wake)
         except Exception:
             self._destroy_handles()
             raise
@@ -107,21 +122,81 @@ class RawReader:
             target=self._run, name=name, daemon=True)
         self._thread.start()
 
+    def _subscribe(self, topic: Topic) -> Any:
+        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+        from rclpy.type_support import check_is_valid_msg_type
+
+        check_is_valid_msg_type(topic.msg_type)
+        with self._node.handle:
+            return _rclpy.Subscription(self._node.handle, topic.msg_type, topic.topic,
+                                       topic.qos.get_c_qos_profile())
+
+    @property
+    def count(self) -> int:
+        """Topics taken or about to be."""
+        with self._lock:
+            return len(self._taken) + len(self._adding) - len(self._removing)
+
+    def add(self, topic: Topic) -> RawSubscription:
+        """Take `topic` too (any thread): its messages are taken from the reader's next
+        turn on; those that came meanwhile wait in the subscription."""
+        subscription = RawSubscription(self, topic, self._subscribe(topic))
+        with self._lock:
+            if self._thread is None:
+                subscription.handle.destroy_when_not_in_use()
+                raise RuntimeError("the raw reader is closed")
+            self._adding.append(subscription)
+        self._wake.trigger_guard_condition()
+        return subscription
+
+    def remove(self, subscription: RawSubscription) -> None:
+        """Stop taking a topic and destroy its subscription. From another thread, returns
+        once the reader takes it no more; from the reader's own (a callback), at once, and
+        nothing more is taken of it after that callback. Idempotent."""
+        done = threading.Event()
+        with self._lock:
+            if subscription in self._adding:
+                self._adding.remove(subscription)
+                subscription.handle.destroy_when_not_in_use()
+                return
+            if subscription not in self._taken or subscription in self._removing:
+                return
+            self._removing[subscription] = done
+            thread = self._thread
+        self._wake.trigger_guard_condition()
+        if thread is not None and thread is not threading.current_thread():
+            if not done.wait(5.0):
+                log.error("the raw reader did not let go of %s within 5 s",
+                          subscription.topic.topic)
+
+    def _apply_changes(self) -> None:
+        """Reader thread, between two takes: what `add` and `remove` asked for."""
+        with self._lock:
+            adding, self._adding = self._adding, []
+            removing, self._removing = self._removing, {}
+        taken = [s for s in self._taken if s not in removing] + adding
+        self._reader.set_subscriptions([s.handle for s in taken])
+        self._taken = taken
+        for subscription, done in removing.items():
+            subscription.handle.destroy_when_not_in_use()
+            done.set()
+
     def _run(self) -> None:
         last_logged = -_ERROR_LOG_INTERVAL_S
         unlogged = 0
         while not self._stopping.is_set():
             try:
+                if self._adding or self._removing:
+                    self._apply_changes()
                 taken = self._reader.take(_WAIT_S)
             except _rcl_reader.ReaderError:
                 if not self._stopping.is_set():
-                    log.exception("the raw reader of %s stopped",
-                                  ", ".join(t.topic for t in self._topics))
+                    log.exception("the raw reader of %s stopped", self._names())
                 return
             if taken is None:
                 continue
             index, view = taken
-            topic = self._topics[index]
+            topic = self._taken[index].topic
             try:
                 if isinstance(topic, BatchTopic):
                     first = view.tobytes()
@@ -140,7 +215,7 @@ class RawReader:
                 if now - last_logged >= _ERROR_LOG_INTERVAL_S:
                     more = f" ({unlogged} more since the last report)" if unlogged else ""
                     log.exception("a callback of %s failed; the reader goes on%s",
-                                  self._topics[index].topic, more)
+                                  topic.topic, more)
                     last_logged, unlogged = now, 0
                 else:
                     unlogged += 1
@@ -149,7 +224,10 @@ class RawReader:
                     view.release()
                 except BufferError:  # a callback kept a view: a bug, the buffer is reused
                     log.error("a callback of %s kept a view on the reader's buffer",
-                              self._topics[index].topic)
+                              topic.topic)
+
+    def _names(self) -> str:
+        return ", ".join(s.topic.topic for s in self._taken) or "no topic"
 
     @property
     def closed(self) -> bool:
@@ -158,21 +236,26 @@ class RawReader:
     def close(self) -> None:
         """Stop the thread (a wait in progress ends at once), then free the reader and
         destroy the subscriptions. Idempotent."""
-        thread, self._thread = self._thread, None
+        with self._lock:
+            thread, self._thread = self._thread, None
         if thread is None:
             return
         self._stopping.set()
         self._wake.trigger_guard_condition()
         thread.join(timeout=5.0)
         if thread.is_alive():  # a callback that does not return: leave the handles be
-            log.error("the raw reader of %s did not stop within 5 s",
-                      ", ".join(t.topic for t in self._topics))
+            log.error("the raw reader of %s did not stop within 5 s", self._names())
             return
         self._reader.close()
         self._destroy_handles()
 
     def _destroy_handles(self) -> None:
-        for subscription in self._subscriptions:
-            subscription.destroy_when_not_in_use()
-        self._subscriptions = []
+        with self._lock:
+            removing = self._removing
+            doomed = [*self._taken, *self._adding]
+            self._taken, self._adding, self._removing = [], [], {}
+        for subscription in doomed:
+            subscription.handle.destroy_when_not_in_use()
+        for done in removing.values():
+            done.set()
         self._wake.destroy_when_not_in_use()

@@ -14,9 +14,10 @@ Two nodes, two executors:
   only for the callback (about 0.05 ms). Jazzy's EventsExecutor cannot run coroutine
   service callbacks (ros2/rclpy#1473, fixed after 7.1.x), hence the split.
 
-Raw readers (`raw_reader`, bridge/ros/raw_reader.py) take some of ``stream_node``'s raw
-subscriptions (/tf, streamed poses) in threads of their own, without the interpreter's lock;
-`stop` closes them before the nodes go.
+Raw readers (bridge/ros/raw_reader.py) take some of ``stream_node``'s raw subscriptions in
+threads of their own, without the interpreter's lock: /tf (`raw_reader`), and up to
+`MAX_READ_STREAMS` streamed poses, all in one thread (`read_stream`). `stop` closes them
+before the nodes go.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
 
-from bridge.ros.raw_reader import BatchTopic, RawReader, RawTopic
+from bridge.ros.raw_reader import BatchTopic, RawReader, RawSubscription, RawTopic
 from protocol.commands import OutOfRangeError
 from bridge.ros.raw_reader import available as raw_reader_available
 
@@ -51,6 +52,10 @@ _SPIN_TIMEOUT_S = 0.1
 _ERROR_PAUSE_S = 0.05
 # A callback failing on every message is reported once per interval, with a count.
 _ERROR_LOG_INTERVAL_S = 5.0
+
+# Topics the one stream reader takes (`read_stream`); more go through the EventsExecutor,
+# whose cost does not grow with the number of subscriptions as a wait over all of them does.
+MAX_READ_STREAMS = 64
 
 RosEntity = Union[Subscription, Publisher, Client, Service]
 
@@ -112,6 +117,8 @@ class RosNode:
         self._stream_thread: Optional[threading.Thread] = None
         self._stopping = threading.Event()
         self._raw_readers: list[RawReader] = []
+        self._stream_reader: Optional[RawReader] = None  # made by the first `read_stream`
+        self._stream_reader_lock = threading.Lock()
 
     @property
     def fully_qualified_name(self) -> str:
@@ -158,6 +165,24 @@ class RosNode:
         self._raw_readers = [r for r in self._raw_readers if not r.closed]
         self._raw_readers.append(reader)
         return reader
+
+    def read_stream(self, topic: BatchTopic) -> Optional[RawSubscription]:
+        """`topic` subscribed raw on ``stream_node`` and taken by the daemon's one stream
+        reader, a burst at a time, without the interpreter's lock (bridge/ros/raw_reader.py);
+        None where the compiled reader is not built, or it takes `MAX_READ_STREAMS` topics
+        already (then subscribe through rclpy): one thread for all, each wait over all
+        its topics. `RawSubscription.close` ends it."""
+        if not raw_reader_available() or self._stopping.is_set():
+            return None
+        with self._stream_reader_lock:
+            reader = self._stream_reader
+            if reader is None:
+                reader = self._stream_reader = self.raw_reader([], name="ros-stream-reader")
+                if reader is None:
+                    return None
+            if reader.count >= MAX_READ_STREAMS:
+                return None
+            return reader.add(topic)
 
     def destroy(self, entity: RosEntity) -> None:
         """Destroy a subscription, publisher, client or service of the node.

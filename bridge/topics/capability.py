@@ -115,11 +115,10 @@ class SubscriberBridge:
                       if has_fast_path(codec.ros_type) and message_filter is None else None)
         # Taken serialized whatever the type: the size is known before anything is kept,
         # and the last message stays as its bytes (deserialized only when asked for). Hot
-        # poses are taken by a raw reader of their own, without the interpreter's lock, a
-        # burst at a time (bridge/ros/raw_reader.py); the rest through the executor.
-        self._reader = (ros.raw_reader([BatchTopic(topic, codec.message_class,
-                                                   qos_profile(qos), self._on_batch)],
-                                       name=f"stream {device}")
+        # poses are taken by the stream reader, without the interpreter's lock, a burst at
+        # a time (bridge/ros/raw_reader.py); the rest through the executor.
+        self._reader = (ros.read_stream(BatchTopic(topic, codec.message_class,
+                                                   qos_profile(qos), self._on_batch))
                         if self._fast is not None else None)
         self._subscription = (None if self._reader is not None else
                               ros.stream_node.create_subscription(

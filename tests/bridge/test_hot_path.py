@@ -678,3 +678,39 @@ def test_a_burst_of_poses_taken_together_reaches_each_client_in_one_write_in_ord
     finally:
         ros.stop()
         served.close()
+
+
+@pytest.mark.ros
+def test_pose_streams_past_the_stream_readers_bound_go_through_rclpy_and_arrive_alike(
+        processes: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    from bridge.ros import ros_node
+    from bridge.ros.ros_node import RosNode, RosOptions
+    from bridge.topics.capability import SubscriberBridge
+    from protocol.commands import QoS
+
+    monkeypatch.setattr(ros_node, "MAX_READ_STREAMS", 1)
+    served = _Served(direct_writes=True)
+    ros = RosNode(RosOptions(node_name="hot_path_reader_bound"))
+    ros.start()
+    try:
+        peer = served.connect()
+        codec = codec_for("geometry_msgs/msg/PoseStamped")
+        read, spun = (SubscriberBridge(ros, served.hub, topic=f"/hot_path_bound_{name}",
+                                       codec=codec, qos=QoS(), device=name, metadata={})
+                      for name in ("read", "spun"))
+        assert read._reader is not None and read._subscription is None
+        assert spun._reader is None and spun._subscription is not None
+        for name in ("read", "spun"):
+            processes.python(name, "stream_publisher.py", f"/hot_path_bound_{name}", "200",
+                             "--count", "100000")
+        seen: dict[str, list[float]] = {"read": [], "spun": []}
+        while min(len(v) for v in seen.values()) < 20:
+            for message in peer.read_until(1):
+                seen[message.device_name].append(message.body.matrix[0][3])
+        for values in seen.values():  # stream_publisher.py: x = n µm, in order
+            assert values == sorted(values) and len(set(values)) == len(values)
+        read.close()
+        spun.close()
+    finally:
+        ros.stop()
+        served.close()

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Iterator
+from typing import Callable, Iterator
 
 import pytest
 from geometry_msgs.msg import PoseStamped
@@ -16,7 +16,7 @@ from tf2_msgs.msg import TFMessage
 
 from bridge.ros import raw_reader
 from bridge.ros.qos import TF_QOS
-from bridge.ros.raw_reader import BatchTopic, RawTopic
+from bridge.ros.raw_reader import BatchTopic, RawSubscription, RawTopic
 from bridge.ros.ros_node import RosNode, RosOptions
 from support import Processes, scaled, wait_until
 
@@ -187,3 +187,83 @@ def test_take_more_refuses_an_index_it_does_not_have(ros: RosNode) -> None:
     assert reader.closed
     with pytest.raises(raw_reader._rcl_reader.ReaderError, match="closed"):
         reader._reader.take_more(0, 10, 1000)
+
+
+# ------------------------------------------------------------ topics added and removed
+
+
+def test_topics_added_to_a_running_reader_are_taken_and_removed_ones_are_not(
+        ros: RosNode, processes: Processes) -> None:
+    received: dict[str, list[float]] = {"/rr_add_a": [], "/rr_add_b": []}
+    threads: set[str] = set()
+
+    def on(topic: str) -> Callable[[list[bytes]], None]:
+        def callback(messages: list[bytes]) -> None:
+            threads.add(threading.current_thread().name)
+            received[topic] += [deserialize_message(m, PoseStamped).pose.position.x
+                                for m in messages]
+        return callback
+
+    reader = ros.raw_reader([], name="rr-dynamic")  # none to begin with
+    assert reader is not None and reader.count == 0
+    a = reader.add(BatchTopic("/rr_add_a", PoseStamped, TF_QOS, on("/rr_add_a")))
+    b = reader.add(BatchTopic("/rr_add_b", PoseStamped, TF_QOS, on("/rr_add_b")))
+    assert reader.count == 2
+    processes.python("a", "stream_publisher.py", "/rr_add_a", "200", "--count", "100000")
+    processes.python("b", "stream_publisher.py", "/rr_add_b", "200", "--count", "100000")
+    wait_until(lambda: all(len(v) >= 20 for v in received.values()), timeout=30,
+               what="20 poses of each topic")
+    assert threads == {"rr-dynamic"}
+    assert ros.stream_node.count_subscribers("/rr_add_a") == 1
+
+    a.close()  # returns once the reader takes it no more
+    after = len(received["/rr_add_a"])
+    assert reader.count == 1
+    wait_until(lambda: ros.stream_node.count_subscribers("/rr_add_a") == 0, timeout=10,
+               what="the removed subscription gone from the graph")
+    seen_b = len(received["/rr_add_b"])
+    wait_until(lambda: len(received["/rr_add_b"]) >= seen_b + 20, timeout=30,
+               what="the other topic still taken")
+    assert len(received["/rr_add_a"]) == after
+    a.close()  # idempotent
+    b.close()
+    reader.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        reader.add(BatchTopic("/rr_add_late", PoseStamped, TF_QOS, on("/rr_add_a")))
+    wait_until(lambda: ros.stream_node.count_subscribers("/rr_add_late") == 0, timeout=10,
+               what="no subscription left by a refused add")
+
+
+def test_a_callback_may_remove_its_own_topic(ros: RosNode, processes: Processes) -> None:
+    batches: list[int] = []
+    holder: list[RawSubscription] = []
+
+    def once(messages: list[bytes]) -> None:
+        batches.append(len(messages))
+        holder[0].close()  # from the reader's own thread: at once, no deadlock
+
+    reader = ros.raw_reader([], name="rr-self-remove")
+    assert reader is not None
+    holder.append(reader.add(BatchTopic("/rr_self_remove", PoseStamped, TF_QOS, once)))
+    processes.python("poses", "stream_publisher.py", "/rr_self_remove", "200", "--count",
+                     "100000")
+    wait_until(lambda: ros.stream_node.count_subscribers("/rr_self_remove") == 0,
+               timeout=30, what="the topic removed by its own callback")
+    assert len(batches) == 1
+    reader.close()
+
+
+def test_the_stream_reader_takes_up_to_its_bound_then_the_caller_uses_rclpy(
+        ros: RosNode, monkeypatch: pytest.MonkeyPatch) -> None:
+    from bridge.ros import ros_node
+
+    monkeypatch.setattr(ros_node, "MAX_READ_STREAMS", 2)
+    topics = [BatchTopic(f"/rr_bound_{i}", PoseStamped, TF_QOS, lambda m: None)
+              for i in range(3)]
+    first, second = ros.read_stream(topics[0]), ros.read_stream(topics[1])
+    assert first is not None and second is not None
+    assert first.reader is second.reader  # one thread for all
+    assert ros.read_stream(topics[2]) is None
+    first.close()
+    third = ros.read_stream(topics[2])
+    assert third is not None and third.reader is second.reader
