@@ -29,7 +29,7 @@ import pytest
 from hypothesis import settings
 
 from interface_builds import BuildUnavailable, BuiltInterfaces, use_test_interfaces
-from support import Processes, children_of, pick_free_port, scaled
+from support import Child, Processes, children_of, pick_free_port, scaled
 
 # 0 and 101 are left alone; other ROS users on this host tend to sit on the default 0.
 _DOMAIN_ID = random.Random(os.getpid() ^ int(time.time())).randint(1, 100)
@@ -56,6 +56,22 @@ def pytest_report_header(config: pytest.Config) -> str:
 # installs); a test that starts them otherwise says so itself (`pytest.mark.integration`).
 _PROCESS_FIXTURES = frozenset({"processes", "module_processes", "turtlesim_interfaces"})
 _PACKAGING = Path(__file__).parent / "packaging"
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item,
+                              call: pytest.CallInfo[None]) -> Iterator[pytest.TestReport]:
+    """A failed test that used a daemon shows the daemon's last log lines: what it saw
+    (a ROS callback failing, a client refused) is often the reason."""
+    report: pytest.TestReport = yield
+    if report.failed:
+        funcargs = getattr(item, "funcargs", {})
+        daemon = funcargs.get("daemon")
+        child = getattr(daemon, "child", None)
+        if isinstance(child, Child):
+            report.sections.append(("daemon log, last 60 lines",
+                                    "\n".join(child.lines()[-60:])))
+    return report
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

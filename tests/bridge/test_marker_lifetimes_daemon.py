@@ -92,8 +92,11 @@ def wait_rows(client: Connection, topic: str, want: set[tuple[str, int]]
 
 def expiry(client: Connection, key: tuple[str, int]) -> float:
     """When the marker's lifetime ends, on this process' monotonic clock (list_markers says
-    how long it has left)."""
-    return time.monotonic() + float(rows(client, "/test_markers")[key]["expires_in"])
+    how long it has left), at most: counted from when the question was sent, so that a
+    reply that was slow to come never pushes the estimate later (a renewal compared with
+    such an estimate would look like none)."""
+    asked = time.monotonic()
+    return asked + float(rows(client, "/test_markers")[key]["expires_in"])
 
 
 def test_renewed_lifetimes_expire_in_order(client: Connection, peer: Peer) -> None:
