@@ -3,34 +3,36 @@
 released.
 
 rclpy takes a raw message holding the lock: a peer's 10 MB TFMessage kept every other
-thread of the daemon (the event loop among them) waiting about 20 ms. Here rcl's own wait set
-and `rcl_take_serialized_message` run without it; the caller reads the message from a view on
+thread of the daemon (the event loop among them) waiting about 20 ms. Here
+`rcl_take_serialized_message` runs without it; the caller reads the message from a view on
 this reader's buffer, valid until its next `take`.
+
+Waiting: the middleware tells each subscription's new messages through rcl's on-new-message
+callback (as rclpy's EventsExecutor has it told), which wakes the reader's thread. A wait
+set is not used: Fast DDS wakes one after a message was taken, for nothing, and a reader
+that waits again at once spins until it stops.
 
 Built by setup.py where rcl's headers are found beside the interpreter (ROS 2 from PyPI puts
 them under ``sys.prefix/include``); imported only after rclpy, which has loaded the rcl
-libraries this module needs. Elsewhere the daemon takes /tf through rclpy, as before.
+libraries this module needs. Elsewhere the daemon takes these topics through rclpy.
 """
 
 from cpython.bytes cimport PyBytes_FromStringAndSize
 from cpython.memoryview cimport PyMemoryView_FromMemory
 from cpython.buffer cimport PyBUF_READ
 from libc.stdint cimport int64_t, uint8_t
-from libc.stdlib cimport calloc, free
+from libc.stdlib cimport calloc, free, malloc
+from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 # Bump with `bridge.ros.raw_reader.READER_INTERFACE`: a module from an older build is not used.
-INTERFACE = 2
+INTERFACE = 3
 
 
 cdef extern from "rcl/rcl.h" nogil:
     ctypedef int rcl_ret_t
     ctypedef struct rcl_allocator_t:
         pass
-    ctypedef struct rcl_context_t:
-        pass
     ctypedef struct rcl_subscription_t:
-        pass
-    ctypedef struct rcl_guard_condition_t:
         pass
     ctypedef struct rmw_message_info_t:
         pass
@@ -39,39 +41,20 @@ cdef extern from "rcl/rcl.h" nogil:
     ctypedef struct rcl_serialized_message_t:
         uint8_t *buffer
         size_t buffer_length
-    ctypedef struct rcl_wait_set_t:
-        const rcl_subscription_t **subscriptions
-        size_t size_of_subscriptions
-        const rcl_guard_condition_t **guard_conditions
-        size_t size_of_guard_conditions
+    ctypedef void (*rcl_event_callback_t)(const void *user_data, size_t number_of_events)
 
     enum:
         RCL_RET_OK
-        RCL_RET_TIMEOUT
         RCL_RET_SUBSCRIPTION_TAKE_FAILED
 
     rcl_allocator_t rcl_get_default_allocator()
-    rcl_wait_set_t rcl_get_zero_initialized_wait_set()
-    rcl_ret_t rcl_wait_set_init(rcl_wait_set_t *wait_set, size_t subscriptions,
-                                size_t guard_conditions, size_t timers, size_t clients,
-                                size_t services, size_t events, rcl_context_t *context,
-                                rcl_allocator_t allocator)
-    rcl_ret_t rcl_wait_set_fini(rcl_wait_set_t *wait_set)
-    rcl_ret_t rcl_wait_set_resize(rcl_wait_set_t *wait_set, size_t subscriptions,
-                                  size_t guard_conditions, size_t timers, size_t clients,
-                                  size_t services, size_t events)
-    rcl_ret_t rcl_wait_set_clear(rcl_wait_set_t *wait_set)
-    rcl_ret_t rcl_wait_set_add_subscription(rcl_wait_set_t *wait_set,
-                                            const rcl_subscription_t *subscription,
-                                            size_t *index)
-    rcl_ret_t rcl_wait_set_add_guard_condition(rcl_wait_set_t *wait_set,
-                                               const rcl_guard_condition_t *condition,
-                                               size_t *index)
-    rcl_ret_t rcl_wait(rcl_wait_set_t *wait_set, int64_t timeout)
     rcl_ret_t rcl_take_serialized_message(const rcl_subscription_t *subscription,
                                           rcl_serialized_message_t *message,
                                           rmw_message_info_t *info,
                                           rmw_subscription_allocation_t *allocation)
+    rcl_ret_t rcl_subscription_set_on_new_message_callback(
+        const rcl_subscription_t *subscription, rcl_event_callback_t callback,
+        const void *user_data)
     rcl_serialized_message_t rmw_get_zero_initialized_serialized_message()
     rcl_ret_t rmw_serialized_message_init(rcl_serialized_message_t *message, size_t capacity,
                                           const rcl_allocator_t *allocator)
@@ -82,58 +65,101 @@ cdef extern from "rcutils/error_handling.h" nogil:
     void rcutils_reset_error()
 
 
+cdef extern from "<pthread.h>" nogil:
+    ctypedef struct pthread_mutex_t:
+        pass
+    ctypedef struct pthread_cond_t:
+        pass
+    ctypedef struct pthread_condattr_t:
+        pass
+    int pthread_mutex_init(pthread_mutex_t *mutex, void *attr)
+    int pthread_mutex_destroy(pthread_mutex_t *mutex)
+    int pthread_mutex_lock(pthread_mutex_t *mutex)
+    int pthread_mutex_unlock(pthread_mutex_t *mutex)
+    int pthread_condattr_init(pthread_condattr_t *attr)
+    int pthread_condattr_setclock(pthread_condattr_t *attr, int clock)
+    int pthread_condattr_destroy(pthread_condattr_t *attr)
+    int pthread_cond_init(pthread_cond_t *cond, pthread_condattr_t *attr)
+    int pthread_cond_destroy(pthread_cond_t *cond)
+    int pthread_cond_signal(pthread_cond_t *cond)
+    int pthread_cond_timedwait(pthread_cond_t *cond, pthread_mutex_t *mutex,
+                               const timespec *abstime)
+
+
 class ReaderError(RuntimeError):
-    """rcl refused a wait set or a take: the reader can go on no further."""
+    """rcl refused a take or a callback: the reader can go on no further."""
+
+
+cdef struct _Signal:
+    # What the middleware's threads tell the reader's: messages came, or `wake` was called.
+    pthread_mutex_t lock
+    pthread_cond_t cond
+    size_t arrived
+    bint woken
+
+
+cdef void _on_new_messages(const void *user_data, size_t count) noexcept nogil:
+    # A middleware thread: no interpreter, no allocation, as short as can be.
+    cdef _Signal *signal = <_Signal *>user_data
+    pthread_mutex_lock(&signal.lock)
+    signal.arrived += count
+    pthread_cond_signal(&signal.cond)
+    pthread_mutex_unlock(&signal.lock)
 
 
 cdef class RawReader:
     """Takes serialized messages of ``subscriptions`` (rclpy's `_rclpy.Subscription`
-    handles, which the caller keeps alive and destroys after `close`) in turn, waiting
-    for them (and for ``wake``, an `_rclpy.GuardCondition`, which ends a wait) without the
-    interpreter's lock. One thread calls `take`; any thread may trigger ``wake``."""
+    handles, which the caller keeps alive and destroys after `close` or after
+    `set_subscriptions` let them go) in turn, waiting for them without the interpreter's
+    lock. One thread calls `take` and `set_subscriptions`; any thread may call `wake`."""
 
-    cdef rcl_wait_set_t _wait_set
     cdef rcl_serialized_message_t _message
     cdef rcl_allocator_t _allocator
     cdef const rcl_subscription_t **_subscriptions
     cdef size_t _count
     cdef size_t _next
-    cdef const rcl_guard_condition_t *_wake
+    cdef _Signal *_signal
     cdef bint _open
 
-    def __cinit__(self, context, subscriptions, wake):
-        cdef rcl_ret_t ret
+    def __cinit__(self, subscriptions):
+        cdef pthread_condattr_t attr
         self._open = False
-        self._count = len(subscriptions)
-        self._subscriptions = _pointers(subscriptions)
-        self._wake = <const rcl_guard_condition_t *><size_t>wake.pointer
+        self._count = 0
+        self._subscriptions = NULL
+        self._signal = <_Signal *>malloc(sizeof(_Signal))
+        if self._signal == NULL:
+            raise MemoryError()
+        pthread_mutex_init(&self._signal.lock, NULL)
+        pthread_condattr_init(&attr)
+        pthread_condattr_setclock(&attr, CLOCK_MONOTONIC)
+        pthread_cond_init(&self._signal.cond, &attr)
+        pthread_condattr_destroy(&attr)
+        self._signal.arrived = 0
+        self._signal.woken = False
         self._allocator = rcl_get_default_allocator()
-        self._wait_set = rcl_get_zero_initialized_wait_set()
-        if rcl_wait_set_init(&self._wait_set, self._count, 1, 0, 0, 0, 0,
-                             <rcl_context_t *><size_t>context.pointer,
-                             self._allocator) != RCL_RET_OK:
-            rcutils_reset_error()
-            raise ReaderError("rcl_wait_set_init failed")
         self._message = rmw_get_zero_initialized_serialized_message()
         if rmw_serialized_message_init(&self._message, 0, &self._allocator) != RCL_RET_OK:
             rcutils_reset_error()
-            ret = rcl_wait_set_fini(&self._wait_set)
             raise ReaderError("rmw_serialized_message_init failed")
-        self._next = 0
         self._open = True
+        self.set_subscriptions(subscriptions)
 
     def take(self, double timeout_s):
         """``(index, view)``: the next message of subscription ``index``, as a read-only
-        view valid until the next call; None when ``timeout_s`` passed or ``wake`` was
-        triggered with nothing to take. Subscriptions take turns, so a busy one cannot
+        view valid until the next call; None when ``timeout_s`` passed or `wake` was
+        called with nothing to take. Subscriptions take turns, so a busy one cannot
         starve the others."""
         cdef rcl_ret_t ret = RCL_RET_SUBSCRIPTION_TAKE_FAILED
         cdef rmw_message_info_t info
         cdef size_t tried, index = 0
-        cdef int64_t timeout_ns = <int64_t>(timeout_s * 1e9)
-        cdef bint waited = False
+        cdef int64_t deadline = _now_ns() + <int64_t>(timeout_s * 1e9)
+        cdef timespec until
+        cdef bint woken = False
+        cdef size_t arrived = 0
         if not self._open:
             raise ReaderError("the reader is closed")
+        until.tv_sec = deadline // 1000000000
+        until.tv_nsec = deadline % 1000000000
         with nogil:
             while True:
                 tried = 0
@@ -146,34 +172,64 @@ cdef class RawReader:
                     if ret != RCL_RET_SUBSCRIPTION_TAKE_FAILED:
                         break
                     tried += 1
-                if ret == RCL_RET_OK or ret != RCL_RET_SUBSCRIPTION_TAKE_FAILED or waited:
+                if ret == RCL_RET_OK or ret != RCL_RET_SUBSCRIPTION_TAKE_FAILED:
                     break
-                ret = self._wait(timeout_ns)
-                if ret != RCL_RET_OK:
+                # Nothing to take: wait until the middleware says more came. Told before
+                # the lock was taken, it is not waited for.
+                pthread_mutex_lock(&self._signal.lock)
+                while (self._signal.arrived == 0 and not self._signal.woken
+                       and _now_ns() < deadline):
+                    pthread_cond_timedwait(&self._signal.cond, &self._signal.lock, &until)
+                woken = self._signal.woken
+                self._signal.woken = False
+                arrived = self._signal.arrived
+                self._signal.arrived = 0
+                pthread_mutex_unlock(&self._signal.lock)
+                if woken or arrived == 0:
                     break
-                waited = True
-                ret = RCL_RET_SUBSCRIPTION_TAKE_FAILED
         if ret == RCL_RET_OK:
             self._next = (index + 1) % self._count
             return index, PyMemoryView_FromMemory(<char *>self._message.buffer,
                                                   <Py_ssize_t>self._message.buffer_length,
                                                   PyBUF_READ)
-        if ret == RCL_RET_TIMEOUT or ret == RCL_RET_SUBSCRIPTION_TAKE_FAILED:
+        if ret == RCL_RET_SUBSCRIPTION_TAKE_FAILED:
             return None
         rcutils_reset_error()
-        raise ReaderError(f"rcl returned {ret} while waiting for or taking a message")
+        raise ReaderError(f"rcl returned {ret} while taking a message")
+
+    def wake(self):
+        """End a `take` that waits (any thread)."""
+        if self._signal != NULL:
+            with nogil:
+                pthread_mutex_lock(&self._signal.lock)
+                self._signal.woken = True
+                pthread_cond_signal(&self._signal.cond)
+                pthread_mutex_unlock(&self._signal.lock)
 
     def set_subscriptions(self, subscriptions):
         """Take ``subscriptions`` (any number, none too) from now on, in place of those
-        before. Called by the thread that calls `take`, between two takes."""
+        before: the middleware no longer calls this reader for those let go, which the
+        caller may destroy then. Called by the thread that calls `take`, between two."""
         if not self._open:
             raise ReaderError("the reader is closed")
         cdef size_t count = len(subscriptions)
         cdef const rcl_subscription_t **pointers = _pointers(subscriptions)
-        if rcl_wait_set_resize(&self._wait_set, count, 1, 0, 0, 0, 0) != RCL_RET_OK:
-            free(pointers)
-            rcutils_reset_error()
-            raise ReaderError("rcl_wait_set_resize failed")
+        cdef size_t i, j
+        cdef bint kept
+        for i in range(self._count):  # those let go: the middleware forgets this reader
+            kept = False
+            for j in range(count):
+                kept = kept or pointers[j] == self._subscriptions[i]
+            if not kept:
+                _set_callback(self._subscriptions[i], NULL, NULL)
+        for j in range(count):
+            if _set_callback(pointers[j], _on_new_messages, self._signal) != RCL_RET_OK:
+                rcutils_reset_error()
+                for i in range(j):
+                    _set_callback(pointers[i], NULL, NULL)
+                free(pointers)
+                raise ReaderError("the middleware does not tell new messages "
+                                  "(rcl_subscription_set_on_new_message_callback)")
         free(self._subscriptions)
         self._subscriptions = pointers
         self._count = count
@@ -205,32 +261,51 @@ cdef class RawReader:
             raise ReaderError(f"rcl returned {ret} while taking a message")
         return taken
 
-    cdef rcl_ret_t _wait(self, int64_t timeout_ns) noexcept nogil:
-        cdef size_t i
-        cdef rcl_ret_t ret = rcl_wait_set_clear(&self._wait_set)
-        i = 0
-        while ret == RCL_RET_OK and i < self._count:
-            ret = rcl_wait_set_add_subscription(&self._wait_set, self._subscriptions[i], NULL)
-            i += 1
-        if ret == RCL_RET_OK:
-            ret = rcl_wait_set_add_guard_condition(&self._wait_set, self._wake, NULL)
-        if ret == RCL_RET_OK:
-            ret = rcl_wait(&self._wait_set, timeout_ns)
-        return ret
-
     def close(self):
-        """Free the wait set and the buffer (the subscriptions are the caller's)."""
+        """Let go of the subscriptions and free the buffer (the subscriptions are the
+        caller's, to destroy after this)."""
         cdef rcl_ret_t ret
+        cdef size_t i
         if self._open:
             self._open = False
+            for i in range(self._count):
+                _set_callback(self._subscriptions[i], NULL, NULL)
             ret = rmw_serialized_message_fini(&self._message)
-            ret = rcl_wait_set_fini(&self._wait_set)
 
     def __dealloc__(self):
         self.close()
         if self._subscriptions != NULL:
             free(self._subscriptions)
             self._subscriptions = NULL
+        if self._signal != NULL:
+            pthread_cond_destroy(&self._signal.cond)
+            pthread_mutex_destroy(&self._signal.lock)
+            free(self._signal)
+            self._signal = NULL
+
+
+cdef void _ignore_new_messages(const void *user_data, size_t count) noexcept nogil:
+    pass
+
+
+def check_tells_new_messages(subscription):
+    """Raise ReaderError unless the middleware tells ``subscription``'s new messages (an
+    rclpy `_rclpy.Subscription` handle); leaves no callback set."""
+    cdef const rcl_subscription_t *pointer = <const rcl_subscription_t *><size_t>(
+        subscription.pointer)
+    if _set_callback(pointer, _ignore_new_messages, NULL) != RCL_RET_OK:
+        rcutils_reset_error()
+        raise ReaderError("the middleware does not tell new messages "
+                          "(rcl_subscription_set_on_new_message_callback)")
+    _set_callback(pointer, NULL, NULL)
+
+
+cdef rcl_ret_t _set_callback(const rcl_subscription_t *subscription,
+                             rcl_event_callback_t callback, const void *user_data) noexcept:
+    cdef rcl_ret_t ret
+    with nogil:  # the middleware takes its listener's lock, which its threads hold a while
+        ret = rcl_subscription_set_on_new_message_callback(subscription, callback, user_data)
+    return ret
 
 
 cdef const rcl_subscription_t **_pointers(subscriptions) except? NULL:
@@ -249,3 +324,9 @@ cdef const rcl_subscription_t **_pointers(subscriptions) except? NULL:
         free(pointers)
         raise
     return pointers
+
+
+cdef inline int64_t _now_ns() noexcept nogil:
+    cdef timespec now
+    clock_gettime(CLOCK_MONOTONIC, &now)
+    return <int64_t>now.tv_sec * 1000000000 + now.tv_nsec

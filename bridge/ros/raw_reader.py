@@ -2,10 +2,11 @@
 
 rclpy takes each raw message holding the lock: a peer's 10 MB TFMessage kept every other
 thread of the daemon waiting about 20 ms (bench/attacks.py's tf_frames storm). A
-`RawReader` waits for and takes its subscriptions' messages with rcl's own wait set and take,
-the lock released (the compiled `bridge.ros._rcl_reader`), and hands each to its topic's callback
-as a read-only view, valid during the call (`RawTopic`), or, for a `BatchTopic`, every message
-of that topic waiting at once, as one list: a burst costs one callback.
+`RawReader` waits for its subscriptions' messages (told by the middleware's on-new-message
+callback) and takes them with rcl's take, the lock released (the compiled
+`bridge.ros._rcl_reader`), and hands each to its topic's callback as a read-only view, valid
+during the call (`RawTopic`), or, for a `BatchTopic`, every message of that topic waiting at
+once, as one list: a burst costs one callback.
 
 The subscriptions are real ones on the given node (the ROS graph lists them), made outside
 rclpy's `Node.create_subscription`, so no executor waits on them too. `available()` says
@@ -28,7 +29,7 @@ from rclpy.qos import QoSProfile
 log = logging.getLogger(__name__)
 
 # The compiled module's interface this wrapper expects (`_rcl_reader.INTERFACE`).
-READER_INTERFACE = 2
+READER_INTERFACE = 3
 _WAIT_S = 0.1  # at most this long between waits: a wake-up rcl missed costs no more
 _ERROR_LOG_INTERVAL_S = 5.0
 
@@ -36,6 +37,15 @@ try:  # imported after rclpy (above), which has loaded the rcl libraries it link
     from bridge.ros import _rcl_reader
 except ImportError:
     _rcl_reader = None  # type: ignore[assignment]
+
+
+class _NotBuilt(RuntimeError):
+    """Stands for the compiled reader's error where it is not built (never raised)."""
+
+
+# What a reader raises when rcl refuses it (a take, the middleware's callback).
+ReaderError: type[RuntimeError] = (_rcl_reader.ReaderError if _rcl_reader is not None
+                                   else _NotBuilt)
 
 
 # Set to 1 to take every raw subscription through rclpy (to compare, or to rule it out).
@@ -98,22 +108,16 @@ class RawReader:
     def __init__(self, node: Node, topics: Sequence[Topic], name: str) -> None:
         if not available():
             raise RuntimeError("the compiled rcl reader is not built here")
-        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-
         self._node = node
         self._taken: list[RawSubscription] = []  # in the compiled reader's order
         # Changes to what is taken, applied by the reader's thread between two takes.
         self._lock = threading.Lock()
         self._adding: list[RawSubscription] = []
         self._removing: dict[RawSubscription, threading.Event] = {}
-        context = node.context.handle
-        assert context is not None
-        self._wake = _rclpy.GuardCondition(context)
         try:
             for topic in topics:
                 self._taken.append(RawSubscription(self, topic, self._subscribe(topic)))
-            self._reader = _rcl_reader.RawReader(context, [s.handle for s in self._taken],
-                                                 self._wake)
+            self._reader = _rcl_reader.RawReader([s.handle for s in self._taken])
         except Exception:
             self._destroy_handles()
             raise
@@ -139,14 +143,20 @@ class RawReader:
 
     def add(self, topic: Topic) -> RawSubscription:
         """Take `topic` too (any thread): its messages are taken from the reader's next
-        turn on; those that came meanwhile wait in the subscription."""
+        turn on; those that came meanwhile wait in the subscription. ReaderError if the
+        middleware cannot tell its new messages (nothing is left subscribed then)."""
         subscription = RawSubscription(self, topic, self._subscribe(topic))
+        try:
+            _rcl_reader.check_tells_new_messages(subscription.handle)
+        except _rcl_reader.ReaderError:
+            subscription.handle.destroy_when_not_in_use()
+            raise
         with self._lock:
             if self._thread is None:
                 subscription.handle.destroy_when_not_in_use()
                 raise RuntimeError("the raw reader is closed")
             self._adding.append(subscription)
-        self._wake.trigger_guard_condition()
+        self._reader.wake()
         return subscription
 
     def remove(self, subscription: RawSubscription) -> None:
@@ -163,7 +173,7 @@ class RawReader:
                 return
             self._removing[subscription] = done
             thread = self._thread
-        self._wake.trigger_guard_condition()
+        self._reader.wake()
         if thread is not None and thread is not threading.current_thread():
             if not done.wait(5.0):
                 log.error("the raw reader did not let go of %s within 5 s",
@@ -241,7 +251,7 @@ class RawReader:
         if thread is None:
             return
         self._stopping.set()
-        self._wake.trigger_guard_condition()
+        self._reader.wake()
         thread.join(timeout=5.0)
         if thread.is_alive():  # a callback that does not return: leave the handles be
             log.error("the raw reader of %s did not stop within 5 s", self._names())
@@ -258,4 +268,3 @@ class RawReader:
             subscription.handle.destroy_when_not_in_use()
         for done in removing.values():
             done.set()
-        self._wake.destroy_when_not_in_use()

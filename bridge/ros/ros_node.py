@@ -40,7 +40,8 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
 
-from bridge.ros.raw_reader import BatchTopic, RawReader, RawSubscription, RawTopic
+from bridge.ros.raw_reader import (BatchTopic, RawReader, RawSubscription, RawTopic,
+                                   ReaderError)
 from protocol.commands import OutOfRangeError
 from bridge.ros.raw_reader import available as raw_reader_available
 
@@ -53,8 +54,8 @@ _ERROR_PAUSE_S = 0.05
 # A callback failing on every message is reported once per interval, with a count.
 _ERROR_LOG_INTERVAL_S = 5.0
 
-# Topics the one stream reader takes (`read_stream`); more go through the EventsExecutor,
-# whose cost does not grow with the number of subscriptions as a wait over all of them does.
+# Topics the one stream reader takes (`read_stream`); more go through the EventsExecutor:
+# the reader tries each of its topics in turn when woken, which costs more as they grow.
 MAX_READ_STREAMS = 64
 
 RosEntity = Union[Subscription, Publisher, Client, Service]
@@ -160,7 +161,11 @@ class RosNode:
         is not built (then subscribe through rclpy). Closed by `stop` at the latest."""
         if not raw_reader_available():
             return None
-        reader = RawReader(self.stream_node, topics, name)
+        try:
+            reader = RawReader(self.stream_node, topics, name)
+        except ReaderError as error:
+            log.warning("%s taken through rclpy: %s", name, error)
+            return None
         # Those closed by their owners meanwhile are forgotten: a bridge each, made and removed.
         self._raw_readers = [r for r in self._raw_readers if not r.closed]
         self._raw_readers.append(reader)
@@ -170,8 +175,8 @@ class RosNode:
         """`topic` subscribed raw on ``stream_node`` and taken by the daemon's one stream
         reader, a burst at a time, without the interpreter's lock (bridge/ros/raw_reader.py);
         None where the compiled reader is not built, or it takes `MAX_READ_STREAMS` topics
-        already (then subscribe through rclpy): one thread for all, each wait over all
-        its topics. `RawSubscription.close` ends it."""
+        already, or the middleware cannot tell it new messages (then subscribe through
+        rclpy): one thread for all. `RawSubscription.close` ends it."""
         if not raw_reader_available() or self._stopping.is_set():
             return None
         with self._stream_reader_lock:
@@ -182,7 +187,11 @@ class RosNode:
                     return None
             if reader.count >= MAX_READ_STREAMS:
                 return None
-            return reader.add(topic)
+            try:
+                return reader.add(topic)
+            except ReaderError as error:
+                log.warning("%s is taken through rclpy: %s", topic.topic, error)
+                return None
 
     def destroy(self, entity: RosEntity) -> None:
         """Destroy a subscription, publisher, client or service of the node.

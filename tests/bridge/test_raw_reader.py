@@ -267,3 +267,25 @@ def test_the_stream_reader_takes_up_to_its_bound_then_the_caller_uses_rclpy(
     first.close()
     third = ros.read_stream(topics[2])
     assert third is not None and third.reader is second.reader
+
+
+def test_a_topic_the_middleware_cannot_tell_goes_through_rclpy(
+        ros: RosNode, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """An rmw without rcl's on-new-message callback: the stream reader refuses the topic,
+    leaves no subscription, and the caller subscribes through rclpy."""
+    subscription = ros.read_stream(BatchTopic("/rr_told", PoseStamped, TF_QOS,
+                                              lambda m: None))
+    assert subscription is not None  # Fast DDS tells them
+    subscription.close()
+
+    def refuse(handle: object) -> None:
+        raise raw_reader.ReaderError("the middleware does not tell new messages")
+
+    monkeypatch.setattr(raw_reader._rcl_reader, "check_tells_new_messages", refuse)
+    with caplog.at_level(logging.WARNING, logger="bridge.ros.ros_node"):
+        assert ros.read_stream(BatchTopic("/rr_untold", PoseStamped, TF_QOS,
+                                          lambda m: None)) is None
+    assert any("/rr_untold is taken through rclpy: the middleware does not tell" in
+               r.getMessage() for r in caplog.records)
+    wait_until(lambda: ros.stream_node.count_subscribers("/rr_untold") == 0, timeout=10,
+               what="no subscription left by the refused topic")
