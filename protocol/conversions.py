@@ -340,11 +340,13 @@ def igtl_timestamp_from_ros(sec: int, nanosec: int) -> int:
 
     ``sec`` must fit 32 unsigned bits (until 2106); nanosec must be in [0, 999999999].
     """
-    s = _check_int(sec, "sec", 0, _U32_MAX)
-    ns = _check_int(nanosec, "nanosec", 0, _NS_PER_S - 1)
-    # Largest ns gives 4294967291.7 -> never rounds up to a full second.
-    frac = (ns * _FRAC_PER_S + _NS_PER_S // 2) // _NS_PER_S
-    return (s << 32) | frac
+    return _igtl_timestamp(_check_int(sec, "sec", 0, _U32_MAX),
+                           _check_int(nanosec, "nanosec", 0, _NS_PER_S - 1))
+
+
+def _igtl_timestamp(sec: int, nanosec: int) -> int:
+    # Checked by the caller. Largest ns gives 4294967291.7: never rounds up to a second.
+    return (sec << 32) | ((nanosec * _FRAC_PER_S + _NS_PER_S // 2) // _NS_PER_S)
 
 
 def ros_time_from_igtl(ts: int) -> tuple[int, int]:
@@ -372,7 +374,7 @@ def igtl_stamp_or_now(sec: int, nanosec: int) -> int:
             or not isinstance(nanosec, int):
         return igtl_timestamp_now()
     if 0 < sec <= _U32_MAX and 0 <= nanosec < _NS_PER_S:
-        return igtl_timestamp_from_ros(sec, nanosec)
+        return _igtl_timestamp(sec, nanosec)  # checked just above (a hot path's call)
     return igtl_timestamp_now()
 
 

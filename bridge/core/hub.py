@@ -404,10 +404,13 @@ class Hub:
         if not frames:
             return
         clock = daemon_clock_ms()
-        for _, frame in frames:
+        direct = self._direct_writes
+        for device, frame in frames:  # a plain loop: this runs per message on hot paths
             frame.clock = frame.clock or clock
-        if self._direct_writes and not any(d in self._min_interval or d in self._audience
-                                           or isinstance(f, BulkFrame) for d, f in frames):
+            if direct and (device in self._min_interval or device in self._audience
+                           or isinstance(frame, BulkFrame)):
+                direct = False
+        if direct:
             with self._lock:
                 if channel is not None and channel.closed:
                     return
@@ -428,7 +431,8 @@ class Hub:
             version = client.header_version
             data = joined.get(version)
             if data is None:
-                data = joined[version] = b"".join(f.encoded(version) for _, f in frames)
+                data = joined[version] = (frames[0][1].encoded(version) if len(frames) == 1
+                                          else b"".join(f.encoded(version) for _, f in frames))
             if not client.write_direct(data):
                 for device, frame in frames:
                     client.hand_over(device, frame)

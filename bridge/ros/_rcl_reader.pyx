@@ -149,6 +149,31 @@ cdef class RawReader:
         view valid until the next call; None when ``timeout_s`` passed or `wake` was
         called with nothing to take. Subscriptions take turns, so a busy one cannot
         starve the others."""
+        cdef size_t index = 0
+        if self._take_first(timeout_s, &index) != RCL_RET_OK:
+            return None
+        return index, PyMemoryView_FromMemory(<char *>self._message.buffer,
+                                              <Py_ssize_t>self._message.buffer_length,
+                                              PyBUF_READ)
+
+    def take_batch(self, double timeout_s, size_t max_count, size_t max_bytes):
+        """``(index, messages)``: `take`'s message and those of the same subscription
+        waiting after it (`take_more`), each copied to bytes, in order; None as `take`."""
+        cdef size_t index = 0
+        if self._take_first(timeout_s, &index) != RCL_RET_OK:
+            return None
+        first = PyBytes_FromStringAndSize(<char *>self._message.buffer,
+                                          <Py_ssize_t>self._message.buffer_length)
+        if max_count <= 1 or <size_t>len(first) >= max_bytes:
+            return index, [first]
+        more = self.take_more(index, max_count - 1, max_bytes - len(first))
+        more.insert(0, first)
+        return index, more
+
+    cdef rcl_ret_t _take_first(self, double timeout_s, size_t *taken) except? -1:
+        """Take the next message into the buffer (RCL_RET_OK, its subscription in
+        ``taken``), waiting up to ``timeout_s``; RCL_RET_SUBSCRIPTION_TAKE_FAILED when the
+        time passed or `wake` was called."""
         cdef rcl_ret_t ret = RCL_RET_SUBSCRIPTION_TAKE_FAILED
         cdef rmw_message_info_t info
         cdef size_t tried, index = 0
@@ -189,11 +214,10 @@ cdef class RawReader:
                     break
         if ret == RCL_RET_OK:
             self._next = (index + 1) % self._count
-            return index, PyMemoryView_FromMemory(<char *>self._message.buffer,
-                                                  <Py_ssize_t>self._message.buffer_length,
-                                                  PyBUF_READ)
+            taken[0] = index
+            return ret
         if ret == RCL_RET_SUBSCRIPTION_TAKE_FAILED:
-            return None
+            return ret
         rcutils_reset_error()
         raise ReaderError(f"rcl returned {ret} while taking a message")
 

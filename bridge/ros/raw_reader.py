@@ -105,9 +105,13 @@ class RawReader:
     destroys the subscriptions; it must run before the node is destroyed (RosNode.stop sees
     to it)."""
 
-    def __init__(self, node: Node, topics: Sequence[Topic], name: str) -> None:
+    def __init__(self, node: Node, topics: Sequence[Topic], name: str, *,
+                 batches: bool = False) -> None:
         if not available():
             raise RuntimeError("the compiled rcl reader is not built here")
+        self._batches = batches  # its topics are all BatchTopics, or all RawTopics
+        for topic in topics:
+            self._check_kind(topic)
         self._node = node
         self._taken: list[RawSubscription] = []  # in the compiled reader's order
         # Changes to what is taken, applied by the reader's thread between two takes.
@@ -125,6 +129,11 @@ class RawReader:
         self._thread: Optional[threading.Thread] = threading.Thread(
             target=self._run, name=name, daemon=True)
         self._thread.start()
+
+    def _check_kind(self, topic: Topic) -> None:
+        if isinstance(topic, BatchTopic) != self._batches:
+            raise TypeError(f"topic: expected a {'BatchTopic' if self._batches else 'RawTopic'}"
+                            f" (this reader's kind), got a {type(topic).__name__}")
 
     def _subscribe(self, topic: Topic) -> Any:
         from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -145,6 +154,7 @@ class RawReader:
         """Take `topic` too (any thread): its messages are taken from the reader's next
         turn on; those that came meanwhile wait in the subscription. ReaderError if the
         middleware cannot tell its new messages (nothing is left subscribed then)."""
+        self._check_kind(topic)
         subscription = RawSubscription(self, topic, self._subscribe(topic))
         try:
             _rcl_reader.check_tells_new_messages(subscription.handle)
@@ -194,27 +204,24 @@ class RawReader:
     def _run(self) -> None:
         last_logged = -_ERROR_LOG_INTERVAL_S
         unlogged = 0
+        reader = self._reader
         while not self._stopping.is_set():
             try:
                 if self._adding or self._removing:
                     self._apply_changes()
-                taken = self._reader.take(_WAIT_S)
+                taken: Optional[tuple[int, Any]] = (
+                    reader.take_batch(_WAIT_S, BATCH_MAX_MESSAGES, BATCH_MAX_BYTES)
+                    if self._batches else reader.take(_WAIT_S))
             except _rcl_reader.ReaderError:
                 if not self._stopping.is_set():
                     log.exception("the raw reader of %s stopped", self._names())
                 return
             if taken is None:
                 continue
-            index, view = taken
+            index, data = taken  # a view (RawTopic) or a list of bytes (BatchTopic)
             topic = self._taken[index].topic
             try:
-                if isinstance(topic, BatchTopic):
-                    first = view.tobytes()
-                    view.release()
-                    topic.callback([first, *self._reader.take_more(
-                        index, BATCH_MAX_MESSAGES - 1, max(0, BATCH_MAX_BYTES - len(first)))])
-                else:
-                    topic.callback(view)
+                topic.callback(data)
             except _rcl_reader.ReaderError:
                 if not self._stopping.is_set():
                     log.exception("the raw reader of %s stopped", topic.topic)
@@ -230,11 +237,12 @@ class RawReader:
                 else:
                     unlogged += 1
             finally:
-                try:
-                    view.release()
-                except BufferError:  # a callback kept a view: a bug, the buffer is reused
-                    log.error("a callback of %s kept a view on the reader's buffer",
-                              topic.topic)
+                if not self._batches:
+                    try:
+                        data.release()
+                    except BufferError:  # a callback kept a view: a bug, the buffer is reused
+                        log.error("a callback of %s kept a view on the reader's buffer",
+                                  topic.topic)
 
     def _names(self) -> str:
         return ", ".join(s.topic.topic for s in self._taken) or "no topic"

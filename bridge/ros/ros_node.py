@@ -154,15 +154,15 @@ class RosNode:
                     unlogged += 1
                 time.sleep(_ERROR_PAUSE_S)
 
-    def raw_reader(self, topics: Sequence[Union[RawTopic, BatchTopic]],
-                   name: str) -> Optional[RawReader]:
+    def raw_reader(self, topics: Sequence[Union[RawTopic, BatchTopic]], name: str, *,
+                   batches: bool = False) -> Optional[RawReader]:
         """`topics` subscribed raw on ``stream_node`` and read without the interpreter's
         lock in the thread ``name`` (bridge/ros/raw_reader.py); None where the compiled reader
         is not built (then subscribe through rclpy). Closed by `stop` at the latest."""
         if not raw_reader_available():
             return None
         try:
-            reader = RawReader(self.stream_node, topics, name)
+            reader = RawReader(self.stream_node, topics, name, batches=batches)
         except ReaderError as error:
             log.warning("%s taken through rclpy: %s", name, error)
             return None
@@ -182,7 +182,8 @@ class RosNode:
         with self._stream_reader_lock:
             reader = self._stream_reader
             if reader is None:
-                reader = self._stream_reader = self.raw_reader([], name="ros-stream-reader")
+                reader = self._stream_reader = self.raw_reader([], name="ros-stream-reader",
+                                                               batches=True)
                 if reader is None:
                     return None
             if reader.count >= MAX_READ_STREAMS:

@@ -179,7 +179,8 @@ class SubscriberBridge:
             self.count += 1
             frames.append((self.device, TemplateFrame(template, content, timestamp, values,
                                                       transform_body)))
-            self._post_whole(None, data)
+            if self._messages is not None:
+                self._post_whole(None, data)
         self._keep(messages[-1])
         self._hub.post_frames(frames, self._channel)
 

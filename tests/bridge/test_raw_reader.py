@@ -16,7 +16,7 @@ from tf2_msgs.msg import TFMessage
 
 from bridge.ros import raw_reader
 from bridge.ros.qos import TF_QOS
-from bridge.ros.raw_reader import BatchTopic, RawSubscription, RawTopic
+from bridge.ros.raw_reader import BatchTopic, RawReader, RawSubscription, RawTopic
 from bridge.ros.ros_node import RosNode, RosOptions
 from support import Processes, scaled, wait_until
 
@@ -145,7 +145,7 @@ def _batched(ros: RosNode, processes: Processes, topic: str,
             published.wait(scaled(30))
 
     reader = ros.raw_reader([BatchTopic(topic, PoseStamped, _deep_reliable(), on_batch)],
-                            name="rr-batch")
+                            name="rr-batch", batches=True)
     assert reader is not None
     publisher = processes.python("poses", "stream_publisher.py", topic, "100000",
                                  "--count", str(count))
@@ -204,7 +204,7 @@ def test_topics_added_to_a_running_reader_are_taken_and_removed_ones_are_not(
                                 for m in messages]
         return callback
 
-    reader = ros.raw_reader([], name="rr-dynamic")  # none to begin with
+    reader = ros.raw_reader([], name="rr-dynamic", batches=True)  # none to begin with
     assert reader is not None and reader.count == 0
     a = reader.add(BatchTopic("/rr_add_a", PoseStamped, TF_QOS, on("/rr_add_a")))
     b = reader.add(BatchTopic("/rr_add_b", PoseStamped, TF_QOS, on("/rr_add_b")))
@@ -242,7 +242,7 @@ def test_a_callback_may_remove_its_own_topic(ros: RosNode, processes: Processes)
         batches.append(len(messages))
         holder[0].close()  # from the reader's own thread: at once, no deadlock
 
-    reader = ros.raw_reader([], name="rr-self-remove")
+    reader = ros.raw_reader([], name="rr-self-remove", batches=True)
     assert reader is not None
     holder.append(reader.add(BatchTopic("/rr_self_remove", PoseStamped, TF_QOS, once)))
     processes.python("poses", "stream_publisher.py", "/rr_self_remove", "200", "--count",
@@ -289,3 +289,15 @@ def test_a_topic_the_middleware_cannot_tell_goes_through_rclpy(
                r.getMessage() for r in caplog.records)
     wait_until(lambda: ros.stream_node.count_subscribers("/rr_untold") == 0, timeout=10,
                what="no subscription left by the refused topic")
+
+
+def test_a_reader_takes_one_kind_of_topic(ros: RosNode) -> None:
+    views = ros.raw_reader([], name="rr-views")
+    assert views is not None
+    with pytest.raises(TypeError, match="topic: expected a RawTopic .* got a BatchTopic"):
+        views.add(BatchTopic("/rr_kind", PoseStamped, TF_QOS, lambda m: None))
+    with pytest.raises(TypeError, match="expected a BatchTopic .* got a RawTopic"):
+        RawReader(ros.stream_node, [RawTopic("/rr_kind", PoseStamped, TF_QOS,
+                                             lambda v: None)], "rr-kind", batches=True)
+    assert ros.stream_node.count_subscribers("/rr_kind") == 0
+    views.close()
