@@ -714,3 +714,34 @@ def test_pose_streams_past_the_stream_readers_bound_go_through_rclpy_and_arrive_
     finally:
         ros.stop()
         served.close()
+
+
+@pytest.mark.ros
+def test_pose_bytes_nobody_can_read_in_a_burst_cost_a_warning_and_the_rest_goes_on(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A malformed PoseStamped among good ones (a hostile peer's bytes): the fast path
+    refuses it, the ordinary way cannot read it either and says so once; the good ones
+    before and after it reach the client, in order."""
+    from bridge.ros.ros_node import RosNode, RosOptions
+    from bridge.topics.capability import SubscriberBridge
+    from protocol.commands import QoS
+
+    served = _Served(direct_writes=True)
+    ros = RosNode(RosOptions(node_name="hot_path_bad_pose"))
+    try:
+        peer = served.connect()
+        bridge = SubscriberBridge(ros, served.hub, topic="/hot_path_bad_pose",
+                                  codec=codec_for("geometry_msgs/msg/PoseStamped"),
+                                  qos=QoS(), device="pose", metadata={})
+        garbage = b"\x00\x01\x00\x00" + b"\xff" * 7  # a CDR header, then a broken stamp
+        with caplog.at_level("WARNING", logger="bridge.topics.capability"):
+            bridge._on_batch([_pose_bytes(1), garbage, _pose_bytes(2)])
+        got = peer.read_until(2)
+        assert [round(m.body.matrix[0][3]) for m in got] == [1, 2]
+        assert any("cannot read a geometry_msgs/msg/PoseStamped from /hot_path_bad_pose"
+                   in r.getMessage() for r in caplog.records)
+        assert bridge.count == 2
+        bridge.close()
+    finally:
+        ros.stop()
+        served.close()
