@@ -168,20 +168,26 @@ class SubscriberBridge:
                 self._on_message(data)
             return
         frames: list[tuple[str, Frame]] = []
+        last: Optional[bytes] = None  # the last one converted here, kept as the last message
         for data in messages:
             try:
                 template, content, timestamp, values = fast.convert(data)
             except NotFast:  # the ordinary way says what is wrong with it, after those before
                 self._hub.post_frames(frames, self._channel)
                 frames = []
-                self._on_message(data)
+                if last is not None:
+                    self._keep(last)
+                    last = None
+                self._on_message(data)  # keeps it, if it can be read at all
                 continue
             self.count += 1
             frames.append((self.device, TemplateFrame(template, content, timestamp, values,
                                                       transform_body)))
             if self._messages is not None:
                 self._post_whole(None, data)
-        self._keep(messages[-1])
+            last = data
+        if last is not None:
+            self._keep(last)
         self._hub.post_frames(frames, self._channel)
 
     def _on_message(self, data: bytes) -> None:

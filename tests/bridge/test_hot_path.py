@@ -741,6 +741,10 @@ def test_pose_bytes_nobody_can_read_in_a_burst_cost_a_warning_and_the_rest_goes_
         assert any("cannot read a geometry_msgs/msg/PoseStamped from /hot_path_bad_pose"
                    in r.getMessage() for r in caplog.records)
         assert bridge.count == 2
+        # Ending a burst, it is not kept as the last message: the one before it is.
+        bridge._on_batch([_pose_bytes(3), garbage])
+        assert [round(m.body.matrix[0][3]) for m in peer.read_until(1)] == [3]
+        assert bridge.last_message.pose.position.x == pytest.approx(0.003)
         bridge.close()
     finally:
         ros.stop()
