@@ -66,6 +66,11 @@ def peer(module_processes: Processes, tmp_path_factory: pytest.TempPathFactory) 
 @pytest.fixture(scope="module")
 def client(daemon: RunningDaemon, peer: Peer) -> Iterator[Connection]:
     connection = daemon.connect()
+    # The publisher's markers are in "base": until the daemon has its /tf_static world ->
+    # base, a marker cannot be placed in the fixed frame, and a re-send once it can would
+    # re-place it (a new model), which these tests read as something else.
+    connection.command("lookup_transform", {"parent": "world", "child": "base",
+                                            "timeout": 60.0})
     for topic, kind in (("/test_markers", "MarkerArray"), ("/test_marker", "Marker")):
         connection.command("create_marker_subscriber",
                            {"topic": topic, "type": kind, "fixed_frame": "world"})
