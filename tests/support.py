@@ -15,7 +15,7 @@ from typing import Callable, Optional, Sequence
 
 import pytest
 
-from slicer_client.connection import Connection
+from slicer_client.connection import CommandRefusedError, Connection
 
 REPO = Path(__file__).resolve().parent.parent
 PEERS = Path(__file__).resolve().parent / "peers"
@@ -143,6 +143,22 @@ class Processes:
     def stop_all(self) -> None:
         for child in reversed(self.children):
             child.stop()
+
+
+def refused(call: Callable[[], object]) -> CommandRefusedError:
+    """The refusal `call` (a command) meets; the test fails if it is not refused."""
+    with pytest.raises(CommandRefusedError) as info:
+        call()
+    return info.value
+
+
+def alive(pid: int) -> bool:
+    """Whether process `pid` runs (a zombie does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except OSError:
+        return False
 
 
 def children_of(pid: int) -> list[tuple[int, str, str]]:

@@ -17,8 +17,8 @@ import pytest
 from protocol.commands import ErrorCode
 from protocol.messages import String
 from protocol.naming import KEY_GOAL_ID
-from slicer_client.connection import CommandRefusedError, Connection
-from support import Child, Processes, RunningDaemon, scaled, wait_until
+from slicer_client.connection import Connection
+from support import Child, Processes, RunningDaemon, refused, scaled, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -34,12 +34,6 @@ def gripper(processes: Processes, action: str, *args: str) -> Child:
                              action, *args)
     child.wait_for_output("READY")
     return child
-
-
-def refused(call: Any) -> CommandRefusedError:
-    with pytest.raises(CommandRefusedError) as info:
-        call()
-    return info.value
 
 
 def test_a_goal_id_in_flight_cannot_be_used_again(client: Connection,

@@ -18,8 +18,9 @@ from protocol.messages import String
 from protocol.naming import KEY_ACTION, KEY_GOAL_ID, KEY_GOAL_STATUS, KEY_ROLE
 from slicer_client.actions import ActionGoalError
 from slicer_client.client import Client
-from slicer_client.connection import CommandRefusedError, Connection
-from support import Child, Processes, RunningDaemon, scaled, start_daemon, wait_until
+from slicer_client.connection import Connection
+from support import (Child, Processes, RunningDaemon, refused, scaled, start_daemon,
+                     wait_until)
 
 pytestmark = pytest.mark.ros
 
@@ -44,12 +45,6 @@ def server(module_processes: Processes) -> Child:
 
 
 # Actions these tests serve through the daemon (unadvertised when their client leaves).
-def refused(call: Any) -> CommandRefusedError:
-    with pytest.raises(CommandRefusedError) as info:
-        call()
-    return info.value
-
-
 def slow_server(processes: Processes, action: str = "/slow_gripper", *,
                 period: float = 0.05, threads: int = 4) -> Child:
     """A gripper server that takes 100 steps of `period` s per goal."""

@@ -10,17 +10,9 @@ import signal
 
 import pytest
 
-from support import Processes, children_of, pick_free_port, scaled, wait_until
+from support import Processes, alive, children_of, pick_free_port, scaled, wait_until
 
 pytestmark = pytest.mark.ros
-
-
-def alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
-    except OSError:
-        return False
 
 
 def test_a_child_that_dies_and_one_that_will_not_stop(processes: Processes) -> None:

@@ -11,17 +11,9 @@ import sys
 import pytest
 
 from bridge.robots._spin import PARENT_PID_ENV
-from support import Processes, children_of, pick_free_port, scaled, wait_until
+from support import Processes, alive, children_of, pick_free_port, scaled, wait_until
 
 pytestmark = pytest.mark.ros
-
-
-def alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
-    except OSError:
-        return False
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGKILL],
