@@ -65,4 +65,4 @@ lint: setup
 clean:
 	rm -rf $(VENV) build dist .cache .pytest_cache .hypothesis bridge/tf/_compiled_store.c \
 		bridge/ros/_rcl_reader.c bridge/ros/_rcl_reader.*.so \
-		bridge/tf/_compiled_store.*.so
+		bridge/tf/_compiled_store.*.so bridge/core/_native_stream.c bridge/core/_native_stream.*.so

@@ -34,7 +34,10 @@ def compiled_modules() -> list:
     # the compiled store's results equal the pure Python store's to the bit.
     store = Extension("bridge.tf._compiled_store", ["bridge/tf/_compiled_store.pyx"],
                       extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
-    return cythonize([store, *rcl_reader()], quiet=True)
+    # The native lane of streamed poses (bridge/core/_native_stream.pyx): same rule.
+    lane = Extension("bridge.core._native_stream", ["bridge/core/_native_stream.pyx"],
+                     extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
+    return cythonize([store, lane, *rcl_reader()], quiet=True)
 
 
 def rcl_reader() -> list:

@@ -197,6 +197,11 @@ class StreamTemplate:
         self._meta_sizes = (len(meta_header), len(meta))
         self._ext_v2 = _EXT_HEADER.pack(EXT_HEADER_SIZE, len(meta_header), len(meta), 0)
 
+    def wire_parts(self) -> tuple[bytes, bytes, int, int, bytes]:
+        """(type, device name, metadata header size, metadata size, metadata), packed: what
+        a native writer needs to make `encode`'s bytes (bridge/core/_native_stream.pyx)."""
+        return (self._type_raw, self._name_raw, *self._meta_sizes, self._meta_tail)
+
     def encode(self, content: bytes, timestamp: int, header_version: int,
                message_id: int = 0) -> bytes:
         """The wire bytes of one message with this content (a packed body), time stamp

@@ -22,10 +22,11 @@ import time
 from collections import deque
 from typing import Deque, Optional, Tuple
 
-__all__ = ["DEFAULT_FRESHNESS_S", "Freshness", "daemon_clock_ms"]
+__all__ = ["CLOCK_MODULUS", "DEFAULT_FRESHNESS_S", "Freshness", "daemon_clock_ms"]
 
 DEFAULT_FRESHNESS_S = 0.5
 _MOD = 1 << 32
+CLOCK_MODULUS = _MOD  # the clock wraps within it (the native lane's clock follows it)
 _HALF = 1 << 31
 _WINDOW_MS = 30_000  # heartbeats this recent set the baseline (drift is followed)
 

@@ -63,6 +63,7 @@ class RawPoseStream:
         self._device = device
         self._metadata = metadata
         self._templates: dict[tuple[str, str], StreamTemplate] = {}
+        self.ids = ("", "")  # the (frame_id, child_frame_id) of the last message converted
 
     def convert(self, data: bytes) -> tuple[StreamTemplate, bytes, int, tuple[float, ...]]:
         """CDR bytes -> (template, TRANSFORM content, IGTL time stamp, the 12 numbers)."""
@@ -79,6 +80,7 @@ class RawPoseStream:
         template = self._templates.get((frame, child))
         if template is None:
             template = self._template_for(data, frame, child)
+        self.ids = (frame, child)
         return template, content, igtl_stamp_or_now(sec, nanosec), values
 
     def _template_for(self, data: bytes, frame: str, child: str) -> StreamTemplate:

@@ -17,6 +17,9 @@ executor thread and hand values over through a `StreamChannel` (`post_frame`):
   (`Subscriber.write_direct`): no loop wake-up per message. A client that is behind gets
   the value through the loop instead (`hand_over`: in order, one wake-up for all handed
   meanwhile), into its own outbox;
+* hotter still: a streamed pose taken by a native lane (native_stream.py) is converted and
+  written to every client without the interpreter, while every client keeps up and
+  nothing waits for the loop (`fanout.hold`); otherwise it takes the path above;
 * otherwise small values queue in order (bounded), large ones (images, point clouds)
   replace their device's waiting one, and the loop is woken at most once per batch, so a
   burst costs one wake-up and each client gets the whole batch in one socket write.
@@ -38,8 +41,9 @@ import threading
 import time
 from collections import deque
 from contextlib import contextmanager
-from typing import Callable, Iterator, Optional, Protocol
+from typing import Any, Callable, Iterator, Optional, Protocol
 
+from bridge.core.native_stream import PySlot, new_fanout, new_slot
 from bridge.core.outbox import BulkFrame, Frame
 from bridge.core.security import WriteGrant
 from protocol.freshness import daemon_clock_ms
@@ -88,6 +92,8 @@ class Subscriber(Protocol):
     @property
     def header_version(self) -> int: ...
     def write_direct(self, data: bytes) -> bool: ...
+    @property
+    def slot(self) -> Any: ...  # native_stream's Slot
     def hand_over(self, device: str, frame: Frame) -> None: ...
 
 
@@ -143,6 +149,10 @@ class Hub:
         self.streamed = 0
         self.batches = 0  # loop wake-ups that took posted values: streamed / batches per wake
         self.direct = 0  # values written to every client from the posting thread
+        # The native lanes' clients (None where they are not built) and lanes: device ->
+        # (lane, what makes a `Frame` of its `latest()`).
+        self.fanout = new_fanout()
+        self._lanes: dict[str, tuple[Any, Callable[[Any], Frame]]] = {}
 
     # --- clients -------------------------------------------------------------------------
     def attach(self, client: Subscriber) -> None:
@@ -151,10 +161,11 @@ class Hub:
         with self._lock:
             self.clients.add(client)
             self._client_tuple = tuple(self.clients)
+            newest = self._set_slots()  # from now on the lanes see it (closed until it keeps up)
             for frame in self._persistent.values():
                 client.send_once(frame)
             audience = self._audience
-            for device, frame in self._latest.items():
+            for device, frame in newest.items():
                 members = audience.get(device)
                 if members is None or client in members:
                     client.send_stream(device, frame)
@@ -167,6 +178,7 @@ class Hub:
         with self._lock:
             self.clients.discard(client)
             self._client_tuple = tuple(self.clients)
+            self._set_slots()
             for device, members in tuple(self._audience.items()):
                 if client in members:
                     self._audience[device] = tuple(m for m in members if m is not client)
@@ -176,6 +188,7 @@ class Hub:
         """From now on `device` goes only to the clients that `join` it (none yet)."""
         with self._lock:
             self._audience.setdefault(device, ())
+        self._update_lane(device)
 
     def join(self, device: str, client: Subscriber) -> None:
         """Stream `device` (limited to an audience) to `client` too; it gets the newest
@@ -185,7 +198,7 @@ class Hub:
             if client in members:
                 return
             self._audience[device] = (*members, client)
-            frame = self._latest.get(device)
+            frame = self._newest(device)
             if frame is not None and client in self.clients:
                 client.send_stream(device, frame)
 
@@ -194,6 +207,62 @@ class Hub:
             members = self._audience.get(device)
             if members is not None and client in members:
                 self._audience[device] = tuple(m for m in members if m is not client)
+
+    # --- native lanes ------------------------------------------------------------------------
+    def _set_slots(self) -> dict[str, Frame]:
+        """Under the hand-off lock: the lanes write to the clients attached now; returns
+        the newest value of every device, lanes' included, as of that moment."""
+        if self.fanout is None:
+            return dict(self._latest)
+        # A client without a native slot (a test's) stays closed: the lanes then leave
+        # every message to the Python path.
+        slots = [getattr(c, "slot", None) for c in self._client_tuple]
+        newest = dict(self._latest)
+        with self.fanout:
+            self.fanout.set_slots([s if s is not None and not isinstance(s, PySlot)
+                                   else _closed_slot() for s in slots])
+            for device, (lane, to_frame) in self._lanes.items():
+                latest = lane.latest()
+                if latest is not None:
+                    newest[device] = to_frame(latest)
+        return newest
+
+    def add_lane(self, device: str, lane: Any, to_frame: Callable[[Any], Frame]) -> None:
+        """`device`'s values may be written by a native lane (`PoseLane`) from now on, when
+        nothing about the device needs the Python path (a bound, an audience).
+        `to_frame` runs holding the fanout, so the lane's template cannot change under it."""
+        with self._lock:
+            self._lanes[device] = (lane, to_frame)
+        self._update_lane(device)
+
+    def remove_lane(self, device: str) -> None:
+        """The lane writes no more (once this returns); its newest value becomes the hub's."""
+        with self._lock:
+            entry = self._lanes.pop(device, None)
+            if entry is None or self.fanout is None:
+                return
+            lane, to_frame = entry
+            with self.fanout:
+                lane.enabled = False
+                latest = lane.latest()
+                if latest is not None:
+                    self._latest[device] = to_frame(latest)
+
+    def _update_lane(self, device: str) -> None:
+        entry = self._lanes.get(device)
+        if entry is None or self.fanout is None:
+            return
+        with self.fanout:
+            entry[0].enabled = device not in self._min_interval and device not in self._audience
+
+    def _newest(self, device: str) -> Optional[Frame]:
+        entry = self._lanes.get(device)
+        if entry is not None and self.fanout is not None:
+            with self.fanout:  # the lane's template cannot change meanwhile
+                latest = entry[0].latest()
+                if latest is not None:
+                    return entry[1](latest)
+        return self._latest.get(device)
 
     def has_audience(self, device: str) -> bool:
         """Does anyone get `device` (any thread: a bridge asks before making a value)?"""
@@ -289,6 +358,7 @@ class Hub:
             self._min_interval[device] = 1.0 / max_hz
         else:
             self._min_interval.pop(device, None)
+        self._update_lane(device)
 
     def forget(self, device: str) -> None:
         """A bridge was removed: new clients no longer get its last value, and what it
@@ -298,6 +368,10 @@ class Hub:
                 self._incoming = deque(item for item in self._incoming if item[0] != device)
             self._incoming_large.pop(device, None)
             self._latest.pop(device, None)
+            lane = self._lanes.pop(device, None)
+            if lane is not None and self.fanout is not None:
+                with self.fanout:
+                    lane[0].enabled = False
         self._persistent.pop(device, None)
         self._condition.pop(device, None)
         self._audience.pop(device, None)
@@ -313,12 +387,13 @@ class Hub:
         members = self._audience.get(device)
         if client is not None and members is not None and client not in members:
             return None
-        frame = self._latest.get(device) or self._persistent.get(device)
+        frame = self._newest(device) or self._persistent.get(device)
         return frame.message if frame else None
 
     def devices(self) -> list[str]:
         with self._lock:  # another thread may add a device to _latest
-            return sorted(set(self._latest) | set(self._persistent))
+            lanes = [d for d in self._lanes if self._newest(d) is not None]
+            return sorted(set(self._latest) | set(self._persistent) | set(lanes))
 
     # --- inbound ---------------------------------------------------------------------------
     def route(self, device: str, handler: InboundHandler) -> None:
@@ -464,6 +539,7 @@ class Hub:
             if self._wake_pending:
                 return
             self._wake_pending = True
+            self._hold_lanes(True)  # nothing may pass what waits for the loop
         try:
             self._loop.call_soon_threadsafe(self._drain)
         except RuntimeError:  # the loop closed during shutdown: nobody to send to
@@ -498,6 +574,14 @@ class Hub:
         finally:
             with self._lock:
                 self._draining = False
+                if not self._wake_pending:
+                    self._hold_lanes(False)
+
+    def _hold_lanes(self, hold: bool) -> None:
+        # Under the hand-off lock.
+        if self.fanout is not None:
+            with self.fanout:
+                self.fanout.hold = hold
 
 
 class StreamChannel:
@@ -510,3 +594,8 @@ class StreamChannel:
     def __init__(self, device: str) -> None:
         self.device = device
         self.closed = False
+
+
+def _closed_slot() -> Any:
+    """A slot no lane writes to (a client the lanes cannot serve)."""
+    return new_slot(None)

@@ -156,6 +156,10 @@ class TemplateFrame(Frame):
         self._body_of = body_of
 
     @property
+    def template(self) -> StreamTemplate:
+        return self._template
+
+    @property
     def message(self) -> Message:
         if self._message is None:
             t = self._template

@@ -23,8 +23,9 @@ replaces an unsent older one.
 
 Direct writes (the hot path): while a client keeps up (nothing waiting anywhere on its
 side), the hub may write a small stream frame to its socket from the ROS executor thread
-(`write_direct`), which saves the loop a wake-up per message. Every write to the socket,
-from either thread, holds the session's write lock, so frames never interleave; whatever
+(`write_direct`), which saves the loop a wake-up per message; a native lane writes a pose
+through the session's `slot` without the interpreter at all (native_stream.py). Every
+write to the socket, from any thread, holds the slot, so frames never interleave; whatever
 a direct write could not finish is written by the loop before anything else, and a client
 that is behind is never written directly: its frames take the loop's path (`hand_over`),
 in order, and meet the outbox there.
@@ -38,7 +39,6 @@ import operator
 import os
 import socket
 import struct
-import threading
 import time
 from dataclasses import dataclass
 from functools import partial
@@ -47,6 +47,7 @@ from typing import Callable, Optional
 from bridge.core.heavy import HeavyWork
 from bridge.core.hub import Hub
 from bridge.core.logging_limits import RateLimitedLog
+from bridge.core.native_stream import BROKEN, SENT, STASHED, new_slot
 from bridge.core.outbox import WRITE_CHUNK, Frame, Outbox, OutboxOverflow
 from bridge.core.security import WRITES, WriteGrant, is_loopback_host
 from protocol.crc64 import Buffer
@@ -142,15 +143,16 @@ class ClientSession(asyncio.Protocol):
         self._attach_timer: Optional[asyncio.TimerHandle] = None
         self._batch: Optional[list[Buffer]] = None  # frames gathered for one write
         self._flush_scheduled = False  # the outbox is written on from the next loop turn
-        # Direct writes from the executor thread (see the module docstring).
-        self._wlock = threading.Lock()
+        # Direct writes from other threads (see the module docstring). The slot is this
+        # session's write lock, and what the native lanes write through (native_stream.py):
+        # open only while nothing of this client waits anywhere. It keeps the rest of a
+        # direct write taken in part, which goes before anything else.
+        self.slot = new_slot(self)
         self._direct: Optional[socket.socket] = None  # a dup of the transport's socket
-        self._stash: Optional[bytes] = None  # the rest of a partial direct write
         # Stream values `write_direct` refused, in order, for the loop to send; `_handed` is
         # set while the loop has yet to take them (one wake-up for any number handed).
         self._handed_frames: list[tuple[str, Frame]] = []
         self._handed = False
-        self._sent_direct = 0
         self._unrouted_warned: set[str] = set()
         self._bad_log = RateLimitedLog(log)
         self.peer = "?"
@@ -188,6 +190,8 @@ class ClientSession(asyncio.Protocol):
             direct = socket.socket(fileno=os.dup(sock.fileno()))
             direct.setblocking(False)
             self._direct = direct
+            with self.slot:
+                self.slot.connect(direct)
         log.info("client %s connected", self.peer)
         # Streams start once the header version is known: the current state sent as v1
         # would reach 3D Slicer without metadata, and meshes are sent only once.
@@ -203,8 +207,10 @@ class ClientSession(asyncio.Protocol):
         self._hub.attach(self)
 
     def connection_lost(self, exc: Optional[Exception]) -> None:
-        with self._wlock:  # the executor thread writes directly: nothing after this
+        with self.slot:  # other threads write directly: nothing after this
             self._closing = True
+            self.slot.disconnect()
+            self.slot.take_stash()
             if self._direct is not None:
                 self._direct.close()
                 self._direct = None
@@ -232,6 +238,7 @@ class ClientSession(asyncio.Protocol):
             self._heavy.forget(self)
 
     def pause_writing(self) -> None:
+        # Called from within transport.write, which runs holding the slot (already closed).
         self._paused = True
 
     def resume_writing(self) -> None:
@@ -379,6 +386,8 @@ class ClientSession(asyncio.Protocol):
         if not self._attached and self._negotiator.peer_speaks_v2:
             self._attach()
         elif announced and self._attached:
+            with self.slot:  # frames of the old header version must not go out any more
+                self.slot.open = False
             # v2 came after the grace time: the state went out as v1, without the metadata
             # 3D Slicer names and places nodes by, and meshes go once per connection.
             log.info("client %s announced header v2 late: sending the state again",
@@ -446,7 +455,7 @@ class ClientSession(asyncio.Protocol):
     @property
     def sent(self) -> int:
         """Frames written (or gathered for a batch write) to this client."""
-        return self._sent + self._sent_direct
+        return self._sent + int(self.slot.sent)
 
     @property
     def header_version(self) -> int:
@@ -562,8 +571,9 @@ class ClientSession(asyncio.Protocol):
         state = self.link_state()
         log.warning("client %s has acknowledged nothing for %.1f s while data waits: the "
                     "link is dead; closing it", self.peer, state.silent_s if state else 0.0)
-        with self._wlock:
+        with self.slot:
             self._closing = True
+            self.slot.open = False
         sock = self._tcp_socket()
         ends = None
         if sock is not None:
@@ -583,8 +593,9 @@ class ClientSession(asyncio.Protocol):
     def close(self) -> None:
         """Close the connection. What the transport already holds is still flushed; the
         receive buffer and the frames not yet handed to the transport go now."""
-        with self._wlock:
+        with self.slot:
             self._closing = True
+            self.slot.open = False
             if self._frame_timer is not None:
                 self._frame_timer.cancel()
                 self._frame_timer = None
@@ -613,9 +624,10 @@ class ClientSession(asyncio.Protocol):
 
     def _transport_write(self, data: Buffer) -> None:
         assert self._transport is not None
-        with self._wlock:
-            if self._stash is not None:  # the rest of a direct write goes first
-                stash, self._stash = self._stash, None
+        with self.slot:
+            self.slot.open = False  # the transport may hold data now: direct writes wait
+            stash = self.slot.take_stash()
+            if stash is not None:  # the rest of a direct write goes first
                 self._transport.write(stash)
             self._transport.write(data)
 
@@ -646,37 +658,38 @@ class ClientSession(asyncio.Protocol):
     # --- direct writes (ROS executor thread) -------------------------------------------------
     def write_direct(self, data: bytes) -> bool:
         """Write a stream frame now, from another thread, if nothing of this client waits
-        anywhere; False (nothing written) if it must take the loop's path (`hand_over`)."""
-        with self._wlock:
-            direct = self._direct
+        anywhere; False (nothing written) if it must take the loop's path (`hand_over`).
+        A frame written whole opens the slot to the native lanes."""
+        slot = self.slot
+        with slot:
             transport = self._transport
-            if (direct is None or transport is None or self._closing or self._paused
-                    or self._handed or self._stash is not None or self._batch is not None
+            if (self._direct is None or transport is None or self._closing or self._paused
+                    or self._handed or slot.has_stash or self._batch is not None
                     or len(self._outbox) or transport.is_closing()
                     or transport.get_write_buffer_size()):
+                slot.open = False
                 return False
-            try:
-                sent = direct.send(data)
-            except (BlockingIOError, InterruptedError):
-                sent = 0
-            except OSError:  # the loop's transport meets the same error and closes
-                self._direct = None
-                direct.close()
-                return False
-            if sent == 0:
-                return False
-            self._sent_direct += 1
-            if sent < len(data):
-                self._stash = data[sent:]
+            slot.header_version = self.header_version
+            result = slot.send(data)
+            if result == SENT:
+                slot.open = True
+                return True
+            if result == STASHED:
                 self._hub.call_soon(self._write_stash)
-            return True
+                return True
+            if result == BROKEN:  # the loop's transport meets the same error and closes
+                slot.disconnect()
+                self._direct.close()
+                self._direct = None
+            return False
 
     def hand_over(self, device: str, frame: Frame) -> None:
         """A stream frame `write_direct` refused: the loop sends it, after any handed before
         it, and until then this client gets no direct write. The loop is woken once for
         all that are handed meanwhile; past `MAX_HANDED` of them only the newest of each
         device is kept (the loop is that far behind)."""
-        with self._wlock:
+        with self.slot:
+            self.slot.open = False
             handed = self._handed_frames
             handed.append((device, frame))
             if len(handed) > MAX_HANDED:
@@ -694,7 +707,7 @@ class ClientSession(asyncio.Protocol):
 
     def _take_handed(self) -> None:
         while True:
-            with self._wlock:
+            with self.slot:
                 frames = self._handed_frames
                 if not frames:
                     self._handed = False
@@ -704,16 +717,22 @@ class ClientSession(asyncio.Protocol):
                 for device, frame in frames:
                     self.send_stream(device, frame)
             except Exception:
-                with self._wlock:  # never left refusing direct writes for good
+                with self.slot:  # never left refusing direct writes for good
                     self._handed_frames.clear()
                     self._handed = False
                 raise
 
     def _write_stash(self) -> None:
-        with self._wlock:
-            stash, self._stash = self._stash, None
+        with self.slot:
+            self.slot.open = False
+            stash = self.slot.take_stash()
             if stash is not None and not self._closing and self._transport is not None:
                 self._transport.write(stash)
+
+    def stash_left(self) -> None:
+        """A native lane wrote part of a frame to this client (any thread): the loop writes
+        the rest."""
+        self._hub.call_soon(self._write_stash)
 
     def describe(self) -> dict[str, object]:
         return {"peer": self.peer, "header_version": self.header_version,

@@ -21,14 +21,14 @@ import asyncio
 import logging
 import time
 from dataclasses import dataclass
-from typing import Callable, Optional
+from typing import Callable, Optional, Protocol
 
 from bridge.core.hub import Hub
 from bridge.core.outbox import Frame
 from protocol.liveness import condition_status
 from protocol.messages import Message
 
-__all__ = ["Arrivals", "CHECK_INTERVAL_S", "StreamHealth", "stale_reason"]
+__all__ = ["Arrivals", "ArrivalsView", "CHECK_INTERVAL_S", "StreamHealth", "stale_reason"]
 
 log = logging.getLogger(__name__)
 
@@ -38,7 +38,20 @@ GRAPH_INTERVAL_S = 0.5  # publisher counts are asked of the graph this often
 # (scheduling jitter on a busy machine is not an outage).
 STALE_PERIODS = 5.0
 SILENCE_FLOOR_S = 0.3
-_SMOOTHING = 0.1  # weight of a new interval in the expected period
+SMOOTHING = 0.1  # weight of a new interval in the expected period
+
+
+class ArrivalsView(Protocol):
+    """What the health check reads of a stream's arrivals (`Arrivals`, or a native lane's:
+    native_stream.LaneArrivals)."""
+
+    @property
+    def last(self) -> Optional[float]: ...
+    @property
+    def period(self) -> Optional[float]: ...
+    @property
+    def count(self) -> int: ...
+    def note(self, now: float) -> None: ...
 
 
 class Arrivals:
@@ -56,12 +69,12 @@ class Arrivals:
         if last is not None:
             gap = now - last
             period = self.period
-            self.period = gap if period is None else period + _SMOOTHING * (gap - period)
+            self.period = gap if period is None else period + SMOOTHING * (gap - period)
         self.last = now
         self.count += 1
 
 
-def stale_reason(arrivals: Arrivals, now: float, publishers: Optional[int],
+def stale_reason(arrivals: ArrivalsView, now: float, publishers: Optional[int],
                  topic: str) -> Optional[str]:
     """Why a stream that has been live is stale now, or None (live, or never live)."""
     if arrivals.last is None:
@@ -81,7 +94,7 @@ def stale_reason(arrivals: Arrivals, now: float, publishers: Optional[int],
 @dataclass
 class _Watched:
     topic: str
-    arrivals: Arrivals
+    arrivals: ArrivalsView
     publishers: Callable[[], int]
     stale: Optional[str] = None
     count: Optional[int] = None
@@ -97,7 +110,7 @@ class StreamHealth:
         self._watched: dict[str, _Watched] = {}
         self._timer: Optional[asyncio.TimerHandle] = None
 
-    def watch(self, device: str, topic: str, arrivals: Arrivals,
+    def watch(self, device: str, topic: str, arrivals: ArrivalsView,
               publishers: Callable[[], int]) -> None:
         """Judge `device`, streamed from `topic`; `publishers()` counts its publishers."""
         self._watched[device] = _Watched(topic, arrivals, publishers)

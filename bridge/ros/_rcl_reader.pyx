@@ -19,13 +19,14 @@ libraries this module needs. Elsewhere the daemon takes these topics through rcl
 
 from cpython.bytes cimport PyBytes_FromStringAndSize
 from cpython.memoryview cimport PyMemoryView_FromMemory
+from cpython.pycapsule cimport PyCapsule_GetPointer
 from cpython.buffer cimport PyBUF_READ
 from libc.stdint cimport int64_t, uint8_t
 from libc.stdlib cimport calloc, free, malloc
 from posix.time cimport CLOCK_MONOTONIC, clock_gettime, timespec
 
 # Bump with `bridge.ros.raw_reader.READER_INTERFACE`: a module from an older build is not used.
-INTERFACE = 3
+INTERFACE = 4
 
 
 cdef extern from "rcl/rcl.h" nogil:
@@ -107,6 +108,20 @@ cdef void _on_new_messages(const void *user_data, size_t count) noexcept nogil:
     pthread_mutex_unlock(&signal.lock)
 
 
+cdef struct _Handler:
+    # A native lane (bridge/core/_native_stream.pyx's Handler): called for each message of
+    # its subscription without the interpreter's lock; 0 handled, 1 for Python, 2 handled
+    # and Python settles after it.
+    int (*handle)(void *lane, const uint8_t *data, size_t size) noexcept nogil
+    void *lane
+
+
+cdef enum:
+    _HANDLED = 0
+    _TO_PYTHON = 1
+    _HANDLED_SETTLE = 2
+
+
 cdef class RawReader:
     """Takes serialized messages of ``subscriptions`` (rclpy's `_rclpy.Subscription`
     handles, which the caller keeps alive and destroys after `close` or after
@@ -116,6 +131,8 @@ cdef class RawReader:
     cdef rcl_serialized_message_t _message
     cdef rcl_allocator_t _allocator
     cdef const rcl_subscription_t **_subscriptions
+    cdef _Handler **_handlers  # per subscription, NULL for none
+    cdef object _handler_owners  # what keeps the handlers alive
     cdef size_t _count
     cdef size_t _next
     cdef _Signal *_signal
@@ -126,6 +143,8 @@ cdef class RawReader:
         self._open = False
         self._count = 0
         self._subscriptions = NULL
+        self._handlers = NULL
+        self._handler_owners = ()
         self._signal = <_Signal *>malloc(sizeof(_Signal))
         if self._signal == NULL:
             raise MemoryError()
@@ -158,10 +177,28 @@ cdef class RawReader:
 
     def take_batch(self, double timeout_s, size_t max_count, size_t max_bytes):
         """``(index, messages)``: `take`'s message and those of the same subscription
-        waiting after it (`take_more`), each copied to bytes, in order; None as `take`."""
+        waiting after it (`take_more`), each copied to bytes, in order; None as `take`.
+        A subscription's native handler takes its messages first, in this thread, and
+        only what it leaves comes back: the message it did not take and the rest of its
+        batch, or an empty list when it asks Python to settle after one it took."""
         cdef size_t index = 0
-        if self._take_first(timeout_s, &index) != RCL_RET_OK:
-            return None
+        cdef int handled
+        cdef int64_t deadline = _now_ns() + <int64_t>(timeout_s * 1e9)
+        while True:
+            if self._take_first(max(0.0, (deadline - _now_ns()) / 1e9), &index) != RCL_RET_OK:
+                return None
+            if self._handlers == NULL or self._handlers[index] == NULL:
+                break
+            with nogil:
+                handled = self._handlers[index].handle(self._handlers[index].lane,
+                                                       self._message.buffer,
+                                                       self._message.buffer_length)
+            if handled == _HANDLED_SETTLE:
+                return index, []
+            if handled != _HANDLED:
+                break
+            if self._signal.woken or _now_ns() >= deadline:  # the caller has work too
+                return None
         first = PyBytes_FromStringAndSize(<char *>self._message.buffer,
                                           <Py_ssize_t>self._message.buffer_length)
         if max_count <= 1 or <size_t>len(first) >= max_bytes:
@@ -230,14 +267,24 @@ cdef class RawReader:
                 pthread_cond_signal(&self._signal.cond)
                 pthread_mutex_unlock(&self._signal.lock)
 
-    def set_subscriptions(self, subscriptions):
+    def set_subscriptions(self, subscriptions, handlers=None):
         """Take ``subscriptions`` (any number, none too) from now on, in place of those
         before: the middleware no longer calls this reader for those let go, which the
-        caller may destroy then. Called by the thread that calls `take`, between two."""
+        caller may destroy then. ``handlers``: for each, a native lane's handler capsule
+        (`PoseLane.handler`) or None. Called by the thread that calls `take`, between two."""
         if not self._open:
             raise ReaderError("the reader is closed")
         cdef size_t count = len(subscriptions)
-        cdef const rcl_subscription_t **pointers = _pointers(subscriptions)
+        if handlers is not None and len(handlers) != count:
+            raise ValueError(f"handlers: expected one per subscription ({count}), got "
+                             f"{len(handlers)}")
+        cdef _Handler **natives = _handler_pointers(handlers, count)
+        cdef const rcl_subscription_t **pointers
+        try:
+            pointers = _pointers(subscriptions)
+        except BaseException:
+            free(natives)
+            raise
         cdef size_t i, j
         cdef bint kept
         for i in range(self._count):  # those let go: the middleware forgets this reader
@@ -252,10 +299,14 @@ cdef class RawReader:
                 for i in range(j):
                     _set_callback(pointers[i], NULL, NULL)
                 free(pointers)
+                free(natives)
                 raise ReaderError("the middleware does not tell new messages "
                                   "(rcl_subscription_set_on_new_message_callback)")
         free(self._subscriptions)
+        free(self._handlers)
         self._subscriptions = pointers
+        self._handlers = natives
+        self._handler_owners = tuple(handlers) if handlers is not None else ()
         self._count = count
         self._next = 0
 
@@ -301,6 +352,8 @@ cdef class RawReader:
         if self._subscriptions != NULL:
             free(self._subscriptions)
             self._subscriptions = NULL
+        free(self._handlers)
+        self._handlers = NULL
         if self._signal != NULL:
             pthread_cond_destroy(&self._signal.cond)
             pthread_mutex_destroy(&self._signal.lock)
@@ -348,6 +401,28 @@ cdef const rcl_subscription_t **_pointers(subscriptions) except? NULL:
         free(pointers)
         raise
     return pointers
+
+
+cdef _Handler **_handler_pointers(handlers, size_t count) except? NULL:
+    """The handlers of the capsules in ``handlers`` (None: none), in a new array; NULL when
+    there is none at all."""
+    if handlers is None or not any(h is not None for h in handlers):
+        return NULL
+    cdef _Handler **pointers = <_Handler **>calloc(count, sizeof(_Handler *))
+    if pointers == NULL:
+        raise MemoryError()
+    try:
+        for i, handler in enumerate(handlers):
+            if handler is not None:
+                pointers[i] = <_Handler *>PyCapsule_GetPointer(handler, HANDLER_CAPSULE)
+    except BaseException:
+        free(pointers)
+        raise
+    return pointers
+
+
+# bridge/core/_native_stream.pyx's capsule name.
+cdef const char *HANDLER_CAPSULE = "bridge.core.native_stream.Handler"
 
 
 cdef inline int64_t _now_ns() noexcept nogil:

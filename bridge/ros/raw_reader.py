@@ -29,7 +29,7 @@ from rclpy.qos import QoSProfile
 log = logging.getLogger(__name__)
 
 # The compiled module's interface this wrapper expects (`_rcl_reader.INTERFACE`).
-READER_INTERFACE = 3
+READER_INTERFACE = 4
 _WAIT_S = 0.1  # at most this long between waits: a wake-up rcl missed costs no more
 _ERROR_LOG_INTERVAL_S = 5.0
 
@@ -81,6 +81,10 @@ class BatchTopic:
     msg_type: Any
     qos: QoSProfile
     callback: Callable[[list[bytes]], None]
+    # A native lane (bridge/core/native_stream.py's `PoseLane`) that takes the messages it
+    # can in the reader's thread, without the interpreter; the callback gets the rest, and
+    # an empty list when the lane asks to settle.
+    native: Any = None
 
 
 Topic = Union[RawTopic, BatchTopic]
@@ -122,6 +126,8 @@ class RawReader:
             for topic in topics:
                 self._taken.append(RawSubscription(self, topic, self._subscribe(topic)))
             self._reader = _rcl_reader.RawReader([s.handle for s in self._taken])
+            self._reader.set_subscriptions([s.handle for s in self._taken],
+                                           self._handlers(self._taken))
         except Exception:
             self._destroy_handles()
             raise
@@ -195,7 +201,7 @@ class RawReader:
             adding, self._adding = self._adding, []
             removing, self._removing = self._removing, {}
         taken = [s for s in self._taken if s not in removing] + adding
-        self._reader.set_subscriptions([s.handle for s in taken])
+        self._reader.set_subscriptions([s.handle for s in taken], self._handlers(taken))
         self._taken = taken
         for subscription, done in removing.items():
             subscription.handle.destroy_when_not_in_use()
@@ -243,6 +249,13 @@ class RawReader:
                     except BufferError:  # a callback kept a view: a bug, the buffer is reused
                         log.error("a callback of %s kept a view on the reader's buffer",
                                   topic.topic)
+
+    @staticmethod
+    def _handlers(taken: Sequence[RawSubscription]) -> Optional[list[Any]]:
+        natives = [getattr(s.topic, "native", None) for s in taken]
+        if not any(n is not None for n in natives):
+            return None
+        return [n.handler if n is not None else None for n in natives]
 
     def _names(self) -> str:
         return ", ".join(s.topic.topic for s in self._taken) or "no topic"

@@ -33,7 +33,8 @@ from bridge.core.hub import Hub, Replier, StreamChannel, Subscriber, frame_for
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.content_guards import ContentGuard
 from bridge.core.outbox import Frame, TemplateFrame
-from bridge.core.stream_health import Arrivals, StreamHealth
+from bridge.core.native_stream import LaneArrivals, new_lane
+from bridge.core.stream_health import SMOOTHING, Arrivals, ArrivalsView, StreamHealth
 from bridge.ros.graph_types import refuse_other_type
 from bridge.ros.qos import default_depth, qos_profile
 from bridge.ros.raw_reader import BatchTopic
@@ -43,6 +44,7 @@ from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
                                Publish, QoS, RemovePublisher, RemoveSubscriber,
                                WrongTypeError)
 from protocol.conversions import igtl_stamp_or_now, igtl_timestamp_now
+from protocol.framing import StreamTemplate
 from protocol.messages import Json, Message, PolyData, StatusCode
 from protocol.messages import Point as PointBody
 from protocol.naming import KEY_COUNT, KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
@@ -95,8 +97,8 @@ class SubscriberBridge:
         self._metadata = metadata
         # The security policy's view of a message (tf frames, parameters): None = drop it.
         self._filter = message_filter
-        self.count = 0
-        self.arrivals = Arrivals()  # judged by StreamHealth: is the stream stale?
+        self._count = 0  # messages the Python path took (`count` adds the native lane's)
+        self.arrivals: ArrivalsView = Arrivals()  # judged by StreamHealth: stale or not?
         # The message stream (`enable_messages`): each message whole, as JSON, for the
         # clients that joined its device; None until a client asks for it.
         self._messages: Optional[_MessageStream] = None
@@ -117,18 +119,40 @@ class SubscriberBridge:
         # and the last message stays as its bytes (deserialized only when asked for). Hot
         # poses are taken by the stream reader, without the interpreter's lock, a burst at
         # a time (bridge/ros/raw_reader.py); the rest through the executor.
+        # Where it is built, the reader's thread also converts and writes them itself, without
+        # the interpreter, while nothing needs the Python path (bridge/core/native_stream.py).
+        lane = (new_lane(hub.fanout, codec.ros_type, LAST_MESSAGE_MAX_BYTES, SMOOTHING)
+                if self._fast is not None else None)
         self._reader = (ros.read_stream(BatchTopic(topic, codec.message_class,
-                                                   qos_profile(qos), self._on_batch))
+                                                   qos_profile(qos), self._on_batch, lane))
                         if self._fast is not None else None)
+        self._lane = lane if self._reader is not None else None
+        self._lane_template: Optional[StreamTemplate] = None
+        if self._lane is not None:
+            self.arrivals = LaneArrivals(self._lane, hub.fanout)
+            hub.add_lane(device, self._lane, self._lane_frame)
         self._subscription = (None if self._reader is not None else
                               ros.stream_node.create_subscription(
                                   codec.message_class, topic, self._on_raw, qos_profile(qos),
                                   raw=True))
 
     @property
+    def count(self) -> int:
+        """Messages received (and sent on, unless filtered out)."""
+        if self._lane is None:
+            return self._count
+        with self._hub.fanout:
+            return self._count + int(self._lane.count)
+
+    @property
     def last_message(self) -> Any:
         """The last message received (None before the first, or if it was larger than
         `LAST_MESSAGE_MAX_BYTES`: see `last_size`), as an rclpy message."""
+        if self._lane is not None:
+            with self._hub.fanout:
+                data = self._lane.last()
+            if data is not None:  # the lane took the last one
+                return deserialize_message(data, self.codec.message_class)
         last = self._last
         data, msg = last
         if msg is None and data is not None:
@@ -149,6 +173,7 @@ class SubscriberBridge:
     def enable_messages(self, device: str, metadata: dict[str, str]) -> str:
         """Open the message stream on `device` (once); clients then `join` it on the hub."""
         if self._messages is None:
+            self._hub.remove_lane(self.device)  # each message goes whole, as JSON, too
             self._hub.limit_to_audience(device)
             self._messages = _MessageStream(self._hub.open_channel(device), metadata)
         return self._messages.channel.device
@@ -161,6 +186,12 @@ class SubscriberBridge:
         `TemplateFrame`s that reach each client in one write; the rest go one by one."""
         if self._channel.closed:
             return
+        if self._lane is not None:
+            self._settle_lane()
+            if not messages:
+                return
+            with self._hub.fanout:
+                self._lane.forget()  # these came after what it wrote
         self.arrivals.note(time.monotonic())
         fast = self._fast
         if fast is None:
@@ -180,7 +211,7 @@ class SubscriberBridge:
                     last = None
                 self._on_message(data)  # keeps it, if it can be read at all
                 continue
-            self.count += 1
+            self._count += 1
             frames.append((self.device, TemplateFrame(template, content, timestamp, values,
                                                       transform_body)))
             if self._messages is not None:
@@ -188,7 +219,47 @@ class SubscriberBridge:
             last = data
         if last is not None:
             self._keep(last)
+            if self._lane is not None:
+                self._lane_takes(fast, frames[-1][1])
         self._hub.post_frames(frames, self._channel)
+
+    def _lane_takes(self, fast: RawPoseStream, frame: Frame) -> None:
+        """The lane takes the frame ids of the last message from now on (it compares the
+        next ones' with them, and leaves others to this path)."""
+        assert isinstance(frame, TemplateFrame)
+        template = frame.template
+        if template is self._lane_template:
+            return
+        frame_id, child = fast.ids
+        with self._hub.fanout:
+            assert self._lane is not None
+            self._lane.set_template(frame_id.encode(), child.encode(), *template.wire_parts())
+            self._lane_template = template
+
+    def _lane_frame(self, latest: tuple[bytes, int, int, tuple[float, ...]]) -> Frame:
+        """The lane's newest value as a `Frame` (the hub holds the fanout)."""
+        content, timestamp, clock, values = latest
+        assert self._lane_template is not None, "a lane writes only with a template"
+        frame = TemplateFrame(self._lane_template, content, timestamp, values, transform_body)
+        frame.clock = clock
+        return frame
+
+    def _settle_lane(self) -> None:
+        """Reader thread: the clients the lane could not write its last value to get it
+        through the loop (`hand_over`); those it wrote only part of, the rest."""
+        assert self._lane is not None
+        with self._hub.fanout:
+            missed, stashed = self._lane.settle()
+            latest = self._lane.latest() if missed else None
+            frame = self._lane_frame(latest) if latest is not None else None
+        for ref in missed:  # weak references to the sessions
+            session = ref() if ref is not None else None
+            if session is not None and frame is not None:
+                session.hand_over(self.device, frame)
+        for ref in stashed:
+            session = ref() if ref is not None else None
+            if session is not None:
+                session.stash_left()
 
     def _on_message(self, data: bytes) -> None:
         if self._filter is None and self._encode_serialized(data):
@@ -206,7 +277,7 @@ class SubscriberBridge:
             self._keep(data, msg)  # what the policy lets through, not the bytes
         else:
             self._keep(data)
-        self.count += 1
+        self._count += 1
         self._convert(msg)
         self._post_whole(msg, data)
 
@@ -228,7 +299,7 @@ class SubscriberBridge:
         if encoded is None:
             return False
         self._keep(data)
-        self.count += 1
+        self._count += 1
         if isinstance(encoded, CodecError):
             self._refused(encoded)
         else:
@@ -261,6 +332,7 @@ class SubscriberBridge:
                          self.codec.igtl_type, self.qos.to_dict(), self.max_rate_hz, self.count)
 
     def close(self) -> None:
+        self._hub.remove_lane(self.device)
         self._hub.close_channel(self._channel)
         if self._messages is not None:
             self._hub.close_channel(self._messages.channel)

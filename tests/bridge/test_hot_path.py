@@ -526,7 +526,7 @@ def test_a_tf_update_reaches_each_client_whole_in_one_write() -> None:
             got = peer.read_until(len(devices))
             assert [(m.device_name, m.body.text) for m in got] == \
                 [(d, str(i)) for i, d in enumerate(devices, 1)]
-        assert [s._sent_direct for s in served.sessions] == [1, 1, 1]
+        assert [s.slot.sent for s in served.sessions] == [1, 1, 1]
         assert served.hub.direct == len(devices)
     finally:
         served.close()
@@ -652,7 +652,7 @@ def test_a_burst_of_poses_taken_together_reaches_each_client_in_one_write_in_ord
         for peer in peers:
             got = peer.read_until(10)
             assert [round(m.body.matrix[0][3]) for m in got] == list(range(1, 11))  # mm
-        assert [s._sent_direct for s in served.sessions] == [1, 1]
+        assert [s.slot.sent for s in served.sessions] == [1, 1]
         assert bridge.count == 10
         assert bridge.last_message.pose.position.x == pytest.approx(0.010)
 
