@@ -4,7 +4,9 @@ callback: conversion, the hub, the client's direct write, `send()` included).
 
 Run: .venv/bin/python bench/bench_pose_path.py [--messages N]
 
-Measured in the same run, each the thread's CPU time per message (`time.thread_time`):
+Measured in the same run, each the thread's CPU time per message (`time.thread_time`), for
+the Python path and, where it is built, the native lane (`PoseLane.handle`: the same work
+in C, which the stream reader's thread does without the interpreter):
 - back to back: the messages one after another, the caches warm;
 - paced at 1 kHz: a 1 ms sleep between messages, as a 1 kHz stream comes. The same code
   then costs several times more per message: after each sleep it runs with cold caches;
@@ -22,7 +24,7 @@ import socket
 import sys
 import threading
 import time
-from typing import Optional
+from typing import Callable, Optional
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -46,7 +48,7 @@ def pose_bytes(n: int) -> bytes:
     return bytes(serialize_message(msg))
 
 
-def per_message_us(bridge: Optional[SubscriberBridge], messages: list[bytes],
+def per_message_us(take: Optional[Callable[[bytes], object]], messages: list[bytes],
                    pause_s: float) -> float:
     """The calling thread's CPU time per message, in a thread of its own."""
     result: list[float] = []
@@ -54,8 +56,8 @@ def per_message_us(bridge: Optional[SubscriberBridge], messages: list[bytes],
     def run() -> None:
         start = time.thread_time()
         for data in messages:
-            if bridge is not None:
-                bridge._on_batch([data])
+            if take is not None:
+                take(data)
             if pause_s:
                 time.sleep(pause_s)
         result.append((time.thread_time() - start) / len(messages) * 1e6)
@@ -103,11 +105,28 @@ def main() -> int:
                               codec=codec_for("geometry_msgs/msg/PoseStamped"), qos=QoS(),
                               device="pose", metadata={})
     messages = [pose_bytes(n) for n in range(args.messages)]
+
+    def python_path(data: bytes) -> None:
+        bridge._on_batch([data])
+
+    lane = bridge._lane
     try:
-        per_message_us(bridge, messages[:500], 0.0)  # first allocations, templates
-        warm = per_message_us(bridge, messages, 0.0)
-        paced = per_message_us(bridge, messages, 0.001)
+        per_message_us(python_path, messages[:500], 0.0)  # first allocations, templates
+        warm = per_message_us(python_path, messages, 0.0)
+        paced = per_message_us(python_path, messages, 0.001)
         sleep = per_message_us(None, messages, 0.001)
+        native: Optional[tuple[float, float, int]] = None
+        if lane is not None:
+            handled = [0]
+
+            def native_lane(data: bytes) -> None:
+                if lane.handle(data) == 0:  # HANDLED: written to the client
+                    handled[0] += 1
+                else:
+                    bridge._on_batch([data])  # as the reader does with what it leaves
+
+            native = (per_message_us(native_lane, messages, 0.0),
+                      per_message_us(native_lane, messages, 0.001), handled[0])
     finally:
         stop.set()
         bridge.close()
@@ -118,6 +137,13 @@ def main() -> int:
     print(f"  back to back (warm caches)       {warm:7.1f}")
     print(f"  paced at 1 kHz, the sleep taken  {paced - sleep:7.1f}   (measured "
           f"{paced:.1f}, the 1 ms sleep alone {sleep:.1f})")
+    if native is None:
+        print("the native lane: not built here")
+    else:
+        print(f"the native lane (PoseLane.handle; {native[2]:,} of {2 * len(messages):,} "
+              f"written by it):")
+        print(f"  back to back (warm caches)       {native[0]:7.1f}")
+        print(f"  paced at 1 kHz, the sleep taken  {native[1] - sleep:7.1f}")
     return 0
 
 

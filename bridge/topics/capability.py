@@ -121,16 +121,19 @@ class SubscriberBridge:
         # a time (bridge/ros/raw_reader.py); the rest through the executor.
         # Where it is built, the reader's thread also converts and writes them itself, without
         # the interpreter, while nothing needs the Python path (bridge/core/native_stream.py).
+        # The reader may call back before read_stream returns: all is set before it.
         lane = (new_lane(hub.fanout, codec.ros_type, LAST_MESSAGE_MAX_BYTES, SMOOTHING)
                 if self._fast is not None else None)
+        self._lane: Any = None  # set once the lane may write (the hub knows it)
+        self._lane_template: Optional[StreamTemplate] = None
+        if lane is not None:
+            self.arrivals = LaneArrivals(lane, hub.fanout)
         self._reader = (ros.read_stream(BatchTopic(topic, codec.message_class,
                                                    qos_profile(qos), self._on_batch, lane))
                         if self._fast is not None else None)
-        self._lane = lane if self._reader is not None else None
-        self._lane_template: Optional[StreamTemplate] = None
-        if self._lane is not None:
-            self.arrivals = LaneArrivals(self._lane, hub.fanout)
-            hub.add_lane(device, self._lane, self._lane_frame)
+        if lane is not None and self._reader is not None:
+            self._lane = lane
+            hub.add_lane(device, lane, self._lane_frame)
         self._subscription = (None if self._reader is not None else
                               ros.stream_node.create_subscription(
                                   codec.message_class, topic, self._on_raw, qos_profile(qos),

@@ -323,7 +323,8 @@ def test_doc_parameters_example_on_a_node_that_appears_later(
             if parameterNode.GetParameterType('robot_description') == 'string':
                 robotDescription = parameterNode.GetParameterAsString('robot_description')  # noqa: N806,E501
         assert robotDescription == "<robot name='doc'/>"
-        assert modified.is_set()
+        # Observers run in their own thread, after the value is readable: waited for.
+        assert modified.wait(timeout=30)
         assert rosNode.RemoveAndDeleteParameterNode('doc_state_publisher')
         # The daemon no longer lists the client that had waited for the node.
         listed = rosLogic.command("list_bridges")["bridges"]
