@@ -214,7 +214,22 @@ cdef int _send(SlotState *slot, const uint8_t *data, size_t n) noexcept nogil:
     return C_BROKEN
 
 
-cdef class Slot:
+cdef class _Held:
+    """``with it:`` holds its mutex, waiting with the interpreter's lock released."""
+
+    cdef pthread_mutex_t *_mutex
+
+    def __enter__(self):
+        with nogil:
+            pthread_mutex_lock(self._mutex)
+        return self
+
+    def __exit__(self, *exc):
+        pthread_mutex_unlock(self._mutex)
+        return False
+
+
+cdef class Slot(_Held):
     """One client's socket as the native lanes see it. Its session holds it (``with
     slot:``) around each write of its own, closes it (``open = False``) before anything of
     the client may wait elsewhere, and opens it only when nothing does. A lane writes only
@@ -229,6 +244,7 @@ cdef class Slot:
         if self.state == NULL:
             raise MemoryError()
         pthread_mutex_init(&self.state.lock, NULL)
+        self._mutex = &self.state.lock
         self.state.fd = -1
         self.state.header_version = 1
         self.state.open = False
@@ -244,15 +260,6 @@ cdef class Slot:
             pthread_mutex_destroy(&self.state.lock)
             free(self.state)
             self.state = NULL
-
-    def __enter__(self):
-        with nogil:
-            pthread_mutex_lock(&self.state.lock)
-        return self
-
-    def __exit__(self, *exc):
-        pthread_mutex_unlock(&self.state.lock)
-        return False
 
     # The rest is called while holding the slot.
     def connect(self, sock):
@@ -335,7 +342,7 @@ cdef inline int64_t _clock_ms(FanoutState *fanout) noexcept nogil:
     return (_now_ns(CLOCK_MONOTONIC) // 1000000) % (fanout.clock_modulus - 1) + 1
 
 
-cdef class Fanout:
+cdef class Fanout(_Held):
     """The clients every native lane writes to (one per hub). ``with fanout:`` holds it, and
     no lane writes meanwhile. `hold` (set while values wait for the loop) sends every
     message to the Python path, so that nothing passes them."""
@@ -353,6 +360,7 @@ cdef class Fanout:
         if self.state == NULL:
             raise MemoryError()
         pthread_mutex_init(&self.state.lock, NULL)
+        self._mutex = &self.state.lock
         self.state.hold = False
         self.state.slots = NULL
         self.state.count = 0
@@ -365,15 +373,6 @@ cdef class Fanout:
             pthread_mutex_destroy(&self.state.lock)
             free(self.state)
             self.state = NULL
-
-    def __enter__(self):
-        with nogil:
-            pthread_mutex_lock(&self.state.lock)
-        return self
-
-    def __exit__(self, *exc):
-        pthread_mutex_unlock(&self.state.lock)
-        return False
 
     @property
     def hold(self):

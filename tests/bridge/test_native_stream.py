@@ -5,6 +5,7 @@ what it writes."""
 from __future__ import annotations
 
 import random
+import select
 import socket
 from typing import Any
 
@@ -117,6 +118,36 @@ def pair() -> tuple[socket.socket, socket.socket]:
     return a, b
 
 
+def taught(seed: int) -> tuple[Any, Any, RawPoseStream, bytes]:
+    """(fanout, a PoseStamped lane on it that knows the message's frame ids, its Python
+    path, the message)."""
+    fanout = native_stream.new_fanout()
+    lane, stream = lane_for("geometry_msgs/msg/PoseStamped", fanout)
+    data = bytes(serialize_message(message(PoseStamped, random.Random(seed), False)))
+    teach(lane, stream, data)
+    return fanout, lane, stream, data
+
+
+def open_slot(sock: socket.socket, version: int = 2, owner: Any = None) -> Any:
+    slot = native_stream.new_slot(owner)
+    with slot:
+        slot.connect(sock)
+        slot.header_version = version
+        slot.open = True
+    return slot
+
+
+def available_now(sock: socket.socket) -> bytes:
+    """What ``sock`` has received so far, without waiting."""
+    chunks = []
+    while select.select([sock], [], [], 0)[0]:
+        chunk = sock.recv(1 << 16)
+        if not chunk:
+            break
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
 def read_exactly(sock: socket.socket, n: int) -> bytes:
     sock.settimeout(5)
     out = b""
@@ -126,19 +157,9 @@ def read_exactly(sock: socket.socket, n: int) -> bytes:
 
 
 def test_the_lane_writes_each_open_client_its_header_version_and_keeps_the_value() -> None:
-    fanout = native_stream.new_fanout()
-    lane, stream = lane_for("geometry_msgs/msg/PoseStamped", fanout)
-    data = bytes(serialize_message(message(PoseStamped, random.Random(3), False)))
-    teach(lane, stream, data)
+    fanout, lane, stream, data = taught(3)
     ends = [pair(), pair()]
-    slots = []
-    for version, (ours, _) in zip((1, 2), ends):
-        slot = native_stream.new_slot(None)
-        with slot:
-            slot.connect(ours)
-            slot.header_version = version
-            slot.open = True
-        slots.append(slot)
+    slots = [open_slot(ours, version) for version, (ours, _) in zip((1, 2), ends)]
     with fanout:
         fanout.set_slots(slots)
         lane.enabled = True
@@ -161,15 +182,9 @@ def test_the_lane_writes_each_open_client_its_header_version_and_keeps_the_value
 
 
 def test_a_held_fanout_a_disabled_lane_or_a_closed_client_leave_it_to_python() -> None:
-    fanout = native_stream.new_fanout()
-    lane, stream = lane_for("geometry_msgs/msg/PoseStamped", fanout)
-    data = bytes(serialize_message(message(PoseStamped, random.Random(4), False)))
-    teach(lane, stream, data)
+    fanout, lane, _, data = taught(4)
     ours, theirs = pair()
-    slot = native_stream.new_slot(None)
-    with slot:
-        slot.connect(ours)
-        slot.open = True
+    slot = open_slot(ours)
     with fanout:
         fanout.set_slots([slot])
     assert lane.handle(data) == ns.TO_PYTHON  # not enabled
@@ -196,18 +211,11 @@ class Owner:
 
 
 def test_a_client_that_cannot_take_a_frame_whole_keeps_the_rest_or_is_handed_it() -> None:
-    fanout = native_stream.new_fanout()
-    lane, stream = lane_for("geometry_msgs/msg/PoseStamped", fanout)
-    data = bytes(serialize_message(message(PoseStamped, random.Random(5), False)))
-    teach(lane, stream, data)
+    fanout, lane, _, data = taught(5)
     ours, theirs = pair()
     ours.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
     owner = Owner()
-    slot = native_stream.new_slot(owner)
-    with slot:
-        slot.connect(ours)
-        slot.header_version = 2
-        slot.open = True
+    slot = open_slot(ours, owner=owner)
     with fanout:
         fanout.set_slots([slot])
         lane.enabled = True
@@ -224,16 +232,7 @@ def test_a_client_that_cannot_take_a_frame_whole_keeps_the_rest_or_is_handed_it(
         rest = slot.take_stash()
     # Whatever the kernel took, then the stash (if any), is a whole number of frames.
     frame_size = len(lane.encode(data, 2, 1))
-    theirs.setblocking(False)
-    taken = b""
-    while True:
-        try:
-            chunk = theirs.recv(1 << 16)
-        except BlockingIOError:
-            break
-        if not chunk:
-            break
-        taken += chunk
+    taken = available_now(theirs)
     total = len(taken) + len(rest or b"")
     if missed:
         assert rest is None and total % frame_size == 0
