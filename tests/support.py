@@ -70,15 +70,19 @@ class Child:
         timeout = scaled(timeout)
         deadline = time.monotonic() + timeout
         while True:
+            running = self.popen.poll() is None  # before the read: a last line is then seen
             text = self.output()
             found = text.find(needle, self._read_upto)
             if found >= 0:
                 line_end = text.find("\n", found)
+                if line_end < 0 and running and time.monotonic() <= deadline:
+                    time.sleep(0.02)  # the line is still being written: wait for its end
+                    continue
                 line_end = len(text) if line_end < 0 else line_end
                 line_start = text.rfind("\n", 0, found) + 1
                 self._read_upto = line_end
                 return text[line_start:line_end]
-            if self.popen.poll() is not None:
+            if not running:
                 raise AssertionError(f"{self.name} exited with {self.popen.returncode} before "
                                      f"printing {needle!r}; output:\n{text[-3000:]}")
             if time.monotonic() > deadline:
