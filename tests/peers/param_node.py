@@ -3,7 +3,9 @@
 usage: param_node.py NAME [--namespace NS] [--description TEXT] [--busy-until PATH]
                      [--lose-first-get]
 --busy-until: the node's only thread is busy right after READY until PATH exists, so that
-parameter requests arriving then go unanswered until it is over (a slow node).
+parameter requests arriving then go unanswered until it is over (a slow node). Its
+robot_description is declared without a parameter event, as a real node's start-up event
+reaches no one not yet matched; here it could reach a watcher a moment later, at random.
 --lose-first-get: the first get_parameters request is never answered (prints LOST), as
 when a request or its answer is lost while DDS is still matching the endpoints; the
 later ones are answered as rclpy's own service does.
@@ -59,6 +61,21 @@ def lose_first_get(node: Node) -> None:
                         callback_group=ReentrantCallbackGroup())
 
 
+class _NoEvents:
+    def publish(self, _event: object) -> None:
+        pass
+
+
+def declare_unannounced(node: Node, name: str, value: str) -> None:
+    """Declare without publishing the /parameter_events message (rclpy has no option)."""
+    events = node._parameter_event_publisher
+    node._parameter_event_publisher = _NoEvents()
+    try:
+        node.declare_parameter(name, value)
+    finally:
+        node._parameter_event_publisher = events
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("name")
@@ -78,7 +95,10 @@ def main() -> None:
     node.declare_parameter("counts", [1, -2, 3])
     node.declare_parameter("ratios", [0.5, -1.25])
     node.declare_parameter("labels", ["a", "b c"])
-    node.declare_parameter("robot_description", args.description)
+    if args.busy_until is None:
+        node.declare_parameter("robot_description", args.description)
+    else:
+        declare_unannounced(node, "robot_description", args.description)
 
     def changed(parameters: list) -> None:
         for parameter in parameters:
