@@ -6,6 +6,8 @@ from typing import Any, Optional
 
 from typing_extensions import Self, disjoint_base
 
+from protocol.crc64 import Buffer
+
 INTERFACE: int
 HANDLED: int
 TO_PYTHON: int
@@ -38,7 +40,7 @@ class Slot:
     @property
     def has_stash(self) -> bool: ...
     def take_stash(self) -> Optional[bytes]: ...
-    def send(self, data: bytes) -> int: ...
+    def send(self, data: bytes | tuple[Buffer, ...]) -> int: ...
     def take_missed(self) -> bool: ...
 
 @disjoint_base

@@ -27,6 +27,7 @@ client) guards its socket. The order is always fanout, then slot; the interprete
 never taken while either is held, and Python waits for them with it released.
 """
 
+from cpython.buffer cimport PyBUF_SIMPLE, PyBuffer_Release, PyObject_GetBuffer
 from cpython.bytes cimport PyBytes_AS_STRING, PyBytes_FromStringAndSize, PyBytes_GET_SIZE
 from cpython.pycapsule cimport PyCapsule_New
 from libc.errno cimport EAGAIN, EINTR, errno
@@ -35,10 +36,11 @@ from libc.stdint cimport int32_t, int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free, malloc, realloc
 from libc.string cimport memcmp, memcpy, memset
 from posix.time cimport CLOCK_MONOTONIC, CLOCK_REALTIME, clock_gettime, timespec
+from posix.uio cimport iovec
 
 # Bump with the wrappers' expectation (bridge/core/native_stream.py): an older build is
 # not used.
-INTERFACE = 1
+INTERFACE = 2
 
 cdef enum:
     # What a lane's handler returns to the reader.
@@ -58,6 +60,7 @@ cdef enum:
     HEADER_SIZE = 58
     EXT_HEADER_SIZE = 12
     CONTENT_SIZE = 48  # a TRANSFORM's 12 float32
+    MAX_PARTS = 8  # a frame written from parts (`Slot.send`): header, content, metadata
 
 HANDLED, TO_PYTHON, HANDLED_SETTLE = C_HANDLED, C_TO_PYTHON, C_HANDLED_SETTLE
 POSE, POSE_STAMPED, TRANSFORM_STAMPED = C_POSE, C_POSE_STAMPED, C_TRANSFORM_STAMPED
@@ -74,7 +77,10 @@ cdef extern from "<pthread.h>" nogil:
 
 
 cdef extern from "<sys/socket.h>" nogil:
-    ssize_t send(int fd, const void *buf, size_t n, int flags)
+    cdef struct msghdr:
+        iovec *msg_iov
+        size_t msg_iovlen
+    ssize_t sendmsg(int fd, const msghdr *msg, int flags)
     enum:
         MSG_DONTWAIT
         MSG_NOSIGNAL
@@ -187,14 +193,27 @@ cdef struct SlotState:
 
 
 cdef int _send(SlotState *slot, const uint8_t *data, size_t n) noexcept nogil:
-    """Write a whole frame now or keep its rest; the slot is held. A slot that could not
-    take it whole is closed."""
+    cdef iovec part
+    part.iov_base = <void *>data
+    part.iov_len = n
+    return _send_parts(slot, &part, 1, n)
+
+
+cdef int _send_parts(SlotState *slot, iovec *parts, int count, size_t n) noexcept nogil:
+    """Write a whole frame (``count`` parts, ``n`` bytes) now or keep its rest; the slot is
+    held. A slot that could not take it whole is closed."""
     cdef ssize_t sent
+    cdef msghdr message
+    cdef size_t skip, at, take
+    cdef int i
     if slot.fd < 0 or slot.stash != NULL:
         slot.open = False
         return C_REFUSED
+    memset(&message, 0, sizeof(message))
+    message.msg_iov = parts
+    message.msg_iovlen = <size_t>count
     while True:
-        sent = send(slot.fd, data, n, MSG_DONTWAIT | MSG_NOSIGNAL)
+        sent = sendmsg(slot.fd, &message, MSG_DONTWAIT | MSG_NOSIGNAL)
         if sent >= 0 or errno != EINTR:
             break
     if sent == <ssize_t>n:
@@ -205,7 +224,16 @@ cdef int _send(SlotState *slot, const uint8_t *data, size_t n) noexcept nogil:
         slot.stash = <uint8_t *>malloc(n - <size_t>sent)
         if slot.stash == NULL:  # the rest cannot be kept: the stream would be corrupt
             return C_BROKEN
-        memcpy(slot.stash, data + sent, n - <size_t>sent)
+        skip = <size_t>sent
+        at = 0
+        for i in range(count):
+            if skip >= parts[i].iov_len:
+                skip -= parts[i].iov_len
+                continue
+            take = parts[i].iov_len - skip
+            memcpy(slot.stash + at, <uint8_t *>parts[i].iov_base + skip, take)
+            at += take
+            skip = 0
         slot.stash_size = n - <size_t>sent
         slot.sent += 1
         return C_STASHED
@@ -313,13 +341,36 @@ cdef class Slot(_Held):
         self.state.stash_size = 0
         return data
 
-    def send(self, bytes data):
-        """Write ``data`` now as a lane does: SENT, STASHED, REFUSED or BROKEN."""
-        cdef const uint8_t *p = <const uint8_t *>PyBytes_AS_STRING(data)
-        cdef size_t n = <size_t>PyBytes_GET_SIZE(data)
-        cdef int result
-        with nogil:
-            result = _send(self.state, p, n)
+    def send(self, data):
+        """Write a frame now as a lane does: SENT, STASHED, REFUSED or BROKEN. ``data``: its
+        bytes, or a tuple of contiguous buffers written as one frame (an image's header,
+        pixels where they lie, metadata), without joining them."""
+        cdef const uint8_t *p
+        cdef size_t n = 0
+        cdef int result, count, i, held = 0
+        cdef Py_buffer views[MAX_PARTS]
+        cdef iovec parts[MAX_PARTS]
+        if type(data) is bytes:
+            p = <const uint8_t *>PyBytes_AS_STRING(data)
+            n = <size_t>PyBytes_GET_SIZE(data)
+            with nogil:
+                result = _send(self.state, p, n)
+            return result
+        count = len(data)
+        if not 0 < count <= MAX_PARTS:
+            raise ValueError(f"expected 1 to {MAX_PARTS} parts, got {count}")
+        try:
+            for i in range(count):
+                PyObject_GetBuffer(data[i], &views[i], PyBUF_SIMPLE)
+                held += 1
+                parts[i].iov_base = views[i].buf
+                parts[i].iov_len = <size_t>views[i].len
+                n += <size_t>views[i].len
+            with nogil:
+                result = _send_parts(self.state, parts, count, n)
+        finally:
+            for i in range(held):
+                PyBuffer_Release(&views[i])
         return result
 
     def take_missed(self):

@@ -12,11 +12,13 @@ one place, `frame_for`.
 Threads: the asyncio loop owns the clients and their buffers. ROS callbacks run in an
 executor thread and hand values over through a `StreamChannel` (`post_frame`):
 
-* the hot path: a small value, with nothing waiting for the loop, is written from the
-  executor thread to each client that keeps up, under that client's write lock
-  (`Subscriber.write_direct`): no loop wake-up per message. A client that is behind gets
-  the value through the loop instead (`hand_over`: in order, one wake-up for all handed
-  meanwhile), into its own outbox;
+* the hot path: a value, with nothing waiting for the loop, is written from the executor
+  thread to each client that keeps up, under that client's write lock
+  (`Subscriber.write_direct`): no loop wake-up per message. A large one (an image) goes
+  as its parts, its pixels from where they lie in the ROS message, and the kernel may
+  hold it whole. A client that is behind gets the value through the loop instead
+  (`hand_over`: in order, one wake-up for all handed meanwhile, an image replacing its
+  device's older one), into its own outbox;
 * hotter still: a streamed pose taken by a native lane (native_stream.py) is converted and
   written to every client without the interpreter, while every client keeps up and
   nothing waits for the loop (`fanout.hold`); otherwise it takes the path above;
@@ -46,6 +48,7 @@ from typing import Any, Callable, Iterator, Optional, Protocol
 from bridge.core.native_stream import PySlot, new_fanout, new_slot
 from bridge.core.outbox import BulkFrame, Frame
 from bridge.core.security import WriteGrant
+from protocol.crc64 import Buffer
 from protocol.freshness import daemon_clock_ms
 from protocol.messages import Message
 
@@ -91,7 +94,7 @@ class Subscriber(Protocol):
     # Direct writes from another thread (see `Hub.post_frame`).
     @property
     def header_version(self) -> int: ...
-    def write_direct(self, data: bytes) -> bool: ...
+    def write_direct(self, data: bytes | tuple[Buffer, ...]) -> bool: ...
     @property
     def slot(self) -> Any: ...  # native_stream's Slot
     def hand_over(self, device: str, frame: Frame) -> None: ...
@@ -293,13 +296,17 @@ class Hub:
                     self._held[device] = frame
                     return
                 self._last_sent[device] = now
+        self._keep_newest(device, frame)
+        self.streamed += 1
+        for client in self._recipients(device):
+            client.send_stream(device, frame)
+
+    def _keep_newest(self, device: str, frame: Frame) -> None:
+        """What a client that connects later gets of `device` (see `set_volatile`)."""
         if isinstance(frame, BulkFrame) and device in self._volatile:
             self._latest.pop(device, None)  # a later client gets no stale copy of it either
         else:
             self._latest[device] = frame
-        self.streamed += 1
-        for client in self._recipients(device):
-            client.send_stream(device, frame)
 
     @contextmanager
     def batch(self) -> Iterator[None]:
@@ -449,17 +456,16 @@ class Hub:
     def post_frame(self, channel: StreamChannel, frame: Frame) -> None:
         """Thread-safe `stream_frame` through an open channel.
 
-        A small value, when nothing is waiting for the loop, is written at once from this
-        thread to every client that keeps up (`Subscriber.write_direct`); a client that
-        does not gets it through the loop (`hand_over`), in order. Otherwise values queue
+        A value, when nothing is waiting for the loop, is written at once from this thread
+        to every client that keeps up (`Subscriber.write_direct`); a client that does not
+        gets it through the loop (`hand_over`), in order. Otherwise values queue
         for the loop, in order; if it falls `MAX_PENDING` behind, the oldest go first. A
         large value replaces its device's waiting one. Memory stays bounded, the newest
         value always arrives, and the loop is woken once per batch."""
         device = channel.device
         if not frame.clock:
             frame.clock = daemon_clock_ms()
-        if (self._direct_writes and not isinstance(frame, BulkFrame)
-                and device not in self._min_interval):
+        if self._direct_writes and device not in self._min_interval:
             with self._lock:
                 if channel.closed:
                     return
@@ -514,11 +520,14 @@ class Hub:
 
     def _write_direct(self, device: str, frame: Frame) -> None:
         # Under self._lock, with nothing queued for the loop: this value is the newest.
-        self._latest[device] = frame
+        self._keep_newest(device, frame)
         self.streamed += 1
         self.direct += 1
+        large = isinstance(frame, BulkFrame)  # its parts, never joined: pixels where they lie
         for client in self._recipients(device):
-            if not client.write_direct(frame.encoded(client.header_version)):
+            version = client.header_version
+            if not client.write_direct(frame.encoded_parts(version) if large
+                                       else frame.encoded(version)):
                 client.hand_over(device, frame)
 
     def _post(self, device: str, frame: Frame, channel: StreamChannel | None) -> None:

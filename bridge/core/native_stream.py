@@ -15,13 +15,14 @@ import threading
 import weakref
 from typing import Any, Optional
 
+from protocol.crc64 import Buffer
 from protocol.freshness import CLOCK_MODULUS
 
 __all__ = ["BROKEN", "REFUSED", "SENT", "STASHED", "LaneArrivals", "PySlot", "available",
            "new_fanout", "new_lane", "new_slot"]
 
 # The compiled module's interface this wrapper expects (`_native_stream.INTERFACE`).
-NATIVE_INTERFACE = 1
+NATIVE_INTERFACE = 2
 
 try:
     from bridge.core import _native_stream
@@ -74,25 +75,27 @@ class PySlot:
         stash, self._stash = self._stash, None
         return stash
 
-    def send(self, data: bytes) -> int:
+    def send(self, data: bytes | tuple[Buffer, ...]) -> int:
         sock = self._sock
         if sock is None or self._stash is not None:
             self.open = False
             return REFUSED
+        parts = [memoryview(part) for part in ((data,) if isinstance(data, bytes) else data)]
+        size = sum(part.nbytes for part in parts)
         try:
-            sent = sock.send(data)
+            sent = sock.sendmsg(parts)
         except (BlockingIOError, InterruptedError):
             sent = 0
         except OSError:
             self.open = False
             return BROKEN
-        if sent == len(data):
+        if sent == size:
             self.sent += 1
             return SENT
         self.open = False
         if sent == 0:
             return REFUSED
-        self._stash = data[sent:]
+        self._stash = b"".join(parts)[sent:]
         self.sent += 1
         return STASHED
 

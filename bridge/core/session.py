@@ -48,7 +48,7 @@ from bridge.core.heavy import HeavyWork
 from bridge.core.hub import Hub
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.native_stream import BROKEN, SENT, STASHED, new_slot
-from bridge.core.outbox import WRITE_CHUNK, Frame, Outbox, OutboxOverflow
+from bridge.core.outbox import WRITE_CHUNK, BulkFrame, Frame, Outbox, OutboxOverflow
 from bridge.core.security import WRITES, WriteGrant, is_loopback_host
 from protocol.crc64 import Buffer
 from protocol.errors import CrcMismatchError, FramingError, MessageError, ReceiveBudgetError
@@ -656,21 +656,27 @@ class ClientSession(asyncio.Protocol):
             self._flush()
 
     # --- direct writes (ROS executor thread) -------------------------------------------------
-    def write_direct(self, data: bytes) -> bool:
+    def write_direct(self, data: bytes | tuple[Buffer, ...]) -> bool:
         """Write a stream frame now, from another thread, if nothing of this client waits
         anywhere; False (nothing written) if it must take the loop's path (`hand_over`).
-        A frame written whole opens the slot to the native lanes."""
+        A frame written whole opens the slot to the native lanes. ``data``: its bytes, or
+        a large frame's parts (an image's pixels where they lie), which the kernel may
+        hold whole (`LARGE_KERNEL_UNSENT_BYTES`) while it goes."""
         slot = self.slot
         with slot:
             transport = self._transport
-            if (self._direct is None or transport is None or self._closing or self._paused
+            direct = self._direct
+            if (direct is None or transport is None or self._closing or self._paused
                     or self._handed or slot.has_stash or self._batch is not None
                     or len(self._outbox) or transport.is_closing()
                     or transport.get_write_buffer_size()):
                 slot.open = False
                 return False
             slot.header_version = self.header_version
-            result = slot.send(data)
+            if isinstance(data, bytes):
+                result = slot.send(data)
+            else:
+                result = self._send_large_direct(direct, data)
             if result == SENT:
                 slot.open = True
                 return True
@@ -679,18 +685,35 @@ class ClientSession(asyncio.Protocol):
                 return True
             if result == BROKEN:  # the loop's transport meets the same error and closes
                 slot.disconnect()
-                self._direct.close()
+                direct.close()
                 self._direct = None
             return False
+
+    def _send_large_direct(self, direct: socket.socket, parts: tuple[Buffer, ...]) -> int:
+        # Under the slot: the kernel's limit is raised for this frame alone. Later frames
+        # then wait (the loop's path, coalesced) until it has mostly gone.
+        try:
+            direct.setsockopt(socket.IPPROTO_TCP, socket.TCP_NOTSENT_LOWAT,
+                              LARGE_KERNEL_UNSENT_BYTES)
+            try:
+                return int(self.slot.send(parts))
+            finally:
+                direct.setsockopt(socket.IPPROTO_TCP, socket.TCP_NOTSENT_LOWAT,
+                                  KERNEL_UNSENT_BYTES)
+        except OSError:  # the socket failed: the loop's transport meets the same error
+            return BROKEN
 
     def hand_over(self, device: str, frame: Frame) -> None:
         """A stream frame `write_direct` refused: the loop sends it, after any handed before
         it, and until then this client gets no direct write. The loop is woken once for
         all that are handed meanwhile; past `MAX_HANDED` of them only the newest of each
-        device is kept (the loop is that far behind)."""
+        device is kept (the loop is that far behind). A large frame replaces its device's
+        handed one at once: no image waits behind a stale one."""
         with self.slot:
             self.slot.open = False
             handed = self._handed_frames
+            if isinstance(frame, BulkFrame):
+                handed[:] = [(d, f) for d, f in handed if d != device]
             handed.append((device, frame))
             if len(handed) > MAX_HANDED:
                 seen: set[str] = set()

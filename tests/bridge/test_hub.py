@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import asyncio
 import threading
+from typing import Any
+
+import numpy as np
 
 from bridge.core.hub import Hub, frame_for
 from bridge.core.outbox import BulkFrame
-from protocol.messages import Message, String
+from protocol.messages import Image, Message, String
 
 
 def _text(device: str, text: str) -> Message:
@@ -128,5 +131,50 @@ def test_a_volatile_device_keeps_its_small_values_for_later_clients_not_its_larg
         assert hub.latest("v") is not None
         hub.set_volatile("v", True)  # made volatile again: its large value goes at once
         assert hub.latest("v") is None
+    finally:
+        loop.close()
+
+
+class _DirectClient(_Client):
+    """A client that keeps up (every direct write taken) or not (`keeps_up`)."""
+
+    def __init__(self, keeps_up: bool) -> None:
+        super().__init__()
+        self.keeps_up = keeps_up
+        self.written: list[Any] = []
+        self.handed: list[tuple[str, Any]] = []
+
+    def write_direct(self, data: Any) -> bool:
+        if self.keeps_up:
+            self.written.append(data)
+        return self.keeps_up
+
+    def hand_over(self, device: str, frame) -> None:  # noqa: ANN001
+        self.handed.append((device, frame))
+
+
+def test_a_large_value_from_another_thread_is_written_at_once_as_its_parts() -> None:
+    loop = asyncio.new_event_loop()
+    try:
+        hub = Hub(loop)
+        quick, behind = _DirectClient(True), _DirectClient(False)
+        hub.attach(quick)
+        hub.attach(behind)
+        pixels = np.arange(120 * 200 * 3, dtype=np.uint32).astype(np.uint8).reshape(
+            1, 120, 200, 3)
+        frame = frame_for(Message(device_name="v", body=Image(pixels=pixels)))
+        assert isinstance(frame, BulkFrame)
+        hub.set_volatile("v", True)
+        poster = threading.Thread(target=hub.post_frame, args=(hub.open_channel("v"), frame))
+        poster.start()
+        poster.join()
+        # Its parts, not joined: the pixels are sent from where they lie.
+        assert [type(data) for data in quick.written] == [tuple]
+        header, content, metadata = quick.written[0]
+        assert bytes(content)[-pixels.size:] == pixels.tobytes()
+        assert b"".join(quick.written[0]) == frame.encoded(2)
+        assert behind.handed == [("v", frame)]  # the loop's path, for a client behind
+        assert hub.latest("v") is None  # volatile: not kept for later clients
+        assert hub.direct == 1 and hub.dropped == 0
     finally:
         loop.close()

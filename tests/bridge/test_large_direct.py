@@ -1,0 +1,115 @@
+"""Images posted from a ROS thread to real TCP clients, written from that thread as their
+parts: a client that reads gets every one whole; one that stops reading gets whole frames
+and then the newest, never a queue of stale images.
+
+In-process: the real `BridgeServer` on an ephemeral port, real sockets, the posts from
+another thread as the ROS executor's are."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import threading
+
+import numpy as np
+
+from bridge.core.hub import Hub, frame_for
+from bridge.core.server import BridgeServer
+from bridge.core.session import SessionLimits
+from protocol.framing import Decoder
+from protocol.messages import Image, Message
+from support import scaled
+
+SHAPE = (1, 480, 640, 3)  # a VGA rgb8 frame: 921,600 bytes of pixels
+
+
+def image(index: int) -> Message:
+    return Message(device_name="camera", body=Image(pixels=np.full(SHAPE, index, np.uint8)),
+                   timestamp=(1 << 32) + index)
+
+
+async def until(predicate, what: str, timeout: float = 20.0) -> None:  # noqa: ANN001
+    deadline = asyncio.get_running_loop().time() + scaled(timeout)
+    while not predicate():
+        if asyncio.get_running_loop().time() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        await asyncio.sleep(0.005)
+
+
+def received_images(data: bytes) -> list[int]:
+    decoder = Decoder(max_body_size=len(data))
+    decoder.feed(data)
+    out = []
+    for message in decoder.messages():
+        pixels = message.body.pixels
+        assert pixels.shape == SHAPE and (pixels == pixels.flat[0]).all(), "a frame is whole"
+        out.append(int(pixels.flat[0]))
+    return out
+
+
+def run(scenario) -> None:  # noqa: ANN001
+    async def main() -> None:
+        hub = Hub(asyncio.get_running_loop())
+        server = BridgeServer(hub, lambda message, session: None, host="127.0.0.1", port=0,
+                              limits=SessionLimits(negotiation_grace_s=0.01))
+        await server.start()
+        try:
+            await scenario(hub, server)
+        finally:
+            await server.close()
+    asyncio.run(main())
+
+
+def post_from_a_thread(hub: Hub, first: int, count: int) -> None:
+    channel = hub.open_channel("camera")
+    poster = threading.Thread(target=lambda: [hub.post_frame(channel, frame_for(image(n)))
+                                              for n in range(first, first + count)])
+    poster.start()
+    poster.join()
+
+
+def test_a_reading_client_gets_every_image_whole_and_in_order() -> None:
+    async def scenario(hub: Hub, server: BridgeServer) -> None:
+        reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
+        await until(lambda: len(hub.clients) == 1, "the client attached")
+        got = bytearray()
+        size = None
+        for n in range(10):  # one at a time, read before the next: each goes directly
+            post_from_a_thread(hub, n, 1)
+            while size is None or len(got) < size * (n + 1):
+                got += await asyncio.wait_for(reader.read(1 << 20), scaled(10))
+                if size is None and len(got) >= 58:
+                    size = 58 + int.from_bytes(got[42:50], "big")
+        assert received_images(bytes(got)) == list(range(10))
+        assert hub.direct == 10
+        writer.close()
+    run(scenario)
+
+
+def test_a_client_that_stops_reading_gets_whole_frames_then_the_newest() -> None:
+    async def scenario(hub: Hub, server: BridgeServer) -> None:
+        sock = socket.create_connection(("127.0.0.1", server.port))
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 64 * 1024)
+        await until(lambda: len(hub.clients) == 1, "the client attached")
+        (session,) = server.sessions
+        post_from_a_thread(hub, 0, 40)  # 37 MB to a client that reads nothing meanwhile
+        await until(lambda: hub.pending == 0 and not session._handed, "the posts settled")
+        sock.setblocking(False)
+        got = bytearray()
+        deadline = asyncio.get_running_loop().time() + scaled(20)
+        while True:  # read it all now: the newest must come last
+            assert asyncio.get_running_loop().time() < deadline, "the newest never came"
+            await asyncio.sleep(0.01)
+            try:
+                while chunk := sock.recv(1 << 20):
+                    got += chunk
+            except BlockingIOError:
+                pass
+            images = received_images(bytes(got)) if got else []
+            if images and images[-1] == 39:
+                break
+        assert images == sorted(images) and len(set(images)) == len(images)
+        # What the kernel held when it stopped, then the newest: not the 40 in a queue.
+        assert len(images) < 12, images
+        sock.close()
+    run(scenario)
