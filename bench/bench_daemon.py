@@ -1,8 +1,8 @@
 """Daemon benchmark: ROS -> OpenIGTLink latency, throughput and CPU, each figure measured in
 the same run beside its baselines, every party in its own process.
 
-    .venv/bin/python bench/bench_daemon.py            # about 3 minutes
-    .venv/bin/python bench/bench_daemon.py --quick    # about 1 minute, shorter phases
+    .venv/bin/python bench/bench_daemon.py            # about 5 minutes
+    .venv/bin/python bench/bench_daemon.py --quick    # about 2 minutes, shorter phases
 
 Parties (bench/peers.py): a publisher that sleeps between messages and stamps each one
 with ``time.time_ns()`` just before ``publish()``; raw OpenIGTLink readers (one process,
@@ -22,6 +22,12 @@ Real traffic as well as steady streams: the burst rate published evenly and in b
 isolation phase: 32 raw clients with a facade client (slicer_client, decoding every
 message in Python), then the same with one more client that stops reading for 5 s, the
 32's figures side by side and what the stopped one read when it read again.
+
+Images (VGA rgb8 at 30 Hz) twice: from a publisher with Fast DDS's defaults, and from one
+whose shared-memory segment holds a whole frame (bench/fastdds_image_publisher.xml). With
+the defaults, most frames lose fragments at the publisher and wait about 10 ms for their
+resend, at each reader independently, so the per-message share there also measures which
+reader's resend came first; the second set-up shows the relay's own share without that.
 
 Each relay runs alone while it is measured. Every pose subscriber (floor, daemon, naive
 relay) keeps the last 5,000 messages (peers.POSE_DEPTH). CPU is the relay process's user +
@@ -57,6 +63,11 @@ from peers import POSE_DEPTH  # noqa: E402
 PEERS = REPO / "bench" / "peers.py"
 POSE_TOPIC = "/bench_pose"
 IMAGE_TOPIC = "/bench_image"
+# The image phase's publisher set-ups: Fast DDS as it comes, and with a shared-memory
+# segment that holds a whole VGA frame (bench/fastdds_image_publisher.xml).
+IMAGE_PUBLISHERS: dict[str, Optional[Path]] = {
+    "Fast DDS defaults": None,
+    "an 8 MB shared-memory segment": REPO / "bench" / "fastdds_image_publisher.xml"}
 LINKS = 7
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 
@@ -67,11 +78,13 @@ CLK_TCK = os.sysconf("SC_CLK_TCK")
 class Child:
     """A child process speaking the peers' line protocol (READY, commands on stdin)."""
 
-    def __init__(self, name: str, argv: list[str], ready: str = "READY") -> None:
+    def __init__(self, name: str, argv: list[str], ready: str = "READY",
+                 env: Optional[dict[str, str]] = None) -> None:
         self.name = name
         self.popen = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                       stderr=subprocess.STDOUT, text=True, cwd=REPO,
-                                      start_new_session=True, bufsize=1)
+                                      start_new_session=True, bufsize=1,
+                                      env=None if env is None else {**os.environ, **env})
         self.expect(ready, 60)
 
     def expect(self, word: str, timeout: float = 120) -> str:
@@ -133,8 +146,8 @@ class Child:
                     self.popen.wait()
 
 
-def peer(name: str, *args: str) -> Child:
-    return Child(name, [sys.executable, str(PEERS), *args])
+def peer(name: str, *args: str, env: Optional[dict[str, str]] = None) -> Child:
+    return Child(name, [sys.executable, str(PEERS), *args], env=env)
 
 
 def free_port() -> int:
@@ -318,7 +331,7 @@ class Results:
     resumed: dict[str, float] = field(default_factory=dict)  # the stopped client's
     tf: Optional[Figure] = None
     tf_floor: float = float("nan")  # bench_fanout_floor.py's CPU share, 8 clients
-    image: dict[str, Figure] = field(default_factory=dict)
+    image: dict[str, dict[str, Figure]] = field(default_factory=dict)  # set-up -> relay
     rss: dict[str, float] = field(default_factory=dict)
 
 
@@ -484,28 +497,35 @@ def fanout_floor(seconds: float) -> float:
 
 
 def image_phase(args: argparse.Namespace, results: Results) -> None:
-    """VGA images: the floor subscriber and the relay receive the same messages; the relay's
-    share is, per message, the reader's last byte minus the floor's receive time."""
-    publisher = peer("image publisher", "publish", "image", IMAGE_TOPIC)
-    try:
-        for kind in ("bridge", "naive"):
-            floor = peer("rclpy floor", "floor", "image", IMAGE_TOPIC)
-            relay = Relay(kind, {"image": IMAGE_TOPIC, "pose": POSE_TOPIC})
-            readers = readers_for(relay.port, 1, v1=kind == "naive")
-            try:
-                reports, cpu, avg = run_phase(publisher, [*readers, floor], 30, args.seconds,
-                                              relay.child, 2)
-                reports, floor_report = reports[:-1], reports[-1]
-                fig = figure_from(reports, int(30 * args.seconds), 30, cpu, avg)
-                fig.extra.update(_image_share(reports[0], floor_report))
-                results.image[kind] = fig
-                print_progress(f"{kind}, VGA image", fig)
-            finally:
-                stop_all(readers)
-                relay.stop()
-                floor.stop()
-    finally:
-        publisher.stop()
+    """VGA images, once per publisher set-up (`IMAGE_PUBLISHERS`): the floor subscriber and
+    the relay receive the same messages; the relay's share is, per message, the reader's
+    last byte minus the floor's receive time."""
+    for setup, profile in IMAGE_PUBLISHERS.items():
+        env = {} if profile is None else {"FASTRTPS_DEFAULT_PROFILES_FILE": str(profile)}
+        publisher = peer("image publisher", "publish", "image", IMAGE_TOPIC, env=env)
+        try:
+            for kind in ("bridge", "naive"):
+                floor = peer("rclpy floor", "floor", "image", IMAGE_TOPIC)
+                relay = Relay(kind, {"image": IMAGE_TOPIC, "pose": POSE_TOPIC})
+                readers = readers_for(relay.port, 1, v1=kind == "naive")
+                try:
+                    reports, cpu, avg = run_phase(publisher, [*readers, floor], 30,
+                                                  args.image_seconds, relay.child, 2)
+                    reports, floor_report = reports[:-1], reports[-1]
+                    fig = figure_from(reports, int(30 * args.image_seconds), 30, cpu, avg)
+                    fig.extra.update(_image_share(reports[0], floor_report))
+                    results.image.setdefault(setup, {})[kind] = fig
+                    print_progress(f"{kind}, VGA image, publisher {setup}", fig)
+                    print(f"{'':37}ROS hop p50 / p99 {ms(fig.extra['hop_p50'])} / "
+                          f"{ms(fig.extra['hop_p99'])} ms; own share p50 / p99 "
+                          f"{ms(fig.extra.get('share_p50', float('nan')))} / "
+                          f"{ms(fig.extra.get('share_p99', float('nan')))} ms", flush=True)
+                finally:
+                    stop_all(readers)
+                    relay.stop()
+                    floor.stop()
+        finally:
+            publisher.stop()
 
 
 def _image_share(reader: dict[str, Any], floor: dict[str, Any]) -> dict[str, float]:
@@ -595,13 +615,13 @@ def table(results: Results, args: argparse.Namespace) -> str:
                     f"clients: CPU; p50 / p99 (ms) | {pct(results.tf_floor)} (fan-out floor: "
                     f"the same bytes, no tf work) | {pct(tf.cpu)}; {ms(tf.p50)} / "
                     f"{ms(tf.p99)} | |")
-    if results.image:
-        nan = float("nan")
-        image = (Figure(), results.image.get("bridge", Figure()),
-                 results.image.get("naive", Figure()))
-        hop = image[1].extra.get("hop_p50", nan)
-        rows.append(f"| 640×480 rgb8 Image at 30 Hz: ROS hop (publish() → plain subscriber), "
-                    f"p50 (ms) | {ms(hop)} | | |")
+    nan = float("nan")
+    for setup, figures in results.image.items():
+        image = (Figure(), figures.get("bridge", Figure()), figures.get("naive", Figure()))
+        hop = image[1].extra
+        rows.append(f"| 640×480 rgb8 Image at 30 Hz, publisher with {setup}: ROS hop "
+                    f"(publish() → plain subscriber), p50 / p99 (ms) | "
+                    f"{ms(hop.get('hop_p50', nan))} / {ms(hop.get('hop_p99', nan))} | | |")
         rows.append(_row("… publish() → last byte at the client: p50 / p99 (ms)", image,
                          lambda f: f"{ms(f.p50)} / {ms(f.p99)}"))
         rows.append(_row("… the relay's own share (its client's last byte minus the plain "
@@ -643,6 +663,7 @@ def main() -> int:
     args = parser.parse_args()
     args.seconds = 2.0 if args.quick else 5.0
     args.burst_seconds = 3.0 if args.quick else 10.0
+    args.image_seconds = 5.0 if args.quick else 20.0  # 30 a second: p99 of 600 frames
     os.environ["ROS_DOMAIN_ID"] = str(random.randint(101, 200))
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="bench-roslog-"))
