@@ -83,6 +83,12 @@ def rows(client: Connection, topic: str) -> dict[tuple[str, int], dict[str, Any]
     return {(r["ns"], r["id"]): r for r in listing["markers"]}
 
 
+def subscriber(client: Connection, topic: str) -> dict[str, Any]:
+    """The daemon's description of the marker subscriber of `topic` (list_bridges)."""
+    bridges = client.command("list_bridges", {})["bridges"]
+    return next(b for b in bridges if b["kind"] == "marker_subscriber" and b["topic"] == topic)
+
+
 def wait_rows(client: Connection, topic: str, want: set[tuple[str, int]]
               ) -> dict[tuple[str, int], dict[str, Any]]:
     found: dict[tuple[str, int], dict[str, Any]] = {}
@@ -117,9 +123,16 @@ def test_renewed_lifetimes_expire_in_order(client: Connection, peer: Peer) -> No
     # model stay: nothing is re-sent.
     for _ in range(4):
         before = expiry(client, ("long", 0))
+        received = subscriber(client, "/test_markers")["messages"]
         peer.send(markers=long_lived)
-        wait_until(lambda b=before: expiry(client, ("long", 0)) > b + 0.03, 15,
-                   "the lifetime renewed by the re-sent array")
+        try:
+            wait_until(lambda b=before: expiry(client, ("long", 0)) > b + 0.03, 15,
+                       "the lifetime renewed by the re-sent array")
+        except AssertionError as error:  # say whether the daemon received it (seen once)
+            raise AssertionError(
+                f"{error}: the expiry estimated before the re-send {before:.3f}, now "
+                f"{expiry(client, ('long', 0)):.3f}; messages received before {received}, "
+                f"now: {subscriber(client, '/test_markers')}") from None
     assert client.latest(device) is first_model
     assert rows(client, "/test_markers")[("long", 0)]["device"] == device
 
