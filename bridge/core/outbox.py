@@ -107,8 +107,9 @@ class BulkFrame(Frame):
 
     @property
     def message(self) -> Message:
-        if self._message is not None:
-            return self._message
+        message = self._message  # read once: another thread may encode it meanwhile
+        if message is not None:
+            return message
         data = self.encoded(self._KEPT_VERSION)
         decoder = Decoder(max_body_size=len(data))
         decoder.feed(data)
@@ -117,9 +118,17 @@ class BulkFrame(Frame):
         return message
 
     def _kept_parts(self) -> tuple[bytes, Buffer, bytes]:
+        # The taking thread (a direct write) and the loop (a client that connects) may both
+        # come first: the parts are set before the message is let go, so a thread that
+        # finds no message finds the parts.
         parts = self._parts
         if parts is None:
-            parts = self._parts = encode_parts(self._stamped(self._message),
+            message = self._message
+            if message is None:
+                parts = self._parts
+                assert parts is not None, "the parts are set before the message is let go"
+                return parts
+            parts = self._parts = encode_parts(self._stamped(message),
                                                header_version=self._KEPT_VERSION)
             self._message = None  # type: ignore[assignment]
         return parts

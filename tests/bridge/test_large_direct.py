@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import asyncio
 import socket
+import sys
 import threading
 
 import numpy as np
 
 from bridge.core.hub import Hub, frame_for
+from bridge.core.outbox import BulkFrame, Frame
 from bridge.core.server import BridgeServer
 from bridge.core.session import SessionLimits
 from protocol.framing import Decoder
@@ -113,3 +115,37 @@ def test_a_client_that_stops_reading_gets_whole_frames_then_the_newest() -> None
         assert len(images) < 12, images
         sock.close()
     run(scenario)
+
+
+def test_a_frame_encoded_by_two_threads_at_once_gives_both_the_same_bytes() -> None:
+    """The taking thread writes a new image while the loop sends it to a client that has
+    just connected: whichever encodes first, both get the same parts, and the message can
+    still be read back."""
+    vga = Message(device_name="camera", body=Image(pixels=np.full(SHAPE, 7, np.uint8)))
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # threads take turns often: the window is hit, not missed
+    try:
+        for _ in range(100):
+            encode_twice(frame_for(vga))
+    finally:
+        sys.setswitchinterval(interval)
+
+
+def encode_twice(frame: Frame) -> None:
+    assert isinstance(frame, BulkFrame)
+    frame.clock = 5
+    results: list[bytes] = []
+    start = threading.Barrier(2)
+    threads = [threading.Thread(target=_encode_after, args=(start, frame, results))
+               for _ in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert len(results) == 2 and results[0] == results[1]
+    assert int(frame.message.body.pixels.flat[0]) == 7
+
+
+def _encode_after(start: threading.Barrier, frame: Frame, results: list[bytes]) -> None:
+    start.wait()
+    results.append(b"".join(frame.encoded_parts(2)))
