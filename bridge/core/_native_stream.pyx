@@ -242,6 +242,13 @@ cdef int _send_parts(SlotState *slot, iovec *parts, int count, size_t n) noexcep
     return C_BROKEN
 
 
+def _contiguous(parts):
+    """The parts as buffers the kernel can read in one piece each (a strided view is
+    copied; the usual parts, bytes and contiguous views, are not)."""
+    return tuple([part if memoryview(part).c_contiguous else memoryview(part).tobytes()
+                  for part in parts])
+
+
 cdef class _Held:
     """``with it:`` holds its mutex, waiting with the interpreter's lock released."""
 
@@ -359,6 +366,7 @@ cdef class Slot(_Held):
         count = len(data)
         if not 0 < count <= MAX_PARTS:
             raise ValueError(f"expected 1 to {MAX_PARTS} parts, got {count}")
+        data = _contiguous(data)
         try:
             for i in range(count):
                 PyObject_GetBuffer(data[i], &views[i], PyBUF_SIMPLE)

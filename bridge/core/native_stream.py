@@ -81,6 +81,7 @@ class PySlot:
             self.open = False
             return REFUSED
         parts = [memoryview(part) for part in ((data,) if isinstance(data, bytes) else data)]
+        parts = [part if part.c_contiguous else memoryview(part.tobytes()) for part in parts]
         size = sum(part.nbytes for part in parts)
         try:
             sent = sock.sendmsg(parts)

@@ -78,6 +78,17 @@ def test_parts_taken_in_part_keep_the_rest_and_refuse_more_until_it_is_taken(
 
 
 @pytest.mark.parametrize("new_slot", SLOTS)
+def test_a_strided_part_is_sent_as_its_bytes(new_slot: Any) -> None:
+    slot, ours, theirs = connected(new_slot)
+    strided = memoryview(np.arange(200, dtype=np.uint8))[::2]  # every other byte
+    with slot:
+        assert slot.send((b"head", strided, b"tail")) == SENT
+    assert read_exactly(theirs, 4 + 100 + 4) == b"head" + bytes(range(0, 200, 2)) + b"tail"
+    ours.close()
+    theirs.close()
+
+
+@pytest.mark.parametrize("new_slot", SLOTS)
 def test_parts_to_a_peer_that_has_gone_say_broken(new_slot: Any) -> None:
     slot, ours, theirs = connected(new_slot)
     theirs.close()
