@@ -17,7 +17,7 @@ from typing import Any, Callable
 import pytest
 
 from slicer_client.reference.entry_points import install
-from support import REPO, Child, scaled
+from support import REPO, Child, scaled, wait_until
 
 
 class _Scene:
@@ -108,8 +108,31 @@ def ros2(command: str) -> subprocess.CompletedProcess[str]:
                           timeout=scaled(30), start_new_session=True)
 
 
+def group_members(pgid: int) -> list[int]:
+    """The live (not zombie) processes of process group `pgid`, read from /proc."""
+    members = []
+    for entry in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rfind(")") + 2:].split()
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            members.append(int(entry))
+    return members
+
+
 def stop_group(child: Child) -> int:
-    """SIGTERM to the process group, as the suite's kill_subprocess; the shell's exit code."""
+    """SIGTERM to the process group, as the suite's kill_subprocess, then wait until every
+    process of it has ended (the suite sleeps 1 s for that); the shell's exit code. The
+    shell ends at once, the node it started on its own: until then `ros2 node list` still
+    lists it (ci64)."""
     if child.popen.poll() is None:
         os.killpg(child.pid, signal.SIGTERM)
-    return child.popen.wait(scaled(10))
+    code = child.popen.wait(scaled(10))
+    try:
+        wait_until(lambda: not group_members(child.pid), what="the process group to end")
+    except AssertionError as error:
+        raise AssertionError(f"{error}; still running: {group_members(child.pid)}; the "
+                             f"node's output: {child.output()[-2000:]!r}") from None
+    return code

@@ -56,13 +56,16 @@ def _signal_me_when_parent_dies(sig: int) -> None:
 
 
 class ros_session:  # noqa: N801 - used as a context manager, like open()
-    """``with ros_session(): ...`` initialises rclpy without its signal handlers and
-    shuts it down at the end; SIGINT, SIGTERM and SIGHUP set `stop` instead of raising,
-    and so does the death of ``parent_pid`` (if given)."""
+    """``with ros_session(): ...`` initialises rclpy (with ``args``, a command line's ROS
+    arguments) without its signal handlers and shuts it down at the end; SIGINT, SIGTERM
+    and SIGHUP set `stop` instead of raising, and so does the death of ``parent_pid`` (if
+    given)."""
 
-    def __init__(self, *, parent_pid: Optional[int] = None) -> None:
+    def __init__(self, *, parent_pid: Optional[int] = None,
+                 args: Optional[Sequence[str]] = None) -> None:
         self.stop = threading.Event()
         self.parent_pid = parent_pid
+        self.args = None if args is None else list(args)  # rclpy.init's (--ros-args ...)
         self.reason = ""
         self._previous: dict[int, object] = {}
         self._watchdog = Watchdog(timeout_s=STOP_TIMEOUT_S)
@@ -90,7 +93,7 @@ class ros_session:  # noqa: N801 - used as a context manager, like open()
         if self.parent_pid is not None:
             _signal_me_when_parent_dies(signal.SIGTERM)
             self.parent_gone()  # it may have died before the kernel was told to say so
-        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(args=self.args, signal_handler_options=SignalHandlerOptions.NO)
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -8,29 +8,15 @@ import json
 import os
 import shlex
 import subprocess
-from pathlib import Path
 from typing import Iterator
 
 import pytest
 
 from interface_builds import BuiltInterfaces
-from reference_suite import SUITE, as_the_suite, ros2, stop_group
-from support import Child, Processes, wait_until
+from reference_suite import SUITE, as_the_suite, group_members, ros2, stop_group
+from support import Child, Processes
 
 pytestmark = pytest.mark.integration  # starts processes
-
-def group_members(pgid: int) -> list[int]:
-    members = []
-    for entry in filter(str.isdigit, os.listdir("/proc")):
-        try:
-            stat = Path(f"/proc/{entry}/stat").read_text()
-        except OSError:
-            continue
-        fields = stat[stat.rfind(")") + 2:].split()
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            members.append(int(entry))
-    return members
-
 
 @pytest.fixture
 def turtlesim(turtlesim_interfaces: BuiltInterfaces, processes: Processes) -> Iterator[Child]:
@@ -87,12 +73,8 @@ def test_param_set_types_the_value_and_says_what_happened(
 
 def test_run_stops_with_its_process_group_and_then_is_not_listed(
         turtlesim: Child) -> None:
-    stop_group(turtlesim)  # the shell ends at once; the node it started ends on its own
-    try:
-        wait_until(lambda: not group_members(turtlesim.pid), what="the process group to end")
-    except AssertionError as error:  # seen once in a full run (ci56): say what was left
-        raise AssertionError(f"{error}; still running: {group_members(turtlesim.pid)}; the "
-                             f"node's output: {turtlesim.output()[-2000:]!r}") from None
+    stop_group(turtlesim)  # returns once the node the shell started has ended too
+    assert not group_members(turtlesim.pid)
     assert "STOPPED" in turtlesim.output()  # the node's clean end, not a kill
     assert "Traceback" not in turtlesim.output()
     nodes = ros2("node list")
