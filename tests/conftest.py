@@ -17,6 +17,7 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
 import random
 import signal
@@ -29,10 +30,36 @@ import pytest
 from hypothesis import settings
 
 from interface_builds import BuildUnavailable, BuiltInterfaces, use_test_interfaces
-from support import Child, Processes, children_of, pick_free_port, scaled
+from support import (DOMAIN_BLOCK, DOMAIN_LOCKS, Child, Processes, children_of, pick_free_port,
+                     scaled)
 
-# 0 and 101 are left alone; other ROS users on this host tend to sit on the default 0.
-_DOMAIN_ID = random.Random(os.getpid() ^ int(time.time())).randint(1, 100)
+
+_DOMAIN_LOCKS: list[object] = []  # the open lock files of this session's domains
+
+
+def _reserve_domains() -> int:
+    """The first of `DOMAIN_BLOCK` ROS domains that no other session of this suite on this
+    host uses while this one runs: each session holds an exclusive lock on its block's file
+    until it ends (a random pick alone let two concurrent sessions share one domain, one
+    time in a hundred). 0 is left alone: other ROS users tend to sit on it."""
+    folder = DOMAIN_LOCKS
+    folder.mkdir(exist_ok=True)
+    firsts = list(range(1, 100 - DOMAIN_BLOCK + 2, DOMAIN_BLOCK))
+    random.Random(os.getpid() ^ time.time_ns()).shuffle(firsts)
+    for first in firsts:
+        handle = open(folder / f"{first}.lock", "w")  # not inherited: children never hold it
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        _DOMAIN_LOCKS.append(handle)  # held until this process ends, however it ends
+        return first
+    raise RuntimeError(f"every block of ROS domains in 1-99 is in use by other sessions of "
+                       f"this suite (their locks in {folder})")
+
+
+_DOMAIN_ID = _reserve_domains()
 os.environ["ROS_DOMAIN_ID"] = str(_DOMAIN_ID)
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_STATIC_PEERS", None)

@@ -8,6 +8,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +28,20 @@ SHARED = REPO.parent / "shared"
 # received, a condition polled), so a generous factor costs nothing while tests pass; it
 # lets the suite hold on a loaded machine. SLICER_BRIDGE_TEST_TIME_SCALE sets it.
 TIME_SCALE = float(os.environ.get("SLICER_BRIDGE_TEST_TIME_SCALE", "3"))
+
+
+# The session's ROS domains (conftest reserves them): ROS_DOMAIN_ID, and after it the spares
+# for tests that need a ROS graph of their own (a demo beside the session's peers).
+DOMAIN_BLOCK = 3
+# Where each session holds the lock of its block (the file named after its first domain).
+DOMAIN_LOCKS = Path(tempfile.gettempdir()) / f"slicer-ros2-bridge-domains-{os.getuid()}"
+
+
+def spare_domain(index: int) -> str:
+    """The session's spare ROS domain `index` (1 or 2), as ROS_DOMAIN_ID takes it."""
+    if not 1 <= index < DOMAIN_BLOCK:
+        raise ValueError(f"a spare domain index 1-{DOMAIN_BLOCK - 1}, got {index}")
+    return str(int(os.environ["ROS_DOMAIN_ID"]) + index)
 
 
 def scaled(seconds: float) -> float:

@@ -10,7 +10,8 @@ import signal
 
 import pytest
 
-from support import Processes, alive, children_of, pick_free_port, scaled, wait_until
+from support import (Processes, alive, children_of, pick_free_port, scaled, spare_domain,
+                     wait_until)
 
 pytestmark = pytest.mark.ros
 
@@ -18,7 +19,7 @@ pytestmark = pytest.mark.ros
 def test_a_child_that_dies_and_one_that_will_not_stop(processes: Processes) -> None:
     port = pick_free_port()
     # A ROS domain of its own: other modules' robots are /robot_state_publisher too.
-    domain = str(int(os.environ["ROS_DOMAIN_ID"]) % 100 + 2)
+    domain = spare_domain(2)
     demo = processes.bridge("demo", "--port", str(port), env={"ROS_DOMAIN_ID": domain})
     demo.wait_for_output("Stop with Ctrl-C", timeout=90)
     helpers = {cmd: pid for pid, _, cmd in children_of(demo.pid)

@@ -11,7 +11,8 @@ import sys
 import pytest
 
 from bridge.robots._spin import PARENT_PID_ENV
-from support import Processes, alive, children_of, pick_free_port, scaled, wait_until
+from support import (Processes, alive, children_of, pick_free_port, scaled, spare_domain,
+                     wait_until)
 
 pytestmark = pytest.mark.ros
 
@@ -21,7 +22,7 @@ pytestmark = pytest.mark.ros
 def test_the_demo_s_children_end_with_it(processes: Processes, sig: signal.Signals) -> None:
     port = pick_free_port()
     # A ROS domain of its own: other modules' robots are /robot_state_publisher too.
-    domain = str(int(os.environ["ROS_DOMAIN_ID"]) % 100 + 1)
+    domain = spare_domain(1)
     demo = processes.bridge("demo", "--port", str(port), env={"ROS_DOMAIN_ID": domain})
     demo.wait_for_output("Stop with Ctrl-C", timeout=90)
     helpers = [pid for pid, _, cmd in children_of(demo.pid)
@@ -57,7 +58,7 @@ def test_ctrl_c_while_the_demo_starts_ends_it_cleanly(processes: Processes, stag
     /proc or the output: numpy's or rclpy's library loaded (the command's imports), the
     daemon listening. (Before the command's first line runs, the interpreter's own start,
     `site` included, prints its traceback: no code of the project's runs there yet.)"""
-    domain = str(int(os.environ["ROS_DOMAIN_ID"]) % 100 + 1)
+    domain = spare_domain(1)
     demo = processes.bridge("demo", "--port", str(pick_free_port()),
                             env={"ROS_DOMAIN_ID": domain})
     if stage == "listening":

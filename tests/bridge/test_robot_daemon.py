@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 import struct
 import xml.etree.ElementTree as ET
@@ -26,7 +25,7 @@ from protocol.messages import AttributeKind, Message, PolyData, Status, Transfor
 from protocol.naming import NameKey, device_name_for
 from slicer_client.connection import CommandRefusedError, Connection
 from support import (SHARED, Processes, RunningDaemon, assert_clean_exit, children_of,
-                     pick_free_port, require_shared, start_daemon, wait_until)
+                     pick_free_port, require_shared, spare_domain, start_daemon, wait_until)
 
 OMNI = SHARED / "robots" / "sensable_omni_model"
 LOAD_TIMEOUT = 30.0  # discovery of a node that just started can take a few seconds
@@ -579,7 +578,7 @@ def test_device_names_are_the_registry_s(omni: dict[str, Any]) -> None:
 def test_the_demo_command(processes: Processes) -> None:
     port = pick_free_port()
     # A ROS domain of its own: the module's Omni is also a /robot_state_publisher.
-    domain = str(int(os.environ["ROS_DOMAIN_ID"]) % 100 + 1)
+    domain = spare_domain(1)
     demo = processes.bridge("demo", "--port", str(port), env={"ROS_DOMAIN_ID": domain})
     demo.wait_for_output("Stop with Ctrl-C", timeout=90)
     banner = demo.output()

@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from support import Processes, REPO
+from support import DOMAIN_BLOCK, DOMAIN_LOCKS, REPO, Processes, spare_domain
 
 
 def read_message(line: str) -> dict:
@@ -20,9 +20,22 @@ def read_message(line: str) -> dict:
 
 def test_session_is_isolated() -> None:
     domain = int(os.environ["ROS_DOMAIN_ID"])
-    assert 1 <= domain <= 100
+    assert 1 <= domain and int(spare_domain(DOMAIN_BLOCK - 1)) <= 99
     assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
     assert os.path.isdir(os.environ["ROS_LOG_DIR"])
+
+
+def test_no_other_session_can_take_this_sessions_domains() -> None:
+    """The session holds the lock of its block of domains: another process trying it, as a
+    concurrent `make test` on this host would, finds it taken."""
+    lock = DOMAIN_LOCKS / f"{os.environ['ROS_DOMAIN_ID']}.lock"
+    probe = subprocess.run([sys.executable, "-c", (
+        "import fcntl, sys\n"
+        "handle = open(sys.argv[1], 'w')\n"
+        "try:\n    fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)\n"
+        "except OSError:\n    print('taken')\n"
+        "else:\n    print('free')\n"), str(lock)], capture_output=True, text=True, timeout=60)
+    assert (probe.returncode, probe.stdout) == (0, "taken\n"), probe.stderr
 
 
 def test_two_rclpy_processes_exchange_pose_stamped(processes: Processes) -> None:
