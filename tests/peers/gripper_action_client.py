@@ -126,6 +126,13 @@ def main() -> None:
             accepted = GripperCommand.Impl.SendGoalService.Response(accepted=True)
             handle = ClientGoalHandle(client, goal_uuid, accepted)
         else:
+            # Seen now and then under load (a served action, its first goal after the
+            # server was revived): whether this node still sees the server and its status
+            # publisher says which way the goal's answers were lost.
+            publishers = node.get_publishers_info_by_topic(args.action + "/_action/status")
+            print(f"seen: server ready {client.server_is_ready()}, status published by "
+                  f"{sorted(p.node_namespace.rstrip('/') + '/' + p.node_name for p in publishers)}",
+                  flush=True)
             print("NO_RESPONSE", flush=True)
             return
         if not handle.accepted:
