@@ -13,6 +13,8 @@ import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException
 
+from peer_teardown import end_ros
+
 PARAMETERS = {
     "flag": True, "count": 42, "ratio": 2.5, "label": "omni",
     "flags": [True, False], "counts": [1, 2, 3], "ratios": [0.5, 1.5], "labels": ["a", "b"],
@@ -41,8 +43,7 @@ def main() -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        end_ros(node)
 
 
 if __name__ == "__main__":

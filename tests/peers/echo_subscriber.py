@@ -13,6 +13,8 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from peer_teardown import end_ros
+
 
 def to_plain(value):  # an independent, minimal message -> JSON walk
     if hasattr(value, "get_fields_and_field_types"):
@@ -58,8 +60,7 @@ def main() -> None:
     except SystemExit:
         pass
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        end_ros(node)
 
 
 if __name__ == "__main__":

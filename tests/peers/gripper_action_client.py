@@ -33,6 +33,8 @@ from rclpy.action.client import ClientGoalHandle
 from rclpy.qos import qos_profile_action_status_default
 from unique_identifier_msgs.msg import UUID
 
+from peer_teardown import end_ros
+
 TERMINAL = {GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED}
 TIME_SCALE = float(os.environ.get("SLICER_BRIDGE_TEST_TIME_SCALE", "3"))
 
@@ -150,8 +152,7 @@ def main() -> None:
         while len(on_topic) < args.feedbacks and time.monotonic() < deadline:
             rclpy.spin_once(node, timeout_sec=0.1)
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        end_ros(node)
 
 
 if __name__ == "__main__":

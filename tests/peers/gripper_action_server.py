@@ -23,6 +23,8 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 
+from peer_teardown import end_ros
+
 
 def main() -> None:
     parser = argparse.ArgumentParser()
@@ -86,9 +88,7 @@ def main() -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        executor.shutdown(timeout_sec=0)
-        node.destroy_node()
-        rclpy.try_shutdown()
+        end_ros(node, executor)
 
 
 if __name__ == "__main__":

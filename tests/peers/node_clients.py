@@ -13,6 +13,8 @@ import time
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
+from peer_teardown import end_ros
+
 
 def main() -> int:
     name, namespace, wanted = sys.argv[1], sys.argv[2], sys.argv[3]
@@ -36,8 +38,7 @@ def main() -> int:
         print(f"TIMEOUT no client {wanted} on {namespace}/{name}", flush=True)
         return 1
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        end_ros(node)
 
 
 if __name__ == "__main__":

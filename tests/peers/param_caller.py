@@ -14,6 +14,8 @@ import rclpy
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 
+from peer_teardown import end_ros
+
 _FIELDS = {ParameterType.PARAMETER_BOOL: "bool_value",
            ParameterType.PARAMETER_INTEGER: "integer_value",
            ParameterType.PARAMETER_DOUBLE: "double_value",
@@ -57,8 +59,7 @@ def main() -> None:
                 print("RESULT " + json.dumps({"successful": result.successful,
                                               "reason": result.reason}), flush=True)
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        end_ros(node)
 
 
 if __name__ == "__main__":

@@ -26,6 +26,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 
+from peer_teardown import end_ros
+
 
 def plain(parameter: Parameter) -> dict:
     value = parameter.value
@@ -120,8 +122,7 @@ def main() -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        end_ros(node)
 
 
 if __name__ == "__main__":

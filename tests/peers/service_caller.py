@@ -10,6 +10,8 @@ import json
 
 import rclpy
 
+from peer_teardown import end_ros
+
 
 def main() -> None:
     parser = argparse.ArgumentParser()
@@ -39,8 +41,7 @@ def main() -> None:
                                         for k in response.get_fields_and_field_types()}),
               flush=True)
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        end_ros(node)
 
 
 if __name__ == "__main__":

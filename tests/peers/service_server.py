@@ -14,6 +14,8 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from std_srvs.srv import SetBool, Trigger
 
+from peer_teardown import end_ros
+
 
 def main() -> None:
     parser = argparse.ArgumentParser()
@@ -58,9 +60,7 @@ def main() -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        executor.shutdown(timeout_sec=0)
-        node.destroy_node()
-        rclpy.try_shutdown()
+        end_ros(node, executor)
 
 
 if __name__ == "__main__":

@@ -21,6 +21,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.qos import qos_profile_action_status_default
 from rclpy.task import Future
 
+from peer_teardown import end_ros
+
 Impl = GripperCommand.Impl
 
 
@@ -76,8 +78,7 @@ def main() -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        end_ros(node)
 
 
 if __name__ == "__main__":
