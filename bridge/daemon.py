@@ -33,6 +33,7 @@ from bridge.parameters.capability import ParameterBridges
 from bridge.robots.capability import RobotBridges
 from bridge.types import InterfaceTypes
 from bridge.ros.ros_node import RosNode, RosOptions
+from bridge.ros.shm_ports import ShmPortWatch
 from bridge.services.capability import ServiceBridges
 from bridge.tf.capability import TfBridges
 from bridge.topics.capability import TopicBridges
@@ -66,6 +67,8 @@ class Daemon:
         self.policy = policy
         # Streams that go stale (publisher gone, silent past their period) are said so.
         self.health = StreamHealth(self.hub, loop)
+        # ROS data Fast DDS loses in a replaced shared-memory port is said so in the log.
+        self.shm_ports = ShmPortWatch(loop)
         # No capability gets the policy: the dispatcher judges each request and hands a
         # handler the guard for the content its op declares (bridge.core.content_guards).
         self.topics = TopicBridges(self.ros, self.hub, names, health=self.health)
@@ -103,6 +106,7 @@ class Daemon:
             # them (own one, remove one, make one fail with another type).
             await self.server.start(serving=False)
             self.ros.start()
+            self.shm_ports.start()
             for command in self.config.startup:
                 try:
                     await self.dispatcher.execute(command.op, command.arguments)
@@ -123,6 +127,7 @@ class Daemon:
     async def stop(self) -> None:
         await self.server.close()
         self.health.close()
+        self.shm_ports.close()
         self.dispatcher.close()
         self.heavy.close()
         self.ros.stop()

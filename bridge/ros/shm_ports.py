@@ -1,0 +1,117 @@
+"""Says so when ROS data between the daemon and a process on this host is silently lost in
+Fast DDS shared memory.
+
+Fast DDS passes same-host ROS traffic through shared-memory "ports", one segment per
+listening participant (``/dev/shm/fastrtps_port<N>``, N from the domain and participant
+id). A process that dies while closing leaves its port behind; the next process given
+that participant id finds it abandoned and makes the port anew. Fast DDS 2.14 in a
+process that was writing to the old port can go on writing into it, unlinked, forever:
+nothing it sends reaches the newcomer, nor any later process with that id
+(eProsima/Fast-DDS#5053). The daemon lives long and talks to every ROS process of the
+host, so it is the one left talking to a dead segment, and nothing in ROS says so.
+
+It shows in the daemon's own memory map: a port segment mapped only in versions that are
+no longer the file of that name, while the file exists. Fast DDS recovers from most such
+swaps by itself within its health check (about a second), so a swap is reported only
+when it outlasts `REPORT_AFTER_S`. The check runs on the loop every `CHECK_INTERVAL_S`
+(reading about a thousand lines of /proc/self/maps: well under a millisecond).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import os
+import re
+import time
+from pathlib import Path
+from typing import Callable, Optional
+
+__all__ = ["CHECK_INTERVAL_S", "REPORT_AFTER_S", "ShmPortWatch", "SHM_DIR",
+           "replaced_ports"]
+
+log = logging.getLogger(__name__)
+
+SHM_DIR = Path("/dev/shm")
+MAPS = Path("/proc/self/maps")
+CHECK_INTERVAL_S = 5.0
+REPORT_AFTER_S = 10.0
+# "address perms offset dev inode path": the path may end with " (deleted)".
+_MAPPING = re.compile(r"^\S+ \S+ \S+ \S+ (\d+)\s+(.*?/(fastrtps_port\d+))(?: \(deleted\))?$")
+
+
+def replaced_ports(maps: str, live_inode: Callable[[str], Optional[int]]) -> dict[str, int]:
+    """The port segments `maps` (a /proc/<pid>/maps text) holds only in replaced versions:
+    port name → the inode of the file that now bears its name (`live_inode` of the mapped
+    path; None when there is no such file, and then nothing is lost)."""
+    mapped: dict[str, set[int]] = {}
+    paths: dict[str, str] = {}
+    for line in maps.splitlines():
+        found = _MAPPING.match(line)
+        if found:
+            inode, path, name = int(found.group(1)), found.group(2), found.group(3)
+            mapped.setdefault(name, set()).add(inode)
+            paths[name] = path
+    replaced: dict[str, int] = {}
+    for name, inodes in mapped.items():
+        live = live_inode(paths[name])
+        if live is not None and live not in inodes:
+            replaced[name] = live
+    return replaced
+
+
+def file_inode(path: str) -> Optional[int]:
+    try:
+        return os.stat(path).st_ino
+    except OSError:
+        return None
+
+
+class ShmPortWatch:
+    """Checks the daemon's map now and then; logs each lasting swap once (an error, with
+    the port and what to do)."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, *, maps: Path = MAPS,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self._loop = loop
+        self._maps = maps
+        self._clock = clock
+        self._seen: dict[tuple[str, int], float] = {}  # (port, live inode) → first seen
+        self._reported: set[tuple[str, int]] = set()
+        self._timer: Optional[asyncio.TimerHandle] = None
+
+    def start(self) -> None:
+        if self._maps.exists():  # Linux; elsewhere there is nothing to read
+            self._timer = self._loop.call_later(CHECK_INTERVAL_S, self._tick)
+
+    def close(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+
+    def _tick(self) -> None:
+        try:
+            self.check(self._maps.read_text(errors="replace"))
+        except OSError as error:
+            log.debug("cannot read %s: %s", self._maps, error)
+        self._timer = self._loop.call_later(CHECK_INTERVAL_S, self._tick)
+
+    def check(self, maps: str) -> list[str]:
+        """Note what `maps` shows now; return the ports reported by this call."""
+        now = self._clock()
+        current = {(name, live) for name, live in replaced_ports(maps, file_inode).items()}
+        self._seen = {key: self._seen.get(key, now) for key in current}
+        self._reported &= current  # a swap that ended and comes back is said again
+        reported: list[str] = []
+        for key, since in self._seen.items():
+            if now - since >= REPORT_AFTER_S and key not in self._reported:
+                self._reported.add(key)
+                reported.append(key[0])
+                log.error(
+                    "ROS data between this bridge and the process now using Fast DDS "
+                    "shared-memory port %s is lost: that process made the port anew (an "
+                    "earlier one with its participant id died while closing) and Fast DDS "
+                    "here still uses the old one (eProsima/Fast-DDS#5053). Restart the "
+                    "bridge to reach that process again; stopping ROS processes with one "
+                    "signal and letting them finish avoids it.", key[0])
+        return reported

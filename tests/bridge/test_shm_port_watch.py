@@ -1,0 +1,137 @@
+"""The daemon says so when Fast DDS keeps a shared-memory port another process replaced
+(`bridge.ros.shm_ports`). The swap itself is made for real: this process maps a port file,
+which is then unlinked and made anew under the same name, and the kernel's map of this
+process is read, as the daemon reads its own; a real daemon's map shows its real ports."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import mmap
+import os
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+
+from bridge.ros.shm_ports import REPORT_AFTER_S, ShmPortWatch, file_inode, replaced_ports
+from support import RunningDaemon
+
+
+def own_maps() -> str:
+    return Path("/proc/self/maps").read_text()
+
+
+def make_port(path: Path) -> None:
+    path.write_bytes(b"\0" * mmap.PAGESIZE)
+
+
+@contextmanager
+def mapped(path: Path) -> Iterator[None]:
+    """`path` (made if missing) mapped by this process while the block runs."""
+    if not path.exists():
+        make_port(path)
+    with path.open("r+b") as file, mmap.mmap(file.fileno(), 0) as mapping:
+        yield
+        assert mapping[0] == 0  # still mapped to the end
+
+
+@pytest.fixture
+def mapped_port(tmp_path: Path) -> Iterator[Path]:
+    """A port file of 'fastrtps_port7413' in tmp_path, mapped as long as the test runs."""
+    path = tmp_path / "fastrtps_port7413"
+    with mapped(path):
+        yield path
+
+
+def replace(path: Path) -> int:
+    """Unlink the file and make a new one of that name, as Fast DDS resets a port; the
+    new file's inode."""
+    path.unlink()
+    make_port(path)
+    return os.stat(path).st_ino
+
+
+class Watched:
+    """A `ShmPortWatch` on a clock the test moves; its loop never runs (`check` is called
+    here)."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+        self.loop = asyncio.new_event_loop()
+        self.watch = ShmPortWatch(self.loop, clock=lambda: self.now)
+
+    def check_after(self, seconds: float) -> list[str]:
+        self.now += seconds
+        return self.watch.check(own_maps())
+
+
+@pytest.fixture
+def watched(caplog: pytest.LogCaptureFixture) -> Iterator[Watched]:
+    made = Watched()
+    with caplog.at_level(logging.ERROR, logger="bridge.ros.shm_ports"):
+        yield made
+    made.loop.close()
+
+
+def test_a_port_mapped_as_it_is_is_not_replaced(mapped_port: Path) -> None:
+    assert "fastrtps_port7413" in own_maps()
+    assert replaced_ports(own_maps(), file_inode) == {}
+
+
+def test_a_port_made_anew_under_its_name_is_replaced(mapped_port: Path) -> None:
+    new_inode = replace(mapped_port)
+    assert replaced_ports(own_maps(), file_inode) == {"fastrtps_port7413": new_inode}
+
+
+def test_a_port_whose_file_is_gone_loses_nothing(mapped_port: Path) -> None:
+    mapped_port.unlink()
+    assert "fastrtps_port7413 (deleted)" in own_maps()
+    assert replaced_ports(own_maps(), file_inode) == {}
+
+
+def test_a_lasting_swap_is_logged_once(mapped_port: Path, watched: Watched,
+                                       caplog: pytest.LogCaptureFixture) -> None:
+    replace(mapped_port)
+    assert watched.check_after(0) == []  # Fast DDS may still recover by itself
+    assert watched.check_after(REPORT_AFTER_S - 1) == []
+    assert watched.check_after(1) == ["fastrtps_port7413"]
+    assert watched.check_after(60) == []  # said once
+    errors = [r.getMessage() for r in caplog.records]
+    assert len(errors) == 1
+    assert "Fast DDS shared-memory port fastrtps_port7413 is lost" in errors[0]
+    assert "Restart the bridge" in errors[0] and "eProsima/Fast-DDS#5053" in errors[0]
+
+
+def test_a_swap_gone_before_the_deadline_is_not_logged(
+        tmp_path: Path, watched: Watched, caplog: pytest.LogCaptureFixture) -> None:
+    path = tmp_path / "fastrtps_port7415"
+    with mapped(path):
+        replace(path)
+        assert watched.check_after(0) == []
+    assert watched.check_after(REPORT_AFTER_S / 2) == []  # the old mapping went
+    assert watched.check_after(REPORT_AFTER_S) == []
+    assert caplog.records == []
+
+
+def test_a_swap_that_ends_and_comes_back_is_logged_again(
+        tmp_path: Path, watched: Watched, caplog: pytest.LogCaptureFixture) -> None:
+    path = tmp_path / "fastrtps_port7417"
+    for _ in range(2):
+        with mapped(path):
+            replace(path)
+            assert watched.check_after(0) == []
+            assert watched.check_after(REPORT_AFTER_S) == ["fastrtps_port7417"]
+        assert watched.check_after(1) == []  # the old mapping went: it ended
+    assert len(caplog.records) == 2
+
+
+@pytest.mark.ros
+def test_a_running_daemons_ports_are_read_and_none_is_replaced(
+        daemon: RunningDaemon) -> None:
+    maps = Path(f"/proc/{daemon.child.pid}/maps").read_text()
+    assert "/dev/shm/fastrtps_port" in maps  # Fast DDS's same-host transport is in use
+    assert replaced_ports(maps, file_inode) == {}
+
+
