@@ -68,7 +68,7 @@ class Daemon:
         # Streams that go stale (publisher gone, silent past their period) are said so.
         self.health = StreamHealth(self.hub, loop)
         # ROS data Fast DDS loses in a replaced shared-memory port is said so in the log.
-        self.shm_ports = ShmPortWatch(loop)
+        self.shm_ports = ShmPortWatch()
         # No capability gets the policy: the dispatcher judges each request and hands a
         # handler the guard for the content its op declares (bridge.core.content_guards).
         self.topics = TopicBridges(self.ros, self.hub, names, health=self.health)

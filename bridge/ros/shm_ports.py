@@ -13,16 +13,16 @@ host, so it is the one left talking to a dead segment, and nothing in ROS says s
 It shows in the daemon's own memory map: a port segment mapped only in versions that are
 no longer the file of that name, while the file exists. Fast DDS recovers from most such
 swaps by itself within its health check (about a second), so a swap is reported only
-when it outlasts `REPORT_AFTER_S`. The check runs on the loop every `CHECK_INTERVAL_S`
-(0.7 ms to read and sift the 1,161 lines of a running daemon's map).
+when it outlasts `REPORT_AFTER_S`. The check runs every `CHECK_INTERVAL_S` on a thread of its
+own (0.7 ms to read and sift the 1,161 lines of a running daemon's map).
 """
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import os
 import re
+import threading
 import time
 from pathlib import Path
 from typing import Callable, Optional
@@ -70,33 +70,40 @@ def file_inode(path: str) -> Optional[int]:
 
 
 class ShmPortWatch:
-    """Checks the daemon's map now and then; logs each lasting swap once (an error, with
+    """Checks the daemon's map now and then, on a thread of its own (reading the map is
+    kernel work the loop need not wait for); logs each lasting swap once (an error, with
     the port and what to do)."""
 
-    def __init__(self, loop: asyncio.AbstractEventLoop, *, maps: Path = MAPS,
-                 clock: Callable[[], float] = time.monotonic) -> None:
-        self._loop = loop
+    def __init__(self, *, maps: Path = MAPS, clock: Callable[[], float] = time.monotonic,
+                 check_interval_s: float = CHECK_INTERVAL_S,
+                 report_after_s: float = REPORT_AFTER_S) -> None:
         self._maps = maps
         self._clock = clock
+        self._check_interval_s = check_interval_s
+        self._report_after_s = report_after_s
         self._seen: dict[tuple[str, int], float] = {}  # (port, live inode) → first seen
         self._reported: set[tuple[str, int]] = set()
-        self._timer: Optional[asyncio.TimerHandle] = None
+        self._closed = threading.Event()
+        self._thread: Optional[threading.Thread] = None
 
     def start(self) -> None:
         if self._maps.exists():  # Linux; elsewhere there is nothing to read
-            self._timer = self._loop.call_later(CHECK_INTERVAL_S, self._tick)
+            self._thread = threading.Thread(target=self._run, name="shm-port-watch",
+                                            daemon=True)
+            self._thread.start()
 
     def close(self) -> None:
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
+        self._closed.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
 
-    def _tick(self) -> None:
-        try:
-            self.check(self._maps.read_text(errors="replace"))
-        except OSError as error:
-            log.debug("cannot read %s: %s", self._maps, error)
-        self._timer = self._loop.call_later(CHECK_INTERVAL_S, self._tick)
+    def _run(self) -> None:
+        while not self._closed.wait(self._check_interval_s):
+            try:
+                self.check(self._maps.read_text(errors="replace"))
+            except OSError as error:
+                log.debug("cannot read %s: %s", self._maps, error)
 
     def check(self, maps: str) -> list[str]:
         """Note what `maps` shows now; return the ports reported by this call."""
@@ -106,7 +113,7 @@ class ShmPortWatch:
         self._reported &= current  # a swap that ended and comes back is said again
         reported: list[str] = []
         for key, since in self._seen.items():
-            if now - since >= REPORT_AFTER_S and key not in self._reported:
+            if now - since >= self._report_after_s and key not in self._reported:
                 self._reported.add(key)
                 reported.append(key[0])
                 log.error(

@@ -5,10 +5,10 @@ process is read, as the daemon reads its own; a real daemon's map shows its real
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import mmap
 import os
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -16,7 +16,10 @@ from typing import Iterator
 import pytest
 
 from bridge.ros.shm_ports import REPORT_AFTER_S, ShmPortWatch, file_inode, replaced_ports
-from support import RunningDaemon
+from support import RunningDaemon, wait_until
+
+
+TEST_PORTS = ("fastrtps_port99991", "fastrtps_port99993", "fastrtps_port99995")
 
 
 def own_maps() -> str:
@@ -39,8 +42,8 @@ def mapped(path: Path) -> Iterator[None]:
 
 @pytest.fixture
 def mapped_port(tmp_path: Path) -> Iterator[Path]:
-    """A port file of 'fastrtps_port7413' in tmp_path, mapped as long as the test runs."""
-    path = tmp_path / "fastrtps_port7413"
+    """A port file of 'fastrtps_port99991' in tmp_path, mapped as long as the test runs."""
+    path = tmp_path / "fastrtps_port99991"
     with mapped(path):
         yield path
 
@@ -54,40 +57,44 @@ def replace(path: Path) -> int:
 
 
 class Watched:
-    """A `ShmPortWatch` on a clock the test moves; its loop never runs (`check` is called
-    here)."""
+    """A `ShmPortWatch` on a clock the test moves, checked by the test (not started)."""
 
     def __init__(self) -> None:
         self.now = 1000.0
-        self.loop = asyncio.new_event_loop()
-        self.watch = ShmPortWatch(self.loop, clock=lambda: self.now)
+        self.watch = ShmPortWatch(clock=lambda: self.now)
 
     def check_after(self, seconds: float) -> list[str]:
+        """The test's ports reported after `seconds` (not real ones this process may map:
+        those are numbered below 65536)."""
         self.now += seconds
-        return self.watch.check(own_maps())
+        return [name for name in self.watch.check(own_maps()) if name in TEST_PORTS]
+
+
+def logged(caplog: pytest.LogCaptureFixture) -> list[str]:
+    """What was logged about the test's ports."""
+    return [r.getMessage() for r in caplog.records
+            if any(port in r.getMessage() for port in TEST_PORTS)]
 
 
 @pytest.fixture
 def watched(caplog: pytest.LogCaptureFixture) -> Iterator[Watched]:
-    made = Watched()
     with caplog.at_level(logging.ERROR, logger="bridge.ros.shm_ports"):
-        yield made
-    made.loop.close()
+        yield Watched()
 
 
 def test_a_port_mapped_as_it_is_is_not_replaced(mapped_port: Path) -> None:
-    assert "fastrtps_port7413" in own_maps()
+    assert "fastrtps_port99991" in own_maps()
     assert replaced_ports(own_maps(), file_inode) == {}
 
 
 def test_a_port_made_anew_under_its_name_is_replaced(mapped_port: Path) -> None:
     new_inode = replace(mapped_port)
-    assert replaced_ports(own_maps(), file_inode) == {"fastrtps_port7413": new_inode}
+    assert replaced_ports(own_maps(), file_inode) == {"fastrtps_port99991": new_inode}
 
 
 def test_a_port_whose_file_is_gone_loses_nothing(mapped_port: Path) -> None:
     mapped_port.unlink()
-    assert "fastrtps_port7413 (deleted)" in own_maps()
+    assert "fastrtps_port99991 (deleted)" in own_maps()
     assert replaced_ports(own_maps(), file_inode) == {}
 
 
@@ -96,35 +103,51 @@ def test_a_lasting_swap_is_logged_once(mapped_port: Path, watched: Watched,
     replace(mapped_port)
     assert watched.check_after(0) == []  # Fast DDS may still recover by itself
     assert watched.check_after(REPORT_AFTER_S - 1) == []
-    assert watched.check_after(1) == ["fastrtps_port7413"]
+    assert watched.check_after(1) == ["fastrtps_port99991"]
     assert watched.check_after(60) == []  # said once
-    errors = [r.getMessage() for r in caplog.records]
+    errors = logged(caplog)
     assert len(errors) == 1
-    assert "Fast DDS shared-memory port fastrtps_port7413 is lost" in errors[0]
+    assert "Fast DDS shared-memory port fastrtps_port99991 is lost" in errors[0]
     assert "Restart the bridge" in errors[0] and "eProsima/Fast-DDS#5053" in errors[0]
 
 
 def test_a_swap_gone_before_the_deadline_is_not_logged(
         tmp_path: Path, watched: Watched, caplog: pytest.LogCaptureFixture) -> None:
-    path = tmp_path / "fastrtps_port7415"
+    path = tmp_path / "fastrtps_port99993"
     with mapped(path):
         replace(path)
         assert watched.check_after(0) == []
     assert watched.check_after(REPORT_AFTER_S / 2) == []  # the old mapping went
     assert watched.check_after(REPORT_AFTER_S) == []
-    assert caplog.records == []
+    assert logged(caplog) == []
 
 
 def test_a_swap_that_ends_and_comes_back_is_logged_again(
         tmp_path: Path, watched: Watched, caplog: pytest.LogCaptureFixture) -> None:
-    path = tmp_path / "fastrtps_port7417"
+    path = tmp_path / "fastrtps_port99995"
     for _ in range(2):
         with mapped(path):
             replace(path)
             assert watched.check_after(0) == []
-            assert watched.check_after(REPORT_AFTER_S) == ["fastrtps_port7417"]
+            assert watched.check_after(REPORT_AFTER_S) == ["fastrtps_port99995"]
         assert watched.check_after(1) == []  # the old mapping went: it ended
-    assert len(caplog.records) == 2
+    assert len(logged(caplog)) == 2
+
+
+def test_the_watch_reads_a_map_on_its_thread_until_closed(
+        mapped_port: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """Started as the daemon starts it, on this process's own map, with short periods."""
+    watch = ShmPortWatch(check_interval_s=0.05, report_after_s=0.2)
+    with caplog.at_level(logging.ERROR, logger="bridge.ros.shm_ports"):
+        watch.start()
+        try:
+            replace(mapped_port)
+            wait_until(lambda: bool(logged(caplog)), what="the swap to be logged")
+        finally:
+            watch.close()
+    ours = logged(caplog)
+    assert len(ours) == 1 and "port fastrtps_port99991 is lost" in ours[0]
+    assert not [t for t in threading.enumerate() if t.name == "shm-port-watch"]
 
 
 @pytest.mark.ros
