@@ -242,8 +242,14 @@ class ClientSession(asyncio.Protocol):
         self._paused = True
 
     def resume_writing(self) -> None:
+        # Called from within the transport's write handler, which goes on after this
+        # returns: a write from here that fails (the client gone) made asyncio end the
+        # connection twice, an error and a traceback in the log (CPython gh-156512, seen
+        # in ci70). The outbox is written from the next loop turn instead.
         self._paused = False
-        self._flush()
+        if not self._flush_scheduled:
+            self._flush_scheduled = True
+            asyncio.get_running_loop().call_soon(self._flush_turn)
 
     def data_received(self, data: bytes) -> None:
         if self._closing:

@@ -407,6 +407,27 @@ def test_a_partial_direct_write_is_finished_before_anything_else(served: _Served
     assert numbers == sorted(set(numbers))
 
 
+def test_resuming_writes_nothing_within_the_transports_handler(served: _Served) -> None:
+    """asyncio calls `resume_writing` from within its write handler, which goes on after
+    it: a write from there that fails ends the connection twice (CPython gh-156512; an
+    error and a traceback in the daemon's log, ci70). What waited is written from the
+    next loop turn, and arrives whole and in order."""
+    peer = served.connect()
+    session = served.sessions[-1]
+
+    async def pause_queue_resume() -> tuple[int, int]:
+        session.pause_writing()
+        for n in range(1, 4):
+            session.send_once(_numbered("queued", n))
+        before = session.sent
+        session.resume_writing()
+        return before, session.sent  # what resume_writing itself wrote
+
+    before, within = served.call(pause_queue_resume())
+    assert within == before
+    assert [m.body.text for m in peer.read_until(3)] == ["1", "2", "3"]
+
+
 def test_the_stamp_of_a_frame_survives_the_direct_path() -> None:
     msg = _pose_stamped((1_700_000_000, 5), "w", (0.1, 0.2, 0.3), (0.0, 0.0, 0.0, 1.0))
     frame = _fast_frame("PoseStamped", msg, "tool", {})
