@@ -13,8 +13,8 @@ host, so it is the one left talking to a dead segment, and nothing in ROS says s
 It shows in the daemon's own memory map: a port segment mapped only in versions that are
 no longer the file of that name, while the file exists. Fast DDS recovers from most such
 swaps by itself within its health check (about a second), so a swap is reported only
-when it outlasts `REPORT_AFTER_S`. The check runs every `CHECK_INTERVAL_S` on a thread of its
-own (0.7 ms to read and sift the 1,161 lines of a running daemon's map).
+when it outlasts `REPORT_AFTER_S`. The check runs every `CHECK_INTERVAL_S` on a thread
+of its own (0.7 ms to read and sift the 1,161 lines of a running daemon's map).
 """
 
 from __future__ import annotations
@@ -27,12 +27,11 @@ import time
 from pathlib import Path
 from typing import Callable, Optional
 
-__all__ = ["CHECK_INTERVAL_S", "REPORT_AFTER_S", "ShmPortWatch", "SHM_DIR",
+__all__ = ["CHECK_INTERVAL_S", "REPORT_AFTER_S", "ShmPortWatch", "file_inode",
            "replaced_ports"]
 
 log = logging.getLogger(__name__)
 
-SHM_DIR = Path("/dev/shm")
 MAPS = Path("/proc/self/maps")
 CHECK_INTERVAL_S = 5.0
 REPORT_AFTER_S = 10.0
