@@ -1,7 +1,8 @@
 """The daemon says so when Fast DDS keeps a shared-memory port another process replaced
 (`bridge.ros.shm_ports`). The swap itself is made for real: this process maps a port file,
 which is then unlinked and made anew under the same name, and the kernel's map of this
-process is read, as the daemon reads its own; a real daemon's map shows its real ports."""
+process is read, as the daemon reads its own; a real daemon's map shows its real ports,
+and a daemon logs a port replaced under it."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from typing import Iterator
 import pytest
 
 from bridge.ros.shm_ports import REPORT_AFTER_S, ShmPortWatch, file_inode, replaced_ports
-from support import RunningDaemon, wait_until
+from support import Processes, RunningDaemon, start_daemon, wait_until
 
 
 TEST_PORTS = ("fastrtps_port99991", "fastrtps_port99993", "fastrtps_port99995")
@@ -158,3 +159,31 @@ def test_a_running_daemons_ports_are_read_and_none_is_replaced(
     assert replaced_ports(maps, file_inode) == {}
 
 
+
+
+def daemon_ports(pid: int) -> set[str]:
+    """The port segments process `pid` maps, by path."""
+    return {line.split()[-1] for line in Path(f"/proc/{pid}/maps").read_text().splitlines()
+            if "/dev/shm/fastrtps_port" in line and not line.endswith("(deleted)")}
+
+
+@pytest.mark.ros
+def test_a_daemon_logs_a_port_replaced_under_it(processes: Processes) -> None:
+    """End to end, on a daemon of its own (its log ends with the error): a ROS peer's port,
+    which the daemon maps to write to it, is made anew under the daemon, as Fast DDS does
+    to a port it finds abandoned; the daemon's log names it."""
+    running = start_daemon(processes)
+    before = daemon_ports(running.child.pid)
+    peer = processes.python("peer", "param_node.py", "shm_watch_peer")
+    peer.wait_for_output("READY", timeout=30)
+    found: list[str] = []
+
+    def peer_port_mapped() -> bool:
+        found[:] = sorted(daemon_ports(running.child.pid) - before)
+        return bool(found)
+
+    wait_until(peer_port_mapped, timeout=30, what="the daemon to map the peer's port")
+    replace(Path(found[0]))
+    name = Path(found[0]).name
+    line = running.child.wait_for_output(f"shared-memory port {name} is lost", timeout=40)
+    assert "ERROR" in line and "Restart the bridge" in line
