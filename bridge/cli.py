@@ -21,6 +21,7 @@ from protocol.auth import new_key_text
 from bridge.core.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_CLIENT,
                                   DEFAULT_MAX_CLIENTS)
 from bridge.ros.ros_args import RosArgsError, apply_parameters, split_ros_args
+from bridge.ros.shm_locks import STUCK_AFTER_S, release_stuck
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 
@@ -173,6 +174,18 @@ def build_parser() -> argparse.ArgumentParser:
                                              "copy (docs/deployment.md).")
     keygen.add_argument("file", type=Path, metavar="FILE")
     keygen.add_argument("--force", action="store_true", help="replace an existing FILE")
+    unlock = commands.add_parser(
+        "shm-unlock", help="release Fast DDS shared-memory port locks a killed ROS process "
+                           "left taken (ROS processes then hang at start-up)",
+        description="Release the Fast DDS shared-memory port locks that stay taken for "
+                    "--wait seconds: a ROS process killed while opening a port (kill -9, "
+                    "a crash) leaves its lock taken, and every later ROS process that "
+                    "opens that port, the bridge too, hangs at start-up or on its first "
+                    "message to a peer.")
+    unlock.add_argument("--wait", type=float, default=STUCK_AFTER_S, metavar="SECONDS",
+                        help="how long a lock must stay taken to be released "
+                             f"(default {STUCK_AFTER_S:g}; Fast DDS holds one at most "
+                             "about a second)")
     # Parsed by its own module (it runs on its own too); listed here for --help.
     commands.add_parser("state-publisher", add_help=False,
                         help="a robot state publisher for any URDF (robot_description, /tf "
@@ -361,6 +374,15 @@ def _keygen(path: Path, *, force: bool) -> int:
     return 0
 
 
+def _shm_unlock(wait_s: float) -> int:
+    released = release_stuck(wait_s)
+    for name in released:
+        print(f"released {name} (left taken by a ROS process that was killed)")
+    if not released:
+        print("no Fast DDS port lock is left taken")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["state-publisher"]:
@@ -396,6 +418,8 @@ def main(argv: list[str] | None = None) -> int:
         return _build_interfaces(args)
     if args.command == "keygen":
         return _keygen(args.file, force=args.force)
+    if args.command == "shm-unlock":
+        return _shm_unlock(args.wait)
     # A wheel installed without ROS or tf2_msgs says so in one line, not with a traceback.
     lacking = missing_runtime_line()
     if lacking is not None:

@@ -9,6 +9,8 @@
 - `turtlesim_interfaces`: turtlesim's interfaces (not on PyPI) for the children a test
   starts, built once into a cache (interface_builds.py); skips where they cannot be built.
 - every test fails if it leaves a child process of the test runner behind.
+- Fast DDS port locks a killed ROS process left taken are released when the session starts
+  and after each test's processes are stopped (support.release_left_port_locks).
 - property tests (hypothesis) have no per-example deadline.
 - tiers: a test that starts processes (the daemon, ROS peers, Debian's C++ examples, a
   build) is marked `integration`; the rest, unit and in-process tests, are the fast tier
@@ -31,7 +33,7 @@ from hypothesis import settings
 
 from interface_builds import BuildUnavailable, BuiltInterfaces, use_test_interfaces
 from support import (DOMAIN_BLOCK, DOMAIN_LOCKS, Child, Processes, children_of, pick_free_port,
-                     scaled)
+                     release_left_port_locks, scaled)
 
 
 _DOMAIN_LOCKS: list[object] = []  # the open lock files of this session's domains
@@ -60,6 +62,7 @@ def _reserve_domains() -> int:
 
 
 _DOMAIN_ID = _reserve_domains()
+release_left_port_locks()  # an earlier session's killed process must not hang this one
 os.environ["ROS_DOMAIN_ID"] = str(_DOMAIN_ID)
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_STATIC_PEERS", None)

@@ -16,6 +16,7 @@ from typing import Callable, Optional, Sequence
 
 import pytest
 
+from bridge.ros.shm_locks import release_stuck
 from slicer_client.connection import CommandRefusedError, Connection
 
 REPO = Path(__file__).resolve().parent.parent
@@ -162,6 +163,17 @@ class Processes:
     def stop_all(self) -> None:
         for child in reversed(self.children):
             child.stop()
+        release_left_port_locks()
+
+
+def release_left_port_locks() -> None:
+    """A ROS process killed while opening a Fast DDS shared-memory port (a test's kill -9,
+    or the SIGKILL of `Child.stop`) leaves the port's lock taken, and every later ROS
+    process of the host that opens that port hangs: every test after it would fail (ci71:
+    8). Released here, and said (pytest shows it with the test's output)."""
+    for name in release_stuck():
+        print(f"released Fast DDS port lock {name}, left taken by a killed ROS process",
+              file=sys.stderr)
 
 
 def refused(call: Callable[[], object]) -> CommandRefusedError:

@@ -1,0 +1,107 @@
+"""Finds and releases Fast DDS shared-memory port locks that a killed process left taken.
+
+Fast DDS guards each shared-memory port (``/dev/shm/fastrtps_port<N>``) with a named
+POSIX semaphore used as a mutex (``/dev/shm/sem.fastrtps_port<N>_mutex``), held while a
+process opens the port, up to its one-second health check. It is not robust: a process
+killed while holding it (kill -9, a crash) leaves it taken for good, and every later
+process that opens that port waits forever: a ROS node, or the bridge, hangs at start-up
+or the first time it writes to a peer on that port. With ROS_AUTOMATIC_DISCOVERY_RANGE=
+LOCALHOST the discovery ports are shared by every domain of the host.
+
+A lock is judged left behind when it stays taken for `STUCK_AFTER_S`, far longer than
+Fast DDS holds one. Linux only (elsewhere nothing is found).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import struct
+import time
+from pathlib import Path
+from typing import Optional
+
+__all__ = ["STUCK_AFTER_S", "release", "release_stuck", "stuck_port_locks"]
+
+SHM_DIR = Path("/dev/shm")
+STUCK_AFTER_S = 5.0
+
+
+class _Timespec(ctypes.Structure):
+    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+
+def _libc() -> Optional[ctypes.CDLL]:
+    name = ctypes.util.find_library("c")
+    if name is None or not SHM_DIR.is_dir():
+        return None
+    libc = ctypes.CDLL(name, use_errno=True)
+    libc.sem_open.restype = ctypes.c_void_p
+    libc.sem_open.argtypes = [ctypes.c_char_p, ctypes.c_int]
+    for function in (libc.sem_post, libc.sem_close):
+        function.argtypes = [ctypes.c_void_p]
+    libc.sem_timedwait.argtypes = [ctypes.c_void_p, ctypes.POINTER(_Timespec)]
+    return libc
+
+
+def _taken_now(path: Path) -> bool:
+    """A glibc semaphore's value is its first 32-bit word: 0 is a taken mutex."""
+    try:
+        with path.open("rb") as file:
+            head = file.read(4)
+    except OSError:
+        return False
+    return len(head) == 4 and struct.unpack("<I", head)[0] == 0
+
+
+def _semaphore_name(path: Path) -> bytes:
+    return b"/" + path.name[len("sem."):].encode()
+
+
+def stuck_port_locks(wait_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
+                     ports: str = "*") -> list[str]:
+    """The port locks (semaphore names, as '/fastrtps_port7005_mutex') taken now and
+    still taken after `wait_s` seconds; `ports` is a glob of the port numbers looked at.
+    Each one that comes free is given back at once; several are waited for together."""
+    libc = _libc()
+    if libc is None:
+        return []
+    candidates = [path for path in sorted(shm_dir.glob(f"sem.fastrtps_port{ports}_mutex"))
+                  if _taken_now(path)]
+    if not candidates:
+        return []
+    deadline = time.time() + wait_s
+    stuck: list[str] = []
+    for path in candidates:
+        handle = libc.sem_open(_semaphore_name(path), 0)
+        if not handle or handle == ctypes.c_void_p(-1).value:  # SEM_FAILED: gone meanwhile
+            continue
+        try:
+            until = _Timespec(int(deadline), int((deadline % 1) * 1e9))
+            if libc.sem_timedwait(handle, ctypes.byref(until)) == 0:
+                libc.sem_post(handle)  # it was only busy: give it back
+            else:
+                stuck.append(_semaphore_name(path).decode())
+        finally:
+            libc.sem_close(handle)
+    return stuck
+
+
+def release(name: str) -> bool:
+    """Give back a lock `stuck_port_locks` named; False if it no longer exists."""
+    libc = _libc()
+    if libc is None:
+        return False
+    handle = libc.sem_open(name.encode(), 0)
+    if not handle or handle == ctypes.c_void_p(-1).value:
+        return False
+    try:
+        return bool(libc.sem_post(handle) == 0)
+    finally:
+        libc.sem_close(handle)
+
+
+def release_stuck(wait_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
+                  ports: str = "*") -> list[str]:
+    """Release every port lock left taken; the names released."""
+    return [name for name in stuck_port_locks(wait_s, shm_dir, ports) if release(name)]

@@ -1,0 +1,90 @@
+"""Fast DDS port locks a killed process left taken are found and released
+(`bridge.ros.shm_locks`), on real POSIX named semaphores made here as Fast DDS makes its
+own (``sem.fastrtps_port<N>_mutex``), numbered above any real port."""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+
+from bridge.ros.shm_locks import release, release_stuck, stuck_port_locks
+
+pytestmark = pytest.mark.skipif(not Path("/dev/shm").is_dir(), reason="no /dev/shm here")
+
+LIBC = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+LIBC.sem_open.restype = ctypes.c_void_p
+LIBC.sem_open.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.c_uint, ctypes.c_uint]
+LIBC.sem_close.argtypes = [ctypes.c_void_p]
+LIBC.sem_unlink.argtypes = [ctypes.c_char_p]
+O_CREAT = 0o100
+PORT = "99997"  # above any real port: the checks here touch no real lock
+
+
+def value(name: str) -> int:
+    with open(f"/dev/shm/sem.{name[1:]}", "rb") as file:
+        return int(struct.unpack("<I", file.read(4))[0])
+
+
+@pytest.fixture
+def lock() -> Iterator[str]:
+    """A port lock made taken, as a process killed while holding it leaves it."""
+    name = "/fastrtps_port99997_mutex"
+    LIBC.sem_unlink(name.encode())
+    handle = LIBC.sem_open(name.encode(), O_CREAT, 0o644, 0)
+    assert handle, ctypes.get_errno()
+    LIBC.sem_close(handle)
+    yield name
+    LIBC.sem_unlink(name.encode())
+
+
+def test_a_lock_left_taken_is_found_and_released(lock: str) -> None:
+    assert value(lock) == 0
+    assert lock in stuck_port_locks(wait_s=0.2, ports=PORT)
+    assert release(lock)
+    assert value(lock) == 1
+    assert lock not in stuck_port_locks(wait_s=0.2, ports=PORT)  # free now: not even waited for
+
+
+def test_a_lock_given_back_while_waited_for_is_only_busy(lock: str) -> None:
+    holder = subprocess.Popen([sys.executable, "-c", f"""
+import ctypes, ctypes.util, time
+libc = ctypes.CDLL(ctypes.util.find_library("c"))
+libc.sem_open.restype = ctypes.c_void_p
+libc.sem_open.argtypes = [ctypes.c_char_p, ctypes.c_int]
+libc.sem_post.argtypes = [ctypes.c_void_p]
+handle = libc.sem_open({lock.encode()!r}, 0)
+print("HOLDING", flush=True)
+time.sleep(0.5)
+libc.sem_post(handle)
+"""], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "HOLDING"
+        started = time.monotonic()
+        assert lock not in stuck_port_locks(wait_s=10.0, ports=PORT)
+        assert time.monotonic() - started < 10.0
+        assert value(lock) == 1  # taken by the check for a moment, then given back
+    finally:
+        holder.wait(10)
+
+
+def test_release_stuck_names_what_it_released(lock: str) -> None:
+    assert lock in release_stuck(wait_s=0.2, ports=PORT)
+    assert value(lock) == 1
+
+
+def test_the_command_releases_them(lock: str) -> None:
+    # The command looks at every lock, real ones too: it waits its full default time.
+    done = subprocess.run([sys.executable, "-m", "bridge.console", "shm-unlock"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert f"released {lock}" in done.stdout
+    assert value(lock) == 1
+    assert lock not in stuck_port_locks(wait_s=0.2, ports=PORT)
