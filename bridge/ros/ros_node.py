@@ -40,6 +40,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
 
+from bridge.ros.shm_ports import release_left_locks
 from bridge.ros.raw_reader import (BatchTopic, RawReader, RawSubscription, RawTopic,
                                    ReaderError)
 from protocol.commands import OutOfRangeError
@@ -89,6 +90,7 @@ class RosNode:
         self.context = Context()
         # Not sys.argv: its --ros-args are the main node's alone (a global __node remap would
         # give the stream node the same name).
+        release_left_locks()  # one a killed ROS process left taken would hang init
         rclpy.init(args=["slicer-ros2-bridge"], context=self.context,
                    signal_handler_options=SignalHandlerOptions.NO)
         try:

@@ -87,10 +87,12 @@ def stuck_port_locks(wait_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
     return stuck
 
 
-def release(name: str) -> bool:
-    """Give back a lock `stuck_port_locks` named; False if it no longer exists."""
+def release(name: str, shm_dir: Path = SHM_DIR) -> bool:
+    """Give back a lock `stuck_port_locks` named; False if it no longer exists or is no
+    longer taken (another process released it meanwhile: giving it back twice would
+    let two processes in at once)."""
     libc = _libc()
-    if libc is None:
+    if libc is None or not _taken_now(shm_dir / f"sem.{name.lstrip('/')}"):
         return False
     handle = libc.sem_open(name.encode(), 0)
     if not handle or handle == ctypes.c_void_p(-1).value:
@@ -104,4 +106,5 @@ def release(name: str) -> bool:
 def release_stuck(wait_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
                   ports: str = "*") -> list[str]:
     """Release every port lock left taken; the names released."""
-    return [name for name in stuck_port_locks(wait_s, shm_dir, ports) if release(name)]
+    return [name for name in stuck_port_locks(wait_s, shm_dir, ports)
+            if release(name, shm_dir)]

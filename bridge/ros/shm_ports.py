@@ -15,6 +15,9 @@ no longer the file of that name, while the file exists. Fast DDS recovers from m
 swaps by itself within its health check (about a second), so a swap is reported only
 when it outlasts `REPORT_AFTER_S`. The check runs every `CHECK_INTERVAL_S` on a thread
 of its own (0.7 ms to read and sift the 1,161 lines of a running daemon's map).
+
+The same thread releases the port locks a killed process left taken (`shm_locks`), which
+would hang the daemon the first time it writes to a peer on that port.
 """
 
 from __future__ import annotations
@@ -27,8 +30,10 @@ import time
 from pathlib import Path
 from typing import Callable, Optional
 
+from bridge.ros.shm_locks import release_stuck
+
 __all__ = ["CHECK_INTERVAL_S", "REPORT_AFTER_S", "ShmPortWatch", "file_inode",
-           "replaced_ports"]
+           "release_left_locks", "replaced_ports"]
 
 log = logging.getLogger(__name__)
 
@@ -103,6 +108,7 @@ class ShmPortWatch:
                 self.check(self._maps.read_text(errors="replace"))
             except OSError as error:
                 log.debug("cannot read %s: %s", self._maps, error)
+            release_left_locks()  # this thread waits on a taken one, nobody else
 
     def check(self, maps: str) -> list[str]:
         """Note what `maps` shows now; return the ports reported by this call."""
@@ -123,3 +129,12 @@ class ShmPortWatch:
                     "bridge to reach that process again; stopping ROS processes with one "
                     "signal and letting them finish avoids it.", key[0])
         return reported
+
+
+def release_left_locks() -> None:
+    """Release the Fast DDS port locks a killed process left taken (`shm_locks`): the
+    daemon would hang on one the first time it writes to a peer on that port."""
+    for name in release_stuck():
+        log.warning("released Fast DDS port lock %s: a ROS process killed while opening "
+                    "that port had left it taken, and every process opening the port "
+                    "hung on it", name)

@@ -16,6 +16,7 @@ from typing import Iterator
 import pytest
 
 from bridge.ros.shm_locks import release, release_stuck, stuck_port_locks
+from support import Processes, start_daemon
 
 pytestmark = pytest.mark.skipif(not Path("/dev/shm").is_dir(), reason="no /dev/shm here")
 
@@ -24,6 +25,7 @@ LIBC.sem_open.restype = ctypes.c_void_p
 LIBC.sem_open.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.c_uint, ctypes.c_uint]
 LIBC.sem_close.argtypes = [ctypes.c_void_p]
 LIBC.sem_unlink.argtypes = [ctypes.c_char_p]
+LIBC.sem_wait.argtypes = [ctypes.c_void_p]
 O_CREAT = 0o100
 PORT = "99997"  # above any real port: the checks here touch no real lock
 
@@ -31,6 +33,13 @@ PORT = "99997"  # above any real port: the checks here touch no real lock
 def value(name: str) -> int:
     with open(f"/dev/shm/sem.{name[1:]}", "rb") as file:
         return int(struct.unpack("<I", file.read(4))[0])
+
+
+def take(name: str) -> None:
+    """Take the lock and never give it back, as a process killed holding it."""
+    handle = LIBC.sem_open(name.encode(), 0, 0, 0)
+    assert handle and LIBC.sem_wait(handle) == 0
+    LIBC.sem_close(handle)
 
 
 @pytest.fixture
@@ -49,6 +58,8 @@ def test_a_lock_left_taken_is_found_and_released(lock: str) -> None:
     assert value(lock) == 0
     assert lock in stuck_port_locks(wait_s=0.2, ports=PORT)
     assert release(lock)
+    assert value(lock) == 1
+    assert not release(lock)  # not taken: never given back twice
     assert value(lock) == 1
     assert lock not in stuck_port_locks(wait_s=0.2, ports=PORT)  # free now: not even waited for
 
@@ -88,3 +99,16 @@ def test_the_command_releases_them(lock: str) -> None:
     assert f"released {lock}" in done.stdout
     assert value(lock) == 1
     assert lock not in stuck_port_locks(wait_s=0.2, ports=PORT)
+
+
+@pytest.mark.ros
+def test_a_running_daemon_releases_one_and_says_so(lock: str, processes: Processes) -> None:
+    """Taken before the daemon starts: released before ROS starts (or it could hang there);
+    taken again while it runs: released by its watch, within its 5 s checks and 5 s wait."""
+    running = start_daemon(processes)  # it printed its start-up lines: the release is before
+    before_ros = running.child.output().split("(OpenIGTLink); ROS node")[0]
+    assert f"WARNING bridge.ros.shm_ports: released Fast DDS port lock {lock}" in before_ros
+    assert value(lock) == 1
+    take(lock)
+    running.child.wait_for_output(f"released Fast DDS port lock {lock}", timeout=60)
+    assert value(lock) == 1

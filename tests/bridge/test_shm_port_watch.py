@@ -9,6 +9,8 @@ from __future__ import annotations
 import logging
 import mmap
 import os
+import re
+import shutil
 import threading
 from contextlib import contextmanager
 from pathlib import Path
@@ -17,7 +19,7 @@ from typing import Iterator
 import pytest
 
 from bridge.ros.shm_ports import REPORT_AFTER_S, ShmPortWatch, file_inode, replaced_ports
-from support import Processes, RunningDaemon, start_daemon, wait_until
+from support import Processes, RunningDaemon, spare_domain, wait_until
 
 
 TEST_PORTS = ("fastrtps_port99991", "fastrtps_port99993", "fastrtps_port99995")
@@ -162,28 +164,43 @@ def test_a_running_daemons_ports_are_read_and_none_is_replaced(
 
 
 def daemon_ports(pid: int) -> set[str]:
-    """The port segments process `pid` maps, by path."""
-    return {line.split()[-1] for line in Path(f"/proc/{pid}/maps").read_text().splitlines()
-            if "/dev/shm/fastrtps_port" in line and not line.endswith("(deleted)")}
+    """The paths of the domain's own port segments process `pid` maps (numbered from 7400:
+    the discovery ports below it are shared by every domain of the host)."""
+    found = set()
+    for line in Path(f"/proc/{pid}/maps").read_text().splitlines():
+        number = re.search(r"/dev/shm/fastrtps_port(\d+)$", line)
+        if number and int(number.group(1)) >= 7400:
+            found.add(line.split()[-1])
+    return found
+
+
+def copy_in_place(path: Path) -> None:
+    """Make the port anew under its name, as Fast DDS does to one it finds abandoned, but
+    as a copy of it: whoever opens it next finds a port, not garbage."""
+    copy = path.with_name(path.name + ".copy")
+    shutil.copyfile(path, copy)
+    os.replace(copy, path)
 
 
 @pytest.mark.ros
 def test_a_daemon_logs_a_port_replaced_under_it(processes: Processes) -> None:
-    """End to end, on a daemon of its own (its log ends with the error): a ROS peer's port,
-    which the daemon maps to write to it, is made anew under the daemon, as Fast DDS does
-    to a port it finds abandoned; the daemon's log names it."""
-    running = start_daemon(processes)
-    before = daemon_ports(running.child.pid)
-    peer = processes.python("peer", "param_node.py", "shm_watch_peer")
+    """End to end, in a spare domain with a daemon of its own (its log ends with the
+    error; the module's daemon never sees the port): a ROS peer's port, which the daemon
+    maps to write to it, is made anew under the daemon; the daemon's log names it."""
+    env = {"ROS_DOMAIN_ID": spare_domain(1)}
+    daemon = processes.bridge("run", "--port", "0", env=env)
+    daemon.wait_for_output(" (OpenIGTLink); ROS node", timeout=30)
+    before = daemon_ports(daemon.pid)
+    peer = processes.python("peer", "param_node.py", "shm_watch_peer", env=env)
     peer.wait_for_output("READY", timeout=30)
     found: list[str] = []
 
     def peer_port_mapped() -> bool:
-        found[:] = sorted(daemon_ports(running.child.pid) - before)
+        found[:] = sorted(daemon_ports(daemon.pid) - before)
         return bool(found)
 
     wait_until(peer_port_mapped, timeout=30, what="the daemon to map the peer's port")
-    replace(Path(found[0]))
+    copy_in_place(Path(found[0]))
     name = Path(found[0]).name
-    line = running.child.wait_for_output(f"shared-memory port {name} is lost", timeout=40)
+    line = daemon.wait_for_output(f"shared-memory port {name} is lost", timeout=40)
     assert "ERROR" in line and "Restart the bridge" in line
