@@ -21,7 +21,8 @@ from protocol.auth import new_key_text
 from bridge.core.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_CLIENT,
                                   DEFAULT_MAX_CLIENTS)
 from bridge.ros.ros_args import RosArgsError, apply_parameters, split_ros_args
-from bridge.ros.shm_locks import STUCK_AFTER_S, release_stuck
+from bridge.ros.shm_locks import (MAX_STUCK_AFTER_S, MIN_STUCK_AFTER_S, STUCK_AFTER_S,
+                                  release_stuck)
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 
@@ -33,6 +34,18 @@ def _package_path(text: str) -> tuple[str, str]:
     if not sep or not name or not folder:
         raise argparse.ArgumentTypeError(f"expected NAME=DIR, got {text!r}")
     return name, folder
+
+
+def _lock_wait(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not MIN_STUCK_AFTER_S <= value <= MAX_STUCK_AFTER_S:
+        raise argparse.ArgumentTypeError(
+            f"expected seconds from {MIN_STUCK_AFTER_S:g} to {MAX_STUCK_AFTER_S:g} (a lock "
+            f"taken for less may only be busy), got {text!r}")
+    return value
 
 
 def _positive(kind: Callable[[str], T]) -> Callable[[str], T]:
@@ -182,7 +195,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "a crash) leaves its lock taken, and every later ROS process that "
                     "opens that port, the bridge too, hangs at start-up or on its first "
                     "message to a peer.")
-    unlock.add_argument("--wait", type=float, default=STUCK_AFTER_S, metavar="SECONDS",
+    unlock.add_argument("--wait", type=_lock_wait, default=STUCK_AFTER_S, metavar="SECONDS",
                         help="how long a lock must stay taken to be released "
                              f"(default {STUCK_AFTER_S:g}; Fast DDS holds one at most "
                              "about a second)")

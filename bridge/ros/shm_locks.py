@@ -21,10 +21,15 @@ import time
 from pathlib import Path
 from typing import Optional
 
-__all__ = ["STUCK_AFTER_S", "release", "release_stuck", "stuck_port_locks"]
+__all__ = ["MAX_STUCK_AFTER_S", "MIN_STUCK_AFTER_S", "STUCK_AFTER_S", "release", "release_stuck",
+           "stuck_port_locks"]
 
 SHM_DIR = Path("/dev/shm")
 STUCK_AFTER_S = 5.0
+# Fast DDS holds a lock up to about a second (its health check): a shorter wait could
+# release one that is only busy.
+MIN_STUCK_AFTER_S = 2.0
+MAX_STUCK_AFTER_S = 3600.0
 
 
 class _Timespec(ctypes.Structure):

@@ -101,6 +101,15 @@ def test_the_command_releases_them(lock: str) -> None:
     assert lock not in stuck_port_locks(wait_s=0.2, ports=PORT)
 
 
+@pytest.mark.parametrize("wait", ["0.5", "-1", "nan", "inf", "soon"])
+def test_the_command_refuses_a_wait_short_enough_to_release_a_busy_lock(wait: str) -> None:
+    done = subprocess.run([sys.executable, "-m", "bridge.console", "shm-unlock", "--wait",
+                           wait], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert f"expected seconds from 2 to 3600 (a lock taken for less may only be busy), " \
+           f"got {wait!r}" in done.stderr
+
+
 @pytest.mark.ros
 def test_a_running_daemon_releases_one_and_says_so(lock: str, processes: Processes) -> None:
     """Taken before the daemon starts: released before ROS starts (or it could hang there);
