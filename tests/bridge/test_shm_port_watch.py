@@ -174,12 +174,21 @@ def daemon_ports(pid: int) -> set[str]:
     return found
 
 
-def copy_in_place(path: Path) -> None:
-    """Make the port anew under its name, as Fast DDS does to one it finds abandoned, but
-    as a copy of it: whoever opens it next finds a port, not garbage."""
-    copy = path.with_name(path.name + ".copy")
-    shutil.copyfile(path, copy)
-    os.replace(copy, path)
+@contextmanager
+def replaced_for_a_while(path: Path) -> Iterator[None]:
+    """The port made anew under its name, as Fast DDS does to one it finds abandoned, for
+    the block; then its own segment is put back under the name. Nothing is left behind:
+    a zeroed port file once left here made every process opening that port hang
+    (Boost waits for a segment to be initialized), and a lasting copy of a live one
+    could carry a lock taken at the moment it was copied."""
+    aside, copy = path.with_name(path.name + ".aside"), path.with_name(path.name + ".copy")
+    os.link(path, aside)  # the segment keeps a name of its own meanwhile
+    try:
+        shutil.copyfile(path, copy)
+        os.replace(copy, path)  # the name the daemon mapped is gone: "(deleted)" in maps
+        yield
+    finally:
+        os.replace(aside, path)
 
 
 @pytest.mark.ros
@@ -200,7 +209,10 @@ def test_a_daemon_logs_a_port_replaced_under_it(processes: Processes) -> None:
         return bool(found)
 
     wait_until(peer_port_mapped, timeout=30, what="the daemon to map the peer's port")
-    copy_in_place(Path(found[0]))
     name = Path(found[0]).name
-    line = daemon.wait_for_output(f"shared-memory port {name} is lost", timeout=40)
+    with replaced_for_a_while(Path(found[0])):
+        line = daemon.wait_for_output(f"shared-memory port {name} is lost", timeout=40)
     assert "ERROR" in line and "Restart the bridge" in line
+    # Its own segment is back under the name (the daemon maps it by the gone name).
+    assert os.stat(found[0]).st_ino in {int(m.split()[4]) for m in Path(
+        f"/proc/{daemon.pid}/maps").read_text().splitlines() if found[0] in m}
