@@ -22,7 +22,7 @@ from bridge.core.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_C
                                   DEFAULT_MAX_CLIENTS)
 from bridge.ros.ros_args import RosArgsError, apply_parameters, split_ros_args
 from bridge.ros.shm_locks import (MAX_STUCK_AFTER_S, MIN_STUCK_AFTER_S, STUCK_AFTER_S,
-                                  release_stuck)
+                                  release_stuck, remove_unfinished)
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 
@@ -191,8 +191,9 @@ def build_parser() -> argparse.ArgumentParser:
         "shm-unlock", help="release Fast DDS shared-memory port locks a killed ROS process "
                            "left taken (ROS processes then hang at start-up)",
         description="Release the Fast DDS shared-memory port locks that stay taken for "
-                    "--wait seconds: a ROS process killed while opening a port (kill -9, "
-                    "a crash) leaves its lock taken, and every later ROS process that "
+                    "--wait seconds, and remove the port segments never finished that "
+                    "are older: a ROS process killed while opening or making a port "
+                    "(kill -9, a crash) leaves them, and every later ROS process that "
                     "opens that port, the bridge too, hangs at start-up or on its first "
                     "message to a peer.")
     unlock.add_argument("--wait", type=_lock_wait, default=STUCK_AFTER_S, metavar="SECONDS",
@@ -388,11 +389,15 @@ def _keygen(path: Path, *, force: bool) -> int:
 
 
 def _shm_unlock(wait_s: float) -> int:
+    removed = remove_unfinished(wait_s)
+    for path in removed:
+        print(f"removed {path} (a port segment never finished: every process opening it "
+              f"hung)")
     released = release_stuck(wait_s)
     for name in released:
         print(f"released {name} (left taken by a ROS process that was killed)")
-    if not released:
-        print("no Fast DDS port lock is left taken")
+    if not released and not removed:
+        print("no Fast DDS port lock is left taken, and no port segment unfinished")
     return 0
 
 

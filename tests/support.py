@@ -16,7 +16,7 @@ from typing import Callable, Optional, Sequence
 
 import pytest
 
-from bridge.ros.shm_locks import release_stuck
+from bridge.ros.shm_locks import release_stuck, remove_unfinished
 from slicer_client.connection import CommandRefusedError, Connection
 
 REPO = Path(__file__).resolve().parent.parent
@@ -171,6 +171,8 @@ def release_left_port_locks() -> None:
     or the SIGKILL of `Child.stop`) leaves the port's lock taken, and every later ROS
     process of the host that opens that port hangs: every test after it would fail (ci71:
     8). Released here, and said (pytest shows it with the test's output)."""
+    for path in remove_unfinished():
+        print(f"removed Fast DDS port segment {path}, never finished", file=sys.stderr)
     for name in release_stuck():
         print(f"released Fast DDS port lock {name}, left taken by a killed ROS process",
               file=sys.stderr)

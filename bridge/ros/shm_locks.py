@@ -10,6 +10,11 @@ LOCALHOST the discovery ports are shared by every domain of the host.
 
 A lock is judged left behind when it stays taken for `STUCK_AFTER_S`, far longer than
 Fast DDS holds one. Linux only (elsewhere nothing is found).
+
+A port segment can be left unfinished too: made, but its Boost header never marked
+initialized (a process killed between the two, or any file put there). Every process that
+opens it waits for that mark forever, holding the port's lock. One older than
+`STUCK_AFTER_S` is removed; the next process to need the port makes it anew.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from pathlib import Path
 from typing import Optional
 
 __all__ = ["MAX_STUCK_AFTER_S", "MIN_STUCK_AFTER_S", "STUCK_AFTER_S", "release", "release_stuck",
-           "stuck_port_locks"]
+           "remove_unfinished", "stuck_port_locks", "unfinished_ports"]
 
 SHM_DIR = Path("/dev/shm")
 STUCK_AFTER_S = 5.0
@@ -113,3 +118,39 @@ def release_stuck(wait_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
     """Release every port lock left taken; the names released."""
     return [name for name in stuck_port_locks(wait_s, shm_dir, ports)
             if release(name, shm_dir)]
+
+
+_INITIALIZED = 2  # Boost's mark in a managed segment's first word, once it is usable
+
+
+def unfinished_ports(min_age_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
+                     ports: str = "*") -> list[Path]:
+    """Port segments never marked initialized, last changed `min_age_s` or more ago."""
+    found: list[Path] = []
+    now = time.time()
+    for path in sorted(shm_dir.glob(f"fastrtps_port{ports}")):
+        if not path.name[len("fastrtps_port"):].isdigit():
+            continue  # its lock files (_el, _sl)
+        try:
+            with path.open("rb") as file:
+                head = file.read(4)
+            changed = path.stat().st_mtime
+        except OSError:
+            continue
+        mark = struct.unpack("<I", head)[0] if len(head) == 4 else 0
+        if mark != _INITIALIZED and now - changed >= min_age_s:
+            found.append(path)
+    return found
+
+
+def remove_unfinished(min_age_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
+                      ports: str = "*") -> list[str]:
+    """Remove the unfinished port segments; the paths removed."""
+    removed: list[str] = []
+    for path in unfinished_ports(min_age_s, shm_dir, ports):
+        try:
+            path.unlink()
+        except OSError:
+            continue
+        removed.append(str(path))
+    return removed

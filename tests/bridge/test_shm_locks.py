@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import os
 import struct
 import subprocess
 import sys
@@ -15,7 +16,8 @@ from typing import Iterator
 
 import pytest
 
-from bridge.ros.shm_locks import release, release_stuck, stuck_port_locks
+from bridge.ros.shm_locks import (release, release_stuck, remove_unfinished, stuck_port_locks,
+                                  unfinished_ports)
 from support import Processes, start_daemon
 
 pytestmark = pytest.mark.skipif(not Path("/dev/shm").is_dir(), reason="no /dev/shm here")
@@ -101,6 +103,26 @@ def test_the_command_releases_them(lock: str) -> None:
     assert lock not in stuck_port_locks(wait_s=0.2, ports=PORT)
 
 
+def test_a_port_segment_never_finished_is_removed_once_old(tmp_path: Path) -> None:
+    """Zeroed (made, never marked initialized by Boost): every opener would wait forever.
+    A finished one is kept, and so is a zeroed one still being made (too young)."""
+    old_unfinished = tmp_path / "fastrtps_port99991"
+    old_unfinished.write_bytes(b"\0" * 4096)
+    os.utime(old_unfinished, (time.time() - 60, time.time() - 60))
+    young = tmp_path / "fastrtps_port99993"
+    young.write_bytes(b"\0" * 4096)
+    finished = tmp_path / "fastrtps_port99995"
+    finished.write_bytes(struct.pack("<I", 2) + b"\0" * 4092)
+    os.utime(finished, (time.time() - 60, time.time() - 60))
+    lock_file = tmp_path / "fastrtps_port99991_el"
+    lock_file.write_bytes(b"")
+    os.utime(lock_file, (time.time() - 60, time.time() - 60))
+    assert unfinished_ports(shm_dir=tmp_path) == [old_unfinished]
+    assert remove_unfinished(shm_dir=tmp_path) == [str(old_unfinished)]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "fastrtps_port99991_el", "fastrtps_port99993", "fastrtps_port99995"]
+
+
 @pytest.mark.parametrize("wait", ["0.5", "-1", "nan", "inf", "soon"])
 def test_the_command_refuses_a_wait_short_enough_to_release_a_busy_lock(wait: str) -> None:
     done = subprocess.run([sys.executable, "-m", "bridge.console", "shm-unlock", "--wait",
@@ -114,10 +136,18 @@ def test_the_command_refuses_a_wait_short_enough_to_release_a_busy_lock(wait: st
 def test_a_running_daemon_releases_one_and_says_so(lock: str, processes: Processes) -> None:
     """Taken before the daemon starts: released before ROS starts (or it could hang there);
     taken again while it runs: released by its watch, within its 5 s checks and 5 s wait."""
-    running = start_daemon(processes)  # it printed its start-up lines: the release is before
+    unfinished = Path("/dev/shm/fastrtps_port99991")  # and a segment never finished
+    unfinished.write_bytes(b"\0" * 4096)
+    os.utime(unfinished, (time.time() - 60, time.time() - 60))
+    try:
+        running = start_daemon(processes)  # it printed its start-up lines: both are before
+    finally:
+        existed = unfinished.exists()
+        unfinished.unlink(missing_ok=True)
     before_ros = running.child.output().split("(OpenIGTLink); ROS node")[0]
     assert f"WARNING bridge.ros.shm_ports: released Fast DDS port lock {lock}" in before_ros
     assert value(lock) == 1
+    assert f"removed Fast DDS port segment {unfinished}" in before_ros and not existed
     take(lock)
     running.child.wait_for_output(f"released Fast DDS port lock {lock}", timeout=60)
     assert value(lock) == 1
