@@ -3,6 +3,8 @@ the same run beside its baselines, every party in its own process.
 
     .venv/bin/python bench/bench_daemon.py            # about 5 minutes
     .venv/bin/python bench/bench_daemon.py --quick    # about 2 minutes, shorter phases
+    .venv/bin/python bench/bench_daemon.py --only image --daemon-profile \
+        bench/fastdds_reader_at_once.xml              # the daemon with a Fast DDS profile
 
 Parties (bench/peers.py): a publisher that sleeps between messages and stamps each one
 with ``time.time_ns()`` just before ``publish()``; raw OpenIGTLink readers (one process,
@@ -163,12 +165,16 @@ def load() -> str:
 class Relay:
     """The daemon or the naive relay: a process listening on a port."""
 
-    def __init__(self, kind: str, topics: dict[str, str]) -> None:
+    def __init__(self, kind: str, topics: dict[str, str],
+                 daemon_profile: Optional[Path] = None) -> None:
         self.kind = kind
         self.port = free_port()
         if kind == "bridge":
+            env = (None if daemon_profile is None
+                   else {"FASTRTPS_DEFAULT_PROFILES_FILE": str(daemon_profile)})
             self.child = Child("daemon", [sys.executable, "-m", "bridge.cli", "run", "--port",
-                                          str(self.port), "--log-level", "INFO"], "listening on")
+                                          str(self.port), "--log-level", "INFO"], "listening on",
+                               env=env)
             threading.Thread(target=self._drain_output, daemon=True).start()
             from slicer_client.connection import Connection
 
@@ -356,7 +362,7 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
         finally:
             floor.stop()
         for kind in ("bridge", "naive"):
-            relay = Relay(kind, {"pose": POSE_TOPIC})
+            relay = Relay(kind, {"pose": POSE_TOPIC}, args.daemon_profile)
             try:
                 readers = readers_for(relay.port, 1, v1=kind == "naive")
                 try:
@@ -413,7 +419,7 @@ def isolation_phase(args: argparse.Namespace, results: Results) -> None:
     the same with one more client that stops reading for STOP_S and reads on: the 32's
     figures side by side, and what the stopped one read when it resumed."""
     publisher = peer("pose publisher", "publish", "pose", POSE_TOPIC)
-    relay = Relay("bridge", {"pose": POSE_TOPIC})
+    relay = Relay("bridge", {"pose": POSE_TOPIC}, args.daemon_profile)
     readers = readers_for(relay.port, ISOLATION_CLIENTS)
     facade = peer("facade client", "facade", str(relay.port), POSE_TOPIC)
     seconds = STOP_S + 3.0
@@ -463,7 +469,7 @@ def resumed_text(results: Results) -> str:
 
 def tf_phase(args: argparse.Namespace, results: Results) -> None:
     publisher = peer("tf publisher", "publish", "tf", "/tf")
-    relay = Relay("bridge", {})
+    relay = Relay("bridge", {}, args.daemon_profile)
     setup = [{"op": "create_tf_lookup", "arguments": {"parent": "base", "child": f"link{i}"}}
              for i in range(1, LINKS + 1)]
     readers = readers_for(relay.port, 8, setup=setup)
@@ -506,7 +512,8 @@ def image_phase(args: argparse.Namespace, results: Results) -> None:
         try:
             for kind in ("bridge", "naive"):
                 floor = peer("rclpy floor", "floor", "image", IMAGE_TOPIC)
-                relay = Relay(kind, {"image": IMAGE_TOPIC, "pose": POSE_TOPIC})
+                relay = Relay(kind, {"image": IMAGE_TOPIC, "pose": POSE_TOPIC},
+                              args.daemon_profile)
                 readers = readers_for(relay.port, 1, v1=kind == "naive")
                 try:
                     reports, cpu, avg = run_phase(publisher, [*readers, floor], 30,
@@ -660,7 +667,15 @@ def main() -> int:
     parser.add_argument("--only", choices=("pose", "isolation", "tf", "image"),
                         action="append",
                         help="run only these phases (repeatable)")
+    parser.add_argument("--daemon-profile", type=Path, metavar="XML",
+                        help="a Fast DDS profiles file that the daemon alone loads "
+                             "(FASTRTPS_DEFAULT_PROFILES_FILE), such as "
+                             "bench/fastdds_reader_at_once.xml; the baselines keep the defaults")
     args = parser.parse_args()
+    if args.daemon_profile is not None and not args.daemon_profile.is_file():
+        parser.error(f"--daemon-profile: expected a Fast DDS profiles file, got "
+                     f"{args.daemon_profile} (no such file)")
+    args.daemon_profile = args.daemon_profile and args.daemon_profile.resolve()
     args.seconds = 2.0 if args.quick else 5.0
     args.burst_seconds = 3.0 if args.quick else 10.0
     args.image_seconds = 5.0 if args.quick else 20.0  # 30 a second: p99 of 600 frames
@@ -669,7 +684,9 @@ def main() -> int:
     os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="bench-roslog-"))
     phases = args.only or ["pose", "isolation", "tf", "image"]
     print(f"{os.cpu_count()} CPUs, load {load()} at the start; "
-          f"{'quick' if args.quick else 'full'} run", flush=True)
+          f"{'quick' if args.quick else 'full'} run"
+          + (f"; the daemon loads {args.daemon_profile}" if args.daemon_profile else ""),
+          flush=True)
     results = Results()
     if "pose" in phases:
         pose_phases(args, results)

@@ -251,10 +251,11 @@ class RunningDaemon:
         return Connection("127.0.0.1", self.port)
 
 
-def start_daemon(processes: Processes, *args: str) -> RunningDaemon:
+def start_daemon(processes: Processes, *args: str,
+                 env: Optional[dict[str, str]] = None) -> RunningDaemon:
     # The kernel picks the port as the daemon binds it: a port picked here and bound later
     # could be taken in between by any other process of a busy machine.
-    child = processes.bridge("run", "--port", "0", *args)
+    child = processes.bridge("run", "--port", "0", *args, env=env)
     line = child.wait_for_output(" (OpenIGTLink); ROS node", timeout=30)
     listening = re.search(r"listening on \S+:(\d+) \(OpenIGTLink\)", line)
     assert listening, line
