@@ -207,9 +207,7 @@ class StreamTemplate:
         """The wire bytes of one message with this content (a packed body), time stamp
         (a u64, as in `Message.timestamp`) and v2 message id."""
         if header_version == 2:
-            ext = self._ext_v2 if not message_id else _EXT_HEADER.pack(
-                EXT_HEADER_SIZE, *self._meta_sizes, message_id)
-            body = b"".join((ext, content, self._meta_tail))
+            body = b"".join((self._ext(message_id), content, self._meta_tail))
         elif header_version == 1:
             body = content
         else:
@@ -218,6 +216,26 @@ class StreamTemplate:
             raise EncodeError("timestamp", "an integer in [0, 2**64)", timestamp)
         return _HEADER.pack(header_version, self._type_raw, self._name_raw, timestamp,
                             len(body), crc64(body)) + body
+
+    def encode_parts(self, lead: bytes, content: Buffer, timestamp: int,
+                     message_id: int = 0) -> tuple[bytes, Buffer, bytes]:
+        """`encode_parts`'s header-v2 parts of one message whose content is ``lead`` then
+        ``content`` (an image's own header, then its pixels where they lie), never joined:
+        the same bytes as for the `Message`, without building one."""
+        if not 0 <= timestamp <= _U64_MAX:
+            raise EncodeError("timestamp", "an integer in [0, 2**64)", timestamp)
+        ext = self._ext(message_id)
+        tail = self._meta_tail
+        crc = crc64_continue(crc64_continue(crc64(ext + lead), content), tail)
+        size = len(ext) + len(lead) + memoryview(content).nbytes + len(tail)
+        return (_HEADER.pack(2, self._type_raw, self._name_raw, timestamp, size, crc) + ext
+                + lead, content, tail)
+
+    def _ext(self, message_id: int) -> bytes:
+        # v2's extended header: the message id is the only part that changes.
+        if not message_id:
+            return self._ext_v2
+        return _EXT_HEADER.pack(EXT_HEADER_SIZE, *self._meta_sizes, message_id)
 
 
 class ReceiveBudget:

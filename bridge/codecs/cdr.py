@@ -146,6 +146,7 @@ class RawImage:
     is_bigendian: int
     step: int
     data: memoryview
+    data_start: int  # where ``data`` begins in the serialized bytes
 
 
 _HEIGHT_WIDTH = struct.Struct("<II")
@@ -170,6 +171,6 @@ def read_image(data: bytes) -> RawImage:
             raise CdrError("the image's data within the message",
                            f"{count} bytes at offset {start} of {len(data)}")
         return RawImage(_Header(_Time(sec, nanosec), frame), height, width, encoding,
-                        is_bigendian, step, memoryview(data)[start:start + count])
+                        is_bigendian, step, memoryview(data)[start:start + count], start)
     except (struct.error, UnicodeDecodeError, IndexError) as error:
         raise CdrError("a whole Image", str(error)) from None

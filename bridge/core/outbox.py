@@ -18,8 +18,8 @@ from protocol.crc64 import Buffer, KnownCrc
 from protocol.framing import Decoder, StreamTemplate, encode, encode_parts
 from protocol.messages import Body, Message
 
-__all__ = ["BulkFrame", "Frame", "Outbox", "OutboxOverflow", "SharedFrame", "TemplateFrame",
-           "WRITE_CHUNK"]
+__all__ = ["BulkFrame", "Frame", "Outbox", "OutboxOverflow", "SharedFrame", "TemplateBulkFrame",
+           "TemplateFrame", "WRITE_CHUNK"]
 
 # A larger one-shot (or stream value) is written this much at a time, as the transport
 # drains: asyncio copies whatever the socket does not take at once into its own buffer,
@@ -143,6 +143,21 @@ class BulkFrame(Frame):
             return b"".join(self._kept_parts())  # rare: a GET_ query, a batch
         self._kept_parts()
         return encode(self.message, header_version=header_version)
+
+
+class TemplateBulkFrame(BulkFrame):
+    """A `BulkFrame` made from its stream's `StreamTemplate` without a `Message`: ``lead``
+    (an image's own header, kept from the stream's last conversion) and ``content`` (the
+    new pixels, where they lie in the ROS message), stamped with the hub's ``clock``."""
+
+    __slots__ = ()
+
+    def __init__(self, template: StreamTemplate, lead: bytes, content: Buffer,
+                 timestamp: int, clock: int) -> None:
+        self._message = None  # type: ignore[assignment]
+        self._encoded = {}
+        self.clock = clock
+        self._parts = template.encode_parts(lead, content, timestamp, clock)
 
 
 class TemplateFrame(Frame):

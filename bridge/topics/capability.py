@@ -25,6 +25,8 @@ from std_msgs.msg import String as StringMsg
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
 from bridge.codecs.base import Encoded
 from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
+from bridge.codecs.fast_image import RawImageStream
+from bridge.codecs.image import ImageCodec
 from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
 from bridge.core.dispatch import Created, Handler, Result
@@ -32,7 +34,7 @@ from bridge.core.heavy import OffLoop
 from bridge.core.hub import Hub, Replier, StreamChannel, Subscriber, frame_for
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.content_guards import ContentGuard
-from bridge.core.outbox import Frame, TemplateFrame
+from bridge.core.outbox import Frame, TemplateBulkFrame, TemplateFrame
 from bridge.core.native_stream import LaneArrivals, new_lane
 from bridge.core.stream_health import SMOOTHING, Arrivals, ArrivalsView, StreamHealth
 from bridge.ros.graph_types import refuse_other_type
@@ -45,6 +47,7 @@ from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
                                WrongTypeError)
 from protocol.conversions import igtl_stamp_or_now, igtl_timestamp_now
 from protocol.framing import StreamTemplate
+from protocol.freshness import daemon_clock_ms
 from protocol.messages import Json, Message, PolyData, StatusCode
 from protocol.messages import Point as PointBody
 from protocol.naming import KEY_COUNT, KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
@@ -115,6 +118,10 @@ class SubscriberBridge:
         # A filtered stream needs the message itself: only unfiltered poses go raw.
         self._fast = (RawPoseStream(codec, device, metadata)
                       if has_fast_path(codec.ros_type) and message_filter is None else None)
+        # Images: the pixels go where they lie, in frames made from what the codec made of
+        # the stream's last differing message (bridge/codecs/fast_image.py).
+        self._images = (RawImageStream()
+                        if isinstance(codec, ImageCodec) and message_filter is None else None)
         # Taken serialized whatever the type: the size is known before anything is kept,
         # and the last message stays as its bytes (deserialized only when asked for). Hot
         # poses are taken by the stream reader, without the interpreter's lock, a burst at
@@ -295,6 +302,16 @@ class SubscriberBridge:
 
     def _encode_serialized(self, data: bytes) -> bool:
         """Sent (or refused) straight from the bytes, if the codec reads them (images)."""
+        images = self._images
+        same = images.convert(data) if images is not None else None
+        if same is not None:
+            self._keep(data)
+            self._count += 1
+            template, lead, pixels, timestamp = same
+            self._hub.post_frame(self._channel, TemplateBulkFrame(template, lead, pixels,
+                                                                  timestamp, daemon_clock_ms()))
+            self._post_whole(None, data)
+            return True
         try:
             encoded: Encoded | CodecError | None = self.codec.encode_serialized(data)
         except CodecError as error:
@@ -306,7 +323,9 @@ class SubscriberBridge:
         if isinstance(encoded, CodecError):
             self._refused(encoded)
         else:
-            self._post(encoded)
+            message = self._post(encoded)
+            if images is not None:
+                images.learn(data, message)
         self._post_whole(None, data)
         return True
 
@@ -322,13 +341,14 @@ class SubscriberBridge:
             return
         self._post(encoded)
 
-    def _post(self, encoded: Encoded) -> None:
+    def _post(self, encoded: Encoded) -> Message:
         stamp = igtl_stamp_or_now(*encoded.stamp) if encoded.stamp else igtl_timestamp_now()
         metadata = dict(self._metadata)
         metadata.update(encoded.metadata)
         message = Message(device_name=self.device, body=encoded.body, timestamp=stamp,
                           metadata=metadata)
         self._hub.post_frame(self._channel, frame_for(message))
+        return message
 
     def info(self) -> TopicInfo:
         return TopicInfo("subscriber", self.topic, self.codec.ros_type, self.device,
