@@ -30,6 +30,8 @@ whose shared-memory segment holds a whole frame (bench/fastdds_image_publisher.x
 the defaults, most frames lose fragments at the publisher and wait about 10 ms for their
 resend, at each reader independently, so the per-message share there also measures which
 reader's resend came first; the second set-up shows the relay's own share without that.
+That race's size is measured too, in the same run: two plain subscribers, the second's
+receive minus the first's (the share row's floor column).
 
 Each relay runs alone while it is measured. Every pose subscriber (floor, daemon, naive
 relay) keeps the last 5,000 messages (peers.POSE_DEPTH). CPU is the relay process's user +
@@ -510,6 +512,7 @@ def image_phase(args: argparse.Namespace, results: Results) -> None:
         env = {} if profile is None else {"FASTRTPS_DEFAULT_PROFILES_FILE": str(profile)}
         publisher = peer("image publisher", "publish", "image", IMAGE_TOPIC, env=env)
         try:
+            _floor_race(args, results, setup, publisher)
             for kind in ("bridge", "naive"):
                 floor = peer("rclpy floor", "floor", "image", IMAGE_TOPIC)
                 relay = Relay(kind, {"image": IMAGE_TOPIC, "pose": POSE_TOPIC},
@@ -533,6 +536,28 @@ def image_phase(args: argparse.Namespace, results: Results) -> None:
                     floor.stop()
         finally:
             publisher.stop()
+
+
+def _floor_race(args: argparse.Namespace, results: Results, setup: str,
+                publisher: Child) -> None:
+    """The share's baseline: a second plain subscriber's receive minus the first's, same
+    message. Fast DDS delivers a frame to each reader in its own time (a fragment the
+    publisher's segment lost for one reader is resent to it alone, about 10 ms later), and
+    that race is in the relay's share too."""
+    first = peer("rclpy floor", "floor", "image", IMAGE_TOPIC)
+    second = peer("second rclpy floor", "floor", "image", IMAGE_TOPIC)
+    try:
+        reports, _, _ = run_phase(publisher, [first, second], 30, args.image_seconds, None, 2)
+        fig = Figure(rate=30)
+        fig.extra.update(_image_share(reports[1], reports[0]))
+        results.image.setdefault(setup, {})["floor"] = fig
+        print(f"  {'a second plain subscriber':<34} its share over the first p50 / p99 "
+              f"{ms(fig.extra.get('share_p50', float('nan')))} / "
+              f"{ms(fig.extra.get('share_p99', float('nan')))} ms (publisher {setup})",
+              flush=True)
+    finally:
+        first.stop()
+        second.stop()
 
 
 def _image_share(reader: dict[str, Any], floor: dict[str, Any]) -> dict[str, float]:
@@ -624,15 +649,17 @@ def table(results: Results, args: argparse.Namespace) -> str:
                     f"{ms(tf.p99)} | |")
     nan = float("nan")
     for setup, figures in results.image.items():
-        image = (Figure(), figures.get("bridge", Figure()), figures.get("naive", Figure()))
+        image = (figures.get("floor", Figure()), figures.get("bridge", Figure()),
+                 figures.get("naive", Figure()))
         hop = image[1].extra
         rows.append(f"| 640×480 rgb8 Image at 30 Hz, publisher with {setup}: ROS hop "
                     f"(publish() → plain subscriber), p50 / p99 (ms) | "
                     f"{ms(hop.get('hop_p50', nan))} / {ms(hop.get('hop_p99', nan))} | | |")
-        rows.append(_row("… publish() → last byte at the client: p50 / p99 (ms)", image,
-                         lambda f: f"{ms(f.p50)} / {ms(f.p99)}"))
+        rows.append(_row("… publish() → last byte at the client: p50 / p99 (ms)",
+                         (Figure(), *image[1:]), lambda f: f"{ms(f.p50)} / {ms(f.p99)}"))
         rows.append(_row("… the relay's own share (its client's last byte minus the plain "
-                         "subscriber's receive, same message): p50 / p99 (ms)", image,
+                         "subscriber's receive, same message; floor: a second plain "
+                         "subscriber's receive minus the first's): p50 / p99 (ms)", image,
                          lambda f: f"{ms(f.extra.get('share_p50', nan))} / "
                                    f"{ms(f.extra.get('share_p99', nan))}"))
     if results.rss:
