@@ -152,3 +152,21 @@ def test_a_templates_parts_are_the_bytes_of_encode() -> None:
         parts = template.encode_parts(lead, content, message.timestamp, message_id)
         assert b"".join(parts) == _wire(replace(message, message_id=message_id))
     assert RawImageStream().convert(b"\x00\x01\x00\x00" + bytes(40)) is None  # nothing kept
+
+
+@pytest.mark.ros
+def test_a_header_v1_client_gets_the_kept_ways_frame_as_the_ordinary_ones(ros: Any) -> None:
+    """An OpenIGTLink 1.11 peer reads header v1: the frame made the kept way gives it the
+    bytes the ordinary path gives (no metadata, no message id in v1)."""
+    from bridge.core.outbox import TemplateBulkFrame
+
+    first = _image_bytes("mono16", 2, width=7)
+    second = _image_bytes("mono16", 2, width=7, stamp=(1_700_000_001, 9), seed=3)
+    _, images = _sent(ros, [first])
+    same = images.convert(second)
+    assert same is not None
+    template, lead, pixels, timestamp = same
+    frame = TemplateBulkFrame(template, lead, pixels, timestamp, 42)
+    ordinary, _ = _sent(ros, [second])
+    assert frame.encoded(1) == encode(ordinary[0], header_version=1)
+    assert frame.message.message_id == 42 and frame.message.metadata == ordinary[0].metadata
