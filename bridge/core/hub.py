@@ -7,7 +7,7 @@ state at once (the newest value of each streamed device, and every persistent on
 as a robot mesh), except what a late ROS subscriber would not get either: a large value
 (an image, a point cloud) of a volatile topic is not kept once sent (`set_volatile`), as it
 may be tens of MB and the next one is on its way. Whether a message is large is decided in
-one place, `frame_for`.
+one place, `is_large`.
 
 Threads: the asyncio loop owns the clients and their buffers. ROS callbacks run in an
 executor thread and hand values over through a `StreamChannel` (`post_frame`):
@@ -62,12 +62,18 @@ LARGE_MESSAGE_BYTES = 64 * 1024
 
 
 def frame_for(message: Message) -> Frame:
-    """The frame `message` is sent as: the one place that decides whether a message is
-    large (a `BulkFrame`: never queued behind another, kept as wire parts, not kept for
-    later clients of a volatile device) or small."""
-    if approximate_size(message) > LARGE_MESSAGE_BYTES:
+    """The frame `message` is sent as: a `BulkFrame` if it is large (`is_large`), never
+    queued behind another, kept as wire parts, not kept for later clients of a volatile
+    device; otherwise a `Frame`."""
+    if is_large(message):
         return BulkFrame(message)
     return Frame(message)
+
+
+def is_large(message: Message) -> bool:
+    """The one place that decides whether a message is large (see `frame_for`); a hot path
+    that makes its own `BulkFrame`s makes them only for messages it says are."""
+    return approximate_size(message) > LARGE_MESSAGE_BYTES
 
 
 def approximate_size(message: Message) -> int:

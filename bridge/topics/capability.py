@@ -31,7 +31,8 @@ from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
 from bridge.core.dispatch import Created, Handler, Result
 from bridge.core.heavy import OffLoop
-from bridge.core.hub import Hub, Replier, StreamChannel, Subscriber, frame_for
+from bridge.core.hub import (Hub, Replier, StreamChannel, Subscriber, frame_for,
+                             is_large)
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.content_guards import ContentGuard
 from bridge.core.outbox import Frame, TemplateBulkFrame, TemplateFrame
@@ -324,7 +325,7 @@ class SubscriberBridge:
             self._refused(encoded)
         else:
             message = self._post(encoded)
-            if images is not None:
+            if images is not None and is_large(message):  # a small one goes as the others
                 images.learn(data, message)
         self._post_whole(None, data)
         return True

@@ -19,7 +19,7 @@ from sensor_msgs.msg import Image as RosImage
 
 from bridge.codecs import codec_for
 from bridge.codecs.fast_image import RawImageStream
-from bridge.core.hub import Hub
+from bridge.core.hub import LARGE_MESSAGE_BYTES, Hub
 from protocol.commands import QoS
 from protocol.framing import StreamTemplate, encode
 from protocol.messages import Image, Message
@@ -30,11 +30,15 @@ KEPT = {"rgb8": 3, "mono8": 1, "rgba8": 4, "mono16": 2, "32FC1": 4, "16SC1": 2, 
 NOT_KEPT = {"bgr8": 3, "bgra8": 4}  # reordered to red first: a copy
 
 
-def _image_bytes(encoding: str, size: int, *, width: int = 5, height: int = 3,
+def _image_bytes(encoding: str, size: int, *, width: int = 5, height: int = 0,
                  frame: str = "camera", stamp: tuple[int, int] = (1_700_000_000, 5),
                  seed: int = 0, pad: int = 0, bigendian: int = 0) -> bytes:
+    """A serialized sensor_msgs/Image; by default just large enough to be sent as a large
+    message (`hub.is_large`), which is what the kept way is for."""
+    step = width * size + pad
+    height = height or LARGE_MESSAGE_BYTES // step + 1
     msg = RosImage(height=height, width=width, encoding=encoding, is_bigendian=bigendian,
-                   step=width * size + pad)
+                   step=step)
     msg.header.frame_id = frame
     msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
     msg.data = np.random.default_rng(seed).integers(
@@ -97,7 +101,7 @@ def _wire(message: Message) -> bytes:
 @pytest.mark.ros
 @settings(max_examples=25, deadline=None)
 @given(encoding=st.sampled_from(sorted(KEPT)), frame=st.text(max_size=11),
-       width=st.integers(1, 9), stamp=st.tuples(st.integers(1, 2**31 - 1),
+       width=st.integers(16, 40), stamp=st.tuples(st.integers(1, 2**31 - 1),
                                                  st.integers(0, 999_999_999)))
 def test_the_next_frame_of_a_stream_is_the_bytes_of_the_ordinary_path(
         ros: Any, encoding: str, frame: str, width: int, stamp: tuple[int, int]) -> None:
@@ -170,3 +174,13 @@ def test_a_header_v1_client_gets_the_kept_ways_frame_as_the_ordinary_ones(ros: A
     ordinary, _ = _sent(ros, [second])
     assert frame.encoded(1) == encode(ordinary[0], header_version=1)
     assert frame.message.message_id == 42 and frame.message.metadata == ordinary[0].metadata
+
+
+@pytest.mark.ros
+def test_a_small_image_goes_the_ordinary_way_as_other_small_messages(ros: Any) -> None:
+    """Whether a message is large is decided in one place (`hub.is_large`): a small image
+    is queued in order as any small message, never made a large frame by the kept way."""
+    small = _image_bytes("rgb8", 3, height=2)
+    streamed, images = _sent(ros, [small, small])
+    assert images.convert(small) is None
+    assert _wire(streamed[0]) == _wire(streamed[1])
