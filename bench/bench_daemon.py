@@ -1,7 +1,7 @@
 """Daemon benchmark: ROS -> OpenIGTLink latency, throughput and CPU, each figure measured in
 the same run beside its baselines, every party in its own process.
 
-    .venv/bin/python bench/bench_daemon.py            # about 5 minutes
+    .venv/bin/python bench/bench_daemon.py            # about 8 minutes
     .venv/bin/python bench/bench_daemon.py --quick    # about 2 minutes, shorter phases
     .venv/bin/python bench/bench_daemon.py --only image --daemon-profile \
         bench/fastdds_reader_at_once.xml              # the daemon with a Fast DDS profile
