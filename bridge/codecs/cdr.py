@@ -19,8 +19,9 @@ import struct
 from dataclasses import dataclass
 from typing import Callable
 
-__all__ = ["CdrError", "RawImage", "RawPose", "RAW_POSE_READERS", "read_image", "read_pose",
-           "read_pose_stamped", "read_tf_message", "read_transform_stamped"]
+__all__ = ["CdrError", "RawImage", "RawPose", "RAW_POSE_READERS", "plain_little_endian",
+           "read_image", "read_pose", "read_pose_stamped", "read_tf_message",
+           "read_transform_stamped"]
 
 _CDR_LE = b"\x00\x01"
 _STAMP = struct.Struct("<iiI")  # sec, nanosec, frame_id length (all at offset 4)
@@ -40,8 +41,13 @@ class CdrError(ValueError):
         super().__init__(f"expected {expected}, got {got}")
 
 
+def plain_little_endian(data: bytes) -> bool:
+    """Whether ``data`` is in the one encoding read here (encapsulation 00 01)."""
+    return data[:2] == _CDR_LE
+
+
 def _check(data: bytes) -> None:
-    if data[:2] != _CDR_LE:
+    if not plain_little_endian(data):
         raise CdrError("little-endian plain CDR (encapsulation 00 01)", data[:2].hex() or "0 bytes")
 
 
@@ -147,6 +153,9 @@ class RawImage:
     step: int
     data: memoryview
     data_start: int  # where ``data`` begins in the serialized bytes
+    # The byte ranges that hold the other fields after the stamp (alignment padding, which
+    # a serializer may leave unset, left out).
+    field_spans: tuple[tuple[int, int], ...]
 
 
 _HEIGHT_WIDTH = struct.Struct("<II")
@@ -158,19 +167,20 @@ def read_image(data: bytes) -> RawImage:
     _check(data)
     try:
         sec, nanosec = _SEC_NANOSEC.unpack_from(data, 4)
-        frame, offset = _string(data, 12)
-        offset += -offset & 3
-        height, width = _HEIGHT_WIDTH.unpack_from(data, offset)
-        encoding, offset = _string(data, offset + 8)
+        frame, frame_end = _string(data, 12)
+        sizes = frame_end + (-frame_end & 3)
+        height, width = _HEIGHT_WIDTH.unpack_from(data, sizes)
+        encoding, offset = _string(data, sizes + 8)
         is_bigendian = data[offset]
         offset += 1
-        offset += -offset & 3
-        step, count = _HEIGHT_WIDTH.unpack_from(data, offset)
-        start = offset + 8
+        steps = offset + (-offset & 3)
+        step, count = _HEIGHT_WIDTH.unpack_from(data, steps)
+        start = steps + 8
         if start + count > len(data):
             raise CdrError("the image's data within the message",
                            f"{count} bytes at offset {start} of {len(data)}")
         return RawImage(_Header(_Time(sec, nanosec), frame), height, width, encoding,
-                        is_bigendian, step, memoryview(data)[start:start + count], start)
+                        is_bigendian, step, memoryview(data)[start:start + count], start,
+                        ((12, frame_end), (sizes, offset), (steps, start)))
     except (struct.error, UnicodeDecodeError, IndexError) as error:
         raise CdrError("a whole Image", str(error)) from None

@@ -2,12 +2,13 @@
 header, its pixels where they lie in the bytes, the stream's `StreamTemplate`), with no
 numpy array, `Image` body or `Message` built.
 
-A video stream's messages differ in their stamp and pixels only: every other byte (frame
+A video stream's messages differ in their stamp and pixels only: every other field (frame
 id, size, encoding, step) repeats. So the ordinary codec converts a message, and what it
-made (the IMAGE header, the metadata) is kept with the bytes it came from (`learn`); a
-later message whose bytes match them there reuses it with its own stamp and pixels
-(`convert`). One rule stays with the codec: a message it must copy or reorder (padded
-rows, blue first, big-endian) is never kept, and one that differs takes the ordinary path
+made (the IMAGE header, the metadata) is kept with the fields' bytes (`learn`); a later
+message whose fields hold the same bytes reuses it with its own stamp and pixels
+(`convert`). The alignment padding between fields is not compared: a serializer may leave
+it unset. One rule stays with the codec: a message it must copy or reorder (padded rows,
+blue first, big-endian) is never kept, and one that differs takes the ordinary path
 again. The bytes are the ones `protocol.framing.encode_parts` makes for the same message
 (tests compare them).
 """
@@ -20,7 +21,7 @@ from typing import Optional
 
 import numpy as np
 
-from bridge.codecs.cdr import CdrError, read_image
+from bridge.codecs.cdr import CdrError, plain_little_endian, read_image
 from protocol.conversions import igtl_stamp_or_now
 from protocol.crc64 import Buffer
 from protocol.errors import ProtocolError
@@ -29,16 +30,15 @@ from protocol.messages import Image, Message
 
 __all__ = ["RawImageStream"]
 
-_SEC_NANOSEC = struct.Struct("<iI")
-_STAMP_END = 12  # the encapsulation header, then the stamp (int32 sec, uint32 nanosec)
+_SEC_NANOSEC = struct.Struct("<iI")  # the stamp, after the 4-byte encapsulation header
 
 
 @dataclass(frozen=True)
 class _Kept:
     """What the ordinary path made of one message, and the bytes it depends on."""
 
-    encapsulation: bytes  # the first 4 bytes
-    fields: bytes  # the bytes after the stamp, up to the pixels
+    spans: tuple[tuple[int, int], ...]  # where its fields lie (`RawImage.field_spans`)
+    fields: tuple[bytes, ...]  # their bytes
     start: int  # where the pixels begin
     count: int  # how many bytes they take
     template: StreamTemplate
@@ -58,9 +58,11 @@ class RawImageStream:
         if kept is None:
             return None
         start, end = kept.start, kept.start + kept.count
-        if (len(data) < end or data[_STAMP_END:start] != kept.fields
-                or data[:4] != kept.encapsulation):
+        if len(data) < end or not plain_little_endian(data):
             return None
+        for (first, last), value in zip(kept.spans, kept.fields):
+            if data[first:last] != value:
+                return None
         sec, nanosec = _SEC_NANOSEC.unpack_from(data, 4)
         return (kept.template, kept.lead, memoryview(data)[start:end],
                 igtl_stamp_or_now(sec, nanosec))
@@ -80,9 +82,9 @@ class RawImageStream:
             return
         if not _same_bytes(pixels, raw.data):
             return  # the codec copied or reordered them
-        start = raw.data_start
-        self._kept = _Kept(data[:4], data[_STAMP_END:start], start, len(raw.data), template,
-                           lead)
+        spans = raw.field_spans
+        self._kept = _Kept(spans, tuple(data[first:last] for first, last in spans),
+                           raw.data_start, len(raw.data), template, lead)
 
 
 def _same_bytes(a: Buffer, b: Buffer) -> bool:
