@@ -40,13 +40,14 @@ from posix.uio cimport iovec
 
 # Bump with the wrappers' expectation (bridge/core/native_stream.py): an older build is
 # not used.
-INTERFACE = 2
+INTERFACE = 3
 
 cdef enum:
     # What a lane's handler returns to the reader.
     C_HANDLED = 0
     C_TO_PYTHON = 1
     C_HANDLED_SETTLE = 2  # handled; Python settles what it left (`PoseLane.settle`)
+    C_BUSY = 3  # nothing done: another thread held a lock (`try_handle` only)
     # Kinds of pose message (bridge/codecs/cdr.py's readers).
     C_POSE = 0
     C_POSE_STAMPED = 1
@@ -62,7 +63,7 @@ cdef enum:
     CONTENT_SIZE = 48  # a TRANSFORM's 12 float32
     MAX_PARTS = 8  # a frame written from parts (`Slot.send`): header, content, metadata
 
-HANDLED, TO_PYTHON, HANDLED_SETTLE = C_HANDLED, C_TO_PYTHON, C_HANDLED_SETTLE
+HANDLED, TO_PYTHON, HANDLED_SETTLE, BUSY = C_HANDLED, C_TO_PYTHON, C_HANDLED_SETTLE, C_BUSY
 POSE, POSE_STAMPED, TRANSFORM_STAMPED = C_POSE, C_POSE_STAMPED, C_TRANSFORM_STAMPED
 SENT, STASHED, REFUSED, BROKEN = C_SENT, C_STASHED, C_REFUSED, C_BROKEN
 
@@ -73,6 +74,7 @@ cdef extern from "<pthread.h>" nogil:
     int pthread_mutex_init(pthread_mutex_t *mutex, void *attr)
     int pthread_mutex_destroy(pthread_mutex_t *mutex)
     int pthread_mutex_lock(pthread_mutex_t *mutex)
+    int pthread_mutex_trylock(pthread_mutex_t *mutex)
     int pthread_mutex_unlock(pthread_mutex_t *mutex)
 
 
@@ -502,6 +504,10 @@ cdef struct Handler:
     # What the stream reader calls for each message, without the interpreter's lock.
     int (*handle)(void *lane, const uint8_t *data, size_t size) noexcept nogil
     void *lane
+    # The same, but BUSY instead of waiting for a lock: for a middleware thread, which
+    # holds the middleware's locks, while a lock here may be held by a thread that needs
+    # the interpreter, which a thread needing those may hold.
+    int (*try_handle)(void *lane, const uint8_t *data, size_t size) noexcept nogil
 
 
 cdef inline size_t _v1_offset(LaneState *lane) noexcept nogil:
@@ -657,9 +663,26 @@ cdef void _keep(LaneState *lane, const uint8_t *data, size_t n, const uint8_t *c
     lane.has_latest = True
 
 
+cdef inline bint _lock(pthread_mutex_t *mutex, bint wait) noexcept nogil:
+    if wait:
+        pthread_mutex_lock(mutex)
+        return True
+    return pthread_mutex_trylock(mutex) == 0
+
+
 cdef int _handle(void *lane_pointer, const uint8_t *data, size_t n) noexcept nogil:
+    return _handle_as(lane_pointer, data, n, True)
+
+
+cdef int _try_handle(void *lane_pointer, const uint8_t *data, size_t n) noexcept nogil:
+    return _handle_as(lane_pointer, data, n, False)
+
+
+cdef int _handle_as(void *lane_pointer, const uint8_t *data, size_t n, bint wait) noexcept nogil:
     """One message: written to every client (HANDLED, or HANDLED_SETTLE when a client
-    could not take it whole), or TO_PYTHON with nothing done."""
+    could not take it whole), or TO_PYTHON with nothing done; BUSY with nothing done when
+    not ``wait``ing and a lock is held. Every client's slot is held before the first
+    write, so a message goes to all or to none."""
     cdef LaneState *lane = <LaneState *>lane_pointer
     cdef FanoutState *fanout = lane.fanout
     cdef SlotState *slot
@@ -667,13 +690,14 @@ cdef int _handle(void *lane_pointer, const uint8_t *data, size_t n) noexcept nog
     cdef double values[12]
     cdef uint64_t timestamp
     cdef int64_t clock
-    cdef Py_ssize_t i
+    cdef Py_ssize_t i, j
     cdef bint v1 = False, v2 = False, settle = False
     cdef size_t size1 = 0, size2 = 0
     cdef int result
     if _convert(lane, data, n, content, values, &timestamp) != 0:
         return C_TO_PYTHON
-    pthread_mutex_lock(&fanout.lock)
+    if not _lock(&fanout.lock, wait):
+        return C_BUSY
     if fanout.hold or not lane.enabled or lane.settle:
         pthread_mutex_unlock(&fanout.lock)
         return C_TO_PYTHON
@@ -686,6 +710,12 @@ cdef int _handle(void *lane_pointer, const uint8_t *data, size_t n) noexcept nog
             v2 = True
         else:
             v1 = True
+    for i in range(fanout.count):
+        if not _lock(&fanout.slots[i].lock, wait):
+            for j in range(i):
+                pthread_mutex_unlock(&fanout.slots[j].lock)
+            pthread_mutex_unlock(&fanout.lock)
+            return C_BUSY
     clock = _clock_ms(fanout)
     if v2:
         size2 = _frame(lane, 2, content, timestamp, clock)
@@ -693,7 +723,6 @@ cdef int _handle(void *lane_pointer, const uint8_t *data, size_t n) noexcept nog
         size1 = _frame(lane, 1, content, timestamp, clock)
     for i in range(fanout.count):
         slot = fanout.slots[i]
-        pthread_mutex_lock(&slot.lock)
         if not slot.open:  # its session closed it meanwhile, for a write of its own
             result = C_REFUSED
         elif slot.header_version == 2:
@@ -735,8 +764,9 @@ cdef class PoseLane:
         self.state.last_max = last_max_bytes
         self.state.smoothing = smoothing
         self._handler.handle = _handle
+        self._handler.try_handle = _try_handle
         self._handler.lane = <void *>self.state
-        self._capsule = PyCapsule_New(<void *>&self._handler, "bridge.core.native_stream.Handler", NULL)
+        self._capsule = PyCapsule_New(<void *>&self._handler, _HANDLER_CAPSULE, NULL)
 
     def __dealloc__(self):
         if self.state != NULL:
@@ -863,13 +893,14 @@ cdef class PoseLane:
         return missed, stashed
 
     # For the tests, which compare with the Python path.
-    def handle(self, bytes data):
-        """What the reader does with ``data``: HANDLED, TO_PYTHON or HANDLED_SETTLE."""
+    def handle(self, bytes data, bint wait=True):
+        """What the reader does with ``data``: HANDLED, TO_PYTHON or HANDLED_SETTLE (or
+        BUSY, not ``wait``ing: what a middleware thread does)."""
         cdef const uint8_t *p = <const uint8_t *>PyBytes_AS_STRING(data)
         cdef size_t n = <size_t>PyBytes_GET_SIZE(data)
         cdef int result
         with nogil:
-            result = _handle(<void *>self.state, p, n)
+            result = _handle_as(<void *>self.state, p, n, wait)
         return result
 
     def encode(self, bytes data, int header_version, long long clock):
@@ -889,7 +920,10 @@ cdef class PoseLane:
         return PyBytes_FromStringAndSize(<char *>(self.state.buffer + offset), <Py_ssize_t>size)
 
 
-HANDLER_CAPSULE = "bridge.core.native_stream.Handler"  # the handler capsule's name
+# The handler capsule's name, which bridge/ros/_rcl_reader.pyx asks for: changed with
+# Handler's layout, so a reader built for another never calls it.
+cdef const char *_HANDLER_CAPSULE = b"bridge.core.native_stream.Handler3"
+HANDLER_CAPSULE = _HANDLER_CAPSULE.decode()
 
 
 cdef uint8_t *_copy(bytes data) except? NULL:

@@ -29,7 +29,7 @@ from rclpy.qos import QoSProfile
 log = logging.getLogger(__name__)
 
 # The compiled module's interface this wrapper expects (`_rcl_reader.INTERFACE`).
-READER_INTERFACE = 4
+READER_INTERFACE = 5
 _WAIT_S = 0.1  # at most this long between waits: a wake-up rcl missed costs no more
 _ERROR_LOG_INTERVAL_S = 5.0
 

@@ -240,3 +240,28 @@ def test_a_client_that_cannot_take_a_frame_whole_keeps_the_rest_or_is_handed_it(
         assert rest is not None and total % frame_size == 0
     ours.close()
     theirs.close()
+
+
+def test_a_handle_that_may_not_wait_leaves_a_held_lock_and_writes_to_all_or_none() -> None:
+    # What a middleware thread calls: it holds the middleware's locks, so it never waits
+    # for one of ours, which a thread needing the interpreter may hold.
+    fanout, lane, _, data = taught(6)
+    ends = [pair(), pair()]
+    slots = [open_slot(ours) for ours, _ in ends]
+    with fanout:
+        fanout.set_slots(slots)
+        lane.enabled = True
+    with fanout:  # this thread's hold: a non-recursive lock, so a try fails as another's
+        assert lane.handle(data, wait=False) == ns.BUSY
+    with slots[1]:
+        assert lane.handle(data, wait=False) == ns.BUSY
+    assert [available_now(theirs) for _, theirs in ends] == [b"", b""]  # none, not one
+    with fanout:
+        assert lane.count == 0 and lane.last() is None
+    assert lane.handle(data, wait=False) == ns.HANDLED
+    want = lane.encode(data, 2, 0)
+    assert [len(read_exactly(theirs, len(want))) for _, theirs in ends] == [len(want)] * 2
+    assert [s.sent for s in slots] == [1, 1]
+    for ours, theirs in ends:
+        ours.close()
+        theirs.close()

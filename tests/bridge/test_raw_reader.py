@@ -5,19 +5,23 @@ each 10 MB message) is measured by bench/attacks.py's tf_frames storm, not here.
 from __future__ import annotations
 
 import logging
+import select
+import socket
 import threading
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import pytest
 from geometry_msgs.msg import PoseStamped
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from tf2_msgs.msg import TFMessage
 
+from bridge.core import native_stream
 from bridge.ros import raw_reader
 from bridge.ros.qos import TF_QOS
 from bridge.ros.raw_reader import BatchTopic, RawReader, RawSubscription, RawTopic
 from bridge.ros.ros_node import RosNode, RosOptions
+from protocol.framing import Decoder
 from support import Processes, scaled, wait_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.skipif(
@@ -301,3 +305,141 @@ def test_a_reader_takes_one_kind_of_topic(ros: RosNode) -> None:
                                              lambda v: None)], "rr-kind", batches=True)
     assert ros.stream_node.count_subscribers("/rr_kind") == 0
     views.close()
+
+
+# ------------------------------------------- native lanes, taken in the middleware's thread
+
+RELIABLE_1000 = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST,
+                           reliability=ReliabilityPolicy.RELIABLE)
+
+
+class _LaneReader:
+    """The compiled reader on one real subscription of the daemon's stream node, whose
+    native lane writes to one client socket; no thread takes unless the test does."""
+
+    def __init__(self, ros: RosNode, topic: str) -> None:
+        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+        from bridge.codecs import codec_for
+        from bridge.codecs.fast import RawPoseStream
+
+        ros_type = "geometry_msgs/msg/PoseStamped"
+        self.fanout = native_stream.new_fanout()
+        self.lane = native_stream.new_lane(self.fanout, ros_type, 1 << 16, 0.1)
+        stream = RawPoseStream(codec_for(ros_type), "dev", {})
+        sample = PoseStamped()
+        sample.header.frame_id = "world"  # stream_publisher.py's
+        sample.pose.orientation.w = 1.0
+        template = stream.convert(bytes(serialize_message(sample)))[0]
+        self.lane.set_template(b"world", b"", *template.wire_parts())
+        self.ours, self.theirs = socket.socketpair()
+        self.ours.setblocking(False)
+        self.slot = native_stream.new_slot(None)
+        with self.slot:
+            self.slot.connect(self.ours)
+            self.slot.header_version = 2
+            self.slot.open = True
+        with self.fanout:
+            self.fanout.set_slots([self.slot])
+        node = ros.stream_node
+        with node.handle:
+            self.handle = _rclpy.Subscription(node.handle, PoseStamped, topic,
+                                              RELIABLE_1000.get_c_qos_profile())
+        self.reader = raw_reader._rcl_reader.RawReader([self.handle])
+        self.reader.set_subscriptions([self.handle], [self.lane.handler])
+        self.decoder = Decoder()
+
+    def written(self, count: int) -> list[int]:
+        """The next ``count`` poses the client got, as stream_publisher.py's numbers."""
+        numbers: list[int] = []
+        self.theirs.settimeout(scaled(20))
+        while len(numbers) < count:
+            message = self.decoder.next_message()
+            if message is None:
+                self.decoder.feed(self.theirs.recv(1 << 16))
+                continue
+            numbers.append(round(float(message.body.matrix[0, 3]) * 1000))  # n / 1000 mm
+        return numbers
+
+    def close(self) -> None:
+        self.reader.close()
+        self.handle.destroy_when_not_in_use()
+        self.ours.close()
+        self.theirs.close()
+
+
+needs_lanes = pytest.mark.skipif(not native_stream.available(),
+                                 reason="the native lane is not built here")
+
+
+@pytest.fixture
+def lane_reader(ros: RosNode) -> Iterator[Callable[[str, bool], _LaneReader]]:
+    made: list[_LaneReader] = []
+
+    def make(topic: str, enabled: bool) -> _LaneReader:
+        made.append(_LaneReader(ros, topic))
+        with made[-1].fanout:
+            made[-1].lane.enabled = enabled
+        return made[-1]
+
+    yield make
+    for lanes in made:
+        lanes.close()
+
+
+def _publish(processes: Processes, topic: str) -> Any:
+    return processes.python("poses", "stream_publisher.py", topic, "500", "--count", "100")
+
+
+@needs_lanes
+def test_a_native_lane_is_written_by_the_middlewares_thread_while_no_thread_takes(
+        lane_reader: Callable[[str, bool], _LaneReader], processes: Processes) -> None:
+    # No thread calls take: what the client gets, the middleware's own thread wrote, in
+    # the callback that told the messages (a thread wake per message saved).
+    lanes = lane_reader("/rr_inline", True)
+    _publish(processes, "/rr_inline")
+    assert lanes.written(100) == list(range(1, 101))
+    with lanes.fanout:
+        assert lanes.lane.count == 100
+
+
+@needs_lanes
+def test_what_the_lane_leaves_to_python_comes_first_and_in_order(
+        lane_reader: Callable[[str, bool], _LaneReader], processes: Processes) -> None:
+    # A disabled lane leaves each message to Python: the callback hands the first over,
+    # and takes no more until Python is done. Enabled, the lane writes the rest.
+    lanes = lane_reader("/rr_handover", False)
+    publisher = _publish(processes, "/rr_handover")
+    to_python: list[int] = []
+    while len(to_python) < 30:
+        taken = lanes.reader.take_batch(scaled(20), 7, 1 << 20)
+        assert taken is not None, f"Python got {to_python}"
+        index, batch = taken
+        assert index == 0 and 1 <= len(batch) <= 7
+        to_python += [round(deserialize_message(data, PoseStamped).pose.position.x * 1e6)
+                      for data in batch]
+    with lanes.fanout:
+        lanes.lane.enabled = True
+    publisher.wait_for_output("SENT 100 DONE")
+    # Python asks for more: the lane writes what waits, here or in the callback.
+    while lanes.reader.take_batch(0.05, 7, 1 << 20) is not None:
+        pass
+    got = len(to_python)
+    assert to_python == list(range(1, got + 1))
+    assert lanes.written(100 - got) == list(range(got + 1, 101))
+
+
+@needs_lanes
+def test_a_lane_whose_lock_is_held_is_written_later_by_the_readers_thread_in_order(
+        lane_reader: Callable[[str, bool], _LaneReader], processes: Processes) -> None:
+    # The middleware's thread never waits for the fanout: it hands the message it took
+    # over, and the reader's thread writes it, then the rest, in order.
+    lanes = lane_reader("/rr_busy", True)
+    with lanes.fanout:
+        publisher = _publish(processes, "/rr_busy")
+        wait_until(lambda: lanes.reader.handed_over, timeout=20,
+                   what="the callback's message handed over")
+        publisher.wait_for_output("SENT 100 DONE")
+        assert not select.select([lanes.theirs], [], [], 0)[0]  # nothing written meanwhile
+    assert lanes.reader.take_batch(0.2, 7, 1 << 20) is None  # all written, none to Python
+    assert lanes.written(100) == list(range(1, 101))
