@@ -22,7 +22,7 @@ from bridge.core.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_C
                                   DEFAULT_MAX_CLIENTS)
 from bridge.ros.ros_args import RosArgsError, apply_parameters, split_ros_args
 from bridge.ros.shm_locks import (MAX_STUCK_AFTER_S, MIN_STUCK_AFTER_S, STUCK_AFTER_S,
-                                  release_stuck, remove_unfinished)
+                                  release_stuck, remove_dead_segments, remove_unfinished)
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 
@@ -195,7 +195,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "are older: a ROS process killed while opening or making a port "
                     "(kill -9, a crash) leaves them, and every later ROS process that "
                     "opens that port, the bridge too, hangs at start-up or on its first "
-                    "message to a peer.")
+                    "message to a peer. Also remove the segments of killed ROS processes, "
+                    "which Fast DDS leaves in /dev/shm (RAM) for good.")
     unlock.add_argument("--wait", type=_lock_wait, default=STUCK_AFTER_S, metavar="SECONDS",
                         help="how long a lock must stay taken to be released "
                              f"(default {STUCK_AFTER_S:g}; Fast DDS holds one at most "
@@ -396,8 +397,13 @@ def _shm_unlock(wait_s: float) -> int:
     released = release_stuck(wait_s)
     for name in released:
         print(f"released {name} (left taken by a ROS process that was killed)")
-    if not released and not removed:
-        print("no Fast DDS port lock is left taken, and no port segment unfinished")
+    dead = remove_dead_segments(wait_s)
+    if dead:
+        print(f"removed {len(dead)} shared-memory segments of killed ROS processes "
+              f"({sum(size for _, size in dead) / 1e6:.1f} MB of RAM)")
+    if not released and not removed and not dead:
+        print("no Fast DDS port lock is left taken, no port segment unfinished, and no "
+              "segment of a killed process left")
     return 0
 
 

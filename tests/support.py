@@ -16,7 +16,7 @@ from typing import Callable, Optional, Sequence
 
 import pytest
 
-from bridge.ros.shm_locks import release_stuck, remove_unfinished
+from bridge.ros.shm_locks import release_stuck, remove_dead_segments, remove_unfinished
 from slicer_client.connection import CommandRefusedError, Connection
 
 REPO = Path(__file__).resolve().parent.parent
@@ -176,6 +176,7 @@ def release_left_port_locks() -> None:
     for name in release_stuck():
         print(f"released Fast DDS port lock {name}, left taken by a killed ROS process",
               file=sys.stderr)
+    remove_dead_segments()  # a killed process's segment stays in RAM until removed
 
 
 def refused(call: Callable[[], object]) -> CommandRefusedError:

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 from typing import Callable, Optional
 
-from bridge.ros.shm_locks import release_stuck, remove_unfinished
+from bridge.ros.shm_locks import release_stuck, remove_dead_segments, remove_unfinished
 
 __all__ = ["CHECK_INTERVAL_S", "REPORT_AFTER_S", "ShmPortWatch", "file_inode",
            "release_left_locks", "replaced_ports"]
@@ -134,7 +134,7 @@ class ShmPortWatch:
 def release_left_locks() -> None:
     """Remove the unfinished Fast DDS port segments and release the port locks a killed
     process left taken (`shm_locks`): the daemon would hang on one the first time it
-    writes to a peer on that port."""
+    writes to a peer on that port. Remove the segments of killed processes too: RAM."""
     for path in remove_unfinished():
         log.warning("removed Fast DDS port segment %s: it was never finished (a process "
                     "killed while making it), and every process opening it hung", path)
@@ -142,3 +142,7 @@ def release_left_locks() -> None:
         log.warning("released Fast DDS port lock %s: a ROS process killed while opening "
                     "that port had left it taken, and every process opening the port "
                     "hung on it", name)
+    dead = remove_dead_segments()
+    if dead:
+        log.info("removed %d Fast DDS shared-memory segments of killed processes (%.1f MB "
+                 "of RAM)", len(dead), sum(size for _, size in dead) / 1e6)

@@ -6,7 +6,10 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import fcntl
 import os
+import re
+import signal
 import struct
 import subprocess
 import sys
@@ -16,8 +19,8 @@ from typing import Iterator
 
 import pytest
 
-from bridge.ros.shm_locks import (release, release_stuck, remove_unfinished, stuck_port_locks,
-                                  unfinished_ports)
+from bridge.ros.shm_locks import (release, release_stuck, remove_dead_segments,
+                                  remove_unfinished, stuck_port_locks, unfinished_ports)
 from support import Processes, start_daemon
 
 pytestmark = pytest.mark.skipif(not Path("/dev/shm").is_dir(), reason="no /dev/shm here")
@@ -42,6 +45,18 @@ def take(name: str) -> None:
     handle = LIBC.sem_open(name.encode(), 0, 0, 0)
     assert handle and LIBC.sem_wait(handle) == 0
     LIBC.sem_close(handle)
+
+
+def _segment(directory: Path, ident: str, age_s: float) -> tuple[Path, Path]:
+    """A participant segment and its lock file as Fast DDS makes them, `age_s` old, the
+    lock held by nobody: as a killed process leaves them."""
+    segment, lock_file = directory / f"fastrtps_{ident}", directory / f"fastrtps_{ident}_el"
+    segment.write_bytes(b"\1" * 1000)
+    lock_file.write_bytes(b"")
+    then = time.time() - age_s
+    for path in (segment, lock_file):
+        os.utime(path, (then, then))
+    return segment, lock_file
 
 
 @pytest.fixture
@@ -95,10 +110,14 @@ def test_release_stuck_names_what_it_released(lock: str) -> None:
 
 def test_the_command_releases_them(lock: str) -> None:
     # The command looks at every lock, real ones too: it waits its full default time.
+    dead, dead_lock = _segment(Path("/dev/shm"), "00000000000000d3", 60)
     done = subprocess.run([sys.executable, "-m", "bridge.console", "shm-unlock"],
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert f"released {lock}" in done.stdout
+    assert re.search(r"removed \d+ shared-memory segments of killed ROS processes",
+                     done.stdout), done.stdout
+    assert not dead.exists() and not dead_lock.exists()
     assert value(lock) == 1
     assert lock not in stuck_port_locks(wait_s=0.2, ports=PORT)
 
@@ -139,15 +158,73 @@ def test_a_running_daemon_releases_one_and_says_so(lock: str, processes: Process
     unfinished = Path("/dev/shm/fastrtps_port99991")  # and a segment never finished
     unfinished.write_bytes(b"\0" * 4096)
     os.utime(unfinished, (time.time() - 60, time.time() - 60))
+    dead, _ = _segment(Path("/dev/shm"), "00000000000000d4", 60)  # and a killed one's
     try:
-        running = start_daemon(processes)  # it printed its start-up lines: both are before
+        running = start_daemon(processes)  # it printed its start-up lines: all are before
     finally:
         existed = unfinished.exists()
         unfinished.unlink(missing_ok=True)
     before_ros = running.child.output().split("(OpenIGTLink); ROS node")[0]
+    assert re.search(r"INFO bridge.ros.shm_ports: removed \d+ Fast DDS shared-memory "
+                     r"segments of killed processes", before_ros), before_ros
+    assert not dead.exists()
     assert f"WARNING bridge.ros.shm_ports: released Fast DDS port lock {lock}" in before_ros
     assert value(lock) == 1
     assert f"removed Fast DDS port segment {unfinished}" in before_ros and not existed
     take(lock)
     running.child.wait_for_output(f"released Fast DDS port lock {lock}", timeout=60)
     assert value(lock) == 1
+
+
+# ------------------------------------------------ participant segments of killed processes
+
+def test_a_segment_whose_lock_nobody_holds_is_removed_and_a_held_or_young_one_kept(
+        tmp_path: Path) -> None:
+    dead, _ = _segment(tmp_path, "00000000000000d1", 60)
+    held, held_lock = _segment(tmp_path, "00000000000000a1", 60)
+    young, _ = _segment(tmp_path, "00000000000000b1", 0)  # its maker may lock it next
+    other = tmp_path / "fastrtps_port99991_el"  # a port's lock: not a participant's
+    other.write_bytes(b"")
+    os.utime(other, (time.time() - 60, time.time() - 60))
+    aside = tmp_path / "elsewhere"
+    aside.write_bytes(b"")
+    os.symlink(aside, tmp_path / "fastrtps_00000000000000c1_el")  # never followed
+    holder = os.open(held_lock, os.O_RDONLY)  # another open file: as a live owner's flock
+    try:
+        fcntl.flock(holder, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        assert remove_dead_segments(shm_dir=tmp_path) == [(str(dead), 1000)]
+    finally:
+        os.close(holder)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "elsewhere", "fastrtps_00000000000000a1", "fastrtps_00000000000000a1_el",
+        "fastrtps_00000000000000b1", "fastrtps_00000000000000b1_el",
+        "fastrtps_00000000000000c1_el", "fastrtps_port99991_el"]
+    assert held.exists() and young.exists()
+
+
+def _segments_of(pid: int) -> set[Path]:
+    """The participant segments whose lock ``pid`` holds (/proc/locks names its inodes)."""
+    inodes = {int(fields[5].split(":")[2]) for fields in
+              (line.split() for line in Path("/proc/locks").read_text().splitlines())
+              if fields[1] == "FLOCK" and fields[4] == str(pid)}
+    return {path.with_name(path.name[:-len("_el")])
+            for path in Path("/dev/shm").glob("fastrtps_" + "[0-9a-f]" * 16 + "_el")
+            if path.exists() and path.stat().st_ino in inodes}
+
+
+@pytest.mark.ros
+def test_a_killed_ros_process_segment_is_removed_and_a_live_ones_kept(
+        processes: Processes) -> None:
+    killed = processes.python("killed", "stream_publisher.py", "/shm_dead", "10")
+    live = processes.python("live", "stream_publisher.py", "/shm_live", "10")
+    for child in (killed, live):
+        child.wait_for_output("READY")
+    theirs = {child.name: _segments_of(child.pid) for child in (killed, live)}
+    assert all(len(found) == 1 for found in theirs.values()), theirs
+    (dead,), (kept,) = theirs["killed"], theirs["live"]
+    killed.stop(signal.SIGKILL)
+    assert dead.exists()  # Fast DDS leaves it: nobody removes it after a kill
+    removed = dict(remove_dead_segments(min_age_s=0))
+    assert removed.get(str(dead), 0) > 0, removed
+    assert not dead.exists() and not dead.with_name(dead.name + "_el").exists()
+    assert kept.exists() and str(kept) not in removed
