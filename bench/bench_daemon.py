@@ -1,7 +1,7 @@
 """Daemon benchmark: ROS -> OpenIGTLink latency, throughput and CPU, each figure measured in
 the same run beside its baselines, every party in its own process.
 
-    .venv/bin/python bench/bench_daemon.py            # about 8 minutes
+    .venv/bin/python bench/bench_daemon.py            # about 9 minutes
     .venv/bin/python bench/bench_daemon.py --quick    # about 2 minutes, shorter phases
     .venv/bin/python bench/bench_daemon.py --only image --daemon-profile \
         bench/fastdds_reader_at_once.xml              # the daemon with a Fast DDS profile
@@ -31,7 +31,9 @@ the defaults, most frames lose fragments at the publisher and wait about 10 ms f
 resend, at each reader independently, so the per-message share there also measures which
 reader's resend came first; the second set-up shows the relay's own share without that.
 That race's size is measured too, in the same run: two plain subscribers, the second's
-receive minus the first's (the share row's floor column).
+receive minus the first's (the share row's floor column). With the defaults, a third daemon
+runs with ``--receive-priority 10`` (its DDS receive threads under SCHED_FIFO, so it is not
+the reader that waits; left out, and said so, where the system does not allow it).
 
 Each relay runs alone while it is measured. Every pose subscriber (floor, daemon, naive
 relay) keeps the last 5,000 messages (peers.POSE_DEPTH). CPU is the relay process's user +
@@ -62,6 +64,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "bench"))
 
+from bridge.ros import receive_priority  # noqa: E402
 from peers import POSE_DEPTH  # noqa: E402
 
 PEERS = REPO / "bench" / "peers.py"
@@ -72,6 +75,9 @@ IMAGE_TOPIC = "/bench_image"
 IMAGE_PUBLISHERS: dict[str, Optional[Path]] = {
     "Fast DDS defaults": None,
     "an 8 MB shared-memory segment": REPO / "bench" / "fastdds_image_publisher.xml"}
+# The image phase's daemon whose DDS receive threads run under SCHED_FIFO.
+RT_KIND = "bridge, --receive-priority"
+RECEIVE_PRIORITY = 10
 LINKS = 7
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 
@@ -168,15 +174,15 @@ class Relay:
     """The daemon or the naive relay: a process listening on a port."""
 
     def __init__(self, kind: str, topics: dict[str, str],
-                 daemon_profile: Optional[Path] = None) -> None:
+                 daemon_profile: Optional[Path] = None, daemon_args: tuple[str, ...] = ()) -> None:
         self.kind = kind
         self.port = free_port()
         if kind == "bridge":
             env = (None if daemon_profile is None
                    else {"FASTRTPS_DEFAULT_PROFILES_FILE": str(daemon_profile)})
             self.child = Child("daemon", [sys.executable, "-m", "bridge.cli", "run", "--port",
-                                          str(self.port), "--log-level", "INFO"], "listening on",
-                               env=env)
+                                          str(self.port), "--log-level", "INFO", *daemon_args],
+                               "listening on", env=env)
             threading.Thread(target=self._drain_output, daemon=True).start()
             from slicer_client.connection import Connection
 
@@ -511,12 +517,20 @@ def image_phase(args: argparse.Namespace, results: Results) -> None:
     for setup, profile in IMAGE_PUBLISHERS.items():
         env = {} if profile is None else {"FASTRTPS_DEFAULT_PROFILES_FILE": str(profile)}
         publisher = peer("image publisher", "publish", "image", IMAGE_TOPIC, env=env)
+        kinds: dict[str, tuple[str, ...]] = {"bridge": (), "naive": ()}
+        if profile is None:  # where the resend race is: the daemon that does not wait for it
+            if receive_priority.allowed(RECEIVE_PRIORITY):
+                kinds[RT_KIND] = ("--receive-priority", str(RECEIVE_PRIORITY))
+            else:
+                print(f"  (the daemon with --receive-priority {RECEIVE_PRIORITY} is left out: "
+                      f"SCHED_FIFO needs CAP_SYS_NICE or `ulimit -r` >= {RECEIVE_PRIORITY})")
         try:
             _floor_race(args, results, setup, publisher)
-            for kind in ("bridge", "naive"):
+            for kind, daemon_args in kinds.items():
                 floor = peer("rclpy floor", "floor", "image", IMAGE_TOPIC)
-                relay = Relay(kind, {"image": IMAGE_TOPIC, "pose": POSE_TOPIC},
-                              args.daemon_profile)
+                relay = Relay("naive" if kind == "naive" else "bridge",
+                              {"image": IMAGE_TOPIC, "pose": POSE_TOPIC}, args.daemon_profile,
+                              daemon_args)
                 readers = readers_for(relay.port, 1, v1=kind == "naive")
                 try:
                     reports, cpu, avg = run_phase(publisher, [*readers, floor], 30,
@@ -662,6 +676,13 @@ def table(results: Results, args: argparse.Namespace) -> str:
                          "subscriber's receive minus the first's): p50 / p99 (ms)", image,
                          lambda f: f"{ms(f.extra.get('share_p50', nan))} / "
                                    f"{ms(f.extra.get('share_p99', nan))}"))
+        rt = figures.get(RT_KIND)
+        if rt is not None:
+            rows.append(f"| … the daemon with --receive-priority {RECEIVE_PRIORITY} (its DDS "
+                        f"receive threads under SCHED_FIFO): publish() → last byte; its own "
+                        f"share: p50 / p99 (ms) | | {ms(rt.p50)} / {ms(rt.p99)}; "
+                        f"{ms(rt.extra.get('share_p50', nan))} / "
+                        f"{ms(rt.extra.get('share_p99', nan))} | |")
     if results.rss:
         rows.append(f"| relay process memory (RSS, MiB) | | {results.rss.get('bridge', 0):.0f} | "
                     f"{results.rss.get('naive', 0):.0f} |")

@@ -20,6 +20,7 @@ from bridge.interfaces import missing_runtime_line
 from protocol.auth import new_key_text
 from bridge.core.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_CLIENT,
                                   DEFAULT_MAX_CLIENTS)
+from bridge.ros.receive_priority import MAX_PRIORITY, MIN_PRIORITY
 from bridge.ros.ros_args import RosArgsError, apply_parameters, split_ros_args
 from bridge.ros.shm_locks import (MAX_STUCK_AFTER_S, MIN_STUCK_AFTER_S, STUCK_AFTER_S,
                                   release_stuck, remove_dead_segments, remove_unfinished)
@@ -160,6 +161,23 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
                         help="on SIGTERM/SIGINT/SIGHUP, exit after this long even if ROS's "
                              "teardown has not finished (logged); a second signal exits at "
                              f"once (default {DaemonConfig.stop_timeout_s:g})")
+    parser.add_argument("--receive-priority", type=_receive_priority, metavar="1-99",
+                        help="run the DDS receive threads under SCHED_FIFO at this priority: "
+                             "a message larger than the publisher's shared-memory segment "
+                             "(a VGA image with Fast DDS's defaults) then reaches the daemon "
+                             "without a resend's 10 ms, whatever else runs. Needs "
+                             "CAP_SYS_NICE or `ulimit -r` at least this high")
+
+
+def _receive_priority(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not MIN_PRIORITY <= value <= MAX_PRIORITY:
+        raise argparse.ArgumentTypeError(
+            f"expected a SCHED_FIFO priority from {MIN_PRIORITY} to {MAX_PRIORITY}, got {text!r}")
+    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -244,7 +262,8 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
                         package_paths=tuple(args.package_path), security=security,
                         limits=limits, frame_prefix=args.frame_prefix,
                         ros_args=tuple(getattr(args, "ros_args", ())),
-                        stop_timeout_s=args.stop_timeout, tls=tls)
+                        stop_timeout_s=args.stop_timeout, tls=tls,
+                        receive_priority=args.receive_priority)
 
 
 def _configure_logging(level: str) -> None:
@@ -399,7 +418,7 @@ def _shm_unlock(wait_s: float) -> int:
         print(f"released {name} (left taken by a ROS process that was killed)")
     dead = remove_dead_segments(wait_s)
     if dead:
-        print(f"removed {len(dead)} shared-memory segments of killed ROS processes "
+        print(f"removed {len(dead)} shared-memory segment(s) of killed ROS processes "
               f"({sum(size for _, size in dead) / 1e6:.1f} MB of RAM)")
     if not released and not removed and not dead:
         print("no Fast DDS port lock is left taken, no port segment unfinished, and no "

@@ -32,6 +32,7 @@ from bridge.markers.capability import MarkerBridges
 from bridge.parameters.capability import ParameterBridges
 from bridge.robots.capability import RobotBridges
 from bridge.types import InterfaceTypes
+from bridge.ros.receive_priority import ReceivePriorityError, raise_receive_threads
 from bridge.ros.ros_node import RosNode, RosOptions
 from bridge.ros.shm_ports import ShmPortWatch
 from bridge.services.capability import ServiceBridges
@@ -99,6 +100,15 @@ class Daemon:
                                    port=config.port, limits=config.limits,
                                    policy=policy, heavy=self.heavy, tls=config.tls)
 
+    @staticmethod
+    def _raise_receive_threads(priority: int) -> None:
+        try:
+            names = raise_receive_threads(priority)
+        except ReceivePriorityError as error:
+            raise StartupError(str(error)) from None
+        log.info("DDS receive threads under SCHED_FIFO at priority %d: %s", priority,
+                 ", ".join(names))
+
     async def start(self) -> None:
         try:
             # The port is bound first (one in use is the first error), but no client is
@@ -106,6 +116,8 @@ class Daemon:
             # them (own one, remove one, make one fail with another type).
             await self.server.start(serving=False)
             self.ros.start()
+            if self.config.receive_priority is not None:
+                self._raise_receive_threads(self.config.receive_priority)
             self.shm_ports.start()
             for command in self.config.startup:
                 try:

@@ -144,5 +144,5 @@ def release_left_locks() -> None:
                     "hung on it", name)
     dead = remove_dead_segments()
     if dead:
-        log.info("removed %d Fast DDS shared-memory segments of killed processes (%.1f MB "
+        log.info("removed %d Fast DDS shared-memory segment(s) of killed processes (%.1f MB "
                  "of RAM)", len(dead), sum(size for _, size in dead) / 1e6)

@@ -115,7 +115,7 @@ def test_the_command_releases_them(lock: str) -> None:
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert f"released {lock}" in done.stdout
-    assert re.search(r"removed \d+ shared-memory segments of killed ROS processes",
+    assert re.search(r"removed \d+ shared-memory segment\(s\) of killed ROS processes",
                      done.stdout), done.stdout
     assert not dead.exists() and not dead_lock.exists()
     assert value(lock) == 1
@@ -166,7 +166,7 @@ def test_a_running_daemon_releases_one_and_says_so(lock: str, processes: Process
         unfinished.unlink(missing_ok=True)
     before_ros = running.child.output().split("(OpenIGTLink); ROS node")[0]
     assert re.search(r"INFO bridge.ros.shm_ports: removed \d+ Fast DDS shared-memory "
-                     r"segments of killed processes", before_ros), before_ros
+                     r"segment\(s\) of killed processes", before_ros), before_ros
     assert not dead.exists()
     assert f"WARNING bridge.ros.shm_ports: released Fast DDS port lock {lock}" in before_ros
     assert value(lock) == 1

@@ -1,0 +1,76 @@
+"""`--receive-priority`: the daemon's DDS receive threads under SCHED_FIFO
+(bridge/ros/receive_priority.py), read back from the kernel; refused in one line where the
+system does not allow it. What it buys (a VGA image without Fast DDS's resend) is measured
+by bench/bench_daemon.py's image phase, not here."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bridge.ros.receive_priority import allowed
+from support import REPO, Processes, assert_clean_exit, start_daemon
+
+PRIORITY = 10
+
+
+def _threads(pid: int) -> dict[str, tuple[int, int]]:
+    """Each thread's name → (scheduling policy, real-time priority)."""
+    found = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        tid = int(task.name)
+        found[(task / "comm").read_text().strip()] = (os.sched_getscheduler(tid),
+                                                     os.sched_getparam(tid).sched_priority)
+    return found
+
+
+@pytest.mark.ros
+@pytest.mark.skipif(not allowed(PRIORITY),
+                    reason=f"SCHED_FIFO {PRIORITY} needs root, CAP_SYS_NICE or `ulimit -r` "
+                           f">= {PRIORITY} here")
+def test_the_receive_threads_run_under_sched_fifo_and_the_rest_as_before(
+        processes: Processes) -> None:
+    running = start_daemon(processes, "--receive-priority", str(PRIORITY))
+    threads = _threads(running.child.pid)
+    receive = {name: policy for name, policy in threads.items()
+               if re.fullmatch(r"dds\.(shm|udp)\.\d+", name)}
+    assert any(name.startswith("dds.shm.") for name in receive), threads
+    assert set(receive.values()) == {(os.SCHED_FIFO, PRIORITY)}, threads
+    others = {policy for name, policy in threads.items() if name not in receive}
+    assert others == {(os.SCHED_OTHER, 0)}, threads
+    said = re.search(r"DDS receive threads under SCHED_FIFO at priority 10: (.*)",
+                     running.child.output())
+    assert said and set(said.group(1).split(", ")) == set(receive), running.child.output()
+    assert_clean_exit(running)
+
+
+@pytest.mark.ros
+@pytest.mark.skipif(not (shutil.which("setpriv") and shutil.which("prlimit")),
+                    reason="needs util-linux's setpriv and prlimit to take the right away")
+def test_where_the_system_refuses_the_daemon_says_what_it_needs_in_one_line() -> None:
+    done = subprocess.run(["setpriv", "--bounding-set", "-sys_nice", "prlimit", "--rtprio=0",
+                           "--", sys.executable, "-m", "bridge.console", "run", "--port", "0",
+                           "--receive-priority", str(PRIORITY)],
+                          capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == (
+        f"slicer-ros2-bridge: --receive-priority {PRIORITY}: the system refused SCHED_FIFO "
+        f"priority {PRIORITY} (expected CAP_SYS_NICE, or an rtprio limit of at least "
+        f"{PRIORITY}: `ulimit -r` says 0; see /etc/security/limits.conf, or docker run "
+        f"--cap-add SYS_NICE)")
+    assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("given", ["0", "100", "-5", "ten", "1.5"])
+def test_a_priority_out_of_range_is_refused(given: str) -> None:
+    done = subprocess.run([sys.executable, "-m", "bridge.console", "run", "--receive-priority",
+                           given], capture_output=True, text=True, timeout=60, cwd=REPO)
+    assert done.returncode == 2
+    assert (f"argument --receive-priority: expected a SCHED_FIFO priority from 1 to 99, got "
+            f"{given!r}") in done.stderr
