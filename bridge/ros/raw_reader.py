@@ -6,7 +6,9 @@ thread of the daemon waiting about 20 ms (bench/attacks.py's tf_frames storm). A
 callback) and takes them with rcl's take, the lock released (the compiled
 `bridge.ros._rcl_reader`), and hands each to its topic's callback as a read-only view, valid
 during the call (`RawTopic`), or, for a `BatchTopic`, every message of that topic waiting at
-once, as one list: a burst costs one callback.
+once, as one list: a burst costs one callback. A `BatchTopic`'s native lane is run in the
+middleware's callback itself, on its thread, while the reader's thread waits (no thread
+wake per message); what the lane leaves to Python comes to the reader's thread, in order.
 
 The subscriptions are real ones on the given node (the ROS graph lists them), made outside
 rclpy's `Node.create_subscription`, so no executor waits on them too. `available()` says
@@ -82,8 +84,8 @@ class BatchTopic:
     qos: QoSProfile
     callback: Callable[[list[bytes]], None]
     # A native lane (bridge/core/native_stream.py's `PoseLane`) that takes the messages it
-    # can in the reader's thread, without the interpreter; the callback gets the rest, and
-    # an empty list when the lane asks to settle.
+    # can without the interpreter, in the middleware's callback or the reader's thread; the
+    # callback gets the rest, and an empty list when the lane asks to settle.
     native: Any = None
 
 
