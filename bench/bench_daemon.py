@@ -28,8 +28,9 @@ message in Python), then the same with one more client that stops reading for 5 
 Images (VGA rgb8 at 30 Hz) twice: from a publisher with Fast DDS's defaults, and from one
 whose shared-memory segment holds a whole frame (bench/fastdds_image_publisher.xml). With
 the defaults, most frames lose fragments at the publisher and wait about 10 ms for their
-resend, at each reader independently, so the per-message share there also measures which
-reader's resend came first; the second set-up shows the relay's own share without that.
+resend: on some machines at every reader alike, on others at each reader on its own, and
+then the per-message share there also measures which reader's resend came first (README,
+"Performance"); the second set-up shows the relay's own share without that.
 That race's size is measured too, in the same run: two plain subscribers, the second's
 receive minus the first's (the share row's floor column). With the defaults, a third daemon
 runs with ``--receive-priority 10`` (its DDS receive threads under SCHED_FIFO, so it is not
