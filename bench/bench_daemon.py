@@ -3,6 +3,7 @@ the same run beside its baselines, every party in its own process.
 
     .venv/bin/python bench/bench_daemon.py            # about 9 minutes
     .venv/bin/python bench/bench_daemon.py --quick    # about 2 minutes, shorter phases
+    .venv/bin/python bench/bench_daemon.py --only pose --busy 2   # beside 2 CPU-bound processes
     .venv/bin/python bench/bench_daemon.py --only image --daemon-profile \
         bench/fastdds_reader_at_once.xml              # the daemon with a Fast DDS profile
 
@@ -716,6 +717,9 @@ def main() -> int:
     parser.add_argument("--only", choices=("pose", "isolation", "tf", "image"),
                         action="append",
                         help="run only these phases (repeatable)")
+    parser.add_argument("--busy", type=int, default=0, metavar="N",
+                        help="keep N CPU-bound processes running beside the bench, as a "
+                             "workstation that renders or compiles (a busy machine)")
     parser.add_argument("--daemon-profile", type=Path, metavar="XML",
                         help="a Fast DDS profiles file that the daemon alone loads "
                              "(FASTRTPS_DEFAULT_PROFILES_FILE), such as "
@@ -724,6 +728,8 @@ def main() -> int:
     if args.daemon_profile is not None and not args.daemon_profile.is_file():
         parser.error(f"--daemon-profile: expected a Fast DDS profiles file, got "
                      f"{args.daemon_profile} (no such file)")
+    if args.busy < 0:
+        parser.error(f"--busy: expected 0 or more processes, got {args.busy}")
     args.daemon_profile = args.daemon_profile and args.daemon_profile.resolve()
     args.seconds = 2.0 if args.quick else 5.0
     args.burst_seconds = 3.0 if args.quick else 10.0
@@ -734,17 +740,25 @@ def main() -> int:
     phases = args.only or ["pose", "isolation", "tf", "image"]
     print(f"{os.cpu_count()} CPUs, load {load()} at the start; "
           f"{'quick' if args.quick else 'full'} run"
-          + (f"; the daemon loads {args.daemon_profile}" if args.daemon_profile else ""),
+          + (f"; the daemon loads {args.daemon_profile}" if args.daemon_profile else "")
+          + (f"; {args.busy} CPU-bound processes beside it" if args.busy else ""),
           flush=True)
     results = Results()
-    if "pose" in phases:
-        pose_phases(args, results)
-    if "isolation" in phases:
-        isolation_phase(args, results)
-    if "tf" in phases:
-        tf_phase(args, results)
-    if "image" in phases:
-        image_phase(args, results)
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
+            for _ in range(args.busy)]
+    try:
+        if "pose" in phases:
+            pose_phases(args, results)
+        if "isolation" in phases:
+            isolation_phase(args, results)
+        if "tf" in phases:
+            tf_phase(args, results)
+        if "image" in phases:
+            image_phase(args, results)
+    finally:
+        for hog in hogs:
+            hog.kill()
+            hog.wait()
     print()
     print(table(results, args))
     print()

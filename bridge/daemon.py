@@ -32,7 +32,8 @@ from bridge.markers.capability import MarkerBridges
 from bridge.parameters.capability import ParameterBridges
 from bridge.robots.capability import RobotBridges
 from bridge.types import InterfaceTypes
-from bridge.ros.receive_priority import ReceivePriorityError, raise_receive_threads
+from bridge.ros.receive_priority import (RECEIVE_SLICE_NS, ReceivePriorityError,
+                                         raise_receive_threads, shorten_receive_slices)
 from bridge.ros.ros_node import RosNode, RosOptions
 from bridge.ros.shm_ports import ShmPortWatch
 from bridge.services.capability import ServiceBridges
@@ -109,6 +110,16 @@ class Daemon:
         log.info("DDS receive threads under SCHED_FIFO at priority %d: %s", priority,
                  ", ".join(names))
 
+    @staticmethod
+    def _shorten_receive_slices() -> None:
+        names = shorten_receive_slices()
+        if names:
+            log.info("DDS receive threads on a %.1f ms scheduler slice: %s",
+                     RECEIVE_SLICE_NS / 1e6, ", ".join(names))
+        else:
+            log.info("DDS receive threads on the kernel's usual slice (a shorter one needs "
+                     "Linux 6.12 or later)")
+
     async def start(self) -> None:
         try:
             # The port is bound first (one in use is the first error), but no client is
@@ -118,6 +129,8 @@ class Daemon:
             self.ros.start()
             if self.config.receive_priority is not None:
                 self._raise_receive_threads(self.config.receive_priority)
+            else:
+                self._shorten_receive_slices()
             self.shm_ports.start()
             for command in self.config.startup:
                 try:

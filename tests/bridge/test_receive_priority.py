@@ -1,11 +1,13 @@
-"""`--receive-priority`: the daemon's DDS receive threads under SCHED_FIFO
-(bridge/ros/receive_priority.py), read back from the kernel; refused in one line where the
-system does not allow it. What it buys (a VGA image without Fast DDS's resend) is measured
-by bench/bench_daemon.py's image phase, not here."""
+"""How the daemon's DDS receive threads are scheduled (bridge/ros/receive_priority.py),
+read back from the kernel: a short slice by default, SCHED_FIFO with `--receive-priority`,
+which is refused in one line where the system does not allow it. What each buys (a pose on
+a busy machine, a VGA image without Fast DDS's resend) is measured by
+bench/bench_daemon.py (`--busy 2`, the image phase), not here."""
 
 from __future__ import annotations
 
 import os
+import platform
 import re
 import shutil
 import subprocess
@@ -14,10 +16,16 @@ from pathlib import Path
 
 import pytest
 
-from bridge.ros.receive_priority import allowed
+from bridge.ros.receive_priority import RECEIVE_SLICE_NS, allowed, thread_slice_ns
 from support import REPO, Processes, assert_clean_exit, start_daemon
 
 PRIORITY = 10
+RECEIVE_THREAD = re.compile(r"dds\.(shm|udp)\.\d+")
+
+
+def _kernel_at_least(major: int, minor: int) -> bool:
+    found = re.match(r"(\d+)\.(\d+)", platform.release())
+    return found is not None and (int(found.group(1)), int(found.group(2))) >= (major, minor)
 
 
 def _threads(pid: int) -> dict[str, tuple[int, int]]:
@@ -39,12 +47,34 @@ def test_the_receive_threads_run_under_sched_fifo_and_the_rest_as_before(
     running = start_daemon(processes, "--receive-priority", str(PRIORITY))
     threads = _threads(running.child.pid)
     receive = {name: policy for name, policy in threads.items()
-               if re.fullmatch(r"dds\.(shm|udp)\.\d+", name)}
+               if RECEIVE_THREAD.fullmatch(name)}
     assert any(name.startswith("dds.shm.") for name in receive), threads
     assert set(receive.values()) == {(os.SCHED_FIFO, PRIORITY)}, threads
     others = {policy for name, policy in threads.items() if name not in receive}
     assert others == {(os.SCHED_OTHER, 0)}, threads
     said = re.search(r"DDS receive threads under SCHED_FIFO at priority 10: (.*)",
+                     running.child.output())
+    assert said and set(said.group(1).split(", ")) == set(receive), running.child.output()
+    assert_clean_exit(running)
+
+
+@pytest.mark.ros
+@pytest.mark.skipif(not _kernel_at_least(6, 12),
+                    reason=f"an ordinary thread's own slice needs Linux 6.12 or later, this is "
+                           f"{platform.release()}")
+def test_by_default_the_receive_threads_ask_for_a_short_slice_and_the_rest_keep_theirs(
+        processes: Processes) -> None:
+    running = start_daemon(processes)
+    slices = {}
+    for task in Path(f"/proc/{running.child.pid}/task").iterdir():
+        slices.setdefault((task / "comm").read_text().strip(), set()).add(
+            thread_slice_ns(int(task.name)))
+    receive = {name: got for name, got in slices.items() if RECEIVE_THREAD.fullmatch(name)}
+    assert any(name.startswith("dds.shm.") for name in receive), slices
+    assert set().union(*receive.values()) == {RECEIVE_SLICE_NS}, slices
+    others = set().union(*(got for name, got in slices.items() if name not in receive))
+    assert others and RECEIVE_SLICE_NS not in others, slices
+    said = re.search(r"DDS receive threads on a 0\.1 ms scheduler slice: (.*)",
                      running.child.output())
     assert said and set(said.group(1).split(", ")) == set(receive), running.child.output()
     assert_clean_exit(running)
