@@ -102,23 +102,21 @@ class Daemon:
                                    policy=policy, heavy=self.heavy, tls=config.tls)
 
     @staticmethod
-    def _raise_receive_threads(priority: int) -> None:
+    def _schedule_receive_threads(priority: Optional[int]) -> str:
+        """SCHED_FIFO at ``priority``, else a short slice; what to log once the daemon is up
+        (a start that fails says its error alone)."""
+        if priority is None:
+            names = shorten_receive_slices()
+            if not names:
+                return ("DDS receive threads on the kernel's usual slice (a shorter one needs "
+                        "Linux 6.12 or later)")
+            return (f"DDS receive threads on a {RECEIVE_SLICE_NS / 1e6:.1f} ms scheduler "
+                    f"slice: {', '.join(names)}")
         try:
             names = raise_receive_threads(priority)
         except ReceivePriorityError as error:
             raise StartupError(str(error)) from None
-        log.info("DDS receive threads under SCHED_FIFO at priority %d: %s", priority,
-                 ", ".join(names))
-
-    @staticmethod
-    def _shorten_receive_slices() -> None:
-        names = shorten_receive_slices()
-        if names:
-            log.info("DDS receive threads on a %.1f ms scheduler slice: %s",
-                     RECEIVE_SLICE_NS / 1e6, ", ".join(names))
-        else:
-            log.info("DDS receive threads on the kernel's usual slice (a shorter one needs "
-                     "Linux 6.12 or later)")
+        return f"DDS receive threads under SCHED_FIFO at priority {priority}: {', '.join(names)}"
 
     async def start(self) -> None:
         try:
@@ -127,10 +125,7 @@ class Daemon:
             # them (own one, remove one, make one fail with another type).
             await self.server.start(serving=False)
             self.ros.start()
-            if self.config.receive_priority is not None:
-                self._raise_receive_threads(self.config.receive_priority)
-            else:
-                self._shorten_receive_slices()
+            scheduling = self._schedule_receive_threads(self.config.receive_priority)
             self.shm_ports.start()
             for command in self.config.startup:
                 try:
@@ -141,6 +136,7 @@ class Daemon:
         except BaseException:
             await self.stop()
             raise
+        log.info("%s", scheduling)
         log.info("listening on %s:%d (OpenIGTLink); ROS node %s", self.config.host,
                  self.server.port, self.ros.fully_qualified_name)
         if self.config.tls is not None:
