@@ -16,6 +16,9 @@ time of each message's last byte; and the baselines:
   process; its latency is the ROS hop alone, its CPU what one plain subscriber costs;
 * the naive relay (bench/naive_relay.py): pyigtl's server + rclpy, what a Python user would
   write. pyigtl's server serves one client at a time, so it has no multi-client figures;
+* for 8 and 32 clients, the pose fan-out floor (bench/fanout_relay.py): a bare subscriber
+  that writes the same bytes to each client, one after another, and nothing else. What
+  any relay gets with that many clients, on this machine at this load;
 * for the tf phase, the fan-out floor (bench/bench_fanout_floor.py, run right after it): a
   bare EventsExecutor subscriber of the same /tf writing the same bytes to 8 clients, with
   no tf work. The daemon's figure minus it is what its tf work costs.
@@ -41,6 +44,9 @@ Each relay runs alone while it is measured. Every pose subscriber (floor, daemon
 relay) keeps the last 5,000 messages (peers.POSE_DEPTH). CPU is the relay process's user +
 system time (/proc/PID/stat) over the phase, as a share of one core; "per kHz" divides it by the
 message rate in thousands of messages a second (so it is the cost of 1,000 msg/s).
+A raw reader also reports when each message reached its socket (the kernel's receive
+time, SO_TIMESTAMPNS): the table gives that p99 beside the multi-client rows ("in the
+sockets"), the relay's latency before the readers' own scheduling adds to it.
 Latency figures depend on the machine's load, CPU time much less: the load average is
 printed with every phase. The table at the end is the one in README.md ("Performance").
 """
@@ -195,6 +201,13 @@ class Relay:
                     self.devices[name] = setup.command("create_subscriber", {
                         "topic": topic, "type": ros_type,
                         "qos": {"depth": POSE_DEPTH if name == "pose" else 10}})["device"]
+        elif kind == "fanout":
+            self.child = Child("fan-out floor", [sys.executable, str(REPO / "bench" /
+                                                                    "fanout_relay.py"),
+                                                 str(self.port), topics["pose"],
+                                                 str(POSE_DEPTH)])
+            threading.Thread(target=self._drain_output, daemon=True).start()
+            self.devices = {"pose": "bench_pose"}
         else:
             self.child = Child("naive relay", [sys.executable, str(REPO / "bench" /
                                                                     "naive_relay.py"),
@@ -310,6 +323,10 @@ def figure_from(reports: list[dict[str, Any]], sent: int, rate: float, cpu: floa
         fig.p99 = max(latencies["p99"])
         fig.max = max(latencies["max"])
         fig.per_second = streams[0]["per_second"]
+        queued = [s for s in streams if "queued_p99" in s]
+        if len(queued) == len(streams):  # a raw reader's: when its socket had the bytes
+            fig.extra["queued_p50"] = sorted(s["queued_p50"] for s in queued)[len(queued) // 2]
+            fig.extra["queued_p99"] = max(s["queued_p99"] for s in queued)
     return fig
 
 
@@ -341,6 +358,7 @@ def stop_all(children: list[Child]) -> None:
 class Results:
     pose: dict[str, Figure] = field(default_factory=dict)
     clients: dict[int, Figure] = field(default_factory=dict)
+    clients_floor: dict[int, Figure] = field(default_factory=dict)  # bench/fanout_relay.py
     burst: dict[str, Figure] = field(default_factory=dict)
     bursty: dict[str, Figure] = field(default_factory=dict)  # bursts of BURST, same rate
     isolation: dict[str, Figure] = field(default_factory=dict)  # "facade", "stopped"
@@ -392,7 +410,7 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
                 finally:
                     stop_all(readers)
                 if kind == "bridge":
-                    for clients in (8, 32):
+                    for clients in MANY_CLIENTS:
                         readers = readers_for(relay.port, clients)
                         try:
                             reports, cpu, avg = run_phase(publisher, readers, args.rate,
@@ -406,8 +424,27 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
                 results.rss[kind] = relay.child.rss_mib()
             finally:
                 relay.stop()
+        # The same clients' floor: a bare subscriber writing the same bytes to each.
+        relay = Relay("fanout", {"pose": POSE_TOPIC})
+        try:
+            for clients in MANY_CLIENTS:
+                readers = readers_for(relay.port, clients)
+                try:
+                    reports, cpu, avg = run_phase(publisher, readers, args.rate, args.seconds,
+                                                  relay.child, 1)
+                    results.clients_floor[clients] = figure_from(
+                        reports, int(args.rate * args.seconds), args.rate, cpu, avg)
+                    print_progress(f"fan-out floor, pose {clients} clients",
+                                   results.clients_floor[clients])
+                finally:
+                    stop_all(readers)
+        finally:
+            relay.stop()
     finally:
         publisher.stop()
+
+
+MANY_CLIENTS = (8, 32)
 
 
 BURST = 10  # messages back to back, as a driver that batches sends them
@@ -596,6 +633,9 @@ def print_progress(what: str, fig: Figure) -> None:
     print(f"  {what:<34} delivered {fig.delivered_text():<24} p50 {fig.p50:7.3f} ms  "
           f"p99 {fig.p99:7.3f} ms  CPU {fig.cpu * 100:5.1f}% of a core  (load {fig.load})",
           flush=True)
+    if "queued_p99" in fig.extra:
+        print(f"  {'':<34} in the clients' sockets: p50 {fig.extra['queued_p50']:7.3f} ms  "
+              f"p99 {fig.extra['queued_p99']:7.3f} ms", flush=True)
     if len(fig.per_second) > 1:
         print(f"  {'':<34} p50 of each second (ms): "
               + " ".join(f"{v:.2f}" for v in fig.per_second), flush=True)
@@ -619,6 +659,15 @@ def lag(fig: Figure) -> str:
     return f"{ms(fig.per_second[0])} → {ms(fig.per_second[-1])}"
 
 
+def latencies(fig: Figure) -> str:
+    """p50 / p99, and where a raw reader measured it, the p99 to its socket (before its
+    own scheduling)."""
+    text = f"{ms(fig.p50)} / {ms(fig.p99)}"
+    if "queued_p99" in fig.extra:
+        text += f" (in the sockets: {ms(fig.extra['queued_p99'])})"
+    return text
+
+
 def _row(label: str, figures: tuple[Figure, ...], cell: Any) -> str:
     return f"| {label} | " + " | ".join(cell(f) if f.rate else "" for f in figures) + " |"
 
@@ -633,8 +682,10 @@ def table(results: Results, args: argparse.Namespace) -> str:
     rows.append(_row("… process CPU (share of one core)", pose, lambda f: pct(f.cpu)))
     for clients, fig in sorted(results.clients.items()):
         rows.append(_row(f"PoseStamped at {rate} → {clients} clients: delivered; p50 / p99 "
-                         "(ms); CPU", (Figure(), fig),
-                         lambda f: f"{f.delivered_text()}; {ms(f.p50)} / {ms(f.p99)}; "
+                         "(ms); CPU (floor: bench/fanout_relay.py, a bare subscriber writing "
+                         "the same bytes to each)", (results.clients_floor.get(clients, Figure()),
+                                                     fig),
+                         lambda f: f"{f.delivered_text()}; {latencies(f)}; "
                                    f"{pct(f.cpu)}") + " (serves one client) |")
     burst = tuple(results.burst.get(k, Figure()) for k in ("floor", "bridge", "naive"))
     rows.append(_row(f"{args.burst_rate:,.0f} PoseStamped/s for {args.burst_seconds:g} s → "
@@ -653,8 +704,8 @@ def table(results: Results, args: argparse.Namespace) -> str:
         fig = results.isolation.get(key)
         if fig is not None:
             rows.append(f"| PoseStamped at {rate} → {what}: the raw clients' delivered; "
-                        f"p50 / p99 (ms); CPU | | {fig.delivered_text()}; {ms(fig.p50)} / "
-                        f"{ms(fig.p99)}; {pct(fig.cpu)} | |")
+                        f"p50 / p99 (ms); CPU | | {fig.delivered_text()}; {latencies(fig)}; "
+                        f"{pct(fig.cpu)} | |")
     if results.resumed:
         rows.append(f"| … the stopped client, reading again | | {resumed_text(results)} | |")
     if results.tf is not None:

@@ -32,6 +32,11 @@ Latency is ``arrival - stamp`` in one host clock (``time.time_ns``). The reader 
 arrival time when `recv` returns the chunk that completes a message: for an image, its
 last byte. It parses only the 58-byte OpenIGTLink header (timestamp, body size), so its
 own cost is the same whichever relay it reads.
+
+The reader also asks the kernel when that chunk's last segment reached its socket
+(SO_TIMESTAMPNS): ``queued - stamp`` is the latency before the reader's own scheduling,
+which on a busy machine is much of the rest (reported as ``queued_p50`` / ``queued_p99``).
+For a chunk that holds several messages, each gets the last segment's time: never early.
 """
 
 from __future__ import annotations
@@ -55,6 +60,11 @@ _HEADER = struct.Struct(">H12s20sQQQ")
 # next heartbeat, ~0.1 s) does not overflow the history of any of them.
 POSE_DEPTH = 5000
 _NS = 1_000_000_000
+# <asm-generic/socket.h> (x86_64 and aarch64 alike); the socket module does not name it.
+# The kernel then hands each recvmsg the time its last segment arrived (a timespec).
+_SO_TIMESTAMPNS = 35
+_TIMESPEC = struct.Struct("@qq")
+_ANCILLARY_SIZE = socket.CMSG_SPACE(_TIMESPEC.size)
 
 
 def _stamp_ns(igtl_timestamp: int) -> int:
@@ -73,6 +83,8 @@ class Recorder:
         with getattr(self, "lock", threading.Lock()):
             # stream -> list of (arrival_ns, stamp_ns)
             self.samples: dict[str, list[tuple[int, int]]] = {}
+            # stream -> latencies (ms) to the reader's socket, where the kernel said
+            self.queued: dict[str, list[float]] = {}
             # Messages published before the reset (a warm-up's, a reliable retransmission
             # after discovery) are not part of what is measured next.
             self.since = time.time_ns()
@@ -82,13 +94,16 @@ class Recorder:
             self.read_since_resume = 0  # bytes
             self.after_resume: list[tuple[int, int]] = []  # (arrival, stamp), all streams
 
-    def add(self, stream: str, arrival_ns: int, stamp_ns: int) -> None:
+    def add(self, stream: str, arrival_ns: int, stamp_ns: int, queued_ns: int = 0) -> None:
         if stamp_ns < self.since:
             return
         samples = self.samples.get(stream)
         if samples is None:
             samples = self.samples[stream] = []
+            self.queued[stream] = []
         samples.append((arrival_ns, stamp_ns))
+        if queued_ns:
+            self.queued[stream].append((queued_ns - stamp_ns) / 1e6)
         if self.resumed_at and arrival_ns >= self.resumed_at:
             self.after_resume.append((arrival_ns, stamp_ns))
 
@@ -97,6 +112,7 @@ class Recorder:
         each second (lag over time); all streams together as "all"."""
         with self.lock:
             streams = {name: list(values) for name, values in self.samples.items()}
+            queued = {name: list(values) for name, values in self.queued.items()}
         out: dict[str, Any] = {"streams": {}}
         every: list[float] = []
         for name, values in streams.items():
@@ -106,6 +122,10 @@ class Recorder:
             disorder = sum(1 for x, y in zip(stamps, stamps[1:]) if y <= x)
             out["streams"][name] = {"n": len(values), "out_of_order": disorder,
                                     **_percentiles(latencies), "per_second": _per_second(values)}
+            if queued.get(name):
+                in_socket = _percentiles(queued[name])
+                out["streams"][name].update(queued_p50=in_socket["p50"],
+                                            queued_p99=in_socket["p99"])
             if len(values) <= 2000:  # few (images): each one, to match with another party
                 out["streams"][name]["arrivals"] = [[s, a] for a, s in values]
         out["all"] = _percentiles(every)
@@ -186,6 +206,7 @@ def read(port: int, clients: int, setup: list[dict[str, Any]], v2: bool) -> None
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         if v2:  # as 3D Slicer does: a STATUS in header v2 at once, then v2 with metadata
             sock.sendall(encode(Message("", Status(text="bench reader")), header_version=2))
+        sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
         sock.setblocking(False)
         selector.register(sock, selectors.EVENT_READ, [index, bytearray()])
     stop = threading.Event()
@@ -219,10 +240,16 @@ def read(port: int, clients: int, setup: list[dict[str, Any]], v2: bool) -> None
         for key, _ in selector.select(timeout=0.2):
             index, buffer = key.data
             try:
-                chunk = key.fileobj.recv(1 << 20)  # type: ignore[union-attr]
+                chunk, ancillary, _, _ = key.fileobj.recvmsg(  # type: ignore[union-attr]
+                    1 << 20, _ANCILLARY_SIZE)
             except BlockingIOError:
                 continue
             arrival = time.time_ns()
+            queued = 0  # none for the first segments: the kernel turns timestamps on lazily
+            for level, kind, data in ancillary:
+                if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS:
+                    seconds, nanoseconds = _TIMESPEC.unpack_from(data)
+                    queued = seconds * _NS + nanoseconds
             if not chunk:
                 selector.unregister(key.fileobj)
                 continue
@@ -237,7 +264,7 @@ def read(port: int, clients: int, setup: list[dict[str, Any]], v2: bool) -> None
                     offset = end
                     if stamp and type_raw[:5] in (b"TRANS", b"IMAGE"):
                         name = name_raw.rstrip(b"\0").decode()
-                        recorder.add(f"{index}:{name}", arrival, _stamp_ns(stamp))
+                        recorder.add(f"{index}:{name}", arrival, _stamp_ns(stamp), queued)
                         if recorder.resumed_at and arrival >= recorder.resumed_at:
                             recorder.read_since_resume += header_size + size
                             if recorder.read_since_resume <= recorder.held_at_resume:
