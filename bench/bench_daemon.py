@@ -410,34 +410,14 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
                 finally:
                     stop_all(readers)
                 if kind == "bridge":
-                    for clients in MANY_CLIENTS:
-                        readers = readers_for(relay.port, clients)
-                        try:
-                            reports, cpu, avg = run_phase(publisher, readers, args.rate,
-                                                          args.seconds, relay.child, 1)
-                            results.clients[clients] = figure_from(
-                                reports, int(args.rate * args.seconds), args.rate, cpu, avg)
-                            print_progress(f"bridge, pose {clients} clients",
-                                           results.clients[clients])
-                        finally:
-                            stop_all(readers)
+                    many_clients(args, publisher, relay, "bridge", results.clients)
                 results.rss[kind] = relay.child.rss_mib()
             finally:
                 relay.stop()
         # The same clients' floor: a bare subscriber writing the same bytes to each.
         relay = Relay("fanout", {"pose": POSE_TOPIC})
         try:
-            for clients in MANY_CLIENTS:
-                readers = readers_for(relay.port, clients)
-                try:
-                    reports, cpu, avg = run_phase(publisher, readers, args.rate, args.seconds,
-                                                  relay.child, 1)
-                    results.clients_floor[clients] = figure_from(
-                        reports, int(args.rate * args.seconds), args.rate, cpu, avg)
-                    print_progress(f"fan-out floor, pose {clients} clients",
-                                   results.clients_floor[clients])
-                finally:
-                    stop_all(readers)
+            many_clients(args, publisher, relay, "fan-out floor", results.clients_floor)
         finally:
             relay.stop()
     finally:
@@ -445,6 +425,21 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
 
 
 MANY_CLIENTS = (8, 32)
+
+
+def many_clients(args: argparse.Namespace, publisher: Child, relay: Relay, name: str,
+                 figures: dict[int, Figure]) -> None:
+    """The pose stream at `args.rate` to each of MANY_CLIENTS raw clients of `relay`."""
+    for clients in MANY_CLIENTS:
+        readers = readers_for(relay.port, clients)
+        try:
+            reports, cpu, avg = run_phase(publisher, readers, args.rate, args.seconds,
+                                          relay.child, 1)
+            figures[clients] = figure_from(reports, int(args.rate * args.seconds), args.rate,
+                                           cpu, avg)
+            print_progress(f"{name}, pose {clients} clients", figures[clients])
+        finally:
+            stop_all(readers)
 
 
 BURST = 10  # messages back to back, as a driver that batches sends them
