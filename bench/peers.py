@@ -34,9 +34,10 @@ last byte. It parses only the 58-byte OpenIGTLink header (timestamp, body size),
 own cost is the same whichever relay it reads.
 
 The reader also asks the kernel when that chunk's last segment reached its socket
-(SO_TIMESTAMPNS): ``queued - stamp`` is the latency before the reader's own scheduling,
-which on a busy machine is much of the rest (reported as ``queued_p50`` / ``queued_p99``).
-For a chunk that holds several messages, each gets the last segment's time: never early.
+(SO_TIMESTAMPNS): ``queued - stamp`` is the latency before the reader's own scheduling adds
+to it (reported as ``queued_p50`` / ``queued_p99``). For a chunk that holds several
+messages, each gets the last segment's time, and the kernel merges segments that wait for a
+late reader, giving them the last one's time: never early, but late where the reader is.
 """
 
 from __future__ import annotations
