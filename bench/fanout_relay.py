@@ -35,7 +35,7 @@ from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rclpy.executors import ExternalShutdownException  # noqa: E402
 from rclpy.experimental import EventsExecutor  # noqa: E402
 
-from protocol.conversions import igtl_timestamp_from_ros  # noqa: E402
+from protocol.conversions import ConversionError, igtl_timestamp_from_ros  # noqa: E402
 from protocol.framing import encode  # noqa: E402
 from protocol.messages import Message, Transform  # noqa: E402
 
@@ -88,8 +88,14 @@ def main() -> None:
     node = rclpy.create_node("fanout_relay")
 
     def on_pose(data: bytes) -> None:
-        sec, nanosec = _STAMP.unpack_from(data, _STAMP_AT)
-        _TIMESTAMP.pack_into(frame, _TIMESTAMP_AT, igtl_timestamp_from_ros(sec, nanosec))
+        try:
+            sec, nanosec = _STAMP.unpack_from(data, _STAMP_AT)
+            stamp = igtl_timestamp_from_ros(sec, nanosec)
+        except (struct.error, ConversionError) as error:  # too short, or stamp out of range
+            print(f"fanout_relay: a message it cannot stamp, dropped: {error}",
+                  file=sys.stderr, flush=True)
+            return
+        _TIMESTAMP.pack_into(frame, _TIMESTAMP_AT, stamp)
         for client in clients.sockets:
             try:
                 client.sendall(frame)
