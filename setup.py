@@ -36,6 +36,7 @@ def compiled_modules() -> list:
                       extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
     # The native lane of streamed poses (bridge/core/_native_stream.pyx): same rule.
     lane = Extension("bridge.core._native_stream", ["bridge/core/_native_stream.pyx"],
+                     depends=["bridge/core/send_batch.h"],
                      extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
     return cythonize([store, lane, *rcl_reader()], quiet=True)
 

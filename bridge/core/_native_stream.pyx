@@ -40,7 +40,7 @@ from posix.uio cimport iovec
 
 # Bump with the wrappers' expectation (bridge/core/native_stream.py): an older build is
 # not used.
-INTERFACE = 3
+INTERFACE = 4
 
 cdef enum:
     # What a lane's handler returns to the reader.
@@ -86,6 +86,17 @@ cdef extern from "<sys/socket.h>" nogil:
     enum:
         MSG_DONTWAIT
         MSG_NOSIGNAL
+
+
+# One system call for a message's writes to every client, where io_uring is there
+# (bridge/core/send_batch.h says why).
+cdef extern from "send_batch.h" nogil:
+    ctypedef struct send_batch_t:
+        int ring_fd
+    int send_batch_open(send_batch_t *b)
+    void send_batch_close(send_batch_t *b)
+    int send_batch_run(send_batch_t *b, int count, const int *fds, msghdr *messages,
+                       int *results)
 
 
 # --- CRC-64 as OpenIGTLink uses it (protocol/crc64.py: ECMA-182, init 0, no reflection) ---
@@ -201,15 +212,20 @@ cdef int _send(SlotState *slot, const uint8_t *data, size_t n) noexcept nogil:
     return _send_parts(slot, &part, 1, n)
 
 
+cdef inline bint _writable(SlotState *slot) noexcept nogil:
+    """Whether a frame may be written to the slot now (held); closes it if not."""
+    if slot.fd < 0 or slot.stash != NULL:
+        slot.open = False
+        return False
+    return True
+
+
 cdef int _send_parts(SlotState *slot, iovec *parts, int count, size_t n) noexcept nogil:
     """Write a whole frame (``count`` parts, ``n`` bytes) now or keep its rest; the slot is
     held. A slot that could not take it whole is closed."""
     cdef ssize_t sent
     cdef msghdr message
-    cdef size_t skip, at, take
-    cdef int i
-    if slot.fd < 0 or slot.stash != NULL:
-        slot.open = False
+    if not _writable(slot):
         return C_REFUSED
     memset(&message, 0, sizeof(message))
     message.msg_iov = parts
@@ -218,6 +234,15 @@ cdef int _send_parts(SlotState *slot, iovec *parts, int count, size_t n) noexcep
         sent = sendmsg(slot.fd, &message, MSG_DONTWAIT | MSG_NOSIGNAL)
         if sent >= 0 or errno != EINTR:
             break
+    return _settle(slot, parts, count, n, sent, errno if sent < 0 else 0)
+
+
+cdef int _settle(SlotState *slot, iovec *parts, int count, size_t n, ssize_t sent,
+                 int error) noexcept nogil:
+    """What a write of ``sent`` bytes (negative: it failed with ``error``) of a frame left:
+    SENT, or the slot closed and its rest kept (STASHED), or nothing sent."""
+    cdef size_t skip, at, take
+    cdef int i
     if sent == <ssize_t>n:
         slot.sent += 1
         return C_SENT
@@ -239,7 +264,7 @@ cdef int _send_parts(SlotState *slot, iovec *parts, int count, size_t n) noexcep
         slot.stash_size = n - <size_t>sent
         slot.sent += 1
         return C_STASHED
-    if sent == 0 or errno == EAGAIN:  # EWOULDBLOCK is EAGAIN on Linux
+    if sent == 0 or error == EAGAIN:  # EWOULDBLOCK is EAGAIN on Linux
         return C_REFUSED
     return C_BROKEN
 
@@ -396,6 +421,13 @@ cdef struct FanoutState:
     SlotState **slots
     Py_ssize_t count
     int64_t clock_modulus
+    send_batch_t batch  # ring_fd -1: one write at a time
+    # Per client, for a batch: what is written where, and what each write did.
+    int *fds
+    Py_ssize_t *staged  # the slot of each write
+    iovec *parts
+    msghdr *messages
+    int *sent
 
 
 cdef inline int64_t _clock_ms(FanoutState *fanout) noexcept nogil:
@@ -411,7 +443,7 @@ cdef class Fanout(_Held):
     cdef FanoutState *state
     cdef list _slots
 
-    def __cinit__(self, long long clock_modulus):
+    def __cinit__(self, long long clock_modulus, bint batch=True):
         import sys
         if sys.byteorder != "little":
             raise RuntimeError("the native lane reads CDR as a little-endian machine")
@@ -426,11 +458,25 @@ cdef class Fanout(_Held):
         self.state.slots = NULL
         self.state.count = 0
         self.state.clock_modulus = clock_modulus
+        self.state.fds = NULL
+        self.state.staged = NULL
+        self.state.parts = NULL
+        self.state.messages = NULL
+        self.state.sent = NULL
+        self.state.batch.ring_fd = -1
+        if batch:
+            send_batch_open(&self.state.batch)  # else, or if it fails: one at a time
         self._slots = []
 
     def __dealloc__(self):
         if self.state != NULL:
+            send_batch_close(&self.state.batch)
             free(self.state.slots)
+            free(self.state.fds)
+            free(self.state.staged)
+            free(self.state.parts)
+            free(self.state.messages)
+            free(self.state.sent)
             pthread_mutex_destroy(&self.state.lock)
             free(self.state)
             self.state = NULL
@@ -442,6 +488,11 @@ cdef class Fanout(_Held):
     @hold.setter
     def hold(self, bint value):  # set while holding the fanout
         self.state.hold = value
+
+    @property
+    def batched(self):
+        """Whether a message's writes to every client go in one system call (io_uring)."""
+        return self.state.batch.ring_fd >= 0
 
     @property
     def slots(self):
@@ -457,6 +508,28 @@ cdef class Fanout(_Held):
         if array == NULL:
             raise MemoryError()
         self.state.slots = array
+        cdef size_t room = <size_t>max(n, 1)
+        cdef void *grown
+        grown = realloc(self.state.fds, room * sizeof(int))
+        if grown == NULL:
+            raise MemoryError()
+        self.state.fds = <int *>grown
+        grown = realloc(self.state.staged, room * sizeof(Py_ssize_t))
+        if grown == NULL:
+            raise MemoryError()
+        self.state.staged = <Py_ssize_t *>grown
+        grown = realloc(self.state.parts, room * sizeof(iovec))
+        if grown == NULL:
+            raise MemoryError()
+        self.state.parts = <iovec *>grown
+        grown = realloc(self.state.messages, room * sizeof(msghdr))
+        if grown == NULL:
+            raise MemoryError()
+        self.state.messages = <msghdr *>grown
+        grown = realloc(self.state.sent, room * sizeof(int))
+        if grown == NULL:
+            raise MemoryError()
+        self.state.sent = <int *>grown
         for i in range(n):
             array[i] = (<Slot>kept[i]).state
         self._slots = kept
@@ -670,6 +743,61 @@ cdef inline bint _lock(pthread_mutex_t *mutex, bint wait) noexcept nogil:
     return pthread_mutex_trylock(mutex) == 0
 
 
+cdef bint _write_all(FanoutState *fanout, LaneState *lane, size_t size1,
+                     size_t size2) noexcept nogil:
+    """The lane's frame to every client (each slot held), in one system call where the
+    fanout batches; True when some client did not take it whole (Python settles)."""
+    cdef Py_ssize_t i, j, count = 0
+    cdef SlotState *slot
+    cdef iovec part
+    cdef int result
+    cdef bint settle = False
+    cdef bint batched = fanout.batch.ring_fd >= 0 and fanout.count > 1
+    for i in range(fanout.count):
+        slot = fanout.slots[i]
+        if slot.header_version == 2:
+            part.iov_base = <void *>lane.buffer
+            part.iov_len = size2
+        else:
+            part.iov_base = <void *>(lane.buffer + _v1_offset(lane))
+            part.iov_len = size1
+        if not slot.open:  # its session closed it meanwhile, for a write of its own
+            result = C_REFUSED
+        elif not batched:
+            result = _send_parts(slot, &part, 1, part.iov_len)
+        elif not _writable(slot):
+            result = C_REFUSED
+        else:
+            fanout.fds[count] = slot.fd
+            fanout.staged[count] = i
+            fanout.parts[count] = part
+            memset(&fanout.messages[count], 0, sizeof(msghdr))
+            fanout.messages[count].msg_iov = &fanout.parts[count]
+            fanout.messages[count].msg_iovlen = 1
+            count += 1
+            continue
+        settle = _missed(slot, result) or settle
+    if count:
+        if send_batch_run(&fanout.batch, <int>count, fanout.fds, fanout.messages,
+                          fanout.sent) != 0:
+            send_batch_close(&fanout.batch)  # the ring failed: one at a time from now on
+        for j in range(count):
+            slot = fanout.slots[fanout.staged[j]]
+            result = _settle(slot, &fanout.parts[j], 1, fanout.parts[j].iov_len,
+                             fanout.sent[j], -fanout.sent[j] if fanout.sent[j] < 0 else 0)
+            settle = _missed(slot, result) or settle
+    return settle
+
+
+cdef inline bint _missed(SlotState *slot, int result) noexcept nogil:
+    """Whether a write's result leaves Python something to settle; marks a client that
+    missed the value."""
+    if result == C_REFUSED or result == C_BROKEN:
+        slot.missed = True
+        return True
+    return result == C_STASHED
+
+
 cdef int _handle(void *lane_pointer, const uint8_t *data, size_t n) noexcept nogil:
     return _handle_as(lane_pointer, data, n, True)
 
@@ -693,7 +821,6 @@ cdef int _handle_as(void *lane_pointer, const uint8_t *data, size_t n, bint wait
     cdef Py_ssize_t i, j
     cdef bint v1 = False, v2 = False, settle = False
     cdef size_t size1 = 0, size2 = 0
-    cdef int result
     if _convert(lane, data, n, content, values, &timestamp) != 0:
         return C_TO_PYTHON
     if not _lock(&fanout.lock, wait):
@@ -721,20 +848,9 @@ cdef int _handle_as(void *lane_pointer, const uint8_t *data, size_t n, bint wait
         size2 = _frame(lane, 2, content, timestamp, clock)
     if v1:
         size1 = _frame(lane, 1, content, timestamp, clock)
+    settle = _write_all(fanout, lane, size1, size2)
     for i in range(fanout.count):
-        slot = fanout.slots[i]
-        if not slot.open:  # its session closed it meanwhile, for a write of its own
-            result = C_REFUSED
-        elif slot.header_version == 2:
-            result = _send(slot, lane.buffer, size2)
-        else:
-            result = _send(slot, lane.buffer + _v1_offset(lane), size1)
-        if result == C_REFUSED or result == C_BROKEN:
-            slot.missed = True
-            settle = True
-        elif result == C_STASHED:
-            settle = True
-        pthread_mutex_unlock(&slot.lock)
+        pthread_mutex_unlock(&fanout.slots[i].lock)
     _keep(lane, data, n, content, values, timestamp, clock)
     _note(lane, <double>_now_ns(CLOCK_MONOTONIC) / 1e9)
     lane.settle = settle

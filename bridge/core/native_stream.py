@@ -10,6 +10,7 @@ interpreter. Without the compiled module, `PySlot` does the same in Python and n
 
 from __future__ import annotations
 
+import os
 import socket
 import threading
 import weakref
@@ -22,7 +23,7 @@ __all__ = ["BROKEN", "REFUSED", "SENT", "STASHED", "LaneArrivals", "PySlot", "av
            "new_fanout", "new_lane", "new_slot"]
 
 # The compiled module's interface this wrapper expects (`_native_stream.INTERFACE`).
-NATIVE_INTERFACE = 3
+NATIVE_INTERFACE = 4
 
 try:
     from bridge.core import _native_stream
@@ -112,9 +113,17 @@ def new_slot(owner: Any) -> Any:
     return _native_stream.Slot(ref) if available() else PySlot(ref)
 
 
+# Set to 0 to write a message to the clients one system call each, not in one batch (to
+# compare, or to rule it out).
+SEND_BATCH_ENV = "SLICER_BRIDGE_SEND_BATCH"
+
+
 def new_fanout() -> Any:
-    """A hub's `Fanout`, or None where the native lane is not built."""
-    return _native_stream.Fanout(CLOCK_MODULUS) if available() else None
+    """A hub's `Fanout`, or None where the native lane is not built. It writes each message
+    to every client in one system call where the system allows (`Fanout.batched`)."""
+    if not available():
+        return None
+    return _native_stream.Fanout(CLOCK_MODULUS, batch=os.environ.get(SEND_BATCH_ENV) != "0")
 
 
 # ROS type -> the lane's kind of message.

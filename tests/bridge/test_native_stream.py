@@ -7,6 +7,7 @@ from __future__ import annotations
 import random
 import select
 import socket
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -17,6 +18,7 @@ from bridge.codecs import codec_for
 from bridge.codecs.fast import NotFast, RawPoseStream
 from bridge.core import native_stream
 from protocol.crc64 import crc64
+from protocol.freshness import CLOCK_MODULUS
 
 pytestmark = pytest.mark.skipif(
     not native_stream.available(),
@@ -118,10 +120,15 @@ def pair() -> tuple[socket.socket, socket.socket]:
     return a, b
 
 
-def taught(seed: int) -> tuple[Any, Any, RawPoseStream, bytes]:
+# A message's writes to every client in one io_uring call, or one sendmsg each (where
+# io_uring is not allowed, or SLICER_BRIDGE_SEND_BATCH=0): the same results either way.
+WRITES = pytest.mark.parametrize("batch", [True, False], ids=["one-call", "one-write-each"])
+
+
+def taught(seed: int, batch: bool = True) -> tuple[Any, Any, RawPoseStream, bytes]:
     """(fanout, a PoseStamped lane on it that knows the message's frame ids, its Python
     path, the message)."""
-    fanout = native_stream.new_fanout()
+    fanout = ns.Fanout(CLOCK_MODULUS, batch=batch)
     lane, stream = lane_for("geometry_msgs/msg/PoseStamped", fanout)
     data = bytes(serialize_message(message(PoseStamped, random.Random(seed), False)))
     teach(lane, stream, data)
@@ -156,8 +163,10 @@ def read_exactly(sock: socket.socket, n: int) -> bytes:
     return out
 
 
-def test_the_lane_writes_each_open_client_its_header_version_and_keeps_the_value() -> None:
-    fanout, lane, stream, data = taught(3)
+@WRITES
+def test_the_lane_writes_each_open_client_its_header_version_and_keeps_the_value(
+        batch: bool) -> None:
+    fanout, lane, stream, data = taught(3, batch)
     ends = [pair(), pair()]
     slots = [open_slot(ours, version) for version, (ours, _) in zip((1, 2), ends)]
     with fanout:
@@ -242,10 +251,12 @@ def test_a_client_that_cannot_take_a_frame_whole_keeps_the_rest_or_is_handed_it(
     theirs.close()
 
 
-def test_a_handle_that_may_not_wait_leaves_a_held_lock_and_writes_to_all_or_none() -> None:
+@WRITES
+def test_a_handle_that_may_not_wait_leaves_a_held_lock_and_writes_to_all_or_none(
+        batch: bool) -> None:
     # What a middleware thread calls: it holds the middleware's locks, so it never waits
     # for one of ours, which a thread needing the interpreter may hold.
-    fanout, lane, _, data = taught(6)
+    fanout, lane, _, data = taught(6, batch)
     ends = [pair(), pair()]
     slots = [open_slot(ours) for ours, _ in ends]
     with fanout:
@@ -265,3 +276,95 @@ def test_a_handle_that_may_not_wait_leaves_a_held_lock_and_writes_to_all_or_none
     for ours, theirs in ends:
         ours.close()
         theirs.close()
+
+
+@WRITES
+def test_a_full_client_and_a_gone_one_miss_the_value_and_the_others_get_every_frame(
+        batch: bool) -> None:
+    fanout, lane, _, data = taught(7, batch)
+    healthy = [pair() for _ in range(3)]
+    full_end, gone_end = pair(), pair()
+    full_end[0].setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+    gone_end[1].close()  # its peer has gone: a write fails with EPIPE
+    owners = {name: Owner() for name in ("full", "gone")}
+    slots = ([open_slot(ours) for ours, _ in healthy[:2]]
+             + [open_slot(full_end[0], owner=owners["full"]),
+                open_slot(gone_end[0], owner=owners["gone"]), open_slot(healthy[2][0])])
+    with fanout:
+        fanout.set_slots(slots)
+        lane.enabled = True
+    assert fanout.batched == batch
+    frame = lane.encode(data, 2, 0)
+    handled = 0
+    settled: list[list[Any]] = []  # owners handed to Python, each time it settles
+    while owners["full"] not in sum(settled, []):  # the full client's peer reads nothing
+        assert lane.handle(data) in (ns.HANDLED, ns.HANDLED_SETTLE)
+        handled += 1
+        # The healthy ones get each frame whole, whatever the others' writes did.
+        for _, theirs in healthy:
+            got = read_exactly(theirs, len(frame))
+            assert got[:2] == b"\x00\x02" and got[2:14] == b"TRANSFORM\0\0\0"
+        with fanout:
+            missed, stashed = lane.settle()
+            if missed or stashed:
+                settled.append([r() for r in missed + stashed])
+                # As a session does: a client handed to Python leaves the native lane.
+                fanout.set_slots([s for s in fanout.slots
+                                  if s.owner is None or s.owner() not in settled[-1]])
+    assert owners["gone"] in settled[0]  # at once, on the first frame
+    assert len(fanout.slots) == 3
+    with slots[2]:
+        rest = slots[2].take_stash()
+    taken = available_now(full_end[1])
+    assert len(taken) + len(rest or b"") == (handled - 1) * len(frame) + (
+        len(frame) if rest else 0)  # whole frames, the last one's rest kept or none of it
+    assert [s.sent for s in slots[:2]] == [handled] * 2 and slots[4].sent == handled
+    assert slots[3].sent == 0
+    for ours, theirs in healthy + [full_end]:
+        ours.close()
+        theirs.close()
+    gone_end[0].close()
+
+
+@WRITES
+def test_more_clients_than_one_call_takes_each_get_the_frame_once(batch: bool) -> None:
+    fanout, lane, _, data = taught(8, batch)
+    ends = [pair() for _ in range(70)]  # over the ring's 64 writes per call
+    slots = [open_slot(ours) for ours, _ in ends]
+    with fanout:
+        fanout.set_slots(slots)
+        lane.enabled = True
+    frame = lane.encode(data, 2, 0)
+    for _ in range(3):
+        assert lane.handle(data) == ns.HANDLED
+    got = [read_exactly(theirs, 3 * len(frame)) for _, theirs in ends]
+    assert got[0][:14] == b"\x00\x02TRANSFORM\0\0\0" and got == [got[0]] * len(ends)
+    assert [available_now(theirs) for _, theirs in ends] == [b""] * len(ends)
+    assert {s.sent for s in slots} == {3}
+    for ours, theirs in ends:
+        ours.close()
+        theirs.close()
+
+
+def _io_uring_allowed() -> tuple[bool, str]:
+    """Whether this process may set up an io_uring, as the system says (not as the lane
+    says: that is what is tested)."""
+    sysctl = Path("/proc/sys/kernel/io_uring_disabled")
+    disabled = sysctl.read_text().strip() if sysctl.exists() else "0"
+    if disabled != "0":
+        return False, f"io_uring is disabled here (kernel.io_uring_disabled={disabled})"
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("Seccomp:") and line.split()[1] != "0":
+            return False, "a seccomp filter may forbid io_uring here (a container's profile)"
+    return True, ""
+
+
+def test_the_daemons_fanout_writes_in_one_call_where_allowed_unless_told_not_to(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    allowed, why = _io_uring_allowed()
+    if not allowed:
+        pytest.skip(why)
+    monkeypatch.delenv(native_stream.SEND_BATCH_ENV, raising=False)
+    assert native_stream.new_fanout().batched
+    monkeypatch.setenv(native_stream.SEND_BATCH_ENV, "0")
+    assert not native_stream.new_fanout().batched
