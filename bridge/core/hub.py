@@ -20,8 +20,9 @@ executor thread and hand values over through a `StreamChannel` (`post_frame`):
   (`hand_over`: in order, one wake-up for all handed meanwhile, an image replacing its
   device's older one), into its own outbox;
 * hotter still: a streamed pose taken by a native lane (native_stream.py) is converted and
-  written to every client without the interpreter, while every client keeps up and
-  nothing waits for the loop (`fanout.hold`); otherwise it takes the path above;
+  written to every client without the interpreter (to all of them in one system call,
+  where io_uring is allowed), while every client keeps up and nothing waits for the loop
+  (`fanout.hold`); otherwise it takes the path above;
 * otherwise small values queue in order (bounded), large ones (images, point clouds)
   replace their device's waiting one, and the loop is woken at most once per batch, so a
   burst costs one wake-up and each client gets the whole batch in one socket write.
