@@ -503,37 +503,28 @@ cdef class Fanout(_Held):
         kept = [<Slot?>s for s in slots]
         cdef Py_ssize_t n = len(kept)
         cdef Py_ssize_t i
-        cdef SlotState **array = <SlotState **>realloc(self.state.slots,
-                                                       max(n, 1) * sizeof(SlotState *))
-        if array == NULL:
-            raise MemoryError()
-        self.state.slots = array
         cdef size_t room = <size_t>max(n, 1)
-        cdef void *grown
-        grown = realloc(self.state.fds, room * sizeof(int))
-        if grown == NULL:
-            raise MemoryError()
-        self.state.fds = <int *>grown
-        grown = realloc(self.state.staged, room * sizeof(Py_ssize_t))
-        if grown == NULL:
-            raise MemoryError()
-        self.state.staged = <Py_ssize_t *>grown
-        grown = realloc(self.state.parts, room * sizeof(iovec))
-        if grown == NULL:
-            raise MemoryError()
-        self.state.parts = <iovec *>grown
-        grown = realloc(self.state.messages, room * sizeof(msghdr))
-        if grown == NULL:
-            raise MemoryError()
-        self.state.messages = <msghdr *>grown
-        grown = realloc(self.state.sent, room * sizeof(int))
-        if grown == NULL:
-            raise MemoryError()
-        self.state.sent = <int *>grown
+        _grow(<void **>&self.state.slots, room * sizeof(SlotState *))
+        # A batch's room, a write per client.
+        _grow(<void **>&self.state.fds, room * sizeof(int))
+        _grow(<void **>&self.state.staged, room * sizeof(Py_ssize_t))
+        _grow(<void **>&self.state.parts, room * sizeof(iovec))
+        _grow(<void **>&self.state.messages, room * sizeof(msghdr))
+        _grow(<void **>&self.state.sent, room * sizeof(int))
+        cdef SlotState **array = self.state.slots
         for i in range(n):
             array[i] = (<Slot>kept[i]).state
         self._slots = kept
         self.state.count = n
+
+
+cdef int _grow(void **pointer, size_t size) except -1:
+    """Resize ``*pointer``'s block to ``size`` bytes; MemoryError leaves it as it was."""
+    cdef void *grown = realloc(pointer[0], size)
+    if grown == NULL:
+        raise MemoryError()
+    pointer[0] = grown
+    return 0
 
 
 # --- a pose stream ----------------------------------------------------------------------------
