@@ -18,10 +18,16 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 def main() -> int:
     try:
-        import slicer  # noqa: F401  (only: are we inside 3D Slicer?)
+        import slicer
     except ImportError:
-        print("selftest.py runs inside 3D Slicer: Slicer --no-main-window --python-script "
-              f"{os.path.abspath(__file__)}", file=sys.stderr)
+        slicer = None
+    # Slicer's Qt-free core (slicer-core on PyPI) also imports as `slicer`: inside 3D
+    # Slicer there is an application, `slicer.app`, which the module's GUI needs.
+    if getattr(slicer, "app", None) is None:
+        where = "slicer imports, but has no slicer.app (not 3D Slicer's application)" \
+            if slicer is not None else "no slicer module"
+        print(f"selftest.py runs inside 3D Slicer ({where}): Slicer --no-main-window "
+              f"--python-script {os.path.abspath(__file__)}", file=sys.stderr)
         return 2
     # The module's folder, as Slicer puts it on sys.path when it loads the module itself.
     module_dir = os.path.join(HERE, "ROS2Bridge")
@@ -42,6 +48,8 @@ if __name__ == "__main__":
     code = main()
     try:
         import slicer
-        slicer.util.exit(code)
     except ImportError:
-        sys.exit(code)
+        slicer = None
+    if getattr(slicer, "app", None) is not None:
+        slicer.util.exit(code)  # ends 3D Slicer itself with the code
+    sys.exit(code)

@@ -54,17 +54,18 @@ class Session:
         self.app.close()
 
 
-def open_session() -> Session:
+def open_session(*, subject_hierarchy: bool = True) -> Session:
     """Slicer's start-up for this module: the scene and module logics, the Qt layer, the
     module folder on sys.path, the module's class made (it hooks startupCompleted), its
-    logic, then startupCompleted (the reference's entry points are installed)."""
+    logic, then startupCompleted (the reference's entry points are installed).
+    `subject_hierarchy=False` leaves out the items Slicer's Qt plugins make for new nodes."""
     for path in (str(REPO), str(MODULE_DIR)):
         if path not in sys.path:
             sys.path.insert(0, path)
     import slicer_app  # the peer's Qt-free application
 
     from tools.slicer_core import qt_layer
-    app = slicer_app.SlicerApp()
+    app = slicer_app.SlicerApp(subject_hierarchy=subject_hierarchy)
     slicer_qt = qt_layer.install(app)
     import ROS2Bridge
     ROS2Bridge.ROS2Bridge(None)

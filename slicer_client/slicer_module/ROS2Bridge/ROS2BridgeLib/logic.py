@@ -444,6 +444,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             item = sh.GetItemByDataNode(node)
             if item:
                 sh.SetItemParent(item, folder)
+            else:  # no plugin made its item (Slicer's Qt plugins do, its core does not)
+                sh.CreateItem(folder, node)
 
     # --- saving -------------------------------------------------------------------------
     def _saveState(self) -> None:
