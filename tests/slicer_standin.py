@@ -36,12 +36,13 @@ import numpy as np
 from protocol import framing
 from protocol.messages import Command as IgtlCommand
 from protocol.messages import Message, RtsCommand, Status, StatusCode
+from slicer_constants import constant, event_as_observers_get_it
 
 MODULE = Path(__file__).resolve().parents[1] / "slicer_client" / "slicer_module" / \
     "ROS2Bridge" / "ROS2Bridge.py"
 
-MODIFIED_EVENT = 33  # vtkCommand::ModifiedEvent
-TRANSFORM_MODIFIED_EVENT = 15000  # vtkMRMLTransformNode::TransformModifiedEvent
+MODIFIED_EVENT = constant("vtkCommand.ModifiedEvent")
+TRANSFORM_MODIFIED_EVENT = constant("vtkMRMLTransformNode.TransformModifiedEvent")
 
 
 class Observable:
@@ -59,8 +60,8 @@ class Observable:
 
     def InvokeEvent(self, event):  # noqa: N802
         for ev, callback in list(self._observers.values()):
-            if ev == event:
-                callback(self, event)
+            if ev in (event, event_as_observers_get_it(event)):
+                callback(self, event_as_observers_get_it(event))  # as VTK's wrapping does
 
     def Modified(self):  # noqa: N802
         self.InvokeEvent(MODIFIED_EVENT)
@@ -116,7 +117,7 @@ class Node(Observable):
 
 
 class TextNode(Node):
-    TextModifiedEvent = 51000
+    TextModifiedEvent = constant("vtkMRMLTextNode.TextModifiedEvent")
     CLASSES = ("vtkMRMLTextNode", "vtkMRMLStorableNode", "vtkMRMLNode")
     _ids = 0
 
@@ -163,7 +164,7 @@ class Command(Observable):
     response) each send ends with."""
 
     script: list = []
-    CommandCompletedEvent = 128004
+    CommandCompletedEvent = constant("vtkSlicerOpenIGTLinkCommand.CommandCompletedEvent")
     CommandWaiting = 1
 
     def __init__(self) -> None:
@@ -183,8 +184,11 @@ class Command(Observable):
 class Connector(Node):
     """vtkMRMLIGTLConnectorNode with no socket: commands end as `Command.script` says."""
 
-    ConnectedEvent, DisconnectedEvent = 118944, 118945
-    StateOff, StateWaitConnection, StateConnected = 0, 1, 2
+    ConnectedEvent = constant("vtkMRMLIGTLConnectorNode.ConnectedEvent")
+    DisconnectedEvent = constant("vtkMRMLIGTLConnectorNode.DisconnectedEvent")
+    StateOff = constant("vtkMRMLIGTLConnectorNode.StateOff")
+    StateWaitConnection = constant("vtkMRMLIGTLConnectorNode.StateWaitConnection")
+    StateConnected = constant("vtkMRMLIGTLConnectorNode.StateConnected")
     CLASSES = ("vtkMRMLIGTLConnectorNode", "vtkMRMLNode")
 
     def __init__(self, name: str = "") -> None:
@@ -233,7 +237,9 @@ class Scene(Observable):
     classes AddNewNodeByClass can make (NODE_CLASSES), RemoveNode and Clear, and the
     save/close events the module observes."""
 
-    StartSaveEvent, StartCloseEvent, EndCloseEvent = 1, 2, 3
+    StartSaveEvent = constant("vtkMRMLScene.StartSaveEvent")
+    StartCloseEvent = constant("vtkMRMLScene.StartCloseEvent")
+    EndCloseEvent = constant("vtkMRMLScene.EndCloseEvent")
 
     def __init__(self) -> None:
         super().__init__()
@@ -718,7 +724,7 @@ class ModelNode(_Transformable, _Displayable, Node):
 
     CLASSES = ("vtkMRMLModelNode", "vtkMRMLDisplayableNode", "vtkMRMLTransformableNode",
                "vtkMRMLStorableNode", "vtkMRMLNode")
-    MeshModifiedEvent = 17001
+    MeshModifiedEvent = constant("vtkMRMLModelNode.MeshModifiedEvent")
     DISPLAY_CLASS = "vtkMRMLModelDisplayNode"
 
     def __init__(self, name: str = "") -> None:
@@ -776,7 +782,7 @@ class MarkupsFiducialNode(_Transformable, _Displayable, Node):
 
     CLASSES = ("vtkMRMLMarkupsFiducialNode", "vtkMRMLMarkupsNode", "vtkMRMLDisplayableNode",
                "vtkMRMLTransformableNode", "vtkMRMLStorableNode", "vtkMRMLNode")
-    PointModifiedEvent = 19001
+    PointModifiedEvent = constant("vtkMRMLMarkupsNode.PointModifiedEvent")
     DISPLAY_CLASS = "vtkMRMLMarkupsDisplayNode"
 
     def __init__(self, name: str = "") -> None:
@@ -976,7 +982,9 @@ class TcpConnector(Connector):
     at once; made by the scene (AddNewNodeByClass), it waits for SetTypeClient and Start,
     and puts the nodes it makes into that scene."""
 
-    COMPLETED, EXPIRED, RESPONSE = 128004, 2, 5
+    COMPLETED = constant("vtkSlicerOpenIGTLinkCommand.CommandCompletedEvent")
+    EXPIRED = constant("vtkSlicerOpenIGTLinkCommand.CommandExpired")
+    RESPONSE = constant("vtkSlicerOpenIGTLinkCommand.CommandResponseReceived")
 
     def __init__(self, host: str = "", port: int = 0,
                  on_node: Callable[[Any, Message], None] = lambda node, message: None, *,

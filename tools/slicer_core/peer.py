@@ -5,13 +5,15 @@ and by tools/render_scene_picture.py; the project itself never needs it."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 from pathlib import Path
 from typing import Optional
 
 REPO = Path(__file__).resolve().parents[2]
 BUILD_SCRIPT = REPO.parent / "shared" / "peers" / "slicer-openigtlinkif" / "build.sh"
-PREFIX = REPO / ".cache" / "slicer-peer"
+# SLICER_PEER_PREFIX: an already built peer elsewhere (another checkout's).
+PREFIX = Path(os.environ.get("SLICER_PEER_PREFIX") or REPO / ".cache" / "slicer-peer")
 
 
 class PeerUnavailableError(Exception):
