@@ -270,13 +270,17 @@ class Status:
 
 
 class AttributeKind(IntEnum):
-    """Spec: polydata.md, attribute TYPE (low nibble); 0x10 marks cell data."""
+    """Spec: polydata.md, attribute TYPE (low nibble); 0x10 marks cell data. TCOORDS
+    (texture coordinates) is not in polydata.md but in the library that defines it
+    (OpenIGTLink 3's igtlPolyDataMessage.h: POINT_TCOORDS 0x05, CELL_TCOORDS 0x15); Slicer
+    sends it for every textured model (a vtkCubeSource has one)."""
 
     SCALAR = 0
     VECTOR = 1
     NORMAL = 2
     TENSOR = 3
     RGBA = 4
+    TCOORDS = 5
 
 
 _KIND_COMPONENTS: dict[AttributeKind, tuple[int, int]] = {
@@ -285,8 +289,27 @@ _KIND_COMPONENTS: dict[AttributeKind, tuple[int, int]] = {
     AttributeKind.NORMAL: (3, 3),
     AttributeKind.TENSOR: (9, 9),
     AttributeKind.RGBA: (4, 4),
+    AttributeKind.TCOORDS: (1, 3),  # VTK's texture coordinates: u, uv or uvw
 }
+_KIND_RANGE = "0..5, +0x10 for cell data"
 _CELL_FLAG = 0x10
+# OpenIGTLink 3.1's C packer (igtl_polydata.c, the one Slicer links) writes NCOMPONENTS 9
+# and 9*N floats for every attribute but point scalars, vectors and normals: its size and
+# header switches fall through to TENSOR. Its own reader takes the first k*N floats as N
+# rows of k (PolyDataAttribute::SetType fixes k; 3 for TCOORDS); the rest is filler (seen
+# with a probe built against 94244fed: TCoords of 8 points came as 0x05, 9, 8, 288 bytes).
+_PADDED_COMPONENTS = 9
+
+
+def _components_on_wire(kind: AttributeKind, ncomp: int) -> tuple[int, int] | None:
+    """(components kept, components on the wire) of an attribute header, or None when
+    ``ncomp`` is not a count ``kind`` can have. The one rule for the padded layout above."""
+    low, high = _KIND_COMPONENTS[kind]
+    if low <= ncomp <= high:
+        return ncomp, ncomp
+    if ncomp == _PADDED_COMPONENTS:
+        return high, ncomp
+    return None
 _MAX_ATTRIBUTE_NAME = 255  # IGTL_POLY_MAX_ATTR_NAME_LEN
 
 
@@ -496,7 +519,7 @@ class PolyData:
             try:
                 kind = AttributeKind(attr.kind)
             except ValueError:
-                raise EncodeError(f"{what}.kind", "an AttributeKind (0..4)", attr.kind) from None
+                raise EncodeError(f"{what}.kind", "an AttributeKind (0..5)", attr.kind) from None
             name_raw = encode_text(attr.name, ENCODING_UTF8, f"{what}.name")
             if not 0 < len(name_raw) <= _MAX_ATTRIBUTE_NAME or b"\0" in name_raw:
                 raise EncodeError(f"{what}.name", "1 to 255 bytes without NUL", repr(attr.name))
@@ -602,23 +625,27 @@ class PolyData:
             try:
                 kind = AttributeKind(type_byte & 0x0F)
             except ValueError:
-                raise _bad(t, f"{what} TYPE", "0..4, +0x10 for cell data", type_byte) from None
+                raise _bad(t, f"{what} TYPE", _KIND_RANGE, type_byte) from None
             if type_byte & ~(0x0F | _CELL_FLAG):
-                raise _bad(t, f"{what} TYPE", "0..4, +0x10 for cell data", type_byte)
-            low, high = _KIND_COMPONENTS[kind]
-            if not low <= ncomp <= high:
-                raise _bad(t, f"{what} NCOMPONENTS", f"{low}..{high} for {kind.name}", ncomp)
+                raise _bad(t, f"{what} TYPE", _KIND_RANGE, type_byte)
+            counts = _components_on_wire(kind, ncomp)
+            if counts is None:
+                low, high = _KIND_COMPONENTS[kind]
+                raise _bad(t, f"{what} NCOMPONENTS",
+                           f"{low}..{high} for {kind.name} (or {_PADDED_COMPONENTS}, "
+                           "OpenIGTLink 3's padded layout)", ncomp)
+            kept, on_wire = counts
             on_cells = bool(type_byte & _CELL_FLAG)
             n_expected = ncells if on_cells else npoints
             if n != n_expected:
                 target = "cells" if on_cells else "points"
                 raise _bad(t, f"{what} N", f"{n_expected} ({target})", n)
-            size = 4 * n * ncomp
+            size = 4 * n * on_wire
             if pos + size > len(content):
                 raise _bad(t, f"{what} data", f"{size} bytes", f"{len(content) - pos} bytes left")
-            data = np.frombuffer(content, ">f4", n * ncomp, pos).astype(np.float32)
+            data = np.frombuffer(content, ">f4", n * kept, pos).astype(np.float32)
             pos += size
-            attributes.append(PolyDataAttribute(name, kind, data.reshape(n, ncomp), on_cells))
+            attributes.append(PolyDataAttribute(name, kind, data.reshape(n, kept), on_cells))
         if pos != len(content):
             raise _bad(t, "body", f"{pos} bytes (from the counts)", f"{len(content)} bytes")
         vertices, lines, polygons, strips = cells

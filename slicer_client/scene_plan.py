@@ -14,6 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
+import numpy as np
+import numpy.typing as npt
+
 from protocol.naming import (KEY_CHILD, KEY_LINK, KEY_MARKER_ID, KEY_MARKER_NS,
                              KEY_MARKER_TYPE, KEY_NODE, KEY_PARENT, KEY_PARENT_DEVICE,
                              KEY_POINT_COLORS, KEY_POSITION, KEY_ROBOT, KEY_ROLE, KEY_TOPIC,
@@ -22,7 +25,7 @@ from protocol.naming import (KEY_CHILD, KEY_LINK, KEY_MARKER_ID, KEY_MARKER_NS,
 
 __all__ = ["ATTRIBUTE_PREFIX", "DEFAULT_COLOUR", "MARKERS_FOLDER", "NodePlan", "ROBOTS_FOLDER",
            "describe_bridges", "marker_folder", "metadata_from_attributes", "model_colour",
-           "plan_node", "robot_folder", "stale_marker_nodes"]
+           "plan_node", "point_colours_differ", "robot_folder", "stale_marker_nodes"]
 
 ATTRIBUTE_PREFIX = "OpenIGTLink."
 ROBOTS_FOLDER = "ROS2 robots"
@@ -43,7 +46,8 @@ class NodePlan:
     folder: Optional[str] = None  # subject-hierarchy folder (one per robot)
     colour: Optional[Rgb] = None
     opacity: float = 1.0
-    # Show the model's "RGBA" point colours as they are (markers with per-point colours).
+    # Show the model's "RGBA" point colours as they are (scalars on, direct mapping): its
+    # points differ in colour (a DAE's vertex colours, a marker's per-point colours).
     point_colours: bool = False
     # A text marker (a text node, not transformable): the module shows it as a markups
     # point labelled with the text, at this position (mm) under `label_parent`.
@@ -107,6 +111,24 @@ def model_colour(metadata: Mapping[str, str],
     return DEFAULT_COLOUR, 1.0
 
 
+def point_colours_differ(metadata: Mapping[str, str],
+                         rgba: Optional[npt.ArrayLike] = None) -> bool:
+    """Whether a model is shown with its "RGBA" point colours rather than one display
+    colour: the array ((N, 3 or 4), 0..1) holds more than one distinct colour, or the
+    daemon says so (``ros2.point_colors`` = ``1``, before the array is there). A mesh of
+    one colour keeps its display colour: that colour, from `model_colour`."""
+    if metadata.get(KEY_POINT_COLORS) == "1":
+        return True
+    rows = _rgba_rows(rgba)
+    return rows is not None and bool(np.any(rows[1:] != rows[0]))
+
+
+def _rgba_rows(rgba: Optional[npt.ArrayLike]) -> Optional[np.ndarray]:
+    """The colour rows of an "RGBA" array, or None when there are none."""
+    rows = None if rgba is None else np.asarray(rgba, dtype=np.float64)
+    return rows if rows is not None and rows.ndim == 2 and len(rows) else None
+
+
 def _link_device(robot: str, link: str,
                  link_devices: Optional[Mapping[Tuple[str, str], str]]) -> Optional[str]:
     if link_devices and (robot, link) in link_devices:
@@ -118,11 +140,13 @@ def _link_device(robot: str, link: str,
 
 
 def plan_node(device: str, metadata: Mapping[str, str], *,
-              rgba_mean: Optional[Sequence[float]] = None,
+              rgba: Optional[npt.ArrayLike] = None,
               link_devices: Optional[Mapping[Tuple[str, str], str]] = None) -> NodePlan:
-    """What to do with the node of `device`, given its metadata (see the module doc).
-    `link_devices` ((robot, link) -> device, from create_robot replies) wins over names
-    computed here."""
+    """What to do with the node of `device`, given its metadata (see the module doc) and
+    its model's "RGBA" point array (`rgba`, (N, 4), 0..1) if it has one. `link_devices`
+    ((robot, link) -> device, from create_robot replies) wins over names computed here."""
+    rows = _rgba_rows(rgba)
+    rgba_mean = None if rows is None else [float(v) for v in rows.mean(axis=0)]
     role = metadata.get(KEY_ROLE, "")
     robot = metadata.get(KEY_ROBOT, "")
     link = metadata.get(KEY_LINK, "")
@@ -134,7 +158,8 @@ def plan_node(device: str, metadata: Mapping[str, str], *,
         name = f"{robot} {link}" + (f" visual {index}" if index not in ("", "0") else "")
         return NodePlan(device, "robot_visual", name,
                         parent_device=_link_device(robot, link, link_devices),
-                        folder=robot_folder(robot), colour=colour, opacity=opacity)
+                        folder=robot_folder(robot), colour=colour, opacity=opacity,
+                        point_colours=point_colours_differ(metadata, rgba))
     if role == Role.ROBOT_DESCRIPTION.value and robot:
         return NodePlan(device, "robot_description", f"{robot} URDF",
                         folder=robot_folder(robot))
@@ -158,7 +183,7 @@ def plan_node(device: str, metadata: Mapping[str, str], *,
         return NodePlan(device, "marker", name,
                         parent_device=metadata.get(KEY_PARENT_DEVICE) or None,
                         folder=marker_folder(topic), colour=colour, opacity=opacity,
-                        point_colours=metadata.get(KEY_POINT_COLORS) == "1")
+                        point_colours=point_colours_differ(metadata, rgba))
     if role == Role.MARKER_FRAME.value:
         return NodePlan(device, "marker_frame",
                         f"markers {metadata.get(KEY_PARENT, '?')} -> "

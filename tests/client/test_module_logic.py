@@ -18,7 +18,7 @@ from slicer_client.connection import ConnectionClosedError
 from slicer_client.connector_codec import (COMMAND_STATUS, SLICER_TEXT_ENCODING,
                                            build_command, message_from_node,
                                            outgoing_content, parse_reply)
-from slicer_client.scene_plan import (DEFAULT_COLOUR, describe_bridges,
+from slicer_client.scene_plan import (DEFAULT_COLOUR, describe_bridges, point_colours_differ,
                                       metadata_from_attributes, model_colour, plan_node)
 from slicer_client.values import value_from_message
 
@@ -37,6 +37,29 @@ def test_robot_visual_goes_under_its_link_transform_in_the_robot_folder() -> Non
     assert plan.folder == "robot PSM1"
     assert plan.display_name == "PSM1 tool_link"
     assert plan.colour == DEFAULT_COLOUR
+
+
+def test_a_mesh_of_one_colour_gets_it_and_a_mesh_of_many_shows_its_point_colours() -> None:
+    """Issue 42 (7): the module gave every robot model the mean of its RGBA array as its
+    display colour, which greys a DAE's vertex colours into one. A mesh of one colour keeps
+    that display colour (scalars off); a mesh whose points differ shows them (scalars on)."""
+    meta = metadata_from_attributes(attrs(metadata_for(NameKey.robot_visual("arm", "hand", 0))))
+    one = np.tile(np.array([0.25, 0.5, 0.75, 1.0], np.float32), (6, 1))
+    plan = plan_node("arm:hand:0", meta, rgba=one)
+    assert (plan.colour, plan.opacity, plan.point_colours) == ((0.25, 0.5, 0.75), 1.0, False)
+    red_blue = np.array([[1, 0, 0, 1], [1, 0, 0, 1], [0, 0, 1, 0.5]], np.float32)
+    plan = plan_node("arm:hand:0", meta, rgba=red_blue)
+    assert plan.point_colours
+    assert plan.colour == pytest.approx((2 / 3, 0.0, 1 / 3))  # the mean, under the scalars
+    # The URDF material in the metadata stays the display colour; no array, one colour.
+    plan = plan_node("arm:hand:0", {**meta, "ros2.color": "0 1 0 1"}, rgba=red_blue)
+    assert (plan.colour, plan.point_colours) == ((0.0, 1.0, 0.0), True)
+    assert not plan_node("arm:hand:0", {**meta, "ros2.color": "0 1 0 1"}).point_colours
+    # The decision alone: one row, equal rows, a difference in alpha only, the daemon's word.
+    assert not point_colours_differ({}, one[:1]) and not point_colours_differ({}, one)
+    assert point_colours_differ({}, np.array([[1, 0, 0, 1], [1, 0, 0, 0.5]]))
+    assert point_colours_differ({"ros2.point_colors": "1"}) and not point_colours_differ({})
+    assert not point_colours_differ({}, np.zeros((0, 4)))
 
 
 def test_long_link_names_use_the_daemons_hashed_device_or_the_create_reply() -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import socket
 import sys
 from pathlib import Path
 from typing import Any, Iterator
@@ -17,9 +18,11 @@ import pytest
 import slicer_client
 from slicer_client.matrices import as_numpy
 from protocol.commands import ErrorCode
-from protocol.messages import PolyData
+from protocol.framing import encode
+from protocol.messages import Message, PolyData, RawBody
 from jointy_urdf import JOINTY_URDF
 from support import Child, Processes, RunningDaemon, assert_clean_exit, start_daemon, wait_until
+from tests.protocol.igtl_captures import CUBE_CORNERS_MM, CUBE_QUADS, OPENIGTLINK3_TCOORDS_CUBE
 
 pytestmark = pytest.mark.ros
 
@@ -95,6 +98,26 @@ def test_a_model_reaches_ros_as_a_mesh_in_metres(ros: slicer_client.Client,
     mesh = _until_received(echo, lambda: pub.send_model(body), "the mesh in ROS")[0]
     np.testing.assert_allclose(_xyz(mesh["vertices"]), POINTS_MM / 1000.0, atol=1e-9)
     assert [t["vertex_indices"] for t in mesh["triangles"]] == TRIANGLES
+
+
+def test_a_textured_cube_from_slicer_reaches_ros_as_a_mesh(ros: slicer_client.Client,
+                                                           daemon: RunningDaemon,
+                                                           processes: Processes) -> None:
+    """Issue 42 (6): a cube with texture coordinates, in the bytes OpenIGTLink 3.1 packs
+    (TYPE 0x05, NCOMPONENTS 9), sent by a raw client in header v1 as Slicer's connector
+    does. It used to come back as a STATUS ("TYPE: expected 0..4 ... got 5") and never
+    reach ROS; the mesh leaves the texture coordinates out."""
+    echo = _echo(processes, "/s2r_textured", "shape_msgs/msg/Mesh")
+    pub = ros.publisher("/s2r_textured", "shape_msgs/msg/Mesh", frame="patient")
+    wire = encode(Message(pub.device, RawBody("POLYDATA", OPENIGTLINK3_TCOORDS_CUBE)))
+    with socket.create_connection(("127.0.0.1", daemon.port), timeout=10) as raw:
+        mesh = _until_received(echo, lambda: raw.sendall(wire), "the textured cube in ROS")[0]
+    np.testing.assert_allclose(_xyz(mesh["vertices"]), np.array(CUBE_CORNERS_MM) / 1000.0,
+                               atol=1e-9)
+    fans = [[a, b, c] for q in CUBE_QUADS for a, b, c in ((q[0], q[1], q[2]),
+                                                          (q[0], q[2], q[3]))]
+    assert [t["vertex_indices"] for t in mesh["triangles"]] == fans
+    assert len(fans) == 12
 
 
 def test_a_model_reaches_ros_as_a_triangle_list_marker(ros: slicer_client.Client,

@@ -81,7 +81,7 @@ def cell_arrays(draw: st.DrawFn, npoints: int) -> np.ndarray:
 
 _COMPONENTS = {AttributeKind.SCALAR: st.integers(1, 4), AttributeKind.VECTOR: st.just(3),
                AttributeKind.NORMAL: st.just(3), AttributeKind.TENSOR: st.just(9),
-               AttributeKind.RGBA: st.just(4)}
+               AttributeKind.RGBA: st.just(4), AttributeKind.TCOORDS: st.integers(1, 3)}
 
 
 @st.composite

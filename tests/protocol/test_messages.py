@@ -37,6 +37,7 @@ from protocol.messages import (
     unpack_body,
 )
 from tests.protocol import igtl_strategies as strat
+from tests.protocol.igtl_captures import CUBE_CORNERS_MM, CUBE_QUADS, OPENIGTLINK3_TCOORDS_CUBE
 
 PROTOCOL = Path(__file__).resolve().parents[2] / "protocol"
 
@@ -235,6 +236,74 @@ def test_polydata_cell_attribute_golden() -> None:
     assert len(packed) == 40 + 36 + 16 + 6 + 4 + 16  # "rgb\0" is even: no padding
 
 
+def test_polydata_tcoords_point_and_cell_golden() -> None:
+    """Issue 42 (6): texture coordinates, TYPE 0x05 on points and 0x15 on cells, with the
+    count of components the message gives (a vtkCubeSource's are u, v)."""
+    body = PolyData(np.zeros((3, 3), np.float32), polygons=cells_from_array([[0, 1, 2]]),
+                    attributes=[
+                        PolyDataAttribute("TCoords", AttributeKind.TCOORDS,
+                                          np.array([[0, 0], [1, 0], [0, 1]], np.float32)),
+                        PolyDataAttribute("uvw", AttributeKind.TCOORDS,
+                                          np.array([[0.5, 0.25, 1]], np.float32),
+                                          on_cells=True)])
+    packed = body.pack()
+    attr = packed[40 + 36 + 16:]
+    assert attr[:12] == (bytes([0x05, 2]) + struct.pack(">I", 3)
+                         + bytes([0x15, 3]) + struct.pack(">I", 1))
+    assert attr[12:24] == b"TCoords\0uvw\0"  # 12 bytes: even, no padding
+    assert attr[24:] == f32be(0, 0, 1, 0, 0, 1) + f32be(0.5, 0.25, 1)
+    again = roundtrip(body)
+    assert again == body
+    assert [a.kind for a in again.attributes] == [AttributeKind.TCOORDS] * 2  # type: ignore[attr-defined]
+
+
+
+
+def test_polydata_openigtlink3_padded_tcoords() -> None:
+    """Before: "attribute 'TCoords' TYPE: expected 0..4 ... got 5". Now the cube decodes,
+    its TCoords as the (u, v, 0) rows OpenIGTLink 3.1's own reader takes from them."""
+    body = unpack_body("POLYDATA", OPENIGTLINK3_TCOORDS_CUBE)
+    assert isinstance(body, PolyData)
+    assert body.points.tolist() == CUBE_CORNERS_MM
+    assert [c.tolist() for c in cells_to_list(body.polygons)] == CUBE_QUADS
+    (tcoords,) = body.attributes
+    assert (tcoords.name, tcoords.kind, tcoords.on_cells) == ("TCoords", AttributeKind.TCOORDS,
+                                                              False)
+    assert tcoords.data.tolist() == [[0.25 * j, 0.5, 0.0] for j in range(8)]
+    # Re-packed in the spec's layout (3 components, no filler), then stable.
+    packed = body.pack()
+    assert packed[270 - 14:270 - 8] == bytes([0x05, 3]) + struct.pack(">I", 8)
+    assert len(packed) == 270 + 4 * 3 * 8
+    assert roundtrip(body) == body
+
+
+@pytest.mark.parametrize("kind, keep", [(AttributeKind.RGBA, 4), (AttributeKind.TCOORDS, 3),
+                                        (AttributeKind.NORMAL, 3), (AttributeKind.VECTOR, 3)])
+def test_polydata_padded_cell_attribute(kind: AttributeKind, keep: int) -> None:
+    """OpenIGTLink 3.1 packs every cell attribute, and point RGBA, as 9 floats a row:
+    the first ``keep`` * N floats are the values, N rows of ``keep``."""
+    values = np.arange(2 * keep, dtype=np.float32).reshape(2, keep) / 8
+    fixed = struct.pack(">10I", 3, 0, 0, 0, 0, 2, 32, 0, 0, 1)
+    content = b"".join([
+        fixed, f32be(*[0.0] * 9), struct.pack(">8I", 3, 0, 1, 2, 3, 2, 1, 0),
+        bytes([0x10 | kind, 9]) + struct.pack(">I", 2), b"a\0",
+        f32be(*values.reshape(-1)), f32be(*[-1.0] * (18 - 2 * keep))])
+    body = unpack_body("POLYDATA", content)
+    assert isinstance(body, PolyData)
+    (attr,) = body.attributes
+    assert (attr.kind, attr.on_cells) == (kind, True)
+    assert attr.data.tolist() == values.tolist()
+
+
+def test_polydata_tcoords_of_four_components_refused() -> None:
+    body = PolyData(np.zeros((1, 3), np.float32), attributes=[
+        PolyDataAttribute("t", AttributeKind.TCOORDS, np.zeros((1, 4), np.float32))])
+    with pytest.raises(EncodeError) as info:
+        body.pack()
+    assert info.value.field == "POLYDATA attributes[0].data"
+    assert "(N, 1..3) for TCOORDS" in str(info.value)
+
+
 def test_point_golden() -> None:
     body = Point([PointElement("p1", "Fiducial", (255, 0, 0, 128), np.array([1.0, 2, 3]),
                                4.0, "owner")])
@@ -415,6 +484,15 @@ MALFORMED = [
     ("POLYDATA", _patch(_poly(attributes=[PolyDataAttribute(
         "a", AttributeKind.VECTOR, np.zeros((3, 3), np.float32))]), 40 + 36 + 18, ">I", 4),
      "attribute 'a' N"),
+    ("POLYDATA", _patch(_poly(attributes=[PolyDataAttribute(  # kind 6: beyond the spec
+        "a", AttributeKind.TCOORDS, np.zeros((3, 2), np.float32))]), 40 + 36 + 16, ">B", 0x16),
+     "attribute 'a' TYPE"),
+    ("POLYDATA", _patch(_poly(attributes=[PolyDataAttribute(
+        "a", AttributeKind.TCOORDS, np.zeros((3, 2), np.float32))]), 40 + 36 + 17, ">B", 4),
+     "attribute 'a' NCOMPONENTS"),
+    ("POLYDATA", _patch(_poly(attributes=[PolyDataAttribute(  # 9: padded, but no filler
+        "a", AttributeKind.TCOORDS, np.zeros((3, 3), np.float32))]), 40 + 36 + 17, ">B", 9),
+     "attribute 'a' data"),
     ("POINT", b"\0" * 135, "body"),
     ("POINT", b"\xff" * 136, "points[0].name"),
     ("IMAGE", GOOD_IMAGE[:-1], "pixel data"),  # size disagrees with the buffer

@@ -390,7 +390,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             metadata = metadata_from_attributes(attributes)
             if "ros2.role" not in metadata:
                 continue  # attributes not there yet: next tick
-            plan = plan_node(node.GetName(), metadata, rgba_mean=self._rgbaMean(node),
+            plan = plan_node(node.GetName(), metadata, rgba=self._rgba(node),
                              link_devices=link_devices)
             if plan.parent_device is not None and node.IsA("vtkMRMLTransformableNode"):
                 parent = slicer.mrmlScene.GetFirstNode(plan.parent_device,
@@ -406,14 +406,14 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._updateMarkerLabels()
 
     @staticmethod
-    def _rgbaMean(node: Any) -> Optional[list[float]]:
+    def _rgba(node: Any) -> Optional[np.ndarray]:
+        """The model's "RGBA" point array (the planner decides one colour or per point)."""
         if not node.IsA("vtkMRMLModelNode") or node.GetPolyData() is None:
             return None
         array = node.GetPolyData().GetPointData().GetArray("RGBA")
         if array is None or array.GetNumberOfTuples() == 0:
             return None
-        mean = np.asarray(slicer.util.arrayFromModelPointData(node, "RGBA")).mean(axis=0)
-        return [float(value) for value in mean]
+        return np.asarray(slicer.util.arrayFromModelPointData(node, "RGBA"))
 
     def _apply(self, node: Any, plan: NodePlan) -> None:
         node.SetDescription(plan.display_name)  # node names stay = device names (see planner)
@@ -424,7 +424,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
                 display = node.GetDisplayNode()
             display.SetColor(*plan.colour)
             display.SetOpacity(plan.opacity)
-            if plan.point_colours:  # per-point marker colours, shown as they are (0..1)
+            if plan.point_colours:  # the points' own colours, shown as they are (0..1)
                 display.SetActiveScalar("RGBA", vtk.vtkAssignAttribute.POINT_DATA)
                 display.SetScalarRangeFlagFromString("UseDirectMapping")
                 display.SetScalarVisibility(True)

@@ -1,0 +1,73 @@
+"""Interop with the OpenIGTLink library 3D Slicer links (3.1, 94244fed): texture coordinates.
+
+Debian's OpenIGTLink 1.11 has no TCOORDS attribute (its SetType refuses 5), so the encoder
+here is OpenIGTLink 3.1 as the real-Slicer tier builds it into .cache/slicer-peer/igtl
+(../shared/peers/slicer-openigtlinkif/build.sh). A small program (cpp/igtl_tcoords_probe.cxx)
+packs a textured cube the way OpenIGTLinkIO's converter does; our decoder reads its bytes
+(header, CRC and body). The test skips, saying why, when that build is absent.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from protocol.framing import Decoder
+from protocol.messages import AttributeKind, PolyData, cells_to_list
+from tests.protocol.igtl_captures import CUBE_CORNERS_MM, CUBE_QUADS
+
+pytestmark = pytest.mark.integration
+
+REPO = Path(__file__).resolve().parents[2]
+IGTL3 = REPO / ".cache" / "slicer-peer" / "igtl"
+PROBE_SOURCE = Path(__file__).resolve().parent / "cpp" / "igtl_tcoords_probe.cxx"
+PROBE = REPO / ".cache" / "igtl3-probe" / "igtl_tcoords_probe"
+
+
+@pytest.fixture(scope="module")
+def probe() -> Path:
+    lib = IGTL3 / "lib" / "igtl"
+    if not (lib / "libOpenIGTLink.so").exists():
+        pytest.skip(f"OpenIGTLink 3 is not built at {IGTL3} (the real-Slicer tier builds it "
+                    "with ../shared/peers/slicer-openigtlinkif/build.sh .cache/slicer-peer)")
+    if shutil.which("c++") is None:
+        pytest.skip("building the OpenIGTLink 3 probe needs c++")
+    if not PROBE.exists() or PROBE.stat().st_mtime < PROBE_SOURCE.stat().st_mtime:
+        PROBE.parent.mkdir(parents=True, exist_ok=True)
+        # The tier's libraries are built with the pre-C++11 string ABI (as the wheels are).
+        result = subprocess.run(
+            ["c++", "-O1", "-D_GLIBCXX_USE_CXX11_ABI=0", f"-I{IGTL3 / 'include' / 'igtl'}",
+             str(PROBE_SOURCE), "-o", str(PROBE), f"-L{lib}", "-lOpenIGTLink",
+             f"-Wl,-rpath,{lib}"], capture_output=True, text=True, timeout=300, check=False)
+        if result.returncode != 0:
+            pytest.fail(f"building {PROBE_SOURCE.name} failed:\n{result.stderr[-3000:]}")
+    return PROBE
+
+
+def _decode(probe: Path, where: str) -> PolyData:
+    raw = subprocess.run([str(probe), where], capture_output=True, timeout=30,
+                         check=True).stdout
+    decoder = Decoder()
+    decoder.feed(raw)
+    (message,) = list(decoder.messages())  # CRC checked
+    assert message.type_name == "POLYDATA" and message.device_name == "Cube"
+    assert isinstance(message.body, PolyData)
+    return message.body
+
+
+@pytest.mark.parametrize("where, rows", [("point", 8), ("cell", 6)])
+def test_openigtlink3_textured_cube_decodes(probe: Path, where: str, rows: int) -> None:
+    """Issue 42 (6): the cube Slicer sends with TCoords (TYPE 0x05 / 0x15, which the library
+    packs with NCOMPONENTS 9 and 9 floats a row) decodes: points, quads, and TCoords as the
+    (u, v, 0) rows OpenIGTLink 3's own reader takes."""
+    body = _decode(probe, where)
+    assert body.points.tolist() == CUBE_CORNERS_MM
+    assert [c.tolist() for c in cells_to_list(body.polygons)] == CUBE_QUADS
+    (tcoords,) = body.attributes
+    assert (tcoords.name, tcoords.kind) == ("TCoords", AttributeKind.TCOORDS)
+    assert tcoords.on_cells == (where == "cell")
+    np.testing.assert_array_equal(tcoords.data, [[0.25 * j, 0.5, 0.0] for j in range(rows)])
