@@ -46,3 +46,22 @@ def folder_path(node: Any) -> list[str]:
         names.append(sh.GetItemName(parent))
         parent = sh.GetItemParent(parent)
     return names
+
+
+def repeat_until_told(session: Any, flag: str, action: Any, *, every: float = 0.5,
+                      timeout: float = 60.0) -> int:
+    """Run `action()` every `every` s (Slicer's event loop in between) until the test
+    creates the file `flag` (it saw the result: ROS discovery makes the first sends miss);
+    how many times it ran."""
+    import os
+    import time
+    count = 0
+    deadline = time.monotonic() + timeout * float(
+        os.environ.get("SLICER_BRIDGE_TEST_TIME_SCALE", "1"))
+    while not os.path.exists(flag):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the test did not say it saw the result ({flag})")
+        action()
+        count += 1
+        session.pump(every)
+    return count
