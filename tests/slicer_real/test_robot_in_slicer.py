@@ -4,11 +4,13 @@ with 3D Slicer's own OpenIGTLinkIF connector making the nodes (scenes/robot.py).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Iterator
 
 import pytest
 
-from support import Processes, RunningDaemon, children_of, spare_domain, wait_until
+from support import (Processes, RunningDaemon, children_of, spare_domain, start_daemon,
+                     wait_until)
 
 DEMO_LINKS = ["base_link", "elbow_link", "finger_left", "finger_right", "forearm_link",
               "shoulder_link", "tool_flange", "upper_arm_link", "wrist_1_link",
@@ -57,3 +59,26 @@ def test_the_demo_robot_is_placed_coloured_filed_and_moved_by_its_sliders(
     assert got["moved"]["joint_1"] == pytest.approx(math.radians(30.0))
     assert got["angle"] == pytest.approx(30.0, abs=0.5)
     assert got["events"] == ["NoEvent"] and got["event_count"] >= 1
+
+
+TWO_COLOUR_URDF = """<robot name="two"><link name="body"><visual><geometry>
+  <mesh filename="package://twocolour/two.obj" scale="0.01 0.01 0.01"/></geometry></visual>
+</link></robot>"""
+
+
+def test_a_mesh_with_per_vertex_colours_shows_them(run_scene, processes: Processes,
+                                                   tmp_path: Path) -> None:
+    """An OBJ of two materials: its model shows its points' two colours (the RGBA array,
+    direct mapping), not their mean as one display colour (issue 42, difference 7)."""
+    (tmp_path / "two.mtl").write_text("newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 1\n")
+    (tmp_path / "two.obj").write_text(
+        "mtllib two.mtl\nv 0 0 0\nv 1 0 0\nv 0 2 0\nv 0 0 3\n"
+        "usemtl red\nf 1 3 2\nf 1 2 4\nusemtl blue\nf 1 4 3\nf 2 3 4\n")
+    daemon = start_daemon(processes, "--package-path", f"twocolour={tmp_path}")
+    rsp = processes.python("rsp", "param_node.py", "two_rsp", "--description", TWO_COLOUR_URDF)
+    rsp.wait_for_output("READY")
+    got = run_scene("robot", port=daemon.port, robot="two", node="/two_rsp", models=1)
+    (model,) = got["models"].values()
+    assert model["rgba_colours"] == 2
+    assert model["scalars"] and model["active_scalar"] == "RGBA"
+    # A one-colour robot (the demo, above) keeps scalars off and its colour.
