@@ -1,5 +1,6 @@
 """Write VTK renderers to a PNG offscreen (EGL or OSMesa: no display needed), for the
-README's pictures (`render_demo_picture.py`, `render_markers_picture.py`)."""
+README's markers picture (`render_markers_picture.py`; the demo picture comes from a real
+Slicer scene: `render_scene_picture.py`)."""
 
 from __future__ import annotations
 
