@@ -7,6 +7,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from support import Processes, assert_clean_exit, start_daemon
 
 # Two links with box and cylinder visuals (the daemon meshes them), one revolute joint.
@@ -20,11 +22,12 @@ ARM_URDF = """<robot name="arm">
 </robot>"""
 
 
-def test_a_saved_bundle_reopened_restores_the_robot_and_the_bridges(
-        run_scene, processes: Processes, tmp_path: Path) -> None:
+@pytest.mark.parametrize("saved_as", ["session.mrb", "session.mrml"])
+def test_a_saved_scene_reopened_restores_the_robot_and_the_bridges(
+        run_scene, processes: Processes, tmp_path: Path, saved_as: str) -> None:
     rsp = processes.python("rsp", "param_node.py", "mrb_arm_rsp", "--description", ARM_URDF)
     rsp.wait_for_output("READY")
-    mrb = tmp_path / "session.mrb"
+    mrb = tmp_path / saved_as
     first = start_daemon(processes)
     saved = run_scene("mrb_save", port=first.port, robot_node="/mrb_arm_rsp", mrb=str(mrb))
     assert saved["saved"] and saved["zipped"] and mrb.stat().st_size > 0

@@ -1,4 +1,4 @@
-"""A saved .mrb reopened in a new scene, then Connect: the module re-creates its bridges
+"""A saved .mrb (or .mrml) reopened in a new scene, then Connect: the module re-creates its bridges
 (the robot, the subscriber) on the daemon it connects to, and the robot's nodes come back
 under their links."""
 
@@ -13,7 +13,11 @@ from scene_tools import nodes
 
 def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     unpack = tempfile.mkdtemp()
-    opened = session.app.app_logic.OpenSlicerDataBundle(args["mrb"], unpack)
+    if args["mrb"].endswith(".mrml"):
+        session.scene.SetURL(args["mrb"])
+        opened = session.scene.Connect()
+    else:
+        opened = session.app.app_logic.OpenSlicerDataBundle(args["mrb"], unpack)
     logic = session.logic
     parameters = logic.getParameterNode()
     saved_state = parameters.bridgeState

@@ -1,5 +1,5 @@
-"""A user's session saved as a Slicer data bundle (.mrb), as Slicer's scene writer saves
-one: the module connected, a robot loaded and a subscriber made, then the bundle written
+"""A user's session saved as a Slicer data bundle (.mrb) or scene file (.mrml), as Slicer's
+scene writers save them: the module connected, a robot loaded and a subscriber made, then the bundle written
 (the module keeps its bridges in its parameter node on the scene's StartSaveEvent)."""
 
 from __future__ import annotations
@@ -19,6 +19,10 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
                  what="the robot's models")
     scene = session.scene
     scene.InvokeEvent(scene.StartSaveEvent)  # what Slicer's scene writer does first
+    if args["mrb"].endswith(".mrml"):  # the scene file alone, as Slicer's .mrml writer
+        scene.SetRootDirectory(os.path.dirname(args["mrb"]))
+        scene.SetURL(args["mrb"])
+        return {"saved": bool(scene.Commit()), "zipped": True, "files": []}
     bundle = os.path.join(tempfile.mkdtemp(), "session")
     os.makedirs(bundle)
     saved = session.app.app_logic.SaveSceneToSlicerDataBundleDirectory(bundle)
