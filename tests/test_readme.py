@@ -11,8 +11,10 @@ does with it:
   list every bridge it names;
 - ``text``: output or a drawing, never run.
 
-A block that cannot run here says so and why in its info string, after the language:
-```` ```python no-run: 3D Slicer's Python console ````. (GitHub highlights by the first word
+A block for 3D Slicer's Python console says so after the language: ```` ```python
+slicer-console ````; the real-Slicer tier runs it in a real Slicer scene fed by Slicer's own
+connector (tests/slicer_real/test_readme_in_slicer.py). A block that cannot run here says so
+and why in its info string, after the language: ```` ```sh no-run: a synopsis ````. (GitHub highlights by the first word
 alone.) The demo is `make demo` on the README's port, 18944; where that port is taken (a 3D
 Slicer, another demo), the demo gets a free port and the blocks get that port in its place,
 which the test prints.
@@ -47,6 +49,7 @@ READMES = {"README.md": 5, "slicer_client/README.md": 2}
 README_PORT = 18944
 RUNNERS = ("python", "sh", "yaml")
 NOT_RUN = ("text",)
+SLICER_CONSOLE = "slicer-console"
 _FENCE = re.compile(r"^(?P<indent> *)```(?P<info>[^`]*)$")
 
 
@@ -60,6 +63,7 @@ class Block:
     no_run: str
     text: str
     line: int
+    in_slicer: bool = False  # `python slicer-console`: run in a real Slicer scene
 
     @property
     def name(self) -> str:
@@ -84,9 +88,10 @@ def blocks(markdown: str, readme: str = "README.md") -> list[Block]:
         indent, info = opening["indent"], opening["info"].strip()
         language, _, rest = info.partition(" ")
         rest = rest.strip()
-        if rest and not rest.startswith("no-run:"):
-            raise ReadmeFormatError(f"{readme}:{i + 1}: expected 'no-run: <why>' after the "
-                                    f"language, got {rest!r}")
+        in_slicer = rest == SLICER_CONSOLE
+        if rest and not in_slicer and not rest.startswith("no-run:"):
+            raise ReadmeFormatError(f"{readme}:{i + 1}: expected 'no-run: <why>' or "
+                                    f"'{SLICER_CONSOLE}' after the language, got {rest!r}")
         body: list[str] = []
         i += 1
         while i < len(lines) and lines[i].strip() != "```":
@@ -94,8 +99,9 @@ def blocks(markdown: str, readme: str = "README.md") -> list[Block]:
             i += 1
         if i == len(lines):
             raise ReadmeFormatError(f"{readme}:{len(found)}: a fence opened and never closed")
-        found.append(Block(readme, language, rest.removeprefix("no-run:").strip(),
-                           "\n".join(body) + "\n", i - len(body)))
+        no_run = "" if in_slicer else rest.removeprefix("no-run:").strip()
+        found.append(Block(readme, language, no_run, "\n".join(body) + "\n", i - len(body),
+                           in_slicer))
         i += 1
     return found
 
@@ -192,7 +198,8 @@ def _run_config(block: Block, processes: Processes, tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("block", [b for b in README_BLOCKS
-                                   if b.language in RUNNERS and not b.no_run],
+                                   if b.language in RUNNERS and not b.no_run
+                                   and not b.in_slicer],
                          ids=lambda b: b.name)
 def test_the_block_runs_against_the_demo(block: Block, demo: Demo, processes: Processes,
                                          tmp_path: Path) -> None:
