@@ -14,7 +14,8 @@ does with it:
 A block for 3D Slicer's Python console says so after the language: ```` ```python
 slicer-console ````; the real-Slicer tier runs it in a real Slicer scene fed by Slicer's own
 connector (tests/slicer_real/test_readme_in_slicer.py). A block that cannot run here says so
-and why in its info string, after the language: ```` ```sh no-run: a synopsis ````. (GitHub highlights by the first word
+and why in its info string, after the language:
+```` ```sh no-run: a synopsis ````. (GitHub highlights by the first word
 alone.) The demo is `make demo` on the README's port, 18944; where that port is taken (a 3D
 Slicer, another demo), the demo gets a free port and the blocks get that port in its place,
 which the test prints.

@@ -4,16 +4,25 @@ VTK, the OpenIGTLinkIF connector) is Slicer's own code.
 
 Each imitation names where Slicer's sources show the behaviour (Slicer/Slicer main):
 
-| here | imitates | Slicer's source |
-|---|---|---|
-| `QTimer` | a Qt timer: `setInterval`, `connect("timeout()", slot)`, `start`, `stop`, `isActive`; fires from the event loop only | Qt's QTimer, as `qt.QTimer` through PythonQt |
-| `Application.processEvents` | one turn of Slicer's event loop: OpenIGTLinkIF's 5 ms timer (`CallConnectorTimerHander`) and the due timers | `Modules/.../qSlicerOpenIGTLinkIFModule.cxx` (SlicerOpenIGTLink), Qt's event loop |
-| `Application.connect("startupCompleted()")` | the signal sent once every module is loaded | `Base/QTGUI/qSlicerApplication.cxx` |
-| `Application.moduleManager().module(name)` | the module manager: None for a module not loaded | `Base/QTCore/qSlicerModuleManager.h` |
-| `getModuleLogic(name)` | `slicer.util.getModuleLogic`: the logic of a loaded module (its widget's `.logic` for a scripted one) | `Base/Python/slicer/util.py` |
-| `ScriptedLoadableModule*` | the scripted-module base classes: `parent`, `moduleName`, `getParameterNode` (a singleton `vtkMRMLScriptedModuleNode` tagged with the module's name), `delayDisplay` | `Base/Python/slicer/ScriptedLoadableModule.py` |
-| `parameterNodeWrapper`, `WithinRange` | typed fields stored as the parameter node's parameters (str and int here, the types the module uses), defaults written on first use; `connectGui`/`disconnectGui` do nothing (no GUI) | `Base/Python/slicer/parameterNodeWrapper/{wrapper,validators}.py` |
-| `ctk` | an empty module: only the module's widget uses it, and no widget runs here | CTK |
+- `QTimer`: a Qt timer (`setInterval`, `connect("timeout()", slot)`, `start`, `stop`,
+  `isActive`), fired from the event loop only. Qt's QTimer, as PythonQt gives `qt.QTimer`.
+- `Application.processEvents`: one turn of Slicer's event loop: OpenIGTLinkIF's 5 ms timer
+  (`CallConnectorTimerHander`) and the due timers. SlicerOpenIGTLink's
+  `qSlicerOpenIGTLinkIFModule.cxx`; Qt's event loop.
+- `Application.connect("startupCompleted()")`: the signal sent once every module is
+  loaded. Slicer's `Base/QTGUI/qSlicerApplication.cxx`.
+- `Application.moduleManager().module(name)`: None for a module not loaded.
+  `Base/QTCore/qSlicerModuleManager.h`.
+- `getModuleLogic(name)`: `slicer.util.getModuleLogic`, the logic of a loaded module (a
+  scripted module's widget's `.logic`). `Base/Python/slicer/util.py`.
+- `ScriptedLoadableModule*`: the scripted-module base classes (`parent`, `moduleName`,
+  `getParameterNode`: a singleton `vtkMRMLScriptedModuleNode` tagged with the module's
+  name; `delayDisplay`). `Base/Python/slicer/ScriptedLoadableModule.py`.
+- `parameterNodeWrapper`, `WithinRange`: typed fields stored as the parameter node's
+  parameters (str and int, the types the module uses), defaults written on first use;
+  `connectGui`/`disconnectGui` do nothing (no GUI here).
+  `Base/Python/slicer/parameterNodeWrapper/{wrapper,validators}.py`.
+- `ctk`: an empty module; only the module's widget uses it, and no widget runs here.
 
 `install(app)` puts them in place (`sys.modules["qt"]`, `["ctk"]`,
 `["slicer.ScriptedLoadableModule"]`, `["slicer.parameterNodeWrapper"]`, `slicer.app`) before
@@ -191,7 +200,7 @@ def parameterNodeWrapper(cls: type) -> type:  # noqa: N802
 
     def __init__(self: Any, parameterNode: Any) -> None:  # noqa: N807,N803
         self.parameterNode = parameterNode
-        for name, (kind, default) in fields.items():
+        for name, (_kind, default) in fields.items():
             if not parameterNode.GetParameter(name):
                 parameterNode.SetParameter(name, str(default))
 

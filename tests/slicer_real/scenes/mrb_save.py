@@ -1,6 +1,7 @@
-"""A user's session saved as a Slicer data bundle (.mrb) or scene file (.mrml), as Slicer's
-scene writers save them: the module connected, a robot loaded and a subscriber made, then the bundle written
-(the module keeps its bridges in its parameter node on the scene's StartSaveEvent)."""
+"""A user's session saved as a Slicer data bundle (.mrb) or scene file (.mrml), as
+Slicer's scene writers save them: the module connected, a robot loaded and a subscriber
+made, then the bundle written (the module keeps its bridges in its parameter node on the
+scene's StartSaveEvent)."""
 
 from __future__ import annotations
 
