@@ -1,0 +1,128 @@
+"""What a pose stream costs 3D Slicer's main thread, in a real Slicer scene.
+
+    .venv/bin/python bench/bench_slicer_main_thread.py [--rate 1000] [--seconds 10]
+
+What runs, each its own process: `slicer-ros2-bridge demo` (its robot moving) in a ROS
+domain of its own; a PoseStamped publisher that sleeps between messages (bench/peers.py);
+3D Slicer's core (slicer-core with Slicer's own OpenIGTLinkIF connector: the peer of
+tools/slicer_core/peer.py) running bench/slicer_scenes/main_thread.py. Two passes in the
+same run:
+  module    - the ROS2Bridge module connected, the demo robot loaded, and a subscriber
+              made as a Slicer user makes it (the reference's CreateAndAddSubscriberNode),
+              its observer reading each message;
+  connector - a plain OpenIGTLinkIF connector given the same stream: what Slicer itself
+              costs (the floor of any Slicer-side client);
+and the rclpy floor: a plain rclpy subscriber of the same stream, its CPU share.
+Figures: the share of wall time Slicer's main thread spends in its event loop's work (the
+connector's 5 ms timer, the module's timers and spin, observers), its CPU share, messages.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
+
+from bench_daemon import Child, load  # noqa: E402
+from tools.slicer_core.peer import PeerUnavailableError, peer_python  # noqa: E402
+
+SCENE = REPO / "bench" / "slicer_scenes" / "main_thread.py"
+RUNNER = REPO / "tools" / "slicer_core" / "run_scene.py"
+PEERS = REPO / "bench" / "peers.py"
+TOPIC = "/bench_slicer_pose"
+
+
+def cpu_seconds(pid: int) -> float:
+    with open(f"/proc/{pid}/stat") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def start_demo(env: dict[str, str]) -> tuple[subprocess.Popen[bytes], int]:
+    log = Path(tempfile.mkdtemp(prefix="bench-slicer-")) / "demo.log"
+    with log.open("wb") as out:
+        demo = subprocess.Popen([sys.executable, "-u", "-m", "bridge.console", "demo",
+                                 "--port", "0"], stdout=out, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, cwd=str(REPO), env=env,
+                                start_new_session=True)
+    deadline = time.monotonic() + 120
+    while "Stop with Ctrl-C" not in log.read_text(errors="replace"):
+        if demo.poll() is not None or time.monotonic() > deadline:
+            raise SystemExit(f"the demo did not start:\n{log.read_text()[-3000:]}")
+        time.sleep(0.1)
+    line = next(ln for ln in log.read_text().splitlines() if " (OpenIGTLink); ROS node" in ln)
+    return demo, int(line.split(" (OpenIGTLink)")[0].rsplit(":", 1)[1])
+
+
+def slicer_pass(python: Path, mode: str, port: int, publisher: Child, rate: float,
+                seconds: float, env: dict[str, str]) -> dict[str, float]:
+    args = {"mode": mode, "port": port, "topic": TOPIC, "device": TOPIC.lstrip("/")}
+    scene = Child(f"slicer-{mode}", [str(python), "-u", str(RUNNER), str(SCENE),
+                                     json.dumps(args)], env=dict(env, PYTHONPATH=""))
+    publisher.ask("WAIT 1", "MATCHED")
+    scene.say(f"MEASURE {seconds}")
+    publisher.say(f"RUN {rate} {seconds + 2}")
+    result = json.loads(scene.expect("RESULT", timeout=seconds + 120)[len("RESULT "):])
+    publisher.expect("DONE", timeout=seconds + 60)
+    scene.popen.wait(60)
+    return result
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--rate", type=float, default=1000.0)
+    parser.add_argument("--seconds", type=float, default=10.0)
+    args = parser.parse_args()
+    try:
+        python = peer_python()
+    except PeerUnavailableError as error:
+        raise SystemExit(str(error)) from None
+    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(1, 100)),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="bench-roslog-"))
+    demo, port = start_demo(env)
+    publisher = Child("publisher", [sys.executable, "-u", str(PEERS), "publish", "pose",
+                                    TOPIC], env=env)
+    rows = []
+    try:
+        print(f"load {load()}; {args.rate:g} Hz PoseStamped for {args.seconds:g} s, "
+              f"the demo robot moving", flush=True)
+        for mode in ("module", "connector"):
+            rows.append(slicer_pass(python, mode, port, publisher, args.rate, args.seconds,
+                                    env))
+        floor = Child("floor", [sys.executable, "-u", str(PEERS), "floor", "pose", TOPIC],
+                      env=env)
+        publisher.ask("WAIT 3", "MATCHED")  # the daemon, the floor (and the bridge)
+        cpu0 = cpu_seconds(floor.popen.pid)
+        start = time.monotonic()
+        publisher.say(f"RUN {args.rate} {args.seconds}")
+        publisher.expect("DONE", timeout=args.seconds + 60)
+        floor_share = (cpu_seconds(floor.popen.pid) - cpu0) / (time.monotonic() - start)
+        floor.say("QUIT")
+    finally:
+        publisher.say("QUIT")
+        os.killpg(demo.pid, signal.SIGINT)
+        demo.wait(30)
+    print(f"{'Slicer side':<34}{'main thread busy':>18}{'its CPU':>10}{'messages':>10}")
+    names = {"module": "ROS2Bridge module + demo robot", "connector": "plain connector (floor)"}
+    for row in rows:
+        print(f"{names[row['mode']]:<34}{100 * row['busy_share']:>17.1f}%"
+              f"{100 * row['cpu_share']:>9.1f}%{row['messages']:>10}")
+    print(f"{'rclpy subscriber (ROS floor)':<34}{'':>18}{100 * floor_share:>9.1f}%")
+    print(json.dumps({"rows": rows, "rclpy_floor_cpu_share": floor_share}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
