@@ -32,7 +32,8 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
         def on_message(caller: Any, event: Any) -> None:
             # Reads the pose (a 4x4 in mm). GetLastMessage() of a PoseStamped needs the
             # daemon's whole-message stream, which Slicer's connector does not carry.
-            caller.resource.last_value
+            pose = caller.resource.last_value
+            del pose
             seen[0] += 1
         sub.AddObserver("ModifiedEvent", on_message)
         count = sub.GetNumberOfMessages
