@@ -273,24 +273,11 @@ class TfBuffer:
         # those few, transforms toward a looked-up frame are judged again, and those naming
         # a new frame while frames can still be forgotten to make room for it.
         worded, rest = refused[:_WORDED_REFUSALS], refused[_WORDED_REFUSALS:]
-        rejected: list[tuple[int, InvalidArgumentError]] = []
-        checked: list[tuple[int, _Checked]] = []
-        for index, raw in worded:
-            try:
-                checked.append((index, _check(_from_raw(raw), index, static,
-                                              self._max_frame_id)))
-            except InvalidArgumentError as exc:
-                rejected.append((index, exc))
+        checked, rejected = self._judge(worded, static)
         unworded = len(rest)
         with self._lock:
             ends = self._toward_looked_up() if self._looked_up and rest else frozenset()
-        for index, raw in rest:
-            if _strip(raw[3]) in ends:
-                try:
-                    checked.append((index, _check(_from_raw(raw), index, static,
-                                                  self._max_frame_id)))
-                except InvalidArgumentError:
-                    continue
+        checked += self._judge([row for row in rest if _strip(row[1][3]) in ends], static)[0]
         with self._lock:
             room_refused = self._store_checked(checked, static, changed, tick)
             store = self._store
@@ -298,13 +285,7 @@ class TfBuffer:
                 not store.has_frame(_strip(raw[2])) or not store.has_frame(_strip(raw[3])))
             ] if rest and self._nothing_to_forget != tick else []
         if late:
-            more: list[tuple[int, _Checked]] = []
-            for index, raw in late:
-                try:
-                    more.append((index, _check(_from_raw(raw), index, static,
-                                               self._max_frame_id)))
-                except InvalidArgumentError:
-                    continue
+            more = self._judge(late, static)[0]
             with self._lock:
                 room_refused += self._store_checked(more, static, changed, tick)
             checked += more
@@ -320,6 +301,20 @@ class TfBuffer:
             raise RejectedTransformsError([exc for _, exc in sorted(rejected, key=_first)],
                                           changed, unworded)
         return changed
+
+    def _judge(self, refused: list[tuple[int, _RawTransform]], static: bool
+               ) -> tuple[list[tuple[int, _Checked]], list[tuple[int, InvalidArgumentError]]]:
+        """Transforms the compiled store refused, judged again by `_check`: the valid ones
+        and the reasons of the others."""
+        checked: list[tuple[int, _Checked]] = []
+        rejected: list[tuple[int, InvalidArgumentError]] = []
+        for index, raw in refused:
+            try:
+                checked.append((index, _check(_from_raw(raw), index, static,
+                                              self._max_frame_id)))
+            except InvalidArgumentError as exc:
+                rejected.append((index, exc))
+        return checked, rejected
 
     def _store_checked(self, rows: list[tuple[int, _Checked]], static: bool,
                        changed: set[str], tick: int) -> list[tuple[int, InvalidArgumentError]]:
