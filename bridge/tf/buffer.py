@@ -189,7 +189,7 @@ class TfBuffer:
         self._chains: Tuple[int, frozenset[str]] = (-1, frozenset())  # (graph_version, frames)
         self._clock = clock
         self._tick = 0  # the receive tick of the last batch (see `_next_tick`)
-        self._nothing_to_forget = -1  # a batch's tick when no frame could be forgotten
+        self._forget_tick = -1  # the tick of the last batch that forgot (or tried to)
         self._forgotten = 0
         self._store: _Store = _make_store(self._cache_ns, compiled, max_frames, max_frame_id)
 
@@ -281,9 +281,13 @@ class TfBuffer:
         with self._lock:
             room_refused = self._store_checked(checked, static, changed, tick)
             store = self._store
+            # Each names a new frame: no more of them fit than the room left once this
+            # batch has forgotten what it may.
+            room = (len(rest) if self._forget_tick != tick
+                    else self._max_frames - store.frame_count)
             late = [(index, raw) for index, raw in rest if _strip(raw[3]) not in ends and (
                 not store.has_frame(_strip(raw[2])) or not store.has_frame(_strip(raw[3])))
-            ] if rest and self._nothing_to_forget != tick else []
+            ][:room] if rest and room > 0 else []
         if late:
             more = self._judge(late, static)[0]
             with self._lock:
@@ -409,14 +413,17 @@ class TfBuffer:
         the future (or now) once must not keep a new frame out, for good or for a cache
         time. Forgotten: every frame silent for longer than the cache time, and at least
         ``new`` and a tenth of the bound (`FORGET_SHARE`), those received least recently
-        first. A frame goes only after the frames below it (a parent of a kept frame stays
+        first; once per batch at most, so that a message of new names costs one rebuild
+        of the store, not one per tenth of the bound (its new frames past that are
+        refused). A frame goes only after the frames below it (a parent of a kept frame stays
         known, so forgetting it would free no room). Never forgotten: static frames (latched,
         never sent again), the frames clients look up and their chains, and the frames of
         the batch being stored. Unlike tf2, which keeps every frame for good, a full buffer
         lets these go: the store is made again from the frames kept (only ever when full).
         """
-        if self._nothing_to_forget == tick:
-            return False  # this batch already found nothing to forget; nothing came since
+        if self._forget_tick == tick:
+            return False
+        self._forget_tick = tick
         receipts = self._store.receipts()
         keep = {row[1] for _, row in batch}
         if self._looked_up:
@@ -442,7 +449,6 @@ class TfBuffer:
             if not below[parent] and parent in can_go:
                 heapq.heappush(heap, can_go[parent])
         if not gone:
-            self._nothing_to_forget = tick
             return False
         old = self._store
         store = _make_store(self._cache_ns, not isinstance(old, FrameStore),
@@ -456,8 +462,6 @@ class TfBuffer:
         store.graph_version = old.graph_version + 1  # every lookup's chain is derived again
         self._store = store
         self._forgotten += len(gone)
-        if store.frame_count + new > self._max_frames:
-            self._nothing_to_forget = tick  # names still in use as parents: no more this batch
         return True
 
     def clear(self) -> None:
