@@ -25,7 +25,7 @@ import sys
 from bridge.tf.errors import ConnectivityError, ExtrapolationError, TfError, TfLookupError
 
 # The store interface this module implements (buffer.STORE_INTERFACE): bump both together.
-INTERFACE = 5
+INTERFACE = 6
 
 # CDR's doubles are read as the machine's: on a big-endian machine `insert_cdr` declines.
 cdef bint LITTLE_ENDIAN = sys.byteorder == "little"
@@ -44,6 +44,7 @@ cdef struct Sample:
 cdef struct Frame:
     bint cached  # a child frame: it has samples (a frame seen only as a parent has none)
     bint static
+    int64_t received  # receive_tick of its last transform (store.py's _FrameCache.received)
     Sample *samples
     Py_ssize_t start  # samples[start:end] are kept; older ones were dropped in a chunk
     Py_ssize_t end
@@ -236,6 +237,7 @@ cdef class CompiledFrameStore:
     cdef Py_ssize_t *_chain_src
     cdef Py_ssize_t *_chain_tgt
     cdef public long long graph_version
+    cdef public long long receive_tick  # store.py's: when the transforms inserted next came
     cdef Py_ssize_t _max_frames  # 0: no bound (TfBuffer's, see buffer.py)
     cdef Py_ssize_t _max_name  # characters of a frame id; 0: no bound
 
@@ -290,6 +292,7 @@ cdef class CompiledFrameStore:
         fid = self._count
         self._frames[fid].cached = False
         self._frames[fid].static = False
+        self._frames[fid].received = 0
         self._frames[fid].samples = NULL
         self._frames[fid].start = 0
         self._frames[fid].end = 0
@@ -332,6 +335,7 @@ cdef class CompiledFrameStore:
             f.start = 0
             f.end = 0
             self.graph_version += 1
+        f.received = self.receive_tick  # a repeat or too old still says it is alive
         if static:
             if f.end > f.start:
                 s = &f.samples[f.start]
@@ -509,6 +513,18 @@ cdef class CompiledFrameStore:
             first = first_live(f, self._window_ns)
             out.append((name, self._names[f.samples[f.end - 1].parent], f.static,
                         f.samples[f.end - 1].stamp, f.samples[first].stamp, f.end - first))
+        return out
+
+    def receipts(self):
+        """One (frame, newest parent, static, receive tick) per child frame."""
+        cdef Frame *f
+        cdef Py_ssize_t k
+        cdef list out = []
+        for k in range(self._count):
+            f = &self._frames[k]
+            if f.cached:
+                out.append((self._names[k], self._names[f.samples[f.end - 1].parent], f.static,
+                            f.received))
         return out
 
     def samples_of(self, str frame):

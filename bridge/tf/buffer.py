@@ -38,12 +38,14 @@ and 20 us on the Python one; with the evaluation, 12 us and 53 us (bench/bench_t
 
 from __future__ import annotations
 
+import heapq
 import math
 import operator
 import os
 import threading
+import time
 from dataclasses import dataclass
-from typing import Iterable, List, NamedTuple, Optional, Sequence, Tuple, Union
+from typing import Callable, Iterable, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -61,7 +63,7 @@ from protocol.conversions import matrix_to_pose, pose_to_matrix
 
 # The store interface this module expects; the compiled module states the one it was built
 # for, so a module left from an older build (a pull without `make setup`) is not used.
-STORE_INTERFACE = 5
+STORE_INTERFACE = 6
 try:  # built by setup.py where a C compiler is found (optional: see `COMPILED`)
     from bridge.tf import _compiled_store
 except ImportError:
@@ -83,6 +85,10 @@ MAX_FRAMES = 10_000
 # them: a peer's flood of other frames, once it has filled the buffer, must not keep a
 # robot that starts later out of every lookup.
 LOOKED_UP_RESERVE = MAX_FRAMES // 10
+# A full buffer makes room for a new frame by forgetting the frames received least recently
+# (by the daemon's clock, never by their stamps), at least a tenth of the bound at a time:
+# forgetting rebuilds the store, so a flood of new names must not rebuild it per frame.
+FORGET_SHARE = 10
 # Refusals of one TFMessage's CDR worded one by one; the others are counted.
 _WORDED_REFUSALS = 8
 # Set to 1 to run every TfBuffer on the pure Python store (to compare, or to rule it out).
@@ -160,13 +166,16 @@ class TfBuffer:
     `COMPILED`). ``max_frames`` and ``max_frame_id`` bound what it keeps (a transform
     naming a frame id longer than ``max_frame_id`` characters, or a new frame past
     ``max_frames``, is refused like an invalid one); ``looked_up_reserve`` more frames are
-    kept for the frames `look_up` names and the chains leading to them. Thread-safe: see the
-    module docstring.
+    kept for the frames `look_up` names and the chains leading to them. A full buffer
+    forgets frames to make room (`_forget_least_received`). ``clock``: the daemon's
+    monotonic clock in ns, read once per batch to judge which frames were received least
+    recently. Thread-safe: see the module docstring.
     """
 
     def __init__(self, cache_time_s: float = 10.0, *, compiled: Optional[bool] = None,
                  max_frames: int = MAX_FRAMES, max_frame_id: int = MAX_FRAME_ID,
-                 looked_up_reserve: int = LOOKED_UP_RESERVE) -> None:
+                 looked_up_reserve: int = LOOKED_UP_RESERVE,
+                 clock: Callable[[], int] = time.monotonic_ns) -> None:
         if not (isinstance(cache_time_s, (int, float)) and math.isfinite(cache_time_s)
                 and cache_time_s > 0):
             raise InvalidArgumentError("cache_time_s", "a finite number of seconds > 0",
@@ -178,7 +187,10 @@ class TfBuffer:
         self._reserve = looked_up_reserve
         self._looked_up: frozenset[str] = frozenset()  # frames named by clients' lookups
         self._chains: Tuple[int, frozenset[str]] = (-1, frozenset())  # (graph_version, frames)
-        self._no_stale_until = 0  # stamp before which a full buffer has no stale frame
+        self._clock = clock
+        self._tick = 0  # the receive tick of the last batch (see `_next_tick`)
+        self._forget_tick = -1  # the tick of the last batch that forgot (or tried to)
+        self._forgotten = 0
         self._store: _Store = _make_store(self._cache_ns, compiled, max_frames, max_frame_id)
 
     # ------------------------------------------------------------------ writing
@@ -199,6 +211,17 @@ class TfBuffer:
         which frames each lookup traverses when it moves."""
         return self._store.graph_version
 
+    @property
+    def forgotten(self) -> int:
+        """Frames forgotten so far to make room for new ones (the capability logs it)."""
+        return self._forgotten
+
+    def _next_tick(self) -> int:
+        """Under the lock: the receive tick of a new batch, the clock's ns, made to grow
+        strictly so that a batch is told from the one before."""
+        self._tick = max(self._clock(), self._tick + 1)
+        return self._tick
+
     def set_transforms(self, transforms: Iterable[StampedTransform], *, static: bool) -> set[str]:
         """Store one batch (a whole TFMessage); return the child frames whose data changed.
 
@@ -217,7 +240,7 @@ class TfBuffer:
             except InvalidArgumentError as exc:
                 rejected.append((index, exc))
         with self._lock:
-            rejected += self._store_checked(checked, static, changed)
+            rejected += self._store_checked(checked, static, changed, self._next_tick())
         if rejected:
             raise RejectedTransformsError([exc for _, exc in sorted(rejected, key=_first)],
                                           changed)
@@ -238,6 +261,7 @@ class TfBuffer:
         if isinstance(store, FrameStore):  # the pure Python store reads no CDR
             return None
         with self._lock:
+            tick = store.receive_tick = self._next_tick()
             stored = store.insert_cdr(data, static)
         if stored is None:
             return None
@@ -246,28 +270,29 @@ class TfBuffer:
             return changed
         # A peer's flood (a thousand new frames past the bound in each message) is worded
         # a few at a time: judging each refusal again in Python cost 20 ms a message. Past
-        # those few, only transforms toward a looked-up frame are judged again.
+        # those few, transforms toward a looked-up frame are judged again, and those naming
+        # a new frame while frames can still be forgotten to make room for it.
         worded, rest = refused[:_WORDED_REFUSALS], refused[_WORDED_REFUSALS:]
-        rejected: list[tuple[int, InvalidArgumentError]] = []
-        checked: list[tuple[int, _Checked]] = []
-        for index, raw in worded:
-            try:
-                checked.append((index, _check(_from_raw(raw), index, static,
-                                              self._max_frame_id)))
-            except InvalidArgumentError as exc:
-                rejected.append((index, exc))
+        checked, rejected = self._judge(worded, static)
         unworded = len(rest)
         with self._lock:
             ends = self._toward_looked_up() if self._looked_up and rest else frozenset()
-        for index, raw in rest:
-            if _strip(raw[3]) in ends:
-                try:
-                    checked.append((index, _check(_from_raw(raw), index, static,
-                                                  self._max_frame_id)))
-                except InvalidArgumentError:
-                    continue
+        checked += self._judge([row for row in rest if _strip(row[1][3]) in ends], static)[0]
         with self._lock:
-            room_refused = self._store_checked(checked, static, changed)
+            room_refused = self._store_checked(checked, static, changed, tick)
+            store = self._store
+            # Each names a new frame: no more of them fit than the room left once this
+            # batch has forgotten what it may.
+            room = (len(rest) if self._forget_tick != tick
+                    else self._max_frames - store.frame_count)
+            late = [(index, raw) for index, raw in rest if _strip(raw[3]) not in ends and (
+                not store.has_frame(_strip(raw[2])) or not store.has_frame(_strip(raw[3])))
+            ][:room] if rest and room > 0 else []
+        if late:
+            more = self._judge(late, static)[0]
+            with self._lock:
+                room_refused += self._store_checked(more, static, changed, tick)
+            checked += more
         last_worded = worded[-1][0]
         rejected += [(index, exc) for index, exc in room_refused if index <= last_worded]
         unworded -= sum(1 for index, _ in checked if index > last_worded)
@@ -281,30 +306,54 @@ class TfBuffer:
                                           changed, unworded)
         return changed
 
+    def _judge(self, refused: list[tuple[int, _RawTransform]], static: bool
+               ) -> tuple[list[tuple[int, _Checked]], list[tuple[int, InvalidArgumentError]]]:
+        """Transforms the compiled store refused, judged again by `_check`: the valid ones
+        and the reasons of the others."""
+        checked: list[tuple[int, _Checked]] = []
+        rejected: list[tuple[int, InvalidArgumentError]] = []
+        for index, raw in refused:
+            try:
+                checked.append((index, _check(_from_raw(raw), index, static,
+                                              self._max_frame_id)))
+            except InvalidArgumentError as exc:
+                rejected.append((index, exc))
+        return checked, rejected
+
     def _store_checked(self, rows: list[tuple[int, _Checked]], static: bool,
-                       changed: set[str]) -> list[tuple[int, InvalidArgumentError]]:
-        """Under the lock: store each checked transform there is room for; the refusals.
-        Refused ones whose child leads to a looked-up frame are tried again while the tree
-        grows: a chain sent root first gets into the reserve from its looked-up end."""
+                       changed: set[str], tick: int) -> list[tuple[int, InvalidArgumentError]]:
+        """Under the lock: store each checked transform of the batch received at ``tick``
+        there is room for; the refusals. Refused ones whose child leads to a looked-up frame
+        are tried again while the tree grows: a chain sent root first gets into the reserve
+        from its looked-up end."""
         refused: dict[int, tuple[_Checked, InvalidArgumentError]] = {}
-        pending = rows
-        while pending:
-            version = self._store.graph_version
-            for index, (parent, child, stamp, value) in pending:
-                try:
-                    self._check_room(parent, child, index, stamp)
-                except InvalidArgumentError as exc:
-                    refused[index] = ((parent, child, stamp, value), exc)
-                    continue
-                refused.pop(index, None)
-                # The store itself: `_check_room` may have made a new one.
-                if self._store.insert(parent, child, stamp, value, static):
-                    changed.add(child)
-            if not (refused and self._looked_up and self._store.graph_version != version):
+        self._store.receive_tick = tick
+        # Twice: first what there is room for, in order, as the compiled store's insert_cdr
+        # stores a message; then the refused ones, in order, forgetting frames to make room.
+        # So both ways in store the same frames.
+        for forget in (False, True):
+            pending = rows if not forget else sorted(
+                (index, row) for index, (row, _) in refused.items())
+            while pending:
+                version = self._store.graph_version
+                for index, (parent, child, stamp, value) in pending:
+                    try:
+                        self._check_room(parent, child, index, tick, rows, forget)
+                    except InvalidArgumentError as exc:
+                        refused[index] = ((parent, child, stamp, value), exc)
+                        continue
+                    refused.pop(index, None)
+                    # The store itself: `_check_room` may have made a new one.
+                    if self._store.insert(parent, child, stamp, value, static):
+                        changed.add(child)
+                if not (refused and self._looked_up and self._store.graph_version != version):
+                    break
+                ends = self._toward_looked_up()
+                pending = [(index, row) for index, (row, _) in sorted(refused.items())
+                           if row[1] in ends]
+            if not refused:
                 break
-            ends = self._toward_looked_up()
-            pending = [(index, row) for index, (row, _) in refused.items() if row[1] in ends]
-        return [(index, exc) for index, (_, exc) in refused.items()]
+        return [(index, exc) for index, (_, exc) in sorted(refused.items())]
 
     def look_up(self, frames: Iterable[str]) -> None:
         """The frames clients look up (`LookupRegistry` says): they, and the frames that
@@ -331,19 +380,23 @@ class TfBuffer:
         self._chains = (self._store.graph_version, frozenset(found))
         return self._chains[1]
 
-    def _check_room(self, parent: str, child: str, index: int, stamp: int) -> None:
-        """Under the lock: InvalidArgumentError if storing parent<-child (at ``stamp``)
-        would make the buffer know more than ``max_frames`` frames, once stale frames are
-        forgotten; a child that leads to a looked-up frame may use the reserve past that."""
+    def _check_room(self, parent: str, child: str, index: int, tick: int,
+                    batch: list[tuple[int, _Checked]], forget: bool) -> None:
+        """Under the lock: InvalidArgumentError if storing parent<-child would make the
+        buffer know more than ``max_frames`` frames. With ``forget``: once frames received
+        least recently are forgotten, and a child that leads to a looked-up frame may then
+        use the reserve past that. ``tick`` and ``batch``: the batch being stored (its frames
+        stay)."""
         store = self._store
         if store.frame_count + 2 <= self._max_frames:
             return  # the usual case: no lookups
         new = (not store.has_frame(parent)) + (not store.has_frame(child))
-        if new and store.frame_count + new > self._max_frames and self._forget_stale(stamp):
+        if (forget and new and store.frame_count + new > self._max_frames
+                and self._forget_least_received(new, tick, batch)):
             store = self._store
             new = (not store.has_frame(parent)) + (not store.has_frame(child))
         if new and store.frame_count + new > self._max_frames:
-            if (store.frame_count + new <= self._max_frames + self._reserve
+            if (forget and store.frame_count + new <= self._max_frames + self._reserve
                     and self._looked_up and child in self._toward_looked_up()):
                 return
             raise InvalidArgumentError(
@@ -351,33 +404,64 @@ class TfBuffer:
                 f"most {self._max_frames} frames are kept)", f"{new} new frame(s): "
                 f"'{_shown(parent)}' -> '{_shown(child)}'")
 
-    def _forget_stale(self, stamp: int) -> bool:
-        """Under the lock, with the buffer full: forget the dynamic frames whose newest
-        sample is more than the cache time older than the newest sample of all, or than
-        ``stamp`` (a new frame's: a peer's flood of once-sent frames must not keep it out),
-        so that new frames find room again; whether any went.
-        Unlike tf2, which keeps every frame for good, a full buffer lets stale ones go:
-        the store is made again from the frames kept (only ever when full)."""
-        if stamp < self._no_stale_until:
-            return False  # the last look found none, and none can have gone stale since
-        rows = self._store.frame_rows()
-        dynamic = [row[3] for row in rows if not row[2]]
-        newest = max([stamp, *dynamic])
-        stale = {row[0] for row in rows if not row[2] and row[3] < newest - self._cache_ns}
-        if not stale:
-            # A frame's newest sample only gets newer: none is stale before this.
-            self._no_stale_until = min(dynamic, default=_STAMP_LIMIT) + self._cache_ns
+    def _forget_least_received(self, new: int, tick: int,
+                               batch: list[tuple[int, _Checked]]) -> bool:
+        """Under the lock, with the buffer full: forget dynamic frames, those received least
+        recently first, so that ``new`` frames find room; whether any went.
+
+        Judged by the daemon's receive ticks, never by stamps: a peer's frames stamped in
+        the future (or now) once must not keep a new frame out, for good or for a cache
+        time. Forgotten: every frame silent for longer than the cache time, and at least
+        ``new`` and a tenth of the bound (`FORGET_SHARE`), those received least recently
+        first; once per batch at most, so that a message of new names costs one rebuild
+        of the store, not one per tenth of the bound (its new frames past that are
+        refused). A frame goes only after the frames below it (a parent of a kept frame stays
+        known, so forgetting it would free no room). Never forgotten: static frames (latched,
+        never sent again), the frames clients look up and their chains, and the frames of
+        the batch being stored. Unlike tf2, which keeps every frame for good, a full buffer
+        lets these go: the store is made again from the frames kept (only ever when full).
+        """
+        if self._forget_tick == tick:
+            return False
+        self._forget_tick = tick
+        receipts = self._store.receipts()
+        keep = {row[1] for _, row in batch}
+        if self._looked_up:
+            keep |= self._toward_looked_up()
+        below: dict[str, int] = {}  # frame -> child frames naming it as newest parent
+        for _, parent, _, _ in receipts:
+            below[parent] = below.get(parent, 0) + 1
+        # Frames that may go, by receive tick; a frame joins once nothing is left below it.
+        can_go = {frame: (received, frame, parent) for frame, parent, static, received
+                  in receipts if not static and received < tick and frame not in keep}
+        heap = [entry for frame, entry in can_go.items() if frame not in below]
+        heapq.heapify(heap)
+        silent_before = tick - self._cache_ns
+        least = max(new, self._max_frames // FORGET_SHARE)
+        gone: set[str] = set()
+        while heap:
+            received, frame, parent = heap[0]
+            if len(gone) >= least and received >= silent_before:
+                break
+            heapq.heappop(heap)
+            gone.add(frame)
+            below[parent] -= 1
+            if not below[parent] and parent in can_go:
+                heapq.heappush(heap, can_go[parent])
+        if not gone:
             return False
         old = self._store
         store = _make_store(self._cache_ns, not isinstance(old, FrameStore),
                             self._max_frames, self._max_frame_id)
-        for frame, _, static, _, _, _ in rows:
-            if frame not in stale:
+        for frame, _, static, received in receipts:
+            if frame not in gone:
+                store.receive_tick = received
                 for stamp, parent, value in old.samples_of(frame):
                     store.insert(parent, frame, stamp, value, static)
+        store.receive_tick = tick
         store.graph_version = old.graph_version + 1  # every lookup's chain is derived again
         self._store = store
-        self._no_stale_until = 0
+        self._forgotten += len(gone)
         return True
 
     def clear(self) -> None:

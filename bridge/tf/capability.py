@@ -58,7 +58,7 @@ from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.outbox import Frame, TemplateFrame
 from bridge.ros.raw_reader import RawTopic
 from bridge.ros.ros_node import RosNode
-from bridge.tf.buffer import StampedTransform, TfBuffer
+from bridge.tf.buffer import MAX_FRAMES, StampedTransform, TfBuffer
 from bridge.tf.errors import (
     ConnectivityError,
     ExtrapolationError,
@@ -268,6 +268,7 @@ class TfBridges:
         self._lock = threading.Lock()
         self._loop_call_scheduled = False
         self._refusals = RateLimitedLog(log)
+        self._forgotten = 0  # the buffer's `forgotten` count as last logged
         # Loop-thread state.
         self._timer: Optional[asyncio.TimerHandle] = None
         self._timer_due_ns: Optional[int] = None
@@ -339,6 +340,13 @@ class TfBridges:
         self._deliver(changed)
 
     def _deliver(self, changed: set[str]) -> None:
+        forgotten = self.buffer.forgotten
+        if forgotten != self._forgotten:
+            self._refusals.warning(
+                "tf-forgotten", None, "the tf buffer was full (%d frames): forgot %d frame(s), "
+                "those received least recently, to make room for new ones",
+                MAX_FRAMES, forgotten - self._forgotten, count=forgotten - self._forgotten)
+            self._forgotten = forgotten
         if not changed:
             return
         with self._deliver_lock:

@@ -18,7 +18,7 @@ from typing import Dict, List, Optional, Sequence, Tuple, Union
 from bridge.tf.errors import ConnectivityError, ExtrapolationError, TfError, TfLookupError
 from bridge.tf.math import IDENTITY, Tf7, compose, interpolate, invert
 
-__all__ = ["FrameStore", "FrameRow", "LatestResult", "NO_STAMP", "Result"]
+__all__ = ["FrameStore", "FrameRow", "LatestResult", "NO_STAMP", "Receipt", "Result"]
 
 NO_STAMP = 1 << 63  # above any stamp (int64 ns): no dynamic frame seen yet
 
@@ -26,6 +26,8 @@ NO_STAMP = 1 << 63  # above any stamp (int64 ns): no dynamic frame seen yet
 FrameRow = Tuple[str, str, bool, int, int, int]
 # target<-source as (time used, translation, rotation): `StampedTransform`'s last fields.
 Result = Tuple[int, Tuple[float, float, float], Tuple[float, float, float, float]]
+# (child frame, newest parent, static, receive tick): what `TfBuffer` judges room by.
+Receipt = Tuple[str, str, bool, int]
 # One result of `FrameStore.latest_many`, or the error it raised.
 LatestResult = Union[Result, TfError]
 
@@ -34,14 +36,16 @@ class _FrameCache:
     """The samples of one child frame, oldest first, in three parallel lists.
 
     Parallel lists (not a list of records) so `bisect` runs on the plain int stamps. A
-    static frame holds exactly one sample with stamp 0.
+    static frame holds exactly one sample with stamp 0. ``received``: the store's
+    ``receive_tick`` when a transform of this frame last came (stored or not).
     """
 
-    __slots__ = ("static", "window_ns", "stamps", "parents", "values")
+    __slots__ = ("static", "window_ns", "received", "stamps", "parents", "values")
 
     def __init__(self, static: bool, window_ns: int) -> None:
         self.static = static
         self.window_ns = window_ns
+        self.received = 0
         self.stamps: List[int] = []
         self.parents: List[str] = []
         self.values: List[Tf7] = []
@@ -114,13 +118,19 @@ def _combine(source_slots: Sequence[_Slot], target_slots: Sequence[_Slot]) -> Tf
 
 
 class FrameStore:
-    """Each child frame's samples within ``window_ns`` of its newest, and tf2's walks."""
+    """Each child frame's samples within ``window_ns`` of its newest, and tf2's walks.
+
+    ``receive_tick``: when the transforms inserted next came, as `TfBuffer` reads its
+    monotonic clock (ns) for each batch; each child frame keeps the tick of its last one
+    (`receipts`). Stamps are the sender's word and may lie; this is the daemon's own.
+    """
 
     def __init__(self, window_ns: int) -> None:
         self._window_ns = window_ns
         self._frames: dict[str, _FrameCache] = {}  # child frame -> its samples
         self._known: dict[str, None] = {}  # every frame id seen, children and parents
         self.graph_version = 0
+        self.receive_tick = 0
 
     @property
     def frame_count(self) -> int:
@@ -141,6 +151,7 @@ class FrameStore:
             # tf2 also replaces the whole cache when a frame switches static <-> dynamic.
             cache = self._frames[child] = _FrameCache(static, self._window_ns)
             self.graph_version += 1
+        cache.received = self.receive_tick  # a repeat or too old still says it is alive
         stamps, parents, values = cache.stamps, cache.parents, cache.values
         if static:
             if parents and parents[0] == parent and values[0] == value:
@@ -200,6 +211,10 @@ class FrameStore:
             out.append((name, c.parents[-1], c.static, c.stamps[-1], c.stamps[first],
                         len(c.stamps) - first))
         return out
+
+    def receipts(self) -> List[Receipt]:
+        """One `Receipt` per child frame, in no particular order."""
+        return [(name, c.parents[-1], c.static, c.received) for name, c in self._frames.items()]
 
     def samples_of(self, frame: str) -> List[Tuple[int, str, Tf7]]:
         """The live samples of a child frame, oldest first: (stamp, parent, value)."""

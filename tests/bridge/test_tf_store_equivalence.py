@@ -115,8 +115,17 @@ def _cdr(batch: list[StampedTransform]) -> bytes:
     return serialize_message(msg)
 
 
+def _ticks() -> Any:
+    """A clock that stands still: each batch then gets the tick after the last (1, 2, ...),
+    the same on both buffers."""
+    return lambda: 0
+
+
 def _compare(py: TfBuffer, compiled: TfBuffer, times: list[int]) -> None:
     assert py.graph_version == compiled.graph_version
+    # What the buffer judges room by: each child frame's newest parent and receive tick.
+    assert sorted(py._store.receipts()) == sorted(compiled._store.receipts())
+    assert py.forgotten == compiled.forgotten
     assert py.frames() == compiled.frames()
     assert py.frame_info() == compiled.frame_info()
     names = [f for f in FRAMES if f] + ["unknown"]
@@ -133,8 +142,8 @@ def _compare(py: TfBuffer, compiled: TfBuffer, times: list[int]) -> None:
 @settings(max_examples=250, deadline=None)
 @given(st.lists(batches, min_size=1, max_size=8), st.booleans())
 def test_both_stores_give_the_same_results(history: list, clear_midway: bool) -> None:
-    py = TfBuffer(WINDOW_S, compiled=False)
-    compiled = TfBuffer(WINDOW_S, compiled=True)
+    py = TfBuffer(WINDOW_S, compiled=False, clock=_ticks())
+    compiled = TfBuffer(WINDOW_S, compiled=True, clock=_ticks())
     assert compiled.compiled and not py.compiled
     stamps = {0}
     for number, (static, raw) in enumerate(history):
@@ -159,13 +168,34 @@ def test_both_stores_give_the_same_results(history: list, clear_midway: bool) ->
 def test_set_transforms_on_both_stores_agrees(history: list) -> None:
     """The same batches through `set_transforms` on both (the path of broadcasters, and of
     messages another CDR encoding brought)."""
-    py = TfBuffer(WINDOW_S, compiled=False)
-    compiled = TfBuffer(WINDOW_S, compiled=True)
+    py = TfBuffer(WINDOW_S, compiled=False, clock=_ticks())
+    compiled = TfBuffer(WINDOW_S, compiled=True, clock=_ticks())
     for static, raw in history:
         batch = [_stamped(*r) for r in raw]
         assert (_outcome(py.set_transforms, batch, static=static)
                 == _outcome(compiled.set_transforms, batch, static=static))
     _compare(py, compiled, [0, S, S + S // 3, 5 * S])
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(batches, st.integers(0, 3 * S)), min_size=1, max_size=10))
+def test_a_full_buffer_forgets_alike(history: list) -> None:
+    """Four frames at most and receive times from a clock set by hand: both buffers forget
+    the same frames (the rule is `TfBuffer`'s, on each store's receive ticks) and refuse
+    the same ones."""
+    now = [0]
+    py = TfBuffer(WINDOW_S, compiled=False, max_frames=4, clock=lambda: now[0])
+    compiled = TfBuffer(WINDOW_S, compiled=True, max_frames=4, clock=lambda: now[0])
+    stamps = {0}
+    for (static, raw), later in history:
+        now[0] += later
+        batch = [_stamped(*r) for r in raw]
+        stamps.update(tr.stamp_ns for tr in batch if tr.stamp_ns >= 0)
+        expected = _outcome(py.set_transforms, batch, static=static)
+        got = _outcome(compiled.set_transforms_cdr, _cdr(batch), static=static)
+        assert got == (expected if expected[0] == "error" else ("ok", expected[1]))
+    times = sorted({max(0, s + d) for s in stamps for d in (-S // 7 - 3, 0)})
+    _compare(py, compiled, times)
 
 
 def test_a_long_history_is_pruned_alike() -> None:
