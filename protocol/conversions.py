@@ -31,6 +31,7 @@ __all__ = [
     "FLOAT32_BOUND",
     "MM_PER_M",
     "ConversionError",
+    "fit_float32_mm",
     "fits_float32",
     "igtl12_to_matrix",
     "igtl_timestamp_from_ros",
@@ -95,6 +96,14 @@ def fits_float32(*values: float) -> bool:
         if not -FLOAT32_BOUND < v < FLOAT32_BOUND:  # False for NaN as well
             return False
     return True
+
+
+def fit_float32_mm(lengths_m: ArrayLike) -> npt.NDArray[np.bool_]:
+    """`fits_float32` of each length (metres) once in mm, element by element: the rule for
+    arrays of points (clouds, meshes, marker models)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        mm = np.asarray(lengths_m, dtype=np.float64) * MM_PER_M
+        return np.asarray(np.abs(mm) < FLOAT32_BOUND)
 
 
 

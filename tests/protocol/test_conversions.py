@@ -15,6 +15,7 @@ from protocol.conversions import (
     FLOAT32_BOUND,
     MM_PER_M,
     ConversionError,
+    fit_float32_mm,
     fits_float32,
     igtl12_to_matrix,
     igtl_timestamp_from_ros,
@@ -237,6 +238,13 @@ def test_fits_float32_is_what_a_float32_cast_makes_of_the_value() -> None:
     assert cast[:7] == [True] * 7 and cast[7:] == [False] * 7
     assert fits_float32() and fits_float32(1.0, 2.0, 3.0)
     assert not fits_float32(1.0, math.nan, 3.0) and not fits_float32(1.0, 2.0, 1e39)
+
+
+def test_fit_float32_mm_is_fits_float32_of_each_length_in_mm() -> None:
+    lengths = np.array([[0.0, 1.5, -2.0], [3.4e35, -3.4e35, 1e36], [math.nan, math.inf, 1e306]])
+    want = [[fits_float32(v * MM_PER_M) for v in row] for row in lengths.tolist()]
+    assert fit_float32_mm(lengths).tolist() == want == [[True] * 3, [True, True, False],
+                                                        [False] * 3]
 
 
 @pytest.mark.parametrize("x_m", [1e306, 1e36, -1e36, FLOAT32_BOUND / 1000 * 1.0000001])
