@@ -121,10 +121,14 @@ def not_json_number(path: str, got: object) -> CommandFailedError:
 def _first_non_finite(value: Any, path: str) -> tuple[str, float] | None:
     # Only after json.dumps refused the value: the rare path, to say where.
     stack: list[tuple[Any, str]] = [(value, path)]
+    seen: set[int] = set()  # json refuses a circular value with ValueError too
     while stack:
         item, where = stack.pop()
         if isinstance(item, float) and not math.isfinite(item):
             return where, item
+        if id(item) in seen:
+            continue
+        seen.add(id(item))
         if isinstance(item, Mapping):
             pairs = [(v, f"{where}.{k}" if where else str(k)) for k, v in item.items()]
         elif isinstance(item, (list, tuple)):

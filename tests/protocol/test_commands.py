@@ -607,3 +607,7 @@ def test_dumps_refuses_nan_and_infinity_naming_where() -> None:
     assert str(info.value) == ("result.response.values[1].double_value: expected finite "
                                "doubles (JSON has no NaN or infinity), got -inf")
     assert c.not_json_number("values.ratio", "inf").error_code == ErrorCode.NOT_SUPPORTED
+    loop: dict[str, object] = {"a": [1.0]}
+    loop["b"] = loop  # refused by json as well, and said so without a hunt that never ends
+    with pytest.raises(OutOfRangeError, match="Circular reference"):
+        c.dumps(loop)
