@@ -28,8 +28,11 @@ import numpy.typing as npt
 from protocol.errors import ProtocolError
 
 __all__ = [
+    "FLOAT32_BOUND",
     "MM_PER_M",
     "ConversionError",
+    "fit_float32_mm",
+    "fits_float32",
     "igtl12_to_matrix",
     "igtl_timestamp_from_ros",
     "igtl_timestamp_from_seconds",
@@ -55,6 +58,11 @@ MM_PER_M = 1000.0
 # tests do, up to 2e-3 off), so this accepts honest rounding yet refuses shear and scale.
 ORTHONORMAL_TOLERANCE = 2e-3
 
+# Every magnitude below this rounds to a finite float32 (what a TRANSFORM, a POINT or a
+# POLYDATA carries); from it on, to infinity: FLT_MAX plus half its last unit (2**103) is
+# a tie, which rounds to the even neighbour, infinity.
+FLOAT32_BOUND = 2.0**128 - 2.0**103
+
 _NS_PER_S = 1_000_000_000
 _FRAC_PER_S = 1 << 32
 _U32_MAX = (1 << 32) - 1
@@ -78,6 +86,25 @@ def _fail(field: str, expected: str, got: object) -> ConversionError:
 
 
 # ---------------------------------------------------------------------------- lengths
+
+
+def fits_float32(*values: float) -> bool:
+    """The one rule for a number sent as float32: finite once cast (NaN and infinity fail,
+    and so does a finite double too large for float32, 1e36 m once in mm). Every path that
+    sends lengths in mm asks it after converting (the native lane takes its bound)."""
+    for v in values:
+        if not -FLOAT32_BOUND < v < FLOAT32_BOUND:  # False for NaN as well
+            return False
+    return True
+
+
+def fit_float32_mm(lengths_m: ArrayLike) -> npt.NDArray[np.bool_]:
+    """`fits_float32` of each length (metres) once in mm, element by element: the rule for
+    arrays of points (clouds, meshes, marker models)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        mm = np.asarray(lengths_m, dtype=np.float64) * MM_PER_M
+        return np.asarray(np.abs(mm) < FLOAT32_BOUND)
+
 
 
 def metres_to_mm(x: ArrayLike) -> FloatArray:
@@ -203,13 +230,16 @@ def pose_to_igtl12(tx: float, ty: float, tz: float, x: float, y: float, z: float
                    w: float) -> tuple[float, ...] | None:
     """ROS pose (metres, quaternion x, y, z, w) as plain floats -> the 12 numbers of an
     OpenIGTLink TRANSFORM in wire order (R11 R21 R31 R12 R22 R32 R13 R23 R33, then the
-    translation in mm), or None if a number is not finite or the quaternion is zero (the
-    caller then takes the checked path, which says what is wrong).
+    translation in mm), or None if a number is not finite, the quaternion is zero, or the
+    translation in mm does not fit float32 (`fits_float32`; the caller then takes the
+    checked path, which says what is wrong).
 
     The one quaternion -> matrix formula for single poses: `pose_to_matrix` uses it too.
     """
     norm2 = x * x + y * y + z * z + w * w
-    if not (math.isfinite(tx + ty + tz) and math.isfinite(norm2)) or norm2 < 1e-24:
+    mx, my, mz = tx * MM_PER_M, ty * MM_PER_M, tz * MM_PER_M
+    # The rotation's nine numbers lie in [-1, 3] once norm2 is finite and not tiny.
+    if not (fits_float32(mx, my, mz) and math.isfinite(norm2)) or norm2 < 1e-24:
         return None
     s = 2.0 / norm2  # normalises the quaternion on the way
     xx, yy, zz = x * x * s, y * y * s, z * z * s
@@ -218,7 +248,7 @@ def pose_to_igtl12(tx: float, ty: float, tz: float, x: float, y: float, z: float
     return (1.0 - (yy + zz), xy + wz, xz - wy,
             xy - wz, 1.0 - (xx + zz), yz + wx,
             xz + wy, yz - wx, 1.0 - (xx + yy),
-            tx * MM_PER_M, ty * MM_PER_M, tz * MM_PER_M)
+            mx, my, mz)
 
 
 def _pose_to_matrix_checked(translation_m: ArrayLike, quaternion_xyzw: ArrayLike) -> FloatArray:
@@ -230,9 +260,13 @@ def _pose_to_matrix_checked(translation_m: ArrayLike, quaternion_xyzw: ArrayLike
     q = _as_float_array(quaternion_xyzw, "quaternion", "4 numbers x, y, z, w")
     if q.shape != (4,):
         raise _fail("quaternion", "shape (4,)", f"shape {q.shape}")
+    mm = [v * MM_PER_M for v in t.tolist()]  # as pose_to_igtl12 (and no numpy overflow warning)
+    if not fits_float32(*mm):
+        raise _fail("translation", f"within float32 once in mm (|x| < {FLOAT32_BOUND:.4g} mm)",
+                    f"{t.tolist()} m")
     matrix = np.eye(4, dtype=np.float64)
     matrix[:3, :3] = quaternion_to_rotation(q)
-    matrix[:3, 3] = metres_to_mm(t)
+    matrix[:3, 3] = mm
     return matrix
 
 
@@ -253,17 +287,15 @@ def matrix_to_igtl12(matrix_mm: ArrayLike) -> npt.NDArray[np.float32]:
     """4x4 matrix (mm) -> the 12 float32 of an OpenIGTLink TRANSFORM body.
 
     Order (column-major rotation, then translation): R11 R21 R31 R12 R22 R32 R13 R23 R33
-    TX TY TZ. Only shape and finiteness are checked: TRANSFORM may carry scaling.
+    TX TY TZ. Only shape and `fits_float32` are checked: TRANSFORM may carry scaling.
     """
     m = _as_float_array(matrix_mm, "matrix", "a 4x4 matrix")
     if m.shape != (4, 4):
         raise _fail("matrix", "shape (4, 4)", f"shape {m.shape}")
-    if not np.all(np.isfinite(m)):
-        raise _fail("matrix", "finite numbers", "NaN or infinity")
-    out = np.empty(12, dtype=np.float32)
-    out[:9] = m[:3, :3].T.reshape(9)  # transposed, so row-major reshape lists columns
-    out[9:] = m[:3, 3]
-    return out
+    wire = np.concatenate([m[:3, :3].T.reshape(9), m[:3, 3]])  # transposed: columns first
+    if not fits_float32(*wire.tolist()):
+        raise _fail("matrix", "finite numbers within float32", repr(wire.tolist()))
+    return wire.astype(np.float32)
 
 
 def igtl12_to_matrix(values: ArrayLike) -> FloatArray:

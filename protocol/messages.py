@@ -15,7 +15,6 @@ copy them before writing into them. Decoding never runs Python loops per point o
 
 from __future__ import annotations
 
-import math
 import struct
 from array import array
 from dataclasses import dataclass, field, fields
@@ -25,7 +24,8 @@ from typing import Any, Callable, ClassVar, Union
 import numpy as np
 import numpy.typing as npt
 
-from protocol.conversions import ConversionError, igtl12_to_matrix, matrix_to_igtl12
+from protocol.conversions import (ConversionError, fits_float32, igtl12_to_matrix,
+                                  matrix_to_igtl12)
 from protocol.errors import BodyError, EncodeError
 from protocol.header import (
     DEVICE_NAME_SIZE,
@@ -136,13 +136,10 @@ class Transform:
             # Fast path (about 1 us): the same gather as conversions.matrix_to_igtl12, via the
             # index table derived from it, packed from Python floats (numpy's per-call
             # overhead is most of the cost for 12 numbers); anything unusual (NaN, a value
-            # beyond float32) goes through the checked path.
+            # beyond float32) goes through the checked path, which says what.
             values = m[:3].reshape(12)[_IGTL12_WIRE_ORDER].tolist()
-            if all(map(math.isfinite, values)):
-                try:
-                    return _TWELVE_F32.pack(*values)
-                except OverflowError:
-                    pass
+            if fits_float32(*values):
+                return _TWELVE_F32.pack(*values)
         try:
             checked = matrix_to_igtl12(m)
         except ConversionError as exc:
@@ -777,9 +774,6 @@ def _eye3() -> FloatArray:
     return np.eye(3, dtype=np.float64)
 
 
-_FLOAT32_MAX = float(np.finfo(np.float32).max)
-
-
 @dataclass(eq=False)
 class Image:
     """Spec: image.md. 72-byte image header, then the pixels, i fastest.
@@ -829,7 +823,7 @@ class Image:
         centre = origin + axes @ ((np.array([i, j, k], dtype=np.float64) - 1.0) / 2.0)
         geometry = np.concatenate([axes.T.ravel(), centre])
         # The header holds float32: finite values beyond its range cannot be written.
-        if not np.all(np.isfinite(geometry)) or np.any(np.abs(geometry) > _FLOAT32_MAX):
+        if not fits_float32(*geometry.tolist()):
             raise EncodeError("IMAGE geometry", "spacing, directions and origin whose "
                               "products fit float32", f"axes and centre {geometry.tolist()}")
         head = _IMAGE_HEAD.pack(

@@ -5,14 +5,14 @@ The bytes it makes are the ones `TypeCodec.encode` + `protocol.framing.encode` m
 same message (tests compare them): the numbers go through the one quaternion formula
 (`protocol.conversions.pose_to_igtl12`), and the metadata of each (frame_id,
 child_frame_id) pair is computed once by the ordinary codec and then reused. Whatever this
-path does not handle (another CDR encoding, a NaN, a zero quaternion) raises `NotFast`,
-and the caller converts that message the ordinary way, which says what is wrong with it.
+path does not handle (another CDR encoding, a NaN, a zero quaternion, a translation beyond
+float32 in mm) raises `NotFast`, and the caller converts that message the ordinary way,
+which says what is wrong with it (and drops it).
 """
 
 from __future__ import annotations
 
 import struct
-from typing import Optional
 from bridge.codecs.base import TypeCodec
 from bridge.codecs.cdr import RAW_POSE_READERS, CdrError
 from protocol.conversions import (
@@ -41,12 +41,10 @@ def has_fast_path(ros_type: str) -> bool:
     return ros_type in RAW_POSE_READERS
 
 
-def pack_transform(values: tuple[float, ...]) -> Optional[bytes]:
-    """A TRANSFORM's content from its 12 wire-order numbers; None if one is beyond float32."""
-    try:
-        return _TWELVE.pack(*values)
-    except OverflowError:
-        return None
+def pack_transform(values: tuple[float, ...]) -> bytes:
+    """A TRANSFORM's content from the 12 wire-order numbers `pose_to_igtl12` gave (they fit
+    float32: it judged them)."""
+    return _TWELVE.pack(*values)
 
 
 def transform_body(values: tuple[float, ...]) -> Transform:
@@ -73,10 +71,8 @@ class RawPoseStream:
             raise NotFast(str(error)) from None
         values = pose_to_igtl12(tx, ty, tz, x, y, z, w)
         if values is None:
-            raise NotFast("a NaN, an infinity or a zero quaternion")
+            raise NotFast("a NaN, an infinity, a zero quaternion or a length beyond float32")
         content = pack_transform(values)
-        if content is None:
-            raise NotFast("a number beyond float32")
         template = self._templates.get((frame, child))
         if template is None:
             template = self._template_for(data, frame, child)

@@ -65,8 +65,11 @@ def pose_msg_to_matrix(position: Any, orientation: Any, where: str) -> np.ndarra
     _finite(q, f"{where}.orientation" if where != "transform" else "transform.rotation")
     try:
         return pose_to_matrix(t, q)
-    except ConversionError as exc:
-        name = "transform.rotation" if where == "transform" else f"{where}.orientation"
+    except ConversionError as exc:  # a zero quaternion, or a translation beyond float32
+        if exc.field == "translation":
+            name = "transform.translation" if where == "transform" else f"{where}.position"
+        else:
+            name = "transform.rotation" if where == "transform" else f"{where}.orientation"
         raise CodecError(field=name, expected=exc.expected, got=exc.got) from None
 
 

@@ -3,11 +3,12 @@
 ROS -> Slicer: points in mm (float32), one vertex cell per point so Slicer draws them, an
 RGBA point attribute (0..1) if the cloud has a packed ``rgb``/``rgba`` field, and every
 other single-valued numeric field (``intensity`` ...) as a SCALAR point attribute. Points
-with a NaN/inf coordinate are dropped (the usual "no return" marker), along with their
-attributes. Everything is numpy over the raw buffer: ``np.frombuffer`` with a structured
-dtype built from the fields' offsets, ``point_step`` and byte order; ``row_step`` padding is
-cut with one strided copy. No Python loop per point (PointCloud v1 stores one Python object
-per point, so gathering those is the one unavoidable loop).
+with a NaN/inf coordinate (the usual "no return" marker), or one beyond float32 once in mm
+(`fit_float32_mm`: 1e36 m), are dropped, along with their attributes. Everything is numpy
+over the raw buffer: ``np.frombuffer`` with a structured dtype built from the fields'
+offsets, ``point_step`` and byte order; ``row_step`` padding is cut with one strided copy.
+No Python loop per point (PointCloud v1 stores one Python object per point, so gathering
+those is the one unavoidable loop).
 
 Slicer -> ROS: POLYDATA points (or POINT elements) become a PointCloud2 with float32 x, y, z
 in metres, a packed float32 ``rgb`` field if an RGBA point attribute (or POINT colours) is
@@ -27,7 +28,7 @@ import numpy as np
 from bridge.codecs.base import KEY_SHAPE, Body, TypeCodec
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import numeric_array
-from protocol.conversions import metres_to_mm, mm_to_metres
+from protocol.conversions import fit_float32_mm, metres_to_mm, mm_to_metres
 from protocol.messages import AttributeKind, Point, PolyData, PolyDataAttribute, cells_from_array
 from protocol.naming import KEY_DROPPED, KEY_UNITS, UNITS_MM
 
@@ -117,7 +118,8 @@ def _unpack_colour(packed: np.ndarray, with_alpha: bool) -> np.ndarray:
 
 
 def cloud2_arrays(msg: Any) -> CloudArrays:
-    """A PointCloud2's finite points (metres), colours and scalar fields, vectorised."""
+    """A PointCloud2's points that are finite as float32 in mm (kept in metres), colours and
+    scalar fields, vectorised."""
     h, w = int(msg.height), int(msg.width)
     step, row_step = int(msg.point_step), int(msg.row_step)
     n = h * w
@@ -140,7 +142,7 @@ def cloud2_arrays(msg: Any) -> CloudArrays:
         table = np.ascontiguousarray(raw).view(dtype).reshape(n)
     xyz = np.empty((n, 3), dtype=np.float64)
     xyz[:, 0], xyz[:, 1], xyz[:, 2] = table["x"], table["y"], table["z"]
-    keep = np.isfinite(xyz).all(axis=1)
+    keep = fit_float32_mm(xyz).all(axis=1)  # NaN, inf, or beyond float32 in mm
     dropped = int(n - np.count_nonzero(keep))
     if dropped:
         xyz = xyz[keep]
@@ -156,12 +158,12 @@ def cloud2_arrays(msg: Any) -> CloudArrays:
 # --------------------------------------------------------------------------- PointCloud (v1)
 
 def cloud1_arrays(msg: Any) -> CloudArrays:
-    """A sensor_msgs/PointCloud's finite points, colour channel ("rgb"/"rgba", packed float)
-    and other channels as scalars."""
+    """A sensor_msgs/PointCloud's points finite as float32 in mm, colour channel
+    ("rgb"/"rgba", packed float) and other channels as scalars."""
     n = len(msg.points)
     # The one unavoidable loop: PointCloud keeps a Python Point32 per point.
     xyz = np.array([(p.x, p.y, p.z) for p in msg.points], dtype=np.float64).reshape(n, 3)
-    keep = np.isfinite(xyz).all(axis=1)
+    keep = fit_float32_mm(xyz).all(axis=1)  # NaN, inf, or beyond float32 in mm
     dropped = int(n - np.count_nonzero(keep))
     rgba = None
     scalars: dict[str, np.ndarray] = {}

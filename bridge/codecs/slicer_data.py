@@ -37,7 +37,7 @@ from bridge.codecs.base import Body, TypeCodec, Stamp
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import numeric_array
 from bridge.codecs.json_codec import GenericJsonCodec
-from protocol.conversions import metres_to_mm, mm_to_metres
+from protocol.conversions import fit_float32_mm, metres_to_mm, mm_to_metres
 from protocol.messages import Point as PointBody
 from protocol.messages import PolyData, cells_from_array, cells_to_list
 from protocol.naming import KEY_COLOR, KEY_MARKER_ID, KEY_MARKER_NS, KEY_UNITS, UNITS_MM
@@ -198,9 +198,10 @@ class MeshCodec(TypeCodec):
     def _arrays(self, msg: Any) -> tuple[np.ndarray, np.ndarray]:
         vertices = np.array([(p.x, p.y, p.z) for p in msg.vertices],
                             dtype=np.float64).reshape(-1, 3)
-        bad = np.flatnonzero(~np.isfinite(vertices).all(axis=1))
+        bad = np.flatnonzero(~fit_float32_mm(vertices).all(axis=1))
         if bad.size:
-            raise CodecError(field=f"vertices[{int(bad[0])}]", expected="finite coordinates",
+            raise CodecError(field=f"vertices[{int(bad[0])}]",
+                             expected="finite coordinates (within float32 once in mm)",
                              got=repr(vertices[int(bad[0])].tolist()))
         triangles = np.array([list(t.vertex_indices) for t in msg.triangles],
                              dtype=np.int64).reshape(-1, 3)

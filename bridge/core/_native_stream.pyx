@@ -18,7 +18,7 @@ The Python path stays the reference, and this file follows it step by step:
 tests/bridge/test_native_stream.py runs both on the same messages and compares the bytes.
 
 A message this lane does not take as it is (another frame id than its template's, a NaN,
-a number beyond float32, bytes it cannot read, a client that is not writable at once, a
+a number that is not finite as float32 once in mm, bytes it cannot read, a client that is not writable at once, a
 bound or an audience on the device, values waiting for the loop) goes to the Python path,
 which decides; so does the rest of its batch, so order is kept.
 
@@ -31,16 +31,22 @@ from cpython.buffer cimport PyBUF_SIMPLE, PyBuffer_Release, PyObject_GetBuffer
 from cpython.bytes cimport PyBytes_AS_STRING, PyBytes_FromStringAndSize, PyBytes_GET_SIZE
 from cpython.pycapsule cimport PyCapsule_New
 from libc.errno cimport EAGAIN, EINTR, errno
-from libc.math cimport isfinite, isinf
+from libc.math cimport isfinite
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free, malloc, realloc
 from libc.string cimport memcmp, memcpy, memset
 from posix.time cimport CLOCK_MONOTONIC, CLOCK_REALTIME, clock_gettime, timespec
 from posix.uio cimport iovec
 
+from protocol.conversions import FLOAT32_BOUND
+
 # Bump with the wrappers' expectation (bridge/core/native_stream.py): an older build is
 # not used.
-INTERFACE = 4
+INTERFACE = 5
+
+# The one rule for a number sent as float32 is protocol/conversions.py's `fits_float32`:
+# its bound, taken from there, not copied.
+cdef double _FLOAT32_BOUND = FLOAT32_BOUND
 
 cdef enum:
     # What a lane's handler returns to the reader.
@@ -602,7 +608,6 @@ cdef int _convert(LaneState *lane, const uint8_t *data, size_t n, uint8_t *conte
     cdef double tx, ty, tz, x, y, z, w, norm2, s
     cdef double xx, yy, zz, xy, xz, yz, wx, wy, wz
     cdef int i
-    cdef float f
     if not lane.has_template or n < 4 or data[0] != 0 or data[1] != 1:
         return -1
     if lane.kind == C_POSE:
@@ -646,9 +651,10 @@ cdef int _convert(LaneState *lane, const uint8_t *data, size_t n, uint8_t *conte
     y = _f64_le(data + offset + 32)
     z = _f64_le(data + offset + 40)
     w = _f64_le(data + offset + 48)
-    # protocol/conversions.py's pose_to_igtl12, operation for operation.
+    # protocol/conversions.py's pose_to_igtl12, operation for operation (the translation
+    # is judged with the rest below).
     norm2 = x * x + y * y + z * z + w * w
-    if not (isfinite(tx + ty + tz) and isfinite(norm2)) or norm2 < 1e-24:
+    if not isfinite(norm2) or norm2 < 1e-24:
         return -1
     s = 2.0 / norm2
     xx = x * x * s
@@ -672,11 +678,10 @@ cdef int _convert(LaneState *lane, const uint8_t *data, size_t n, uint8_t *conte
     values[9] = tx * 1000.0  # MM_PER_M
     values[10] = ty * 1000.0
     values[11] = tz * 1000.0
-    for i in range(12):  # struct's ">f": beyond float32 is an error, an infinity is not
-        f = <float>values[i]
-        if isinf(f) and not isinf(values[i]):
+    for i in range(12):  # fits_float32, with its bound: the Python path says why not
+        if not (-_FLOAT32_BOUND < values[i] < _FLOAT32_BOUND):
             return -1
-        _put_f32(content + 4 * i, f)
+        _put_f32(content + 4 * i, <float>values[i])
     timestamp[0] = _stamp_or_now(sec, nanosec)
     return 0
 

@@ -219,9 +219,19 @@ class Dispatcher:
     # --- entry points -------------------------------------------------------------------
     def handle(self, message: Message, client: Replier) -> None:
         """A COMMAND from a client (loop thread): reply now, or when an async op is done.
+        Nothing escapes to the session (its connection stays open): a failure anywhere
+        becomes the request's error reply.
 
         A large text (a publish of a megabyte of JSON) is parsed in the client's lane, and
         the client's later commands wait for it, so that they still run in order."""
+        try:
+            self._handle(message, client)
+        except Exception as error:  # noqa: BLE001 - every failure becomes a reply
+            body = message.body
+            assert isinstance(body, Command)
+            self._reply(client, message, self._failure(body.name, error))
+
+    def _handle(self, message: Message, client: Replier) -> None:
         waiting = self._parsing.get(client)
         if waiting is not None:
             waiting.append(message)
@@ -281,7 +291,14 @@ class Dispatcher:
     def _spawn(self, coroutine: Awaitable[None]) -> None:
         task = asyncio.ensure_future(coroutine)
         self._tasks.add(task)
-        task.add_done_callback(self._tasks.discard)
+        task.add_done_callback(self._done)
+
+    def _done(self, task: asyncio.Future[None]) -> None:
+        self._tasks.discard(task)
+        # `_finish` replies to every outcome; anything left is a bug, said here and not as
+        # "Task exception was never retrieved" at collection.
+        if not task.cancelled() and task.exception() is not None:
+            log.error("a command's task failed", exc_info=task.exception())
 
     @staticmethod
     async def _resolved(result: Result) -> Result:
@@ -449,17 +466,28 @@ class Dispatcher:
             log.info("command %s refused: %s", op, error)
         return c.reply_for_exception(op, error)
 
-    @staticmethod
-    def _reply(client: Replier, request: Message, reply: Reply,
+    @classmethod
+    def _reply(cls, client: Replier, request: Message, reply: Reply,
                text: Optional[str] = None) -> None:
-        """Send ``reply`` (its JSON ``text`` when already encoded)."""
+        """Send ``reply`` (its JSON ``text`` when already encoded). A result the text cannot
+        hold (a NaN or an infinity from ROS: `protocol.commands.dumps` refuses it, naming
+        where) is answered with that error instead, under the same command id."""
         body = request.body
         assert isinstance(body, Command)
-        client.send_message(Message(
-            device_name=request.device_name,
-            body=RtsCommand(command_id=body.command_id, name=body.name,
-                            text=reply.to_json() if text is None else text),
-            metadata=reply.metadata(), message_id=request.message_id))
+        if text is None:
+            try:
+                text = reply.to_json()
+            except Exception as error:  # noqa: BLE001 - every failure becomes a reply
+                reply = cls._failure(body.name, error)
+                text = reply.to_json()
+        try:
+            client.send_message(Message(
+                device_name=request.device_name,
+                body=RtsCommand(command_id=body.command_id, name=body.name, text=text),
+                metadata=reply.metadata(), message_id=request.message_id))
+        except Exception:  # noqa: BLE001 - a bug: said, and the connection stays
+            log.exception("the reply to command %s (id %d) could not be sent", body.name,
+                          body.command_id)
 
     # --- small handlers -----------------------------------------------------------------
     def _hello(self, request: c.Hello, client: Replier | None) -> Result:

@@ -52,7 +52,7 @@ import numpy.typing as npt
 
 from bridge.robots.errors import RobotError
 from bridge.robots.resources import PackageResolver
-from protocol.conversions import metres_to_mm, quaternion_to_rotation
+from protocol.conversions import fit_float32_mm, metres_to_mm, quaternion_to_rotation
 from protocol.crc64 import KnownCrc
 from protocol.errors import ProtocolError
 from protocol.messages import AttributeKind, PolyData, PolyDataAttribute, RawBody, String
@@ -207,6 +207,17 @@ def _finite(array: npt.ArrayLike, name: str) -> F64:
     return values
 
 
+def _float32_mm(points_m: F64, dtype: str = "=f4") -> npt.NDArray[np.float32]:
+    """The model's points as the float32 mm sent, or `MarkerError` where one is not finite
+    as float32 (a finite pose far away: 1e36 m)."""
+    fits = fit_float32_mm(points_m)
+    if not fits.all():
+        bad = np.argwhere(~fits)[0]
+        raise MarkerError(f"points[{bad[0]}]", "coordinates within float32 once in mm (the "
+                          "marker posed)", f"{np.asarray(points_m)[bad[0]].tolist()} m")
+    return np.ascontiguousarray(metres_to_mm(points_m), dtype=dtype)
+
+
 def _rotation(q: F64) -> F64:
     key = tuple(float(v) for v in q)
     if not all(math.isfinite(v) for v in key):
@@ -286,7 +297,7 @@ def _polydata(points_m: F64, *, rgba: Rgba, colours: Optional[F32] = None,
     if n > MAX_MODEL_POINTS:
         raise MarkerError("points", f"a model of at most {MAX_MODEL_POINTS} points",
                           f"{n} points")
-    pts = np.ascontiguousarray(metres_to_mm(points_m), dtype=np.float32).reshape(n, 3)
+    pts = _float32_mm(points_m).reshape(n, 3)
     if colours is None:
         colours = np.broadcast_to(np.asarray(rgba, dtype=np.float32), (n, 4))
     poly = PolyData(points=pts, attributes=[PolyDataAttribute(RGBA_ATTRIBUTE,
@@ -417,7 +428,7 @@ def _shape(spec: MarkerSpec, rgba: Rgba) -> RawBody:
     # The hot path of a large MarkerArray: one matrix product, the rest is a template.
     rotation = _rotation(spec.orientation)
     position = _finite(spec.position, "pose.position")
-    points = metres_to_mm(v @ rotation.T + position).astype(">f4")
+    points = _float32_mm(v @ rotation.T + position, ">f4")
     return RawBody(PolyData.TYPE, head + points.tobytes() + tail)
 
 

@@ -50,7 +50,7 @@ from protocol.commands import (Op, CommandError, CommandFailedError, CreateParam
                                OutOfRangeError, ParameterValue, RemoveParameterClient,
                                ServerDeclareParameter, ServerGetParameters,
                                ServerSetParameter, ServerUndeclareParameter, SetParameters,
-                               dumps)
+                               dumps, not_json_number)
 from protocol.messages import Message, Status, StatusCode, String
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
 
@@ -113,8 +113,7 @@ def from_ros_value(msg: RosParameterValue, path: str) -> ParameterValue:
     if kind in ("double", "double_array"):
         numbers = raw if isinstance(raw, list) else [raw]
         if not all(math.isfinite(x) for x in numbers):
-            raise CommandFailedError(path, "finite doubles (JSON has no NaN or infinity)",
-                                     repr(raw), code=ErrorCode.NOT_SUPPORTED)
+            raise not_json_number(path, repr(raw))
     return ParameterValue(kind, raw)
 
 

@@ -218,15 +218,13 @@ class _Lookup:
         self.template = StreamTemplate("TRANSFORM", self.device, self.metadata)
 
     def frame_of(self, result: StampedTransform) -> Optional[TemplateFrame]:
-        """The result as a frame, or None if it is not finite (the checked path says why)."""
+        """The result as a frame, or None if a number is not finite as float32 once in mm
+        (the checked path says why)."""
         values = pose_to_igtl12(*result.translation, *result.rotation)
         if values is None or self.template is None:
             return None
-        content = pack_transform(values)
-        if content is None:
-            return None
-        return TemplateFrame(self.template, content, _igtl_timestamp(result.stamp_ns), values,
-                             transform_body)
+        return TemplateFrame(self.template, pack_transform(values),
+                             _igtl_timestamp(result.stamp_ns), values, transform_body)
 
 
 @dataclass
@@ -430,7 +428,13 @@ class TfBridges:
                 if frame is not None:
                     frames.append((lookup.device, frame))
                     continue
-                body: Union[Transform, Status] = Transform(matrix=result.matrix_mm())
+                try:
+                    body: Union[Transform, Status] = Transform(matrix=result.matrix_mm())
+                except ConversionError as error:  # finite links can compose beyond float32
+                    self._refusals.warning(lookup.device, None, "lookup %s <- %s (device %r)"
+                                           " not sent: %s", *lookup.requested, lookup.device,
+                                           error)
+                    continue
                 timestamp = _igtl_timestamp(result.stamp_ns)
             else:
                 body = status_for_error(result)
@@ -527,7 +531,12 @@ class TfBridges:
 
     def _lookup_once(self, pair: tuple[str, str], time_ns: int) -> dict[str, Any]:
         result = self.buffer.lookup(pair[0], pair[1], time_ns)
-        matrix: npt.NDArray[np.float64] = result.matrix_mm()
+        try:
+            matrix: npt.NDArray[np.float64] = result.matrix_mm()
+        except ConversionError as error:  # JSON and TRANSFORM would both hold infinity
+            raise CommandFailedError(
+                "child", f"a transform {pair[0]} <- {pair[1]} whose numbers fit float32 in mm",
+                f"{error}", code=ErrorCode.NOT_SUPPORTED) from None
         return {"parent": pair[0], "child": pair[1], "matrix": matrix.tolist(),
                 "translation": list(result.translation), "rotation": list(result.rotation),
                 "stamp": _stamp_dict(result.stamp_ns)}

@@ -7,15 +7,17 @@ hostile text costs the daemon no more than its size."""
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from typing import Any, NewType
 
-from protocol.commands.errors import BadJsonError, CommandError, OutOfRangeError, TooLargeError
+from protocol.commands.errors import (BadJsonError, CommandError, CommandFailedError, ErrorCode,
+                                      OutOfRangeError, TooLargeError)
 
 __all__ = ["COMMAND_DEVICE_NAME", "MAX_COMMAND_TEXT_BYTES", "MAX_JSON_DEPTH",
            "MAX_OP_NAME_BYTES", "METADATA_ERROR_MESSAGE", "METADATA_STATUS", "SCHEMA_VERSION",
            "SLICER_MAX_COMMAND_TEXT_BYTES", "STATUS_FAIL", "STATUS_SUCCESS", "CommandId",
-           "dumps", "json_type", "loads", "status_is_success"]
+           "JSON_NUMBERS", "dumps", "json_type", "loads", "not_json_number", "status_is_success"]
 
 SCHEMA_VERSION = 1
 # What 3D Slicer's OpenIGTLinkIO puts in the header of every COMMAND it sends.
@@ -106,13 +108,48 @@ def loads(text: str | bytes, *, max_bytes: int = MAX_COMMAND_TEXT_BYTES) -> dict
     return value
 
 
+JSON_NUMBERS = "finite doubles (JSON has no NaN or infinity)"
+
+
+def not_json_number(path: str, got: object) -> CommandFailedError:
+    """The one refusal of a number JSON cannot carry (a NaN or an infinity, from ROS or a
+    client): NOT_SUPPORTED, naming where it is. `dumps` raises it; so do the checks that
+    look at values before a text is made (parameters)."""
+    return CommandFailedError(path, JSON_NUMBERS, got, code=ErrorCode.NOT_SUPPORTED)
+
+
+def _first_non_finite(value: Any, path: str) -> tuple[str, float] | None:
+    # Only after json.dumps refused the value: the rare path, to say where.
+    stack: list[tuple[Any, str]] = [(value, path)]
+    seen: set[int] = set()  # json refuses a circular value with ValueError too
+    while stack:
+        item, where = stack.pop()
+        if isinstance(item, float) and not math.isfinite(item):
+            return where, item
+        if id(item) in seen:
+            continue
+        seen.add(id(item))
+        if isinstance(item, Mapping):
+            pairs = [(v, f"{where}.{k}" if where else str(k)) for k, v in item.items()]
+        elif isinstance(item, (list, tuple)):
+            pairs = [(v, f"{where}[{i}]") for i, v in enumerate(item)]
+        else:
+            continue
+        stack.extend(reversed(pairs))  # depth first, in document order
+    return None
+
+
 def dumps(value: Mapping[str, Any]) -> str:
     """Compact, ASCII-only JSON (matches the US-ASCII encoding Slicer labels commands with);
-    NaN and infinity are refused rather than written as non-standard tokens."""
+    NaN and infinity are refused (`not_json_number`, naming the first one) rather than
+    written as non-standard tokens: the one place a text refuses them."""
     try:
         return json.dumps(value, ensure_ascii=True, allow_nan=False, separators=(",", ":"))
     except ValueError as exc:
-        raise OutOfRangeError("value", "finite numbers", str(exc)) from None
+        found = _first_non_finite(value, "")
+        if found is None:
+            raise OutOfRangeError("value", "JSON values", str(exc)) from None
+        raise not_json_number(*found) from None
 
 
 def json_type(value: Any) -> str:

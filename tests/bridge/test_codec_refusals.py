@@ -163,8 +163,11 @@ def _mesh(vertices: list[tuple[float, float, float]], triangles: list[list[int]]
 
 def test_a_mesh_from_ros_with_nan_or_a_bad_index_is_refused() -> None:
     codec = codec_for("shape_msgs/msg/Mesh")
-    err = _refusal(lambda: codec.to_igtl(_mesh([(0, 0, 0), (float("nan"), 0, 0)], [])))
-    assert (err.field, err.expected) == ("vertices[1]", "finite coordinates")
+    for bad in (float("nan"), 1e36, -1e306):  # the last two: finite, not as float32 in mm
+        mesh = _mesh([(0, 0, 0), (bad, 0, 0)], [])
+        err = _refusal(lambda: codec.to_igtl(mesh))  # noqa: B023 - called at once
+        assert (err.field, err.expected) == ("vertices[1]", "finite coordinates (within "
+                                             "float32 once in mm)")
     err = _refusal(lambda: codec.to_value(_mesh([(0, 0, 0)] * 3, [[0, 1, 2], [0, 1, 3]])))
     assert (err.field, err.got) == ("triangles[1].vertex_indices", "[0, 1, 3]")
     assert "indices < 3" in err.expected

@@ -119,6 +119,15 @@ def test_nan_points_are_dropped_with_their_colours() -> None:
     assert enc.body.vertices.tolist() == [1, 0, 1, 1]
 
 
+def test_points_finite_in_metres_but_not_as_float32_in_mm_are_dropped() -> None:
+    xyz = np.array([[1.0, 2.0, 3.0], [1e36, 0.0, 0.0], [0.0, -3e38, 0.0], [3e35, 0.0, 0.0]],
+                   dtype=np.float32)
+    enc = codec_for("PointCloud2").encode(_cloud(xyz))
+    assert np.all(np.isfinite(enc.body.points))
+    np.testing.assert_allclose(enc.body.points, [[1000, 2000, 3000], [3e38, 0, 0]], rtol=1e-6)
+    assert enc.metadata["ros2.dropped"] == "2"
+
+
 def test_float64_fields_odd_offsets_row_padding_and_intensity() -> None:
     xyz = RNG.normal(size=(12, 3))
     intensity = np.arange(12, dtype=np.float32)

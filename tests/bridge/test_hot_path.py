@@ -21,7 +21,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
 
-from bridge.codecs import codec_for
+from bridge.codecs import CodecError, codec_for
 from bridge.codecs.cdr import CdrError, read_pose, read_pose_stamped, read_transform_stamped
 from bridge.codecs.fast import NotFast, RawPoseStream, transform_body
 from bridge.core.hub import Hub
@@ -160,6 +160,18 @@ def test_what_the_fast_path_cannot_convert_goes_the_ordinary_way() -> None:
     for msg in (nan, zero, huge):
         with pytest.raises(NotFast):
             stream.convert(serialize_message(msg))
+
+
+@pytest.mark.parametrize("x_m", [1e306, 1e36])
+def test_a_finite_length_beyond_float32_in_mm_is_refused_by_both_ways(x_m: float) -> None:
+    """Finite in metres, so ROS takes it; infinite as the float32 a TRANSFORM carries."""
+    msg = _pose_stamped((1, 0), "w", (0.0, x_m, 0.0), (0.0, 0.0, 0.0, 1.0))
+    with pytest.raises(NotFast):
+        RawPoseStream(codec_for("PoseStamped"), "tool", {}).convert(serialize_message(msg))
+    with pytest.raises(CodecError) as info:
+        codec_for("PoseStamped").encode(msg)
+    assert info.value.field == "pose.position"
+    assert info.value.got == f"{[0.0, x_m, 0.0]} m"
 
 
 # ------------------------------------------------------------- hub + real sockets

@@ -116,6 +116,11 @@ def test_models_bound_and_check_their_input() -> None:
         build_model(MarkerSpec(kind="cylinder", scale=np.array([1.0, 1.0, 0.0])))
     with pytest.raises(MarkerError, match="points.* finite"):
         build_model(MarkerSpec(kind="line_strip", points=np.array([[0, 0, np.inf]] * 2)))
+    for kind in ("cube", "sphere_list"):  # a template's shape, and a list's points
+        with pytest.raises(MarkerError) as info:  # finite in metres, not as float32 in mm
+            build_model(MarkerSpec(kind=kind, position=np.array([1e36, 0.0, 0.0]),
+                                   scale=np.ones(3), points=np.zeros((2, 3))))
+        assert info.value.field == "points[0]" and "within float32 once in mm" in str(info.value)
     with pytest.raises(MarkerError, match="different places"):
         build_model(MarkerSpec(kind="arrow", points=np.zeros((2, 3)), scale=np.ones(3)))
     # An unset quaternion is identity (as RViz): a cube at the origin, axis-aligned.

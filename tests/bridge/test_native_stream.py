@@ -4,9 +4,11 @@ what it writes."""
 
 from __future__ import annotations
 
+import math
 import random
 import select
 import socket
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +19,8 @@ from rclpy.serialization import serialize_message
 from bridge.codecs import codec_for
 from bridge.codecs.fast import NotFast, RawPoseStream
 from bridge.core import native_stream
+from protocol.conversions import (FLOAT32_BOUND, fits_float32, igtl_timestamp_from_ros,
+                                  igtl_timestamp_now)
 from protocol.crc64 import crc64
 from protocol.freshness import CLOCK_MODULUS
 
@@ -101,7 +105,7 @@ def test_its_crc_is_protocols() -> None:
         assert ns.crc64(data) == crc64(data)
 
 
-def test_other_frame_ids_a_stamp_out_of_range_and_bad_bytes_go_to_python() -> None:
+def test_other_frame_ids_and_bad_bytes_go_to_python() -> None:
     lane, stream = lane_for("geometry_msgs/msg/PoseStamped")
     msg = message(PoseStamped, random.Random(2), False)
     data = bytes(serialize_message(msg))
@@ -112,6 +116,95 @@ def test_other_frame_ids_a_stamp_out_of_range_and_bad_bytes_go_to_python() -> No
     assert lane.encode(bytes(serialize_message(msg)), 2, 1) is None
     assert lane.encode(data[:-1], 2, 1) is None  # cut short
     assert lane.encode(b"\x00\x00" + data[2:], 2, 1) is None  # big-endian CDR
+
+
+def posed(cls: type, t: tuple[float, float, float], q: tuple[float, float, float, float],
+          sec: int = 1_700_000_000, nanosec: int = 5) -> bytes:
+    msg = message(cls, random.Random(0), False)
+    if cls is TransformStamped:
+        pos, rot = msg.transform.translation, msg.transform.rotation
+    elif cls is PoseStamped:
+        pos, rot = msg.pose.position, msg.pose.orientation
+    else:
+        pos, rot = msg.position, msg.orientation
+    if cls is not Pose:
+        msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+    pos.x, pos.y, pos.z = t
+    rot.x, rot.y, rot.z, rot.w = q
+    return bytes(serialize_message(msg))
+
+
+# Around protocol.conversions.fits_float32's bound, once in mm (x1000): both sides of it.
+EDGE = FLOAT32_BOUND / 1000
+LENGTHS = [EDGE, -EDGE, math.nextafter(EDGE, 0.0), math.nextafter(EDGE, math.inf),
+           math.nextafter(-EDGE, 0.0), 3.4e35, 3.41e35, 1e36, -1e36, 1e306, -1e306, 1.7e308,
+           math.inf, -math.inf, math.nan, 1.5, -0.0]
+
+
+@pytest.mark.parametrize("ros_type, cls", KINDS)
+def test_the_lane_and_the_python_path_judge_lengths_by_the_one_float32_rule(
+        ros_type: str, cls: type) -> None:
+    """Every length in x, y and z: the lane writes exactly what fits_float32 lets through,
+    with the Python path's bytes, and leaves the rest to it (which refuses it)."""
+    lane, stream = lane_for(ros_type)
+    teach(lane, stream, posed(cls, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)))
+    written = left = 0
+    for length in LENGTHS:
+        for axis in range(3):
+            t = [0.25, -0.5, 0.75]
+            t[axis] = length
+            data = posed(cls, (t[0], t[1], t[2]), (0.0, 0.0, 0.0, 1.0))
+            fits = fits_float32(length * 1000)
+            got = lane.encode(data, 2, 7)
+            assert (got is not None) == fits, (length, axis)
+            if not fits:
+                with pytest.raises(NotFast):
+                    stream.convert(data)
+                left += 1
+                continue
+            template, content, timestamp, _ = stream.convert(data)
+            want = template.encode(content, timestamp, 2, 7)
+            if cls is Pose:  # the time now: all but it and the CRC
+                assert (got[:34], got[42:50], got[58:]) == (want[:34], want[42:50], want[58:])
+            else:
+                assert got == want
+            sent = struct.unpack(">12f", got[70:118])  # after the header and extended header
+            assert all(math.isfinite(v) for v in sent) and sent[9 + axis] == \
+                struct.unpack(">f", struct.pack(">f", length * 1000))[0]
+            written += 1
+    # Seven lengths fit (the bound over 1000 and its lower neighbour round below it in mm);
+    # ten do not (from 3.41e35 m on, and inf, NaN).
+    assert (written, left) == (3 * 7, 3 * 10)
+
+
+def test_a_rotation_the_lane_cannot_normalise_goes_to_python() -> None:
+    lane, stream = lane_for("geometry_msgs/msg/PoseStamped")
+    teach(lane, stream, posed(PoseStamped, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)))
+    for q in [(0.0, 0.0, 0.0, 0.0), (1e-13, 0.0, 0.0, 0.0), (1e200, 0.0, 0.0, 1.0),
+              (0.0, math.nan, 0.0, 1.0), (0.0, 0.0, math.inf, 1.0)]:
+        assert lane.encode(posed(PoseStamped, (1.0, 2.0, 3.0), q), 1, 0) is None, q
+    assert lane.encode(posed(PoseStamped, (1.0, 2.0, 3.0), (0.0, 0.0, 2.0, 0.0)), 1, 0)
+
+
+@pytest.mark.parametrize("ros_type, cls", KINDS[:2])
+def test_a_stamp_out_of_range_is_the_time_now_in_the_lane_as_in_python(
+        ros_type: str, cls: type) -> None:
+    """igtl_stamp_or_now: an unset, negative or over-long stamp becomes the time now."""
+    lane, stream = lane_for(ros_type)
+    teach(lane, stream, posed(cls, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)))
+    for sec, nanosec in [(-1, 0), (0, 0), (-(2**31), 5), (1, 1_000_000_000),
+                         (1, 2**32 - 1)]:
+        data = posed(cls, (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0), sec, nanosec)
+        before = igtl_timestamp_now()
+        got = lane.encode(data, 1, 0)
+        python = stream.convert(data)[2]
+        after = igtl_timestamp_now()
+        assert got is not None
+        stamp = struct.unpack(">Q", got[34:42])[0]
+        assert before <= stamp <= after and before <= python <= after, (sec, nanosec)
+    good = posed(cls, (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0), 1, 999_999_999)
+    assert struct.unpack(">Q", lane.encode(good, 1, 0)[34:42])[0] == \
+        igtl_timestamp_from_ros(1, 999_999_999) == stream.convert(good)[2]
 
 
 def pair() -> tuple[socket.socket, socket.socket]:

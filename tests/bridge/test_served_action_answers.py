@@ -119,7 +119,7 @@ def test_a_goal_json_cannot_carry_is_aborted_without_asking_the_client(
     caller = ros_goal(processes, "/nan_gripper", "nan")
     assert ros_result(caller)["status"] == ABORTED
     line = daemon.child.wait_for_output("cannot forward a goal of /nan_gripper")
-    assert "finite numbers" in line
+    assert "expected finite doubles (JSON has no NaN or infinity), got nan" in line
     assert hand.commands.empty()
 
 

@@ -11,9 +11,8 @@ import sys
 
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException
 
-from peer_teardown import end_ros
+from peer_teardown import spin_until_stopped
 
 PARAMETERS = {
     "flag": True, "count": 42, "ratio": 2.5, "label": "omni",
@@ -38,12 +37,7 @@ def main() -> None:
 
     node.add_on_set_parameters_callback(on_set)
     print("READY", flush=True)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        end_ros(node)
+    spin_until_stopped(node)
 
 
 if __name__ == "__main__":

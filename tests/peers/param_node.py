@@ -21,12 +21,11 @@ from pathlib import Path
 import rclpy
 from rcl_interfaces.srv import GetParameters
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 
-from peer_teardown import end_ros
+from peer_teardown import spin_until_stopped
 
 
 def plain(parameter: Parameter) -> dict:
@@ -117,12 +116,7 @@ def main() -> None:
         while not args.busy_until.exists():
             time.sleep(0.05)
         print("NOT BUSY", flush=True)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        end_ros(node)
+    spin_until_stopped(node)
 
 
 if __name__ == "__main__":

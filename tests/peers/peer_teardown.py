@@ -17,7 +17,7 @@ import signal
 from typing import Optional
 
 import rclpy
-from rclpy.executors import Executor
+from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.node import Node
 
 
@@ -30,3 +30,14 @@ def end_ros(node: Node, executor: Optional[Executor] = None) -> None:
         executor.shutdown(timeout_sec=0)
     node.destroy_node()
     rclpy.try_shutdown()
+
+
+def spin_until_stopped(node: Node) -> None:
+    """Spin `node` until SIGINT (the harness's stop) or an external shutdown, then
+    `end_ros`."""
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        end_ros(node)

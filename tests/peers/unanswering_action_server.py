@@ -17,11 +17,10 @@ from action_msgs.msg import GoalInfo, GoalStatus, GoalStatusArray
 from action_msgs.srv import CancelGoal
 from control_msgs.action import GripperCommand
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException
 from rclpy.qos import qos_profile_action_status_default
 from rclpy.task import Future
 
-from peer_teardown import end_ros
+from peer_teardown import spin_until_stopped
 
 Impl = GripperCommand.Impl
 
@@ -73,12 +72,7 @@ def main() -> None:
     node.create_service(Impl.CancelGoalService, f"{hidden}/cancel_goal", cancel_goal,
                         callback_group=group)
     print("READY", flush=True)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        end_ros(node)
+    spin_until_stopped(node)
 
 
 if __name__ == "__main__":

@@ -596,6 +596,18 @@ def test_error_codes_are_stable() -> None:
     assert {e.name: int(e) for e in ErrorCode} == expected
 
 
-def test_dumps_refuses_nan() -> None:
-    with pytest.raises(OutOfRangeError):
+def test_dumps_refuses_nan_and_infinity_naming_where() -> None:
+    with pytest.raises(c.CommandFailedError) as info:
         c.Publish("/x", float("nan")).to_json()
+    assert (info.value.error_code, info.value.field) == (ErrorCode.NOT_SUPPORTED, "value")
+    reply = c.Reply.success("call_service", {"response": {"values": [
+        {"double_value": 1.0}, {"double_value": float("-inf")}], "z": float("nan")}})
+    with pytest.raises(c.CommandFailedError) as info:
+        reply.to_json()
+    assert str(info.value) == ("result.response.values[1].double_value: expected finite "
+                               "doubles (JSON has no NaN or infinity), got -inf")
+    assert c.not_json_number("values.ratio", "inf").error_code == ErrorCode.NOT_SUPPORTED
+    loop: dict[str, object] = {"a": [1.0]}
+    loop["b"] = loop  # refused by json as well, and said so without a hunt that never ends
+    with pytest.raises(OutOfRangeError, match="Circular reference"):
+        c.dumps(loop)

@@ -12,8 +12,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from protocol.conversions import (
+    FLOAT32_BOUND,
     MM_PER_M,
     ConversionError,
+    fit_float32_mm,
+    fits_float32,
     igtl12_to_matrix,
     igtl_timestamp_from_ros,
     igtl_timestamp_from_seconds,
@@ -23,6 +26,7 @@ from protocol.conversions import (
     matrix_to_pose,
     metres_to_mm,
     mm_to_metres,
+    pose_to_igtl12,
     pose_to_matrix,
     quaternion_to_rotation,
     ros_time_from_igtl,
@@ -218,6 +222,58 @@ def test_bad_pose_inputs() -> None:
     with pytest.raises(ConversionError) as info:
         rotation_to_quaternion(np.zeros((2, 2)))
     assert info.value.field == "rotation"
+
+
+# ---------------------------------------------------------------- float32 on the wire
+
+BELOW = math.nextafter(FLOAT32_BOUND, 0.0)  # the largest double that is finite as float32
+
+
+def test_fits_float32_is_what_a_float32_cast_makes_of_the_value() -> None:
+    values = [0.0, -0.0, 5e-324, 1.0, float(np.finfo(np.float32).max), BELOW, -BELOW,
+              FLOAT32_BOUND, -FLOAT32_BOUND, 1e39, 1e306, math.inf, -math.inf, math.nan]
+    with np.errstate(over="ignore"):
+        cast = [bool(np.isfinite(np.float32(v))) for v in values]
+    assert [fits_float32(v) for v in values] == cast
+    assert cast[:7] == [True] * 7 and cast[7:] == [False] * 7
+    assert fits_float32() and fits_float32(1.0, 2.0, 3.0)
+    assert not fits_float32(1.0, math.nan, 3.0) and not fits_float32(1.0, 2.0, 1e39)
+
+
+def test_fit_float32_mm_is_fits_float32_of_each_length_in_mm() -> None:
+    lengths = np.array([[0.0, 1.5, -2.0], [3.4e35, -3.4e35, 1e36], [math.nan, math.inf, 1e306]])
+    want = [[fits_float32(v * MM_PER_M) for v in row] for row in lengths.tolist()]
+    assert fit_float32_mm(lengths).tolist() == want == [[True] * 3, [True, True, False],
+                                                        [False] * 3]
+
+
+@pytest.mark.parametrize("x_m", [1e306, 1e36, -1e36, FLOAT32_BOUND / 1000 * 1.0000001])
+def test_a_finite_translation_beyond_float32_in_mm_is_refused_on_both_paths(x_m: float) -> None:
+    assert pose_to_igtl12(x_m, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0) is None
+    assert pose_to_igtl12(0.0, 0.0, x_m, 0.0, 0.0, 0.0, 1.0) is None
+    with pytest.raises(ConversionError) as info:
+        pose_to_matrix([0.0, x_m, 0.0], [0, 0, 0, 1])
+    assert info.value.field == "translation"
+    assert "within float32 once in mm" in info.value.expected
+    assert info.value.got == f"{[0.0, x_m, 0.0]} m"
+
+
+def test_a_translation_just_inside_float32_in_mm_is_sent_as_it_is() -> None:
+    x_m = 3.4e35  # 3.4e38 mm: finite as float32
+    values = pose_to_igtl12(x_m, -x_m, 0.0, 0.0, 0.0, 0.0, 1.0)
+    assert values is not None and values[9:] == (x_m * 1000, -x_m * 1000, 0.0)
+    out = matrix_to_igtl12(pose_to_matrix([x_m, -x_m, 0.0], [0, 0, 0, 1]))
+    assert np.all(np.isfinite(out)) and out[9] == np.float32(3.4e38)
+
+
+def test_matrix_to_igtl12_refuses_what_float32_makes_infinite() -> None:
+    m = np.eye(4)
+    m[0, 3] = 1e39  # finite as a double, infinite as float32
+    with pytest.raises(ConversionError) as info:
+        matrix_to_igtl12(m)
+    assert (info.value.field, info.value.expected) == ("matrix", "finite numbers within float32")
+    m[0, 3] = BELOW
+    assert float(matrix_to_igtl12(m)[9]) == float(np.finfo(np.float32).max)
 
 
 # ---------------------------------------------------------------- time stamps
