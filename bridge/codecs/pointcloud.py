@@ -348,7 +348,7 @@ def _meta(cloud: CloudArrays) -> dict[str, str]:
 
 @dataclass(frozen=True)
 class PointCloud2Codec(TypeCodec):
-    """PointCloud2 <-> POLYDATA (mm, vertex cells, RGBA and SCALAR point attributes);
+    """PointCloud2 <-> POLYDATA (mm, one polyvertex cell, colour and SCALAR attributes);
     POINT is accepted on the way back. Value: ``{"points": [[x, y, z] mm...],
     "rgba": [[r, g, b, a] 0..255...]}`` (rgba only if coloured)."""
 
