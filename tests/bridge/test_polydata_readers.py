@@ -140,3 +140,64 @@ def test_markers_read_with_their_colours() -> None:
     kind, rgba = read.attributes[RGBA_ATTRIBUTE]
     assert kind == 0x00
     np.testing.assert_allclose(rgba, np.tile([1, 0, 0, 1], (len(read.points), 1)))
+
+
+def convert_with_igtlio(body: PolyData | RawBody) -> subprocess.CompletedProcess[bytes]:
+    """The same probe, then OpenIGTLinkIO's converter (what makes Slicer's model)."""
+    return subprocess.run([str(igtl3_probe("igtl_polydata_reader_probe", igtlio=True))],
+                          input=encode(Message("model", body)), capture_output=True,
+                          timeout=60, check=False)
+
+
+def vtk_output(stdout: bytes) -> tuple[list[int], dict[str, np.ndarray]]:
+    """The converter's vertex cells (legacy layout) and point arrays."""
+    verts: list[int] = []
+    arrays: dict[str, list[list[float]]] = {}
+    rows: list[list[float]] = []
+    for line in stdout.decode().splitlines():
+        word, *rest = line.split()
+        if word == "vtkverts":
+            verts = [int(v) for v in rest]
+        elif word == "vtkarray":
+            rows = arrays.setdefault(rest[0], [])
+        elif word == "r":
+            rows.append([float(v) for v in rest])
+    return verts, {name: np.array(data) for name, data in arrays.items()}
+
+
+def test_slicers_converter_dies_on_a_vertex_cell_per_point_and_takes_one_polyvertex() -> None:
+    """Issue 42 (8), against OpenIGTLinkIO's own converter: a cloud of 4 points as one
+    VERTICES cell each kills it (the id of cell i is written at index i of a vtkVertex of
+    one id: glibc aborts, "munmap_chunk(): invalid pointer", as Slicer did); the daemon's
+    cloud (one polyvertex cell, colours as the SCALAR "RGBA") converts, keeping the first
+    point's vertex (the module adds the rest) and the 4-component colours."""
+    xyz = np.array([[0.01 * i, 0.02 * i, 0.03 * i] for i in range(4)])
+    colours = np.array([[40 * i, 80, 120, 255] for i in range(4)], dtype=np.uint8)
+    body = arrays_to_polydata(CloudArrays(xyz, colours, {}))
+    old = PolyData(points=body.points, vertices=cells_from_array(np.arange(4).reshape(4, 1)),
+                   attributes=[PolyDataAttribute(RGBA_ATTRIBUTE, AttributeKind.RGBA,
+                                                 colours / 255.0)])
+    crashed = convert_with_igtlio(old)
+    assert crashed.returncode != 0 and b"vtkverts" not in crashed.stdout, crashed
+    done = convert_with_igtlio(body)
+    assert done.returncode == 0, done.stderr.decode(errors="replace")
+    verts, arrays = vtk_output(done.stdout)
+    assert verts == [1, 0]
+    np.testing.assert_allclose(arrays[RGBA_ATTRIBUTE], colours / 255.0, rtol=1e-6)
+
+
+def test_slicers_converter_reads_robot_normals_and_marker_colours() -> None:
+    v = sphere_visual()
+    done = convert_with_igtlio(to_polydata(v))
+    assert done.returncode == 0, done.stderr.decode(errors="replace")
+    verts, arrays = vtk_output(done.stdout)
+    assert verts == [] and arrays[RGBA_ATTRIBUTE].shape == (len(v.vertices), 4)
+    np.testing.assert_allclose(arrays[NORMALS_ATTRIBUTE], v.normals, rtol=1e-6, atol=1e-7)
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float64)
+    model = build_model(MarkerSpec(kind="points", points=pts, color=(0.0, 0.0, 1.0, 1.0),
+                                   scale=np.array([0.005, 0.005, 0.0])))
+    done = convert_with_igtlio(model.body)
+    assert done.returncode == 0, done.stderr.decode(errors="replace")
+    verts, arrays = vtk_output(done.stdout)
+    assert verts == [1, 0]
+    np.testing.assert_allclose(arrays[RGBA_ATTRIBUTE], np.tile([0, 0, 1, 1], (3, 1)))

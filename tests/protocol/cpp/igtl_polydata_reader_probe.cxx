@@ -4,7 +4,10 @@
 //   points N / p x y z (N lines)
 //   cells <section> NCELLS / c k id... (one line a cell), for vertices lines polygons strips
 //   attributes N / a <name> <TYPE> <NCOMPONENTS> <N> / d v... (one line a row)
-// Test helper for tests/protocol/test_interop_igtl3.py.
+// Built with -DIGTLIO_CONVERTER, it then hands the message to OpenIGTLinkIO's converter
+// (igtlioPolyDataConverter::IGTLToVTKPolyData, what makes Slicer's model) and writes the
+// vtkPolyData it made: vtkverts <legacy cell array...> / vtkarray <name> <ncomp> / r v...
+// Test helper for tests/bridge/test_polydata_readers.py.
 #include <cstdio>
 #include <iostream>
 #include <iterator>
@@ -13,6 +16,52 @@
 
 #include "igtlMessageHeader.h"
 #include "igtlPolyDataMessage.h"
+
+#ifdef IGTLIO_CONVERTER
+#include <vtkCellArray.h>
+#include <vtkDataArray.h>
+#include <vtkIdTypeArray.h>
+#include <vtkNew.h>
+#include <vtkPointData.h>
+#include <vtkPolyData.h>
+#include <vtkSmartPointer.h>
+
+#include "igtlioPolyDataConverter.h"
+
+static void converted(igtl::PolyDataMessage::Pointer msg)
+{
+  vtkSmartPointer<vtkPolyData> poly = vtkSmartPointer<vtkPolyData>::New();
+  if (!igtlioPolyDataConverter::IGTLToVTKPolyData(msg, poly))
+    {
+    std::printf("vtkfailed\n");
+    return;
+    }
+  vtkNew<vtkIdTypeArray> legacy;
+  poly->GetVerts()->ExportLegacyFormat(legacy);
+  std::printf("vtkverts");
+  for (vtkIdType i = 0; i < legacy->GetNumberOfValues(); i++)
+    {
+    std::printf(" %lld", static_cast<long long>(legacy->GetValue(i)));
+    }
+  std::printf("\n");
+  vtkPointData* data = poly->GetPointData();
+  for (int a = 0; a < data->GetNumberOfArrays(); a++)
+    {
+    vtkDataArray* array = data->GetArray(a);
+    const int ncomp = array->GetNumberOfComponents();
+    std::printf("vtkarray %s %d\n", array->GetName(), ncomp);
+    for (vtkIdType t = 0; t < array->GetNumberOfTuples(); t++)
+      {
+      std::printf("r");
+      for (int k = 0; k < ncomp; k++)
+        {
+        std::printf(" %.9g", array->GetComponent(t, k));
+        }
+      std::printf("\n");
+      }
+    }
+}
+#endif
 
 static void cells(const char* section, igtl::PolyDataCellArray* array)
 {
@@ -96,5 +145,9 @@ int main()
       std::printf("\n");
       }
     }
+#ifdef IGTLIO_CONVERTER
+  std::fflush(stdout);  // what the library read is out, should the converter crash
+  converted(msg);
+#endif
   return 0;
 }
