@@ -24,8 +24,9 @@ from protocol.naming import (KEY_CHILD, KEY_LINK, KEY_MARKER_ID, KEY_MARKER_NS,
                              device_name_for)
 
 __all__ = ["ATTRIBUTE_PREFIX", "DEFAULT_COLOUR", "MARKERS_FOLDER", "NodePlan", "ROBOTS_FOLDER",
-           "describe_bridges", "marker_folder", "metadata_from_attributes", "model_colour",
-           "plan_node", "point_colours_differ", "robot_folder", "stale_marker_nodes"]
+           "describe_bridges", "is_point_like", "marker_folder", "metadata_from_attributes",
+           "model_colour", "plan_node", "point_colours_differ", "robot_folder",
+           "stale_marker_nodes", "vertex_per_point"]
 
 ATTRIBUTE_PREFIX = "OpenIGTLink."
 ROBOTS_FOLDER = "ROS2 robots"
@@ -33,6 +34,10 @@ MARKERS_FOLDER = "ROS2 markers"
 DEFAULT_COLOUR: Tuple[float, float, float] = (0.7, 0.7, 0.7)
 # Metadata keys a daemon may add for colours (r g b [a], each 0..1).
 _COLOUR_KEYS = ("ros2.color", "ros2.colour", "ros2.rgba")
+# Models drawn as points: a point cloud subscriber's (its ROS type) and POINTS-like markers
+# (their ros2.marker_type). The daemon sends them as one polyvertex cell.
+POINT_CLOUD_TYPES = ("sensor_msgs/msg/PointCloud2", "sensor_msgs/msg/PointCloud")
+POINT_MARKER_TYPES = ("points", "point")
 
 Rgb = Tuple[float, float, float]
 
@@ -53,12 +58,35 @@ class NodePlan:
     # point labelled with the text, at this position (mm) under `label_parent`.
     label_position: Optional[Tuple[float, float, float]] = None
     label_parent: Optional[str] = None
+    # A model of points (`is_point_like`): the module gives it one vertex per point again
+    # each time the connector updates it (`vertex_per_point`).
+    point_like: bool = False
 
 
 def metadata_from_attributes(attributes: Mapping[str, str]) -> Dict[str, str]:
     """Node attributes -> the message metadata they came from (``OpenIGTLink.`` stripped)."""
     return {k[len(ATTRIBUTE_PREFIX):]: v for k, v in attributes.items()
             if k.startswith(ATTRIBUTE_PREFIX)}
+
+
+def is_point_like(metadata: Mapping[str, str]) -> bool:
+    """Whether a model node holds points drawn one by one: a point cloud subscriber's
+    model or a POINTS / PointStamped marker's. The daemon sends their points as ONE
+    polyvertex cell (protocol/polydata.py: OpenIGTLinkIO's converter crashes on a second
+    vertex cell), of which the converter keeps the first point only: the module then
+    gives each point its vertex again (`vertex_per_point`)."""
+    role = metadata.get(KEY_ROLE)
+    if role == Role.SUBSCRIBER.value:
+        return metadata.get(KEY_TYPE) in POINT_CLOUD_TYPES
+    if role == Role.MARKER.value:
+        return metadata.get(KEY_MARKER_TYPE) in POINT_MARKER_TYPES
+    return False
+
+
+def vertex_per_point(npoints: int) -> Tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """The (offsets, connectivity) of a vtkCellArray of one vertex per point, for
+    ``vtkCellArray.SetData``: offsets 0..n, connectivity 0..n-1 (no loop per point)."""
+    return np.arange(npoints + 1, dtype=np.int64), np.arange(npoints, dtype=np.int64)
 
 
 def robot_folder(robot: str) -> str:
@@ -183,7 +211,8 @@ def plan_node(device: str, metadata: Mapping[str, str], *,
         return NodePlan(device, "marker", name,
                         parent_device=metadata.get(KEY_PARENT_DEVICE) or None,
                         folder=marker_folder(topic), colour=colour, opacity=opacity,
-                        point_colours=point_colours_differ(metadata, rgba))
+                        point_colours=point_colours_differ(metadata, rgba),
+                        point_like=is_point_like(metadata))
     if role == Role.MARKER_FRAME.value:
         return NodePlan(device, "marker_frame",
                         f"markers {metadata.get(KEY_PARENT, '?')} -> "
@@ -199,7 +228,7 @@ def plan_node(device: str, metadata: Mapping[str, str], *,
         kind = metadata.get(KEY_TYPE, "")
         return NodePlan(device, "subscriber",
                         f"{metadata.get(KEY_TOPIC, device)}" + (f" ({kind})" if kind else ""),
-                        folder="ROS2 topics")
+                        folder="ROS2 topics", point_like=is_point_like(metadata))
     if role == Role.PARAMETER_CLIENT.value:
         return NodePlan(device, "parameters", f"parameters of {metadata.get(KEY_NODE, '?')}",
                         folder="ROS2 parameters")

@@ -546,6 +546,14 @@ class VTKObservationMixin:
         self.Observations = [o for o in self.Observations
                              if method is not None and o[2] != method]
 
+    def hasObserver(self, obj: Any, event: Any, method: Any) -> bool:  # noqa: N802
+        return any(o[:3] == (obj, event, method) for o in self.Observations)
+
+    def removeObserver(self, obj: Any, event: Any, method: Any) -> None:  # noqa: N802
+        for o in [o for o in self.Observations if o[:3] == (obj, event, method)]:
+            obj.RemoveObserver(o[3])
+            self.Observations.remove(o)
+
 
 class ScriptedLoadableModule:
     def __init__(self, parent: Any) -> None:
@@ -904,7 +912,9 @@ def array_from_model_point_data(node: Any, name: str) -> Any:
 
 def vtk_from_polydata(body: Any) -> Any:
     """What OpenIGTLinkIO's PolyData converter makes of a POLYDATA: a vtkPolyData with the
-    points, cells and attribute arrays (each named as on the wire)."""
+    points, cells and attribute arrays (each named as on the wire). Of VERTICES it makes
+    one vtkVertex of the first id of each cell, and it writes the second cell's id past
+    its vtkVertex (Slicer dies): here, an error."""
     from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
     from vtkmodules.vtkCommonCore import vtkPoints
     from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
@@ -917,6 +927,11 @@ def vtk_from_polydata(body: Any) -> Any:
                             ("polygons", polydata.SetPolys),
                             ("triangle_strips", polydata.SetStrips)):
         flat = np.asarray(getattr(body, section), dtype=np.int64)
+        if section == "vertices" and flat.size:
+            if int(flat[0]) + 1 != flat.size:
+                raise RuntimeError("more than one VERTICES cell: OpenIGTLinkIO's converter "
+                                   "writes past a vtkVertex (3D Slicer crashes)")
+            flat = np.array([1, flat[1]], dtype=np.int64) if flat[0] else flat[:0]
         if flat.size:
             cells = vtkCellArray()
             cells.ImportLegacyFormat(numpy_to_vtkIdTypeArray(flat, deep=True))

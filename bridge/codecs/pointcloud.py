@@ -1,19 +1,21 @@
 """sensor_msgs PointCloud2 / PointCloud <-> OpenIGTLink POLYDATA (and POINT on the way in).
 
-ROS -> Slicer: points in mm (float32), one vertex cell per point so Slicer draws them, an
-RGBA point attribute (0..1) if the cloud has a packed ``rgb``/``rgba`` field, and every
-other single-valued numeric field (``intensity`` ...) as a SCALAR point attribute. Points
-with a NaN/inf coordinate (the usual "no return" marker), or one beyond float32 once in mm
-(`fit_float32_mm`: 1e36 m), are dropped, along with their attributes. Everything is numpy
-over the raw buffer: ``np.frombuffer`` with a structured dtype built from the fields'
-offsets, ``point_step`` and byte order; ``row_step`` padding is cut with one strided copy.
-No Python loop per point (PointCloud v1 stores one Python object per point, so gathering
-those is the one unavoidable loop).
+ROS -> Slicer: points in mm (float32), one polyvertex cell of all the points (what every
+reader takes, `protocol.polydata`), the point colours (0..1, the 4-component SCALAR "RGBA")
+if the cloud has a packed ``rgb``/``rgba`` field, and every other single-valued numeric
+field (``intensity`` ...) as a SCALAR point attribute. Points with a NaN/inf coordinate
+(the usual "no return" marker), or one beyond float32 once in mm (`fit_float32_mm`: 1e36
+m), are dropped, along with their attributes. Everything is numpy over the raw buffer:
+``np.frombuffer`` with a structured dtype built from the fields' offsets, ``point_step``
+and byte order; ``row_step`` padding is cut with one strided copy. No Python loop per point
+(PointCloud v1 stores one Python object per point, so gathering those is the one
+unavoidable loop).
 
 Slicer -> ROS: POLYDATA points (or POINT elements) become a PointCloud2 with float32 x, y, z
-in metres, a packed float32 ``rgb`` field if an RGBA point attribute (or POINT colours) is
-present (named ``rgba`` when some alpha is not opaque), and 1-component SCALAR point
-attributes as float32 fields. height 1, dense, little-endian.
+in metres, a packed float32 ``rgb`` field if a colour point attribute (TYPE RGBA, or the
+SCALAR "RGBA" of 4 components; or POINT colours) is present (named ``rgba`` when some
+alpha is not opaque), and 1-component SCALAR point attributes as float32 fields. height 1,
+dense, little-endian.
 
 Packed colour: the 4 bytes of the float32 field read as uint32 0xAARRGGBB (PCL's layout).
 """
@@ -29,20 +31,19 @@ from bridge.codecs.base import KEY_SHAPE, Body, TypeCodec
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import numeric_array
 from protocol.conversions import fit_float32_mm, metres_to_mm, mm_to_metres
-from protocol.messages import AttributeKind, Point, PolyData, PolyDataAttribute, cells_from_array
+from protocol.messages import AttributeKind, Point, PolyData, PolyDataAttribute
+from protocol.polydata import (RGBA_ATTRIBUTE, colour_attribute, point_attribute, point_colours,
+                               vertex_cell)
 from protocol.naming import KEY_DROPPED, KEY_UNITS, UNITS_MM
 
 __all__ = [
     "KEY_DROPPED",
-    "RGBA_ATTRIBUTE",
     "CloudArrays",
     "PointCloud2Codec",
     "PointCloudCodec",
     "arrays_to_cloud2",
     "cloud2_arrays",
 ]
-
-RGBA_ATTRIBUTE = "RGBA"
 
 # sensor_msgs/PointField datatypes -> numpy base types.
 _POINTFIELD_DTYPES: dict[int, str] = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4",
@@ -186,36 +187,33 @@ def arrays_to_polydata(cloud: CloudArrays) -> PolyData:
     n = cloud.xyz_m.shape[0]
     attributes: list[PolyDataAttribute] = []
     if cloud.rgba is not None:
-        attributes.append(PolyDataAttribute(RGBA_ATTRIBUTE, AttributeKind.RGBA,
-                                            cloud.rgba.astype(np.float32) / np.float32(255.0)))
+        attributes.append(colour_attribute(cloud.rgba.astype(np.float32) / np.float32(255.0)))
     for name, values in cloud.scalars.items():
         if name != RGBA_ATTRIBUTE:
-            attributes.append(PolyDataAttribute(name, AttributeKind.SCALAR,
-                                                values.astype(np.float32).reshape(n, 1)))
+            attributes.append(point_attribute(name, AttributeKind.SCALAR,
+                                              values.astype(np.float32).reshape(n, 1)))
     return PolyData(points=metres_to_mm(cloud.xyz_m).astype(np.float32),
-                    vertices=cells_from_array(np.arange(n, dtype=np.uint32).reshape(n, 1)),
-                    attributes=attributes)
+                    vertices=vertex_cell(n), attributes=attributes)
 
 
 def polydata_arrays(body: PolyData) -> CloudArrays:
-    """Points (mm -> m), the first RGBA point attribute and 1-component SCALAR point
-    attributes of a POLYDATA body."""
+    """Points (mm -> m), the point colours (`protocol.polydata.point_colours`: TYPE RGBA or
+    the SCALAR "RGBA") and the other 1-component SCALAR point attributes of a POLYDATA."""
     points = np.asarray(body.points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
         raise CodecError(field="points", expected="shape (N, 3)", got=f"shape {points.shape}")
     _check_finite(points, "points")
     n = points.shape[0]
-    rgba = None
+    colours = point_colours(body.attributes, n)
+    rgba = None if colours is None else \
+        np.round(np.clip(np.nan_to_num(colours), 0.0, 1.0) * 255.0).astype(np.uint8)
     scalars: dict[str, np.ndarray] = {}
     for attr in body.attributes:
         data = np.asarray(attr.data, dtype=np.float32)
         if attr.on_cells or data.shape[0] != n:
             continue  # cell data has no place in a point cloud
-        if attr.kind == AttributeKind.RGBA and rgba is None and data.ndim == 2 \
-                and data.shape[1] == 4:
-            rgba = np.round(np.clip(np.nan_to_num(data), 0.0, 1.0) * 255.0).astype(np.uint8)
-        elif attr.kind == AttributeKind.SCALAR and data.size == n and attr.name not in (
-                "x", "y", "z", *_COLOUR_NAMES) and attr.name not in scalars:
+        if attr.kind == AttributeKind.SCALAR and data.size == n and attr.name not in (
+                "x", "y", "z", RGBA_ATTRIBUTE, *_COLOUR_NAMES) and attr.name not in scalars:
             scalars[attr.name] = data.reshape(n)
     return CloudArrays(mm_to_metres(points), rgba, scalars)
 
@@ -352,7 +350,7 @@ def _meta(cloud: CloudArrays) -> dict[str, str]:
 
 @dataclass(frozen=True)
 class PointCloud2Codec(TypeCodec):
-    """PointCloud2 <-> POLYDATA (mm, vertex cells, RGBA and SCALAR point attributes);
+    """PointCloud2 <-> POLYDATA (mm, one polyvertex cell, colour and SCALAR attributes);
     POINT is accepted on the way back. Value: ``{"points": [[x, y, z] mm...],
     "rgba": [[r, g, b, a] 0..255...]}`` (rgba only if coloured)."""
 

@@ -20,7 +20,8 @@ LINE_STRIP         one polyline cell through the points; scale.x (line width) in
 LINE_LIST          one 2-point line cell per pair (an odd last point is left out, as RViz)
 CUBE_LIST/         a box / sphere of size scale at each point, joined in one mesh
 SPHERE_LIST
-POINTS             one vertex cell per point; scale.x, scale.y (point size) in metadata
+POINTS             one polyvertex cell of all the points (`protocol.polydata.vertex_cell`);
+                   scale.x, scale.y (point size) in metadata
 TRIANGLE_LIST      one triangle per 3 points, points scaled by scale (as RViz does)
 TEXT_VIEW_FACING   a STRING message (the text) with metadata ros2.position ("x y z" mm, the
                    pose's position) and ros2.text_height (scale.z in mm): SlicerOpenIGTLink
@@ -28,10 +29,11 @@ TEXT_VIEW_FACING   a STRING message (the text) with metadata ros2.position ("x y
                    point labelled with the text from these
 MESH_RESOURCE      the file (robot mesh loader, mesh roots only), scaled, posed
 Path / Polygon     a polyline through the poses' positions / a closed polyline
-PointStamped       one vertex
+PointStamped       one vertex (a polyvertex cell of one point)
 =================  ==========================================================================
 
-Colours: a model always has an RGBA point attribute ("RGBA", 0..1, what robots send):
+Colours: a model always has the point colours "RGBA" (0..1, what robots send, as
+`protocol.polydata.colour_attribute` lays them out):
 the per-point ``colors`` when there is one per point (points, lines, lists, triangles),
 else the marker's ``color`` on every point; the whole colour also goes in metadata
 (``ros2.color``) for Slicer's display node. An all-zero quaternion is taken as identity
@@ -55,13 +57,14 @@ from bridge.robots.resources import PackageResolver
 from protocol.conversions import fit_float32_mm, metres_to_mm, quaternion_to_rotation
 from protocol.crc64 import KnownCrc
 from protocol.errors import ProtocolError
-from protocol.messages import AttributeKind, PolyData, PolyDataAttribute, RawBody, String
+from protocol.messages import PolyData, RawBody, String
+from protocol.polydata import colour_attribute, vertex_cell
 from protocol.naming import (KEY_LINE_WIDTH, KEY_POINT_COLORS, KEY_POINT_SIZE, KEY_POSITION,
                              KEY_TEXT_HEIGHT)
 
 __all__ = ["ARROW_HEAD_FRACTION", "KINDS", "MAX_ARRAY_MARKERS", "MAX_MARKER_POINTS",
            "MAX_MODEL_POINTS",
-           "MarkerError", "MarkerModel", "MarkerSpec", "RGBA_ATTRIBUTE", "build_model",
+           "MarkerError", "MarkerModel", "MarkerSpec", "build_model",
            "kind_of_type", "model_bytes", "packed", "warm_up"]
 
 F64 = npt.NDArray[np.float64]
@@ -69,7 +72,6 @@ F32 = npt.NDArray[np.float32]
 U32 = npt.NDArray[np.uint32]
 Rgba = tuple[float, float, float, float]
 
-RGBA_ATTRIBUTE = "RGBA"
 # visualization_msgs/Marker type constants -> the word metadata and errors use.
 KINDS: dict[int, str] = {0: "arrow", 1: "cube", 2: "sphere", 3: "cylinder", 4: "line_strip",
                          5: "line_list", 6: "cube_list", 7: "sphere_list", 8: "points",
@@ -291,8 +293,10 @@ def warm_up() -> None:
 
 
 def _polydata(points_m: F64, *, rgba: Rgba, colours: Optional[F32] = None,
-              vertices: Optional[U32] = None, lines: Optional[U32] = None,
+              as_points: bool = False, lines: Optional[U32] = None,
               triangles: Optional[U32] = None) -> PolyData:
+    """A model of these points (metres) in mm with its colours; ``as_points``: drawn as
+    points (one polyvertex cell, `protocol.polydata.vertex_cell`)."""
     n = len(points_m)
     if n > MAX_MODEL_POINTS:
         raise MarkerError("points", f"a model of at most {MAX_MODEL_POINTS} points",
@@ -300,10 +304,9 @@ def _polydata(points_m: F64, *, rgba: Rgba, colours: Optional[F32] = None,
     pts = _float32_mm(points_m).reshape(n, 3)
     if colours is None:
         colours = np.broadcast_to(np.asarray(rgba, dtype=np.float32), (n, 4))
-    poly = PolyData(points=pts, attributes=[PolyDataAttribute(RGBA_ATTRIBUTE,
-                                                              AttributeKind.RGBA, colours)])
-    if vertices is not None:
-        poly.vertices = vertices
+    poly = PolyData(points=pts, attributes=[colour_attribute(colours)])
+    if as_points:
+        poly.vertices = vertex_cell(n)
     if lines is not None:
         poly.lines = lines
     if triangles is not None:
@@ -410,8 +413,7 @@ def _shape_template(kind: str, scale: tuple[float, float, float], rgba: Rgba
     ~15 ms less on the loop)."""
     v, cells = _scaled_unit(kind, scale)
     body = PolyData(points=np.zeros((len(v), 3), dtype=np.float32), polygons=cells,
-                    attributes=[PolyDataAttribute(RGBA_ATTRIBUTE, AttributeKind.RGBA,
-                                                  _uniform_colour(rgba, len(v)))])
+                    attributes=[colour_attribute(_uniform_colour(rgba, len(v)))])
     content = body.pack()
     head = _POLY_HEAD_BYTES
     return content[:head], content[head + 12 * len(v):], v
@@ -471,9 +473,8 @@ def _lines(spec: MarkerSpec, rgba: Rgba) -> PolyData:
 
 def _points(spec: MarkerSpec, rgba: Rgba) -> PolyData:
     pts = spec.points
-    cells = _cells(np.arange(len(pts), dtype=np.uint32).reshape(-1, 1))
     return _polydata(_posed(pts, spec), rgba=rgba, colours=_point_colours(spec, len(pts)),
-                     vertices=cells)
+                     as_points=True)
 
 
 def _triangles(spec: MarkerSpec, rgba: Rgba) -> PolyData:

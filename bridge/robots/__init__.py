@@ -22,7 +22,7 @@ _EXPORTS = {
     "bridge.robots.errors": ("MeshError", "ResourceError", "RobotError", "UrdfError"),
     "bridge.robots.kinematics": ("Kinematics",),
     "bridge.robots.meshes": ("DEFAULT_MESH_CACHE", "MeshCache"),
-    "bridge.robots.model": ("DEFAULT_RGBA", "RGBA_ATTRIBUTE", "LoadOptions", "RobotModel",
+    "bridge.robots.model": ("DEFAULT_RGBA", "LoadOptions", "RobotModel",
                             "VisualMesh", "load_robot", "load_robot_file", "to_polydata"),
     "bridge.robots.resources": ("PackageResolver", "parse_package_path_option"),
 }
@@ -39,7 +39,6 @@ def __getattr__(name: str) -> Any:
 __all__ = [
     "DEFAULT_MESH_CACHE",
     "DEFAULT_RGBA",
-    "RGBA_ATTRIBUTE",
     "JointLimits",
     "JointSpec",
     "Kinematics",

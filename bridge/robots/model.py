@@ -37,11 +37,10 @@ from bridge.robots.meshes import DEFAULT_MESH_CACHE, MeshCache, MeshData, vertex
 from bridge.robots.resources import PackageResolver
 from protocol.conversions import metres_to_mm
 from protocol.messages import AttributeKind, PolyData, PolyDataAttribute, cells_from_array
+from protocol.polydata import NORMALS_ATTRIBUTE, colour_attribute, point_attribute
 
 __all__ = [
     "DEFAULT_RGBA",
-    "RGBA_ATTRIBUTE",
-    "NORMALS_ATTRIBUTE",
     "LoadOptions",
     "VisualMesh",
     "RobotModel",
@@ -58,8 +57,6 @@ U32 = npt.NDArray[np.uint32]
 Rgba = tuple[float, float, float, float]
 
 DEFAULT_RGBA: Rgba = (0.7, 0.7, 0.7, 1.0)
-RGBA_ATTRIBUTE = "RGBA"  # POLYDATA point attribute holding each point's colour, 0..1
-NORMALS_ATTRIBUTE = "Normals"
 
 
 @dataclass(frozen=True)
@@ -270,8 +267,9 @@ def load_robot_file(path: str | Path, *, package_paths: Optional[Mapping[str, Pa
 
 def to_polydata(visual: VisualMesh, *, colours: bool = True,
                 normals: bool = True) -> PolyData:
-    """One visual as a POLYDATA body: points (mm, link frame), triangles as polygons, an
-    RGBA point attribute (``"RGBA"``, 0..1) and, if the visual has them, ``"Normals"``."""
+    """One visual as a POLYDATA body: points (mm, link frame), triangles as polygons, the
+    point colours (``"RGBA"``, 0..1, `protocol.polydata.colour_attribute`) and, if the
+    visual has them, the point normals ``"Normals"``."""
     attributes: list[PolyDataAttribute] = []
     n = len(visual.vertices)
     if colours:
@@ -279,9 +277,9 @@ def to_polydata(visual: VisualMesh, *, colours: bool = True,
             rgba = visual.vertex_rgba
         else:
             rgba = np.broadcast_to(np.asarray(visual.rgba, dtype=np.float32), (n, 4))
-        attributes.append(PolyDataAttribute(RGBA_ATTRIBUTE, AttributeKind.RGBA, rgba))
+        attributes.append(colour_attribute(rgba))
     if normals and visual.normals is not None:
-        attributes.append(PolyDataAttribute(NORMALS_ATTRIBUTE, AttributeKind.NORMAL,
-                                            visual.normals))
+        attributes.append(point_attribute(NORMALS_ATTRIBUTE, AttributeKind.NORMAL,
+                                          visual.normals))
     return PolyData(points=visual.vertices, polygons=cells_from_array(visual.triangles),
                     attributes=attributes)

@@ -19,6 +19,7 @@ from protocol.messages import (
     String,
     unpack_body,
 )
+from protocol.polydata import RGBA_ATTRIBUTE
 
 RNG = np.random.default_rng(7)
 
@@ -90,10 +91,11 @@ def test_100k_points_with_rgb_to_polydata_and_back() -> None:
     assert isinstance(body, PolyData)
     assert enc.metadata["ros2.units"] == "mm" and enc.metadata["ros2.shape"] == str(n)
     np.testing.assert_allclose(body.points, xyz.astype(np.float64) * 1000.0, rtol=1e-6)
-    # one vertex cell per point: [1, i] pairs
-    np.testing.assert_array_equal(body.vertices.reshape(n, 2)[:, 0], 1)
-    np.testing.assert_array_equal(body.vertices.reshape(n, 2)[:, 1], np.arange(n))
-    (rgba,) = [a for a in body.attributes if a.kind == AttributeKind.RGBA]
+    # one polyvertex cell of all the points, [n, 0..n-1] (Slicer's converter crashed on a
+    # second vertex cell)
+    np.testing.assert_array_equal(body.vertices, [n, *range(n)])
+    (rgba,) = [a for a in body.attributes if a.name == RGBA_ATTRIBUTE]
+    assert (rgba.kind, rgba.on_cells) == (AttributeKind.SCALAR, False)
     np.testing.assert_array_equal(np.round(rgba.data[:, :3] * 255), colours)
     np.testing.assert_array_equal(rgba.data[:, 3], 1.0)
 
@@ -116,7 +118,7 @@ def test_nan_points_are_dropped_with_their_colours() -> None:
     assert enc.metadata["ros2.dropped"] == "2"
     (rgba,) = enc.body.attributes
     np.testing.assert_array_equal(np.round(rgba.data * 255)[:, 0], [10, 40])
-    assert enc.body.vertices.tolist() == [1, 0, 1, 1]
+    assert enc.body.vertices.tolist() == [2, 0, 1]
 
 
 def test_points_finite_in_metres_but_not_as_float32_in_mm_are_dropped() -> None:
@@ -257,3 +259,24 @@ def test_rgba_attribute_from_slicer_clamped() -> None:
     assert cloud.fields[3].name == "rgba"
     packed = np.frombuffer(cloud.data, "<u4").reshape(2, 4)[:, 3]
     assert [hex(int(v)) for v in packed] == ["0xffff8000", "0x800000ff"]
+
+
+def test_colours_as_sent_today_and_before_both_become_the_rgb_field() -> None:
+    """Colours come as the daemon sends them now (the point SCALAR "RGBA" of 4 components)
+    or as clients built before sent them (TYPE RGBA): the same packed field either way. A
+    4-component SCALAR of another name is not a colour, nor a 1-component "RGBA"."""
+    colours = np.array([[1.0, 0.5, 0.0, 1.0], [0.0, 0.0, 1.0, 1.0]], np.float32)
+    packed = []
+    for kind in (AttributeKind.SCALAR, AttributeKind.RGBA):
+        body = PolyData(points=np.zeros((2, 3), np.float32),
+                        attributes=[PolyDataAttribute(RGBA_ATTRIBUTE, kind, colours)])
+        cloud = codec_for("PointCloud2").from_igtl(PolyData.unpack(body.pack()))
+        assert [f.name for f in cloud.fields] == ["x", "y", "z", "rgb"]
+        packed.append(np.frombuffer(cloud.data, "<u4").reshape(2, 4)[:, 3].tolist())
+    assert packed[0] == packed[1] == [0xFFFF8000, 0xFF0000FF]
+    other = PolyData(points=np.zeros((2, 3), np.float32),
+                     attributes=[PolyDataAttribute("weights", AttributeKind.SCALAR, colours),
+                                 PolyDataAttribute(RGBA_ATTRIBUTE, AttributeKind.SCALAR,
+                                                   np.ones((2, 1), np.float32))])
+    cloud = codec_for("PointCloud2").from_igtl(other)
+    assert [f.name for f in cloud.fields] == ["x", "y", "z"]

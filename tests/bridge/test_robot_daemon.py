@@ -22,6 +22,7 @@ import pytest
 
 from bridge.robots.demo import DEMO_PACKAGE, demo_urdf_path
 from protocol.messages import AttributeKind, Message, PolyData, Status, Transform
+from protocol.polydata import RGBA_ATTRIBUTE
 from protocol.naming import NameKey, device_name_for
 from slicer_client.connection import CommandRefusedError, Connection
 from support import (SHARED, Processes, RunningDaemon, assert_clean_exit, children_of,
@@ -94,7 +95,8 @@ def stl_counts(path: Path) -> tuple[int, int]:
 
 
 def rgba_of(body: PolyData) -> np.ndarray:
-    (attribute,) = [a for a in body.attributes if a.kind == AttributeKind.RGBA]
+    (attribute,) = [a for a in body.attributes if a.name == RGBA_ATTRIBUTE]
+    assert attribute.kind == AttributeKind.SCALAR  # as every reader sizes it (4 components)
     return np.asarray(attribute.data)
 
 

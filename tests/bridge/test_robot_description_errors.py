@@ -18,6 +18,7 @@ import pytest
 
 from protocol.commands import ErrorCode
 from protocol.messages import AttributeKind, Message, PolyData
+from protocol.polydata import RGBA_ATTRIBUTE
 from slicer_client.connection import CommandRefusedError, Connection
 from support import Processes, RunningDaemon, assert_clean_exit, start_daemon
 
@@ -157,7 +158,8 @@ def textured_obj(folder: Path) -> None:
 
 
 def rgba_of(body: PolyData) -> np.ndarray:
-    (attribute,) = [a for a in body.attributes if a.kind == AttributeKind.RGBA]
+    (attribute,) = [a for a in body.attributes if a.name == RGBA_ATTRIBUTE]
+    assert attribute.kind == AttributeKind.SCALAR  # as every reader sizes it (4 components)
     return np.asarray(attribute.data)
 
 

@@ -15,6 +15,7 @@ from bridge.robots import (DEFAULT_RGBA, LoadOptions, MeshCache, PackageResolver
                            ResourceError, UrdfError, load_robot, load_robot_file, parse_urdf,
                            to_polydata)
 from protocol.messages import AttributeKind, PolyData
+from protocol.polydata import RGBA_ATTRIBUTE
 
 # A tetrahedron: 4 corners, 4 triangles, extents 1 x 2 x 3 (file units).
 TETRA = np.array([[0, 0, 0], [1, 0, 0], [0, 2, 0], [0, 0, 3]], dtype=np.float32)
@@ -458,12 +459,15 @@ def test_polydata_has_points_triangles_colours_and_normals() -> None:
     ))), options=LoadOptions(normals=True), cache=MeshCache())
     v = model.visuals[0]
     body = PolyData.unpack(to_polydata(v).pack())
-    kinds = {a.kind: a for a in body.attributes}
-    assert set(kinds) == {AttributeKind.RGBA, AttributeKind.NORMAL}
-    np.testing.assert_allclose(kinds[AttributeKind.RGBA].data[0], (1, 0.5, 0, 1))
+    # Colours as the point SCALAR "RGBA" (4 components) and normals as NORMAL: the kinds
+    # OpenIGTLink 3.1's reader sizes right (it read a TYPE RGBA as 9 floats a row).
+    named = {a.name: a for a in body.attributes}
+    assert {(name, a.kind, a.on_cells) for name, a in named.items()} == {
+        (RGBA_ATTRIBUTE, AttributeKind.SCALAR, False), ("Normals", AttributeKind.NORMAL, False)}
+    np.testing.assert_allclose(named[RGBA_ATTRIBUTE].data[0], (1, 0.5, 0, 1))
     # Sphere normals point away from the centre.
     radial = v.vertices / np.linalg.norm(v.vertices, axis=1, keepdims=True)
-    assert float(np.min(np.einsum("ij,ij->i", radial, kinds[AttributeKind.NORMAL].data))) > 0.95
+    assert float(np.min(np.einsum("ij,ij->i", radial, named["Normals"].data))) > 0.95
 
 
 def test_obj_with_two_materials_gives_per_vertex_colours(tmp_path: Path) -> None:

@@ -15,6 +15,7 @@ import pytest
 
 from bridge.robots import LoadOptions, MeshCache, load_robot_file, to_polydata
 from protocol.messages import AttributeKind, PolyData
+from protocol.polydata import RGBA_ATTRIBUTE
 from support import require_shared
 
 OMNI_COLOURS = {
@@ -149,7 +150,8 @@ def test_polydata_of_a_link_packs_and_unpacks(omni) -> None:
     np.testing.assert_array_equal(again.points, visual.vertices)
     assert len(again.polygons) == 4 * len(visual.triangles)
     np.testing.assert_array_equal(again.polygons.reshape(-1, 4)[:, 1:], visual.triangles)
-    (rgba,) = [a for a in again.attributes if a.kind == AttributeKind.RGBA]
+    (rgba,) = [a for a in again.attributes if a.name == RGBA_ATTRIBUTE]
+    assert (rgba.kind, rgba.data.shape[1]) == (AttributeKind.SCALAR, 4)
     np.testing.assert_allclose(rgba.data, np.tile(OMNI_COLOURS["blue"], (len(visual.vertices), 1)),
                                atol=1e-7)
 

@@ -18,8 +18,9 @@ from slicer_client.connection import ConnectionClosedError
 from slicer_client.connector_codec import (COMMAND_STATUS, SLICER_TEXT_ENCODING,
                                            build_command, message_from_node,
                                            outgoing_content, parse_reply)
-from slicer_client.scene_plan import (DEFAULT_COLOUR, describe_bridges, point_colours_differ,
-                                      metadata_from_attributes, model_colour, plan_node)
+from slicer_client.scene_plan import (DEFAULT_COLOUR, describe_bridges, is_point_like,
+                                      metadata_from_attributes, model_colour, plan_node,
+                                      point_colours_differ, vertex_per_point)
 from slicer_client.values import value_from_message
 
 
@@ -60,6 +61,28 @@ def test_a_mesh_of_one_colour_gets_it_and_a_mesh_of_many_shows_its_point_colours
     assert point_colours_differ({}, np.array([[1, 0, 0, 1], [1, 0, 0, 0.5]]))
     assert point_colours_differ({"ros2.point_colors": "1"}) and not point_colours_differ({})
     assert not point_colours_differ({}, np.zeros((0, 4)))
+
+
+def test_point_clouds_and_points_markers_are_point_like() -> None:
+    """Issue 42 (8): the daemon sends their points as one polyvertex cell, of which Slicer's
+    converter keeps the first: these models get one vertex per point again in the module."""
+    def sub(ros_type: str) -> dict[str, str]:
+        return metadata_for(NameKey.subscriber("/cloud"), ros_type=ros_type)
+
+    def marker(kind: str) -> dict[str, str]:
+        return {**metadata_for(NameKey.marker("/m", "ns", 1)), "ros2.marker_type": kind}
+    for meta, expected in ((sub("sensor_msgs/msg/PointCloud2"), True),
+                           (sub("sensor_msgs/msg/PointCloud"), True),
+                           (sub("sensor_msgs/msg/Image"), False),
+                           (marker("points"), True), (marker("point"), True),
+                           (marker("sphere_list"), False), (marker("line_strip"), False),
+                           (metadata_for(NameKey.robot_visual("r", "l", 0)), False), ({}, False)):
+        assert is_point_like(meta) is expected, meta
+        assert plan_node("dev", meta).point_like is expected, meta
+    offsets, connectivity = vertex_per_point(4)
+    assert (offsets.tolist(), connectivity.tolist()) == ([0, 1, 2, 3, 4], [0, 1, 2, 3])
+    assert offsets.dtype == connectivity.dtype == np.int64
+    assert [a.tolist() for a in vertex_per_point(0)] == [[0], []]
 
 
 def test_long_link_names_use_the_daemons_hashed_device_or_the_create_reply() -> None:

@@ -288,3 +288,43 @@ def test_a_script_s_first_reference_call_connects_and_a_model_goes_to_ros(
     assert logic.client is None and logic.connector is None and not logic.isActive()
     assert ros_node is not None
     logic.cleanup()
+
+
+def test_point_clouds_and_points_markers_get_a_vertex_per_point(
+        widget: Any, daemon: RunningDaemon, processes: Processes) -> None:
+    """Issue 42 (8): the daemon sent one VERTICES cell per point, and Slicer's converter
+    crashed on the second (the stand-in's connector raises there, as Slicer dies). Now it
+    sends one polyvertex cell, of which the converter keeps the first point; the module
+    gives every point of a cloud or a POINTS marker its vertex again, on every update."""
+    import vtk
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    processes.python("data", "scene_data_publisher.py").wait_for_output("READY")
+    connect(widget, daemon.port)
+    logic = widget.logic
+    cloud = logic.client.subscribe("/scene_cloud", "PointCloud2")
+    logic.addMarkers("/scene_markers", "MarkerArray", "world")
+
+    def model(predicate: Callable[[Any], bool]) -> Any:
+        return next((n for n in scene_nodes("vtkMRMLModelNode") if predicate(n)), None)
+
+    def cloud_node() -> Any:
+        return model(lambda n: n.GetName() == cloud.device)
+
+    def dots_node() -> Any:
+        return model(lambda n: n.GetAttribute("OpenIGTLink.ros2.marker_type") == "points")
+
+    def verts(node: Any) -> list[int]:
+        out = vtk.vtkIdTypeArray()
+        node.GetPolyData().GetVerts().ExportLegacyFormat(out)
+        return vtk_to_numpy(out).tolist()
+
+    pump_until(lambda: cloud_node() is not None and dots_node() is not None
+               and cloud_node().GetPolyData().GetNumberOfPoints() == 4, what="cloud, markers")
+    first = cloud_node().GetPolyData()
+    pump_until(lambda: cloud_node().GetPolyData() is not first, what="the next cloud")
+    for node, n in ((cloud_node(), 4), (dots_node(), 3)):
+        assert verts(node) == [1, 0, 1, 1, 1, 2, 1, 3][:2 * n]
+    # The cloud's colours came as the 4-component "RGBA" array: (40 i, 80, 120), opaque.
+    rgba = vtk_to_numpy(cloud_node().GetPolyData().GetPointData().GetArray("RGBA"))
+    np.testing.assert_allclose(rgba * 255, [[40 * i, 80, 120, 255] for i in range(4)],
+                               atol=1e-3)

@@ -8,8 +8,8 @@ usage: scene_data_publisher.py
 - /scene_cloud: sensor_msgs/PointCloud2, organised 2 x 2, x y z float32 + rgb (packed in a
   float32), point i at (i, 2 i, 3 i) cm, colour (40 i, 80, 120);
 - /scene_markers: visualization_msgs/MarkerArray in base: a CUBE (ns "scene", id 1,
-  0.02 m, red, at (0, 0, 0.05) m) and a TEXT_VIEW_FACING (id 2, "hello", green, at
-  (0.03, 0, 0) m);
+  0.02 m, red, at (0, 0, 0.05) m), a TEXT_VIEW_FACING (id 2, "hello", green, at
+  (0.03, 0, 0) m) and POINTS (id 3, blue, at (0, 0, 0), (0.01, 0, 0), (0, 0.01, 0) m);
 - /scene_text: std_msgs/String "note <n>".
 Prints READY once its publishers exist.
 """
@@ -18,7 +18,7 @@ import math
 import struct
 
 import rclpy
-from geometry_msgs.msg import TransformStamped
+from geometry_msgs.msg import Point, TransformStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import Image, PointCloud2, PointField
 from std_msgs.msg import String
@@ -62,7 +62,13 @@ def markers(node):
     text.pose.position.x, text.pose.orientation.w = 0.03, 1.0
     text.scale.z = 0.01
     text.color.g, text.color.a = 1.0, 1.0
-    return MarkerArray(markers=[cube, text])
+    dots = Marker(ns="scene", id=3, type=Marker.POINTS, action=Marker.ADD,
+                  points=[Point(x=0.01 * (i == 1), y=0.01 * (i == 2)) for i in range(3)])
+    dots.header.frame_id = "base"
+    dots.pose.orientation.w = 1.0
+    dots.scale.x = dots.scale.y = 0.005
+    dots.color.b, dots.color.a = 1.0, 1.0
+    return MarkerArray(markers=[cube, text, dots])
 
 
 def main() -> None:

@@ -9,7 +9,6 @@ packs a textured cube the way OpenIGTLinkIO's converter does; our decoder reads 
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -18,34 +17,15 @@ import pytest
 
 from protocol.framing import Decoder
 from protocol.messages import AttributeKind, PolyData, cells_to_list
+from tests.protocol.igtl3_probes import igtl3_probe
 from tests.protocol.igtl_captures import CUBE_CORNERS_MM, CUBE_QUADS
 
 pytestmark = pytest.mark.integration
 
-REPO = Path(__file__).resolve().parents[2]
-IGTL3 = REPO / ".cache" / "slicer-peer" / "igtl"
-PROBE_SOURCE = Path(__file__).resolve().parent / "cpp" / "igtl_tcoords_probe.cxx"
-PROBE = REPO / ".cache" / "igtl3-probe" / "igtl_tcoords_probe"
-
 
 @pytest.fixture(scope="module")
 def probe() -> Path:
-    lib = IGTL3 / "lib" / "igtl"
-    if not (lib / "libOpenIGTLink.so").exists():
-        pytest.skip(f"OpenIGTLink 3 is not built at {IGTL3} (the real-Slicer tier builds it "
-                    "with ../shared/peers/slicer-openigtlinkif/build.sh .cache/slicer-peer)")
-    if shutil.which("c++") is None:
-        pytest.skip("building the OpenIGTLink 3 probe needs c++")
-    if not PROBE.exists() or PROBE.stat().st_mtime < PROBE_SOURCE.stat().st_mtime:
-        PROBE.parent.mkdir(parents=True, exist_ok=True)
-        # The tier's libraries are built with the pre-C++11 string ABI (as the wheels are).
-        result = subprocess.run(
-            ["c++", "-O1", "-D_GLIBCXX_USE_CXX11_ABI=0", f"-I{IGTL3 / 'include' / 'igtl'}",
-             str(PROBE_SOURCE), "-o", str(PROBE), f"-L{lib}", "-lOpenIGTLink",
-             f"-Wl,-rpath,{lib}"], capture_output=True, text=True, timeout=300, check=False)
-        if result.returncode != 0:
-            pytest.fail(f"building {PROBE_SOURCE.name} failed:\n{result.stderr[-3000:]}")
-    return PROBE
+    return igtl3_probe("igtl_tcoords_probe")
 
 
 def _decode(probe: Path, where: str) -> PolyData:

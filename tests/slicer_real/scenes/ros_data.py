@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 import slicer
+import vtk
 from vtk.util.numpy_support import vtk_to_numpy
 
 from scene_tools import connect, matrix
@@ -39,7 +40,7 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
         node(subs["PointCloud2"].device, "vtkMRMLModelNode"),
         node(subs["String"].device, "vtkMRMLTextNode"),
         node(lookup.device, "vtkMRMLLinearTransformNode"),
-        len(markers()) >= 2, label() is not None and label().GetNumberOfControlPoints())))
+        len(markers()) >= 3, label() is not None and label().GetNumberOfControlPoints())))
     session.pump(1.0)  # a few more messages: what is shown is the latest
     volume = node(subs["Image"].device, "vtkMRMLVolumeNode")
     cloud = node(subs["PointCloud2"].device, "vtkMRMLModelNode")
@@ -47,15 +48,17 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     tf = node(lookup.device, "vtkMRMLLinearTransformNode")
     pixels = slicer.util.arrayFromVolume(volume)
     poly = cloud.GetPolyData()
-    colours = poly.GetPointData().GetScalars() or poly.GetPointData().GetArray(0)
+    colours = poly.GetPointData().GetArray("RGBA")
     marker_info = []
     for m in markers():
         entry = {"name": m.GetName(), "class": m.GetClassName(),
+                 "type": m.GetAttribute("OpenIGTLink.ros2.marker_type"),
                  "parent": m.GetParentTransformNode().GetName()
                  if m.IsA("vtkMRMLTransformableNode") and m.GetParentTransformNode() else None}
         if m.IsA("vtkMRMLModelNode"):
             entry["bounds"] = list(m.GetPolyData().GetBounds())
             entry["colour"] = list(m.GetDisplayNode().GetColor())
+            entry["vertices"] = _vertices(m.GetPolyData())
         marker_info.append(entry)
     point = [0.0, 0.0, 0.0]
     lab = label()
@@ -64,12 +67,20 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
         "volume": {"class": volume.GetClassName(), "shape": list(pixels.shape),
                    "pixels": pixels.tolist()},
         "cloud": {"points": vtk_to_numpy(poly.GetPoints().GetData()).tolist(),
+                  "vertices": _vertices(poly),
                   "colours": vtk_to_numpy(colours).tolist() if colours is not None else None},
         "text": text.GetText(),
         "tf": matrix(tf),
         "markers": marker_info,
         "label": {"text": lab.GetNthControlPointLabel(0), "world": point},
     }
+
+
+def _vertices(poly: Any) -> list[int]:
+    """A model's vertex cells, legacy layout [1, i, 1, j, ...]."""
+    out = vtk.vtkIdTypeArray()
+    poly.GetVerts().ExportLegacyFormat(out)
+    return [int(v) for v in vtk_to_numpy(out)] if out.GetNumberOfTuples() else []
 
 
 _ = np

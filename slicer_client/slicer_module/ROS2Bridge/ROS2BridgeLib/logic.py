@@ -16,6 +16,7 @@ from slicer.ScriptedLoadableModule import ScriptedLoadableModuleLogic
 from slicer.util import VTKObservationMixin
 
 from protocol import commands as c
+from protocol.polydata import RGBA_ATTRIBUTE
 from slicer_client.bridge_state import BridgeState
 from slicer_client.client import Client, read_key_file
 from slicer_client.joint_sliders import JointSlider, joint_sliders, slider_positions
@@ -24,7 +25,8 @@ from slicer_client.reference.nodes import ROS2Node, RobotNode
 from slicer_client.resources import MarkerSubscriber, Publisher, Robot
 from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER, NodePlan,
                                       describe_bridges, metadata_from_attributes, plan_node,
-                                      robot_status_lines, stale_lines, stale_marker_nodes)
+                                      robot_status_lines, stale_lines, stale_marker_nodes,
+                                      vertex_per_point)
 from slicer_client.send_plan import KIND_ORDER, plan_send
 
 from .parameters import ROS2BridgeParameterNode
@@ -219,6 +221,10 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             self._removeNode(label)  # a text marker's labelled point goes with it
         if self.transport is not None:
             self.transport.unwatch(node)
+        if node.IsA("vtkMRMLModelNode") and self.hasObserver(
+                node, slicer.vtkMRMLModelNode.MeshModifiedEvent, self._onPointsModified):
+            self.removeObserver(node, slicer.vtkMRMLModelNode.MeshModifiedEvent,
+                                self._onPointsModified)
         self._planned.discard(node.GetID())
         displays: list[Any] = []
         if node.IsA("vtkMRMLDisplayableNode"):
@@ -410,10 +416,25 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         """The model's "RGBA" point array (the planner decides one colour or per point)."""
         if not node.IsA("vtkMRMLModelNode") or node.GetPolyData() is None:
             return None
-        array = node.GetPolyData().GetPointData().GetArray("RGBA")
+        array = node.GetPolyData().GetPointData().GetArray(RGBA_ATTRIBUTE)
         if array is None or array.GetNumberOfTuples() == 0:
             return None
-        return np.asarray(slicer.util.arrayFromModelPointData(node, "RGBA"))
+        return np.asarray(slicer.util.arrayFromModelPointData(node, RGBA_ATTRIBUTE))
+
+    @staticmethod
+    def _onPointsModified(node: Any, event: Any = None) -> None:
+        """One vertex per point of a point-like model (scene_plan.is_point_like): the
+        connector keeps the first point of the daemon's one polyvertex cell."""
+        polydata = node.GetPolyData()
+        if polydata is None or polydata.GetNumberOfVerts() in (0, polydata.GetNumberOfPoints()):
+            return  # not drawn as vertices, or done
+        from vtk.util.numpy_support import numpy_to_vtkIdTypeArray
+        offsets, connectivity = vertex_per_point(polydata.GetNumberOfPoints())
+        # In place: SetVerts would fire MeshModifiedEvent again, and the transport would
+        # hand the client this message twice.
+        polydata.GetVerts().SetData(numpy_to_vtkIdTypeArray(offsets, deep=True),
+                                    numpy_to_vtkIdTypeArray(connectivity, deep=True))
+        polydata.DeleteCells()  # its cell map, if built, held the one vertex
 
     def _apply(self, node: Any, plan: NodePlan) -> None:
         node.SetDescription(plan.display_name)  # node names stay = device names (see planner)
@@ -425,11 +446,18 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             display.SetColor(*plan.colour)
             display.SetOpacity(plan.opacity)
             if plan.point_colours:  # the points' own colours, shown as they are (0..1)
-                display.SetActiveScalar("RGBA", vtk.vtkAssignAttribute.POINT_DATA)
+                display.SetActiveScalar(RGBA_ATTRIBUTE, vtk.vtkAssignAttribute.POINT_DATA)
                 display.SetScalarRangeFlagFromString("UseDirectMapping")
                 display.SetScalarVisibility(True)
             else:
                 display.SetScalarVisibility(False)
+        if plan.point_like and node.IsA("vtkMRMLModelNode"):
+            # The connector makes a new polydata for each message: redo it on each one.
+            if not self.hasObserver(node, slicer.vtkMRMLModelNode.MeshModifiedEvent,
+                                    self._onPointsModified):
+                self.addObserver(node, slicer.vtkMRMLModelNode.MeshModifiedEvent,
+                                 self._onPointsModified)
+            self._onPointsModified(node)
         if plan.folder:
             sh = slicer.vtkMRMLSubjectHierarchyNode.GetSubjectHierarchyNode(slicer.mrmlScene)
             top_name = (ROBOTS_FOLDER if plan.kind.startswith("robot") else
