@@ -20,6 +20,7 @@ from protocol.auth import proof
 from protocol.commands import ErrorCode
 from protocol.liveness import DEAD_AFTER_S
 from protocol.messages import Message, Status, StatusCode, String
+from hardening_tools import make_certificate
 from slicer_client.connection import CommandRefusedError, Connection
 from support import (REPO, Child, Processes, RunningDaemon, assert_clean_exit, scaled,
                      start_daemon, wait_until)
@@ -169,16 +170,7 @@ def test_a_bad_key_file_stops_the_start_in_one_line(processes: Processes,
 
 @pytest.fixture(scope="module")
 def certificate(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    folder = tmp_path_factory.mktemp("tls")
-    cert, key = folder / "cert.pem", folder / "key.pem"
-    made = subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes",
-                           "-keyout", str(key), "-out", str(cert), "-days", "2",
-                           "-subj", "/CN=localhost", "-addext",
-                           "subjectAltName=IP:127.0.0.1,DNS:localhost"],
-                          capture_output=True, text=True, timeout=60)
-    if made.returncode != 0:
-        pytest.skip(f"openssl could not make a test certificate: {made.stderr[-300:]}")
-    return cert, key
+    return make_certificate(tmp_path_factory.mktemp("tls"))
 
 
 def test_the_tls_port_serves_clients_that_check_its_certificate(
