@@ -201,9 +201,8 @@ class BridgeServer:
                 loop = asyncio.get_running_loop()
                 self._incidents.warning(
                     "accept", time.monotonic(), "cannot accept a connection on port %d: %s "
-                    "(%d descriptors open, limit %d); trying again in %.1f s",
-                    sock.getsockname()[1], error.strerror or error, open_descriptors(),
-                    descriptor_limit(), ACCEPT_PAUSE_S)
+                    "(%s); trying again in %.1f s", sock.getsockname()[1],
+                    error.strerror or error, descriptor_use(), ACCEPT_PAUSE_S)
                 loop.remove_reader(sock)
                 loop.call_later(ACCEPT_PAUSE_S, self._resume, sock, tls)
                 return
@@ -376,6 +375,16 @@ def open_descriptors() -> int:
         return len(os.listdir("/proc/self/fd")) - 1  # less listdir's own
     except OSError:
         return 0
+
+
+def descriptor_use() -> str:
+    """What the log says of the process's descriptors: how many are open, of how many."""
+    limit = descriptor_limit()
+    try:
+        used = str(len(os.listdir("/proc/self/fd")) - 1)
+    except OSError as error:  # EMFILE: reading the list needs one more
+        used = "all" if error.errno == errno.EMFILE else "?"
+    return f"{used} of {limit or 'unlimited'} descriptors open (ulimit -n)"
 
 
 def descriptor_room() -> int:

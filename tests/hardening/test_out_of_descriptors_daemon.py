@@ -1,0 +1,74 @@
+"""A daemon whose process runs out of descriptors (issue 43): the descriptor limit of the
+running daemon is lowered to what it has open (`prlimit --pid`), so every new descriptor
+fails with EMFILE, whoever asks. Accept says so in one line per interval, the shared-memory
+port watch fails, says so in one line and runs again; once descriptors are free again,
+clients are served, and the watch still runs."""
+
+from __future__ import annotations
+
+import os
+import re
+import resource
+import shutil
+import socket
+import subprocess
+
+import pytest
+
+from support import Processes, assert_clean_exit, scaled, start_daemon, wait_until
+
+pytestmark = pytest.mark.ros
+
+WATCH_FAILED = "thread shm-port-watch failed (OSError: [Errno 24] Too many open files"
+
+
+def set_descriptor_limit(pid: int, soft: int) -> None:
+    hard = resource.getrlimit(resource.RLIMIT_NOFILE)[1]
+    subprocess.run(["prlimit", "--pid", str(pid), f"--nofile={soft}:{hard}"], check=True,
+                   timeout=30)
+
+
+def lowest_free_descriptor(pid: int) -> int:
+    used = {int(fd) for fd in os.listdir(f"/proc/{pid}/fd")}
+    return next(fd for fd in range(len(used) + 1) if fd not in used)
+
+
+def test_out_of_descriptors_is_said_once_and_every_thread_goes_on(
+        processes: Processes) -> None:
+    if shutil.which("prlimit") is None or not os.path.isdir("/dev/shm"):
+        pytest.skip("needs util-linux's prlimit and /dev/shm (the watch reads it)")
+    running = start_daemon(processes)
+    pid = running.child.popen.pid
+    output = running.child.output
+    before = len(os.listdir(f"/proc/{pid}/fd"))
+    set_descriptor_limit(pid, lowest_free_descriptor(pid))  # nothing new opens now
+    try:
+        waiting = [socket.create_connection(("127.0.0.1", running.port)) for _ in range(5)]
+        wait_until(lambda: "cannot accept a connection" in output(), timeout=10,
+                   what="the accept failure said")
+        wait_until(lambda: WATCH_FAILED in output(), timeout=15,
+                   what="the port watch's failure said")
+    finally:
+        set_descriptor_limit(pid, 1024)
+    # The clients that waited in the backlog are taken now, and new ones are served.
+    with running.connect() as client:
+        assert client.command("hello")["ops"]
+    for sock in waiting:
+        sock.close()
+    said = output()
+    assert said.count("cannot accept a connection") == 1, said[-3000:]
+    line = next(line for line in said.splitlines() if "cannot accept a connection" in line)
+    assert re.search(r"on port \d+: Too many open files \((all|\d+) of \d+ descriptors open "
+                     r"\(ulimit -n\)\); trying again in 0.5 s$", line), line
+    assert said.count(WATCH_FAILED) == 1 and "Traceback" not in said, said[-3000:]
+    # The watch still runs: out of descriptors again, it fails again (and says so). (Once
+    # the clients' descriptors are closed: a hole below the limit would let it open one.)
+    wait_until(lambda: len(os.listdir(f"/proc/{pid}/fd")) <= before, timeout=10,
+               what="the clients' descriptors closed")
+    set_descriptor_limit(pid, lowest_free_descriptor(pid))
+    try:
+        wait_until(lambda: output().count(WATCH_FAILED) == 2, timeout=scaled(20),
+                   what="the port watch's next turn")
+    finally:
+        set_descriptor_limit(pid, 1024)
+    assert_clean_exit(running)
