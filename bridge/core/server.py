@@ -108,9 +108,9 @@ class BridgeServer:
         self._link_check: Optional[asyncio.TimerHandle] = None
         self.knocker = Knocker()
         # Every admitted connection, from accept on: those still in their TLS handshake
-        # (also in `_handshakes`: loop time begun, the task) hold a slot as clients do.
+        # (also in `_handshakes`) hold a slot as clients do.
         self.sessions: set[ClientSession] = set()
-        self._handshakes: dict[ClientSession, tuple[float, asyncio.Task[None]]] = {}
+        self._handshakes: dict[ClientSession, _Handshake] = {}
         self.client_room = descriptor_room()  # clients the descriptor limit leaves room for
         self.refused = 0
 
@@ -231,7 +231,7 @@ class BridgeServer:
         task = loop.create_task(self._open(conn, session, who, tls))
         # Cancelled (evicted, or the server closes) before it ran, it never closed `conn`.
         task.add_done_callback(lambda done: conn.close() if done.cancelled() else None)
-        self._handshakes[session] = (loop.time(), task)
+        self._handshakes[session] = _Handshake(loop.time(), task, who)
 
     def _judge(self, address: str, who: str) -> Optional[Refusal]:
         """May the peer at `address` (just accepted on either port) become a client? The
@@ -291,8 +291,8 @@ class BridgeServer:
         stalled = [(s.frame_started, id(s), s) for s in self.sessions
                    if s.frame_started is not None and now - s.frame_started
                    >= STALLED_FRAME_EVICT_S]
-        stalled += [(begun, id(s), s) for s, (begun, _) in self._handshakes.items()
-                    if now - begun >= STALLED_FRAME_EVICT_S]
+        stalled += [(h.begun, id(s), s) for s, h in self._handshakes.items()
+                    if now - h.begun >= STALLED_FRAME_EVICT_S]
         if not stalled:
             return False
         started, _, victim = min(stalled, key=lambda item: (item[0], item[1]))
@@ -300,10 +300,11 @@ class BridgeServer:
         self._incidents.warning("evict", time.monotonic(), "all %d client slots taken: "
                                 "closing client %s, whose %s has been unfinished for "
                                 "%.1f s, to admit %s", len(self.sessions),
-                                victim.peer, "frame" if handshake is None else "TLS handshake",
+                                victim.peer if handshake is None else handshake.peer,
+                                "frame" if handshake is None else "TLS handshake",
                                 now - started, newcomer)
         if handshake is not None:
-            handshake[1].cancel()  # its socket is closed with the unfinished transport
+            handshake.task.cancel()  # its socket is closed with the unfinished transport
         else:
             victim.close_stalled()
         self.sessions.discard(victim)  # its slot is free now, not once its socket is gone
@@ -318,13 +319,23 @@ class BridgeServer:
                 if sock.fileno() >= 0:
                     loop.remove_reader(sock)
                     sock.close()
-        handshakes = [task for _, task in self._handshakes.values()]
+        handshakes = [handshake.task for handshake in self._handshakes.values()]
         for task in handshakes:
             task.cancel()
         for session in tuple(self.sessions):
             session.close()
         await self.knocker.close()
         await asyncio.gather(*handshakes, return_exceptions=True)
+
+
+@dataclass(frozen=True)
+class _Handshake:
+    """A connection admitted but not yet a client: its TLS handshake (or, for a plain one,
+    the loop turn that makes its transport) runs in `task`."""
+
+    begun: float  # loop time
+    task: asyncio.Task[None]
+    peer: str
 
 
 @dataclass(frozen=True)
