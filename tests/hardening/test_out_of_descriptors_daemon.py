@@ -71,4 +71,18 @@ def test_out_of_descriptors_is_said_once_and_every_thread_goes_on(
                    what="the port watch's next turn")
     finally:
         set_descriptor_limit(pid, 1024)
+    # One descriptor left: accept takes it, and a plain client needs a second (for direct
+    # writes): that client is closed, in one line, and the next one is served.
+    set_descriptor_limit(pid, lowest_free_descriptor(pid) + 1)
+    try:
+        with socket.create_connection(("127.0.0.1", running.port)) as one:
+            one.settimeout(scaled(10))
+            assert one.recv(1) == b""
+        wait_until(lambda: "(its second descriptor); closing it" in output(), timeout=10,
+                   what="the client without a second descriptor said")
+    finally:
+        set_descriptor_limit(pid, 1024)
+    with running.connect() as client:
+        assert client.command("hello")["ops"]
+    assert "Traceback" not in output()
     assert_clean_exit(running)
