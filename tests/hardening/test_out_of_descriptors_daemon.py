@@ -15,6 +15,8 @@ import subprocess
 
 import pytest
 
+from hardening_tools import read_until_closed
+from protocol.messages import StatusCode
 from support import Processes, assert_clean_exit, scaled, start_daemon, wait_until
 
 pytestmark = pytest.mark.ros
@@ -85,4 +87,40 @@ def test_out_of_descriptors_is_said_once_and_every_thread_goes_on(
     with running.connect() as client:
         assert client.command("hello")["ops"]
     assert "Traceback" not in output()
+    assert_clean_exit(running)
+
+
+def test_clients_past_the_room_the_descriptor_limit_leaves_are_refused(
+        processes: Processes) -> None:
+    """--max-clients 64 under ``ulimit -n`` 200: the daemon says at start how many fit
+    (128 descriptors kept aside, 2 a client), refuses the others with a STATUS saying why,
+    and its descriptors stay under the limit."""
+    if shutil.which("prlimit") is None:
+        pytest.skip("needs util-linux's prlimit")
+    running = start_daemon(processes, "--max-clients", "64", nofile=200)
+    pid = running.child.popen.pid
+    said_at_start = re.search(r"the descriptor limit \(ulimit -n 200\) leaves room for (\d+) "
+                              r"clients, fewer than --max-clients 64: the others are refused",
+                              running.child.output())
+    assert said_at_start, running.child.output()
+    room = int(said_at_start.group(1))
+    assert 10 <= room < 64, room
+    clients = []
+    try:
+        for _ in range(room):
+            clients.append(running.connect())
+        assert all(c.command("hello")["ops"] for c in clients[-2:])
+        with socket.create_connection(("127.0.0.1", running.port)) as extra:
+            said = read_until_closed(extra)
+        assert [m.type_name for m in said] == ["STATUS"]
+        assert said[0].body.code == StatusCode.RESOURCE_ERROR
+        assert said[0].body.text == (f"clients: expected at most {room} (what the daemon's "
+                                     f"descriptor limit leaves room for), got one more; "
+                                     f"closing")
+        assert len(os.listdir(f"/proc/{pid}/fd")) < 200 - 64
+    finally:
+        for client in clients:
+            client.close()
+    assert f"{room} clients already connected, all the descriptor limit" in \
+        running.child.output()
     assert_clean_exit(running)
