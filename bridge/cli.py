@@ -276,7 +276,7 @@ def run_with_config(args: argparse.Namespace,
     """Build the config from the options, set up logging, run `main(config)`; what stops
     the start (bad config, port in use, a bad start-up bridge) is one line and exit 2."""
     from bridge.core.server import PortInUseError
-    from bridge.daemon import StartupError
+    from bridge.daemon import StartupError, ThreadFailedError
     from bridge.ros.ros_node import RosArgumentsError
 
     try:
@@ -294,6 +294,9 @@ def run_with_config(args: argparse.Namespace,
     except (StartupError, RosArgumentsError) as error:
         print(f"slicer-ros2-bridge: {error}", file=sys.stderr)
         return 2
+    except ThreadFailedError as error:
+        print(f"slicer-ros2-bridge: stopped: {error}", file=sys.stderr)
+        return 1
     return 0
 
 

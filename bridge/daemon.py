@@ -24,9 +24,10 @@ from bridge.core.client_replies import ClientReplies
 from bridge.core.dispatch import Dispatcher
 from bridge.core.heavy import HeavyWork
 from bridge.core.hub import Hub
-from bridge.core.security import is_loopback_host
+from bridge.core.security import is_loopback_host, open_permissions
 from bridge.core.server import BridgeServer
 from bridge.core.shutdown import StopSignals
+from bridge.core.threads import fatal_failure
 from bridge.core.stream_health import StreamHealth
 from bridge.markers.capability import MarkerBridges
 from bridge.parameters.capability import ParameterBridges
@@ -50,6 +51,10 @@ GC_THRESHOLDS = (100_000, 50, 100)  # CPython's default: (700, 10, 10)
 
 class StartupError(Exception):
     """The daemon cannot start as configured (a bad start-up bridge, for example)."""
+
+
+class ThreadFailedError(Exception):
+    """A thread the daemon cannot do without failed (bridge/core/threads.py): it stopped."""
 
 
 class Daemon:
@@ -143,6 +148,12 @@ class Daemon:
             log.info("listening on %s:%d (OpenIGTLink over TLS)", self.config.host,
                      self.server.tls_port)
         log.info("security: %s", self.policy.describe())
+        secrets = [("--key-file", self.policy.key_path),
+                   ("--tls-key", self.config.tls.key_file if self.config.tls else None)]
+        for what, path in secrets:
+            warning = open_permissions(path, what) if path else None
+            if warning is not None:
+                log.warning("%s", warning)
         log.info("tf buffer on the %s", self.tf.store_in_use())
 
     async def stop(self) -> None:
@@ -186,3 +197,6 @@ async def run_daemon(config: DaemonConfig,
         if stopping is not None:
             stopping()
         await daemon.stop()
+    failure = fatal_failure()
+    if failure is not None:
+        raise ThreadFailedError(failure)

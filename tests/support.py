@@ -154,11 +154,14 @@ class Processes:
             path = PEERS / script
         return self.start(name, [sys.executable, "-u", str(path), *args], env=env)
 
-    def bridge(self, *args: str, env: Optional[dict[str, str]] = None) -> Child:
+    def bridge(self, *args: str, env: Optional[dict[str, str]] = None,
+               nofile: Optional[int] = None) -> Child:
         """Run the `slicer-ros2-bridge` command (its entry point, `python -m bridge.console`)
-        with these arguments."""
-        return self.start("bridge", [sys.executable, "-u", "-m", "bridge.console", *args],
-                          env=env)
+        with these arguments; `nofile`: under that descriptor limit (util-linux's prlimit,
+        which execs it: the child's pid is the daemon's)."""
+        limit = ["prlimit", f"--nofile={nofile}:{nofile}", "--"] if nofile else []
+        return self.start("bridge", [*limit, sys.executable, "-u", "-m", "bridge.console",
+                                     *args], env=env)
 
     def stop_all(self) -> None:
         for child in reversed(self.children):
@@ -252,11 +255,11 @@ class RunningDaemon:
         return Connection("127.0.0.1", self.port)
 
 
-def start_daemon(processes: Processes, *args: str,
-                 env: Optional[dict[str, str]] = None) -> RunningDaemon:
+def start_daemon(processes: Processes, *args: str, env: Optional[dict[str, str]] = None,
+                 nofile: Optional[int] = None) -> RunningDaemon:
     # The kernel picks the port as the daemon binds it: a port picked here and bound later
     # could be taken in between by any other process of a busy machine.
-    child = processes.bridge("run", "--port", "0", *args, env=env)
+    child = processes.bridge("run", "--port", "0", *args, env=env, nofile=nofile)
     line = child.wait_for_output(" (OpenIGTLink); ROS node", timeout=30)
     listening = re.search(r"listening on \S+:(\d+) \(OpenIGTLink\)", line)
     assert listening, line

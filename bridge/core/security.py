@@ -48,7 +48,7 @@ __all__ = ["WRITES", "DEFAULT_MAX_BRIDGES", "WriteGrant", "read_key_file",
            "OPERATOR",
            "PARAMETER_SERVICES", "SECURITY_KEYS", "BridgeOwners", "BridgeQuota", "NameRules",
            "PolicyError", "RateLimitedLog", "SecurityPolicy", "hidden_action", "inside",
-           "is_loopback_host",
+           "is_loopback_host", "open_permissions",
            "parameter_service", "parse_network", "positive_int", "strip_frame"]
 
 log = logging.getLogger(__name__)
@@ -209,6 +209,7 @@ class SecurityPolicy:
     robot_dirs: tuple[str, ...] = ()
     # The writers' shared key (`--key-file`, protocol/auth.py); None: no key.
     key: Optional[bytes] = field(default=None, repr=False)
+    key_path: Optional[str] = None  # its file, checked for open permissions at start
     # Networks whose plain connections may write without a key (`--trust`).
     trusted_networks: tuple[Network, ...] = ()
     # Listening beyond loopback (set by the daemon from --host): then, without a key, only
@@ -430,7 +431,8 @@ class SecurityPolicy:
         policy = replace(policy, allowed_networks=networks, trusted_networks=trusted)
         if settings.get("key_file") is not None:
             policy = replace(policy, key=read_key_file(settings["key_file"],
-                                                       f"{where}.key_file"))
+                                                       f"{where}.key_file"),
+                             key_path=str(settings["key_file"]))
         # Fields named one by one (not **{kind: ...}): mypy checks each against its type.
         rules = {kind: NameRules(allow=_globs(settings, f"allow_{kind}", where),
                                  deny=_globs(settings, f"deny_{kind}", where))
@@ -507,6 +509,21 @@ def read_key_file(path: Any, where: str) -> bytes:
         return read_key_text(text, f"{where} ({path})")
     except KeyFileError as error:
         raise PolicyError(str(error)) from None
+
+
+def open_permissions(path: str, what: str) -> Optional[str]:
+    """One warning line if the secret file at `path` may be read by its group or others
+    (as ssh warns of a private key); None if only its owner may (or it cannot be read)."""
+    try:
+        mode = os.stat(path).st_mode & 0o777
+    except OSError:
+        return None
+    if not mode & 0o077:
+        return None
+    return (f"{what} {path} has permissions {mode:04o}: readable by "
+            f"{'others' if mode & 0o007 else 'its group'}, who could then "
+            f"{'write through the daemon' if what == '--key-file' else 'pose as the daemon'}; "
+            f"expected 0600 (chmod 600 {path})")
 
 
 def parse_network(text: str, where: str) -> Network:

@@ -187,7 +187,15 @@ class ClientSession(asyncio.Protocol):
         if sock is not None and not tls:
             # Its own descriptor: closed in connection_lost, under the write lock, before
             # the transport closes its own, so a direct write can never reach a reused fd.
-            direct = socket.socket(fileno=os.dup(sock.fileno()))
+            try:
+                duplicate = os.dup(sock.fileno())
+            except OSError as error:  # the process is out of descriptors: so is this client
+                self._incidents.warning("descriptors", time.monotonic(), "client %s: %s "
+                                        "(its second descriptor); closing it", self.peer,
+                                        error.strerror or error)
+                transport.abort()
+                return
+            direct = socket.socket(fileno=duplicate)
             direct.setblocking(False)
             self._direct = direct
             with self.slot:

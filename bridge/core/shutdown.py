@@ -23,6 +23,8 @@ import time
 
 __all__ = ["STOP_SIGNALS", "StopSignals", "Watchdog", "default_action_from_now"]
 
+from bridge.core.threads import OnFailure, start_thread
+
 log = logging.getLogger("bridge")
 
 STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -58,9 +60,7 @@ class Watchdog:
         """Idempotent: the bound runs from the first call."""
         if self._thread is None:
             faulthandler.dump_traceback_later(self._timeout_s + _BACKSTOP_S, exit=True)
-            self._thread = threading.Thread(target=self._watch, name="stop-watchdog",
-                                            daemon=True)
-            self._thread.start()
+            self._thread = start_thread("stop-watchdog", self._watch, OnFailure.STOP)
 
     def _watch(self) -> None:
         time.sleep(self._timeout_s)

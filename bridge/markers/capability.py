@@ -84,6 +84,7 @@ from bridge.core.hub import Hub, Replier, Subscriber
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.outbox import SharedFrame
 from bridge.core.security import DEFAULT_MAX_MARKER_BYTES, strip_frame
+from bridge.core.threads import OnFailure, start_thread
 from bridge.markers.cdr import layout_supported, read_marker, read_marker_array
 from bridge.markers.convert import ADD, DELETE, DELETEALL, MarkerEvent, events_of
 from bridge.markers.geometry import (MarkerError, MarkerModel, MarkerSpec, build_model,
@@ -304,9 +305,9 @@ class _Worker:
         self._lock = threading.Lock()
         self.dropped = 0
         self.meshed = 0
-        self._thread = threading.Thread(target=self._run, name=f"markers {sub.topic}",
-                                        daemon=True)
-        self._thread.start()
+        # A bug that escapes the worker's own handling is logged, and the worker starts
+        # again (what it had folded is lost; the next markers make it anew).
+        self._thread = start_thread(f"markers {sub.topic}", self._run, OnFailure.RESTART)
 
     def put(self, msg: Any) -> None:  # ROS executor thread
         with self._cond:

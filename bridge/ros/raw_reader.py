@@ -28,6 +28,8 @@ from typing import Any, Callable, Optional, Sequence, Union
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from bridge.core.threads import OnFailure, start_thread
+
 log = logging.getLogger(__name__)
 
 # The compiled module's interface this wrapper expects (`_rcl_reader.INTERFACE`).
@@ -39,6 +41,10 @@ try:  # imported after rclpy (above), which has loaded the rcl libraries it link
     from bridge.ros import _rcl_reader
 except ImportError:
     _rcl_reader = None  # type: ignore[assignment]
+
+
+class ReaderStopped(RuntimeError):
+    """The reader's ROS wait or take failed: its topics would go silent for good."""
 
 
 class _NotBuilt(RuntimeError):
@@ -134,9 +140,9 @@ class RawReader:
             self._destroy_handles()
             raise
         self._stopping = threading.Event()
-        self._thread: Optional[threading.Thread] = threading.Thread(
-            target=self._run, name=name, daemon=True)
-        self._thread.start()
+        # Its topics would go silent for good if the thread died: the daemon stops instead.
+        self._thread: Optional[threading.Thread] = start_thread(name, self._run,
+                                                                OnFailure.STOP)
 
     def _check_kind(self, topic: Topic) -> None:
         if isinstance(topic, BatchTopic) != self._batches:
@@ -220,9 +226,9 @@ class RawReader:
                 taken: Optional[tuple[int, Any]] = (
                     reader.take_batch(_WAIT_S, BATCH_MAX_MESSAGES, BATCH_MAX_BYTES)
                     if self._batches else reader.take(_WAIT_S))
-            except _rcl_reader.ReaderError:
+            except _rcl_reader.ReaderError as error:
                 if not self._stopping.is_set():
-                    log.exception("the raw reader of %s stopped", self._names())
+                    raise ReaderStopped(f"the raw reader of {self._names()}: {error}") from None
                 return
             if taken is None:
                 continue
@@ -230,9 +236,9 @@ class RawReader:
             topic = self._taken[index].topic
             try:
                 topic.callback(data)
-            except _rcl_reader.ReaderError:
+            except _rcl_reader.ReaderError as error:
                 if not self._stopping.is_set():
-                    log.exception("the raw reader of %s stopped", topic.topic)
+                    raise ReaderStopped(f"the raw reader of {topic.topic}: {error}") from None
                 return
             except Exception:
                 # One failing message must not stop the topic: log it and go on.

@@ -26,6 +26,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
+from functools import partial
 from typing import Optional, Sequence, Union
 
 import rclpy
@@ -41,6 +42,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
 
+from bridge.core.threads import OnFailure, start_thread
 from bridge.ros.shm_ports import release_left_locks
 from bridge.ros.raw_reader import (BatchTopic, RawReader, RawSubscription, RawTopic,
                                    ReaderError)
@@ -129,12 +131,12 @@ class RosNode:
         return self.node.get_fully_qualified_name()
 
     def start(self) -> None:
-        self._thread = threading.Thread(target=self._spin, args=(self.executor,),
-                                        name="ros-executor", daemon=True)
-        self._thread.start()
-        self._stream_thread = threading.Thread(target=self._spin, args=(self.stream_executor,),
-                                               name="ros-streams", daemon=True)
-        self._stream_thread.start()
+        # `_spin` logs a failing callback and goes on; what escapes it runs it again.
+        self._thread = start_thread("ros-executor", partial(self._spin, self.executor),
+                                    OnFailure.RESTART)
+        self._stream_thread = start_thread("ros-streams",
+                                           partial(self._spin, self.stream_executor),
+                                           OnFailure.RESTART)
 
     def _spin(self, executor: Executor) -> None:
         last_logged = -_ERROR_LOG_INTERVAL_S

@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 from typing import Callable, Optional
 
+from bridge.core.threads import OnFailure, start_thread
 from bridge.ros.shm_locks import release_stuck, remove_dead_segments, remove_unfinished
 
 __all__ = ["CHECK_INTERVAL_S", "REPORT_AFTER_S", "ShmPortWatch", "file_inode",
@@ -92,9 +93,9 @@ class ShmPortWatch:
 
     def start(self) -> None:
         if self._maps.exists():  # Linux; elsewhere there is nothing to read
-            self._thread = threading.Thread(target=self._run, name="shm-port-watch",
-                                            daemon=True)
-            self._thread.start()
+            # A failure (out of descriptors while releasing a lock) is logged, and the
+            # watch goes on at its next turn.
+            self._thread = start_thread("shm-port-watch", self._run, OnFailure.RESTART)
 
     def close(self) -> None:
         self._closed.set()

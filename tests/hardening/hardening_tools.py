@@ -6,6 +6,7 @@ import json
 import os
 import socket
 import struct
+import subprocess
 import time
 from pathlib import Path
 from typing import Optional
@@ -17,6 +18,7 @@ from protocol.messages import Command, Message, Status, String, Transform
 from support import PEERS, Child, Processes, scaled
 
 import numpy as np
+import pytest
 
 HEADER = struct.Struct(">H12s20sQQQ")
 
@@ -238,3 +240,18 @@ class MarkerPeer:
         tmp.write_text(json.dumps({"seq": self.seq, **doc}))
         os.replace(tmp, self.control)
         self.child.wait_for_output(f"APPLIED {self.seq}", timeout=30)
+
+
+def make_certificate(folder: Path, *addresses: str) -> tuple[Path, Path]:
+    """A self-signed certificate (and its key, mode 0600 as openssl writes it) for
+    ``localhost`` and these IP addresses (127.0.0.1 always): the TLS port's test chain."""
+    cert, key = folder / "cert.pem", folder / "key.pem"
+    names = ",".join(f"IP:{address}" for address in ("127.0.0.1", *addresses))
+    made = subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes",
+                           "-keyout", str(key), "-out", str(cert), "-days", "2",
+                           "-subj", "/CN=localhost", "-addext",
+                           f"subjectAltName={names},DNS:localhost"],
+                          capture_output=True, text=True, timeout=60)
+    if made.returncode != 0:
+        pytest.skip(f"openssl could not make a test certificate: {made.stderr[-300:]}")
+    return cert, key

@@ -20,6 +20,7 @@ from protocol.auth import proof
 from protocol.commands import ErrorCode
 from protocol.liveness import DEAD_AFTER_S
 from protocol.messages import Message, Status, StatusCode, String
+from hardening_tools import make_certificate
 from slicer_client.connection import CommandRefusedError, Connection
 from support import (REPO, Child, Processes, RunningDaemon, assert_clean_exit, scaled,
                      start_daemon, wait_until)
@@ -169,16 +170,7 @@ def test_a_bad_key_file_stops_the_start_in_one_line(processes: Processes,
 
 @pytest.fixture(scope="module")
 def certificate(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    folder = tmp_path_factory.mktemp("tls")
-    cert, key = folder / "cert.pem", folder / "key.pem"
-    made = subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes",
-                           "-keyout", str(key), "-out", str(cert), "-days", "2",
-                           "-subj", "/CN=localhost", "-addext",
-                           "subjectAltName=IP:127.0.0.1,DNS:localhost"],
-                          capture_output=True, text=True, timeout=60)
-    if made.returncode != 0:
-        pytest.skip(f"openssl could not make a test certificate: {made.stderr[-300:]}")
-    return cert, key
+    return make_certificate(tmp_path_factory.mktemp("tls"))
 
 
 def test_the_tls_port_serves_clients_that_check_its_certificate(
@@ -217,3 +209,30 @@ def test_the_tls_port_serves_clients_that_check_its_certificate(
             plain.close()
     finally:
         assert_clean_exit(running)
+    assert "has permissions" not in running.child.output()  # both keys are 0600
+
+
+def test_key_files_others_may_read_are_warned_of_at_start(
+        processes: Processes, key_file: Path, certificate: tuple[Path, Path],
+        tmp_path: Path) -> None:
+    """As ssh warns of a private key others may read (issue 43, item 6): one line each."""
+    cert, tls_key = certificate
+    loose_key, loose_tls_key = tmp_path / "writers.key", tmp_path / "tls-key.pem"
+    loose_key.write_bytes(key_file.read_bytes())
+    loose_key.chmod(0o644)
+    loose_tls_key.write_bytes(tls_key.read_bytes())
+    loose_tls_key.chmod(0o640)
+    running = start_daemon(processes, "--key-file", str(loose_key), "--tls-cert", str(cert),
+                           "--tls-key", str(loose_tls_key), "--tls-port", "0")
+    running.child.wait_for_output("over TLS", timeout=30)
+    output = running.child.output()
+    assert f"WARNING bridge: --key-file {loose_key} has permissions 0644: readable " \
+           f"by others, who could then write through the daemon; expected 0600 (chmod 600 " \
+           f"{loose_key})\n" in output, output[-3000:]
+    assert f"WARNING bridge: --tls-key {loose_tls_key} has permissions 0640: " \
+           f"readable by its group, who could then pose as the daemon; expected 0600 " \
+           f"(chmod 600 {loose_tls_key})\n" in output, output[-3000:]
+    assert output.count("has permissions") == 2
+    with Connection("127.0.0.1", running.port) as client:  # it serves all the same
+        assert client.command("hello")["ops"]
+    assert_clean_exit(running)
