@@ -27,7 +27,7 @@ from protocol.naming import (KEY_COLOR, KEY_COUNT, KEY_FRAME, KEY_LINK, KEY_LINK
                              KEY_PARENT_DEVICE, KEY_POSITION, KEY_ROLE, KEY_TOPIC, KEY_VISUAL,
                              KEY_VISUAL_COUNT, KEY_WARNINGS)
 from slicer_client.bridge_state import BridgeSpec
-from slicer_client.errors import PointsError, RobotNotLoadedError
+from slicer_client.errors import BridgeClientError, PointsError, RobotNotLoadedError
 from slicer_client.matrices import as_numpy, as_rows
 from slicer_client.owner import ResourceOwner
 from slicer_client.transport import CommandFn, request_with
@@ -712,9 +712,27 @@ class Robot(Resource):
             if self._changed.wait_for(loaded, timeout):
                 return
             received, expected = self.progress()
-            raise RobotNotLoadedError(self.name, timeout, state=self.state,
-                                      reason=self.reason, received=received,
-                                      expected=expected)
+            state, reason = self.state, self.reason
+        # Outside the lock: the receive thread takes it to deliver this robot's messages.
+        unposed = self._unposed() if state == "loaded" else {}
+        raise RobotNotLoadedError(self.name, timeout, state=state, reason=reason,
+                                  received=received, expected=expected,
+                                  unposed=[str(n) for n in unposed.get("links", ())],
+                                  unposed_reason=str(unposed.get("reason", "")))
+
+    def _unposed(self) -> Dict[str, Any]:
+        """The daemon's word on this robot's links that tf cannot place (list_robots'
+        ``unposed``: the links and why); empty if it has none or cannot say."""
+        try:
+            listed = self._client.command(c.ListRobots.op, {}, timeout=10.0)
+        except BridgeClientError as error:
+            log.info("robot %s: cannot ask the daemon which links lack tf: %s", self.name,
+                     error)
+            return {}
+        for summary in listed.get("robots", []):
+            if summary.get("name") == self.name:
+                return dict(summary.get("unposed") or {})
+        return {}
 
 
 @dataclass

@@ -342,14 +342,16 @@ class ParameterBridges:
 
     # --- parameter watches (for other capabilities) ----------------------------------------
     async def watch_parameter(self, node: str, name: str,
-                              on_change: Callable[[ParameterValue], None],
+                              on_change: Callable[[ParameterValue], None], *,
+                              ready_wait_s: Optional[float] = None,
                               ) -> tuple[ParameterWatch, Optional[ParameterValue]]:
         """Fetch parameter ``name`` of ``node`` (a fully qualified node name) and keep
         ``on_change(value)`` (loop thread) told of every later value: parameter events, and
         a fetch whenever the node (re)appears. Returns the watch and the value now, or None
         if the node is not there yet or does not answer (then ``on_change`` gets it when it
         does; ``watch.unanswered`` says why). The node's readiness is judged as for
-        parameter clients (`ready_wait_s` at first, then the periodic check). Any other
+        parameter clients (`ready_wait_s`, or the one given, at first, then the periodic
+        check). Any other
         failed fetch (a value that cannot be read) raises `CommandError`.
 
         The daemon's own node is read in process, and told of changes by its set callback:
@@ -365,7 +367,8 @@ class ParameterBridges:
         self.watches.append(watch)
         self._update_watched()
         try:
-            ready = await wait_until_ready(get_client, self._ready_wait_s)
+            ready = await wait_until_ready(
+                get_client, self._ready_wait_s if ready_wait_s is None else ready_wait_s)
             if watch not in self.watches:  # unwatched meanwhile
                 return watch, None
             value = None
