@@ -162,7 +162,8 @@ class Subscriber(Resource):
 
     @property
     def ros_type(self) -> str:
-        return str(self.info.get("type", c.resolve_message_type(self.type)))
+        # The daemon's (it looks bare names up among installed packages), else the grammar's.
+        return str(self.info.get("type") or c.resolve_message_type(self.type))
 
     def _handle(self, message: Message) -> None:
         if self.message_device and message.device_name == self.message_device:
@@ -201,8 +202,27 @@ class Subscriber(Resource):
         def ready() -> bool:
             return self.last_message is not None and (
                 predicate is None or bool(predicate(value_from_message(self.last_message))))
-        self._wait(ready, timeout, f"a message on {self.topic}")
+        try:
+            self._wait(ready, timeout, f"a message on {self.topic}")
+        except TimeoutError as error:
+            unpublished = self._unpublished()
+            if not unpublished:
+                raise
+            raise TimeoutError(f"{error}; {unpublished}") from None
         return self.last_value
+
+    def _unpublished(self) -> str:
+        """"no publisher of <topic> on the ROS graph" if the daemon's graph has none of
+        this topic (the likely reason nothing came), else ""."""
+        topic = str(self.info.get("topic") or self.topic)
+        try:
+            listed = self._client.request(c.ListTopics(), timeout=10.0).topics
+        except BridgeClientError as error:
+            log.info("cannot ask the daemon for the publishers of %s: %s", topic, error)
+            return ""
+        publishers = sum(int(entry.get("publishers", 0)) for entry in listed
+                         if entry.get("topic") == topic)
+        return f"no publisher of {topic} on the ROS graph" if publishers == 0 else ""
 
     def last_message_yaml(self, timeout: float = 10.0) -> str:
         """The daemon's last message as YAML (`ros2 topic echo` style); "" before any."""
