@@ -734,7 +734,8 @@ class Robot(Resource):
             received, expected = self.progress()
             state, reason = self.state, self.reason
         # Outside the lock: the receive thread takes it to deliver this robot's messages.
-        unposed = self._unposed() if state == "loaded" else {}
+        # Asked whatever the state said: the daemon's "loaded" STATUS may trail the meshes.
+        unposed = self._unposed() if state != "error" else {}
         raise RobotNotLoadedError(self.name, timeout, state=state, reason=reason,
                                   received=received, expected=expected,
                                   unposed=[str(n) for n in unposed.get("links", ())],

@@ -444,15 +444,16 @@ class RobotBridges:
         if robot.withheld:
             summary += (f"; {len(robot.withheld)} link(s) withheld by the frame policy: "
                         + ", ".join(sorted(robot.withheld)))
-        if model.warnings:
-            summary += f"; {len(model.warnings)} warning(s): " + "; ".join(model.warnings)
+        warned = f"; {len(model.warnings)} warning(s)" if model.warnings else ""
         # The counts let a client that created the robot while it was waiting know when
         # every link and mesh has arrived.
-        self._status(robot, StatusCode.OK, summary,
+        self._status(robot, StatusCode.OK,
+                     summary + (warned + ": " + "; ".join(model.warnings) if warned else ""),
                      {KEY_LINK_COUNT: str(len(robot.links)),
                       KEY_VISUAL_COUNT: str(len(robot.visuals)),
                       KEY_WARNINGS: json.dumps(list(model.warnings))})
-        log.info("robot %s %s", robot.name, summary)
+        # The loader logged each warning as it met it: the log counts them, once.
+        log.info("robot %s %s%s", robot.name, summary, warned + " (above)" if warned else "")
 
     def _publish_visual(self, robot: _Robot, visual: VisualMesh) -> _VisualInfo:
         key = NameKey.robot_visual(robot.name, visual.link, visual.index)

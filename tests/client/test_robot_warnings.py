@@ -57,6 +57,12 @@ def test_a_missing_mesh_reaches_the_user(processes: Processes, tmp_path: Path,
         with daemon.connect() as listener:
             status = listener.wait_for("urdf:warned", timeout=30)
             assert json.loads(status.metadata["ros2.warnings"]) == [warning]
+    # Issue 43, item 12: the daemon's log said each warning twice (as the loader met it,
+    # then all of them in the "loaded" line): once now, the "loaded" line counts them.
+    log = daemon.child.output()
+    assert len([line for line in log.splitlines() if "meshes/missing.stl" in line]) == 1, log
+    assert "robot warned loaded 'warned': 2 links, 1 visuals, fixed frame base; 1 " \
+        "warning(s) (above)" in log
     assert_clean_exit(daemon)
 
 
@@ -121,7 +127,8 @@ def test_a_robot_without_joint_states_says_so_when_its_wait_times_out(
     try:
         def placed() -> bool:
             plate = robot.links.get("plate")
-            return robot.mesh_count() == 2 and plate is not None and plate.matrix is not None
+            return robot.mesh_count() == 2 and plate is not None and \
+                plate.matrix is not None and robot.state == "loaded"
         robot._wait(placed, scaled(30), "the meshes and the fixed links' transforms")
         with pytest.raises(slicer_client.RobotNotLoadedError) as error:
             robot.wait_until_loaded(timeout=1.0)
