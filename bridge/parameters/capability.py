@@ -149,6 +149,7 @@ class ParameterClient:
     set_client: Client
     types_client: Client
     ready: Optional[bool] = None  # None until the first check
+    made_at: float = 0.0  # loop time of create_parameter_client
     observed: tuple[str, ...] = ()
     # Set: also stream every other parameter a /parameter_events message declares or changes,
     # as far as this guard (from observe_parameters) lets a client see it.
@@ -223,6 +224,7 @@ class ParameterBridges:
             set_client=ros_node.create_client(SetParametersSrv, f"{node}/set_parameters"),
             types_client=ros_node.create_client(GetParameterTypesSrv,
                                                 f"{node}/get_parameter_types"))
+        client.made_at = asyncio.get_running_loop().time()
         self.clients[node] = client
         # Give discovery a moment, so an existing node is reported ready at once.
         ready = await self._wait_all_ready(client)
@@ -319,11 +321,22 @@ class ParameterBridges:
         # Discovery of a node that just appeared can take seconds: it may use the whole
         # timeout before the call is UNAVAILABLE. Reads are sent again until answered (a
         # request or answer can be lost while the endpoints match); a set is sent once.
-        return await call_ros_service(
-            self._hub, ros_client, request, timeout=self._request_timeout_s,
-            ready_wait=self._request_timeout_s, what=f"the parameter services of {client.node}",
-            field="node",
-            resend_every=None if ros_client is client.set_client else _RESEND_READS_S)
+        try:
+            return await call_ros_service(
+                self._hub, ros_client, request, timeout=self._request_timeout_s,
+                ready_wait=self._request_timeout_s,
+                what=f"the parameter services of {client.node}", field="node",
+                resend_every=None if ros_client is client.set_client else _RESEND_READS_S)
+        except CommandFailedError as error:
+            if error.error_code != ErrorCode.UNAVAILABLE or client.ready:
+                raise
+            # This call's wait is not all a client waited: create_parameter_client looked
+            # for the node first. Say the whole time it has been looked for.
+            since = asyncio.get_running_loop().time() - client.made_at
+            raise CommandFailedError(error.field, error.expected,
+                                     f"{error.got}; not seen in the {since:.1f} s since its "
+                                     f"parameter client was made",
+                                     code=ErrorCode.UNAVAILABLE) from None
 
     async def _get(self, client: ParameterClient,
                    names: tuple[str, ...]) -> dict[str, ParameterValue]:
