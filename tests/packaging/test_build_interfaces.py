@@ -291,6 +291,20 @@ def test_a_failed_step_shows_its_log_and_installs_nothing(tmp_path: Path) -> Non
 
 # --- the progress reporter (also setup_env.py's, for pip) --------------------------------
 
+def _reported(step: Step, release: Path) -> list[str]:
+    """What `run_step` said of ``step``, a command that works until ``release`` exists:
+    its start, one progress line, its end."""
+    said: list[str] = []
+    runner = threading.Thread(target=run_step, args=(step, said.append))
+    runner.start()
+    try:
+        wait_until(lambda: len(said) >= 2, timeout=REPORT_EVERY_S * 3, what="a progress line")
+    finally:
+        release.write_text("")
+        runner.join(60)
+    return said
+
+
 def test_a_long_step_reports_what_it_does_until_it_ends(tmp_path: Path) -> None:
     """A pip-like command that works until the test lets it end: a line at the start, one
     every REPORT_EVERY_S with pip's last action (not its warnings), one at the end."""
@@ -303,16 +317,8 @@ def test_a_long_step_reports_what_it_does_until_it_ends(tmp_path: Path) -> None:
               f"while not pathlib.Path({str(release)!r}).exists():\n"
               "    time.sleep(0.05)\n"
               "print('Successfully installed ros-rclpy-7.1.6')\n")
-    said: list[str] = []
-    step = Step("[setup] pip install", [sys.executable, "-c", script], tmp_path,
-                tmp_path / "pip.log", where=pip_progress)
-    runner = threading.Thread(target=run_step, args=(step, said.append))
-    runner.start()
-    try:
-        wait_until(lambda: len(said) >= 2, timeout=REPORT_EVERY_S * 3, what="a progress line")
-    finally:
-        release.write_text("")
-        runner.join(60)
+    said = _reported(Step("[setup] pip install", [sys.executable, "-c", script], tmp_path,
+                          tmp_path / "pip.log", where=pip_progress), release)
     assert said[0] == "[setup] pip install ..."
     assert re.fullmatch(r"\[setup\] pip install: \d+ s, Downloading ros_rclpy-7\.1\.6-cp311-"
                         r"manylinux_2_28_x86_64\.whl \(2\.6 MB\)", said[1]), said
@@ -353,16 +359,8 @@ def test_progress_lines_leave_out_source_excerpts_and_echoed_warnings(
               f"sys.stdout.flush()\n"
               f"while not pathlib.Path({str(release)!r}).exists():\n"
               f"    time.sleep(0.05)\n")
-    said: list[str] = []
-    step = Step("[setup] setup.py build_ext", [sys.executable, "-c", script], tmp_path,
-                tmp_path / "build-ext.log", where=compile_progress)
-    runner = threading.Thread(target=run_step, args=(step, said.append))
-    runner.start()
-    try:
-        wait_until(lambda: len(said) >= 2, timeout=REPORT_EVERY_S * 3, what="a progress line")
-    finally:
-        release.write_text("")
-        runner.join(60)
+    said = _reported(Step("[setup] setup.py build_ext", [sys.executable, "-c", script],
+                          tmp_path, tmp_path / "build-ext.log", where=compile_progress), release)
     assert re.fullmatch(r"\[setup\] setup\.py build_ext: \d+ s, compiling "
                         r"bridge/ros/_rcl_reader\.c", said[1]), said
 
