@@ -14,6 +14,7 @@ import asyncio
 import dataclasses
 import gc
 import logging
+import os
 import sys
 from pathlib import Path
 from typing import Awaitable, Callable, Optional
@@ -47,6 +48,10 @@ log = logging.getLogger("bridge")
 
 GIL_SWITCH_INTERVAL_S = 0.0005
 GC_THRESHOLDS = (100_000, 50, 100)  # CPython's default: (700, 10, 10)
+# How long after start the graph is watched for another node of the daemon's name (a
+# second daemon on the same domain): discovery takes seconds on a busy machine.
+NAMESAKE_WATCH_S = 10.0
+_NAMESAKE_POLL_S = 0.25
 
 
 class StartupError(Exception):
@@ -65,6 +70,7 @@ class Daemon:
         self.heavy = HeavyWork()
         self.ros = RosNode(RosOptions(node_name=config.node_name, namespace=config.namespace,
                                       ros_args=config.ros_args))
+        self._namesake: Optional[asyncio.Future[None]] = None
         names = DeviceNameRegistry()
         # Clients' robots may read files (URDF, meshes) from the --package-path folders too.
         # Who may write depends on where the daemon listens (see SecurityPolicy.grant_at_accept).
@@ -155,8 +161,27 @@ class Daemon:
             if warning is not None:
                 log.warning("%s", warning)
         log.info("tf buffer on the %s", self.tf.store_in_use())
+        self._namesake = asyncio.ensure_future(self._warn_of_a_namesake())
+
+    async def _warn_of_a_namesake(self) -> None:
+        """One warning if another node of this daemon's name is on the graph: two daemons
+        on one ROS domain are both /slicer_bridge, and a peer cannot tell them apart."""
+        node = self.ros.node
+        own = (node.get_name(), node.get_namespace())
+        deadline = asyncio.get_running_loop().time() + NAMESAKE_WATCH_S
+        while asyncio.get_running_loop().time() < deadline:
+            if node.get_node_names_and_namespaces().count(own) > 1:
+                log.warning("another node named %s is on the ROS graph (ROS_DOMAIN_ID %s): "
+                            "a second daemon? Peers cannot tell the two apart; start this "
+                            "one with --node-name, or on another ROS_DOMAIN_ID",
+                            self.ros.fully_qualified_name,
+                            os.environ.get("ROS_DOMAIN_ID", "0"))
+                return
+            await asyncio.sleep(_NAMESAKE_POLL_S)
 
     async def stop(self) -> None:
+        if self._namesake is not None:
+            self._namesake.cancel()
         await self.server.close()
         self.health.close()
         self.shm_ports.close()

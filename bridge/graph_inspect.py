@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import os
 import sys
 import threading
 import time
@@ -72,8 +73,27 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     except GraphInspectError as error:
         print(f"slicer-ros2-bridge {args.command}: {error}", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # the reader left (`| head -3`): its node is stopped already
+        return _reader_gone(out)
     except KeyboardInterrupt:
         return 0
+
+
+# Python's exit status when a write meets EPIPE (the `signal` module's note on SIGPIPE).
+READER_GONE_STATUS = 1
+
+
+def _reader_gone(out: TextIO) -> int:
+    """End quietly: what is still buffered for ``out`` goes to /dev/null, so the flush at
+    interpreter exit does not print an "Exception ignored ... BrokenPipeError" either."""
+    try:
+        fd = out.fileno()
+    except (OSError, ValueError):  # not a file (a test's StringIO): nothing is flushed
+        return READER_GONE_STATUS
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, fd)
+    os.close(devnull)
+    return READER_GONE_STATUS
 
 
 class _Inspector:
@@ -144,15 +164,21 @@ def _echo(out: TextIO, ros: RosNode, topic: str, type_name: Optional[str],
     printed = 0
     done = threading.Event()
     lock = threading.Lock()
+    reader_gone = False
 
     def on_message(msg: Any) -> None:  # executor thread
-        nonlocal printed
+        nonlocal printed, reader_gone
         with lock:
             if done.is_set():
                 return
-            out.write(message_to_yaml(msg))
-            out.write("---\n")
-            out.flush()
+            try:
+                out.write(message_to_yaml(msg))
+                out.write("---\n")
+                out.flush()
+            except BrokenPipeError:  # raised here, it would only kill this callback
+                reader_gone = True
+                done.set()
+                return
             printed += 1
             if count is not None and printed >= count:
                 done.set()
@@ -169,7 +195,11 @@ def _echo(out: TextIO, ros: RosNode, topic: str, type_name: Optional[str],
             depth=10, reliability=ReliabilityPolicy.BEST_EFFORT,
             durability=DurabilityPolicy.VOLATILE)
     ros.node.create_subscription(cls, full, on_message, qos)
-    if not done.wait(timeout):
+    finished = done.wait(timeout)
+    with lock:
+        if reader_gone:
+            raise BrokenPipeError(f"the reader of {full}'s messages closed its end")
+    if not finished:
         if timeout is not None and printed == 0:
             raise GraphInspectError(f"no message on {full} within {timeout:g} s")
     return 0

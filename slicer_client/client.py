@@ -376,9 +376,15 @@ class Client:
               tf_prefix: str = "", namespace: str = "",
               source: Optional[Mapping[str, Any]] = None,
               callback: Optional[Callable[[str, str, Any], None]] = None,
-              timeout: float = 30.0) -> Robot:
+              timeout: float = 30.0, wait: bool = False) -> Robot:
         """Load a robot from its URDF (default: /robot_state_publisher's
-        robot_description). Its meshes and link transforms then arrive in `Robot.links`."""
+        robot_description). Its meshes and link transforms then arrive in `Robot.links`.
+
+        A description that is not there (its node not on the ROS graph, its parameter
+        not set, nothing on its topic) raises `CommandRefusedError` (``NOT_FOUND``, naming
+        the node and parameter); ``wait=True`` creates the robot anyway, to load when its
+        description appears (`Robot.state` "waiting"). A re-sync after a reconnect always
+        waits: the robot was there before."""
         robot = Robot(self, name, node=node, parameter=parameter, fixed_frame=fixed_frame,
                       tf_prefix=tf_prefix, namespace=namespace, source=source)
         if callback is not None:
@@ -392,7 +398,8 @@ class Client:
         with self._lock:
             self._resources[key] = robot
         try:
-            self._apply(robot, lambda op, args: self.command(op, args, timeout=timeout))
+            self._apply(robot, lambda op, args: self.command(op, {**args, "wait": wait},
+                                                             timeout=timeout))
         except BaseException:
             with self._lock:
                 self._resources.pop(key, None)
@@ -495,7 +502,7 @@ class Client:
             resource = self.robot(a["name"], source=a.get("source"),
                                   fixed_frame=a.get("fixed_frame"),
                                   tf_prefix=a.get("tf_prefix", ""),
-                                  namespace=a.get("namespace", ""))
+                                  namespace=a.get("namespace", ""), wait=True)
         elif spec.op == c.CreateMarkerSubscriber.op:
             resource = self.markers(a["topic"], a["type"], a["fixed_frame"], qos=a.get("qos"))
         else:  # a bridge kind without a Pythonic class yet: its spec alone re-creates it

@@ -8,12 +8,14 @@ thread) and is kept as the latest value per device.
 
 from __future__ import annotations
 
+import atexit
 import itertools
 import select
 import socket
 import ssl
 import threading
 import time
+import weakref
 from typing import Any, Callable, Dict, List, Mapping, Optional
 
 from protocol import commands as c
@@ -168,6 +170,7 @@ class Connection:
         self._reader = threading.Thread(target=self._read_loop, name="igtl-receive",
                                         daemon=True)
         self._reader.start()
+        close_at_exit(self)
 
     # --- sending ------------------------------------------------------------------------
     def send(self, message: Message) -> None:
@@ -353,6 +356,7 @@ class Connection:
         return self._closed
 
     def close(self) -> None:
+        closed_before_exit(self)
         with self._send_lock:
             self._closed = True
             try:
@@ -367,3 +371,26 @@ class Connection:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+
+
+# Connections (and transports) a script left open: closed at its exit as close() does.
+# The kernel would otherwise close the socket with unread stream data in it, which
+# resets the connection (the daemon then logs "Connection reset by peer" for an ordinary
+# end of a script).
+_OPEN: "weakref.WeakSet[Any]" = weakref.WeakSet()
+
+
+def close_at_exit(closable: Any) -> None:
+    """Have ``closable.close()`` called at interpreter exit unless `closed_before_exit`."""
+    _OPEN.add(closable)
+
+
+def closed_before_exit(closable: Any) -> None:
+    _OPEN.discard(closable)
+
+
+@atexit.register
+def _close_left_open() -> None:
+    # Transports first: a connection closed under its transport would be reported lost.
+    for closable in sorted(_OPEN, key=lambda item: isinstance(item, Connection)):
+        closable.close()

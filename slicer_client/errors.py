@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Optional, Sequence
 
 from protocol.auth import KeyFileError
 from slicer_client.connection import (BridgeClientError, CommandRefusedError,
@@ -27,17 +27,25 @@ class ParameterRejectedError(BridgeClientError):
 
 class RobotNotLoadedError(BridgeClientError, TimeoutError):
     """A robot's links and meshes did not all arrive in time; `state` and `reason` are
-    what the daemon last said about its description ("waiting" and why, or "error")."""
+    what the daemon last said about its description ("waiting" and why, or "error");
+    `unposed` the links loaded but with no transform (tf cannot place them) and
+    `unposed_reason` why, as the daemon judged it."""
 
     def __init__(self, name: str, timeout: float, *, state: str, reason: str,
-                 received: int, expected: Optional[int]) -> None:
+                 received: int, expected: Optional[int],
+                 unposed: Sequence[str] = (), unposed_reason: str = "") -> None:
         count = f"{received} of {expected}" if expected is not None else f"{received}"
         said = f"{state}: {reason}" if reason else (state or "nothing yet")
+        if unposed:
+            said = (f"{said}, but {len(unposed)} link(s) have no transform "
+                    f"({', '.join(unposed)}): {unposed_reason}")
         super().__init__(f"robot {name!r} not loaded within {timeout} s ({count} meshes "
                          f"received); the daemon says {said}")
         self.name = name
         self.state = state
         self.reason = reason
+        self.unposed = tuple(unposed)
+        self.unposed_reason = unposed_reason
 
 
 class PointsError(BridgeClientError, ValueError):

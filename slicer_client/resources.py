@@ -27,7 +27,7 @@ from protocol.naming import (KEY_COLOR, KEY_COUNT, KEY_FRAME, KEY_LINK, KEY_LINK
                              KEY_PARENT_DEVICE, KEY_POSITION, KEY_ROLE, KEY_TOPIC, KEY_VISUAL,
                              KEY_VISUAL_COUNT, KEY_WARNINGS)
 from slicer_client.bridge_state import BridgeSpec
-from slicer_client.errors import PointsError, RobotNotLoadedError
+from slicer_client.errors import BridgeClientError, PointsError, RobotNotLoadedError
 from slicer_client.matrices import as_numpy, as_rows
 from slicer_client.owner import ResourceOwner
 from slicer_client.transport import CommandFn, request_with
@@ -162,7 +162,8 @@ class Subscriber(Resource):
 
     @property
     def ros_type(self) -> str:
-        return str(self.info.get("type", c.resolve_message_type(self.type)))
+        # The daemon's (it looks bare names up among installed packages), else the grammar's.
+        return str(self.info.get("type") or c.resolve_message_type(self.type))
 
     def _handle(self, message: Message) -> None:
         if self.message_device and message.device_name == self.message_device:
@@ -201,8 +202,27 @@ class Subscriber(Resource):
         def ready() -> bool:
             return self.last_message is not None and (
                 predicate is None or bool(predicate(value_from_message(self.last_message))))
-        self._wait(ready, timeout, f"a message on {self.topic}")
+        try:
+            self._wait(ready, timeout, f"a message on {self.topic}")
+        except TimeoutError as error:
+            unpublished = self._unpublished()
+            if not unpublished:
+                raise
+            raise TimeoutError(f"{error}; {unpublished}") from None
         return self.last_value
+
+    def _unpublished(self) -> str:
+        """"no publisher of <topic> on the ROS graph" if the daemon's graph has none of
+        this topic (the likely reason nothing came), else ""."""
+        topic = str(self.info.get("topic") or self.topic)
+        try:
+            listed = self._client.request(c.ListTopics(), timeout=10.0).topics
+        except BridgeClientError as error:
+            log.info("cannot ask the daemon for the publishers of %s: %s", topic, error)
+            return ""
+        publishers = sum(int(entry.get("publishers", 0)) for entry in listed
+                         if entry.get("topic") == topic)
+        return f"no publisher of {topic} on the ROS graph" if publishers == 0 else ""
 
     def last_message_yaml(self, timeout: float = 10.0) -> str:
         """The daemon's last message as YAML (`ros2 topic echo` style); "" before any."""
@@ -712,9 +732,28 @@ class Robot(Resource):
             if self._changed.wait_for(loaded, timeout):
                 return
             received, expected = self.progress()
-            raise RobotNotLoadedError(self.name, timeout, state=self.state,
-                                      reason=self.reason, received=received,
-                                      expected=expected)
+            state, reason = self.state, self.reason
+        # Outside the lock: the receive thread takes it to deliver this robot's messages.
+        # Asked whatever the state said: the daemon's "loaded" STATUS may trail the meshes.
+        unposed = self._unposed() if state != "error" else {}
+        raise RobotNotLoadedError(self.name, timeout, state=state, reason=reason,
+                                  received=received, expected=expected,
+                                  unposed=[str(n) for n in unposed.get("links", ())],
+                                  unposed_reason=str(unposed.get("reason", "")))
+
+    def _unposed(self) -> Dict[str, Any]:
+        """The daemon's word on this robot's links that tf cannot place (list_robots'
+        ``unposed``: the links and why); empty if it has none or cannot say."""
+        try:
+            listed = self._client.command(c.ListRobots.op, {}, timeout=10.0)
+        except BridgeClientError as error:
+            log.info("robot %s: cannot ask the daemon which links lack tf: %s", self.name,
+                     error)
+            return {}
+        for summary in listed.get("robots", []):
+            if summary.get("name") == self.name:
+                return dict(summary.get("unposed") or {})
+        return {}
 
 
 @dataclass

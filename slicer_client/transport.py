@@ -22,7 +22,8 @@ from typing import Any, Callable, Deque, Dict, Mapping, Optional, Protocol, Type
 from protocol import commands as c
 from protocol.messages import Message
 from slicer_client.connection import (DEFAULT_HOST, DEFAULT_PORT, ConnectionClosedError,
-                                      Connection, DaemonUnreachableError, NotTheDaemonError)
+                                      Connection, DaemonUnreachableError, NotTheDaemonError,
+                                      close_at_exit, closed_before_exit)
 
 __all__ = ["CommandFn", "ReconnectingTransport", "Transport", "TransportListener",
            "open_transport", "request_with"]
@@ -123,6 +124,7 @@ class ReconnectingTransport:
         self.reconnects = 0
         self.last_loss: str = ""
         self._conn = self._open()  # raises DaemonUnreachableError naming host:port
+        close_at_exit(self)  # before its connection, which it would report lost
 
     # --- connections --------------------------------------------------------------------
     def _open(self) -> Connection:
@@ -239,6 +241,7 @@ class ReconnectingTransport:
         self._conn.expect_data_within(seconds)
 
     def close(self) -> None:
+        closed_before_exit(self)
         self._stop.set()
         self._ready.clear()
         self._conn.close()

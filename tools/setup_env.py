@@ -36,8 +36,8 @@ sys.path.insert(0, str(REPO))
 # the standard library.
 from bridge.interfaces import (INTERFACES_DIR, MIN_CMAKE, InterfaceBuildError,  # noqa: E402
                                Step, StepFailedError, Target, build_interfaces,
-                               find_cmake, last_line, missing_build_tools, pip_progress,
-                               run_step, shipped_packages)
+                               compile_progress, find_cmake, last_line, missing_build_tools,
+                               pip_progress, run_step, shipped_packages)
 
 VENV = REPO / ".venv"
 CACHE = REPO / ".cache"
@@ -105,10 +105,11 @@ def child_env() -> dict[str, str]:
     return env
 
 
-def run(label: str, cmd: list[str], log: Path) -> None:
+def run(label: str, cmd: list[str], log: Path,
+        where: Callable[[str], str | None] = last_line) -> None:
     """Run a command, saying what it does every few seconds; on failure show the tail of its
     log and raise."""
-    where = pip_progress if "pip" in label else last_line
+    where = pip_progress if "pip" in label else where
     try:
         run_step(Step(f"[setup] {label}", cmd, REPO, log, child_env(), where=where),
                  say=print_flushed)
@@ -182,7 +183,7 @@ def build_compiled_modules() -> None:
     tf store but not the rcl reader (setup.py says where each comes from)."""
     say("building the compiled modules (tf store, rcl reader) in place")
     run("setup.py build_ext", [str(venv_python()), "setup.py", "-q", "build_ext", "--inplace",
-                               "--force"], CACHE / "build-ext.log")
+                               "--force"], CACHE / "build-ext.log", where=compile_progress)
 
 
 def build_shipped_interfaces() -> None:

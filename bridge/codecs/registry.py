@@ -20,7 +20,8 @@ from typing import Any
 
 from bridge.codecs.errors import CodecError
 from protocol.commands import (REFERENCE_TYPE_NAMES, CommandFailedError, ErrorCode,
-                               OutOfRangeError, resolve_message_type, resolve_service_type)
+                               OutOfRangeError, resolve_message_type, resolve_service_type,
+                               unknown_type)
 
 __all__ = ["ACTION", "MESSAGE", "REFERENCE_SHORT_NAMES", "SERVICE", "InterfaceKind",
            "action_class", "installed_class", "installed_types", "interface_class",
@@ -156,10 +157,15 @@ def resolve_type(name: str) -> str:
                          got=type(name).__name__)
     try:
         ros_type = resolve_message_type(
-            name, packages_of=lambda bare: _installed_messages().get(bare, ()))
+            name, packages_of=lambda bare: _installed_messages().get(bare, ()),
+            known=_installed_messages())
     except OutOfRangeError as error:
-        raise _unknown(name.strip(), error.expected) from None
-    message_class(ros_type)
+        raise CodecError(field="type", expected=error.expected, got=error.got) from None
+    try:
+        message_class(ros_type)
+    except CodecError as error:  # a full name: say the closest installed one
+        close = unknown_type("type", error.expected, ros_type, installed_types())
+        raise CodecError(field="type", expected=error.expected, got=close.got) from None
     return ros_type
 
 

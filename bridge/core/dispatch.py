@@ -558,8 +558,11 @@ class Dispatcher:
         return LargeResult(reply)
 
     def _list_topics(self, request: c.ListTopics, client: Replier | None) -> Result:
-        return LargeResult(topics=[{"topic": name, "types": list(types)} for name, types
-                                   in self._ros.node.get_topic_names_and_types()])
+        # The publisher count: a client's wait for a topic that has none says so.
+        node = self._ros.node
+        return LargeResult(topics=[{"topic": name, "types": list(types),
+                                    "publishers": node.count_publishers(name)}
+                                   for name, types in node.get_topic_names_and_types()])
 
     def _list_services(self, request: c.ListServices, client: Replier | None) -> Result:
         return LargeResult(services=[{"service": name, "types": list(types)} for name, types

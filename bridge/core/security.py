@@ -33,6 +33,8 @@ from dataclasses import dataclass, field, replace
 from fnmatch import fnmatchcase
 from typing import Any, Callable, Optional, Union
 
+from bridge.codecs.errors import CodecError
+from bridge.codecs.registry import resolve_type  # bare names: looked up as capabilities do
 from bridge.core.logging_limits import RateLimitedLog
 from protocol.auth import KeyFileError, read_key_text
 from bridge.core.content_guards import (PARAMETER_EVENT_TYPE, TF_MESSAGE_TYPE, ContentGuard,
@@ -40,7 +42,7 @@ from bridge.core.content_guards import (PARAMETER_EVENT_TYPE, TF_MESSAGE_TYPE, C
                                         TfMessageGuard)
 from protocol.commands import (REQUEST_TYPES, ActionUse, FileUse, ForbiddenError, FrameUse,
                                LimitReachedError, Op, OutOfRangeError, ParameterUse, Resource,
-                               ServiceUse, TopicUse, resolve_message_type, resolve_service_type)
+                               ServiceUse, TopicUse, resolve_service_type)
 
 __all__ = ["WRITES", "DEFAULT_MAX_BRIDGES", "WriteGrant", "read_key_file",
            "DEFAULT_MAX_BRIDGES_PER_CLIENT", "DEFAULT_MAX_CLIENTS",
@@ -122,7 +124,7 @@ def _resolved(resolve: Callable[[str], str], text: Optional[str]) -> Optional[st
         return None
     try:
         return resolve(text)
-    except OutOfRangeError:
+    except (OutOfRangeError, CodecError):
         return None
 
 
@@ -312,7 +314,7 @@ class SecurityPolicy:
         action = hidden_action(topic, ACTION_TOPICS)
         if action is not None:
             self._judge_action(use.field, action)
-        ros_type = _resolved(resolve_message_type, use.type)
+        ros_type = _resolved(resolve_type, use.type)
         # A tf topic carries frames: only a TFMessage can be judged transform by transform
         # (the bridge's MessageGuard does it); another type on /tf cannot be judged.
         if self.frames.active and topic in _TF_TOPICS and use.type is not None \
@@ -389,7 +391,7 @@ class SecurityPolicy:
         if "messages" in declared:
             topic = next(use for use in uses if isinstance(use, TopicUse))
             guard = replace(guard, messages=self._message_guard(
-                topic.name, _resolved(resolve_message_type, topic.type) or "", topic.writes))
+                topic.name, _resolved(resolve_type, topic.type) or "", topic.writes))
         if "parameters" in declared:
             for use in uses:
                 if isinstance(use, ServiceUse):

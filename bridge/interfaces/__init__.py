@@ -26,12 +26,13 @@ from bridge.interfaces.errors import (DependencyCycleError, InputError, Interfac
                                       MissingDependencyError, PackageError, StepFailedError,
                                       ToolMissingError)
 from bridge.interfaces.packages import InterfacePackage, find_packages, read_package
-from bridge.interfaces.steps import Step, last_line, pip_progress, run_step
+from bridge.interfaces.steps import Step, compile_progress, last_line, pip_progress, run_step
 
 __all__ = ["INTERFACES_DIR", "MIN_CMAKE", "DependencyCycleError", "InputError",
            "InterfaceBuildError", "InterfacePackage", "MissingDependencyError", "PackageError",
            "Step", "StepFailedError", "Target", "ToolMissingError", "build_interfaces",
-           "check_build_tools", "cmake_version", "describe_exports", "find_cmake",
+           "check_build_tools", "cmake_version", "compile_progress", "describe_exports",
+           "find_cmake",
            "find_packages", "interface_packages", "last_line", "missing_build_tools",
            "missing_interfaces", "missing_runtime_line", "pip_progress", "prefix_exports",
            "read_package",

@@ -30,13 +30,36 @@ _MAKE_OBJECT = re.compile(r"Building \w+ object CMakeFiles/([^/]+?)\.dir/")
 _MAKE_LINKING = re.compile(r"Linking \w+ (?:shared |static )?(?:library|module|executable) (\S+)")
 
 
+_COMPILING = re.compile(r"^(\S+\.(?:c|cc|cpp|cxx)):", re.MULTILINE)
+# What a tool prints that says nothing of where it is: a compiler's excerpt of the source a
+# diagnostic is about (`15209 |   x = (a > b);`, `      |   ^~`), and the source line
+# Python echoes under a warning (`  warnings.warn(msg, _BetaConfiguration)`).
+_EXCERPT = re.compile(r"\s*\d*\s*\|")
+_PY_WARNING = re.compile(r"\S+\.py:\d+: \w+: ")
+
+
 def last_line(output: str) -> str | None:
-    """What a tool last said (pip: `Collecting ...`, `Installing collected packages ...`)."""
-    lines = [line.strip() for line in output.splitlines() if line.strip()]
+    """What a tool last said (pip: `Collecting ...`, `Installing collected packages ...`),
+    its source excerpts and echoed warning lines left out."""
+    lines: list[str] = []
+    echo_next = False
+    for raw in output.splitlines():
+        echo, echo_next = echo_next and raw[:1].isspace(), bool(_PY_WARNING.match(raw))
+        line = raw.strip()
+        if line and not echo and not _EXCERPT.match(raw) and any(c.isalpha() for c in line):
+            lines.append(line)
     if not lines:
         return None
     line = lines[-1]
     return line if len(line) <= 90 else line[:87] + "..."
+
+
+def compile_progress(output: str) -> str | None:
+    """Where a quiet compile (`setup.py -q build_ext`) is: the last source file its
+    compiler named (`compiling bridge/ros/_rcl_reader.c`); None while it has named none
+    (its diagnostics, and setuptools' warnings, are in the log)."""
+    found = _COMPILING.findall(output)
+    return f"compiling {found[-1]}" if found else None
 
 
 def pip_progress(output: str) -> str | None:

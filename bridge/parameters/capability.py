@@ -148,6 +148,7 @@ class ParameterClient:
     set_client: Client
     types_client: Client
     ready: Optional[bool] = None  # None until the first check
+    made_at: float = 0.0  # loop time of create_parameter_client
     observed: tuple[str, ...] = ()
     # Set: also stream every other parameter a /parameter_events message declares or changes,
     # as far as this guard (from observe_parameters) lets a client see it.
@@ -222,6 +223,7 @@ class ParameterBridges:
             set_client=ros_node.create_client(SetParametersSrv, f"{node}/set_parameters"),
             types_client=ros_node.create_client(GetParameterTypesSrv,
                                                 f"{node}/get_parameter_types"))
+        client.made_at = asyncio.get_running_loop().time()
         self.clients[node] = client
         # Give discovery a moment, so an existing node is reported ready at once.
         ready = await self._wait_all_ready(client)
@@ -318,11 +320,22 @@ class ParameterBridges:
         # Discovery of a node that just appeared can take seconds: it may use the whole
         # timeout before the call is UNAVAILABLE. Reads are sent again until answered (a
         # request or answer can be lost while the endpoints match); a set is sent once.
-        return await call_ros_service(
-            self._hub, ros_client, request, timeout=self._request_timeout_s,
-            ready_wait=self._request_timeout_s, what=f"the parameter services of {client.node}",
-            field="node",
-            resend_every=None if ros_client is client.set_client else _RESEND_READS_S)
+        try:
+            return await call_ros_service(
+                self._hub, ros_client, request, timeout=self._request_timeout_s,
+                ready_wait=self._request_timeout_s,
+                what=f"the parameter services of {client.node}", field="node",
+                resend_every=None if ros_client is client.set_client else _RESEND_READS_S)
+        except CommandFailedError as error:
+            if error.error_code != ErrorCode.UNAVAILABLE or client.ready:
+                raise
+            # This call's wait is not all a client waited: create_parameter_client looked
+            # for the node first. Say the whole time it has been looked for.
+            since = asyncio.get_running_loop().time() - client.made_at
+            raise CommandFailedError(error.field, error.expected,
+                                     f"{error.got}; not seen in the {since:.1f} s since its "
+                                     f"parameter client was made",
+                                     code=ErrorCode.UNAVAILABLE) from None
 
     async def _get(self, client: ParameterClient,
                    names: tuple[str, ...]) -> dict[str, ParameterValue]:
@@ -341,14 +354,16 @@ class ParameterBridges:
 
     # --- parameter watches (for other capabilities) ----------------------------------------
     async def watch_parameter(self, node: str, name: str,
-                              on_change: Callable[[ParameterValue], None],
+                              on_change: Callable[[ParameterValue], None], *,
+                              ready_wait_s: Optional[float] = None,
                               ) -> tuple[ParameterWatch, Optional[ParameterValue]]:
         """Fetch parameter ``name`` of ``node`` (a fully qualified node name) and keep
         ``on_change(value)`` (loop thread) told of every later value: parameter events, and
         a fetch whenever the node (re)appears. Returns the watch and the value now, or None
         if the node is not there yet or does not answer (then ``on_change`` gets it when it
         does; ``watch.unanswered`` says why). The node's readiness is judged as for
-        parameter clients (`ready_wait_s` at first, then the periodic check). Any other
+        parameter clients (`ready_wait_s`, or the one given, at first, then the periodic
+        check). Any other
         failed fetch (a value that cannot be read) raises `CommandError`.
 
         The daemon's own node is read in process, and told of changes by its set callback:
@@ -364,7 +379,8 @@ class ParameterBridges:
         self.watches.append(watch)
         self._update_watched()
         try:
-            ready = await wait_until_ready(get_client, self._ready_wait_s)
+            ready = await wait_until_ready(
+                get_client, self._ready_wait_s if ready_wait_s is None else ready_wait_s)
             if watch not in self.watches:  # unwatched meanwhile
                 return watch, None
             value = None

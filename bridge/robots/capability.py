@@ -81,6 +81,9 @@ log = logging.getLogger(__name__)
 _STATUS_NAME = "slicer-ros2-bridge"
 # How long create_robot waits for a latched description on a topic before saying "waiting".
 _TOPIC_WAIT_S = 2.0
+# With "wait": false, how long its source may take to be discovered before the request is
+# refused (discovery takes seconds on a busy machine; as `echo --wait`).
+_REFUSE_AFTER_S = 10.0
 _JOINT_STATES_TYPE = "sensor_msgs/msg/JointState"
 _DESCRIPTION_TYPE = "std_msgs/msg/String"
 # robot_state_publisher's own profile for robot_description: a late subscriber gets it.
@@ -244,11 +247,17 @@ class RobotBridges:
         if source.kind == "parameter":
             robot.watch, value = await self._parameters.watch_parameter(
                 source.node, source.parameter,
-                lambda v: self._on_parameter(robot, v))
+                lambda v: self._on_parameter(robot, v),
+                ready_wait_s=None if robot.request.wait else _REFUSE_AFTER_S)
             if value is None:
                 robot.reason = (f"parameter {source.parameter} of {source.node}: "
                                 + (f"{robot.watch.unanswered}; asked again while the node is up"
                                    if robot.watch.unanswered else "node not available yet"))
+                if not robot.watch.unanswered:  # a node that is there but slow still waits
+                    _refuse_unless_waiting(robot, "source.node", f"a node on the ROS graph "
+                                           f"holding parameter {source.parameter}",
+                                           f"{source.node}: no such node (its parameter "
+                                           f"services not found in {_REFUSE_AFTER_S:g} s)")
                 return None
             return self._text_of(robot, value, initial=True)
         # topic
@@ -261,11 +270,13 @@ class RobotBridges:
 
         robot.subscription = self._ros.node.create_subscription(
             StringMsg, source.topic, on_message, _DESCRIPTION_QOS)
+        bound = self._topic_wait_s if robot.request.wait else _REFUSE_AFTER_S
         try:
-            return await asyncio.wait_for(asyncio.shield(robot.first_description),
-                                          self._topic_wait_s)
+            return await asyncio.wait_for(asyncio.shield(robot.first_description), bound)
         except asyncio.TimeoutError:
             robot.reason = f"topic {source.topic}: no description published yet"
+            _refuse_unless_waiting(robot, "source.topic", "a URDF published (latched) on it",
+                                   f"{source.topic}: nothing within {bound:g} s")
             return None
 
     def _text_of(self, robot: _Robot, value: ParameterValue, *, initial: bool,
@@ -273,6 +284,9 @@ class RobotBridges:
         source = robot.source
         if value.type == "not_set":
             robot.reason = f"parameter {source.parameter} of {source.node}: not set yet"
+            if initial:
+                _refuse_unless_waiting(robot, "source.parameter", f"a parameter set on "
+                                       f"{source.node}", f"{source.parameter}: not set")
             return None
         if value.type != "string":
             problem = CommandFailedError(
@@ -430,15 +444,16 @@ class RobotBridges:
         if robot.withheld:
             summary += (f"; {len(robot.withheld)} link(s) withheld by the frame policy: "
                         + ", ".join(sorted(robot.withheld)))
-        if model.warnings:
-            summary += f"; {len(model.warnings)} warning(s): " + "; ".join(model.warnings)
+        warned = f"; {len(model.warnings)} warning(s)" if model.warnings else ""
         # The counts let a client that created the robot while it was waiting know when
         # every link and mesh has arrived.
-        self._status(robot, StatusCode.OK, summary,
+        self._status(robot, StatusCode.OK,
+                     summary + (warned + ": " + "; ".join(model.warnings) if warned else ""),
                      {KEY_LINK_COUNT: str(len(robot.links)),
                       KEY_VISUAL_COUNT: str(len(robot.visuals)),
                       KEY_WARNINGS: json.dumps(list(model.warnings))})
-        log.info("robot %s %s", robot.name, summary)
+        # The loader logged each warning as it met it: the log counts them, once.
+        log.info("robot %s %s%s", robot.name, summary, warned + " (above)" if warned else "")
 
     def _publish_visual(self, robot: _Robot, visual: VisualMesh) -> _VisualInfo:
         key = NameKey.robot_visual(robot.name, visual.link, visual.index)
@@ -592,7 +607,36 @@ class RobotBridges:
             out["namespace"] = robot.request.namespace
         if robot.reason:
             out["reason"] = robot.reason
+        unposed = self._unposed(robot)
+        if unposed is not None:
+            out["unposed"] = unposed
         return out
+
+    def _unposed(self, robot: _Robot) -> Optional[dict[str, Any]]:
+        """The links of a loaded robot tf cannot place in its fixed frame now, and why: a
+        client whose wait for every link's transform timed out says the cause."""
+        model = robot.model
+        if model is None:
+            return None
+        missing = [name for name, link in robot.links.items()
+                   if not self._tf.buffer.can_transform(robot.fixed_frame, link.frame)]
+        if not missing:
+            return None
+        lacking = set(missing)
+        # Where the tree breaks: the joints from a placed link to one that is not.
+        moving = [joint.name for joint in model.joints.values()
+                  if joint.child in lacking and joint.parent not in lacking and joint.moves]
+        if moving:
+            topic = self._joint_states_topic(robot)
+            publishers = int(self._ros.node.count_publishers(topic))
+            given = (f"nothing publishes joint states on {topic}" if not publishers else
+                     f"{topic} has {publishers} publisher(s), which gave none of them yet")
+            reason = (f"the links after moving joint(s) {', '.join(moving)} get tf from a "
+                      f"state publisher only once it has those joints' states, and {given}")
+        else:
+            reason = (f"nothing placed them in tf from {robot.fixed_frame}: is a state "
+                      f"publisher (robot_state_publisher) running for this URDF?")
+        return {"links": missing, "reason": reason}
 
     def _describe(self, robot: _Robot) -> dict[str, Any]:
         model = robot.model
@@ -623,6 +667,15 @@ class RobotBridges:
             task.cancel()
         for robot in list(self.robots.values()):
             self._drop(robot)
+
+
+def _refuse_unless_waiting(robot: _Robot, field_name: str, expected: str,
+                           got: str) -> None:
+    """The description is not there (``got`` says what is missing): the robot waits for
+    it, unless its request said not to (``"wait": false``)."""
+    if not robot.request.wait:
+        raise CommandFailedError(field_name, f"{expected} (or \"wait\": true to wait for "
+                                 f"it)", got, code=ErrorCode.NOT_FOUND)
 
 
 def _fixed_frame(robot: _Robot, model: RobotModel) -> str:

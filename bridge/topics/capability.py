@@ -567,9 +567,9 @@ class TopicBridges:
         self.subscribers: dict[str, SubscriberBridge] = {}
         self.publishers: dict[str, PublisherBridge] = {}
 
-    def _codec(self, type_name: str, ros_type: str) -> TypeCodec:
+    def _codec(self, type_name: str) -> TypeCodec:
         try:
-            return codec_for(ros_type)
+            return codec_for(type_name)
         except CodecError as error:
             raise CommandFailedError("type", "a message type installed in the daemon's "
                                      "environment", f"{type_name!r} ({error})",
@@ -596,8 +596,8 @@ class TopicBridges:
         """``guard`` judges what its messages name (a tf topic's frames) on their way to
         clients; an existing bridge keeps its own (the policy is the daemon's: the same)."""
         topic = request.topic
-        ros_type = request.ros_type
-        codec = self._codec(request.type, ros_type)
+        codec = self._codec(request.type)  # a bare name is looked up among installed packages
+        ros_type = codec.ros_type
         if self._check_existing(self.subscribers.get(topic), topic, ros_type):
             return Created(self._with_messages(request, client, self.subscribers[topic],
                                                _describe(self.subscribers[topic].info())),
@@ -646,8 +646,8 @@ class TopicBridges:
 
     def create_publisher(self, request: CreatePublisher, guard: ContentGuard) -> Created:
         topic = request.topic
-        ros_type = request.ros_type
-        codec = self._codec(request.type, ros_type)
+        codec = self._codec(request.type)  # a bare name is looked up among installed packages
+        ros_type = codec.ros_type
         labels = request.labels_topic
         existing = self.publishers.get(topic)
         if self._check_existing(existing, topic, ros_type):

@@ -11,7 +11,8 @@ from protocol.errors import ProtocolError
 
 __all__ = ["BadJsonError", "CommandError", "CommandFailedError", "ErrorCode", "ForbiddenError",
            "LimitReachedError", "MissingFieldError", "OutOfRangeError", "TooLargeError",
-           "UnknownFieldError", "UnknownOpError", "UnsupportedSchemaError", "WrongTypeError"]
+           "UnknownFieldError", "UnknownOpError", "UnknownTypeError", "UnsupportedSchemaError",
+           "WrongTypeError"]
 
 class ErrorCode(IntEnum):
     """``error.code`` of a failed `Reply`. 1-19: the request is malformed (fix the client);
@@ -95,6 +96,14 @@ class OutOfRangeError(CommandError):
     """A field has the right type but a value that is not allowed."""
 
     code = ErrorCode.OUT_OF_RANGE
+
+
+class UnknownTypeError(OutOfRangeError):
+    """An interface type name that names no type here (misspelt, or not installed): the
+    code is the one of a type the daemon does not have, and the text says the closest
+    known name ("did you mean PoseStamped?")."""
+
+    code = ErrorCode.UNKNOWN_ROS_TYPE
 
 
 class ForbiddenError(CommandError):

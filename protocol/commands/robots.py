@@ -3,7 +3,7 @@ transforms."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, cast
 
 from protocol.commands.errors import TooLargeError
@@ -31,13 +31,19 @@ class CreateRobot(Op, op="create_robot", ros_names=("source.node", "source.topic
     ``fixed_frame`` (omitted = the URDF's root link) to ``tf_prefix`` + link.
 
     It reads what its source names (a parameter, a topic or a file) and, when the URDF
-    loads, the link frames ``tf_prefix`` + link (judged then, link by link)."""
+    loads, the link frames ``tf_prefix`` + link (judged then, link by link).
+
+    ``wait``: a description not there yet (its node not on the graph, its parameter not
+    set, nothing on its topic) leaves the robot waiting for it; False refuses the request
+    with ``NOT_FOUND`` naming what is missing. It is how one asks, not what is made: two
+    requests that differ only in it create the same robot."""
 
     name: str
     source: RobotSource = RobotSource()
     fixed_frame: str | None = None
     tf_prefix: str = ""
     namespace: str = ""
+    wait: bool = field(default=True, compare=False)
 
     def with_names(self, resolve: NameResolver) -> CreateRobot:
         # Relative source names live in the robot's namespace: placed first, then resolved;
@@ -93,6 +99,7 @@ class CreateRobot(Op, op="create_robot", ros_names=("source.node", "source.topic
             tf_prefix=cast(str, a.opt_str("tf_prefix", "", allow_empty=True)),
             namespace=cast(str, a.opt_str("namespace", "", allow_empty=True, pattern=ROS_NAME,
                                           desc=ROS_NAME_DESC)),
+            wait=a.opt_bool("wait", True),
         )
 
 

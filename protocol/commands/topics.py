@@ -9,7 +9,7 @@ from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import MISSING, ROS_NAME, ROS_NAME_DESC, Args
 from protocol.commands.op import Bridge, FrameUse, Op, Resource, TopicUse
 from protocol.commands.results import Answered, GetLastMessageResult, PublishResult
-from protocol.commands.types import resolve_message_type
+from protocol.commands.types import check_message_type, resolve_message_type
 from protocol.commands.values import QoS
 from protocol.commands.wire import json_type
 
@@ -28,7 +28,7 @@ def _qos(a: Args) -> QoS:
 
 def _msg_type(a: Args) -> str:
     text = a.req_str("type")
-    resolve_message_type(text, a.path("type"))
+    check_message_type(text, a.path("type"))  # a bare name is the daemon's to look up
     return text
 
 

@@ -10,13 +10,15 @@ name found in exactly one package. Services: ``pkg/srv/Type`` or ``pkg/Type``; a
 
 from __future__ import annotations
 
+import difflib
 import re
-from typing import Callable, Optional, Sequence
+from typing import Callable, Iterable, Optional, Sequence
 
-from protocol.commands.errors import OutOfRangeError
+from protocol.commands.errors import OutOfRangeError, UnknownTypeError
 
 __all__ = ["REFERENCE_SERVICE_NAMES", "REFERENCE_TYPE_NAMES", "PackagesOf",
-           "resolve_action_type", "resolve_message_type", "resolve_service_type"]
+           "check_message_type", "resolve_action_type", "resolve_message_type",
+           "resolve_service_type", "unknown_type"]
 
 # A bare message name -> the installed packages that define it.
 PackagesOf = Callable[[str], Sequence[str]]
@@ -81,14 +83,15 @@ _EXPECTED = "pkg/msg/Type, pkg/Type, or a short name such as String or PoseStamp
 
 
 def resolve_message_type(text: str, field: str = "type", *,
-                         packages_of: Optional[PackagesOf] = None) -> str:
-    """Any accepted spelling (see the module) -> ``pkg/msg/Type``; `OutOfRangeError` naming
-    `field` otherwise. A bare name other than a short name needs `packages_of`."""
+                         packages_of: Optional[PackagesOf] = None,
+                         known: Iterable[str] = ()) -> str:
+    """Any accepted spelling (see the module) -> ``pkg/msg/Type``; `UnknownTypeError`
+    naming `field` otherwise, with the closest of the short names and ``known`` (the
+    caller's installed names). A bare name other than a short name needs `packages_of`."""
     if not isinstance(text, str):
         raise OutOfRangeError(field, _EXPECTED, type(text).__name__)
     given = text.strip()
-    class_match = _CLASS_NAME.match(given)
-    stem = class_match.group(1) if class_match else given
+    stem = _stem(given)
     if stem in REFERENCE_TYPE_NAMES:
         return REFERENCE_TYPE_NAMES[stem]
     for spelling in _SPELLINGS:
@@ -98,7 +101,32 @@ def resolve_message_type(text: str, field: str = "type", *,
     found = _by_package(stem, "msg", packages_of, field)
     if found is not None:
         return found
-    raise OutOfRangeError(field, _EXPECTED, repr(given))
+    raise unknown_type(field, _EXPECTED, given, (*REFERENCE_TYPE_NAMES, *known))
+
+
+def check_message_type(text: str, field: str = "type") -> None:
+    """Refuse what no look-up could make a message type. A bare name that is not a short
+    name (``Float32``) passes: only the daemon can look it up among its installed
+    packages (`resolve_message_type` with `packages_of`), so a client or a request's parse
+    leaves it to the daemon."""
+    if isinstance(text, str) and _BARE.match(_stem(text.strip())):
+        return
+    resolve_message_type(text, field)
+
+
+def unknown_type(field: str, expected: str, given: str,
+                 known: Iterable[str]) -> UnknownTypeError:
+    """The error for a type name that names no type, with the closest of ``known``."""
+    close = difflib.get_close_matches(given, list(known), n=1, cutoff=0.6)
+    hint = f" (did you mean {close[0]}?)" if close else ""
+    return UnknownTypeError(field, expected, f"{given!r}{hint}")
+
+
+def _stem(given: str) -> str:
+    """The type part of a reference node class name (``vtkMRMLROS2SubscriberStringNode``
+    -> ``String``), else the name as given."""
+    class_match = _CLASS_NAME.match(given)
+    return class_match.group(1) if class_match else given
 
 
 def _by_package(stem: str, kind: str, packages_of: Optional[PackagesOf],

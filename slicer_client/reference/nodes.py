@@ -286,7 +286,7 @@ class PublisherNode(_Node):
         return self.resource.topic
 
     def GetROSType(self) -> str:  # noqa: N802
-        return str(self.resource.info.get("type", c.resolve_message_type(self.resource.type)))
+        return str(self.resource.info.get("type") or c.resolve_message_type(self.resource.type))
 
     def GetSlicerType(self) -> str:  # noqa: N802
         return _type_name(self._slicer_type.blank())
@@ -1006,7 +1006,7 @@ class ROS2Node:
 
     # --- topics -----------------------------------------------------------------------------
     def CreateAndAddSubscriberNode(self, className: str, topic: str) -> SubscriberNode:  # noqa: N802,N803
-        c.resolve_message_type(className, "className")  # an early, named error
+        c.check_message_type(className, "className")  # an early, named error
         sub = self.client.subscribe(topic, className, messages=True)
 
         def make() -> SubscriberNode:
@@ -1020,12 +1020,12 @@ class ROS2Node:
                                   labelsTopic: str = "") -> PublisherNode:  # noqa: N803
         """``frame`` / ``labelsTopic``: this bridge's additions for models and markups
         sent to ROS (not in the reference)."""
-        c.resolve_message_type(className, "className")
+        c.check_message_type(className, "className")
         pub = self.client.publisher(topic, className, frame=frame or None,
                                     labels_topic=labelsTopic or None)
 
         def make() -> PublisherNode:
-            ros_type = str(pub.info.get("type", c.resolve_message_type(className)))
+            ros_type = str(pub.info.get("type") or c.resolve_message_type(className))
             # As the subscriber of the same name: Publish takes what GetLastMessage gives.
             return PublisherNode(self, pub, self._slicer_type(
                 className, ros_type, str(pub.info.get("igtl_type", ""))))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import socket
 import subprocess
@@ -53,6 +54,23 @@ def test_a_second_bridge_on_a_running_bridge_s_port_is_refused(processes: Proces
     with socket.create_connection(("127.0.0.1", daemon.port), timeout=5):
         pass
     assert_clean_exit(daemon)
+
+
+def test_a_second_daemon_on_the_same_domain_warns_that_it_is_a_namesake(
+        processes: Processes) -> None:
+    """Issue 43, item 13: a second daemon on the same ROS domain was /slicer_bridge too,
+    with no word of it. It now says so in one warning line at start."""
+    first = start_daemon(processes)
+    second = start_daemon(processes)
+    line = second.child.wait_for_output("another node named /slicer_bridge", timeout=30)
+    domain = os.environ["ROS_DOMAIN_ID"]
+    assert line.endswith(f" WARNING bridge: another node named /slicer_bridge is on "
+                         f"the ROS graph (ROS_DOMAIN_ID {domain}): a second daemon? Peers "
+                         f"cannot tell the two apart; start this one with --node-name, or "
+                         f"on another ROS_DOMAIN_ID"), line
+    assert second.child.output().count("another node named") == 1
+    assert_clean_exit(second)
+    assert_clean_exit(first)
 
 
 def test_bad_config_file_is_refused_with_its_location(tmp_path: Path) -> None:

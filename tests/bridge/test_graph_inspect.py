@@ -3,11 +3,16 @@ SlicerROS2's documentation, for a ROS installed from wheels (no `ros2` command).
 
 from __future__ import annotations
 
+import os
 import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
-from support import Processes, wait_until
+from support import REPO, Processes, scaled, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -116,3 +121,32 @@ def test_echo_with_a_type_that_is_not_installed(processes: Processes) -> None:
     output = child.output()
     assert "expected a message type installed here, got 'no_such_pkg/msg/Thing'" in output
     assert "Traceback" not in output
+
+
+def test_echo_into_a_reader_that_stops_ends_quietly(processes: Processes, tmp_path: Path,
+                                                    pose_peer: None) -> None:
+    """Issue 43, item 8: `echo /topic | head -3` printed a BrokenPipeError traceback (from
+    the executor thread that wrote the message) and then hung. A closed stdout now ends the
+    command at once, with no traceback and status 1 (Python's status for EPIPE)."""
+    errors = tmp_path / "echo-stderr.log"
+    with errors.open("wb") as stderr:
+        popen = subprocess.Popen(
+            [sys.executable, "-m", "bridge.console", "echo", "/gi_pose", "--wait", "30"],
+            stdout=subprocess.PIPE, stderr=stderr, stdin=subprocess.DEVNULL,
+            cwd=str(REPO), start_new_session=True)
+    try:
+        assert popen.stdout is not None
+        head = [popen.stdout.readline() for _ in range(3)]  # as `head -3` reads
+        popen.stdout.close()  # ... and exits
+        try:
+            status = popen.wait(scaled(30))
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"echo hung after its reader closed; stderr:\n"
+                                 f"{errors.read_text()}") from None
+    finally:
+        if popen.poll() is None:
+            os.killpg(popen.pid, signal.SIGKILL)
+            popen.wait(5)
+    assert head[0] == b"header:\n", head
+    assert status == 1
+    assert errors.read_text() == ""  # no traceback, no "Exception ignored" at exit

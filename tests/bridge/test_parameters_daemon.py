@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import itertools
 import json
+import re
+import time
 from typing import Any, Callable
 
 import pytest
@@ -350,3 +352,21 @@ def test_server_declares_every_type(client: Connection) -> None:
     error = refused(lambda: client.command("server_declare_parameter", {
         "name": "every.nothing", "value": {"type": "not_set", "value": None}}))
     assert (error.code, error.field) == (ErrorCode.OUT_OF_RANGE, "value.type")
+
+
+def test_a_get_on_a_missing_node_says_how_long_it_was_looked_for(client: Connection) -> None:
+    """Issue 43, item 13: a get on a missing node took 6.05 s (create_parameter_client's
+    discovery wait, then the get's own) but said "no server after 4 s". The reply now
+    also says the whole time the node has been looked for, measured."""
+    name = fresh_node("missing")
+    made = time.monotonic()
+    assert client.command("create_parameter_client", {"node": name})["ready"] is False
+    error = refused(lambda: client.command("get_parameters", {"node": name, "names": ["x"]}))
+    took = time.monotonic() - made
+    assert (error.code, error.field) == (ErrorCode.UNAVAILABLE, "node")
+    found = re.fullmatch(rf"node: expected the parameter services of /{name} to be "
+                         rf"available, got no server after 4 s; not seen in the (\d+\.\d) s "
+                         rf"since its parameter client was made", error.message)
+    assert found, error.message
+    # What it says is what a caller waited (both ops), to the reply's own travel time.
+    assert took - 0.5 <= float(found.group(1)) <= took + 0.05

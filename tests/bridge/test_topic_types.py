@@ -396,3 +396,24 @@ def test_bulk_types_keep_one_message_and_a_large_last_message_is_not_kept(
         assert late.latest(created["device"]) is None
         kept = late.latest(small_device)
         assert kept is not None and kept.body.text == "kept"
+
+
+def test_short_names_resolve_for_installed_types_and_a_misspelt_one_says_the_closest(
+        daemon: RunningDaemon, client: Connection) -> None:
+    """Issue 43, item 10: `Float64` was accepted and `Float32` not (a request's parse knew
+    only the reference's short names, before the daemon could look installed packages up);
+    a misspelt type got OUT_OF_RANGE and no "did you mean"."""
+    for op in ("create_subscriber", "create_publisher"):
+        topic = fresh_topic("float32")
+        created = client.command(op, {"topic": topic, "type": "Float32"})
+        assert created["type"] == "std_msgs/msg/Float32"
+    for given, closest in (("PoseStampd", "PoseStamped"),
+                           ("geometry_msgs/msg/PoseStampd", "geometry_msgs/msg/PoseStamped")):
+        with pytest.raises(CommandRefusedError) as refused:
+            client.command("create_subscriber", {"topic": fresh_topic("typo"), "type": given})
+        assert (refused.value.code.name, refused.value.field) == ("UNKNOWN_ROS_TYPE", "type")
+        assert str(refused.value).endswith(f"got {given!r} (did you mean {closest}?))"), \
+            str(refused.value)
+    with pytest.raises(CommandRefusedError) as malformed:  # no look-up could make it a type
+        client.command("create_subscriber", {"topic": fresh_topic("bad"), "type": "pose stamped"})
+    assert (malformed.value.code.name, malformed.value.field) == ("UNKNOWN_ROS_TYPE", "type")

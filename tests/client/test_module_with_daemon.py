@@ -232,11 +232,16 @@ def test_what_fails_is_shown_to_the_user(widget: Any, daemon: RunningDaemon,
     text = slicer.mrmlScene.AddNewNodeByClass("vtkMRMLTextNode", "notes")
     with pytest.raises(ValueError, match="not a vtkMRMLTextNode"):
         logic.sendToROS(text, "/notes", "base_link")
-    # A robot whose node does not exist: the GUI says it waits for its description.
+    # A robot whose node does not exist: the GUI says so (issue 43, item 9: it "loaded"
+    # with 0 links, waiting).
     ui.robotNodeEdit.emit("textChanged(QString)", "/no_such_node")
-    ui.loadRobotButton.emit("clicked(bool)", False)
+    with pytest.raises(Exception, match="NOT_FOUND: source.node: expected a node on the ROS "
+                                        "graph holding parameter robot_description"):
+        ui.loadRobotButton.emit("clicked(bool)", False)
+    assert slicer.util.errors[-1].startswith("Failed to load the robot.")
+    assert "/no_such_node: no such node" in slicer.util.errors[-1]
     widget.updateStatus()
-    assert ui.robotStatusLabel.text.startswith("demo: waiting for its description")
+    assert not ui.robotStatusLabel.text.startswith("demo:")
     ui.connectButton.checked = False
     ui.connectButton.emit("toggled(bool)", False)
     assert ui.statusLabel.text == "Not connected" and logic.client is None

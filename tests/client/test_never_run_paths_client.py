@@ -104,7 +104,7 @@ def test_wait_until_loaded_on_a_robot_whose_node_appears_later(
     """Asked for before its robot_state_publisher exists, the robot is "waiting" with no
     link known; wait_until_loaded returns once the node appeared and the daemon's "loaded"
     STATUS (its link and visual counts) and every link and mesh have arrived."""
-    robot = ros.robot("later", namespace="later_ns", tf_prefix="later_ns/")
+    robot = ros.robot("later", namespace="later_ns", tf_prefix="later_ns/", wait=True)
     try:
         assert (robot.state, robot.progress()) == ("waiting", (0, None))
         publisher = processes.bridge("state-publisher", str(robot_dir / "waiter.urdf"),

@@ -11,7 +11,7 @@ import pytest
 import slicer_client
 from protocol.commands import ErrorCode
 from protocol.messages import Transform
-from support import Processes, RunningDaemon, pick_free_port, wait_until
+from support import Processes, RunningDaemon, pick_free_port, scaled, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -168,3 +168,22 @@ def test_hello_replies_what_protocol_readme_documents(ros: slicer_client.Client)
     assert set(reply) == documented
     assert reply["schema"] == 1 and reply["ops"] == sorted(reply["ops"])
     assert reply["node"] == "/slicer_bridge"
+
+
+def test_a_wait_on_a_topic_nobody_publishes_says_so(ros: slicer_client.Client,
+                                                     processes: Processes) -> None:
+    """Issue 43, item 10: a subscription's wait timed out on a topic nobody publishes with
+    no hint. It now ends "no publisher of <topic> on the ROS graph"; with a publisher (the
+    wait's predicate unmet) it does not."""
+    silent = ros.subscribe("/py_nobody", "std_msgs/msg/String")
+    with pytest.raises(TimeoutError) as error:
+        silent.wait_for_message(timeout=0.5)
+    assert str(error.value).startswith("a message on /py_nobody: nothing within 0.5 s")
+    assert str(error.value).endswith("; no publisher of /py_nobody on the ROS graph")
+    processes.python("pose", "pose_publisher.py", "/py_posed", "1", "2", "3", "0", "0", "0",
+                     "1").wait_for_output("READY", timeout=30)
+    posed = ros.subscribe("/py_posed", "PoseStamped")
+    posed.wait_for_message(timeout=scaled(30))
+    with pytest.raises(TimeoutError) as error:
+        posed.wait_for_message(timeout=0.5, predicate=lambda matrix: False)
+    assert "no publisher" not in str(error.value)

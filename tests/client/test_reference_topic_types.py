@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+import slicer_client
 from slicer_client.reference.messages import MessageValueError
 from ros_echo import echo, until_received, until_got
 from support import Processes
@@ -254,3 +255,12 @@ def test_subscriber_observers_and_events(rosLogic: Any) -> None:
     assert sub.GetLastMessageYAML() == ""
     assert sub.GetSlicerType() == "std::string"
 
+
+
+def test_a_short_name_the_daemon_knows_makes_a_node(ros: slicer_client.Client) -> None:
+    """Issue 43, item 10: the facade refused `Float32` before asking the daemon (it knew
+    only the reference's short names); the daemon resolves it among installed types."""
+    node = ros.GetDefaultROS2Node()
+    subscriber = node.CreateAndAddSubscriberNode("Float32", "/short_float32")
+    publisher = node.CreateAndAddPublisherNode("Float32", "/short_float32_out")
+    assert subscriber.GetROSType() == publisher.GetROSType() == "std_msgs/msg/Float32"

@@ -33,7 +33,7 @@ def test_a_saved_state_recreates_every_kind_in_another_client(
         params.observe(["count"], all_changes=True)
         first.tf_lookup("bs_world", "bs_tool", rate_hz=10.0)
         first.tf_broadcaster("bs_world", "bs_fixed", static=True)
-        first.robot("bs_robot", namespace="bs_nowhere")  # waits for a node that never comes
+        first.robot("bs_robot", namespace="bs_nowhere", wait=True)  # its node never comes
         first.markers("/bs_markers", "visualization_msgs/msg/MarkerArray", "bs_world")
         saved = first.state().to_json()
     state = BridgeState.from_json(saved)

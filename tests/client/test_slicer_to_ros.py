@@ -403,6 +403,51 @@ def test_the_demo_motion_yields_to_joints_set_from_slicer(
     assert sorted(last_word["name"]) == ["shoulder", "slide", "spin"]
 
 
+def test_a_yielding_demo_motion_keeps_its_joint_states_live(
+        ros: slicer_client.Client, daemon: RunningDaemon, processes: Processes,
+        tmp_path: Path) -> None:
+    """Issue 43, item 12: the demo warned "/joint_states is stale ... 0.3 s" on every
+    set_joints: the motion fell silent while it yielded, and the daemon's subscriber
+    judged the 20 Hz stream stale. It now publishes the pose it was put in at its rate."""
+    urdf = tmp_path / "quiet.urdf"
+    urdf.write_text(ROBOT_URDF.replace('name="jointy"', 'name="quiet"'))
+    motion = processes.start("quiet-motion", [
+        sys.executable, "-u", "-m", "bridge.robots.demo.joint_motion", str(urdf),
+        "--namespace", "quiet", "--rate", "20", "--yield-s", "2",
+        "--no-trajectory-action"])
+    motion.wait_for_output("joint motion ready", timeout=30)
+    topic = "/quiet/joint_states"
+    echo = _echo(processes, topic, "sensor_msgs/msg/JointState")
+    followed = ros.subscribe(topic, "JointState")
+    _until_received(echo, lambda: None, "the idle motion", count=5)
+    followed.wait_for_message(timeout=30, predicate=lambda _: followed.count >= 5)
+    slider = ros.publisher(topic, "JointState")
+
+    def stamp(m: dict[str, Any]) -> float:
+        return m["header"]["stamp"]["sec"] + m["header"]["stamp"]["nanosec"] * 1e-9
+
+    def yielded_at() -> float:
+        lines = [line for line in motion.lines() if "joint motion yields for 2 s" in line]
+        if not lines:
+            slider.publish({"name": ["shoulder"], "position": [0.25]})
+            return -1.0
+        return float(lines[0].rsplit("(at ", 1)[1].rstrip(")"))
+    wait_until(lambda: yielded_at() > 0, timeout=30, what="the motion to yield")
+    start = yielded_at()
+
+    def held_for_a_second() -> bool:
+        return any(not m["velocity"] and stamp(m) >= start + 1.0
+                   and dict(zip(m["name"], m["position"]))["shoulder"] == 0.25
+                   for m in _messages(echo))
+    def stale() -> list[str]:
+        return [line for line in daemon.child.lines() if f"{topic} is stale" in line]
+    wait_until(lambda: held_for_a_second() or bool(stale()), timeout=30,
+               what="the held pose 1 s into the yield, or a stale warning")
+    assert stale() == []
+    followed.remove()
+    slider.remove()
+
+
 def test_models_in_a_burst_arrive_in_order_ending_with_the_newest(
         ros: slicer_client.Client, processes: Processes) -> None:
     """Models convert off the daemon's loop with one waiting slot: a burst may skip a

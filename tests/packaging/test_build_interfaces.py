@@ -21,7 +21,8 @@ from bridge.interfaces import (MissingDependencyError, PackageError, find_packag
                                prefix_exports, with_exports)
 from bridge.interfaces.errors import DependencyCycleError
 from bridge.interfaces.packages import evaluate_condition, order_packages
-from bridge.interfaces.steps import REPORT_EVERY_S, Step, make_progress, pip_progress, run_step
+from bridge.interfaces.steps import (REPORT_EVERY_S, Step, compile_progress, last_line,
+                                     make_progress, pip_progress, run_step)
 from support import REPO, wait_until
 
 PACKAGE_XML = """<?xml version="1.0"?>
@@ -290,6 +291,20 @@ def test_a_failed_step_shows_its_log_and_installs_nothing(tmp_path: Path) -> Non
 
 # --- the progress reporter (also setup_env.py's, for pip) --------------------------------
 
+def _reported(step: Step, release: Path) -> list[str]:
+    """What `run_step` said of ``step``, a command that works until ``release`` exists:
+    its start, one progress line, its end."""
+    said: list[str] = []
+    runner = threading.Thread(target=run_step, args=(step, said.append))
+    runner.start()
+    try:
+        wait_until(lambda: len(said) >= 2, timeout=REPORT_EVERY_S * 3, what="a progress line")
+    finally:
+        release.write_text("")
+        runner.join(60)
+    return said
+
+
 def test_a_long_step_reports_what_it_does_until_it_ends(tmp_path: Path) -> None:
     """A pip-like command that works until the test lets it end: a line at the start, one
     every REPORT_EVERY_S with pip's last action (not its warnings), one at the end."""
@@ -302,21 +317,52 @@ def test_a_long_step_reports_what_it_does_until_it_ends(tmp_path: Path) -> None:
               f"while not pathlib.Path({str(release)!r}).exists():\n"
               "    time.sleep(0.05)\n"
               "print('Successfully installed ros-rclpy-7.1.6')\n")
-    said: list[str] = []
-    step = Step("[setup] pip install", [sys.executable, "-c", script], tmp_path,
-                tmp_path / "pip.log", where=pip_progress)
-    runner = threading.Thread(target=run_step, args=(step, said.append))
-    runner.start()
-    try:
-        wait_until(lambda: len(said) >= 2, timeout=REPORT_EVERY_S * 3, what="a progress line")
-    finally:
-        release.write_text("")
-        runner.join(60)
+    said = _reported(Step("[setup] pip install", [sys.executable, "-c", script], tmp_path,
+                          tmp_path / "pip.log", where=pip_progress), release)
     assert said[0] == "[setup] pip install ..."
     assert re.fullmatch(r"\[setup\] pip install: \d+ s, Downloading ros_rclpy-7\.1\.6-cp311-"
                         r"manylinux_2_28_x86_64\.whl \(2\.6 MB\)", said[1]), said
     assert re.fullmatch(r"\[setup\] pip install: done in \d+\.\d s", said[-1]), said
     assert (tmp_path / "pip.log").read_text().endswith("Successfully installed ros-rclpy-7.1.6\n")
+
+
+# What `setup.py -q build_ext` writes (its log in a set-up of this project): setuptools'
+# warning with the source line Python echoes under it, then compiler diagnostics with
+# their source excerpts.
+BUILD_EXT_OUTPUT = (
+    "/v/lib/python3.11/site-packages/setuptools/config/pyprojecttoml.py:108: "
+    "_BetaConfiguration: Support for `[tool.setuptools]` in `pyproject.toml` is still *beta*.\n"
+    "  warnings.warn(msg, _BetaConfiguration)\n")
+BUILD_EXT_COMPILING = (
+    "bridge/ros/_rcl_reader.c: In function '__pyx_pf_set_subscriptions':\n"
+    "bridge/ros/_rcl_reader.c:6327:26: warning: comparison of integer expressions of "
+    "different signedness [-Wsign-compare]\n"
+    " 6327 |   __pyx_t_7 = (__pyx_t_6 != __pyx_v_count);\n"
+    "      |                          ^~\n")
+
+
+def test_progress_lines_leave_out_source_excerpts_and_echoed_warnings(
+        tmp_path: Path) -> None:
+    """Issue 43, item 12: set-up progress said `build_ext: 10 s, |     ^` and
+    `warnings.warn(msg, _BetaConfiguration)`: the last line of the output, whatever it
+    was. A compile now says the file it is at; any step's last line is one that says
+    something (the warning itself, not the source Python echoes, nor a caret line)."""
+    assert last_line(BUILD_EXT_OUTPUT).startswith(  # type: ignore[union-attr]
+        "/v/lib/python3.11/site-packages/setuptools/config/pyprojecttoml.py:108: _Beta")
+    assert last_line(BUILD_EXT_COMPILING) == BUILD_EXT_COMPILING.splitlines()[1][:87] + "..."
+    assert compile_progress(BUILD_EXT_OUTPUT) is None
+    assert compile_progress(BUILD_EXT_OUTPUT + BUILD_EXT_COMPILING) == \
+        "compiling bridge/ros/_rcl_reader.c"
+    release = tmp_path / "release"
+    script = (f"import pathlib, sys, time\n"
+              f"sys.stdout.write({BUILD_EXT_OUTPUT + BUILD_EXT_COMPILING!r})\n"
+              f"sys.stdout.flush()\n"
+              f"while not pathlib.Path({str(release)!r}).exists():\n"
+              f"    time.sleep(0.05)\n")
+    said = _reported(Step("[setup] setup.py build_ext", [sys.executable, "-c", script],
+                          tmp_path, tmp_path / "build-ext.log", where=compile_progress), release)
+    assert re.fullmatch(r"\[setup\] setup\.py build_ext: \d+ s, compiling "
+                        r"bridge/ros/_rcl_reader\.c", said[1]), said
 
 
 def test_make_progress_names_the_percentage_and_the_target() -> None:

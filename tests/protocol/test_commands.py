@@ -360,7 +360,7 @@ BAD: list[tuple[str, str, type, str]] = [
     ("create_subscriber", '{"type": "String"}', MissingFieldError, "topic"),
     ("create_subscriber", '{"topic": 3, "type": "String"}', WrongTypeError, "topic"),
     ("create_subscriber", '{"topic": "/a b", "type": "String"}', OutOfRangeError, "topic"),
-    ("create_subscriber", '{"topic": "/x", "type": "Nope"}', OutOfRangeError, "type"),
+    ("create_subscriber", '{"topic": "/x", "type": "No pe"}', OutOfRangeError, "type"),
     ("create_subscriber", '{"topic": "/x", "type": "String", "qos": {"depth": 0}}',
      OutOfRangeError, "qos.depth"),
     ("create_subscriber", '{"topic": "/x", "type": "String", "qos": {"depth": 1.5}}',
@@ -611,3 +611,20 @@ def test_dumps_refuses_nan_and_infinity_naming_where() -> None:
     loop["b"] = loop  # refused by json as well, and said so without a hunt that never ends
     with pytest.raises(OutOfRangeError, match="Circular reference"):
         c.dumps(loop)
+
+
+def test_type_names_left_to_the_daemon_and_misspelt_ones() -> None:
+    """Issue 43, item 10: a bare name the protocol cannot look up (`Float32`) passes a
+    request's parse for the daemon to resolve; a name no look-up could make a type, or one
+    close to a known one, is UNKNOWN_ROS_TYPE with the closest known name."""
+    c.check_message_type("Float32")
+    c.check_message_type("vtkMRMLROS2SubscriberFloat32Node")
+    assert c.CreateSubscriber.from_json('{"topic": "/f", "type": "Float32"}').type == "Float32"
+    with pytest.raises(c.UnknownTypeError) as misspelt:
+        c.resolve_message_type("PoseStampd")
+    assert misspelt.value.error_code == c.ErrorCode.UNKNOWN_ROS_TYPE
+    assert str(misspelt.value) == ("type: expected pkg/msg/Type, pkg/Type, or a short name "
+                                   "such as String or PoseStamped, got 'PoseStampd' (did you "
+                                   "mean PoseStamped?)")
+    with pytest.raises(c.UnknownTypeError, match="got 'Pose Stamped' \\(did you mean Pose"):
+        c.check_message_type("Pose Stamped")

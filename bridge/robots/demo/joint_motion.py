@@ -11,11 +11,13 @@ to the state publisher. `JointMotion.positions_at` is pure, for tests.
 itself (the demo's FollowJointTrajectory controller, `bridge.robots.demo.trajectory`) holds
 them and releases them to blend back into the idle motion; and it yields to another
 publisher of ``joint_states`` (a client's sliders through ``set_robot_joints``): nothing for
-``--yield-s`` seconds after the last foreign joint state, 3 s by default. Its last word before
-it falls silent is the pose it saw last: on each foreign state it publishes its own positions
-with the foreign ones laid over them. A motion message sent just before the foreign one may
-reach the state publisher after it (more likely on a busy machine); the motion's own messages
-arrive in order, so this last one wins and the arm stays where it was put.
+``--yield-s`` seconds after the last foreign joint state, 3 s by default. Meanwhile it goes
+on publishing, at its rate, the pose it saw last (as a robot's driver reports an arm that
+stands still: a silent topic would be judged stale): on each foreign state it publishes its
+own positions with the foreign ones laid over them at once, then that pose on every tick. A
+motion message sent just before the foreign one may reach the state publisher after it (more
+likely on a busy machine); the motion's own messages arrive in order, so the one that
+follows wins and the arm stays where it was put.
 
 Command line::
 
@@ -147,6 +149,9 @@ def create_joint_motion_node(motion: JointMotion, *, rate_hz: float = 50.0,
         now_s = now.nanoseconds * 1e-9
         with publishing:
             if hold.yields(now_s):
+                # Still at its rate, the pose it was put in: a driver reports a still arm,
+                # and a silent joint_states would be judged stale by whoever follows it.
+                publish(now, dict(last), [])
                 return
             t = (now - start).nanoseconds * 1e-9
             if controller is not None:
