@@ -439,11 +439,12 @@ def test_a_yielding_demo_motion_keeps_its_joint_states_live(
         return any(not m["velocity"] and stamp(m) >= start + 1.0
                    and dict(zip(m["name"], m["position"]))["shoulder"] == 0.25
                    for m in _messages(echo))
-    def stale() -> list[str]:
-        return [line for line in daemon.child.lines() if f"{topic} is stale" in line]
-    wait_until(lambda: held_for_a_second() or bool(stale()), timeout=30,
-               what="the held pose 1 s into the yield, or a stale warning")
-    assert stale() == []
+    wait_until(held_for_a_second, timeout=30, what="the held pose 1 s into the yield")
+    # What the daemon's staleness judges: the stream goes on while the motion yields. Before,
+    # it fell silent for the whole yield (0 messages). The count, not the gaps between them,
+    # is asserted: a loaded machine may stall a publisher, never for most of a second.
+    during = [m for m in _messages(echo) if start < stamp(m) < start + 1.0]
+    assert len(during) >= 5, [stamp(m) - start for m in _messages(echo)]
     followed.remove()
     slider.remove()
 
