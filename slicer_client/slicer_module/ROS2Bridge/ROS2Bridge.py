@@ -4,8 +4,9 @@ Laid out as Slicer's scripted-module template (Utilities/Templates/Modules/Scrip
 file holds the module, its widget (wiring only: the GUI is Resources/UI/ROS2Bridge.ui) and
 its self-test; the code is in ROS2BridgeLib/ beside it (`logic`: ROS2BridgeLogic, what
 scripts use; `transport`: ConnectorTransport; `parameters`: the parameter node;
-`reference`: SlicerROS2's entry points). Slicer puts this folder on sys.path when it loads
-the module, so ROS2BridgeLib is found; the names scripts and tests use are re-exported here.
+`reference`: SlicerROS2's entry points; `scene_nodes`: its nodes as MRML nodes). Slicer puts
+this folder on sys.path when it loads the module, so ROS2BridgeLib is found; the names
+scripts and tests use are re-exported here.
 
 Install (Slicer 5.4 or newer: the parameter node wrapper used here first shipped in 5.4;
 it needs the SlicerOpenIGTLink extension). The module imports the client packages
