@@ -38,9 +38,8 @@ log = logging.getLogger("ROS2Bridge")
 
 
 def _reference_nodes(scene: Any) -> list[Any]:
-    found = scene.GetNodesByClass("vtkMRMLNode")
-    nodes = [found.GetItemAsObject(i) for i in range(found.GetNumberOfItems())]
-    return [n for n in nodes if n.GetAttribute(CLASS_ATTRIBUTE)]
+    return [n for n in slicer.util.getNodesByClass("vtkMRMLNode", scene)
+            if n.GetAttribute(CLASS_ATTRIBUTE)]
 
 
 def nodes_of_class(scene: Any, className: str) -> list[Any]:  # noqa: N803
@@ -82,8 +81,12 @@ class SceneNodes:
         if mrml is None:
             lookup = issubclass(cls, Tf2LookupNode)
             base = slicer.vtkMRMLLinearTransformNode if lookup else slicer.vtkMRMLScriptedModuleNode
+
+            def __init__(self: Any, *args: Any) -> None:
+                base.__init__(self)
+                cls.__init__(self, *args)  # type: ignore[misc]
             namespace: dict[str, Any] = {
-                "__init__": lambda self, *args: cls.__init__(self, *args),  # type: ignore[misc]
+                "__init__": __init__,
                 "facadeName": cls.GetName,  # type: ignore[attr-defined]
                 "InvokeEvent": _invoke(base),
                 **{name: getattr(base, name) for name in (
