@@ -54,6 +54,9 @@ _VTK_EVENT_NAMES = {33: "ModifiedEvent", 15000: "TransformModifiedEvent",
 EVENT_IDS = {name: number for number, name in _VTK_EVENT_NAMES.items()}
 _tags = itertools.count(1)
 _N = TypeVar("_N")
+# How long past a request's timeout a read waits for its end: the call's own timeout ends
+# on the worker thread a moment after (a failure is noted then).
+REPLY_GRACE_S = 1.0
 
 # How a facade node was made: the logic's or its ROS node's method and its arguments
 # (("CreateAndAddSubscriberNode", "String", "/chatter")); a saved scene's nodes are made
@@ -826,13 +829,14 @@ class ServiceClientNode(_Node):
         """Send and return at once; observers get ModifiedEvent when the response comes.
         `GetLastResponse()` and `GetLastResponseStatus()` called while this request is in
         flight wait for its end: at most `timeout` seconds after this call (the request's
-        own deadline), so a script that reads after spinning gets this request's response,
-        however loaded the machine. Returns the number of requests sent (1)."""
+        own deadline), plus REPLY_GRACE_S for a failure to be noted, so a script that reads
+        after spinning gets this request's response, however loaded the machine. Returns
+        the number of requests sent (1)."""
         self.calls += 1
         body = self._request_json(request)
         ended = threading.Event()
         with self._lock:
-            self._in_flight = (ended, time.monotonic() + float(timeout))
+            self._in_flight = (ended, time.monotonic() + float(timeout) + REPLY_GRACE_S)
 
         def run() -> None:
             try:

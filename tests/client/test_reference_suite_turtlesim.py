@@ -14,7 +14,7 @@ import pytest
 import slicer_client
 from interface_builds import BuiltInterfaces
 from reference_suite import as_the_suite, ros2, slicer_standin, spin_some, spin_until, stop_group
-from support import Child, Processes, RunningDaemon, assert_clean_exit, start_daemon
+from support import TIME_SCALE, Child, Processes, RunningDaemon, assert_clean_exit, start_daemon
 
 pytestmark = pytest.mark.ros
 
@@ -132,4 +132,28 @@ def test_service_client(slicer, turtlesim: Child) -> None:
     assert spawn1.GetLastResponseStatus() and spawn1.PreRequestCheck()
     kill_subprocess(turtlesim)
     spin_some(slicer)
+    ros2Node.Destroy()
+
+
+def test_an_async_reply_in_flight_is_there_when_the_script_reads_it(slicer,
+                                                                    turtlesim: Child) -> None:
+    """The issue's failure under load: `GetLastResponse()` was None after SendAsyncRequest
+    and the suite's spins. A request in flight is waited for, up to its timeout: read at
+    once, with no spin at all, the response is this request's."""
+    ros2Node = slicer.mrmlScene.AddNewNodeByClass("vtkMRMLROS2NodeNode")  # noqa: N806
+    spawn = ros2Node.CreateAndAddServiceClientNode("vtkMRMLROS2ServiceClientSpawnNode",
+                                                   "/spawn")
+    for name in ("first", "second"):
+        req = spawn.CreateBlankRequest()
+        req.SetX(2.0)
+        req.SetName(name)
+        spawn.SendAsyncRequest(req, 4.0 * TIME_SCALE)
+        res = spawn.GetLastResponse()
+        assert res is not None and res.GetName() == name  # the one just sent, not the last
+        assert spawn.GetLastResponseStatus()
+    # A request that cannot be answered: the wait ends at its timeout, the status says so.
+    stopped = spawn.GetLastResponse()
+    kill_subprocess(turtlesim)
+    spawn.SendAsyncRequest(spawn.CreateBlankRequest(), 0.5)
+    assert spawn.GetLastResponse() is stopped and not spawn.GetLastResponseStatus()
     ros2Node.Destroy()
