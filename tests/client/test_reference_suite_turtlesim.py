@@ -12,25 +12,15 @@ from typing import Iterator
 import pytest
 
 import slicer_client
-from interface_builds import BuiltInterfaces
-from reference_suite import as_the_suite, ros2, slicer_standin, spin_some, spin_until, stop_group
-from support import TIME_SCALE, Child, Processes, RunningDaemon, assert_clean_exit, start_daemon
+from reference_suite import ros2, slicer_standin, spin_some, spin_until, stop_group
+from support import TIME_SCALE, Child, RunningDaemon
 
 pytestmark = pytest.mark.ros
 
 
-@pytest.fixture(scope="module")
-def daemon(turtlesim_interfaces: BuiltInterfaces,
-           module_processes: Processes) -> Iterator[RunningDaemon]:
-    """A daemon that can use turtlesim's interfaces (started once they are exported)."""
-    running = start_daemon(module_processes)
-    yield running
-    assert_clean_exit(running)
-
-
 @pytest.fixture
-def slicer(daemon: RunningDaemon) -> Iterator[object]:
-    client = slicer_client.connect("127.0.0.1", daemon.port)
+def slicer(turtle_daemon: RunningDaemon) -> Iterator[object]:
+    client = slicer_client.connect("127.0.0.1", turtle_daemon.port)
     try:
         yield slicer_standin(client.logic)
     finally:
@@ -42,17 +32,6 @@ def check_ros2_node_running(node_name: str) -> bool:
     listed = ros2("node list")
     assert listed.returncode == 0, listed.stderr
     return node_name in listed.stdout.split("\n")
-
-
-@pytest.fixture
-def turtlesim(processes: Processes) -> Iterator[Child]:
-    """`ros2 run turtlesim turtlesim_node` through the suite's shell line, until READY."""
-    node = processes.start("turtlesim", ["sh", "-c", as_the_suite("run turtlesim turtlesim_node")])
-    try:
-        node.wait_for_output("READY", timeout=60)
-        yield node
-    finally:
-        stop_group(node)
 
 
 def kill_subprocess(node: Child) -> None:

@@ -16,7 +16,8 @@ from typing import Any, Iterator
 
 import pytest
 
-from support import TIME_SCALE, Processes, RunningDaemon, assert_clean_exit, scaled, start_daemon
+from support import (TIME_SCALE, Processes, RunningDaemon, assert_clean_exit, children_of, scaled,
+                     spare_domain, start_daemon, wait_until)
 from tools.slicer_core.peer import PeerUnavailableError, peer_python
 
 SCENES = Path(__file__).resolve().parent / "scenes"
@@ -44,6 +45,21 @@ def daemon(module_processes: Processes) -> Iterator[RunningDaemon]:
     running = start_daemon(module_processes)
     yield running
     assert_clean_exit(running)
+
+
+@pytest.fixture(scope="module")
+def demo(module_processes: Processes) -> Iterator[RunningDaemon]:
+    """`slicer-ros2-bridge demo` on a ROS domain of its own (other modules' robots are
+    /robot_state_publisher too), once its two children run."""
+    child = module_processes.bridge("demo", "--port", "0", env={"ROS_DOMAIN_ID": spare_domain(1)})
+    line = child.wait_for_output(" (OpenIGTLink); ROS node", timeout=60)
+    port = int(line.split(" (OpenIGTLink)")[0].rsplit(":", 1)[1])
+    child.wait_for_output("Stop with Ctrl-C", timeout=60)
+    wait_until(lambda: sum("joint_motion" in cmd or "state_publisher" in cmd
+                           for _, _, cmd in children_of(child.pid)) == 2,
+               what="the demo's two children")
+    yield RunningDaemon(child, port)
+    child.stop()
 
 
 class SceneRunner:

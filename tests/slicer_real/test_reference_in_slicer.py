@@ -8,35 +8,11 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Iterator
-
 import pytest
 
-from interface_builds import BuiltInterfaces
-from reference_suite import as_the_suite, stop_group
-from support import (REPO, Child, Processes, RunningDaemon, assert_clean_exit, children_of,
-                     spare_domain, start_daemon, wait_until)
+from support import REPO, Child, RunningDaemon
 
 pytestmark = pytest.mark.ros
-
-
-@pytest.fixture(scope="module")
-def turtle_daemon(turtlesim_interfaces: BuiltInterfaces,
-                  module_processes: Processes) -> Iterator[RunningDaemon]:
-    """A daemon that can use turtlesim's interfaces (started once they are exported)."""
-    running = start_daemon(module_processes)
-    yield running
-    assert_clean_exit(running)
-
-
-@pytest.fixture
-def turtlesim(processes: Processes) -> Iterator[Child]:
-    node = processes.start("turtlesim", ["sh", "-c", as_the_suite("run turtlesim turtlesim_node")])
-    try:
-        node.wait_for_output("READY", timeout=60)
-        yield node
-    finally:
-        stop_group(node)
 
 
 def test_the_reference_suite_cases_pass_in_a_real_scene_with_its_nodes_in_it(
@@ -90,20 +66,6 @@ def test_the_reference_suite_cases_pass_in_a_real_scene_with_its_nodes_in_it(
     assert got["service"] == {"id": "vtkMRMLROS2ServiceClientSpawnNode1", "name": "turtle2",
                               "status": True}
     assert got["after_destroy"] == []
-
-
-@pytest.fixture(scope="module")
-def demo(module_processes: Processes) -> Iterator[RunningDaemon]:
-    """`slicer-ros2-bridge demo` (a robot on /robot_state_publisher) on a domain of its own."""
-    child = module_processes.bridge("demo", "--port", "0", env={"ROS_DOMAIN_ID": spare_domain(2)})
-    line = child.wait_for_output(" (OpenIGTLink); ROS node", timeout=60)
-    port = int(line.split(" (OpenIGTLink)")[0].rsplit(":", 1)[1])
-    child.wait_for_output("Stop with Ctrl-C", timeout=60)
-    wait_until(lambda: sum("joint_motion" in cmd or "state_publisher" in cmd
-                           for _, _, cmd in children_of(child.pid)) == 2,
-               what="the demo's two children")
-    yield RunningDaemon(child, port)
-    child.stop()
 
 
 def test_a_saved_scene_reopened_brings_the_reference_nodes_and_their_bridges_back(

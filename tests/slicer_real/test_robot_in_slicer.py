@@ -4,30 +4,13 @@ with 3D Slicer's own OpenIGTLinkIF connector making the nodes (scenes/robot.py).
 from __future__ import annotations
 
 import math
-from typing import Iterator
-
 import pytest
 
-from support import Processes, RunningDaemon, children_of, spare_domain, wait_until
+from support import RunningDaemon
 
 DEMO_LINKS = ["base_link", "elbow_link", "finger_left", "finger_right", "forearm_link",
               "shoulder_link", "tool_flange", "upper_arm_link", "wrist_1_link",
               "wrist_2_link", "wrist_3_link"]
-
-
-@pytest.fixture(scope="module")
-def demo(module_processes: Processes) -> Iterator[RunningDaemon]:
-    """`slicer-ros2-bridge demo` on a ROS domain of its own (other modules' robots are
-    /robot_state_publisher too), once its two children run."""
-    child = module_processes.bridge("demo", "--port", "0", env={"ROS_DOMAIN_ID": spare_domain(1)})
-    line = child.wait_for_output(" (OpenIGTLink); ROS node", timeout=60)
-    port = int(line.split(" (OpenIGTLink)")[0].rsplit(":", 1)[1])
-    child.wait_for_output("Stop with Ctrl-C", timeout=60)
-    wait_until(lambda: sum("joint_motion" in cmd or "state_publisher" in cmd
-                           for _, _, cmd in children_of(child.pid)) == 2,
-               what="the demo's two children")
-    yield RunningDaemon(child, port)
-    child.stop()
 
 
 def test_the_demo_robot_is_placed_coloured_filed_and_moved_by_its_sliders(
