@@ -84,6 +84,8 @@ def reference_class(recipe: Recipe) -> str:
                          f"{', '.join(_REFERENCE_CLASSES)}, got {recipe!r}")
     stem = ""
     if "{}" in pattern:
+        if len(recipe) < 2:
+            raise ValueError(f"expected {recipe[0]}'s class name after it, got {recipe!r}")
         kind = pattern.replace("{}", "")
         stem = recipe[1].strip().rsplit("/", 1)[-1]
         if stem.startswith(f"vtkMRMLROS2{kind}") and stem.endswith("Node"):

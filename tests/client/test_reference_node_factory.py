@@ -36,6 +36,9 @@ def test_an_unknown_recipe_is_refused_naming_the_known_ones() -> None:
     with pytest.raises(ValueError, match="expected a recipe starting with one of "
                                          "GetDefaultROS2Node.*got \\('Nope',\\)"):
         reference_class(("Nope",))
+    with pytest.raises(ValueError, match="expected CreateAndAddSubscriberNode's class name "
+                                         "after it, got \\('CreateAndAddSubscriberNode',\\)"):
+        reference_class(("CreateAndAddSubscriberNode",))
 
 
 class Recording(PlainNodes):

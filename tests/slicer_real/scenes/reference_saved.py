@@ -74,17 +74,25 @@ def reopen(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     temp = Path(tempfile.mkdtemp(prefix="mrb-open-"))
     assert logic.OpenSlicerDataBundle(args["mrb"], str(temp))
     opened = reference_nodes(scene)  # plain MRML nodes until the module is connected
+    # A scene file is input: a recipe that is no reference node's call is refused.
+    tampered = scene.AddNewNodeByClassWithID("vtkMRMLScriptedModuleNode", "tampered",
+                                             "vtkMRMLROS2NodeNode9")
+    tampered.SetAttribute("ROS2.Class", "vtkMRMLROS2NodeNode")
+    tampered.SetAttribute("ROS2.Recipe", '["Destroy"]')
     module = connect(session, args["port"])
     spin_until(session, lambda: all(v["python"] != "vtkMRMLScriptedModuleNode"
                                     and v["python"] != "vtkMRMLLinearTransformNode"
-                                    for v in reference_nodes(scene).values()),
+                                    for k, v in reference_nodes(scene).items()
+                                    if k != tampered.GetID()),
                "every saved reference node made again")
+    problems = list(module.problems)
+    scene.RemoveNode(tampered)
     robot = scene_nodes().nodes_of_class(scene, "vtkMRMLROS2RobotNode")[0]
     spin_until(session, lambda: robot.GetNumberOfLinks() > 0, "the robot's links")
     ros2Node = scene_nodes().nodes_of_class(scene, "vtkMRMLROS2NodeNode")[0]  # noqa: N806
     return {
         "opened": opened, "adopted": reference_nodes(scene),
-        "problems": module.problems,
+        "problems": problems,
         "sub_by_topic": ros2Node.GetSubscriberNodeByTopic("/saved_string").GetID(),
         "ros_node_name": ros2Node.GetROS2NodeName(),
         "links": robot.GetNumberOfLinks(),

@@ -29,7 +29,7 @@ from slicer_client.reference.nodes import (EVENT_IDS, ROS2Node, Recipe, Tf2Looku
                                            reference_class)
 
 __all__ = ["CLASS_ATTRIBUTE", "OWNER_ATTRIBUTE", "RECIPE_ATTRIBUTE", "SceneNodes",
-           "nodes_of_class"]
+           "nodes_of_class", "saved_recipe"]
 
 CLASS_ATTRIBUTE = "ROS2.Class"
 RECIPE_ATTRIBUTE = "ROS2.Recipe"
@@ -64,6 +64,24 @@ def _modify_transform(self: Any) -> None:
     was_modifying = self.StartModify()
     self.SetMatrixTransformToParent(fill_vtk(matrix, vtk.vtkMatrix4x4()))
     self.EndModify(was_modifying)
+
+
+def saved_recipe(node: Any) -> Recipe:
+    """A saved node's recipe, checked: only the calls that make reference nodes, with text
+    arguments, of the class the node says it is (a scene file is input like any other)."""
+    text = node.GetAttribute(RECIPE_ATTRIBUTE) or ""
+    try:
+        recipe = json.loads(text)
+    except ValueError:
+        recipe = None
+    if not (isinstance(recipe, list) and recipe and all(isinstance(a, str) for a in recipe)):
+        raise ValueError(f"{RECIPE_ATTRIBUTE}: expected a JSON list of strings, got {text!r}")
+    made = reference_class(tuple(recipe))  # raises for a call that makes no reference node
+    said = node.GetAttribute(CLASS_ATTRIBUTE)
+    if made != said:
+        raise ValueError(f"{RECIPE_ATTRIBUTE}: expected a call that makes a {said}, got "
+                         f"{recipe[0]}, which makes a {made}")
+    return tuple(recipe)
 
 
 class SceneNodes:
@@ -144,19 +162,21 @@ class SceneNodes:
         # ROS nodes first: the others are made by theirs.
         saved.sort(key=lambda n: n.GetAttribute(CLASS_ATTRIBUTE) != "vtkMRMLROS2NodeNode")
         problems = []
+        made_for: dict[str, Any] = {}  # saved ID -> the node made for it
         for node in saved:
             node_id = node.GetID()
             try:
-                recipe = json.loads(node.GetAttribute(RECIPE_ATTRIBUTE) or "[]")
-                if recipe[:1] == ["GetDefaultROS2Node"] or recipe[:1] == ["CreateROS2Node"]:
+                recipe = saved_recipe(node)
+                if recipe[0] in ("GetDefaultROS2Node", "CreateROS2Node"):
                     maker: Any = logic
                 else:
-                    maker = self.scene.GetNodeByID(node.GetAttribute(OWNER_ATTRIBUTE) or "")
+                    owner_id = node.GetAttribute(OWNER_ATTRIBUTE) or ""
+                    maker = made_for.get(owner_id) or self.scene.GetNodeByID(owner_id)
                     if not hasattr(maker, "facadeName"):
-                        raise LookupError(f"its ROS node {node.GetAttribute(OWNER_ATTRIBUTE)} "
-                                          f"is not in the scene")
+                        raise LookupError(f"its ROS node {owner_id!r} is not in the scene")
                 self._reuse_id = node_id
                 made = getattr(maker, recipe[0])(*recipe[1:])
+                made_for[node_id] = made
                 if made.GetID() != node_id:  # one made before the scene was opened
                     self.scene.RemoveNode(node)
             except Exception as error:  # noqa: BLE001 - the other nodes still come back
