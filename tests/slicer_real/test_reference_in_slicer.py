@@ -68,12 +68,13 @@ def test_the_reference_suite_cases_pass_in_a_real_scene_with_its_nodes_in_it(
     assert got["after_destroy"] == []
 
 
+@pytest.mark.parametrize("suffix", [".mrb", ".mrml"])
 def test_a_saved_scene_reopened_brings_the_reference_nodes_and_their_bridges_back(
-        run_scene, demo: RunningDaemon, tmp_path: Path) -> None:
-    mrb = tmp_path / "reference.mrb"
+        run_scene, demo: RunningDaemon, tmp_path: Path, suffix: str) -> None:
+    saved_file = tmp_path / f"reference{suffix}"
     saved = run_scene("reference_saved", timeout=300, step="save", port=demo.port,
-                      mrb=str(mrb), robot="saved_arm", node="/robot_state_publisher")
-    assert saved["mrb_bytes"] > 0 and saved["links"] == 11
+                      file=str(saved_file), robot="saved_arm", node="/robot_state_publisher")
+    assert saved["file_bytes"] > 0 and saved["links"] == 11
     expected = {
         "vtkMRMLROS2NodeNode1": ("ros2:node:kept", "vtkMRMLROS2NodeNode"),
         "vtkMRMLROS2PublisherStringNode1": ("ros2:pub:/saved_string",
@@ -87,9 +88,9 @@ def test_a_saved_scene_reopened_brings_the_reference_nodes_and_their_bridges_bac
         "vtkMRMLROS2RobotNode1": ("ros2:robot:saved_arm", "vtkMRMLROS2RobotNode"),
     }
     assert {k: (v["name"], v["class"]) for k, v in saved["nodes"].items()} == expected
-    # A new Slicer process opens the .mrb, then connects: the same nodes, IDs and names.
+    # A new Slicer process opens the file, then connects: the same nodes, IDs and names.
     got = run_scene("reference_saved", timeout=300, step="reopen", port=demo.port,
-                    mrb=str(mrb))
+                    file=str(saved_file))
     assert {k: (v["name"], v["class"]) for k, v in got["opened"].items()} == expected
     assert {v["python"] for v in got["opened"].values()} == {
         "vtkMRMLScriptedModuleNode", "vtkMRMLLinearTransformNode"}  # as the file has them

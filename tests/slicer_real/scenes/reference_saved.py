@@ -1,7 +1,8 @@
 """The reference's nodes saved with the scene and reopened (issue 42): `save` makes a ROS
 node with a publisher, a subscriber, a tf2 lookup, a service client and a robot, and writes
-the scene as an .mrb (Slicer's application logic); `reopen`, in a new Slicer process, opens
-the .mrb into an empty scene, connects the module, and reports what came back."""
+the scene as an .mrb (Slicer's application logic) or an .mrml (the scene's Commit); `reopen`,
+in a new Slicer process, opens it into an empty scene, connects the module, and reports what
+came back."""
 
 from __future__ import annotations
 
@@ -58,21 +59,28 @@ def save(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     robot = ros2Node.CreateAndAddRobotNode(args["robot"], args["node"])
     spin_until(session, lambda: robot.GetNumberOfLinks() > 0, "the robot's links")
     before = reference_nodes(scene)
-    path = Path(args["mrb"])
-    bundle = Path(tempfile.mkdtemp(prefix="mrb-save-"))
-    logic = session.app.app_logic
-    scene.InvokeEvent(scene.StartSaveEvent)  # what Slicer's save does first: state saved
-    assert logic.SaveSceneToSlicerDataBundleDirectory(str(bundle), None)
-    assert logic.Zip(str(path), str(bundle))
+    path = Path(args["file"])
+    if path.suffix == ".mrml":  # Commit invokes StartSaveEvent itself
+        scene.SetURL(str(path))
+        assert scene.Commit()
+    else:
+        bundle = Path(tempfile.mkdtemp(prefix="mrb-save-"))
+        logic = session.app.app_logic
+        scene.InvokeEvent(scene.StartSaveEvent)  # what Slicer's save does first: state saved
+        assert logic.SaveSceneToSlicerDataBundleDirectory(str(bundle), None)
+        assert logic.Zip(str(path), str(bundle))
     return {"nodes": before, "sub_id": sub.GetID(), "links": robot.GetNumberOfLinks(),
-            "mrb_bytes": path.stat().st_size}
+            "file_bytes": path.stat().st_size}
 
 
 def reopen(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     scene = slicer.mrmlScene
-    logic = session.app.app_logic
-    temp = Path(tempfile.mkdtemp(prefix="mrb-open-"))
-    assert logic.OpenSlicerDataBundle(args["mrb"], str(temp))
+    if args["file"].endswith(".mrml"):
+        scene.SetURL(args["file"])
+        assert scene.Import()
+    else:
+        temp = Path(tempfile.mkdtemp(prefix="mrb-open-"))
+        assert session.app.app_logic.OpenSlicerDataBundle(args["file"], str(temp))
     opened = reference_nodes(scene)  # plain MRML nodes until the module is connected
     # A scene file is input: a recipe that is no reference node's call is refused.
     tampered = scene.AddNewNodeByClassWithID("vtkMRMLScriptedModuleNode", "tampered",
