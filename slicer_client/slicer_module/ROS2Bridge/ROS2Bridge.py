@@ -30,9 +30,12 @@ answers its entry points (slicer_client/reference/entry_points.py), so a script 
 it runs with no line changed: `slicer.util.getModuleLogic('ROS2')` gives the logic
 (`Spin()`, `GetDefaultROS2Node()`...; used before Connect, it connects to the host and port
 of this module's settings), and `slicer.mrmlScene.AddNewNodeByClass("vtkMRMLROS2NodeNode")`
-a ROS node. `slicer.util.getModuleLogic('ROS2Bridge')` offers the same methods. Observers
-and callbacks run on Slicer's main thread, in this module's 20 ms spin (the reference's 50
-Hz timer), never while a command waits.
+a ROS node. Its nodes are MRML nodes of the scene (ROS2BridgeLib/scene_nodes.py: the
+reference's IDs and names, VTK's observers, saved with the scene and made again once the
+module is connected). `slicer.util.getModuleLogic('ROS2Bridge')` offers the same methods.
+Observers and callbacks run on Slicer's main thread, in this module's 20 ms spin (the
+reference's 50 Hz timer), never while a command waits; a script's own `Spin()` takes in what
+the connector received.
 
 Verified against (every Slicer/MRML/VTK call in this folder was read in these sources; the
 list with the facts relied on is in slicer_client/README.md, "Verified against"):
