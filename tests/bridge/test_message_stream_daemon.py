@@ -130,8 +130,9 @@ def test_a_parameter_client_keeps_every_change_when_asked(client: Connection,
     # declarations are events too, and DDS may deliver them late (after a repair), so the
     # label's declared value may be streamed first: wait for the change itself.
     changed = {"type": "string", "value": "changed"}
-    streamed = client.wait_for(device, lambda m: "count" in (values := json.loads(
-        m.body.text)["values"]) and values.get("label") == changed, timeout=20)
+    streamed = client.wait_for(device, lambda m: isinstance(m.body, String) and "count" in (
+        values := json.loads(m.body.text)["values"]) and values.get("label") == changed,
+        timeout=20)
     values = json.loads(streamed.body.text)["values"]
     assert values["label"] == changed
     assert values["count"] == {"type": "integer", "value": 3}  # the observed one, fetched
