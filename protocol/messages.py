@@ -59,6 +59,7 @@ __all__ = [
     "cell_count",
     "cells_from_array",
     "cells_to_list",
+    "document_body",
     "unpack_body",
 ]
 
@@ -983,6 +984,15 @@ class Json:
             raise _bad(cls.TYPE, "LENGTH", f"<= {len(content) - _JSON_HEAD.size} (bytes left)",
                        length)
         return cls(decode_text(content[_JSON_HEAD.size:end], ENCODING_UTF8, "text", cls.TYPE))
+
+
+def document_body(text: str) -> String | Json:
+    """A JSON document as the body that carries it: a STRING (UTF-8) when it fits one
+    (65535 bytes), since every OpenIGTLink peer reads STRING (3D Slicer's connector imports
+    it as a text node); a JSON message beyond."""
+    if len(text.encode("utf-8")) <= 0xFFFF:
+        return String(text, ENCODING_UTF8)
+    return Json(text)
 
 
 # ----------------------------------------------------------------------------- others

@@ -8,6 +8,8 @@
 - `module_processes`: the same, shared by the tests of one module.
 - `turtlesim_interfaces`: turtlesim's interfaces (not on PyPI) for the children a test
   starts, built once into a cache (interface_builds.py); skips where they cannot be built.
+  `turtle_daemon`: a daemon that can use them; `turtlesim`: the node, started as SlicerROS2's
+  suite starts it (tests/reference_suite.py).
 - every test fails if it leaves a child process of the test runner behind.
 - Fast DDS port locks a killed ROS process left taken are released when the session starts
   and after each test's processes are stopped (support.release_left_port_locks).
@@ -32,8 +34,10 @@ import pytest
 from hypothesis import settings
 
 from interface_builds import BuildUnavailable, BuiltInterfaces, use_test_interfaces
-from support import (DOMAIN_BLOCK, DOMAIN_LOCKS, Child, Processes, children_of, pick_free_port,
-                     release_left_port_locks, scaled)
+from reference_suite import as_the_suite, stop_group
+from support import (DOMAIN_BLOCK, DOMAIN_LOCKS, Child, Processes, RunningDaemon,
+                     assert_clean_exit, children_of, pick_free_port, release_left_port_locks,
+                     scaled, start_daemon)
 
 
 _DOMAIN_LOCKS: list[object] = []  # the open lock files of this session's domains
@@ -144,6 +148,26 @@ def turtlesim_interfaces() -> BuiltInterfaces:
         return use_test_interfaces()
     except BuildUnavailable as error:
         pytest.skip(str(error))
+
+
+@pytest.fixture(scope="module")
+def turtle_daemon(turtlesim_interfaces: BuiltInterfaces,
+                  module_processes: Processes) -> Iterator[RunningDaemon]:
+    """A daemon that can use turtlesim's interfaces (started once they are exported)."""
+    running = start_daemon(module_processes)
+    yield running
+    assert_clean_exit(running)
+
+
+@pytest.fixture
+def turtlesim(processes: Processes) -> Iterator[Child]:
+    """`ros2 run turtlesim turtlesim_node` through the suite's shell line, until READY."""
+    node = processes.start("turtlesim", ["sh", "-c", as_the_suite("run turtlesim turtlesim_node")])
+    try:
+        node.wait_for_output("READY", timeout=60)
+        yield node
+    finally:
+        stop_group(node)
 
 
 @pytest.fixture(autouse=True)

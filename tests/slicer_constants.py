@@ -10,6 +10,7 @@ SLICER_CONSTANTS: dict[str, int] = {
     "vtkMRMLScene.StartSaveEvent": 8464,
     "vtkMRMLScene.StartCloseEvent": 8451,
     "vtkMRMLScene.EndCloseEvent": 8707,
+    "vtkMRMLScene.EndImportEvent": 8709,
     "vtkMRMLTransformNode.TransformModifiedEvent": 15000,
     "vtkMRMLTextNode.TextModifiedEvent": 51000,
     "vtkMRMLModelNode.MeshModifiedEvent": 17001,

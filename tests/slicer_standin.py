@@ -66,6 +66,13 @@ class Observable:
     def Modified(self):  # noqa: N802
         self.InvokeEvent(MODIFIED_EVENT)
 
+    def RemoveAllObservers(self):  # noqa: N802
+        self._observers.clear()
+
+    def HasObserver(self, event):  # noqa: N802
+        return any(ev in (event, event_as_observers_get_it(event))
+                   for ev, _ in self._observers.values())
+
 
 class Node(Observable):
     """vtkMRMLNode's attributes (the connector copies each message's metadata into them
@@ -89,6 +96,13 @@ class Node(Observable):
     def IsA(self, name): return name in self.CLASSES  # noqa: E704, N802
     def SetDescription(self, text): self._description = text  # noqa: E704, N802
     def GetDescription(self): return self._description  # noqa: E704, N802
+    def SetName(self, name): self._name = name  # noqa: E704, N802
+
+    def CopyWithScene(self, other):  # noqa: N802
+        """vtkMRMLNode::CopyWithScene: its content and its ID, kept when this node is added
+        to the scene in its place."""
+        self._name, self.attributes = other.GetName(), dict(other.attributes)
+        self._kept_id = other.GetID()
 
     def StartModify(self):  # noqa: N802
         was, self._disabled = self._disabled, 1
@@ -240,6 +254,7 @@ class Scene(Observable):
     StartSaveEvent = constant("vtkMRMLScene.StartSaveEvent")
     StartCloseEvent = constant("vtkMRMLScene.StartCloseEvent")
     EndCloseEvent = constant("vtkMRMLScene.EndCloseEvent")
+    EndImportEvent = constant("vtkMRMLScene.EndImportEvent")
 
     def __init__(self) -> None:
         super().__init__()
@@ -255,8 +270,12 @@ class Scene(Observable):
 
     def AddNode(self, node):  # noqa: N802
         cls = node.GetClassName() if hasattr(node, "GetClassName") else type(node).__name__
-        self._counts[cls] = self._counts.get(cls, 0) + 1
-        node._id, node._scene = f"{cls}{self._counts[cls]}", self
+        kept = getattr(node, "_kept_id", None)  # an ID the node was given: kept if free
+        if kept and self.GetNodeByID(kept) is None:
+            node._id, node._scene = kept, self
+        else:
+            self._counts[cls] = self._counts.get(cls, 0) + 1
+            node._id, node._scene = f"{cls}{self._counts[cls]}", self
         self.nodes.append(node)
         if isinstance(node, MarkupsFiducialNode) and node.GetDisplayNode() is None:
             node.CreateDefaultDisplayNodes()  # as the Markups module does on NodeAddedEvent
@@ -267,6 +286,11 @@ class Scene(Observable):
         if made is None:
             raise ValueError(f"the stand-in scene cannot make a {cls}")
         node = made(name)
+        return self.AddNode(node)
+
+    def AddNewNodeByClassWithID(self, cls, name, node_id):  # noqa: N802
+        node = NODE_CLASSES[cls](name)
+        node._kept_id = node_id
         return self.AddNode(node)
 
     def RemoveNode(self, node):  # noqa: N802
@@ -306,6 +330,8 @@ def install_slicer(setitem: Callable[[str, types.ModuleType], None],
     slicer.vtkSlicerOpenIGTLinkCommand = Command
     slicer.vtkMRMLTextNode = TextNode
     slicer.vtkMRMLTransformNode = TransformNode
+    slicer.vtkMRMLLinearTransformNode = TransformNode
+    slicer.vtkMRMLScriptedModuleNode = ScriptedModuleNode
     slicer.vtkMRMLModelNode = ModelNode
     slicer.vtkMRMLMarkupsNode = MarkupsFiducialNode
     slicer.vtkMRMLSubjectHierarchyNode = SubjectHierarchyNode
@@ -982,8 +1008,23 @@ def outgoing_message(node: Any) -> Message:
     raise TypeError(f"the connector cannot send a {node.GetClassName()}")
 
 
+class ScriptedModuleNode(Node):
+    """vtkMRMLScriptedModuleNode: a node with a name and attributes (the reference's
+    nodes are made on it: the module's ROS2BridgeLib/scene_nodes.py)."""
+
+    CLASSES = ("vtkMRMLScriptedModuleNode", "vtkMRMLNode")
+
+    def __init__(self, name: str = "") -> None:
+        super().__init__()
+        self._name, self._id = name, ""
+
+    def GetID(self): return self._id  # noqa: E704, N802
+    def GetName(self): return self._name  # noqa: E704, N802
+
+
 NODE_CLASSES: Dict[str, Callable[[str], Any]] = {
-    "vtkMRMLTextNode": TextNode, "vtkMRMLLinearTransformNode": TransformNode,
+    "vtkMRMLScriptedModuleNode": ScriptedModuleNode, "vtkMRMLTextNode": TextNode,
+    "vtkMRMLLinearTransformNode": TransformNode,
     "vtkMRMLModelNode": ModelNode, "vtkMRMLModelDisplayNode": ModelDisplayNode,
     "vtkMRMLMarkupsFiducialNode": MarkupsFiducialNode,
     "vtkMRMLMarkupsDisplayNode": MarkupsDisplayNode,

@@ -49,7 +49,7 @@ from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
 from protocol.conversions import igtl_stamp_or_now, igtl_timestamp_now
 from protocol.framing import StreamTemplate
 from protocol.freshness import daemon_clock_ms
-from protocol.messages import Json, Message, PolyData, StatusCode
+from protocol.messages import Message, PolyData, StatusCode, document_body
 from protocol.messages import Point as PointBody
 from protocol.naming import KEY_COUNT, KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
 
@@ -381,7 +381,7 @@ class _MessageStream:
         stamp = getattr(getattr(msg, "header", None), "stamp", None)
         timestamp = (igtl_stamp_or_now(stamp.sec, stamp.nanosec) if stamp is not None
                      else igtl_timestamp_now())
-        message = Message(device_name=self.channel.device, body=Json(message_to_json(msg)),
+        message = Message(device_name=self.channel.device, body=document_body(message_to_json(msg)),
                           timestamp=timestamp, metadata=metadata)
         hub.post_frame(self.channel, frame_for(message))
 

@@ -4,7 +4,9 @@ line changed where SlicerROS2 itself is not installed:
 * ``slicer.util.getModuleLogic('ROS2')`` gives this project's `ROS2Logic`;
 * ``slicer.mrmlScene.AddNewNodeByClass("vtkMRMLROS2NodeNode")`` gives a new facade node
   (a Python module cannot register an MRML node class, so the scene's method is answered
-  for that one class name and passes every other call on unchanged).
+  for that one class name and passes every other call on unchanged); inside 3D Slicer the
+  ROS2Bridge module's node factory makes it an MRML node of the scene, with the ID
+  ``vtkMRMLROS2NodeNode<n>`` (ROS2BridgeLib/scene_nodes.py).
 
 `install` does both on 3D Slicer's own ``slicer`` module (the ROS2Bridge module calls it
 once its logic is connected) or on any object with the same two attributes (a script's

@@ -14,16 +14,21 @@ import threading
 from typing import Any, Callable, Dict, List, Set, Tuple
 
 from slicer_client.reference.messages import MessageTypes
-from slicer_client.reference.nodes import FacadeClient, ROS2Node, RobotNode
+from slicer_client.reference.nodes import (FacadeClient, NodeFactory, PlainNodes, ROS2Node,
+                                           RobotNode)
 from slicer_client.reference.vtk_values import SlicerValues
 
 __all__ = ["ROS2Logic"]
 
 
 class ROS2Logic:
-    def __init__(self, client: Any, *, vtk: Any = None) -> None:
-        """`vtk`: the vtk module, False for plain stand-ins, None to import it if there."""
+    def __init__(self, client: Any, *, vtk: Any = None,
+                 nodes: NodeFactory | None = None) -> None:
+        """`vtk`: the vtk module, False for plain stand-ins, None to import it if there.
+        `nodes`: what makes the facade's nodes (plain objects unless given; the ROS2Bridge
+        module sets MRML nodes of its scene)."""
         self.client: FacadeClient = client
+        self.nodes: NodeFactory = nodes if nodes is not None else PlainNodes()
         self.values = SlicerValues(vtk)
         self.types = MessageTypes(client.describe_type, self.values)
         self._default: ROS2Node | None = None
@@ -40,13 +45,13 @@ class ROS2Logic:
         """The node every script starts from (``ros2:node:slicer`` in the reference): here
         the daemon's own ROS node, named by `GetROS2NodeName`."""
         if self._default is None:
-            self._default = ROS2Node(self)
+            self._default = self.nodes.make(ROS2Node, ("GetDefaultROS2Node",), None, self)
         return self._default
 
     def CreateROS2Node(self, name: str = "") -> ROS2Node:  # noqa: N802
         """Another node, for what the reference makes with
         ``slicer.mrmlScene.AddNewNodeByClass("vtkMRMLROS2NodeNode")`` then ``Create(name)``."""
-        node = ROS2Node(self, name)
+        node: ROS2Node = self.nodes.make(ROS2Node, ("CreateROS2Node", name), None, self, name)
         self._nodes.append(node)
         return node
 

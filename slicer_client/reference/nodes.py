@@ -21,7 +21,9 @@ import itertools
 import json
 import logging
 import threading
-from typing import Any, Callable, Dict, List, Mapping, Optional, Protocol, Tuple
+import time
+from typing import (Any, Callable, Dict, List, Mapping, Optional, Protocol, Tuple, Type,
+                    TypeVar)
 
 import numpy as np
 
@@ -37,9 +39,10 @@ from slicer_client.resources import (MarkerSubscriber, ParameterClient, Publishe
                                      Robot, Service, Subscriber, TfBroadcaster, TfLookup,
                                      parameter_to_python)
 
-__all__ = ["ActionClientNode", "MarkerSubscriberNode", "ParameterNode", "PublisherNode",
-           "ROS2Node", "RobotNode", "ServiceClientNode", "SubscriberNode", "Tf2BroadcasterNode",
-           "Tf2LookupNode"]
+__all__ = ["ActionClientNode", "EVENT_IDS", "MarkerSubscriberNode", "NodeFactory",
+           "ParameterNode", "PlainNodes", "PublisherNode", "ROS2Node", "Recipe", "RobotNode",
+           "ServiceClientNode", "SubscriberNode", "Tf2BroadcasterNode", "Tf2LookupNode",
+           "reference_class"]
 
 log = logging.getLogger("slicer_client")
 
@@ -48,7 +51,76 @@ log = logging.getLogger("slicer_client")
 # (vtkCommand::UserEvent + 54).
 _VTK_EVENT_NAMES = {33: "ModifiedEvent", 15000: "TransformModifiedEvent",
                     1054: "ParameterModifiedEvent"}
+EVENT_IDS = {name: number for number, name in _VTK_EVENT_NAMES.items()}
 _tags = itertools.count(1)
+_N = TypeVar("_N")
+# How long past a request's timeout a read waits for its end: the call's own timeout ends
+# on the worker thread a moment after (a failure is noted then).
+REPLY_GRACE_S = 1.0
+
+# How a facade node was made: the logic's or its ROS node's method and its arguments
+# (("CreateAndAddSubscriberNode", "String", "/chatter")); a saved scene's nodes are made
+# again by calling it (the ROS2Bridge module, ROS2BridgeLib/scene_nodes.py).
+Recipe = Tuple[str, ...]
+
+# The reference's class of the node each method makes ("{}": its type's name).
+_REFERENCE_CLASSES = {
+    "GetDefaultROS2Node": "Node", "CreateROS2Node": "Node",
+    "CreateAndAddSubscriberNode": "Subscriber{}", "CreateAndAddPublisherNode": "Publisher{}",
+    "CreateAndAddParameterNode": "Parameter", "CreateAndAddTf2BroadcasterNode": "Tf2Broadcaster",
+    "CreateAndAddTf2LookupNode": "Tf2Lookup", "CreateAndAddRobotNode": "Robot",
+    "CreateAndAddMarkerSubscriberNode": "MarkerSubscriber",
+    "CreateAndAddServiceClientNode": "ServiceClient{}",
+    "CreateAndAddActionClientNode": "ActionClient{}"}
+
+
+def reference_class(recipe: Recipe) -> str:
+    """The reference's class name of the node `recipe` makes: ``vtkMRMLROS2NodeNode``,
+    ``vtkMRMLROS2SubscriberStringNode`` (from "String", "std_msgs/msg/String" or the class
+    name itself), ``vtkMRMLROS2ServiceClientSpawnNode``..."""
+    pattern = _REFERENCE_CLASSES.get(recipe[0]) if recipe else None
+    if pattern is None:
+        raise ValueError(f"expected a recipe starting with one of "
+                         f"{', '.join(_REFERENCE_CLASSES)}, got {recipe!r}")
+    stem = ""
+    if "{}" in pattern:
+        if len(recipe) < 2:
+            raise ValueError(f"expected {recipe[0]}'s class name after it, got {recipe!r}")
+        kind = pattern.replace("{}", "")
+        stem = recipe[1].strip().rsplit("/", 1)[-1]
+        if stem.startswith(f"vtkMRMLROS2{kind}") and stem.endswith("Node"):
+            stem = stem[len(f"vtkMRMLROS2{kind}"):-len("Node")]
+        stem = "".join(ch for ch in stem if ch.isalnum())
+    return f"vtkMRMLROS2{pattern.format(stem)}Node"
+
+
+class NodeFactory(Protocol):
+    """Makes the facade's nodes: plain Python objects (`PlainNodes`), or MRML nodes in 3D
+    Slicer's scene (the ROS2Bridge module's factory)."""
+
+    def make(self, cls: type, recipe: Recipe, owner: Optional[ROS2Node], *args: Any) -> Any:
+        """A new `cls(*args)`, made by `owner` (None: by the logic) with `recipe`."""
+
+    def changed(self, node: Any) -> None:
+        """`node`'s name or recipe changed (a ROS node's Create, a tf2 node's frames)."""
+
+    def discard(self, node: Any) -> None:
+        """`node` was removed by its ROS node (RemoveAndDelete..., Destroy)."""
+
+
+class PlainNodes:
+    """Facade nodes as plain Python objects: the client outside Slicer."""
+
+    def make(self, cls: type, recipe: Recipe, owner: Optional[ROS2Node], *args: Any) -> Any:
+        node = cls(*args)
+        node.recipe = tuple(recipe)
+        return node
+
+    def changed(self, node: Any) -> None:
+        pass
+
+    def discard(self, node: Any) -> None:
+        pass
 
 
 class FacadeClient(Protocol):
@@ -106,6 +178,7 @@ class Logic(Protocol):
     client: FacadeClient
     types: MessageTypes
     values: SlicerValues
+    nodes: NodeFactory
 
     def Spin(self) -> None: ...  # noqa: N802
 
@@ -158,6 +231,8 @@ class _Observable:
 
 
 class _Node(_Observable):
+    recipe: Recipe = ()  # how it was made (its factory sets it)
+
     def __init__(self, ros_node: ROS2Node, resource: Any) -> None:
         super().__init__()
         self._ros_node = ros_node
@@ -675,6 +750,8 @@ class ServiceClientNode(_Node):
         self.calls = 0
         self.sent = 0
         self._lock = threading.Lock()
+        # The latest async request while it is in flight: (its end, when it times out).
+        self._in_flight: Optional[Tuple[threading.Event, float]] = None
 
     @property
     def _types(self) -> MessageTypes:
@@ -751,20 +828,28 @@ class ServiceClientNode(_Node):
         return obj
 
     def SendAsyncRequest(self, request: Any = None, timeout: float = 4.0) -> int:  # noqa: N802
-        """Send and return at once; `GetLastResponse()` has the response once it came,
-        and observers get ModifiedEvent. Returns the number of requests sent (1)."""
+        """Send and return at once; observers get ModifiedEvent when the response comes.
+        `GetLastResponse()` and `GetLastResponseStatus()` called while this request is in
+        flight wait for its end: at most `timeout` seconds after this call (the request's
+        own deadline), plus REPLY_GRACE_S for a failure to be noted, so a script that reads
+        after spinning gets this request's response, however loaded the machine. Returns
+        the number of requests sent (1)."""
         self.calls += 1
         body = self._request_json(request)
+        ended = threading.Event()
+        with self._lock:
+            self._in_flight = (ended, time.monotonic() + float(timeout) + REPLY_GRACE_S)
 
         def run() -> None:
             try:
-                response = self.resource.call(body, timeout)
+                self._received(self.resource.call(body, timeout))
             except Exception as error:  # noqa: BLE001 - the status says it; logged too
                 with self._lock:
                     self._last_ok = False
                 log.warning("service %s: %s", self.resource.service, error)
                 return
-            self._received(response)
+            finally:
+                ended.set()  # after the response is stored (or the failure noted)
             self._ros_node.logic.client.emit(self.InvokeEvent, "ModifiedEvent")
 
         threading.Thread(target=run, name=f"service {self.resource.service}",
@@ -772,11 +857,22 @@ class ServiceClientNode(_Node):
         self.sent += 1
         return 1
 
+    def _await_in_flight(self) -> None:
+        """Wait for the latest async request's end, bounded by its timeout."""
+        with self._lock:
+            in_flight = self._in_flight
+        if in_flight is not None:
+            ended, deadline = in_flight
+            ended.wait(max(0.0, deadline - time.monotonic()))
+
     def GetLastResponse(self) -> Any:  # noqa: N802
+        """The latest response; waits for a request in flight (see SendAsyncRequest)."""
+        self._await_in_flight()
         with self._lock:
             return self._last
 
     def GetLastResponseStatus(self) -> bool:  # noqa: N802
+        self._await_in_flight()
         with self._lock:
             return self._last_ok
 
@@ -889,6 +985,8 @@ class ROS2Node:
     ROS node; a node made with ``Create(name)`` is a named group of bridges that
     ``Destroy()`` removes (bridges another node of this client also made stay)."""
 
+    recipe: Recipe = ()  # how it was made (its factory sets it)
+
     def __init__(self, logic: Logic, name: str = "") -> None:
         self.logic = logic
         self.client = logic.client
@@ -904,14 +1002,17 @@ class ROS2Node:
         on the daemon's node, which `GetROS2NodeName` of the default node names)."""
         self._name = nodeName
         self._destroyed = False
+        if self.recipe[:1] == ("CreateROS2Node",):
+            self.recipe = ("CreateROS2Node", nodeName)
+        self.logic.nodes.changed(self)
 
     def Destroy(self) -> None:  # noqa: N802
         """Remove every bridge this node made (one another node also holds stays)."""
         for key, node in list(self._nodes.items()):
             self._forget(key, node)
+        for client in [*self._services.values(), *self._actions.values()]:
+            self._let_go(client)
         self._services.clear()
-        for action in self._actions.values():
-            action.RemoveAllObservers()
         self._actions.clear()
         self._destroyed = True
 
@@ -956,9 +1057,18 @@ class ROS2Node:
     def _get(self, *key: str) -> Any:
         return self._nodes.get(key)
 
+    def _new(self, cls: Type[_N], recipe: Recipe, *args: Any) -> _N:
+        """A node of `cls` made by this ROS node, through the logic's node factory."""
+        node: _N = self.logic.nodes.make(cls, recipe, self, self, *args)
+        return node
+
+    def _let_go(self, node: _Node) -> None:
+        self.logic.nodes.discard(node)
+        node.RemoveAllObservers()
+
     def _forget(self, key: Tuple[str, ...], node: _Node) -> bool:
         self._nodes.pop(key, None)
-        node.RemoveAllObservers()
+        self._let_go(node)
         if isinstance(node, Tf2LookupNode):
             node.forget()
         if self.logic.release(key, self):
@@ -984,6 +1094,8 @@ class ROS2Node:
         resource = (self.client.tf_lookup(parent, child) if lookup
                     else self.client.tf_broadcaster(parent, child))
         node._attach(resource)
+        node.recipe = (node.recipe[0], parent, child)
+        self.logic.nodes.changed(node)
         self._nodes.pop(old_key, None)
         self._nodes[new_key] = node
         self.logic.hold(new_key, self)
@@ -1012,7 +1124,8 @@ class ROS2Node:
         def make() -> SubscriberNode:
             slicer_type = self._slicer_type(className, sub.ros_type,
                                             str(sub.info.get("igtl_type", "")))
-            return SubscriberNode(self, sub, slicer_type)
+            return self._new(SubscriberNode, ("CreateAndAddSubscriberNode", className, topic),
+                             sub, slicer_type)
         return self._keep(sub, make)  # type: ignore[no-any-return]
 
     def CreateAndAddPublisherNode(self, className: str, topic: str,  # noqa: N802,N803
@@ -1027,8 +1140,10 @@ class ROS2Node:
         def make() -> PublisherNode:
             ros_type = str(pub.info.get("type") or c.resolve_message_type(className))
             # As the subscriber of the same name: Publish takes what GetLastMessage gives.
-            return PublisherNode(self, pub, self._slicer_type(
-                className, ros_type, str(pub.info.get("igtl_type", ""))))
+            return self._new(PublisherNode, ("CreateAndAddPublisherNode", className, topic,
+                                             frame, labelsTopic),
+                             pub, self._slicer_type(className, ros_type,
+                                                    str(pub.info.get("igtl_type", ""))))
         return self._keep(pub, make)  # type: ignore[no-any-return]
 
     def GetSubscriberNodeByTopic(self, topic: str) -> Optional[SubscriberNode]:  # noqa: N802
@@ -1046,7 +1161,8 @@ class ROS2Node:
     # --- parameters ---------------------------------------------------------------------------
     def CreateAndAddParameterNode(self, nodeName: str) -> ParameterNode:  # noqa: N802,N803
         params = self.client.parameters(nodeName)
-        return self._keep(params, lambda: ParameterNode(self, params))  # type: ignore[no-any-return]
+        return self._keep(params, lambda: self._new(  # type: ignore[no-any-return]
+            ParameterNode, ("CreateAndAddParameterNode", nodeName), params))
 
     def GetParameterNodeByNode(self, nodeName: str) -> Optional[ParameterNode]:  # noqa: N802,N803
         return self._get(c.CreateParameterClient.op, nodeName)  # type: ignore[no-any-return]
@@ -1058,13 +1174,15 @@ class ROS2Node:
     def CreateAndAddTf2BroadcasterNode(self, parent_id: str, child_id: str  # noqa: N802
                                        ) -> Tf2BroadcasterNode:
         broadcaster = self.client.tf_broadcaster(parent_id, child_id)
-        return self._keep(broadcaster,  # type: ignore[no-any-return]
-                          lambda: Tf2BroadcasterNode(self, broadcaster))
+        return self._keep(broadcaster, lambda: self._new(  # type: ignore[no-any-return]
+            Tf2BroadcasterNode, ("CreateAndAddTf2BroadcasterNode", parent_id, child_id),
+            broadcaster))
 
     def CreateAndAddTf2LookupNode(self, parent_id: str, child_id: str  # noqa: N802
                                   ) -> Tf2LookupNode:
         lookup = self.client.tf_lookup(parent_id, child_id)
-        return self._keep(lookup, lambda: Tf2LookupNode(self, lookup))  # type: ignore[no-any-return]
+        return self._keep(lookup, lambda: self._new(  # type: ignore[no-any-return]
+            Tf2LookupNode, ("CreateAndAddTf2LookupNode", parent_id, child_id), lookup))
 
     def GetTf2BroadcasterNodeByParentChild(self, parent_id: str, child_id: str  # noqa: N802
                                            ) -> Optional[Tf2BroadcasterNode]:
@@ -1087,7 +1205,9 @@ class ROS2Node:
                               fixedFrame: str = "", tfPrefix: str = "") -> RobotNode:  # noqa: N803
         robot = self.client.robot(robotName, node=parameterNodeName, parameter=parameterName,
                                   fixed_frame=fixedFrame or None, tf_prefix=tfPrefix)
-        return self._keep(robot, lambda: RobotNode(self, robot))  # type: ignore[no-any-return]
+        return self._keep(robot, lambda: self._new(  # type: ignore[no-any-return]
+            RobotNode, ("CreateAndAddRobotNode", robotName, parameterNodeName, parameterName,
+                        fixedFrame, tfPrefix), robot))
 
     def GetRobotNodeByName(self, robotName: str) -> Optional[RobotNode]:  # noqa: N802,N803
         return self._get(c.CreateRobot.op, robotName)  # type: ignore[no-any-return]
@@ -1100,8 +1220,9 @@ class ROS2Node:
                                          fixedFrame: str) -> MarkerSubscriberNode:  # noqa: N803
         """`className`: Marker, MarkerArray, Path, PolygonStamped or PointStamped."""
         markers = self.client.markers(topic, className, fixedFrame)
-        return self._keep(markers,  # type: ignore[no-any-return]
-                          lambda: MarkerSubscriberNode(self, markers))
+        return self._keep(markers, lambda: self._new(  # type: ignore[no-any-return]
+            MarkerSubscriberNode, ("CreateAndAddMarkerSubscriberNode", className, topic,
+                                   fixedFrame), markers))
 
     def GetMarkerSubscriberNodeByTopic(self, topic: str  # noqa: N802
                                        ) -> Optional[MarkerSubscriberNode]:
@@ -1122,8 +1243,10 @@ class ROS2Node:
             stem = className.strip()
             if stem.startswith("vtkMRMLROS2ServiceClient") and stem.endswith("Node"):
                 stem = stem[len("vtkMRMLROS2ServiceClient"):-len("Node")]
-            node = ServiceClientNode(self, self.client.service(service, description.type),
-                                     description, _ADAPTERS.get(stem))
+            node = self._new(ServiceClientNode,
+                             ("CreateAndAddServiceClientNode", className, service),
+                             self.client.service(service, description.type), description,
+                             _ADAPTERS.get(stem))
             self._services[service] = node
         return node
 
@@ -1136,7 +1259,7 @@ class ROS2Node:
     def RemoveAndDeleteServiceClientNode(self, service: str) -> bool:  # noqa: N802
         node = self._services.pop(service, None)
         if node is not None:
-            node.RemoveAllObservers()
+            self._let_go(node)
         return node is not None
 
     # --- actions (the reference has none: named like its service client nodes) ---------------
@@ -1144,7 +1267,9 @@ class ROS2Node:
                                      ) -> ActionClientNode:
         node = self._actions.get(action)
         if node is None:
-            node = ActionClientNode(self, self.client.action(action, className))
+            node = self._new(ActionClientNode,
+                             ("CreateAndAddActionClientNode", className, action),
+                             self.client.action(action, className))
             self._actions[action] = node
         return node
 
@@ -1154,7 +1279,7 @@ class ROS2Node:
     def RemoveAndDeleteActionClientNode(self, action: str) -> bool:  # noqa: N802
         node = self._actions.pop(action, None)
         if node is not None:
-            node.RemoveAllObservers()
+            self._let_go(node)
         return node is not None
 
 

@@ -64,8 +64,8 @@ class SlicerType:
     def from_native(self, message: Message) -> Any:
         raise MessageValueError(
             f"GetLastMessage: a {self.ros_type} comes whole only in the daemon's message "
-            f"stream, which 3D Slicer's connector does not carry (it imports OpenIGTLink's "
-            f"standard types only); read it with slicer_client.connect() in Slicer's Python")
+            f"stream, which this client's transport does not carry; read it with "
+            f"slicer_client.connect()")
 
     def to_publish(self, value: Any) -> Publication:
         raise NotImplementedError

@@ -10,7 +10,7 @@ import json
 import pytest
 
 from protocol.commands import ErrorCode, TypeDescription
-from protocol.messages import Json, Message, RawBody
+from protocol.messages import Json, Message, RawBody, String
 from protocol.naming import KEY_COUNT, KEY_TYPE
 from slicer_client.connection import CommandRefusedError, Connection
 from support import Processes, RunningDaemon, wait_until
@@ -64,7 +64,8 @@ def test_the_message_stream_is_whole_counted_and_private(daemon: RunningDaemon) 
         asker.command("publish", {"topic": "/ms_pose", "value": last})
         message = asker.wait_for(device, lambda m: json.loads(m.body.text)["pose"][
             "position"]["x"] == 2.7182 / 1000)  # whole: not through float32
-        assert isinstance(message.body, Json)
+        # A STRING (what 3D Slicer's connector imports, as a text node) while it fits one.
+        assert isinstance(message.body, String)
         assert message.metadata[KEY_TYPE] == "geometry_msgs/msg/PoseStamped"
         assert int(message.metadata[KEY_COUNT]) > first  # the subscription's own count
         # The native stream went to both; the message stream to the one that asked.
@@ -77,6 +78,24 @@ def test_the_message_stream_is_whole_counted_and_private(daemon: RunningDaemon) 
     finally:
         asker.close()
         other.close()
+
+
+def test_a_message_too_long_for_a_string_streams_as_json(client: Connection) -> None:
+    """STRING stops at 65535 bytes: a longer message's JSON goes as a JSON message."""
+    device = client.command("create_subscriber", {"topic": "/ms_long", "type": "String",
+                                                  "messages": True})["message_device"]
+    client.command("create_publisher", {"topic": "/ms_long", "type": "String"})
+    short, long = "s" * 100, "l" * 70000
+
+    def sent(text: str) -> Message:
+        def arrived() -> bool:
+            client.command("publish", {"topic": "/ms_long", "message": {"data": text}})
+            latest = client.latest(device)
+            return latest is not None and json.loads(latest.body.text)["data"] == text
+        wait_until(arrived, timeout=20, what=f"a {len(text)}-character message")
+        return client.latest(device)
+    assert isinstance(sent(short).body, String)
+    assert isinstance(sent(long).body, Json)
 
 
 def test_publish_takes_a_whole_message_checked_strictly(client: Connection) -> None:
@@ -111,8 +130,9 @@ def test_a_parameter_client_keeps_every_change_when_asked(client: Connection,
     # declarations are events too, and DDS may deliver them late (after a repair), so the
     # label's declared value may be streamed first: wait for the change itself.
     changed = {"type": "string", "value": "changed"}
-    streamed = client.wait_for(device, lambda m: "count" in (values := json.loads(
-        m.body.text)["values"]) and values.get("label") == changed, timeout=20)
+    streamed = client.wait_for(device, lambda m: isinstance(m.body, String) and "count" in (
+        values := json.loads(m.body.text)["values"]) and values.get("label") == changed,
+        timeout=20)
     values = json.loads(streamed.body.text)["values"]
     assert values["label"] == changed
     assert values["count"] == {"type": "integer", "value": 3}  # the observed one, fetched

@@ -12,25 +12,15 @@ from typing import Iterator
 import pytest
 
 import slicer_client
-from interface_builds import BuiltInterfaces
-from reference_suite import as_the_suite, ros2, slicer_standin, spin_some, spin_until, stop_group
-from support import Child, Processes, RunningDaemon, assert_clean_exit, start_daemon
+from reference_suite import ros2, slicer_standin, spin_some, spin_until, stop_group
+from support import TIME_SCALE, Child, RunningDaemon
 
 pytestmark = pytest.mark.ros
 
 
-@pytest.fixture(scope="module")
-def daemon(turtlesim_interfaces: BuiltInterfaces,
-           module_processes: Processes) -> Iterator[RunningDaemon]:
-    """A daemon that can use turtlesim's interfaces (started once they are exported)."""
-    running = start_daemon(module_processes)
-    yield running
-    assert_clean_exit(running)
-
-
 @pytest.fixture
-def slicer(daemon: RunningDaemon) -> Iterator[object]:
-    client = slicer_client.connect("127.0.0.1", daemon.port)
+def slicer(turtle_daemon: RunningDaemon) -> Iterator[object]:
+    client = slicer_client.connect("127.0.0.1", turtle_daemon.port)
     try:
         yield slicer_standin(client.logic)
     finally:
@@ -42,17 +32,6 @@ def check_ros2_node_running(node_name: str) -> bool:
     listed = ros2("node list")
     assert listed.returncode == 0, listed.stderr
     return node_name in listed.stdout.split("\n")
-
-
-@pytest.fixture
-def turtlesim(processes: Processes) -> Iterator[Child]:
-    """`ros2 run turtlesim turtlesim_node` through the suite's shell line, until READY."""
-    node = processes.start("turtlesim", ["sh", "-c", as_the_suite("run turtlesim turtlesim_node")])
-    try:
-        node.wait_for_output("READY", timeout=60)
-        yield node
-    finally:
-        stop_group(node)
 
 
 def kill_subprocess(node: Child) -> None:
@@ -132,4 +111,28 @@ def test_service_client(slicer, turtlesim: Child) -> None:
     assert spawn1.GetLastResponseStatus() and spawn1.PreRequestCheck()
     kill_subprocess(turtlesim)
     spin_some(slicer)
+    ros2Node.Destroy()
+
+
+def test_an_async_reply_in_flight_is_there_when_the_script_reads_it(slicer,
+                                                                    turtlesim: Child) -> None:
+    """The issue's failure under load: `GetLastResponse()` was None after SendAsyncRequest
+    and the suite's spins. A request in flight is waited for, up to its timeout: read at
+    once, with no spin at all, the response is this request's."""
+    ros2Node = slicer.mrmlScene.AddNewNodeByClass("vtkMRMLROS2NodeNode")  # noqa: N806
+    spawn = ros2Node.CreateAndAddServiceClientNode("vtkMRMLROS2ServiceClientSpawnNode",
+                                                   "/spawn")
+    for name in ("first", "second"):
+        req = spawn.CreateBlankRequest()
+        req.SetX(2.0)
+        req.SetName(name)
+        spawn.SendAsyncRequest(req, 4.0 * TIME_SCALE)
+        res = spawn.GetLastResponse()
+        assert res is not None and res.GetName() == name  # the one just sent, not the last
+        assert spawn.GetLastResponseStatus()
+    # A request that cannot be answered: the wait ends at its timeout, the status says so.
+    stopped = spawn.GetLastResponse()
+    kill_subprocess(turtlesim)
+    spawn.SendAsyncRequest(spawn.CreateBlankRequest(), 0.5)
+    assert spawn.GetLastResponse() is stopped and not spawn.GetLastResponseStatus()
     ros2Node.Destroy()

@@ -34,6 +34,7 @@ from protocol.messages import (
     cell_count,
     cells_from_array,
     cells_to_list,
+    document_body,
     unpack_body,
 )
 from tests.protocol import igtl_strategies as strat
@@ -193,6 +194,17 @@ def test_json_golden_and_bounds() -> None:
         Json.unpack(b"\x00\x00")
     with pytest.raises(BodyError):
         Json.unpack(bytes.fromhex("00000002") + b"\xff\xfe")  # not UTF-8
+
+
+def test_a_document_is_a_string_while_it_fits_one_then_json() -> None:
+    """The message stream's body (document_body): STRING, which every OpenIGTLink peer
+    (3D Slicer's connector too) reads, up to 65535 bytes of UTF-8; JSON beyond."""
+    fits = "é" * 32767 + "x"  # 65535 bytes, 32768 characters
+    body = document_body(fits)
+    assert isinstance(body, String) and body.encoding == 106  # UTF-8's MIBenum
+    assert String.unpack(body.pack()).text == fits
+    over = "é" * 32768  # 65536 bytes
+    assert document_body(over) == Json(over)
 
 
 def test_status_golden() -> None:

@@ -1,12 +1,17 @@
 """Run SlicerROS2's own unit tests, unchanged, against this project's daemon.
 
     sudo .venv/bin/python tools/reference_suite/run.py PATH/TO/ROS2Tests.py
+    sudo .venv/bin/python tools/reference_suite/run.py --real-slicer PATH/TO/ROS2Tests.py
 
 `PATH/TO/ROS2Tests.py` is `Testing/Python/ROS2Tests.py` of rosmed/slicer_ros2_module, as
 it is (its code is not part of this project: fetch it yourself). What stands in for what
 it expects:
 
-* 3D Slicer's ``slicer`` module: a stand-in with the reference's two entry points answered
+* 3D Slicer's ``slicer`` module: with ``--real-slicer``, the real one (slicer-core's MRML
+  scene, Slicer's OpenIGTLinkIF connector, the ROS2Bridge module loaded and its entry points
+  installed at startupCompleted, as Slicer does: tools/slicer_core/session.py), the suite
+  run in the Slicer peer's Python by real_scene.py; else a stand-in with the reference's two
+  entry points answered
   by `slicer_client.reference.entry_points.install` (``slicer.util.getModuleLogic('ROS2')``,
   ``slicer.mrmlScene.AddNewNodeByClass("vtkMRMLROS2NodeNode")``), as the ROS2Bridge module
   answers them inside Slicer, plus the names the file imports (``ScriptedLoadableModule``
@@ -48,6 +53,10 @@ _IN_NAMESPACE = "SLICER_ROS2_BRIDGE_REFERENCE_SUITE_NS"
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("suite", type=Path, help="SlicerROS2's Testing/Python/ROS2Tests.py")
+    parser.add_argument("--real-slicer", action="store_true",
+                        help="run it in a real MRML scene with the ROS2Bridge module (the "
+                             "Slicer peer of tools/slicer_core; SLICER_PEER_PREFIX: one "
+                             "already built)")
     args = parser.parse_args()
     if not args.suite.is_file():
         parser.error(f"expected the reference's ROS2Tests.py, got {args.suite} (no such file)")
@@ -61,6 +70,8 @@ def main() -> int:
                       ROS_DOMAIN_ID=str(random.randint(102, 232)))
     daemon, port = _start_daemon()
     try:
+        if args.real_slicer:
+            return _run_in_real_slicer(args.suite, port)
         return _run(args.suite, port)
     finally:
         daemon.send_signal(signal.SIGINT)
@@ -89,9 +100,10 @@ def _mount_ros_standin() -> None:
 
 def _start_daemon() -> tuple[subprocess.Popen[str], int]:
     port = random.randint(20000, 40000)
-    daemon = subprocess.Popen([str(REPO / ".venv" / "bin" / "slicer-ros2-bridge"), "run",
+    # The daemon of this checkout (`slicer-ros2-bridge` is `python -m bridge.console`).
+    daemon = subprocess.Popen([sys.executable, "-u", "-m", "bridge.console", "run",
                                "--port", str(port)], stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True)
+                              stderr=subprocess.STDOUT, text=True, cwd=REPO)
     assert daemon.stdout is not None
     for line in daemon.stdout:
         sys.stdout.write(f"[daemon] {line}")
@@ -163,31 +175,50 @@ def _slicer_standin(logic: Any) -> types.ModuleType:
     return slicer
 
 
+def _run_in_real_slicer(suite_path: Path, port: int) -> int:
+    """The suite in the Slicer peer's Python (real_scene.py), its output passed on."""
+    from tools.slicer_core.peer import PeerUnavailableError, peer_python
+    try:
+        python = peer_python()
+    except PeerUnavailableError as error:
+        print(f"run.py: the real Slicer core is not available here: {error}", file=sys.stderr)
+        return 2
+    env = dict(os.environ, PYTHONPATH="")
+    return subprocess.call([str(python), "-u", str(HERE / "real_scene.py"), str(suite_path),
+                            str(port)], env=env, cwd=REPO)
+
+
 def _run(suite_path: Path, port: int) -> int:
     import slicer_client
 
     client = slicer_client.connect("127.0.0.1", port)
     try:
         _slicer_standin(client.logic)
-        spec = importlib.util.spec_from_file_location("ROS2Tests", suite_path)
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        logic = module.ROS2TestsLogic
-        cases: List[type] = [logic.TestTurtlesimNode, logic.TestCreateAndAddPubSub,
-                             logic.TestParameterNode, logic.TestTf2BroadcasterAndLookupNode,
-                             logic.TestServiceClient]  # the order of its own run()
-        suite = unittest.TestSuite(unittest.TestLoader().loadTestsFromTestCase(case)
-                                   for case in cases)
-        started = time.monotonic()
-        result = unittest.TextTestRunner(verbosity=2, stream=sys.stdout).run(suite)
-        failed = len(result.failures) + len(result.errors)
-        print(f"\nSlicerROS2's unit tests against slicer-ros2-bridge: "
-              f"{result.testsRun - failed} of {result.testsRun} passed "
-              f"in {time.monotonic() - started:.1f} s")
-        return 0 if result.wasSuccessful() else 1
+        return run_suite_file(suite_path)
     finally:
         client.close()
+
+
+def run_suite_file(suite_path: Path, where: str = "slicer-ros2-bridge") -> int:
+    """Import the suite as it is and run its five classes in its own run()'s order; 0 if
+    every case passed. `slicer` is whatever is imported as that (real or stand-in)."""
+    spec = importlib.util.spec_from_file_location("ROS2Tests", suite_path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    logic = module.ROS2TestsLogic
+    cases: List[type] = [logic.TestTurtlesimNode, logic.TestCreateAndAddPubSub,
+                         logic.TestParameterNode, logic.TestTf2BroadcasterAndLookupNode,
+                         logic.TestServiceClient]  # the order of its own run()
+    suite = unittest.TestSuite(unittest.TestLoader().loadTestsFromTestCase(case)
+                               for case in cases)
+    started = time.monotonic()
+    result = unittest.TextTestRunner(verbosity=2, stream=sys.stdout).run(suite)
+    failed = len(result.failures) + len(result.errors)
+    print(f"\nSlicerROS2's unit tests against {where}: "
+          f"{result.testsRun - failed} of {result.testsRun} passed "
+          f"in {time.monotonic() - started:.1f} s")
+    return 0 if result.wasSuccessful() else 1
 
 
 if __name__ == "__main__":

@@ -4,8 +4,9 @@ Laid out as Slicer's scripted-module template (Utilities/Templates/Modules/Scrip
 file holds the module, its widget (wiring only: the GUI is Resources/UI/ROS2Bridge.ui) and
 its self-test; the code is in ROS2BridgeLib/ beside it (`logic`: ROS2BridgeLogic, what
 scripts use; `transport`: ConnectorTransport; `parameters`: the parameter node;
-`reference`: SlicerROS2's entry points). Slicer puts this folder on sys.path when it loads
-the module, so ROS2BridgeLib is found; the names scripts and tests use are re-exported here.
+`reference`: SlicerROS2's entry points; `scene_nodes`: its nodes as MRML nodes). Slicer puts
+this folder on sys.path when it loads the module, so ROS2BridgeLib is found; the names
+scripts and tests use are re-exported here.
 
 Install (Slicer 5.4 or newer: the parameter node wrapper used here first shipped in 5.4;
 it needs the SlicerOpenIGTLink extension). The module imports the client packages
@@ -29,9 +30,12 @@ answers its entry points (slicer_client/reference/entry_points.py), so a script 
 it runs with no line changed: `slicer.util.getModuleLogic('ROS2')` gives the logic
 (`Spin()`, `GetDefaultROS2Node()`...; used before Connect, it connects to the host and port
 of this module's settings), and `slicer.mrmlScene.AddNewNodeByClass("vtkMRMLROS2NodeNode")`
-a ROS node. `slicer.util.getModuleLogic('ROS2Bridge')` offers the same methods. Observers
-and callbacks run on Slicer's main thread, in this module's 20 ms spin (the reference's 50
-Hz timer), never while a command waits.
+a ROS node. Its nodes are MRML nodes of the scene (ROS2BridgeLib/scene_nodes.py: the
+reference's IDs and names, VTK's observers, saved with the scene and made again once the
+module is connected). `slicer.util.getModuleLogic('ROS2Bridge')` offers the same methods.
+Observers and callbacks run on Slicer's main thread, in this module's 20 ms spin (the
+reference's 50 Hz timer), never while a command waits; a script's own `Spin()` takes in what
+the connector received.
 
 Verified against (every Slicer/MRML/VTK call in this folder was read in these sources; the
 list with the facts relied on is in slicer_client/README.md, "Verified against"):

@@ -1,7 +1,7 @@
 """The ROS2Bridge module's code beside its module file (Slicer's `<Module>Lib` convention):
 `transport` (slicer_client's Transport over Slicer's OpenIGTLinkIF connector), `parameters`
 (the module's parameter node), `logic` (what scripts use), `reference` (SlicerROS2's entry
-points).
+points), `scene_nodes` (SlicerROS2's nodes as MRML nodes of the scene).
 
 Every part imports the client packages `slicer_client` and `protocol`. The module no longer
 finds them by itself: they come with the SlicerROS2Bridge extension, or from the client

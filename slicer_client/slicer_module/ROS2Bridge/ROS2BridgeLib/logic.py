@@ -30,6 +30,7 @@ from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER, NodePlan,
 from slicer_client.send_plan import KIND_ORDER, plan_send
 
 from .parameters import ROS2BridgeParameterNode
+from .scene_nodes import SceneNodes
 from .transport import ConnectorTransport
 
 __all__ = ["CONNECTOR_NAME", "CONNECT_WAIT_S", "SPIN_INTERVAL_MS", "ROS2BridgeLogic",
@@ -71,6 +72,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartSaveEvent, self._onSave)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
                          self._onSceneStartClose)
+        self.addObserver(slicer.mrmlScene, slicer.mrmlScene.EndImportEvent,
+                         self._onSceneEndImport)
 
     def getParameterNode(self) -> ROS2BridgeParameterNode:
         return ROS2BridgeParameterNode(super().getParameterNode())
@@ -145,6 +148,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             self.problems.append(f"The daemon at {transport.address} did not answer: {error}")
             return
         self.transport, self.client = transport, client
+        # The reference's nodes are MRML nodes of this scene (scene_nodes.py).
+        client.logic.nodes = SceneNodes(slicer.mrmlScene)
         saved = self.getParameterNode().bridgeState
         if saved:
             try:
@@ -152,6 +157,15 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             except Exception as error:  # noqa: BLE001 - a bad saved bridge must not stop the rest
                 log.exception("restoring the saved bridges failed")
                 self.problems.append(f"Restoring the scene's saved bridges failed: {error}")
+        self._adoptSavedNodes()
+
+    def _adoptSavedNodes(self) -> None:
+        """The reference nodes of an opened scene, made again over this client."""
+        if self.client is not None:
+            self.problems += self.client.logic.nodes.adopt(self.client.logic)
+
+    def _onSceneEndImport(self, caller: Any = None, event: Any = None) -> None:
+        self._adoptSavedNodes()  # connected already: else _onConnected does it
 
     def requireClient(self) -> Client:
         if self.client is None:
@@ -174,7 +188,11 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         return logic
 
     def Spin(self) -> None:  # noqa: N802
-        """Run the callbacks of what arrived (the spin timer calls it every 20 ms)."""
+        """Run the callbacks of what arrived (the spin timer calls it every 20 ms). The
+        connector's messages are taken in first: a script that spins in a loop of its own
+        (as SlicerROS2's tests do) keeps Slicer's event loop, and so the connector's and
+        this module's timers, from running, and must still receive."""
+        self._onTimer()
         if self.client is not None:
             self.client.Spin()
 

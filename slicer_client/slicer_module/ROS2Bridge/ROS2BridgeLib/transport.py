@@ -51,8 +51,10 @@ class ConnectorTransport:
     # The connector puts each value into the scene itself, whatever its age: the daemon
     # cuts a dead link before its backlog ages past the freshness bound.
     drops_late_values = False
-    # Its connector imports standard OpenIGTLink types only, not the daemon's JSON bodies.
-    carries_whole_messages = False
+    # A subscriber's whole messages come as STRING (a text node of the connector) when
+    # their JSON fits 65535 bytes (protocol.messages.document_body); a larger one is a JSON
+    # message, which the connector does not import (standard OpenIGTLink types only).
+    carries_whole_messages = True
 
     def __init__(self, connector: Any, clock: Callable[[], float] = time.monotonic) -> None:
         self.connector = connector
@@ -116,11 +118,13 @@ class ConnectorTransport:
         self._dead_after = max(0.0, float(seconds))
         self._heard = self._clock()
 
-    def _watchIncomingNodes(self) -> None:
+    def _watchIncomingNodes(self, firstNew: int) -> None:
         """Observe the STATUS nodes the connector makes: the heartbeat's (counted), and
         each stream's stale/live condition (handed to the client, which marks the
         subscriber stale as slicer_client does); and a robot's meshes (the client counts
-        its load done), placed or not yet."""
+        its load done), placed or not yet. Nodes from index `firstNew` on were made by the
+        connector's last PeriodicProcess: a heartbeat node among them is a heartbeat heard
+        (its observer comes after the modification that made it)."""
         for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
             node = self.connector.GetIncomingMRMLNode(i)
             if node is not None and node.IsA("vtkMRMLModelNode") \
@@ -135,6 +139,8 @@ class ConnectorTransport:
                     self._heartbeat[0].RemoveObserver(self._heartbeat[1])
                 tag = node.AddObserver(vtk.vtkCommand.ModifiedEvent, self._onHeartbeat)
                 self._heartbeat = (node, tag)
+                if i >= firstNew:
+                    self._onHeartbeat()
                 node.SetHideFromEditors(True)  # plumbing, not data for the user
 
     def _onHeartbeat(self, caller: Any = None, event: Any = None) -> None:
@@ -150,8 +156,9 @@ class ConnectorTransport:
             return
         if self._listener is None:
             return
+        known = self.connector.GetNumberOfIncomingMRMLNodes()
         self.connector.PeriodicProcess()  # what has come is counted before judging silence
-        self._watchIncomingNodes()
+        self._watchIncomingNodes(known)
         if not self._dead_after:
             return
         now = self._clock()
