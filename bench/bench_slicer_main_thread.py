@@ -22,11 +22,8 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import signal
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -35,7 +32,7 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "bench"))
 
 from bench_daemon import Child, load  # noqa: E402
-from tools.slicer_core.peer import PeerUnavailableError, peer_python  # noqa: E402
+from tools.slicer_core.demo import peer_or_exit, ros_env, start_demo  # noqa: E402
 
 SCENE = REPO / "bench" / "slicer_scenes" / "main_thread.py"
 RUNNER = REPO / "tools" / "slicer_core" / "run_scene.py"
@@ -47,22 +44,6 @@ def cpu_seconds(pid: int) -> float:
     with open(f"/proc/{pid}/stat") as stat:
         fields = stat.read().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-def start_demo(env: dict[str, str]) -> tuple[subprocess.Popen[bytes], int]:
-    log = Path(tempfile.mkdtemp(prefix="bench-slicer-")) / "demo.log"
-    with log.open("wb") as out:
-        demo = subprocess.Popen([sys.executable, "-u", "-m", "bridge.console", "demo",
-                                 "--port", "0"], stdout=out, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, cwd=str(REPO), env=env,
-                                start_new_session=True)
-    deadline = time.monotonic() + 120
-    while "Stop with Ctrl-C" not in log.read_text(errors="replace"):
-        if demo.poll() is not None or time.monotonic() > deadline:
-            raise SystemExit(f"the demo did not start:\n{log.read_text()[-3000:]}")
-        time.sleep(0.1)
-    line = next(ln for ln in log.read_text().splitlines() if " (OpenIGTLink); ROS node" in ln)
-    return demo, int(line.split(" (OpenIGTLink)")[0].rsplit(":", 1)[1])
 
 
 def slicer_pass(python: Path, mode: str, port: int, publisher: Child, rate: float,
@@ -84,13 +65,8 @@ def main() -> int:
     parser.add_argument("--rate", type=float, default=1000.0)
     parser.add_argument("--seconds", type=float, default=10.0)
     args = parser.parse_args()
-    try:
-        python = peer_python()
-    except PeerUnavailableError as error:
-        raise SystemExit(str(error)) from None
-    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(1, 100)),
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    env.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="bench-roslog-"))
+    python = peer_or_exit()
+    env = ros_env("bench")
     demo, port = start_demo(env)
     publisher = Child("publisher", [sys.executable, "-u", str(PEERS), "publish", "pose",
                                     TOPIC], env=env)

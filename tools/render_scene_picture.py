@@ -16,36 +16,18 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import signal
 import subprocess
 import sys
-import tempfile
-import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from tools.slicer_core.peer import PeerUnavailableError, peer_python  # noqa: E402
+from tools.slicer_core.demo import peer_or_exit, ros_env, start_demo  # noqa: E402
 
 SCENE = REPO / "tools" / "slicer_core" / "scenes" / "demo_robot_picture.py"
 RUNNER = REPO / "tools" / "slicer_core" / "run_scene.py"
-
-
-def start_demo(log: Path, env: dict[str, str]) -> tuple[subprocess.Popen[bytes], int]:
-    with log.open("wb") as out:
-        demo = subprocess.Popen([sys.executable, "-u", "-m", "bridge.console", "demo",
-                                 "--port", "0"], stdout=out, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, cwd=str(REPO), env=env,
-                                start_new_session=True)
-    deadline = time.monotonic() + 120
-    while "Stop with Ctrl-C" not in log.read_text(errors="replace"):
-        if demo.poll() is not None or time.monotonic() > deadline:
-            raise SystemExit(f"the demo did not start:\n{log.read_text()[-3000:]}")
-        time.sleep(0.1)
-    line = next(ln for ln in log.read_text().splitlines() if " (OpenIGTLink); ROS node" in ln)
-    return demo, int(line.split(" (OpenIGTLink)")[0].rsplit(":", 1)[1])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,14 +38,9 @@ def main(argv: list[str] | None = None) -> int:
                              "(default 9: a full swing)")
     parser.add_argument("--size", type=int, nargs=2, default=(1200, 900))
     args = parser.parse_args(argv)
-    try:
-        python = peer_python()
-    except PeerUnavailableError as error:
-        raise SystemExit(str(error)) from None
-    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(1, 100)),
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    env.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="render-roslog-"))
-    demo, port = start_demo(Path(tempfile.mkdtemp(prefix="render-demo-")) / "demo.log", env)
+    python = peer_or_exit()
+    env = ros_env("render")
+    demo, port = start_demo(env)
     try:
         scene_args = {"port": port, "models": 14, "settle": args.settle,
                       "size": list(args.size), "out": str(args.out.resolve())}

@@ -25,6 +25,8 @@ from std_msgs.msg import String
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
+from peer_teardown import spin_until_stopped
+
 
 def transform(node, parent, child, xyz, yaw):
     t = TransformStamped()
@@ -98,13 +100,7 @@ def main() -> None:
         text.publish(String(data=f"note {count[0]}"))
     node.create_timer(0.2, tick)
     print("READY", flush=True)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin_until_stopped(node)
 
 
 if __name__ == "__main__":

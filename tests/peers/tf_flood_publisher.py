@@ -15,8 +15,9 @@ import time
 
 import rclpy
 from geometry_msgs.msg import TransformStamped
-from rclpy.executors import ExternalShutdownException
 from tf2_msgs.msg import TFMessage
+
+from peer_teardown import spin_until_stopped
 
 
 def transform(sec: int, nanosec: int, parent: str, child: str, x: float, z: float):
@@ -57,10 +58,7 @@ def main() -> None:
             transform(now.sec, now.nanosec, p + "world", p + "new", 1.0, 0.0)]))
         print(f"NEW {n}", flush=True)
     print("NEW DONE", flush=True)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+    spin_until_stopped(node)
 
 
 if __name__ == "__main__":
