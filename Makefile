@@ -55,8 +55,9 @@ fuzz: setup
 wheel: setup
 	$(BIN)/python -m pip wheel --no-deps --wheel-dir dist .
 
-client-wheel: setup
-	$(BIN)/python tools/build_client_wheel.py --out dist
+# The client's wheel needs Python and pip only: no ROS set-up first.
+client-wheel:
+	$(PYTHON) tools/build_client_wheel.py --out dist
 
 lint: setup
 	$(BIN)/python -m ruff check protocol bridge slicer_client tests bench tools

@@ -235,3 +235,14 @@ def test_the_client_wheel_on_the_oldest_python_and_numpy_it_declares(
     assert len(mesh["vertices"]) == 900 and len(mesh["triangles"]) == 841
     assert mesh["vertices"][31] == {"x": 0.001, "y": 0.001, "z": 0.0}  # mm -> m
     assert probe.popen.wait(scaled(60)) == 0, probe.output()[-3000:]
+
+
+def test_make_client_wheel_needs_no_ros_set_up(tmp_path: Path) -> None:
+    """Issue 43, item 11: `make client-wheel` ran the whole ROS set-up (make setup) first,
+    where the client's wheel needs Python and pip only. Made with the system's Python and
+    no venv: make's plan names build_client_wheel.py and nothing of the set-up."""
+    plan = _run(["make", "-n", "--no-print-directory", "-C", str(REPO), "client-wheel",
+                 "PYTHON=python3"])
+    assert plan.returncode == 0, plan.stderr
+    assert "tools/build_client_wheel.py --out dist" in plan.stdout
+    assert "setup_env.py" not in plan.stdout and ".venv" not in plan.stdout, plan.stdout
