@@ -43,6 +43,9 @@ VENV = REPO / ".venv"
 CACHE = REPO / ".cache"
 BUILD = REPO / "build"
 STAMP = VENV / ".slicer-ros2-bridge-setup"
+# The venv's packages and compiled modules were installed from these inputs: a run cut short
+# after them (Ctrl-C in the interface build) does not install them again.
+PACKAGES_STAMP = VENV / ".slicer-ros2-bridge-packages"
 # What the interface packages in the venv were built from (see interfaces_digest).
 INTERFACES_STAMP = VENV / ".slicer-ros2-bridge-interfaces"
 CMAKE_WHEEL = "cmake==3.31.6"
@@ -226,9 +229,16 @@ def set_up() -> int:
     for folder in (CACHE / "pip", CACHE / "tmp", BUILD):
         folder.mkdir(parents=True, exist_ok=True)
     STAMP.unlink(missing_ok=True)
-    create_venv()
-    install_project()
-    build_compiled_modules()
+    if venv_python().exists() and PACKAGES_STAMP.exists() \
+            and PACKAGES_STAMP.read_text().strip() == digest:
+        say("packages: keeping those installed from the same inputs (the last run stopped "
+            "after them)")
+    else:
+        PACKAGES_STAMP.unlink(missing_ok=True)
+        create_venv()
+        install_project()
+        build_compiled_modules()
+        PACKAGES_STAMP.write_text(digest + "\n")
     ensure_cmake()
     build_shipped_interfaces()
     verify()

@@ -67,3 +67,43 @@ def test_set_up_s_entry_point_is_the_guarded_one(monkeypatch: pytest.MonkeyPatch
     monkeypatch.setattr(setup_env, "guarded", guarded)
     assert setup_env.main() == 7
     assert calls == [setup_env.set_up]
+
+
+def test_a_set_up_cut_short_after_pip_does_not_run_pip_again(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Issue 43, item 13: Ctrl-C in the interface build, then `make setup` again, ran pip
+    (and the compiled modules' build) in full once more. The steps are stood in for by
+    recorders; the stamps and the order are set_up's own."""
+    monkeypatch.syspath_prepend(str(REPO / "tools"))
+    import setup_env
+
+    venv = tmp_path / "venv"
+    (venv / "bin").mkdir(parents=True)
+    (venv / "bin" / "python").write_text("")
+    monkeypatch.setattr(setup_env, "VENV", venv)
+    monkeypatch.setattr(setup_env, "STAMP", venv / "setup-stamp")
+    monkeypatch.setattr(setup_env, "PACKAGES_STAMP", venv / "packages-stamp")
+    monkeypatch.setattr(setup_env, "CACHE", tmp_path / "cache")
+    monkeypatch.setattr(setup_env, "BUILD", tmp_path / "build")
+    ran: list[str] = []
+    cut_short = [True]
+
+    def interfaces() -> None:
+        ran.append("interfaces")
+        if cut_short[0]:
+            raise KeyboardInterrupt
+    for name in ("check_python", "check_build_tools", "create_venv", "install_project",
+                 "build_compiled_modules", "ensure_cmake", "verify"):
+        monkeypatch.setattr(setup_env, name, lambda name=name: ran.append(name))
+    monkeypatch.setattr(setup_env, "build_shipped_interfaces", interfaces)
+
+    assert setup_env.guarded(setup_env.set_up) == 128 + signal.SIGINT
+    assert ran[-4:] == ["install_project", "build_compiled_modules", "ensure_cmake",
+                        "interfaces"]
+    ran.clear()
+    cut_short[0] = False
+    assert setup_env.guarded(setup_env.set_up) == 0
+    assert "install_project" not in ran and "build_compiled_modules" not in ran, ran
+    assert ran[-3:] == ["ensure_cmake", "interfaces", "verify"]
+    ran.clear()
+    assert setup_env.guarded(setup_env.set_up) == 0 and ran == []  # all in place
