@@ -216,6 +216,11 @@ class Client:
         for the first), then the tick hooks; returns how many callbacks ran."""
         return self._events.spin(timeout, max_events)
 
+    def serve_other_threads(self) -> None:
+        """Let the transport run what other threads handed to this thread (a caller that
+        waits here for another thread's command calls it between waits)."""
+        self._transport.serve_other_threads()
+
     def Spin(self) -> None:  # noqa: N802 - the reference logic's name
         """The reference's ``logic.Spin()``: run what arrived since the last spin, here."""
         self._events.spin()

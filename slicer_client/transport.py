@@ -88,6 +88,10 @@ class Transport(Protocol):
     def expect_data_within(self, seconds: float) -> None:
         """The daemon sends a heartbeat: `seconds` of silence mean a dead link."""
 
+    def serve_other_threads(self) -> None:
+        """Run what other threads handed to the thread that owns the transport (3D Slicer's
+        connector is its main thread's); a call that waits for a reply calls it."""
+
     def close(self) -> None: ...
 
 
@@ -239,6 +243,9 @@ class ReconnectingTransport:
 
     def expect_data_within(self, seconds: float) -> None:
         self._conn.expect_data_within(seconds)
+
+    def serve_other_threads(self) -> None:
+        """Nothing: a socket's commands are safe from any thread."""
 
     def close(self) -> None:
         closed_before_exit(self)

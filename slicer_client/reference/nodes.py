@@ -134,6 +134,8 @@ class FacadeClient(Protocol):
     @property
     def events(self) -> Any: ...
 
+    def serve_other_threads(self) -> None: ...
+
     def find(self, op: str, *identity: str) -> Optional[Resource]: ...
 
     def remove_bridge(self, op: str, *identity: str) -> bool: ...
@@ -863,7 +865,11 @@ class ServiceClientNode(_Node):
             in_flight = self._in_flight
         if in_flight is not None:
             ended, deadline = in_flight
-            ended.wait(max(0.0, deadline - time.monotonic()))
+            # The request's worker may need this thread to send it (3D Slicer's connector
+            # is the main thread's): let the transport serve it between short waits.
+            client = self._ros_node.logic.client
+            while not ended.wait(0.005) and time.monotonic() < deadline:
+                client.serve_other_threads()
 
     def GetLastResponse(self) -> Any:  # noqa: N802
         """The latest response; waits for a request in flight (see SendAsyncRequest)."""

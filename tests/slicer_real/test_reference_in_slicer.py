@@ -63,8 +63,10 @@ def test_the_reference_suite_cases_pass_in_a_real_scene_with_its_nodes_in_it(
     assert tf["removed"] == [True, False, True]
     # One spin after SendAsyncRequest, then GetLastResponse: the reply in flight is waited
     # for (up to the request's timeout), so it is there however busy the machine.
+    # The request ran on a worker thread; its command was handed to Slicer's main thread,
+    # which owns the connector and the scene (served while GetLastResponse waited).
     assert got["service"] == {"id": "vtkMRMLROS2ServiceClientSpawnNode1", "name": "turtle2",
-                              "status": True}
+                              "status": True, "handed_off": 1}
     assert got["after_destroy"] == []
 
 

@@ -177,7 +177,10 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     slicer.util.getModuleLogic("ROS2").Spin()
     response = spawn.GetLastResponse()
     out["service"] = {"id": spawn.GetID(), "name": None if response is None else response.GetName(),
-                      "status": spawn.GetLastResponseStatus()}
+                      "status": spawn.GetLastResponseStatus(),
+                      # the request's worker thread did not drive Slicer's connector: the
+                      # main thread ran its command
+                      "handed_off": session.logic.transport.commands_handed_off}
     ros2Node.Destroy()
     out["after_destroy"] = sorted(n.GetID() for n in scene_nodes().nodes_of_class(
         scene, "vtkMRMLROS2ServiceClientSpawnNode"))

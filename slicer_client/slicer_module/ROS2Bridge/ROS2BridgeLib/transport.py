@@ -3,7 +3,10 @@ the ROS2Bridge module's only link to the daemon. Slicer's objects (connector, no
 commands) are untyped wrappers here: typed `Any`, what is taken from them is typed."""
 
 import logging
+import queue
+import threading
 import time
+from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Optional
 
 import slicer
@@ -13,7 +16,7 @@ from protocol.liveness import HEARTBEAT_DEVICE
 from protocol.messages import Message
 from protocol.naming import KEY_ROBOT
 from slicer_client.scene_plan import ATTRIBUTE_PREFIX
-from slicer_client.connection import ConnectionClosedError
+from slicer_client.connection import CommandTimeoutError, ConnectionClosedError
 from slicer_client.connector_codec import (SLICER_TEXT_ENCODING, build_command,
                                            message_from_node, outgoing_content, parse_reply)
 from slicer_client.send_plan import SendPlan
@@ -26,6 +29,21 @@ log = logging.getLogger("ROS2Bridge")  # the module's logger, as before the spli
 ROBOT_ATTRIBUTE = ATTRIBUTE_PREFIX + KEY_ROBOT
 
 Observer = tuple[Any, int]  # (VTK object, observer tag)
+# A command handed to the main thread is given up this long after its own timeout: the main
+# thread may be busy (a blocking command of its own) when it is handed over.
+HANDOFF_GRACE_S = 1.0
+
+
+@dataclass
+class _HandedOff:
+    """A command another thread asked for, run by the main thread (`serve_other_threads`)."""
+
+    op: str
+    arguments: Optional[Mapping[str, Any]]
+    timeout: float
+    done: threading.Event = field(default_factory=threading.Event)
+    reply: Optional[dict[str, Any]] = None
+    error: Optional[BaseException] = None
 
 
 class ConnectorTransport:
@@ -71,6 +89,11 @@ class ConnectorTransport:
         self._silent_since: Optional[float] = None
         self._heartbeat: Optional[Observer] = None  # (node, tag) of the heartbeat's STATUS node
         self.heartbeats = 0  # heard on this transport
+        # Slicer's connector and scene belong to the main thread (the one that made this):
+        # a command from another thread (an async service call's worker) is run there.
+        self._main_thread = threading.get_ident()
+        self._handed_off: "queue.SimpleQueue[_HandedOff]" = queue.SimpleQueue()
+        self.commands_handed_off = 0  # run on the main thread for another thread
 
     @property
     def connected(self) -> bool:
@@ -148,8 +171,10 @@ class ConnectorTransport:
         self.heartbeats += 1
 
     def poll(self) -> None:
-        """Called from the module's timer: report a loss the connector has not yet sent,
-        or a heartbeat gone missing; and a heartbeat back on the same socket."""
+        """Called from the module's timer: run what other threads handed over; report a
+        loss the connector has not yet sent, or a heartbeat gone missing; and a heartbeat
+        back on the same socket."""
+        self.serve_other_threads()
         if not self._socket_up():
             self._silent_since = None
             self._down("the connector lost the daemon (it retries itself)")
@@ -193,8 +218,37 @@ class ConnectorTransport:
                 f"{what}: 3D Slicer's connector is not connected to the daemon at "
                 f"{self.address} (it keeps retrying; start it with `slicer-ros2-bridge run`)")
 
+    def serve_other_threads(self) -> None:
+        """Run, on the main thread, the commands other threads handed over (the connector
+        processes what it receives in `SendCommand`, and MRML's nodes and observers are the
+        main thread's: another thread must never drive them)."""
+        if threading.get_ident() != self._main_thread:
+            return
+        while True:
+            try:
+                job = self._handed_off.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                job.reply = self.command(job.op, job.arguments, timeout=job.timeout)
+            except BaseException as error:  # noqa: BLE001 - handed back to the caller
+                job.error = error
+            finally:
+                self.commands_handed_off += 1
+                job.done.set()
+
     def command(self, op: str, arguments: Optional[Mapping[str, Any]] = None, *,
                 timeout: float = 5.0) -> dict[str, Any]:
+        if threading.get_ident() != self._main_thread:
+            job = _HandedOff(op, arguments, timeout)
+            self._handed_off.put(job)
+            if not job.done.wait(timeout + HANDOFF_GRACE_S):
+                raise CommandTimeoutError(op, timeout, "3D Slicer's main thread did not run "
+                                          "it (it runs commands of other threads as it spins)")
+            if job.error is not None:
+                raise job.error
+            assert job.reply is not None
+            return job.reply
         name, text = build_command(op, arguments)
         self._requireConnected(op)  # a silent link: refused at once, the GUI never waits
         cmd = slicer.vtkSlicerOpenIGTLinkCommand()
