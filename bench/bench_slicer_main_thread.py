@@ -12,6 +12,8 @@ same run:
               its observer reading each message;
   connector - a plain OpenIGTLinkIF connector given the same stream: what Slicer itself
               costs (the floor of any Slicer-side client);
+  naive     - the same plain connector fed by the naive relay (pyigtl's server + rclpy,
+              bench/naive_relay.py) instead of the daemon;
 and the rclpy floor: a plain rclpy subscriber of the same stream, its CPU share.
 Figures: the share of wall time Slicer's main thread spends in its event loop's work (the
 connector's 5 ms timer, the module's timers and spin, observers), its CPU share, messages.
@@ -31,7 +33,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "bench"))
 
-from bench_daemon import Child, load  # noqa: E402
+from bench_daemon import Child, free_port, load  # noqa: E402
 from tools.slicer_core.demo import peer_or_exit, ros_env, start_demo  # noqa: E402
 
 SCENE = REPO / "bench" / "slicer_scenes" / "main_thread.py"
@@ -47,11 +49,12 @@ def cpu_seconds(pid: int) -> float:
 
 
 def slicer_pass(python: Path, mode: str, port: int, publisher: Child, rate: float,
-                seconds: float, env: dict[str, str]) -> dict[str, float]:
-    args = {"mode": mode, "port": port, "topic": TOPIC, "device": TOPIC.lstrip("/")}
+                seconds: float, env: dict[str, str], device: str = TOPIC.lstrip("/"),
+                subscribers: int = 1) -> dict[str, float]:
+    args = {"mode": mode, "port": port, "topic": TOPIC, "device": device}
     scene = Child(f"slicer-{mode}", [str(python), "-u", str(RUNNER), str(SCENE),
                                      json.dumps(args)], env=dict(env, PYTHONPATH=""))
-    publisher.ask("WAIT 1", "MATCHED")
+    publisher.ask(f"WAIT {subscribers}", "MATCHED")
     scene.say(f"MEASURE {seconds}")
     publisher.say(f"RUN {rate} {seconds + 2}")
     result = json.loads(scene.expect("RESULT", timeout=seconds + 120)[len("RESULT "):])
@@ -77,9 +80,20 @@ def main() -> int:
         for mode in ("module", "connector"):
             rows.append(slicer_pass(python, mode, port, publisher, args.rate, args.seconds,
                                     env))
+        # The naive relay (pyigtl's server + rclpy) feeding the same plain connector.
+        naive_port = free_port()
+        naive = Child("naive", [sys.executable, "-u", str(REPO / "bench" / "naive_relay.py"),
+                                str(naive_port), TOPIC, "/bench_slicer_unused_image"], env=env)
+        try:
+            row = slicer_pass(python, "connector", naive_port, publisher, args.rate,
+                              args.seconds, env, device="pose", subscribers=2)
+            rows.append(dict(row, mode="naive"))
+        finally:
+            naive.popen.terminate()
+            naive.popen.wait(30)
         floor = Child("floor", [sys.executable, "-u", str(PEERS), "floor", "pose", TOPIC],
                       env=env)
-        publisher.ask("WAIT 3", "MATCHED")  # the daemon, the floor (and the bridge)
+        publisher.ask("WAIT 2", "MATCHED")  # the daemon and the floor
         cpu0 = cpu_seconds(floor.popen.pid)
         start = time.monotonic()
         publisher.say(f"RUN {args.rate} {args.seconds}")
@@ -91,7 +105,8 @@ def main() -> int:
         os.killpg(demo.pid, signal.SIGINT)
         demo.wait(30)
     print(f"{'Slicer side':<34}{'main thread busy':>18}{'its CPU':>10}{'messages':>10}")
-    names = {"module": "ROS2Bridge module + demo robot", "connector": "plain connector (floor)"}
+    names = {"module": "ROS2Bridge module + demo robot", "connector": "plain connector (floor)",
+             "naive": "plain connector, naive pyigtl relay"}
     for row in rows:
         print(f"{names[row['mode']]:<34}{100 * row['busy_share']:>17.1f}%"
               f"{100 * row['cpu_share']:>9.1f}%{row['messages']:>10}")
