@@ -3,8 +3,8 @@ real-Slicer tier builds it into .cache/slicer-peer/igtl (../shared/peers/
 slicer-openigtlinkif/build.sh; SLICER_PEER_PREFIX: another checkout's): each is built from
 tests/protocol/cpp/<source>.cxx into .cache/igtl3-probe/ when its source is newer; with
 ``igtlio``, also against OpenIGTLinkIO's converters and VTK as the tier builds them
-(build-igtlio, vtk-sdk). A test that needs one skips, saying why, when that build or a
-C++ compiler is absent."""
+(build-igtlio, vtk-sdk); the build is made here first when these tests come before the tier.
+A test that needs one skips, saying why, when that build or a C++ compiler is absent."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from tools.slicer_core.peer import PREFIX as PEER  # .cache/slicer-peer, or SLICER_PEER_PREFIX
+from tools.slicer_core.peer import PeerUnavailableError, peer_python
 
 REPO = Path(__file__).resolve().parents[2]
 IGTL3 = PEER / "igtl"
@@ -44,6 +45,11 @@ def igtl3_probe(source_name: str, *, igtlio: bool = False) -> Path:
     """The probe built from `source_name` (now if needed), with OpenIGTLinkIO's converters
     if `igtlio`, or a skip saying why it cannot be."""
     lib = IGTL3 / "lib" / "igtl"
+    if not (lib / "libOpenIGTLink.so").exists():
+        try:  # built here when these tests run before the real-Slicer tier (a fresh clone)
+            peer_python()
+        except PeerUnavailableError as error:
+            pytest.skip(str(error))
     if not (lib / "libOpenIGTLink.so").exists():
         pytest.skip(f"OpenIGTLink 3 is not built at {IGTL3} (the real-Slicer tier builds it "
                     "with ../shared/peers/slicer-openigtlinkif/build.sh .cache/slicer-peer)")
