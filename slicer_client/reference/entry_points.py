@@ -3,10 +3,11 @@ line changed where SlicerROS2 itself is not installed:
 
 * ``slicer.util.getModuleLogic('ROS2')`` gives this project's `ROS2Logic`;
 * ``slicer.mrmlScene.AddNewNodeByClass("vtkMRMLROS2NodeNode")`` gives a new facade node
-  (a Python module cannot register an MRML node class, so the scene's method is answered
-  for that one class name and passes every other call on unchanged); inside 3D Slicer the
-  ROS2Bridge module's node factory makes it an MRML node of the scene, with the ID
-  ``vtkMRMLROS2NodeNode<n>`` (ROS2BridgeLib/scene_nodes.py).
+  (the scene alone would make a bare node of the C++ class, without the reference's
+  methods, so the scene's method is answered for that one class name and passes every
+  other call on unchanged); inside 3D Slicer the ROS2Bridge module's node factory makes it
+  an MRML node of the scene, with the ID ``vtkMRMLROS2NodeNode<n>``
+  (ROS2BridgeLib/scene_nodes.py).
 
 `install` does both on 3D Slicer's own ``slicer`` module (the ROS2Bridge module calls it
 once its logic is connected) or on any object with the same two attributes (a script's
@@ -22,6 +23,7 @@ __all__ = ["NODE_CLASS", "REFERENCE_MODULE", "install", "reference_installed"]
 
 REFERENCE_MODULE = "ROS2"
 NODE_CLASS = "vtkMRMLROS2NodeNode"
+OWN_LIBRARY = "vtkSlicerROS2BridgeModuleMRML"  # slicer_client/slicer_module/ROS2BridgeMRML
 _MARK = "_slicer_ros2_bridge_entry_point"
 
 
@@ -33,7 +35,10 @@ def reference_installed(slicer: Any) -> bool:
         return True
     scene = getattr(slicer, "mrmlScene", None)
     registered = getattr(scene, "IsNodeClassRegistered", None)
-    return bool(registered is not None and registered(NODE_CLASS))
+    if registered is None or not registered(NODE_CLASS):
+        return False
+    # The ROS2Bridge extension's own MRML library registers a class of that name too.
+    return OWN_LIBRARY not in str(getattr(getattr(slicer, NODE_CLASS, None), "__module__", ""))
 
 
 def install(slicer: Any, logic: Any) -> bool:

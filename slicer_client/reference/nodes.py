@@ -42,7 +42,7 @@ from slicer_client.resources import (MarkerSubscriber, ParameterClient, Publishe
 __all__ = ["ActionClientNode", "EVENT_IDS", "MarkerSubscriberNode", "NodeFactory",
            "ParameterNode", "PlainNodes", "PublisherNode", "ROS2Node", "Recipe", "RobotNode",
            "ServiceClientNode", "SubscriberNode", "Tf2BroadcasterNode", "Tf2LookupNode",
-           "reference_class"]
+           "reference_base_class", "reference_class"]
 
 log = logging.getLogger("slicer_client")
 
@@ -92,6 +92,13 @@ def reference_class(recipe: Recipe) -> str:
             stem = stem[len(f"vtkMRMLROS2{kind}"):-len("Node")]
         stem = "".join(ch for ch in stem if ch.isalnum())
     return f"vtkMRMLROS2{pattern.format(stem)}Node"
+
+
+def reference_base_class(recipe: Recipe) -> str:
+    """The reference's base class of the node `recipe` makes: ``vtkMRMLROS2SubscriberNode``
+    for any subscriber, ``vtkMRMLROS2NodeNode`` for a ROS node (its own class)."""
+    reference_class(recipe)  # the same checks
+    return f"vtkMRMLROS2{_REFERENCE_CLASSES[recipe[0]].format('')}Node"
 
 
 class NodeFactory(Protocol):

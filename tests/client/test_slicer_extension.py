@@ -64,6 +64,22 @@ macro(ctkMacroCompilePythonScript)
     _record("package-script ${f}")
   endforeach()
 endmacro()
+macro(SlicerMacroBuildModuleMRML)
+  cmake_parse_arguments(L "DISABLE_WRAP_PYTHON" "NAME;EXPORT_DIRECTIVE;FOLDER"
+    "SRCS;INCLUDE_DIRECTORIES;TARGET_LIBRARIES" ${ARGN})
+  if(L_UNPARSED_ARGUMENTS)
+    message(FATAL_ERROR "unknown arguments: ${L_UNPARSED_ARGUMENTS}")
+  endif()
+  _record("mrml-library ${L_NAME} ${L_EXPORT_DIRECTIVE}")
+  foreach(f ${L_SRCS})
+    get_filename_component(class ${f} NAME_WE)
+    file(READ ${f} source)
+    string(REPLACE ".cxx" ".h" header ${f})
+    file(READ ${header} header_text)
+    string(REGEX MATCH "public ([A-Za-z0-9]+)" base "${header_text}")
+    _record("mrml-class ${class} ${CMAKE_MATCH_1}")
+  endforeach()
+endmacro()
 macro(slicer_add_python_unittest)
   cmake_parse_arguments(T "" "SCRIPT" "" ${ARGN})
   _check_files(${T_SCRIPT})
@@ -120,6 +136,19 @@ def test_it_depends_on_slicer_openigtlink_in_cmake_and_in_the_index_entry(
     assert entry["$schema"].endswith("slicer-extension-catalog-entry-schema-v1.0.2.json#")
     assert entry["build_dependencies"] == ["SlicerOpenIGTLink"]
     assert f"category {entry['category']}" in recorded
+
+
+def test_the_mrml_library_has_the_reference_node_classes(recorded: list[str]) -> None:
+    assert ("mrml-library vtkSlicerROS2BridgeModuleMRML "
+            "VTK_SLICER_ROS2BRIDGE_MODULE_MRML_EXPORT") in recorded
+    classes = dict(line.split(" ")[1:] for line in recorded if line.startswith("mrml-class"))
+    # The reference's bases, each deriving from the MRML class it does in SlicerROS2.
+    assert classes["vtkMRMLROS2NodeNode"] == "vtkMRMLNode"
+    assert classes["vtkMRMLROS2Tf2LookupNode"] == "vtkMRMLLinearTransformNode"
+    assert classes["vtkMRMLROS2SubscriberStringNode"] == "vtkMRMLROS2SubscriberNode"
+    assert classes["vtkMRMLROS2PublisherPoseStampedNode"] == "vtkMRMLROS2PublisherNode"
+    assert classes["vtkMRMLROS2ServiceClientSpawnNode"] == "vtkMRMLROS2ServiceClientNode"
+    assert len(classes) == 10 + 20 + 19 + 18
 
 
 def test_the_icon_is_a_128_pixel_png() -> None:

@@ -1,6 +1,7 @@
 """The real-Slicer peer: 3D Slicer's core from PyPI (slicer-core) with Slicer's own
 OpenIGTLinkIF connector, built by ../shared/peers/slicer-openigtlinkif/build.sh into
-`.cache/slicer-peer` (minutes once, then seconds: its steps are cached). Used by the tests
+`.cache/slicer-peer` (minutes once, then seconds: its steps are cached), with the ROS2Bridge
+extension's MRML library (mrml_library.py). Used by the tests
 and by tools/render_scene_picture.py; the project itself never needs it."""
 
 from __future__ import annotations
@@ -9,6 +10,8 @@ import os
 import subprocess
 from pathlib import Path
 from typing import Optional
+
+from tools.slicer_core.mrml_library import LibraryBuildError, build_mrml_library
 
 REPO = Path(__file__).resolve().parents[2]
 BUILD_SCRIPT = REPO.parent / "shared" / "peers" / "slicer-openigtlinkif" / "build.sh"
@@ -40,4 +43,9 @@ def peer_python(prefix: Path = PREFIX, *, log: Optional[Path] = None,
         tail = log.read_text(errors="replace")[-1500:]
         raise PeerUnavailableError(f"building the Slicer peer failed (exit {code}; {log}):\n"
                                    f"{tail}")
+    try:
+        build_mrml_library(prefix, python, log)
+    except (LibraryBuildError, OSError, subprocess.SubprocessError) as error:
+        raise PeerUnavailableError(f"building the ROS2Bridge MRML library failed: {error}") \
+            from error
     return python

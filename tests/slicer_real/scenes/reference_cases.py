@@ -80,6 +80,9 @@ def pub_sub(ros2Node: Any, type_name: str, sent: Any) -> dict[str, Any]:  # noqa
         value = received
     found = {"pub_id": pub.GetID(), "sub_id": sub.GetID(), "sub_name": sub.GetName(),
              "by_id": slicer.mrmlScene.GetNodeByID(sub.GetID()) is sub,
+             "by_class": [ids_of_class(slicer.mrmlScene, f"vtkMRMLROS2Subscriber{type_name}Node"),
+                          ids_of_class(slicer.mrmlScene, "vtkMRMLROS2PublisherNode")],
+             "sub_class": sub.GetClassName(),
              "delta": sub.GetNumberOfMessages() - before,
              "observer_yaml_same": sub.GetLastMessageYAML() == observer.lastMessageYAML,
              "observer_calls": observer.counter, "events": observer.events,
@@ -90,6 +93,12 @@ def pub_sub(ros2Node: Any, type_name: str, sent: Any) -> dict[str, Any]:  # noqa
                         ros2Node.RemoveAndDeletePublisherNode(topic)]
     found["gone_from_scene"] = slicer.mrmlScene.GetNodeByID(found["sub_id"]) is None
     return found
+
+
+def ids_of_class(scene: Any, class_name: str) -> list[str]:
+    """What the scene's own GetNodesByClass finds (the C++ classes' IsA)."""
+    found = scene.GetNodesByClass(class_name)
+    return [found.GetItemAsObject(i).GetID() for i in range(found.GetNumberOfItems())]
 
 
 def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
@@ -112,6 +121,8 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
         "by_name": scene.GetFirstNodeByName("ros2:node:testNode") is ros2Node,
         "by_class": [n.GetID() for n in scene_nodes().nodes_of_class(
             scene, "vtkMRMLROS2NodeNode")],
+        "by_scene_class": ids_of_class(scene, "vtkMRMLROS2NodeNode"),
+        "is_a": ros2Node.IsA("vtkMRMLROS2NodeNode"),
         "cpp_class": ros2Node.GetClassName(),
         "class_attribute": ros2Node.GetAttribute("ROS2.Class"),
         "events": ros_events}

@@ -37,6 +37,18 @@ def reference_nodes(scene: Any) -> dict[str, dict[str, Any]]:
             for n in nodes if n.GetAttribute(scene_nodes().CLASS_ATTRIBUTE)}
 
 
+def ids_by_class(scene: Any) -> dict[str, list[str]]:
+    """The scene's own GetNodesByClass for each reference class the library has."""
+    found: dict[str, list[str]] = {}
+    for class_name in ("vtkMRMLROS2NodeNode", "vtkMRMLROS2PublisherStringNode",
+                       "vtkMRMLROS2SubscriberStringNode", "vtkMRMLROS2Tf2LookupNode",
+                       "vtkMRMLROS2RobotNode"):
+        nodes = scene.GetNodesByClass(class_name)
+        found[class_name] = [nodes.GetItemAsObject(i).GetID()
+                             for i in range(nodes.GetNumberOfItems())]
+    return found
+
+
 def spin_until(session: Any, condition: Any, what: str, seconds: float = 60.0) -> None:
     ros2Logic = slicer.util.getModuleLogic("ROS2")  # noqa: N806
     deadline = time.monotonic() + seconds * SCALE
@@ -81,15 +93,15 @@ def reopen(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     else:
         temp = Path(tempfile.mkdtemp(prefix="mrb-open-"))
         assert session.app.app_logic.OpenSlicerDataBundle(args["file"], str(temp))
-    opened = reference_nodes(scene)  # plain MRML nodes until the module is connected
+    opened = reference_nodes(scene)  # nodes of the C++ classes until the module is connected
+    opened_by_class = ids_by_class(scene)
     # A scene file is input: a recipe that is no reference node's call is refused.
     tampered = scene.AddNewNodeByClassWithID("vtkMRMLScriptedModuleNode", "tampered",
                                              "vtkMRMLROS2NodeNode9")
     tampered.SetAttribute("ROS2.Class", "vtkMRMLROS2NodeNode")
     tampered.SetAttribute("ROS2.Recipe", '["Destroy"]')
     module = connect(session, args["port"])
-    spin_until(session, lambda: all(v["python"] != "vtkMRMLScriptedModuleNode"
-                                    and v["python"] != "vtkMRMLLinearTransformNode"
+    spin_until(session, lambda: all(v["python"].endswith("MRML")  # the facade's classes
                                     for k, v in reference_nodes(scene).items()
                                     if k != tampered.GetID()),
                "every saved reference node made again")
@@ -100,6 +112,7 @@ def reopen(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     ros2Node = scene_nodes().nodes_of_class(scene, "vtkMRMLROS2NodeNode")[0]  # noqa: N806
     return {
         "opened": opened, "adopted": reference_nodes(scene),
+        "opened_by_class": opened_by_class, "adopted_by_class": ids_by_class(scene),
         "problems": problems,
         "sub_by_topic": ros2Node.GetSubscriberNodeByTopic("/saved_string").GetID(),
         "ros_node_name": ros2Node.GetROS2NodeName(),

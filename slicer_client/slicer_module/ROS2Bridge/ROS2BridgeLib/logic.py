@@ -30,7 +30,7 @@ from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER, NodePlan,
 from slicer_client.send_plan import KIND_ORDER, plan_send
 
 from .parameters import ROS2BridgeParameterNode
-from .scene_nodes import SceneNodes
+from .scene_nodes import SceneNodes, register_node_classes
 from .transport import ConnectorTransport
 
 __all__ = ["CONNECTOR_NAME", "CONNECT_WAIT_S", "SPIN_INTERVAL_MS", "ROS2BridgeLogic",
@@ -69,6 +69,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._spinTimer = qt.QTimer()
         self._spinTimer.setInterval(SPIN_INTERVAL_MS)
         self._spinTimer.connect("timeout()", self.Spin)
+        # A scene opened before Connect keeps its reference nodes as their classes.
+        register_node_classes(slicer.mrmlScene)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartSaveEvent, self._onSave)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
                          self._onSceneStartClose)

@@ -1,22 +1,27 @@
 """The reference SlicerROS2's nodes as MRML nodes of 3D Slicer's scene (issue 42).
 
-A Python module cannot register an MRML node class, but a Python subclass of one, added to
-the scene, is handed back by the scene as that Python object (VTK keeps it). So each facade
-class (slicer_client/reference/nodes.py) gets an MRML class: the facade's methods on a
-``vtkMRMLScriptedModuleNode`` (a ``vtkMRMLLinearTransformNode`` for a tf2 lookup, whose
-matrix the lookups set, so models can be parented under it). Each node is
+The extension's MRML library (slicer_client/slicer_module/ROS2BridgeMRML) gives the scene the
+reference's node classes in C++ (``vtkMRMLROS2NodeNode``, ``vtkMRMLROS2SubscriberStringNode``,
+a kind's base such as ``vtkMRMLROS2SubscriberNode`` for a type outside the reference's list),
+holding no ROS. Each facade class (slicer_client/reference/nodes.py) is made a Python subclass
+of its C++ class, which the scene hands back as that Python object (VTK keeps it). Each node is
 
 * in the scene under the reference's ID (``vtkMRMLROS2NodeNode1``,
-  ``vtkMRMLROS2SubscriberStringNode1``...) and name (``ros2:sub:/chatter``), with the
-  attribute ``ROS2.Class`` = the reference's class name (the scene's ``GetNodesByClass``
-  matches C++ classes only: `nodes_of_class` finds them by the attribute);
+  ``vtkMRMLROS2SubscriberStringNode1``...) and name (``ros2:sub:/chatter``), found by the
+  scene's own ``GetNodesByClass``, with the attribute ``ROS2.Class`` = the reference's class
+  name (`nodes_of_class` matches it, also for a type the library has no class of);
 * observed with VTK's own ``AddObserver`` (events as VTK hands them to Python);
-* saved with the scene: ``ROS2.Recipe`` is the call that made it, ``ROS2.Owner`` its ROS
-  node's ID. A reopened scene holds them as plain MRML nodes; `SceneNodes.adopt` makes each
-  again with the same ID through its recipe once the module is connected (the daemon's
-  bridges come back with the module's saved bridge state).
+* saved with the scene under its class's tag: ``ROS2.Recipe`` is the call that made it,
+  ``ROS2.Owner`` its ROS node's ID. A reopened scene holds them as nodes of the C++ classes;
+  `SceneNodes.adopt` makes each again with the same ID through its recipe once the module is
+  connected (the daemon's bridges come back with the module's saved bridge state).
+
+Without the library (the module folder added by hand, no extension build), the nodes are
+``vtkMRMLScriptedModuleNode``s (``vtkMRMLLinearTransformNode``s for tf2 lookups) and only
+`nodes_of_class` finds them by class.
 """
 
+import importlib
 import json
 import logging
 from typing import Any, Optional
@@ -26,15 +31,41 @@ import vtk
 
 from slicer_client.matrices import fill_vtk
 from slicer_client.reference.nodes import (EVENT_IDS, ROS2Node, Recipe, Tf2LookupNode,
-                                           reference_class)
+                                           reference_base_class, reference_class)
 
 __all__ = ["CLASS_ATTRIBUTE", "OWNER_ATTRIBUTE", "RECIPE_ATTRIBUTE", "SceneNodes",
-           "nodes_of_class", "saved_recipe"]
+           "library_classes", "nodes_of_class", "register_node_classes", "saved_recipe"]
 
 CLASS_ATTRIBUTE = "ROS2.Class"
 RECIPE_ATTRIBUTE = "ROS2.Recipe"
 OWNER_ATTRIBUTE = "ROS2.Owner"
 log = logging.getLogger("ROS2Bridge")
+
+
+LIBRARY_MODULE = "vtkSlicerROS2BridgeModuleMRMLPython"  # the extension build's wrapped library
+
+
+def library_classes() -> dict[str, type]:
+    """The MRML library's classes by name, put in the `slicer` namespace as Slicer does for
+    a module library; empty when the library is not installed."""
+    if not hasattr(slicer, "vtkMRMLROS2NodeNode"):
+        try:
+            library = importlib.import_module(LIBRARY_MODULE)
+        except ImportError:
+            return {}
+        for name in dir(library):
+            if name.startswith("vtkMRMLROS2"):
+                setattr(slicer, name, getattr(library, name))
+    return {name: getattr(slicer, name) for name in dir(slicer)
+            if name.startswith("vtkMRMLROS2") and name.endswith("Node")}
+
+
+def register_node_classes(scene: Any) -> None:
+    """Let `scene` make the library's nodes from their tags (a scene opened from a file)."""
+    for cls in library_classes().values():
+        node = cls()
+        if scene.GetClassNameByTag(node.GetNodeTagName()) != node.GetClassName():
+            scene.RegisterNodeClass(node)
 
 
 def _reference_nodes(scene: Any) -> list[Any]:
@@ -89,16 +120,27 @@ class SceneNodes:
 
     def __init__(self, scene: Any) -> None:
         self.scene = scene
-        self._classes: dict[type, type] = {}
+        self._classes: dict[tuple[type, Any], type] = {}
+        register_node_classes(scene)
         self._reuse_id: Optional[str] = None  # the saved node `adopt` makes again
 
-    def _mrml_class(self, cls: type) -> type:
+    def _base(self, recipe: Recipe) -> Any:
+        """The C++ class of the node `recipe` makes: the reference's own, else its kind's
+        base; without the library, a scripted module node (a linear transform for a lookup)."""
+        classes = library_classes()
+        mrml = classes.get(reference_class(recipe)) or classes.get(reference_base_class(recipe))
+        if mrml is not None:
+            return mrml
+        if reference_base_class(recipe) == "vtkMRMLROS2Tf2LookupNode":
+            return slicer.vtkMRMLLinearTransformNode
+        return slicer.vtkMRMLScriptedModuleNode
+
+    def _mrml_class(self, cls: type, base: Any) -> type:
         """The MRML class of a facade class: the facade's methods first, VTK's own for
         observers, events and the node's name."""
-        mrml = self._classes.get(cls)
+        mrml = self._classes.get((cls, base))
         if mrml is None:
             lookup = issubclass(cls, Tf2LookupNode)
-            base = slicer.vtkMRMLLinearTransformNode if lookup else slicer.vtkMRMLScriptedModuleNode
 
             def __init__(self: Any, *args: Any) -> None:
                 base.__init__(self)
@@ -113,7 +155,7 @@ class SceneNodes:
             if lookup:
                 namespace["_modify"] = _modify_transform
             mrml = type(f"{cls.__name__}MRML", (cls, base), namespace)
-            self._classes[cls] = mrml
+            self._classes[(cls, base)] = mrml
         return mrml
 
     def _free_id(self, className: str) -> str:  # noqa: N803
@@ -123,7 +165,7 @@ class SceneNodes:
         return f"{className}{number}"
 
     def make(self, cls: type, recipe: Recipe, owner: Optional[ROS2Node], *args: Any) -> Any:
-        node = self._mrml_class(cls)(*args)
+        node = self._mrml_class(cls, self._base(recipe))(*args)
         node.recipe = tuple(recipe)
         className = reference_class(recipe)  # noqa: N806
         node_id, self._reuse_id = self._reuse_id or self._free_id(className), None
