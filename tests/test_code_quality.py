@@ -3,8 +3,10 @@ mypy --strict (protocol/, bridge/ and slicer_client/, as configured in pyproject
 
 from __future__ import annotations
 
+import ast
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -38,3 +40,46 @@ def test_the_daemon_starts_without_the_mesh_libraries() -> None:
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True,
                          text=True, timeout=120, check=True)
     assert out.stdout.strip() == "[]", out.stderr
+
+
+CAPABILITIES = sorted(p.parent.name for p in (REPO / "bridge").glob("*/__init__.py")
+                      if p.parent.name not in ("core", "ros", "codecs", "interfaces"))
+
+
+def _imports(path: Path) -> set[str]:
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+        elif isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+    return names
+
+
+def _is_handler_module(module: str) -> bool:
+    """A module that serves ops: it takes `Handler` from the dispatcher."""
+    path = REPO / (module.replace(".", "/") + ".py")
+    if not path.exists():
+        path = REPO / module.replace(".", "/") / "__init__.py"  # a package: its __init__
+        if not path.exists():
+            return False
+    return any(isinstance(node, ast.ImportFrom) and node.module == "bridge.core.dispatch"
+               and any(alias.name == "Handler" for alias in node.names)
+               for node in ast.walk(ast.parse(path.read_text())))
+
+
+def test_no_capability_imports_another_capabilitys_handlers() -> None:
+    """Capabilities are peers: what one offers another lives in an interface module
+    (bridge/tf/lookups.py's LookupStreams, bridge/parameters/watch.py) or in core/ and ros/,
+    and the daemon wires them together."""
+    assert {"actions", "markers", "parameters", "robots", "services", "tf",
+            "topics"} <= set(CAPABILITIES)
+    crossing = []
+    for capability in CAPABILITIES:
+        for path in (REPO / "bridge" / capability).rglob("*.py"):
+            for module in _imports(path):
+                parts = module.split(".")
+                if (len(parts) >= 2 and parts[0] == "bridge" and parts[1] in CAPABILITIES
+                        and parts[1] != capability and _is_handler_module(module)):
+                    crossing.append(f"{path.relative_to(REPO)} imports {module}")
+    assert crossing == []

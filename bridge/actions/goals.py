@@ -42,7 +42,8 @@ from bridge.core.security import hidden_action
 from bridge.codecs.registry import installed_class
 from bridge.ros.ros_clients import RosClientCache
 from bridge.ros.ros_node import RosNode
-from bridge.services.capability import connected_client, message_from_json
+from bridge.codecs import message_from_json
+from bridge.core.served import connected_client
 from protocol import commands as c
 from protocol.commands import (CancelGoal, CommandError, CommandFailedError, ErrorCode,
                                ForbiddenError, LimitReachedError, SendGoal)

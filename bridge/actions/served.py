@@ -32,8 +32,8 @@ from bridge.core.dispatch import Created
 from bridge.core.hub import Hub, Replier
 from bridge.codecs.registry import installed_class
 from bridge.ros.ros_node import RosNode
-from bridge.services.capability import (advertised_by, already_served, client_answer,
-                                        connected_client, message_from_json)
+from bridge.codecs import message_from_json
+from bridge.core.served import advertised_by, already_served, client_answer, connected_client
 from protocol import commands as c
 from protocol.commands import (ActionCancel, ActionDecide, ActionFeedback, ActionGoal,
                                AdvertiseAction,

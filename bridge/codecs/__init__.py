@@ -29,6 +29,7 @@ from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import (
     dict_to_message,
     json_to_message,
+    message_from_json,
     message_to_dict,
     message_to_json,
     message_to_yaml,
@@ -56,6 +57,7 @@ __all__ = [
     "installed_types",
     "json_to_message",
     "message_class",
+    "message_from_json",
     "message_to_dict",
     "message_to_json",
     "message_to_yaml",

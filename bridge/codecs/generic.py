@@ -39,7 +39,7 @@ from rosidl_parser import definition as rdef
 
 from bridge.codecs.errors import CodecError
 from bridge.codecs.registry import message_class, resolve_type, ros_type_of
-from protocol.commands import FieldDescription, MessageDescription
+from protocol.commands import FieldDescription, MessageDescription, WrongTypeError
 from protocol.yaml_text import to_yaml
 
 __all__ = [
@@ -50,6 +50,7 @@ __all__ = [
     "is_message",
     "json_to_message",
     "list_of",
+    "message_from_json",
     "message_to_dict",
     "message_to_json",
     "message_to_yaml",
@@ -494,3 +495,13 @@ def list_of(value: Any, field: str, expected: str = "a list") -> list[Any]:
     if not isinstance(value, (list, tuple)):
         raise CodecError(field=field, expected=expected, got=_describe(value))
     return list(value)
+
+
+def message_from_json(cls: Any, data: dict[str, Any], path: str) -> Any:
+    """A message of `cls` from a client's JSON fields; `WrongTypeError` naming the field
+    under `path` (``request.data``)."""
+    try:
+        return dict_to_message(cls, data)
+    except CodecError as error:
+        raise WrongTypeError(f"{path}.{error.field}" if error.field else path,
+                             error.expected, error.got) from None

@@ -93,9 +93,8 @@ from bridge.ros.graph_types import refuse_other_type
 from bridge.ros.qos import qos_profile
 from bridge.ros.ros_node import RosNode
 from bridge.tf.buffer import TfBuffer
-from bridge.tf.capability import TfBridges
 from bridge.tf.errors import ExtrapolationError, TfError
-from bridge.tf.lookups import LookupKey
+from bridge.tf.lookups import LookupKey, LookupStreams
 from bridge.tf.math import Quat, Tf7, Vec3, compose, quat_normalize
 from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
                                ListMarkers, Op, RemoveMarkerSubscriber)
@@ -517,7 +516,7 @@ class _Subscription:
 class MarkerBridges:
     """Marker subscribers: models per marker, a TRANSFORM per frame, lifetimes."""
 
-    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: TfBridges,
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: LookupStreams,
                  package_paths: Optional[Mapping[str, Path]] = None,
                  max_model_bytes: int = DEFAULT_MAX_MARKER_BYTES) -> None:
         self._ros = ros

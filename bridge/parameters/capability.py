@@ -43,7 +43,8 @@ from bridge.core.hub import Hub, Replier
 from bridge.core.content_guards import ContentGuard
 from bridge.core.security import parameter_service
 from bridge.ros.ros_node import RosNode
-from bridge.services.capability import call_ros_service, wait_until_ready
+from bridge.parameters.watch import ParameterWatch
+from bridge.ros.service_calls import call_ros_service, wait_until_ready
 from protocol.commands import (Op, CommandError, CommandFailedError, CreateParameterClient,
                                ErrorCode, ForbiddenError, GetParameters, ListParameters,
                                ObserveParameters,
@@ -160,23 +161,6 @@ class ParameterClient:
 
     def clients(self) -> tuple[Client, ...]:
         return (self.list_client, self.get_client, self.set_client, self.types_client)
-
-
-@dataclass(eq=False)
-class ParameterWatch:
-    """Another capability's interest in one parameter of one node (robots watch
-    ``robot_description``); made by `ParameterBridges.watch_parameter`. Not a client-visible
-    bridge: no device, nothing streamed."""
-
-    node: str
-    name: str
-    on_change: Callable[[ParameterValue], None]
-    # None for the daemon's own node: read in process, never through its own services.
-    get_client: Optional[Client]
-    ready: Optional[bool] = None  # None until the first check
-    value: Optional[ParameterValue] = None  # the last value reported
-    touched: int = 0  # serial of the last event that set `value`
-    unanswered: str = ""  # why the last fetch got no answer ("" once one is answered)
 
 
 class ParameterBridges:

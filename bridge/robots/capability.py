@@ -55,14 +55,13 @@ from std_msgs.msg import String as StringMsg
 from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
-from bridge.parameters.capability import ParameterBridges, ParameterWatch
+from bridge.parameters.watch import ParameterWatch, ParameterWatcher
 from bridge.robots.errors import RobotError
 from bridge.robots.joints import describe_joints, joint_positions
 from bridge.robots.resources import PackageResolver
 from bridge.ros.graph_types import refuse_other_type
 from bridge.ros.ros_node import RosNode
-from bridge.tf.capability import TfBridges
-from bridge.tf.lookups import LookupKey
+from bridge.tf.lookups import LookupKey, LookupStreams
 from protocol.commands import (CommandFailedError, CreateRobot, DescribeRobotJoints, ErrorCode,
                                ForbiddenError, ListRobots, Op, OutOfRangeError, ParameterValue,
                                RemoveRobot, RobotSource, SetRobotJoints)
@@ -162,8 +161,8 @@ class _Robot:
 class RobotBridges:
     """Robots from URDF: meshes once per connection, link transforms from tf."""
 
-    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: TfBridges,
-                 parameters: ParameterBridges,
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: LookupStreams,
+                 parameters: ParameterWatcher,
                  package_paths: Mapping[str, Path] | None = None,
                  topic_wait_s: float = _TOPIC_WAIT_S) -> None:
         self._ros = ros

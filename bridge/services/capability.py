@@ -10,8 +10,9 @@ callback group); the coroutine hands the request to the loop, which sends the ad
 client a `service_request` COMMAND and waits for its RTS_COMMAND. The client's answer (or a
 default response after the timeout) completes an rclpy future and wakes the executor.
 
-`call_ros_service` is shared with the parameter bridges;
-`message_from_json` and `client_answer` with the action bridges.
+What it shares with other capabilities lives outside it: `bridge.ros.service_calls` (calls,
+with the parameter bridges), `bridge.core.served` (advertised entities, with the action
+bridges), `bridge.codecs.message_from_json` (a message from a client's JSON).
 """
 
 from __future__ import annotations
@@ -19,189 +20,28 @@ from __future__ import annotations
 import asyncio
 import logging
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Mapping, Optional, Protocol, TypeVar
+from typing import Any, Callable, Optional
 
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.client import Client
-from rclpy.exceptions import InvalidHandle
 from rclpy.task import Future as RosFuture
 
-from bridge.codecs import CodecError, dict_to_message, message_to_dict
+from bridge.codecs import CodecError, dict_to_message, message_from_json, message_to_dict
 from bridge.codecs.registry import SERVICE
 from bridge.core.client_replies import ClientReplies
 from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Created, Handler
+from bridge.core.served import advertised_by, already_served, client_answer, connected_client
 from bridge.core.hub import Hub, Replier
 from bridge.codecs.registry import installed_class
 from bridge.ros.ros_clients import RosClientCache
 from bridge.ros.ros_node import RosNode
-from protocol.commands import (Op, AdvertiseService, CallService, CommandError, CommandFailedError,
-                               ErrorCode, LimitReachedError, Reply, ServiceRequest,
-                               UnadvertiseService, WrongTypeError, loads)
+from bridge.ros.service_calls import call_ros_service
+from protocol.commands import (Op, AdvertiseService, CallService, CommandError, LimitReachedError,
+                               ServiceRequest, UnadvertiseService, WrongTypeError)
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
 
 log = logging.getLogger(__name__)
-
-# How often an async wait re-checks that a service server has been discovered.
-_READY_POLL_S = 0.05
-
-
-# ---------------------------------------------------------------------------- shared helpers
-
-
-def connected_client(client: Optional[Replier], field: str, why: str) -> Replier:
-    """The client a request came from; NOT_SUPPORTED for a start-up command (no client
-    to ``why``: answer the calls, get the feedback...)."""
-    if client is None:
-        raise CommandFailedError(field, f"a request from a connected client (it {why})",
-                                 "a start-up command", code=ErrorCode.NOT_SUPPORTED)
-    return client
-
-
-def already_served(kind: str, name: str, ros_type: str, client: Replier,
-                   owner: Optional[Replier], owner_type: str,
-                   graph: Iterable[tuple[str, list[str]]]) -> bool:
-    """Whether `client` already serves the ``kind`` (service, action) `name` as `ros_type`
-    (advertising again is idempotent); ALREADY_EXISTS if another client (`owner`, serving
-    it as `owner_type`) or a ROS node in `graph` ((name, types) pairs) serves it."""
-    if owner is not None:
-        if owner is client and owner_type == ros_type:
-            return True
-        raise CommandFailedError(kind, f"a {kind} no other client advertises (or the same "
-                                 "type again)", f"{name} ({owner_type})",
-                                 code=ErrorCode.ALREADY_EXISTS)
-    for found, types in graph:
-        if found == name:
-            raise CommandFailedError(kind, f"a {kind} no ROS node serves yet",
-                                     f"{name} ({', '.join(types)})",
-                                     code=ErrorCode.ALREADY_EXISTS)
-    return False
-
-
-class Advertised(Protocol):
-    """A ROS service or action a client serves: who advertised it."""
-
-    @property
-    def owner(self) -> Replier: ...
-
-
-A = TypeVar("A", bound=Advertised)
-
-
-def advertised_by(served: Mapping[str, A], kind: str, name: str,
-                  client: Optional[Replier]) -> A:
-    """The ``kind`` (service, action) `name` of `served` that `client` advertises (the
-    operator's config: whoever does); NOT_FOUND naming the field ``kind`` otherwise. The one
-    rule of who may unadvertise."""
-    entry = served.get(name)
-    if entry is None or (client is not None and entry.owner is not client):
-        raise CommandFailedError(kind, f"{'an' if kind[0] in 'aeiou' else 'a'} {kind} this "
-                                 "client advertises", name,
-                                 code=ErrorCode.NOT_FOUND)
-    return entry
-
-
-async def wait_until_ready(client: Client, wait_s: float) -> bool:
-    """True once `client` sees a server, False after `wait_s` (polled on the loop: the
-    check is one cheap rcl call, and no thread blocks)."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + wait_s
-    while not client.service_is_ready():
-        if loop.time() >= deadline:
-            return False
-        await asyncio.sleep(_READY_POLL_S)
-    return True
-
-
-async def call_ros_service(hub: Hub, client: Client, request: Any, *, timeout: float,
-                           ready_wait: float, what: str, field: str,
-                           resend_every: Optional[float] = None) -> Any:
-    """Call a ROS service from the asyncio loop and return its response.
-
-    Waits up to ``min(timeout, ready_wait)`` for the server (else UNAVAILABLE), then for the
-    response until ``timeout`` has passed in all (else TIMEOUT). The errors name ``field``.
-
-    ``resend_every`` is for idempotent requests only (reads): the request is sent again at
-    that interval until an answer comes, and the first answer wins. A server seen in the
-    graph may not have matched this client's request writer or response reader yet (Fast
-    DDS waits 100 ms for the latter, then drops the response: ros2/rmw_fastrtps#392), so on
-    a busy machine the first request or its answer can be lost outright.
-    """
-    loop = asyncio.get_running_loop()
-    start = loop.time()
-    deadline = start + timeout
-    outcome: asyncio.Future[Any] = loop.create_future()
-    sent: list[RosFuture] = []
-
-    def send() -> None:
-        ros_future = client.call_async(request)
-        sent.append(ros_future)
-        # Runs in the executor thread (or at once if already done): hand off only.
-        ros_future.add_done_callback(
-            lambda done: hub.call_soon(_transfer, done, outcome))
-
-    try:
-        if not await wait_until_ready(client, min(timeout, ready_wait)):
-            raise CommandFailedError(field, f"{what} to be available",
-                                     f"no server after {min(timeout, ready_wait):g} s",
-                                     code=ErrorCode.UNAVAILABLE)
-        send()
-        while True:
-            left = deadline - loop.time()
-            wait = left if resend_every is None else min(left, resend_every)
-            done, _ = await asyncio.wait((outcome,), timeout=max(0.0, wait))
-            if done:
-                return outcome.result()
-            if loop.time() >= deadline:
-                raise CommandFailedError(field, f"a response from {what} within {timeout:g} s",
-                                         "no response", code=ErrorCode.TIMEOUT)
-            send()
-    except InvalidHandle:  # the bridge was removed meanwhile
-        raise CommandFailedError(field, f"{what} to be available", "a removed client",
-                                 code=ErrorCode.UNAVAILABLE) from None
-    finally:
-        for ros_future in sent:
-            if not ros_future.done():
-                client.remove_pending_request(ros_future)
-
-
-def _transfer(ros_future: RosFuture, outcome: asyncio.Future[Any]) -> None:
-    if outcome.done():  # timed out meanwhile
-        return
-    if ros_future.cancelled():
-        outcome.set_exception(CommandFailedError("service", "a response", "a cancelled call",
-                                                 code=ErrorCode.ROS_ERROR))
-    elif ros_future.exception() is not None:
-        outcome.set_exception(CommandFailedError(
-            "service", "a response", str(ros_future.exception()),
-            code=ErrorCode.ROS_ERROR))
-    else:
-        outcome.set_result(ros_future.result())
-
-
-def message_from_json(cls: Any, data: dict[str, Any], path: str) -> Any:
-    """A message of `cls` from a client's JSON fields; `WrongTypeError` naming the field
-    under `path` (``request.data``)."""
-    try:
-        return dict_to_message(cls, data)
-    except CodecError as error:
-        raise WrongTypeError(f"{path}.{error.field}" if error.field else path,
-                             error.expected, error.got) from None
-
-
-def client_answer(text: str) -> dict[str, Any]:
-    """The payload of a client's RTS_COMMAND answer to a COMMAND the daemon sent: an
-    ordinary `Reply` (its result) or the bare object, judged by its JSON (3D Slicer's Status
-    metadata is junk). A refusal (``ok: false``) raises `CommandFailedError`."""
-    data = loads(text)
-    if "ok" in data:  # a Reply envelope
-        reply = Reply.from_json(text)
-        if not reply.ok:
-            assert reply.error is not None
-            raise CommandFailedError("ok", "true", f"false ({reply.error.message})")
-        data = reply.result
-    return data
-
 
 # ---------------------------------------------------------------------------- bridges
 

@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass, field
-from typing import Dict, Iterable, List, NamedTuple, Optional, Set, Tuple, Union
+from typing import Dict, Iterable, List, NamedTuple, Optional, Protocol, Set, Tuple, Union
 
 from bridge.tf.buffer import StampedTransform, TfBuffer
 from bridge.tf.errors import InvalidArgumentError, TfError, TfLookupError
@@ -269,3 +269,17 @@ def _frame(frame: object, name: str) -> str:
     if not isinstance(stripped, str) or not stripped:
         raise InvalidArgumentError(name, "a non-empty frame id", repr(frame))
     return stripped
+
+
+class LookupStreams(Protocol):
+    """Lookups streamed for another capability (robot links, marker frames): what the tf
+    capability offers the others (`TfBridges` is one). They import this, never its handlers."""
+
+    @property
+    def buffer(self) -> TfBuffer: ...
+
+    def stream_lookup(self, parent: str, child: str, *, device: str,
+                      metadata: dict[str, str], rate_hz: Optional[float] = None,
+                      ) -> LookupKey: ...
+
+    def stop_lookup(self, handle: LookupKey) -> None: ...
