@@ -1,5 +1,7 @@
-"""Stand-ins of the Slicer API the ROS2Bridge module calls, so that its code runs here
-although 3D Slicer cannot.
+"""Stand-ins of the Slicer API the ROS2Bridge module calls, kept for one user only:
+tests/peers/module_link_reader.py (the operating-room tests), which times each pose by its
+message header, a time Slicer's real connector keeps on no MRML node. Every other test of
+the module runs in a real Slicer scene (tests/slicer_real/); do not add users here.
 
 Only the calls checked in SlicerOpenIGTLink / OpenIGTLinkIO / Slicer sources exist on these
 (see slicer_client/README.md, "Verified against"), so a misspelt or invented call
