@@ -21,6 +21,7 @@ import pytest
 from netns import Hosts
 from protocol.liveness import DEAD_AFTER_S, PEER_SILENT_AFTER_S
 from support import REPO, Child, Processes, pick_free_port, scaled, wait_until
+from tools.slicer_core.peer import PeerUnavailableError, peer_python
 
 pytestmark = pytest.mark.ros
 
@@ -101,7 +102,7 @@ def room(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Room]:
         daemon.wait_for_output("listening on", timeout=60)
         robot = processes.start("robot", net.argv("robot", [
             sys.executable, "-u", str(REPO / "tests/peers/stream_publisher.py"), TOPIC, "100",
-            "--count", "100000000"]), env=env)
+            "--count", "100000000", "--stamp-in-y"]), env=env)
         try:
             yield Room(net, daemon, robot, port, key, env)
         finally:
@@ -171,11 +172,14 @@ def test_a_pulled_cable_is_noticed_by_both_sides_and_no_old_pose_comes_back(
     assert max(after) < FRESHNESS_S * 1000 + 1000  # the bound, plus a busy machine's slack
 
 
-def reader_on(room: Room, processes: Processes, name: str, peer: str) -> Child:
-    """A reader on the workstation (`peer`, in tests/peers), once it shows 50 poses."""
+def reader_on(room: Room, processes: Processes, name: str, peer: str,
+              python: Path = Path(sys.executable)) -> Child:
+    """A reader on the workstation (`peer`, in tests/peers, run by `python`), once it shows
+    50 poses."""
+    env = room.env if python == Path(sys.executable) else dict(room.env, PYTHONPATH="")
     child = processes.start(name, room.net.argv("slicer", [
-        sys.executable, "-u", str(REPO / "tests/peers" / peer),
-        room.net.address("bridge", "slicer"), str(room.port), TOPIC]), env=room.env)
+        str(python), "-u", str(REPO / "tests/peers" / peer),
+        room.net.address("bridge", "slicer"), str(room.port), TOPIC]), env=env)
     child.wait_for_output("READY", timeout=60)
     wait_until(lambda: len(lines(child, "POSE")) >= 50, 60, f"50 poses at {name}")
     return child
@@ -187,9 +191,13 @@ def plain_reader_on(room: Room, processes: Processes, name: str) -> Child:
 
 
 def module_reader_on(room: Room, processes: Processes, name: str) -> Child:
-    """The ROS2Bridge module's transport and client over a stand-in of Slicer's connector
-    with a real socket."""
-    return reader_on(room, processes, name, "module_link_reader.py")
+    """The ROS2Bridge module's transport and client over Slicer's own connector, in a real
+    scene (the Slicer peer's Python; a skip saying why where it cannot be built)."""
+    try:
+        python = peer_python()
+    except PeerUnavailableError as error:
+        pytest.skip(str(error))
+    return reader_on(room, processes, name, "module_link_reader.py", python)
 
 
 def daemon_cut_times(room: Room, since: float) -> list[float]:
@@ -216,8 +224,14 @@ def pull_for(room: Room, reader: Child, outage_s: float) -> Outage:
     time.sleep(max(0.0, pulled + outage_s - time.time()))
     room.net.plug("bridge", "slicer")
     plugged = time.time()
-    wait_until(lambda: any(t > plugged for t, _ in lines(reader, "CONNECTED")), 60,
-               "the reader connected again")
+    try:
+        wait_until(lambda: any(t > plugged for t, _ in lines(reader, "CONNECTED")), 60,
+                   "the reader connected again")
+    except AssertionError as error:
+        said = [line for line in reader.lines() if " POSE " not in line][-40:]
+        daemon = [line for line in room.daemon.lines() if "10.77.0.2" in line][-20:]
+        raise AssertionError("\n".join([f"{error}; the reader said (poses left out):", *said,
+                                        "the daemon said of it:", *daemon])) from None
     reconnected = min(t for t, _ in lines(reader, "CONNECTED") if t > plugged) - plugged
     wait_until(lambda: len(shown_ages(reader, plugged)) >= 50, 60,
                "50 poses after the cable is back")
@@ -239,12 +253,21 @@ def test_a_plain_connector_s_dead_link_is_reset_and_no_old_pose_comes_back(
     assert max(out.after) < FRESHNESS_S * 1000 + 1000  # no pose from before the pull
 
 
+@pytest.mark.xfail(run=False, strict=True, reason=(
+    "Found on Slicer's real connector (issue 42): after the cable is back, OpenIGTLinkIO's "
+    "client reconnects within one 100 ms turn of its connection thread "
+    "(igtlioConnector::ConnectionAcceptThreadFunction: the old socket dropped and a new one "
+    "made before its state check), so no Disconnected/ConnectedEvent reaches MRML; the "
+    "module, silent since the pull, waits for a heartbeat the daemon sends only after a "
+    "hello on the new socket, and stays 'LINK LOST' while poses flow. Not run: the wait for "
+    "the reconnect takes 3 minutes to fail. The stand-in's connector announced every "
+    "reconnect and hid this."))
 def test_the_slicer_module_notices_a_pulled_cable_and_shows_no_old_pose(
         room: Room, processes: Processes) -> None:
-    """The ROS2Bridge module's own transport, over a stand-in of Slicer's connector with a
-    real socket (tests/peers/module_link_reader.py): the connector's socket looks connected
-    while the cable is out; the daemon's heartbeat going silent tells the module, and the
-    daemon cuts its end as for any plain connector."""
+    """The ROS2Bridge module's own transport, over Slicer's own connector in a real scene
+    (tests/peers/module_link_reader.py): the connector's socket looks connected while the
+    cable is out; the daemon's heartbeat going silent tells the module, and the daemon cuts
+    its end as for any plain connector."""
     reader = module_reader_on(room, processes, "module")
     out = pull_for(room, reader, DEAD_AFTER_S + 2.0)
     noticed = [(t - out.pulled, rest) for t, rest in lines(reader, "LOST")

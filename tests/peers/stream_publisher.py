@@ -1,7 +1,9 @@
 """Publish numbered messages as fast as asked, until stopped or --count is reached.
 
-usage: stream_publisher.py TOPIC RATE_HZ [--image WIDTHxHEIGHT] [--count N]
-PoseStamped (default): position.x = n * 1e-6 m, so a client sees n / 1000 mm.
+usage: stream_publisher.py TOPIC RATE_HZ [--image WIDTHxHEIGHT] [--count N] [--stamp-in-y]
+PoseStamped (default): position.x = n * 1e-6 m, so a client sees n / 1000 mm;
+--stamp-in-y: also position.y = the header stamp's seconds modulo 1000, in m (a client sees
+the stamp in mm = ms, for one whose transform node keeps no header time: Slicer's).
 --image: sensor_msgs/Image rgb8 of that size, header.frame_id = "seq:n".
 Waits (up to 20 s) for a subscriber before the first message.
 Prints READY, then SENT <n> every 100 messages and at the end.
@@ -22,6 +24,7 @@ def main() -> None:
     parser.add_argument("rate", type=float)
     parser.add_argument("--image")
     parser.add_argument("--count", type=int, default=0)
+    parser.add_argument("--stamp-in-y", action="store_true")
     args = parser.parse_args()
     rclpy.init()
     node = rclpy.create_node("test_stream_publisher")
@@ -53,6 +56,9 @@ def main() -> None:
                 msg.pose.position.x = n * 1e-6
                 msg.pose.orientation.w = 1.0
             msg.header.stamp = node.get_clock().now().to_msg()
+            if args.stamp_in_y and not args.image:
+                msg.pose.position.y = (msg.header.stamp.sec % 1000
+                                       + msg.header.stamp.nanosec * 1e-9)
             publisher.publish(msg)
             if n % 100 == 0:
                 print(f"SENT {n}", flush=True)

@@ -1,13 +1,15 @@
 """SlicerROS2's API in a real Slicer scene (issue 42): its nodes are MRML nodes of the scene
 (found by ID, name and class, observed with VTK's AddObserver, saved and reopened with
-their bridges), and its own test cases pass there with the ROS2Bridge module answering its
-entry points as Slicer installs them (scenes/reference_cases.py, scenes/reference_saved.py).
-The suite file itself runs with tools/reference_suite/run.py --real-slicer."""
+their bridges), and its own test cases (every case of its Testing/Python/ROS2Tests.py,
+turtlesim's included, with the same calls and assertions) pass there with the ROS2Bridge
+module answering its entry points as Slicer installs them (scenes/reference_cases.py,
+scenes/reference_saved.py). The suite file itself runs with tools/reference_suite/run.py."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
+
 import pytest
 
 from support import REPO, Child, RunningDaemon
@@ -18,9 +20,11 @@ pytestmark = pytest.mark.ros
 def test_the_reference_suite_cases_pass_in_a_real_scene_with_its_nodes_in_it(
         run_scene, turtle_daemon: RunningDaemon, turtlesim: Child) -> None:
     got = run_scene("reference_cases", timeout=300, port=turtle_daemon.port,
-                    python=sys.executable,
+                    python=sys.executable, turtlesim_pgid=turtlesim.pid,
                     ros2_cli=str(REPO / "tools" / "reference_suite" / "ros2_cli.py"),
                     block_s=4.0)
+    assert got["turtlesim_listed"]  # TestTurtlesimNode: running, then (below) stopped
+    assert got["turtlesim_listed_after_kill"] is False
     # Slicer's thread blocked past the 3 s silence bound before the first heartbeat was
     # watched (the suite's `ros2 node list` does): the link stays up.
     assert got["connected_after_block"]
@@ -49,28 +53,56 @@ def test_the_reference_suite_cases_pass_in_a_real_scene_with_its_nodes_in_it(
         assert case["events"] == ["ModifiedEvent"], case
         assert case["removed"] == [True, True, False], case
         assert case["gone_from_scene"], case
-    assert pubsub["String"]["value"] == "xkcd"
-    assert pubsub["Pose"]["value"] == 3.1415 and pubsub["Pose"]["value_class"] == "vtkMatrix4x4"
+    assert pubsub["Empty"]["value"] == ""
+    assert pubsub["String"]["value"] == "xkcd" and pubsub["String"]["yaml"] == "data: xkcd\n"
+    # Lossless where the suite compares with ==; its PoseArray rotations to 5e-4.
+    for type_name, value_class in (("Pose", "vtkMatrix4x4"), ("IntArray", "vtkIntArray"),
+                                   ("DoubleArray", "vtkDoubleArray"), ("IntTable", "vtkTable"),
+                                   ("DoubleTable", "vtkTable")):
+        case = pubsub[type_name]
+        assert case["value"] == case["sent"] and case["value_class"] == value_class, case
+    assert pubsub["Pose"]["value"][11] == 3.1415
     assert pubsub["Double"]["value"] == 3.1415
     assert pubsub["IntArray"]["value"] == [1, 2, 3, 4, 5]
+    assert pubsub["IntTable"]["value"] == [[0, 3, 6], [1, 5, 9]]
+    assert pubsub["WrenchStamped"]["value"] == [1.1, 2.2, 3.3, 4.4, 5.5, 6.6]
+    sent, received = pubsub["PoseArray"]["sent"], pubsub["PoseArray"]["value"]
+    assert {k: received[k] for k in ("frame", "sec", "nanosec")} == {
+        "frame": "test_frame", "sec": 123, "nanosec": 456}
+    assert len(received["poses"]) == 3
+    for sent_pose, got_pose in zip(sent["poses"], received["poses"]):
+        assert got_pose == pytest.approx(sent_pose, abs=5e-4)
+    # test_pub_sub_deletion: publisher removed, gone, never made; the same for a subscriber.
+    assert got["deletion"] == [True, False, False, True, False, False]
     param = got["param"]
-    assert got["param_type_before"] == ""
+    assert got["param_types_before"] == ["", "", ""]
     assert param["id"] == "vtkMRMLROS2ParameterNode1"
-    assert param["r_type"] == "integer" and not param["y_set"]
-    assert param["g"] == 150 and param["set_output"] == "Set parameter successful"
+    assert param["r_type"] == "integer" and not param["y_set"] and param["y_type"] == ""
+    # Changed by another node (`ros2 param set`): known without AddParameter.
+    assert param["g_set"] and param["g_type"] == "integer" and param["g"] == 150
+    assert param["set_output"] == "Set parameter successful"
     assert param["removed"] == [True, False]
+    assert param["removed_again"] == [True, False, False]
     tf = got["tf"]
     assert tf["lookup_id"] == "vtkMRMLROS2Tf2LookupNode1"
     assert tf["broadcaster_id"] == "vtkMRMLROS2Tf2BroadcasterNode1"
+    # Refreshed on every spin, as the reference's lookups are; its observer reads the pose.
     assert tf["lookup_is_transform"] and tf["x"] == 66 and tf["events"] > 1
+    assert tf["observer_x"] == 66
     assert tf["model_world_x"] == 66  # a node under the lookup node follows it
-    assert tf["removed"] == [True, False, True]
+    assert tf["removed"] == [True, False, True, False]
     # One spin after SendAsyncRequest, then GetLastResponse: the reply in flight is waited
     # for (up to the request's timeout), so it is there however busy the machine.
     # The request ran on a worker thread; its command was handed to Slicer's main thread,
     # which owns the connector and the scene (served while GetLastResponse waited).
     assert got["service"] == {"id": "vtkMRMLROS2ServiceClientSpawnNode1", "name": "turtle2",
-                              "status": True, "handed_off": 1}
+                              "class": "vtkTurtlesimSpawnResponse", "status": True,
+                              "pre_request_check": True, "handed_off": 1}
+    # Issue 42's failure under load (GetLastResponse None after SendAsyncRequest): read at
+    # once, with no spin, each reply is there and is the request's just sent.
+    assert got["in_flight"] == [["first", True], ["second", True]]
+    # Turtlesim stopped: a request nobody answers ends at its timeout, the status says so.
+    assert got["unanswered"] == {"same_response": True, "status": False}
     assert got["after_destroy"] == []
 
 

@@ -1,22 +1,17 @@
-"""Run SlicerROS2's own unit tests, unchanged, against this project's daemon.
+"""Run SlicerROS2's own unit tests, unchanged, against this project's daemon, in a real
+MRML scene.
 
     sudo .venv/bin/python tools/reference_suite/run.py PATH/TO/ROS2Tests.py
-    sudo .venv/bin/python tools/reference_suite/run.py --real-slicer PATH/TO/ROS2Tests.py
 
 `PATH/TO/ROS2Tests.py` is `Testing/Python/ROS2Tests.py` of rosmed/slicer_ros2_module, as
-it is (its code is not part of this project: fetch it yourself). What stands in for what
-it expects:
+it is (its code is not part of this project: fetch it yourself). What it runs against:
 
-* 3D Slicer's ``slicer`` module: with ``--real-slicer``, the real one (slicer-core's MRML
-  scene, Slicer's OpenIGTLinkIF connector, the ROS2Bridge module loaded and its entry points
-  installed at startupCompleted, as Slicer does: tools/slicer_core/session.py), the suite
-  run in the Slicer peer's Python by real_scene.py; else a stand-in with the reference's two
-  entry points answered
-  by `slicer_client.reference.entry_points.install` (``slicer.util.getModuleLogic('ROS2')``,
-  ``slicer.mrmlScene.AddNewNodeByClass("vtkMRMLROS2NodeNode")``), as the ROS2Bridge module
-  answers them inside Slicer, plus the names the file imports (``ScriptedLoadableModule``
-  and co, ``VTKObservationMixin``, ``vtkMRMLTransformNode.TransformModifiedEvent``);
-* VTK: the real one (the test extra's wheel);
+* 3D Slicer's ``slicer`` module: the real one of the Slicer peer (tools/slicer_core:
+  slicer-core's MRML scene, Slicer's OpenIGTLinkIF connector; SLICER_PEER_PREFIX: a peer
+  already built), with the ROS2Bridge module loaded and its entry points installed at
+  startupCompleted, as Slicer does (tools/slicer_core/session.py); the suite runs in the
+  peer's Python, by real_scene.py. Only Qt is imitated (tools/slicer_core/qt_layer.py);
+* VTK: the peer's (slicer-core's);
 * ROS: a daemon started here, on a ROS domain of its own;
 * ``/opt/ros/$ROS_DISTRO/{setup.sh,bin/ros2}``: ros2_cli.py and setup.sh from this folder,
   mounted there in a private mount namespace (so this needs root and ``unshare``; the host's
@@ -24,7 +19,7 @@ it expects:
   built from tests/interfaces/turtlesim.
 
 The cases run with unittest's own runner, verbosely; the last line says how many passed,
-and the exit code is 0 only if all did.
+and the exit code is 0 only if all did (2: the peer cannot be had here).
 """
 
 from __future__ import annotations
@@ -39,10 +34,9 @@ import subprocess
 import sys
 import tempfile
 import time
-import types
 import unittest
 from pathlib import Path
-from typing import Any, List
+from typing import List
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
@@ -53,10 +47,8 @@ _IN_NAMESPACE = "SLICER_ROS2_BRIDGE_REFERENCE_SUITE_NS"
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("suite", type=Path, help="SlicerROS2's Testing/Python/ROS2Tests.py")
-    parser.add_argument("--real-slicer", action="store_true",
-                        help="run it in a real MRML scene with the ROS2Bridge module (the "
-                             "Slicer peer of tools/slicer_core; SLICER_PEER_PREFIX: one "
-                             "already built)")
+    # Earlier a choice beside a stand-in of `slicer`; the real scene is now the only one.
+    parser.add_argument("--real-slicer", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if not args.suite.is_file():
         parser.error(f"expected the reference's ROS2Tests.py, got {args.suite} (no such file)")
@@ -70,9 +62,7 @@ def main() -> int:
                       ROS_DOMAIN_ID=str(random.randint(102, 232)))
     daemon, port = _start_daemon()
     try:
-        if args.real_slicer:
-            return _run_in_real_slicer(args.suite, port)
-        return _run(args.suite, port)
+        return _run_in_real_slicer(args.suite, port)
     finally:
         daemon.send_signal(signal.SIGINT)
         daemon.wait(timeout=30)
@@ -112,69 +102,6 @@ def _start_daemon() -> tuple[subprocess.Popen[str], int]:
     raise SystemExit(f"the daemon did not start (exit code {daemon.wait()})")
 
 
-def _slicer_standin(logic: Any) -> types.ModuleType:
-    """What ROS2Tests.py imports of 3D Slicer, with the reference's entry points installed."""
-    from slicer_client.reference.entry_points import install
-
-    slicer = types.ModuleType("slicer")
-    scripted = types.ModuleType("slicer.ScriptedLoadableModule")
-
-    class ScriptedLoadableModule:
-        def __init__(self, parent: Any) -> None:
-            self.parent = parent
-
-    class ScriptedLoadableModuleWidget:
-        def __init__(self, parent: Any = None) -> None:
-            self.parent = parent
-
-        def setup(self) -> None:
-            pass
-
-    class ScriptedLoadableModuleLogic:
-        def __init__(self) -> None:
-            pass
-
-    class ScriptedLoadableModuleTest(unittest.TestCase):
-        pass
-
-    for cls in (ScriptedLoadableModule, ScriptedLoadableModuleWidget,
-                ScriptedLoadableModuleLogic, ScriptedLoadableModuleTest):
-        setattr(scripted, cls.__name__, cls)
-    scripted.__all__ = [cls.__name__ for cls in (  # type: ignore[attr-defined]
-        ScriptedLoadableModule, ScriptedLoadableModuleWidget, ScriptedLoadableModuleLogic,
-        ScriptedLoadableModuleTest)]
-
-    util = types.ModuleType("slicer.util")
-
-    def getModuleLogic(module: str) -> Any:  # noqa: N802
-        raise RuntimeError(f"Could not find module with name '{module}'")
-
-    def pip_install(requirements: str) -> None:
-        print(f"[slicer stand-in] pip_install({requirements!r}) skipped")
-
-    class VTKObservationMixin:
-        pass
-
-    util.getModuleLogic = getModuleLogic  # type: ignore[attr-defined]
-    util.pip_install = pip_install  # type: ignore[attr-defined]
-    util.VTKObservationMixin = VTKObservationMixin  # type: ignore[attr-defined]
-
-    class Scene:
-        def AddNewNodeByClass(self, class_name: str, *args: Any) -> Any:  # noqa: N802
-            raise RuntimeError(f"the stand-in scene makes no {class_name}")
-
-    slicer.util = util  # type: ignore[attr-defined]
-    slicer.ScriptedLoadableModule = scripted  # type: ignore[attr-defined]
-    slicer.mrmlScene = Scene()  # type: ignore[attr-defined]
-    slicer.vtkMRMLTransformNode = types.SimpleNamespace(  # type: ignore[attr-defined]
-        TransformModifiedEvent=15000)
-    if not install(slicer, logic):
-        raise SystemExit("the stand-in looked like a Slicer with SlicerROS2 installed")
-    sys.modules.update({"slicer": slicer, "slicer.util": util,
-                        "slicer.ScriptedLoadableModule": scripted})
-    return slicer
-
-
 def _run_in_real_slicer(suite_path: Path, port: int) -> int:
     """The suite in the Slicer peer's Python (real_scene.py), its output passed on."""
     from tools.slicer_core.peer import PeerUnavailableError, peer_python
@@ -188,20 +115,9 @@ def _run_in_real_slicer(suite_path: Path, port: int) -> int:
                             str(port)], env=env, cwd=REPO)
 
 
-def _run(suite_path: Path, port: int) -> int:
-    import slicer_client
-
-    client = slicer_client.connect("127.0.0.1", port)
-    try:
-        _slicer_standin(client.logic)
-        return run_suite_file(suite_path)
-    finally:
-        client.close()
-
-
 def run_suite_file(suite_path: Path, where: str = "slicer-ros2-bridge") -> int:
     """Import the suite as it is and run its five classes in its own run()'s order; 0 if
-    every case passed. `slicer` is whatever is imported as that (real or stand-in)."""
+    every case passed. `slicer` is the peer's real one (real_scene.py runs this)."""
     spec = importlib.util.spec_from_file_location("ROS2Tests", suite_path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)

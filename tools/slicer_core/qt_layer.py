@@ -13,16 +13,24 @@ Each imitation names where Slicer's sources show the behaviour (Slicer/Slicer ma
   loaded. Slicer's `Base/QTGUI/qSlicerApplication.cxx`.
 - `Application.moduleManager().module(name)`: None for a module not loaded.
   `Base/QTCore/qSlicerModuleManager.h`.
+- `Application.topLevelWidgets()` (none: no main window, so `slicer.util.errorDisplay` only
+  logs), `testingEnabled()` (False), `setOverrideCursor`/`restoreOverrideCursor` (nothing to
+  show), `applicationName`: what `slicer.util.tryWithErrorDisplay` calls.
+  `Base/QTCore/qSlicerCoreApplication.h`, Qt's QApplication.
 - `getModuleLogic(name)`: `slicer.util.getModuleLogic`, the logic of a loaded module (a
   scripted module's widget's `.logic`). `Base/Python/slicer/util.py`.
 - `ScriptedLoadableModule*`: the scripted-module base classes (`parent`, `moduleName`,
   `getParameterNode`: a singleton `vtkMRMLScriptedModuleNode` tagged with the module's
-  name; `delayDisplay`). `Base/Python/slicer/ScriptedLoadableModule.py`.
+  name; `delayDisplay`; the widget's `parent.isEntered`, `layout.addWidget`, `setup`,
+  `resourcePath`: the module folder's Resources/). `Base/Python/slicer/ScriptedLoadableModule.py`.
 - `parameterNodeWrapper`, `WithinRange`: typed fields stored as the parameter node's
   parameters (str and int, the types the module uses), defaults written on first use;
-  `connectGui`/`disconnectGui` do nothing (no GUI here).
-  `Base/Python/slicer/parameterNodeWrapper/{wrapper,validators}.py`.
-- `ctk`: an empty module; only the module's widget uses it, and no widget runs here.
+  `connectGui(ui)` binds each widget whose `SlicerParameterName` names a field, both ways
+  (QLineEdit `text`/textChanged(QString) to str, QSpinBox `value`/valueChanged(int) to int;
+  the widgets follow the node's ModifiedEvent), an unknown name raising; `disconnectGui`
+  ends that. `Base/Python/slicer/parameterNodeWrapper/{wrapper,validators,guiConnectors}.py`.
+- `ctk` and the Qt widgets (`qt.QFile`, `qt.QUiLoader`, `ctk.ctkSliderWidget`...): in
+  qt_widgets.py beside this file, each named there.
 
 `install(app)` puts them in place (`sys.modules["qt"]`, `["ctk"]`,
 `["slicer.ScriptedLoadableModule"]`, `["slicer.parameterNodeWrapper"]`, `slicer.app`) before
@@ -31,6 +39,7 @@ a module file is imported, as Slicer has them before it loads modules.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 import types
@@ -39,6 +48,9 @@ import unittest
 from typing import Any, Callable, Optional
 
 import slicer
+import vtk
+
+from tools.slicer_core.qt_widgets import install_widgets
 
 __all__ = ["Application", "QTimer", "install"]
 
@@ -126,6 +138,20 @@ class Application:
         for slot in self._startup:
             slot()
 
+    applicationName = "Slicer"
+
+    def topLevelWidgets(self) -> list[Any]:  # noqa: N802
+        return []
+
+    def testingEnabled(self) -> bool:  # noqa: N802
+        return False
+
+    def setOverrideCursor(self, cursor: Any) -> None:  # noqa: N802
+        pass
+
+    def restoreOverrideCursor(self) -> None:  # noqa: N802
+        pass
+
     def processEvents(self) -> None:  # noqa: N802
         self._slicer_app.pump(0)  # OpenIGTLinkIF's connector timer
         now = time.monotonic()
@@ -142,8 +168,18 @@ class ScriptedLoadableModule:
 
 class ScriptedLoadableModuleWidget:
     def __init__(self, parent: Any = None) -> None:
-        self.parent = parent
+        self.parent = parent if parent is not None else types.SimpleNamespace(isEntered=True)
         self.moduleName = type(self).__name__[:-len("Widget")]
+        self.layout = types.SimpleNamespace(widgets=[])
+        self.layout.addWidget = self.layout.widgets.append
+
+    def setup(self) -> None:
+        pass
+
+    def resourcePath(self, filename: str) -> str:  # noqa: N802
+        module = sys.modules[type(self).__module__].__file__
+        assert module is not None
+        return os.path.join(os.path.dirname(module), "Resources", filename)
 
 
 class ScriptedLoadableModuleLogic:
@@ -191,6 +227,11 @@ def _field(name: str, kind: type, default: Any) -> property:
     return property(get, set_)
 
 
+# A bound widget's property and the signal it changes by, per widget class.
+_GUI_FIELDS = {"QLineEdit": ("text", "textChanged(QString)"),
+               "QSpinBox": ("value", "valueChanged(int)")}
+
+
 def parameterNodeWrapper(cls: type) -> type:  # noqa: N802
     hints = typing.get_type_hints(cls, include_extras=True)
     fields = {}
@@ -200,14 +241,34 @@ def parameterNodeWrapper(cls: type) -> type:  # noqa: N802
 
     def __init__(self: Any, parameterNode: Any) -> None:  # noqa: N807,N803
         self.parameterNode = parameterNode
+        self._guis = {}  # tag -> (observer tag, {field: widget})
         for name, (_kind, default) in fields.items():
             if not parameterNode.GetParameter(name):
                 parameterNode.SetParameter(name, str(default))
 
+    def connectGui(self: Any, gui: Any) -> int:  # noqa: N802
+        widgets = {w.property("SlicerParameterName"): w for w in vars(gui).values()
+                   if hasattr(w, "property") and w.property("SlicerParameterName")}
+        for name, widget in widgets.items():
+            if name not in fields:
+                raise ValueError(f"{widget.name}: no parameter {name!r} in {cls.__name__}")
+            attribute, signal = _GUI_FIELDS[widget.className()]
+            setattr(widget, attribute, getattr(self, name))
+            widget.connect(signal, lambda value, n=name: setattr(self, n, value))
+
+        def follow(caller: Any = None, event: Any = None) -> None:
+            for name, widget in widgets.items():
+                setattr(widget, _GUI_FIELDS[widget.className()][0], getattr(self, name))
+        tag = self.parameterNode.AddObserver(vtk.vtkCommand.ModifiedEvent, follow)
+        self._guis[tag] = widgets
+        return int(tag)
+
+    def disconnectGui(self: Any, tag: int) -> None:  # noqa: N802
+        if self._guis.pop(tag, None) is not None:
+            self.parameterNode.RemoveObserver(tag)
+
     namespace = {name: _field(name, kind, default) for name, (kind, default) in fields.items()}
-    namespace["__init__"] = __init__
-    namespace["connectGui"] = lambda self, gui: 1
-    namespace["disconnectGui"] = lambda self, tag: None
+    namespace.update(__init__=__init__, connectGui=connectGui, disconnectGui=disconnectGui)
     return type(cls.__name__, (), namespace)
 
 
@@ -216,8 +277,10 @@ def install(slicer_app: Any) -> Application:
     app = Application(slicer_app)
     qt = types.ModuleType("qt")
     qt.QTimer = QTimer  # type: ignore[attr-defined]
+    ctk = types.ModuleType("ctk")
+    install_widgets(qt, ctk)
     sys.modules["qt"] = qt
-    sys.modules["ctk"] = types.ModuleType("ctk")
+    sys.modules["ctk"] = ctk
     slm = types.ModuleType("slicer.ScriptedLoadableModule")
     for item in (ScriptedLoadableModule, ScriptedLoadableModuleWidget,
                  ScriptedLoadableModuleLogic, ScriptedLoadableModuleTest):

@@ -1,13 +1,17 @@
-"""SlicerROS2's own test cases (its Testing/Python/ROS2Tests.py: pub/sub, parameters, tf2,
-the async service client), with the same calls, in a real scene where the ROS2Bridge module
-answers its entry points; plus what issue 42 asks of its nodes there: found by ID, name and
-class, observed with VTK's AddObserver, a tf2 lookup node a transform node models follow.
-Waits where the suite spins a fixed 100 ms, except for the service reply, read after one
-spin (GetLastResponse waits for a request in flight)."""
+"""SlicerROS2's own test cases (its Testing/Python/ROS2Tests.py: turtlesim, pub/sub of every
+type it tests, parameters, tf2, the service client), with the same calls, in a real scene
+where the ROS2Bridge module answers its entry points; plus what issue 42 asks of its nodes
+there: found by ID, name and class, observed with VTK's AddObserver, a tf2 lookup node a
+transform node models follow. Waits where the suite spins a fixed 100 ms, except for the
+service replies, read after one spin or none (GetLastResponse waits for a request in
+flight). Last, turtlesim is stopped as the suite stops it (SIGTERM to its process group)
+and a request nobody answers ends at its timeout.
+"""
 
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import time
 from typing import Any, Callable
@@ -16,8 +20,6 @@ import slicer
 import vtk
 
 from scene_tools import connect, world_matrix
-
-
 
 
 def scene_nodes() -> Any:
@@ -60,10 +62,85 @@ class Observer:
         self.events.append(event)
 
 
+def as_json(received: Any) -> Any:
+    """A received message as the test compares it: a matrix's 16 values, an array's values,
+    a table's columns, a pose array's header and poses, a wrench's values."""
+    if isinstance(received, vtk.vtkMatrix4x4):
+        return [received.GetElement(i, j) for i in range(4) for j in range(4)]
+    if isinstance(received, vtk.vtkDataArray):
+        return [received.GetValue(i) for i in range(received.GetNumberOfValues())]
+    if isinstance(received, vtk.vtkTable):
+        return [[received.GetValue(row, col).ToDouble()
+                 for row in range(received.GetNumberOfRows())]
+                for col in range(received.GetNumberOfColumns())]
+    if hasattr(received, "GetPoses"):
+        header = received.GetHeader()
+        return {"frame": header.GetFrameId(), "sec": header.GetStamp().GetSec(),
+                "nanosec": header.GetStamp().GetNanosec(),
+                "poses": [as_json(pose) for pose in received.GetPoses()]}
+    if hasattr(received, "GetWrench"):
+        return as_json(received.GetWrench())
+    return received
+
+
+def filled(array: Any, values: list[Any]) -> Any:
+    array.SetNumberOfValues(len(values))
+    for i, value in enumerate(values):
+        array.SetValue(i, value)
+    return array
+
+
+def pose(tx: float, ty: float, tz: float, r00: float, r01: float, r10: float,
+         r11: float) -> Any:
+    matrix = vtk.vtkMatrix4x4()
+    for (row, col), value in {(0, 3): tx, (1, 3): ty, (2, 3): tz, (0, 0): r00, (0, 1): r01,
+                              (1, 0): r10, (1, 1): r11}.items():
+        matrix.SetElement(row, col, value)
+    return matrix
+
+
+def sent_messages(ros2Node: Any) -> list[tuple[str, Any]]:  # noqa: N803
+    """What the suite's TestCreateAndAddPubSub publishes, type by type, built as it does."""
+    sent_matrix = vtk.vtkMatrix4x4()
+    sent_matrix.SetElement(2, 3, 3.1415)
+    tables = []
+    for array_type, columns in ((vtk.vtkIntArray, [[3 * i for i in range(3)],
+                                                   [4 * i + 1 for i in range(3)]]),
+                                (vtk.vtkDoubleArray, [[3.3 * i for i in range(3)],
+                                                      [4.4 * i + 1.1 for i in range(3)]])):
+        table = vtk.vtkTable()
+        for values in columns:
+            table.AddColumn(filled(array_type(), values))
+        tables.append(table)
+    return [("Empty", ""), ("String", "xkcd"), ("Pose", sent_matrix), ("Double", 3.1415),
+            ("IntArray", filled(vtk.vtkIntArray(), [1, 2, 3, 4, 5])),
+            ("DoubleArray", filled(vtk.vtkDoubleArray(), [1.1, 2.2, 3.3, 4.4, 5.5])),
+            ("WrenchStamped", None), ("PoseArray", None),
+            ("IntTable", tables[0]), ("DoubleTable", tables[1])]
+
+
+def blank_message(type_name: str, pub: Any) -> Any:
+    """The suite's WrenchStamped and PoseArray messages, filled from GetBlankMessage."""
+    message = pub.GetBlankMessage()
+    if type_name == "WrenchStamped":
+        filled(message.GetWrench(), [1.1, 2.2, 3.3, 4.4, 5.5, 6.6])
+        return message
+    header = message.GetHeader()
+    header.SetFrameId("test_frame")
+    header.GetStamp().SetSec(123)
+    header.GetStamp().SetNanosec(456)
+    message.SetPoses((pose(1.0, 2.0, 3.0, 0, -1, 1, 0),
+                      pose(4.0, 5.0, 6.0, 0.707, -0.707, 0.707, 0.707),
+                      pose(7.0, 8.0, 9.0, 0.866, -0.5, 0.5, 0.866)))
+    return message
+
+
 def pub_sub(ros2Node: Any, type_name: str, sent: Any) -> dict[str, Any]:  # noqa: N803
     topic = "slicer_test_" + type_name.lower()
     pub = ros2Node.CreateAndAddPublisherNode(type_name, topic)
     sub = ros2Node.CreateAndAddSubscriberNode(type_name, topic)
+    if sent is None:
+        sent = blank_message(type_name, pub)
     observer = Observer()
     tag = sub.AddObserver("ModifiedEvent", observer.Callback)
     spin_some()
@@ -72,13 +149,9 @@ def pub_sub(ros2Node: Any, type_name: str, sent: Any) -> dict[str, Any]:  # noqa
     spin_until(lambda: sub.GetNumberOfMessages() > before, f"the {type_name} message")
     spin_some()
     received = sub.GetLastMessage()
-    if isinstance(received, vtk.vtkMatrix4x4):
-        value: Any = received.GetElement(2, 3)
-    elif isinstance(received, vtk.vtkIntArray):
-        value = [received.GetValue(i) for i in range(received.GetNumberOfValues())]
-    else:
-        value = received
+    value = as_json(received)
     found = {"pub_id": pub.GetID(), "sub_id": sub.GetID(), "sub_name": sub.GetName(),
+             "sent": as_json(sent),
              "by_id": slicer.mrmlScene.GetNodeByID(sub.GetID()) is sub,
              "by_class": [ids_of_class(slicer.mrmlScene, f"vtkMRMLROS2Subscriber{type_name}Node"),
                           ids_of_class(slicer.mrmlScene, "vtkMRMLROS2PublisherNode")],
@@ -86,7 +159,8 @@ def pub_sub(ros2Node: Any, type_name: str, sent: Any) -> dict[str, Any]:  # noqa
              "delta": sub.GetNumberOfMessages() - before,
              "observer_yaml_same": sub.GetLastMessageYAML() == observer.lastMessageYAML,
              "observer_calls": observer.counter, "events": observer.events,
-             "value": value, "value_class": type(received).__name__}
+             "value": value, "value_class": type(received).__name__,
+             "yaml": sub.GetLastMessageYAML()}
     sub.RemoveObserver(tag)
     found["removed"] = [ros2Node.RemoveAndDeletePublisherNode(topic),
                         ros2Node.RemoveAndDeleteSubscriberNode(topic),
@@ -110,6 +184,14 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     spin_some()
     out: dict[str, Any] = {"connected_after_block": session.logic.isConnected()}
 
+    def ros2(*command: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([args["python"], args["ros2_cli"], *command],
+                              capture_output=True, text=True, timeout=60 * SCALE)
+
+    def turtlesim_listed() -> bool:  # the suite's check_ros2_node_running
+        return "/turtlesim" in ros2("node", "list").stdout.split("\n")
+    out["turtlesim_listed"] = turtlesim_listed()  # TestTurtlesimNode, before it is stopped
+
     ros2Node = scene.AddNewNodeByClass("vtkMRMLROS2NodeNode")  # noqa: N806
     ros2Node.Create("testNode")
     ros_events: list[str] = []
@@ -127,39 +209,56 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
         "class_attribute": ros2Node.GetAttribute("ROS2.Class"),
         "events": ros_events}
 
-    sent_matrix = vtk.vtkMatrix4x4()
-    sent_matrix.SetElement(2, 3, 3.1415)
-    ints = vtk.vtkIntArray()
-    ints.SetNumberOfValues(5)
-    for i in range(5):
-        ints.SetValue(i, i + 1)
-    out["pubsub"] = {name: pub_sub(ros2Node, name, sent) for name, sent in (
-        ("String", "xkcd"), ("Pose", sent_matrix), ("Double", 3.1415), ("IntArray", ints))}
+    out["pubsub"] = {name: pub_sub(ros2Node, name, sent)
+                     for name, sent in sent_messages(ros2Node)}
+    # test_pub_sub_deletion: by the class names, then again (gone), then a name never made.
+    ros2Node.CreateAndAddPublisherNode("vtkMRMLROS2PublisherStringNode", "test_string_xkcd")
+    ros2Node.CreateAndAddSubscriberNode("vtkMRMLROS2SubscriberStringNode", "test_string_xkcd")
+    out["deletion"] = [remove("test_string_xkcd") for remove in (
+        ros2Node.RemoveAndDeletePublisherNode, ros2Node.RemoveAndDeletePublisherNode)] + [
+        ros2Node.RemoveAndDeletePublisherNode("random_name")] + [
+        remove("test_string_xkcd") for remove in (
+            ros2Node.RemoveAndDeleteSubscriberNode, ros2Node.RemoveAndDeleteSubscriberNode)] + [
+        ros2Node.RemoveAndDeleteSubscriberNode("random_name")]
 
     # TestParameterNode, on turtlesim (started by the test).
     param = ros2Node.CreateAndAddParameterNode("/turtlesim")
     spin_some()
-    out["param_type_before"] = param.GetParameterType("background_r")
+    # Not added yet, absent, and present but not added: no type.
+    out["param_types_before"] = [param.GetParameterType(name) for name in (
+        "background_r", "background_y", "background_g")]
     param.AddParameter("background_r")
     param.AddParameter("background_y")
     spin_until(lambda: param.IsParameterSet("background_r"), "background_r fetched")
-    set_cmd = subprocess.run([args["python"], args["ros2_cli"], "param", "set", "/turtlesim",
-                              "background_g", "150"], capture_output=True, text=True,
-                             timeout=60 * SCALE)
+    set_cmd = ros2("param", "set", "/turtlesim", "background_g", "150")
     spin_until(lambda: param.IsParameterSet("background_g", True), "background_g changed")
     out["param"] = {"id": param.GetID(), "r_type": param.GetParameterType("background_r"),
                     "y_set": param.IsParameterSet("background_y", True),
+                    "y_type": param.GetParameterType("background_y"),
+                    "g_set": param.IsParameterSet("background_g"),
+                    "g_type": param.GetParameterType("background_g"),
                     "g": param.GetParameterAsInteger("background_g"),
                     "set_output": set_cmd.stdout.strip(),
                     "removed": [ros2Node.RemoveAndDeleteParameterNode("/turtlesim"),
                                 ros2Node.RemoveAndDeleteParameterNode("/turtlesim")]}
+    # The suite's deletion checks: made again, removed, then gone; a name never made.
+    ros2Node.CreateAndAddParameterNode("/turtlesim")
+    spin_some()
+    out["param"]["removed_again"] = [ros2Node.RemoveAndDeleteParameterNode(name) for name in (
+        "/turtlesim", "/turtlesim", "/random_name")]
 
     # TestTf2BroadcasterAndLookupNode, and the lookup node as a transform node.
     broadcaster = ros2Node.CreateAndAddTf2BroadcasterNode("Parent", "Child")
     lookup = ros2Node.CreateAndAddTf2LookupNode("Parent", "Child")
     lookup_events: list[str] = []
-    lookup.AddObserver(slicer.vtkMRMLTransformNode.TransformModifiedEvent,
-                       lambda caller, event: lookup_events.append(event))
+    observed_x: list[float] = []  # the suite's TestObserverTf2Lookup reads the matrix
+
+    def on_lookup(caller: Any, event: Any) -> None:
+        lookup_events.append(event)
+        seen = vtk.vtkMatrix4x4()
+        caller.GetMatrixTransformToParent(seen)
+        observed_x.append(seen.GetElement(0, 3))
+    lookup.AddObserver(slicer.vtkMRMLTransformNode.TransformModifiedEvent, on_lookup)
     model = scene.AddNewNodeByClass("vtkMRMLLinearTransformNode", "under the lookup")
     model.SetAndObserveTransformNodeID(lookup.GetID())
     broadcast = vtk.vtkMatrix4x4()
@@ -174,9 +273,11 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     out["tf"] = {"lookup_id": lookup.GetID(), "broadcaster_id": broadcaster.GetID(),
                  "lookup_is_transform": lookup.IsA("vtkMRMLLinearTransformNode"),
                  "x": looked_up.GetElement(0, 3), "events": len(lookup_events),
+                 "observer_x": observed_x[-1],
                  "model_world_x": world_matrix(model)[0][3],
                  "removed": [ros2Node.RemoveAndDeleteTf2LookupNode("Parent", "Child"),
                              ros2Node.RemoveAndDeleteTf2LookupNode("Parent", "Child"),
+                             ros2Node.RemoveAndDeleteTf2BroadcasterNode("Parent", "Child"),
                              ros2Node.RemoveAndDeleteTf2BroadcasterNode("Parent", "Child")]}
 
     # TestServiceClient: one spin, then the response is read.
@@ -188,10 +289,35 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     slicer.util.getModuleLogic("ROS2").Spin()
     response = spawn.GetLastResponse()
     out["service"] = {"id": spawn.GetID(), "name": None if response is None else response.GetName(),
+                      "class": type(response).__name__,
                       "status": spawn.GetLastResponseStatus(),
+                      "pre_request_check": spawn.PreRequestCheck(),
                       # the request's worker thread did not drive Slicer's connector: the
                       # main thread ran its command
                       "handed_off": session.logic.transport.commands_handed_off}
+    # Read at once, no spin: each reply is the request's just sent, not the last one.
+    in_flight = []
+    for name in ("first", "second"):
+        request = spawn.CreateBlankRequest()
+        request.SetX(2.0)
+        request.SetName(name)
+        spawn.SendAsyncRequest(request, 4.0 * SCALE)
+        response = spawn.GetLastResponse()
+        in_flight.append([None if response is None else response.GetName(),
+                          spawn.GetLastResponseStatus()])
+    out["in_flight"] = in_flight
+    # The suite's kill_subprocess: SIGTERM to turtlesim's group; then it is not listed.
+    answered = spawn.GetLastResponse()
+    os.killpg(int(args["turtlesim_pgid"]), signal.SIGTERM)
+    deadline = time.monotonic() + 30 * SCALE
+    while turtlesim_listed():
+        if time.monotonic() > deadline:
+            raise AssertionError("turtlesim still listed 30 s after SIGTERM")
+    out["turtlesim_listed_after_kill"] = False
+    # A request nobody answers: the wait ends at its timeout, the status says so.
+    spawn.SendAsyncRequest(spawn.CreateBlankRequest(), 0.5)
+    out["unanswered"] = {"same_response": spawn.GetLastResponse() is answered,
+                         "status": spawn.GetLastResponseStatus()}
     ros2Node.Destroy()
     out["after_destroy"] = sorted(n.GetID() for n in scene_nodes().nodes_of_class(
         scene, "vtkMRMLROS2ServiceClientSpawnNode"))
