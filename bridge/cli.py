@@ -1,4 +1,4 @@
-"""The `slicer-ros2-bridge` command line: `run`, `demo`, `state-publisher`."""
+"""The `slicer-ros2-bridge` command line: `run`, `demo`, `record`, `state-publisher`."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from bridge.config import (DEFAULT_HOST, DEFAULT_PORT, DEFAULT_TLS_PORT, ConfigE
 from bridge.config import ConfigFile, build_security, load_config_file
 from bridge.core.allocator import keep_large_buffers_returnable
 from bridge.interfaces import missing_runtime_line
+from bridge.record import cli as record_cli
 from protocol.auth import new_key_text
 from bridge.core.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_CLIENT,
                                   DEFAULT_MAX_CLIENTS)
@@ -197,6 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
                                            "moving (state publisher and joint motion included).")
     _add_daemon_options(demo)
     graph_inspect.add_parsers(commands)
+    record_cli.add_parser(commands)
     _add_build_interfaces_parser(commands)
     keygen = commands.add_parser("keygen", help="make a writers' key file (--key-file)",
                                  description="Write a new random key (32 bytes, hex) to FILE, "
@@ -481,6 +483,8 @@ def main(argv: list[str] | None = None) -> int:
         return run_with_config(args, run_daemon)
     if args.command in ("topics", "services", "echo"):
         return graph_inspect.run(args)
+    if args.command == "record":
+        return record_cli.run(args)
     parser.error(f"unknown command {args.command}")
     return 2
 
