@@ -32,6 +32,7 @@ from bridge.core.threads import fatal_failure
 from bridge.core.stream_health import StreamHealth
 from bridge.markers.capability import MarkerBridges
 from bridge.parameters.capability import ParameterBridges
+from bridge.record.capability import RecordBridges
 from bridge.robots.capability import RobotBridges
 from bridge.types import InterfaceTypes
 from bridge.ros.receive_priority import (RECEIVE_SLICE_NS, ReceivePriorityError,
@@ -102,10 +103,12 @@ class Daemon:
         self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
                                      package_paths=package_paths,
                                      max_model_bytes=policy.max_marker_bytes)
+        self.recordings = RecordBridges(self.ros, topics=self.topics, markers=self.markers,
+                                        robots=self.robots)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
                                                           self.robots, self.markers,
-                                                          InterfaceTypes()],
+                                                          InterfaceTypes(), self.recordings],
                                      policy=policy, resolve_frame=self.tf.resolve_client_frame,
                                      resolve_file=self.robots.file_path, heavy=self.heavy)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,

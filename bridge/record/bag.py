@@ -32,6 +32,8 @@ from mcap.data_stream import RecordBuilder
 from mcap.records import DataEnd, Footer
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
+from protocol.commands import COMPRESSIONS as COMPRESSION_NAMES
+
 __all__ = ["BAG_SUFFIX", "BagPathError", "BagStats", "BagWriter", "DEFAULT_QUEUE_BYTES",
            "TopicStats", "check_bag_path"]
 
@@ -44,8 +46,8 @@ DEFAULT_QUEUE_BYTES = 128 * 1024 * 1024
 CHUNK_BYTES = 1024 * 1024  # mcap's default: a chunk is what one write puts on disk
 FLUSH_EVERY_S = 1.0  # a chunk is written at least this often: a crash loses at most that
 LIBRARY = "slicer-ros2-bridge record"
-COMPRESSIONS = {"none": CompressionType.NONE, "zstd": CompressionType.ZSTD,
-                "lz4": CompressionType.LZ4}
+COMPRESSIONS = dict(zip(COMPRESSION_NAMES, (CompressionType.NONE, CompressionType.ZSTD,
+                                            CompressionType.LZ4)))
 # Recent write boundaries kept to fall back on when even the end records do not fit.
 _BOUNDARIES_KEPT = 64
 
@@ -366,9 +368,10 @@ class BagWriter:
             self._on_error(text)
 
     def _disk_full(self, error: _DiskError) -> None:
-        reason = {errno.ENOSPC: "the disk is full", errno.EFBIG: "the file size limit "
-                  "(RLIMIT_FSIZE) is reached", errno.EDQUOT: "the disk quota is used up"}.get(
-            error.error.errno, error.error.strerror or "a write failed")
+        reasons = {errno.ENOSPC: "the disk is full",
+                   errno.EFBIG: "the file size limit (RLIMIT_FSIZE) is reached",
+                   errno.EDQUOT: "the disk quota is used up"}
+        reason = reasons.get(error.error.errno or 0, error.error.strerror or "a write failed")
         kept = self._end_readable()
         self._fail(f"recording stopped: {reason} ({self.path}, {error.error.strerror}); "
                    f"the bag is closed and readable ({kept} bytes kept; messages still in "
@@ -381,7 +384,7 @@ class BagWriter:
         builder = RecordBuilder()
         DataEnd(0).write(builder)
         Footer(0, 0, 0).write(builder)
-        ending = builder.end() + MCAP0_MAGIC
+        ending = bytes(builder.end()) + MCAP0_MAGIC
         sink = self._sink
         while True:
             try:

@@ -19,7 +19,7 @@ import logging
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Mapping, Optional
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Optional, cast
 
 from bridge.core.threads import OnFailure, start_thread
 from bridge.record.bag import BagStats, BagWriter
@@ -117,10 +117,16 @@ class Recorder:
                         "not in the ROS graph yet" if not types else
                         f"several types in the graph ({', '.join(types)})")
                     continue
-                self._subscribe(topic, types[0])
+                # Subscribed once it has a publisher, whose QoS it then matches: a latched
+                # topic asked for as volatile would miss what was latched before.
+                publishers = self._ros.node.get_publishers_info_by_topic(topic)
+                if not publishers:
+                    self._state.pending[topic] = "no publisher yet"
+                    continue
+                self._subscribe(topic, types[0], publishers)
         self._attach()
 
-    def _subscribe(self, topic: str, ros_type: str) -> None:
+    def _subscribe(self, topic: str, ros_type: str, publishers: list[Any]) -> None:
         from bridge.codecs import CodecError
         from bridge.codecs.registry import message_class
 
@@ -130,7 +136,6 @@ class Recorder:
         except (DefinitionError, CodecError) as error:
             self._state.pending[topic] = f"{ros_type} cannot be recorded: {error}"
             return
-        publishers = self._ros.node.get_publishers_info_by_topic(topic)
         channel = self.bag.add_channel(topic, ros_type, definition, _offered_qos(publishers))
         entry = _Topic(topic, ros_type, channel)
         entry.subscription = self._take(entry, cls, self._qos(publishers, ros_type))
@@ -144,9 +149,9 @@ class Recorder:
     def _qos(publishers: list[Any], ros_type: str) -> Any:
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-        reliable = bool(publishers) and all(
+        reliable = all(
             p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
-        latched = bool(publishers) and all(
+        latched = all(
             p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers)
         return QoSProfile(
             depth=BULK_DEPTH if ros_type in _BULK_TYPES else DEPTH,
@@ -171,7 +176,8 @@ class Recorder:
             except ReaderError as error:
                 log.warning("%s is taken through rclpy: %s", entry.topic, error)
         return self._ros.stream_node.create_subscription(
-            cls, entry.topic, lambda data: offer(channel, [data]), qos, raw=True)
+            cls, entry.topic, lambda data: offer(channel, [cast(bytes, data)]), qos,
+            raw=True)  # raw: the bytes as received
 
     def _attach(self) -> None:
         for name, path in dict(self._attachments()).items():
