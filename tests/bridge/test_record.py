@@ -191,7 +191,7 @@ def test_the_op_is_a_write_and_bad_paths_are_refused_by_type(
         existing.write_bytes(b"precious")
         cases[str(existing)] = ErrorCode.ALREADY_EXISTS
         for path, code in cases.items():
-            error = refused(lambda p=path: ros.record(p, ["/rec_pose"]))  # type: ignore[misc]
+            error = refused(lambda p=path: ros.record(p, ["/rec_pose"]))
             assert (error.code, error.field) == (code, "path"), (path, str(error))
         assert existing.read_bytes() == b"precious"
         with ros.record(str(target), ["/rec_pose"]) as rec:
