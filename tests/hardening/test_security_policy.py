@@ -57,6 +57,8 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
         "cancel_goal": {"action": "/a", "goal_id": "0" * 32},
         "advertise_action": {"action": "/a", "type": "control_msgs/action/GripperCommand"},
         "action_feedback": {"action": "/a", "goal_id": "0" * 32, "feedback": {}},
+        "start_recording": {"path": "/data/s.mcap"},  # a file on the daemon's host
+        "stop_recording": {"path": "/data/s.mcap"},
     }
     # The declarations say what writes: this list is the expectation they are held to.
     assert set(writes) == {op for op, cls in c.REQUEST_TYPES.items() if cls.writes}
@@ -69,6 +71,7 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
                      "create_tf_lookup": {"parent": "a", "child": "b"},
                      "get_parameters": {"node": "/n", "names": ["p"]},
                      "list_actions": {},
+                     "recording_status": {"path": "/data/s.mcap"},
                      "hello": {}}.items():
         check(policy, op, args)
     # Watching an action: its goal status topic.
