@@ -260,3 +260,42 @@ def _bridge(*args: str) -> list[str]:
     import sys
 
     return [sys.executable, "-u", "-m", "bridge.console", *args]
+
+
+def test_a_full_disk_stops_the_daemon_s_recording_readable_and_it_serves_on(
+        processes: Processes, tmp_path: Path) -> None:
+    """A real full file system (a 3 MiB tmpfs mounted here, as root): the recording stops
+    with an error in its status, the bag stays readable, the daemon serves on."""
+    import subprocess
+
+    disk = tmp_path / "small-disk"
+    disk.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(disk)],
+                             capture_output=True, text=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"needs to mount a small tmpfs (root): {mounted.stderr.strip()}")
+    try:
+        daemon = start_daemon(processes)
+        images = processes.python("images", "stream_publisher.py", "/full_image", "30",
+                                  "--image", "320x240")
+        images.wait_for_output("READY")
+        bag = disk / "full.mcap"
+        with slicer_client.connect("127.0.0.1", daemon.port) as ros:
+            rec = ros.record(str(bag), ["/full_image"])
+            wait_until(lambda: not rec.status()["running"], timeout=60,
+                       what="the disk to fill up")
+            status = rec.status()
+            assert status["error"].startswith("recording stopped: the disk is full")
+            assert ros.list_topics() and ros.command("hello")["ops"]  # served on
+            final = rec.stop()
+            assert final["error"] == status["error"]
+        in_bag, _, _ = bag_messages(bag)
+        frames = []
+        with AnyReader([bag]) as reader:
+            for connection, _, raw in reader.messages():
+                frames.append(reader.deserialize(raw, connection.msgtype).header.frame_id)
+        numbers = [int(f.split(":")[1]) for f in frames]
+        assert len(numbers) >= 5 and numbers == list(range(numbers[0],
+                                                           numbers[0] + len(numbers)))
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], check=False)
