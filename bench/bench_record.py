@@ -12,7 +12,7 @@ Figures: messages in each bag / messages sent, per topic (read back from the bag
 summaries), drops the daemon counted, and the CPU seconds each process spent during the
 run (the daemon's include serving the client and its own bridges).
 
-usage: python bench/bench_record.py [--seconds 20] [--pose-hz 1000] [--image-hz 30]
+usage: python bench/bench_record.py [--seconds 20] [--pose-hz 1000] [--image-hz 30] [--tf]
 """
 
 from __future__ import annotations
@@ -32,11 +32,19 @@ sys.path.insert(0, str(REPO / "bench"))
 
 from bench_daemon import PEERS, Child, free_port, load  # noqa: E402
 
-POSE_TOPIC, IMAGE_TOPIC = "/bench_record_pose", "/bench_record_image"
-TYPES = {POSE_TOPIC: "geometry_msgs/msg/PoseStamped", IMAGE_TOPIC: "sensor_msgs/msg/Image"}
+IMAGE_TOPIC = "/bench_record_image"
+# The fast stream: PoseStamped on a topic of its own, or --tf: a TFMessage of 7 transforms
+# on /tf (the daemon's tf buffer takes it too, and the client streams a lookup of it).
+STREAMS = {"pose": ("/bench_record_pose", "geometry_msgs/msg/PoseStamped"),
+           "tf": ("/tf", "tf2_msgs/msg/TFMessage")}
 
 
-def floor(out: str) -> None:
+def types(kind: str) -> dict[str, str]:
+    topic, ros_type = STREAMS[kind]
+    return {topic: ros_type, IMAGE_TOPIC: "sensor_msgs/msg/Image"}
+
+
+def floor(out: str, kind: str) -> None:
     """A plain rclpy recorder: raw subscriptions, each callback writes with mcap."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
@@ -52,7 +60,7 @@ def floor(out: str) -> None:
     writer = Writer(stream, compression=CompressionType.NONE)
     writer.start(profile="ros2", library="bench floor")
     lock = threading.Lock()
-    for topic, ros_type in TYPES.items():
+    for topic, ros_type in types(kind).items():
         schema = writer.register_schema(ros_type, "ros2msg", full_definition(ros_type).encode())
         channel = writer.register_channel(topic, "cdr", schema)
 
@@ -102,10 +110,13 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--pose-hz", type=float, default=1000.0)
     parser.add_argument("--image-hz", type=float, default=30.0)
+    parser.add_argument("--tf", action="store_true",
+                        help="the fast stream is /tf (7 transforms a message), not poses")
     parser.add_argument("--floor", metavar="OUT", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    kind = "tf" if args.tf else "pose"
     if args.floor:
-        floor(args.floor)
+        floor(args.floor, kind)
         return
     import slicer_client
 
@@ -116,30 +127,36 @@ def main() -> None:
     threading.Thread(target=drain, args=(daemon,), daemon=True).start()
     children = [daemon]
     try:
-        poses = Child("pose publisher", [sys.executable, str(PEERS), "publish", "pose",
-                                         POSE_TOPIC])
+        fast, _ = STREAMS[kind]
+        poses = Child(f"{kind} publisher", [sys.executable, str(PEERS), "publish", kind, fast])
         images = Child("image publisher", [sys.executable, str(PEERS), "publish", "image",
                                            IMAGE_TOPIC])
         children += [poses, images]
-        received = {POSE_TOPIC: 0, IMAGE_TOPIC: 0}
+        received = {fast: 0, IMAGE_TOPIC: 0}
         ros = slicer_client.connect("127.0.0.1", port)
-        for topic in TYPES:
-            sub = ros.subscribe(topic, TYPES[topic])
-            sub.add_callback(lambda value, t=topic: received.__setitem__(t, received[t] + 1))
+
+        def count(topic: str) -> Any:
+            return lambda value: received.__setitem__(topic, received[topic] + 1)
+        if kind == "tf":
+            ros.tf_lookup("base", "link7", callback=count(fast))
+        else:
+            ros.subscribe(fast, STREAMS[kind][1], callback=count(fast))
+        ros.subscribe(IMAGE_TOPIC, "Image", callback=count(IMAGE_TOPIC))
         ours = folder / "daemon.mcap"
         rec = ros.record(str(ours))
         deadline = time.monotonic() + 30
-        while set(TYPES) - set(rec.counts) and time.monotonic() < deadline:
+        while set(types(kind)) - set(rec.counts) and time.monotonic() < deadline:
             time.sleep(0.1)  # the recorder subscribes once the publishers are in the graph
         theirs = folder / "floor.mcap"
-        plain = Child("floor", [sys.executable, __file__, "--floor", str(theirs)])
+        plain = Child("floor", [sys.executable, __file__, "--floor", str(theirs),
+                                *(["--tf"] if args.tf else [])])
         children.append(plain)
         for publisher in (poses, images):  # the daemon's bridge and recorder, the floor
             publisher.ask("WAIT 3", "MATCHED", 40)
         cpu = {child.name: child.cpu_seconds() for child in (daemon, plain)}
         poses.say(f"RUN {args.pose_hz} {args.seconds}")
         images.say(f"RUN {args.image_hz} {args.seconds}")
-        sent = {POSE_TOPIC: int(poses.expect("DONE", args.seconds + 60).split()[1]),
+        sent = {fast: int(poses.expect("DONE", args.seconds + 60).split()[1]),
                 IMAGE_TOPIC: int(images.expect("DONE", args.seconds + 60).split()[1])}
         time.sleep(1.0)  # what is in flight lands (the bags are read after, not timed)
         spent = {name: child.cpu_seconds() - cpu[name] for name, child in
@@ -149,27 +166,30 @@ def main() -> None:
         plain.expect("FINISHED", 60)
         ros.close()
         counts = {"daemon": bag_counts(ours), "floor": bag_counts(theirs)}
-        report(args, sent, counts, spent, final, received)
+        report(args, fast, sent, counts, spent, final, received)
     finally:
         for child in reversed(children):
             child.stop()
 
 
-def report(args: argparse.Namespace, sent: dict[str, int], counts: dict[str, dict[str, int]],
-           spent: dict[str, float], final: dict[str, Any], received: dict[str, int]) -> None:
-    print(f"\nrecording {args.pose_hz:g} Hz PoseStamped + {args.image_hz:g} Hz VGA rgb8 for "
+def report(args: argparse.Namespace, fast: str, sent: dict[str, int],
+           counts: dict[str, dict[str, int]], spent: dict[str, float], final: dict[str, Any],
+           received: dict[str, int]) -> None:
+    what = "tf (7 transforms)" if args.tf else "PoseStamped"
+    print(f"\nrecording {args.pose_hz:g} Hz {what} + {args.image_hz:g} Hz VGA rgb8 for "
           f"{args.seconds:g} s (load {load()}):")
-    print(f"{'recorder':<40}{'poses in bag':>22}{'images in bag':>18}{'CPU s':>8}"
+    print(f"{'recorder':<40}{fast + ' in bag':>22}{'images in bag':>18}{'CPU s':>8}"
           f"{'CPU %':>7}")
     for name, label in (("daemon", "daemon (ros.record, serving 1 client)"),
                         ("floor", "plain rclpy + mcap Writer")):
         got = counts[name]
         cells = [f"{got.get(t, 0)}/{sent[t]} ({100 * got.get(t, 0) / sent[t]:.1f}%)"
-                 for t in (POSE_TOPIC, IMAGE_TOPIC)]
+                 for t in (fast, IMAGE_TOPIC)]
         print(f"{label:<40}{cells[0]:>22}{cells[1]:>18}{spent[name]:>8.2f}"
               f"{100 * spent[name] / args.seconds:>6.0f}%")
     print(f"daemon's drops counted: {final['dropped']}; its client received "
-          f"{received[POSE_TOPIC]} poses, {received[IMAGE_TOPIC]} images")
+          f"{received[fast]} {'lookups' if args.tf else 'poses'}, {received[IMAGE_TOPIC]} "
+          f"images")
     print(json.dumps({"sent": sent, "bags": counts, "cpu_s": spent,
                       "dropped": final["dropped"]}))
 

@@ -565,8 +565,11 @@ class RobotBridges:
             model = robot.model
             if model is None:
                 continue
-            base = (self._file_path(robot.source.path).parent
-                    if robot.source.kind == "file" else None)
+            try:
+                base = (self._file_path(robot.source.path).parent
+                        if robot.source.kind == "file" else None)
+            except CommandFailedError:  # its URDF file is gone since it loaded
+                continue
             resolver = PackageResolver(dict(self._package_paths), base_dir=base,
                                        allowed_roots=robot.mesh_roots)
             for link in model.description.links.values():
