@@ -28,14 +28,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional, Union
 
-from mcap.data_stream import RecordBuilder
-from mcap.records import DataEnd, Footer
-from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
+from protocol.commands import COMPRESSIONS
 
-from protocol.commands import COMPRESSIONS as COMPRESSION_NAMES
+try:  # a daemon installed without it serves on; recording says what to install
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import DataEnd, Footer
+    from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
+    MCAP_MISSING = ""
+except ImportError as missing:
+    MCAP_MISSING = str(missing)
 
-__all__ = ["BAG_SUFFIX", "BagPathError", "BagStats", "BagWriter", "DEFAULT_QUEUE_BYTES",
-           "TopicStats", "check_bag_path"]
+__all__ = ["BAG_SUFFIX", "COMPRESSIONS", "DEFAULT_QUEUE_BYTES", "MCAP_MISSING", "BagPathError",
+           "BagStats", "BagWriter", "TopicStats", "check_bag_path"]
 
 log = logging.getLogger(__name__)
 
@@ -46,8 +50,7 @@ DEFAULT_QUEUE_BYTES = 128 * 1024 * 1024
 CHUNK_BYTES = 1024 * 1024  # mcap's default: a chunk is what one write puts on disk
 FLUSH_EVERY_S = 1.0  # a chunk is written at least this often: a crash loses at most that
 LIBRARY = "slicer-ros2-bridge record"
-COMPRESSIONS = dict(zip(COMPRESSION_NAMES, (CompressionType.NONE, CompressionType.ZSTD,
-                                            CompressionType.LZ4)))
+_CHUNK_OPCODE = 0x06  # MCAP's Chunk record: the writer writes each one in one write
 # Recent write boundaries kept to fall back on when even the end records do not fit.
 _BOUNDARIES_KEPT = 64
 
@@ -55,7 +58,7 @@ _BOUNDARIES_KEPT = 64
 class BagPathError(Exception):
     """The bag cannot be made at this path. ``reason``: ``missing`` (no such folder),
     ``exists`` (without overwrite), ``forbidden`` (not writable), ``invalid`` (not an
-    absolute ``.mcap`` path)."""
+    absolute ``.mcap`` path), ``unavailable`` (the mcap package is not installed)."""
 
     def __init__(self, reason: str, expected: str, got: str) -> None:
         super().__init__(f"expected {expected}, got {got}")
@@ -103,8 +106,9 @@ class _Sink:
     """The file as the `mcap` writer sees it: every `write` lands whole or not at all (a
     refused one is cut back), so the file always ends on a record boundary."""
 
-    def __init__(self, fd: int) -> None:
+    def __init__(self, fd: int, on_chunk: Callable[[int], None]) -> None:
         self.fd = fd
+        self.on_chunk = on_chunk  # a chunk is on disk at this offset, with what was added
         self.offset = 0
         self.boundaries: deque[int] = deque(maxlen=_BOUNDARIES_KEPT)
 
@@ -121,6 +125,8 @@ class _Sink:
             raise _DiskError(error, start) from None
         if len(data):
             self.boundaries.append(start)
+            if data[0] == _CHUNK_OPCODE:
+                self.on_chunk(start)
         return len(data)
 
     def cut(self, offset: int) -> None:
@@ -191,10 +197,18 @@ class BagWriter:
                  chunk_bytes: int = CHUNK_BYTES,
                  on_error: Optional[Callable[[str], None]] = None) -> None:
         self.path = Path(path)
+        if MCAP_MISSING:
+            raise BagPathError("unavailable", "the mcap package (pip install mcap==1.6.0)",
+                               f"none installed ({MCAP_MISSING})")
         if compression not in COMPRESSIONS:
             raise ValueError(f"compression: expected one of {', '.join(COMPRESSIONS)}, "
                              f"got {compression!r}")
-        self._sink = _Sink(_open(self.path, overwrite))
+        # Messages handed to the writer and not yet in a chunk on disk, per channel (the
+        # writer thread's): lost if the disk refuses that chunk, and then counted so.
+        self._unwritten: dict[int, int] = {}
+        # The last chunks on disk: (offset, messages per channel), for what a cut loses.
+        self._chunks: deque[tuple[int, dict[int, int]]] = deque(maxlen=_BOUNDARIES_KEPT)
+        self._sink = _Sink(_open(self.path, overwrite), self._chunk_written)
         self._queue_bytes = queue_bytes
         self._on_error = on_error
         self._lock = threading.Condition()
@@ -212,7 +226,7 @@ class BagWriter:
         self._schemas: dict[str, int] = {}  # ros type -> schema id (writer thread)
         self._channels: dict[int, int] = {}  # our channel -> the writer's (writer thread)
         self._writer = Writer(self._sink, chunk_size=chunk_bytes,  # type: ignore[arg-type]
-                              compression=COMPRESSIONS[compression])
+                              compression=getattr(CompressionType, compression.upper()))
         try:
             self._writer.start(profile="ros2", library=LIBRARY)
             self._writer.flush()  # the header on disk: never given up to make room
@@ -339,20 +353,39 @@ class BagWriter:
             os.close(self._sink.fd)
 
     def _write(self, taken: deque[Union[_Batch, _Job]]) -> int:
+        try:
+            return self._write_all(taken)
+        except _DiskError:  # what was taken and not written yet is lost with it
+            for channel, _, rest in (i for i in taken if isinstance(i, tuple)):
+                self._unwritten[channel] = self._unwritten.get(channel, 0) + len(rest)
+            raise
+
+    def _write_all(self, taken: deque[Union[_Batch, _Job]]) -> int:
         size = 0
         add = self._writer.add_message
-        for item in taken:
+        unwritten = self._unwritten
+        while taken:
+            item = taken.popleft()
             if isinstance(item, tuple):
                 channel, stamp, messages = item
                 target = self._channels[channel]
-                for data in messages:
-                    add(target, stamp, data, stamp)
+                for index, data in enumerate(messages):
+                    unwritten[channel] = unwritten.get(channel, 0) + 1
+                    try:
+                        add(target, stamp, data, stamp)
+                    except _DiskError:
+                        unwritten[channel] += len(messages) - index - 1
+                        raise
                     stamp += 1
                     size += len(data)
             else:
                 item.work(self._writer)
                 size += item.size
         return size
+
+    def _chunk_written(self, offset: int) -> None:
+        self._chunks.append((offset, dict(self._unwritten)))
+        self._unwritten.clear()
 
     def _fail(self, text: str) -> None:
         with self._lock:
@@ -373,9 +406,13 @@ class BagWriter:
                    errno.EDQUOT: "the disk quota is used up"}
         reason = reasons.get(error.error.errno or 0, error.error.strerror or "a write failed")
         kept = self._end_readable()
+        with self._lock:
+            for channel, lost in self._unwritten.items():
+                self._topics[channel].messages -= lost
+                self._topics[channel].dropped += lost
         self._fail(f"recording stopped: {reason} ({self.path}, {error.error.strerror}); "
-                   f"the bag is closed and readable ({kept} bytes kept; messages still in "
-                   f"memory are counted as dropped)")
+                   f"the bag is closed and readable ({kept} bytes kept; the messages not on "
+                   f"disk yet are counted as dropped)")
         log.error("%s", self._error)
 
     def _end_readable(self) -> int:
@@ -398,3 +435,6 @@ class BagWriter:
                 return sink.offset  # nothing to give up: the bare magic and header stay
             sink.cut(earlier[-1])
             sink.boundaries.pop()
+            while self._chunks and self._chunks[-1][0] >= sink.offset:  # given up: lost
+                for channel, lost in self._chunks.pop()[1].items():
+                    self._unwritten[channel] = self._unwritten.get(channel, 0) + lost

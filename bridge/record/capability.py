@@ -37,7 +37,8 @@ log = logging.getLogger(__name__)
 
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 FINISHED_KEPT = 16  # finished recordings whose last status stays asked for
-_PATH_CODES = {"missing": ErrorCode.NOT_FOUND, "exists": ErrorCode.ALREADY_EXISTS}
+_PATH_CODES = {"missing": ErrorCode.NOT_FOUND, "exists": ErrorCode.ALREADY_EXISTS,
+               "unavailable": ErrorCode.NOT_SUPPORTED}
 
 
 class RecordBridges:

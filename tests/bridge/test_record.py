@@ -236,6 +236,10 @@ def test_the_command_line_recorder_and_a_full_disk(processes: Processes,
     numbers = [int(f.split(":")[1]) for f in frames]
     assert len(numbers) >= 5 and numbers == sorted(numbers)
     assert numbers == list(range(numbers[0], numbers[0] + len(numbers)))  # none lost inside
+    # The summary counts what is in the bag; what the disk refused is counted as dropped.
+    counted = re.search(r"/rec_image \[sensor_msgs/msg/Image\]: (\d+) messages, (\d+) "
+                        r"dropped", output)
+    assert counted and int(counted.group(1)) == len(numbers) and int(counted.group(2)) >= 1
 
     # Without a limit: Ctrl-C ends it with the bag finished (its summary written).
     whole = tmp_path / "whole.mcap"
@@ -297,5 +301,6 @@ def test_a_full_disk_stops_the_daemon_s_recording_readable_and_it_serves_on(
         numbers = [int(f.split(":")[1]) for f in frames]
         assert len(numbers) >= 5 and numbers == list(range(numbers[0],
                                                            numbers[0] + len(numbers)))
+        assert final["messages"] == len(numbers) and final["dropped"] >= 1
     finally:
         subprocess.run(["umount", "-l", str(disk)], check=False)
