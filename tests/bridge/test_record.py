@@ -138,6 +138,9 @@ def test_a_demo_session_recorded_by_the_daemon_holds_what_a_subscriber_saw(
         "/robot_description": "std_msgs/msg/String",
         "/tool_pose": "geometry_msgs/msg/PoseStamped", "/slicer_notes": "std_msgs/msg/String"}
     assert final["messages"] == sum(len(m) for m in in_bag.values())
+    # The publishers' QoS, as rosbag2 keeps it: a player latches /tf_static again.
+    latched = connections["/tf_static"].ext.offered_qos_profiles
+    assert latched and {q.durability.name for q in latched} == {"TRANSIENT_LOCAL"}
 
     # Its schemas decode it (rosbags builds the types from the bag's own definitions).
     with AnyReader([bag]) as reader:
