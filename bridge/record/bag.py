@@ -287,6 +287,11 @@ class BagWriter:
     def add_metadata(self, name: str, values: dict[str, str]) -> None:
         self._put(_Job(lambda writer: writer.add_metadata(name, values), 0))
 
+    @property
+    def running(self) -> bool:
+        """Whether it still takes messages (not closed, no write refused)."""
+        return not self._stopped
+
     def stats(self) -> BagStats:
         with self._lock:
             topics = [TopicStats(t.topic, t.ros_type, t.messages, t.dropped)

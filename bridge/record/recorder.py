@@ -99,6 +99,9 @@ class Recorder:
 
     def _watch(self) -> None:
         while not self._stopping.wait(POLL_S):
+            if not self.bag.running:  # the disk refused it: its subscriptions go
+                self._unsubscribe()
+                return
             self.poll()
 
     def poll(self) -> None:
@@ -206,19 +209,25 @@ class Recorder:
             return sorted(self._state.topics)
 
     def stop(self) -> BagStats:
-        """Unsubscribe (what the middleware still holds is taken first), finish the bag."""
-        with self._lock:
-            self._stopping.set()
-            entries = list(self._state.topics.values())
+        """Unsubscribe, finish the bag."""
+        self._stopping.set()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join()
+        self._unsubscribe()
+        return self.bag.close()
+
+    def _unsubscribe(self) -> None:
         from bridge.ros.raw_reader import RawSubscription
 
-        for entry in entries:
-            if isinstance(entry.subscription, RawSubscription):
-                entry.subscription.close()
-            else:
-                self._ros.destroy(entry.subscription)
-        if self._reader:
-            self._reader.close()
-        return self.bag.close()
+        with self._lock:
+            self._stopping.set()
+            entries = [entry for entry in self._state.topics.values()
+                       if entry.subscription is not None]
+            for entry in entries:
+                subscription, entry.subscription = entry.subscription, None
+                if isinstance(subscription, RawSubscription):
+                    subscription.close()
+                else:
+                    self._ros.destroy(subscription)
+            if self._reader:
+                self._reader.close()
