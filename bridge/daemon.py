@@ -103,8 +103,8 @@ class Daemon:
         self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
                                      package_paths=package_paths,
                                      max_model_bytes=policy.max_marker_bytes)
-        self.recordings = RecordBridges(self.ros, topics=self.topics, markers=self.markers,
-                                        robots=self.robots)
+        self.recordings = RecordBridges(self.ros, topics=self.topics, tf=self.tf,
+                                        markers=self.markers, robots=self.robots)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
                                                           self.robots, self.markers,

@@ -2,8 +2,9 @@
 
 A recording is a `Recorder` on the daemon's node writing a bag on the daemon's machine.
 Without topics it records what the daemon bridges, looked at again every
-`bridge.record.recorder.POLL_S` (bridges made later are recorded from then on): /tf,
-/tf_static, each robot's joint states and description topic, with its meshes attached,
+`bridge.record.recorder.POLL_S` (bridges made later are recorded from then on): the tf
+topics its buffer reads (/tf, /tf_static), joint_states, each robot's joint states and
+description topic, with its meshes attached,
 every subscribed topic (streams and markers) and every topic clients publish on.
 
 Opening the file and finishing the bag (the last chunk, the index) run in the client's
@@ -21,7 +22,7 @@ from bridge.core.dispatch import Handler, Result
 from bridge.core.heavy import OffLoop
 from bridge.record.bag import BagPathError, BagWriter, check_bag_path
 from bridge.record.recorder import Recorder
-from protocol.commands import (CommandFailedError, ErrorCode, ForbiddenError, Op,
+from protocol.commands import (JOINT_STATE_TYPE, CommandFailedError, ErrorCode, ForbiddenError, Op,
                                OutOfRangeError, RecordingStatus, StartRecording,
                                StopRecording)
 
@@ -29,6 +30,7 @@ if TYPE_CHECKING:
     from bridge.markers.capability import MarkerBridges
     from bridge.robots.capability import RobotBridges
     from bridge.ros.ros_node import RosNode
+    from bridge.tf.capability import TfBridges
     from bridge.topics.capability import TopicBridges
 
 __all__ = ["RecordBridges"]
@@ -44,10 +46,11 @@ _PATH_CODES = {"missing": ErrorCode.NOT_FOUND, "exists": ErrorCode.ALREADY_EXIST
 class RecordBridges:
     """Recordings by path (running, and the last `FINISHED_KEPT` finished)."""
 
-    def __init__(self, ros: RosNode, *, topics: TopicBridges, markers: MarkerBridges,
-                 robots: RobotBridges) -> None:
+    def __init__(self, ros: RosNode, *, topics: TopicBridges, tf: TfBridges,
+                 markers: MarkerBridges, robots: RobotBridges) -> None:
         self._ros = ros
         self._topics = topics
+        self._tf = tf
         self._markers = markers
         self._robots = robots
         self.running: dict[str, Recorder] = {}
@@ -56,7 +59,9 @@ class RecordBridges:
 
     def bridged(self) -> dict[str, Optional[str]]:
         """What the daemon bridges now, topic -> type (any thread: copies of the dicts)."""
-        wanted: dict[str, Optional[str]] = {"/tf": TF_TYPE, "/tf_static": TF_TYPE}
+        # tf (what the buffer reads), and joint states even before a robot is loaded.
+        wanted: dict[str, Optional[str]] = {topic: TF_TYPE for topic in self._tf.topics}
+        wanted[self._ros.resolve_topic("joint_states")] = JOINT_STATE_TYPE
         for topic, bridge in tuple(self._topics.subscribers.items()):
             wanted[topic] = bridge.codec.ros_type
         for topic, publisher in tuple(self._topics.publishers.items()):

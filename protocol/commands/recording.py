@@ -26,8 +26,8 @@ def _path(a: Args) -> str:
 class StartRecording(Op, op="start_recording", writes=True):
     """Record into ``path`` (absolute, ``.mcap``, on the daemon's machine; an existing file
     is refused with ``ALREADY_EXISTS`` unless ``overwrite``) the ``topics`` given, or
-    without any, what the daemon bridges: /tf, /tf_static, each robot's joint states and
-    description topic (its meshes as attachments), every subscribed topic and every topic
+    without any, what the daemon bridges: /tf, /tf_static, joint_states, each robot's joint
+    states and description topic (its meshes as attachments), every subscribed topic and every topic
     clients publish on, those bridged later too. It lasts until `StopRecording` (any
     writer's) or the daemon stops."""
 
