@@ -201,6 +201,8 @@ def test_the_op_is_a_write_and_bad_paths_are_refused_by_type(
             error = refused(lambda: ros.record(str(target), ["/rec_pose"]))
             assert error.code == ErrorCode.ALREADY_EXISTS  # one recording per file
             wait_until(lambda: rec.messages >= 50, what="50 poses recorded")
+            listed = ros.list_bridges()["recordings"]
+            assert [(r["path"], r["running"]) for r in listed] == [(str(target), True)]
         assert rec.status()["running"] is False
         again = ros.record(str(existing), ["/rec_pose"], overwrite=True)
         wait_until(lambda: again.messages >= 1, what="a pose in the overwritten bag")
