@@ -50,6 +50,17 @@ def witnessed(path: Path) -> dict[str, list[bytes]]:
     return seen
 
 
+def image_numbers(bag: Path) -> list[int]:
+    """The numbers of stream_publisher.py's images in a bag cut short by a full disk (read
+    with rosbags): at least 5, consecutive (none lost inside)."""
+    with AnyReader([bag]) as reader:
+        frames = [reader.deserialize(raw, connection.msgtype).header.frame_id
+                  for connection, _, raw in reader.messages()]
+    numbers = [int(f.split(":")[1]) for f in frames]
+    assert len(numbers) >= 5 and numbers == list(range(numbers[0], numbers[0] + len(numbers)))
+    return numbers
+
+
 def unpadded(data: bytes) -> bytes:
     """A payload without its trailing zeros (padding, and a string's terminator): two
     payloads equal but for padding compare equal."""
@@ -233,14 +244,7 @@ def test_the_command_line_recorder_and_a_full_disk(processes: Processes,
     assert "/not_there: not recorded: no publisher yet" in output or \
         "/not_there: not recorded: not in the ROS graph yet" in output
     assert os.path.getsize(bag) <= limit
-    in_bag, connections, _ = bag_messages(bag)
-    frames = []
-    with AnyReader([bag]) as reader:
-        for connection, _, raw in reader.messages():
-            frames.append(reader.deserialize(raw, connection.msgtype).header.frame_id)
-    numbers = [int(f.split(":")[1]) for f in frames]
-    assert len(numbers) >= 5 and numbers == sorted(numbers)
-    assert numbers == list(range(numbers[0], numbers[0] + len(numbers)))  # none lost inside
+    numbers = image_numbers(bag)
     # The summary counts what is in the bag; what the disk refused is counted as dropped.
     counted = re.search(r"/rec_image \[sensor_msgs/msg/Image\]: (\d+) messages, (\d+) "
                         r"dropped", output)
@@ -304,14 +308,7 @@ def test_a_full_disk_stops_the_daemon_s_recording_readable_and_it_serves_on(
             assert ros.list_topics() and ros.command("hello")["ops"]  # served on
             final = rec.stop()
             assert final["error"] == status["error"]
-        in_bag, _, _ = bag_messages(bag)
-        frames = []
-        with AnyReader([bag]) as reader:
-            for connection, _, raw in reader.messages():
-                frames.append(reader.deserialize(raw, connection.msgtype).header.frame_id)
-        numbers = [int(f.split(":")[1]) for f in frames]
-        assert len(numbers) >= 5 and numbers == list(range(numbers[0],
-                                                           numbers[0] + len(numbers)))
+        numbers = image_numbers(bag)
         assert final["messages"] == len(numbers) and final["dropped"] >= 1
     finally:
         subprocess.run(["umount", "-l", str(disk)], check=False)
