@@ -81,6 +81,10 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
                         help="a folder whose URDF files clients may load by path "
                              "(create_robot from a file; repeatable). --package-path folders "
                              "count too; nothing else on this machine can be read")
+    parser.add_argument("--record-dir", action="append", default=[], metavar="DIR",
+                        help="a folder clients' recordings (start_recording, ros.record) may "
+                             "write bags in (repeatable; default: the system's temporary "
+                             "folder). Nowhere else on this machine can be written")
     parser.add_argument("--frame-prefix", default="", metavar="PREFIX",
                         help="tf prefix of the robot instance this daemon serves, trailing / "
                              "included (PSM1/): a client's relative frame id 'base' means "
@@ -242,6 +246,7 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
            "max_message_bytes": args.max_message_bytes,
            "max_send_buffer_bytes": args.max_send_buffer_bytes,
            "max_marker_bytes": args.max_marker_bytes, "robot_dirs": args.robot_dir,
+           "record_dirs": args.record_dir,
            "key_file": args.key_file, "trust": args.trust}
     where = f"{file.name}: security (or its command-line option)" if file.name else "option"
     security, limits = build_security(file.security, cli, where)

@@ -16,6 +16,7 @@ import gc
 import logging
 import os
 import sys
+import tempfile
 from pathlib import Path
 from typing import Awaitable, Callable, Optional
 
@@ -75,8 +76,11 @@ class Daemon:
         names = DeviceNameRegistry()
         # Clients' robots may read files (URDF, meshes) from the --package-path folders too.
         # Who may write depends on where the daemon listens (see SecurityPolicy.grant_at_accept).
+        # Clients' recordings write only in --record-dir folders (default: the temp folder).
         policy = dataclasses.replace(config.security, robot_dirs=config.security.robot_dirs
                                      + tuple(folder for _, folder in config.package_paths),
+                                     record_dirs=(config.security.record_dirs
+                                                  or (tempfile.gettempdir(),)),
                                      beyond_loopback=not is_loopback_host(config.host))
         self.policy = policy
         # Streams that go stale (publisher gone, silent past their period) are said so.

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional, Union
 
-from protocol.commands import COMPRESSIONS
+from protocol.commands import BAG_SUFFIX, COMPRESSIONS, bag_path_problem
 
 try:  # a daemon installed without it serves on; recording says what to install
     from mcap.data_stream import RecordBuilder
@@ -43,7 +43,6 @@ __all__ = ["BAG_SUFFIX", "COMPRESSIONS", "DEFAULT_QUEUE_BYTES", "MCAP_MISSING", 
 
 log = logging.getLogger(__name__)
 
-BAG_SUFFIX = ".mcap"
 # What may wait for the writer thread: 5 s of a 30 Hz VGA stream (27 MB/s) while a disk
 # stalls. Past it, messages are dropped and counted.
 DEFAULT_QUEUE_BYTES = 128 * 1024 * 1024
@@ -67,13 +66,10 @@ class BagPathError(Exception):
 
 def check_bag_path(path: Union[str, Path], *, absolute: bool) -> Path:
     """The bag's path, if it names a ``.mcap`` file (an absolute one if ``absolute``)."""
-    p = Path(path)
-    if p.suffix != BAG_SUFFIX:
-        raise BagPathError("invalid", f"a file name ending in {BAG_SUFFIX}", repr(str(path)))
-    if absolute and not p.is_absolute():
-        raise BagPathError("invalid", "an absolute path on the daemon's machine",
-                           repr(str(path)))
-    return p
+    problem = bag_path_problem(str(path), absolute=absolute)
+    if problem is not None:
+        raise BagPathError("invalid", *problem)
+    return Path(path)
 
 
 def _open(path: Path, overwrite: bool) -> int:

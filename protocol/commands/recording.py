@@ -8,28 +8,48 @@ are judged as topics read. Without topics it records what the daemon bridges (RE
 
 from __future__ import annotations
 
+import posixpath
 from dataclasses import dataclass, replace
+from typing import Optional
 
+from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import MAX_TEXT, ROS_NAME, ROS_NAME_DESC, Args
-from protocol.commands.op import NameResolver, Op, Resource, TopicUse
+from protocol.commands.op import FileUse, NameResolver, Op, Resource, TopicUse
 
-__all__ = ["COMPRESSIONS", "RecordingStatus", "StartRecording", "StopRecording"]
+__all__ = ["BAG_SUFFIX", "COMPRESSIONS", "RecordingStatus", "StartRecording", "StopRecording",
+           "bag_path_problem"]
 
 COMPRESSIONS = ("none", "zstd", "lz4")
+BAG_SUFFIX = ".mcap"
+
+
+def bag_path_problem(path: str, *, absolute: bool) -> Optional[tuple[str, str]]:
+    """(expected, got) if ``path`` cannot name a bag: a file ending in ``.mcap``, absolute
+    (on the daemon's machine) where ``absolute``; None if it can."""
+    if not path.endswith(BAG_SUFFIX) or posixpath.basename(path) == BAG_SUFFIX:
+        return f"a file name ending in {BAG_SUFFIX}", repr(path)
+    if absolute and not posixpath.isabs(path):
+        return "an absolute path on the daemon's machine", repr(path)
+    return None
 
 
 def _path(a: Args) -> str:
-    return a.req_str("path", max_len=MAX_TEXT)
+    path = a.req_str("path", max_len=MAX_TEXT)
+    problem = bag_path_problem(path, absolute=True)
+    if problem is not None:
+        raise OutOfRangeError(a.path("path"), *problem)
+    return path
 
 
 @dataclass(frozen=True)
 class StartRecording(Op, op="start_recording", writes=True):
-    """Record into ``path`` (absolute, ``.mcap``, on the daemon's machine; an existing file
-    is refused with ``ALREADY_EXISTS`` unless ``overwrite``) the ``topics`` given, or
-    without any, what the daemon bridges: /tf, /tf_static, joint_states, each robot's joint
-    states and description topic (its meshes as attachments), every subscribed topic and every topic
-    clients publish on, those bridged later too. It lasts until `StopRecording` (any
-    writer's) or the daemon stops."""
+    """Record into ``path`` (absolute, ``.mcap``, on the daemon's machine, inside one of
+    its ``--record-dir`` folders; an existing file is refused with ``ALREADY_EXISTS``
+    unless ``overwrite``) the ``topics`` given, or without any, what the daemon bridges:
+    /tf, /tf_static, joint_states, each robot's joint states and description topic (its
+    meshes as attachments), every subscribed topic and every topic clients publish on,
+    those bridged later too. It lasts until `StopRecording` (any writer's) or the daemon
+    stops."""
 
     path: str
     topics: tuple[str, ...] = ()
@@ -41,7 +61,8 @@ class StartRecording(Op, op="start_recording", writes=True):
                                           for i, topic in enumerate(self.topics)))
 
     def resources(self) -> tuple[Resource, ...]:
-        return tuple(TopicUse("topics", topic) for topic in self.topics)
+        return (FileUse("path", self.path, writes=True),
+                *(TopicUse("topics", topic) for topic in self.topics))
 
     @classmethod
     def from_args(cls, a: Args) -> StartRecording:

@@ -186,7 +186,9 @@ def test_the_op_is_a_write_and_bad_paths_are_refused_by_type(
         processes: Processes, tmp_path: Path) -> None:
     key = tmp_path / "writers.key"
     assert processes.bridge("keygen", str(key)).popen.wait(scaled(30)) == 0
-    daemon = start_daemon(processes, "--key-file", str(key))
+    # /sys: a record folder the daemon may not write in (even as root).
+    daemon = start_daemon(processes, "--key-file", str(key), "--record-dir", str(tmp_path),
+                          "--record-dir", "/sys")
     poses = processes.python("poses", "stream_publisher.py", "/rec_pose", "100")
     poses.wait_for_output("READY")
     target = tmp_path / "a.mcap"
@@ -198,6 +200,7 @@ def test_the_op_is_a_write_and_bad_paths_are_refused_by_type(
         cases = {
             str(tmp_path / "no_such_folder" / "a.mcap"): ErrorCode.NOT_FOUND,
             "/sys/a.mcap": ErrorCode.FORBIDDEN,  # not writable (even for root)
+            "/var/tmp/a.mcap": ErrorCode.FORBIDDEN,  # outside the record folders
             "relative.mcap": ErrorCode.OUT_OF_RANGE,
             str(tmp_path / "a.bag"): ErrorCode.OUT_OF_RANGE,
         }

@@ -97,7 +97,8 @@ names_tuples = st.lists(param_names, max_size=5).map(tuple)
 action_types = st.sampled_from(["control_msgs/action/FollowJointTrajectory",
                                 "control_msgs/GripperCommand"])
 goal_ids = st.uuids().map(lambda u: u.hex)
-bag_paths = st.text(min_size=1, max_size=40).map(lambda name: f"/data/{name}.mcap")
+bag_paths = st.from_regex(r"[A-Za-z0-9_ .-]{1,30}", fullmatch=True).map(
+    lambda name: f"/data/{name}.mcap")
 
 STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.Hello: st.builds(c.Hello, client=st.none() | st.text(min_size=1, max_size=30),

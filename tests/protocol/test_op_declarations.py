@@ -88,7 +88,8 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "action_decide": ({"action": "/a", "type": "control_msgs/GripperCommand", "goal": {}},
                       set()),
     "start_recording": ({"path": "/data/s.mcap", "topics": ["/a", "/b"]},
-                        {("topic", "topics", "/a"), ("topic", "topics", "/b")}),
+                        {("file", "path", "/data/s.mcap"), ("topic", "topics", "/a"),
+                         ("topic", "topics", "/b")}),
     "stop_recording": ({"path": "/data/s.mcap"}, set()),
     "recording_status": ({"path": "/data/s.mcap"}, set()),
 }
