@@ -108,3 +108,17 @@ def test_a_file_size_limit_closes_the_bag_readable_with_true_counts(tmp_path: Pa
         values = [reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages()]
     assert len(values) == messages
     assert values == [f"message {i} " + "x" * 200 for i in range(messages)]
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4"])
+def test_compressed_chunks_read_back(tmp_path: Path, compression: str) -> None:
+    path = tmp_path / f"{compression}.mcap"
+    bag = BagWriter(path, compression=compression)
+    channel = bag.add_channel("/text", "std_msgs/msg/String",
+                              full_definition("std_msgs/msg/String"))
+    sent = [cdr_string("same text " * 20) for _ in range(200)]
+    bag.offer(channel, sent)
+    stats = bag.close()
+    assert stats.bytes < sum(len(m) for m in sent) / 4  # compressed
+    with rosbags.AnyReader([path]) as reader:
+        assert [bytes(raw) for _, _, raw in reader.messages()] == sent
