@@ -256,6 +256,8 @@ class BagWriter:
 
     def offer(self, channel: int, messages: list[bytes]) -> None:
         """Messages of one topic, as received (a ROS callback: cheap, never blocks)."""
+        if not messages:
+            return
         size = sum(len(m) for m in messages)
         now = time.time_ns()
         with self._lock:
