@@ -11,7 +11,9 @@ A write the disk refuses (full, or past RLIMIT_FSIZE) stops the recording with
 `BagStats.error` saying so; the file is cut back to the last whole record and closed with
 the library's own end records (a footer with no summary, which readers answer by scanning
 the data), so what was written stays readable. If even those 50 bytes do not fit, records
-are given up from the end until they do.
+are given up from the end until they do. The messages that did not reach the disk (those
+of the chunk refused or given up, and those waiting) are counted as dropped: the counts
+are the bag's.
 
 No ROS import: the ROS side (`bridge.record.recorder`) feeds it bytes.
 """
@@ -32,6 +34,7 @@ from protocol.commands import BAG_SUFFIX, COMPRESSIONS, bag_path_problem
 
 try:  # a daemon installed without it serves on; recording says what to install
     from mcap.data_stream import RecordBuilder
+    from mcap.opcode import Opcode
     from mcap.records import DataEnd, Footer
     from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
     MCAP_MISSING = ""
@@ -49,7 +52,6 @@ DEFAULT_QUEUE_BYTES = 128 * 1024 * 1024
 CHUNK_BYTES = 1024 * 1024  # mcap's default: a chunk is what one write puts on disk
 FLUSH_EVERY_S = 1.0  # a chunk is written at least this often: a crash loses at most that
 LIBRARY = "slicer-ros2-bridge record"
-_CHUNK_OPCODE = 0x06  # MCAP's Chunk record: the writer writes each one in one write
 # Recent write boundaries kept to fall back on when even the end records do not fit.
 _BOUNDARIES_KEPT = 64
 
@@ -121,7 +123,7 @@ class _Sink:
             raise _DiskError(error, start) from None
         if len(data):
             self.boundaries.append(start)
-            if data[0] == _CHUNK_OPCODE:
+            if data[0] == Opcode.CHUNK:  # the writer writes each chunk in one write
                 self.on_chunk(start)
         return len(data)
 
