@@ -10,7 +10,9 @@ Foxglove's mcap Writer (the library the daemon uses), spun by rclpy.
 
 Figures: messages in each bag / messages sent, per topic (read back from the bags'
 summaries), drops the daemon counted, and the CPU seconds each process spent during the
-run (the daemon's include serving the client and its own bridges).
+run (the daemon's include serving the client and its own bridges); first, the same streams
+through the daemon serving the client without recording: what recording adds is the
+difference.
 
 usage: python bench/bench_record.py [--seconds 20] [--pose-hz 1000] [--image-hz 30] [--tf]
 """
@@ -142,6 +144,16 @@ def main() -> None:
         else:
             ros.subscribe(fast, STREAMS[kind][1], callback=count(fast))
         ros.subscribe(IMAGE_TOPIC, "Image", callback=count(IMAGE_TOPIC))
+        # First the daemon serving the client alone, no recording: what recording adds.
+        for publisher in (poses, images):  # the daemon's bridge (tf: its buffer)
+            publisher.ask("WAIT 1", "MATCHED", 40)
+        before = daemon.cpu_seconds()
+        poses.say(f"RUN {args.pose_hz} {args.seconds}")
+        images.say(f"RUN {args.image_hz} {args.seconds}")
+        for publisher in (poses, images):
+            publisher.expect("DONE", args.seconds + 60)
+        time.sleep(1.0)
+        serving = daemon.cpu_seconds() - before
         ours = folder / "daemon.mcap"
         rec = ros.record(str(ours))
         deadline = time.monotonic() + 30
@@ -166,7 +178,7 @@ def main() -> None:
         plain.expect("FINISHED", 60)
         ros.close()
         counts = {"daemon": bag_counts(ours), "floor": bag_counts(theirs)}
-        report(args, fast, sent, counts, spent, final, received)
+        report(args, fast, sent, counts, spent, final, received, serving)
     finally:
         for child in reversed(children):
             child.stop()
@@ -174,7 +186,7 @@ def main() -> None:
 
 def report(args: argparse.Namespace, fast: str, sent: dict[str, int],
            counts: dict[str, dict[str, int]], spent: dict[str, float], final: dict[str, Any],
-           received: dict[str, int]) -> None:
+           received: dict[str, int], serving: float) -> None:
     what = "tf (7 transforms)" if args.tf else "PoseStamped"
     print(f"\nrecording {args.pose_hz:g} Hz {what} + {args.image_hz:g} Hz VGA rgb8 for "
           f"{args.seconds:g} s (load {load()}):")
@@ -187,10 +199,12 @@ def report(args: argparse.Namespace, fast: str, sent: dict[str, int],
                  for t in (fast, IMAGE_TOPIC)]
         print(f"{label:<40}{cells[0]:>22}{cells[1]:>18}{spent[name]:>8.2f}"
               f"{100 * spent[name] / args.seconds:>6.0f}%")
+    print(f"{'daemon serving the client, no recording (before)':<80}{serving:>8.2f}"
+          f"{100 * serving / args.seconds:>6.0f}%")
     print(f"daemon's drops counted: {final['dropped']}; its client received "
           f"{received[fast]} {'lookups' if args.tf else 'poses'}, {received[IMAGE_TOPIC]} "
           f"images")
-    print(json.dumps({"sent": sent, "bags": counts, "cpu_s": spent,
+    print(json.dumps({"sent": sent, "bags": counts, "cpu_s": spent, "serving_cpu_s": serving,
                       "dropped": final["dropped"]}))
 
 
