@@ -1,4 +1,4 @@
-"""The `slicer-ros2-bridge` command line: `run`, `demo`, `state-publisher`."""
+"""The `slicer-ros2-bridge` command line: `run`, `demo`, `record`, `state-publisher`."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from bridge.config import (DEFAULT_HOST, DEFAULT_PORT, DEFAULT_TLS_PORT, ConfigE
 from bridge.config import ConfigFile, build_security, load_config_file
 from bridge.core.allocator import keep_large_buffers_returnable
 from bridge.interfaces import missing_runtime_line
+from bridge.record import cli as record_cli
 from protocol.auth import new_key_text
 from bridge.core.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_CLIENT,
                                   DEFAULT_MAX_CLIENTS)
@@ -80,6 +81,10 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
                         help="a folder whose URDF files clients may load by path "
                              "(create_robot from a file; repeatable). --package-path folders "
                              "count too; nothing else on this machine can be read")
+    parser.add_argument("--record-dir", action="append", default=[], metavar="DIR",
+                        help="a folder clients' recordings (start_recording, ros.record) may "
+                             "write bags in (repeatable; default: the system's temporary "
+                             "folder). Nowhere else on this machine can be written")
     parser.add_argument("--frame-prefix", default="", metavar="PREFIX",
                         help="tf prefix of the robot instance this daemon serves, trailing / "
                              "included (PSM1/): a client's relative frame id 'base' means "
@@ -197,6 +202,7 @@ def build_parser() -> argparse.ArgumentParser:
                                            "moving (state publisher and joint motion included).")
     _add_daemon_options(demo)
     graph_inspect.add_parsers(commands)
+    record_cli.add_parser(commands)
     _add_build_interfaces_parser(commands)
     keygen = commands.add_parser("keygen", help="make a writers' key file (--key-file)",
                                  description="Write a new random key (32 bytes, hex) to FILE, "
@@ -240,6 +246,7 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
            "max_message_bytes": args.max_message_bytes,
            "max_send_buffer_bytes": args.max_send_buffer_bytes,
            "max_marker_bytes": args.max_marker_bytes, "robot_dirs": args.robot_dir,
+           "record_dirs": args.record_dir,
            "key_file": args.key_file, "trust": args.trust}
     where = f"{file.name}: security (or its command-line option)" if file.name else "option"
     security, limits = build_security(file.security, cli, where)
@@ -481,6 +488,8 @@ def main(argv: list[str] | None = None) -> int:
         return run_with_config(args, run_daemon)
     if args.command in ("topics", "services", "echo"):
         return graph_inspect.run(args)
+    if args.command == "record":
+        return record_cli.run(args)
     parser.error(f"unknown command {args.command}")
     return 2
 

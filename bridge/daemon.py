@@ -16,6 +16,7 @@ import gc
 import logging
 import os
 import sys
+import tempfile
 from pathlib import Path
 from typing import Awaitable, Callable, Optional
 
@@ -32,6 +33,7 @@ from bridge.core.threads import fatal_failure
 from bridge.core.stream_health import StreamHealth
 from bridge.markers.capability import MarkerBridges
 from bridge.parameters.capability import ParameterBridges
+from bridge.record.capability import RecordBridges
 from bridge.robots.capability import RobotBridges
 from bridge.types import InterfaceTypes
 from bridge.ros.receive_priority import (RECEIVE_SLICE_NS, ReceivePriorityError,
@@ -74,8 +76,11 @@ class Daemon:
         names = DeviceNameRegistry()
         # Clients' robots may read files (URDF, meshes) from the --package-path folders too.
         # Who may write depends on where the daemon listens (see SecurityPolicy.grant_at_accept).
+        # Clients' recordings write only in --record-dir folders (default: the temp folder).
         policy = dataclasses.replace(config.security, robot_dirs=config.security.robot_dirs
                                      + tuple(folder for _, folder in config.package_paths),
+                                     record_dirs=(config.security.record_dirs
+                                                  or (tempfile.gettempdir(),)),
                                      beyond_loopback=not is_loopback_host(config.host))
         self.policy = policy
         # Streams that go stale (publisher gone, silent past their period) are said so.
@@ -102,10 +107,12 @@ class Daemon:
         self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
                                      package_paths=package_paths,
                                      max_model_bytes=policy.max_marker_bytes)
+        self.recordings = RecordBridges(self.ros, topics=self.topics, tf=self.tf,
+                                        markers=self.markers, robots=self.robots)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
                                                           self.robots, self.markers,
-                                                          InterfaceTypes()],
+                                                          InterfaceTypes(), self.recordings],
                                      policy=policy, resolve_frame=self.tf.resolve_client_frame,
                                      resolve_file=self.robots.file_path, heavy=self.heavy)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,

@@ -14,9 +14,10 @@ from slicer_client.errors import (BridgeClientError, CommandRefusedError, Comman
                                   KeyFileError, NotTheDaemonError, ParameterRejectedError,
                                   RobotNotLoadedError)
 from slicer_client.matrices import MatrixError, as_numpy, to_vtk
+from slicer_client.recording import Recording
 
 __all__ = ["BridgeClientError", "BridgeSpec", "BridgeState", "Client",
            "CommandRefusedError", "CommandTimeoutError", "ConnectionClosedError",
            "DaemonUnreachableError", "DeadLinkError", "KeyFileError", "MatrixError",
-           "NotTheDaemonError", "ParameterRejectedError", "RobotNotLoadedError",
+           "NotTheDaemonError", "ParameterRejectedError", "Recording", "RobotNotLoadedError",
            "StateFormatError", "as_numpy", "connect", "to_vtk"]

@@ -42,6 +42,7 @@ from slicer_client.bridge_state import REMOVE_OPS, BridgeSpec, BridgeState
 from slicer_client.connection import DEFAULT_HOST, DEFAULT_PORT, CommandRefusedError
 from slicer_client.events import EventDispatcher
 from slicer_client.matrices import as_numpy
+from slicer_client.recording import Recording
 from slicer_client.resources import (MarkerSubscriber, ParameterClient, Publisher, Resource,
                                      Robot, Service, Subscriber, TfBroadcaster, TfLookup)
 from slicer_client.transport import CommandFn, Transport, open_transport, request_with
@@ -337,6 +338,16 @@ class Client:
 
     def service(self, service: str, type: str) -> Service:
         return Service(self, service, type)
+
+    def record(self, path: str, topics: Optional[List[str]] = None, *,
+               overwrite: bool = False, compression: str = "none",
+               timeout: float = 10.0) -> Recording:
+        """Have the daemon record a ROS 2 bag (MCAP) at ``path``, an absolute path on the
+        daemon's machine: the ``topics`` given, or what it bridges (tf, robots, every
+        subscribed and published topic). `Recording.stop()` finishes it. It writes: a
+        read-only connection is refused (FORBIDDEN)."""
+        return Recording.start(self.request, path, topics, overwrite=overwrite,
+                               compression=compression, timeout=timeout)
 
     def action(self, name: str, type: str) -> Action:
         """A ROS action to send goals to: ``ros.action(name, type).send_goal(goal,

@@ -209,6 +209,9 @@ class SecurityPolicy:
     # Folders whose URDF files clients may load by path (`--robot-dir`, and the daemon adds
     # every `--package-path` folder): a client must not make the daemon read any file.
     robot_dirs: tuple[str, ...] = ()
+    # Folders clients' recordings may write bags in (`--record-dir`; the daemon's default is
+    # the system's temporary folder): a client must not make the daemon write any file.
+    record_dirs: tuple[str, ...] = ()
     # The writers' shared key (`--key-file`, protocol/auth.py); None: no key.
     key: Optional[bytes] = field(default=None, repr=False)
     key_path: Optional[str] = None  # its file, checked for open permissions at start
@@ -360,7 +363,21 @@ class SecurityPolicy:
                 raise ForbiddenError(field, "a parameter this daemon exposes: "
                                      + self.parameters.why_not(full), full)
 
+    def _judge_written_file(self, use: FileUse) -> None:
+        # Its folder is judged (the file is made later): symlinks followed, so a link inside
+        # an allowed folder cannot point outside it.
+        allowed = ", ".join(self.record_dirs) or "none: start the daemon with --record-dir"
+        folder = os.path.realpath(os.path.dirname(use.path) or ".")
+        target = os.path.join(folder, os.path.basename(use.path))
+        real = os.path.realpath(target)  # an existing link at the path itself, too
+        if not (inside(folder, self.record_dirs) and inside(real, self.record_dirs)):
+            raise ForbiddenError(use.field, f"a path inside a --record-dir folder ({allowed})",
+                                 use.path)
+
     def _judge_file(self, use: FileUse, resolve_file: FileResolver) -> None:
+        if use.writes:
+            self._judge_written_file(use)
+            return
         # A missing file and a refused one get one answer: the reply must not tell a client
         # whether a path it chose exists. Symlinks are followed, so a link inside an
         # allowed folder cannot point outside it.
@@ -443,7 +460,8 @@ class SecurityPolicy:
                          actions=rules["actions"], parameters=rules["parameters"],
                          frames=rules["frames"])
         dirs = _globs(settings, "robot_dirs", where)
-        policy = replace(policy, robot_dirs=tuple(dirs))
+        policy = replace(policy, robot_dirs=tuple(dirs),
+                         record_dirs=tuple(_globs(settings, "record_dirs", where)))
 
         def limit(key: str, default: int) -> int:
             if settings.get(key) is None:
@@ -493,7 +511,7 @@ SECURITY_KEYS: tuple[str, ...] = (
     "allow_parameters", "deny_parameters", "allow_frames", "deny_frames",
     "max_clients", "max_bridges_per_client", "max_bridges", "max_message_bytes",
     "max_send_buffer_bytes", "max_marker_bytes",
-    "robot_dirs", "key_file", "trust",
+    "robot_dirs", "record_dirs", "key_file", "trust",
 )
 
 

@@ -62,9 +62,10 @@ from bridge.robots.resources import PackageResolver
 from bridge.ros.graph_types import refuse_other_type
 from bridge.ros.ros_node import RosNode
 from bridge.tf.lookups import LookupKey, LookupStreams
-from protocol.commands import (CommandFailedError, CreateRobot, DescribeRobotJoints, ErrorCode,
-                               ForbiddenError, ListRobots, Op, OutOfRangeError, ParameterValue,
-                               RemoveRobot, RobotSource, SetRobotJoints)
+from protocol.commands import (JOINT_STATE_TYPE, CommandFailedError, CreateRobot,
+                               DescribeRobotJoints, ErrorCode, ForbiddenError, ListRobots, Op,
+                               OutOfRangeError, ParameterValue, RemoveRobot, RobotSource,
+                               SetRobotJoints)
 from protocol.messages import Message, PolyData, Status, StatusCode
 from protocol.naming import (KEY_CHILD, KEY_COLOR, KEY_LINK_COUNT, KEY_PARENT, KEY_PARENT_DEVICE,
                              KEY_VISUAL_COUNT, KEY_WARNINGS, UNITS_MM,
@@ -539,6 +540,48 @@ class RobotBridges:
             SetRobotJoints: lambda request, _: self.set_robot_joints(request),
         }
 
+    # ------------------------------------------------------------------ recording
+
+    def recorded_topics(self) -> dict[str, str]:
+        """What a bag needs to show each robot again (any thread): its joint states and,
+        unless it came from a file, the description topic its state publisher latches
+        (beside the node whose parameter holds it, as robot_state_publisher does)."""
+        topics: dict[str, str] = {}
+        for robot in tuple(self.robots.values()):
+            topics[self._joint_states_topic(robot)] = JOINT_STATE_TYPE
+            source = robot.source
+            if source.kind == "topic":
+                topics[source.topic] = _DESCRIPTION_TYPE
+            elif source.kind == "parameter":
+                topics[f"{_source_base(source)}/robot_description"] = _DESCRIPTION_TYPE
+        return topics
+
+    def mesh_files(self) -> dict[str, Path]:
+        """The mesh files of the loaded robots, by their URI as the URDF writes it (any
+        thread), resolved as their load did; those that did not resolve are left out."""
+        files: dict[str, Path] = {}
+        for robot in tuple(self.robots.values()):
+            model = robot.model
+            if model is None:
+                continue
+            try:
+                base = (self._file_path(robot.source.path).parent
+                        if robot.source.kind == "file" else None)
+            except CommandFailedError:  # its URDF file is gone since it loaded
+                continue
+            resolver = PackageResolver(dict(self._package_paths), base_dir=base,
+                                       allowed_roots=robot.mesh_roots)
+            for link in model.description.links.values():
+                for visual in link.visuals:
+                    uri = visual.geometry.filename
+                    if visual.geometry.kind != "mesh" or not uri or uri in files:
+                        continue
+                    try:
+                        files[uri] = resolver.resolve(uri)
+                    except RobotError:
+                        continue
+        return files
+
     # ------------------------------------------------------------------ joints
 
     def _loaded(self, name: str) -> tuple[_Robot, RobotModel]:
@@ -557,12 +600,8 @@ class RobotBridges:
         the relative ``joint_states``, so in the namespace of the node whose parameter
         holds the description (``/PSM1/robot_state_publisher`` -> ``/PSM1/joint_states``),
         of the description topic, or for a file the robot's namespace."""
-        source = robot.source  # names already resolved (absolute)
-        if source.kind == "parameter":
-            base = source.node.rsplit("/", 1)[0]
-        elif source.kind == "topic":
-            base = source.topic.rsplit("/", 1)[0]
-        else:
+        base = _source_base(robot.source)
+        if base is None:
             namespace = robot.request.namespace.strip("/")
             return self._ros.resolve_name(f"{namespace}/joint_states" if namespace
                                           else "joint_states", "topic")
@@ -675,6 +714,16 @@ def _refuse_unless_waiting(robot: _Robot, field_name: str, expected: str,
     if not robot.request.wait:
         raise CommandFailedError(field_name, f"{expected} (or \"wait\": true to wait for "
                                  f"it)", got, code=ErrorCode.NOT_FOUND)
+
+
+def _source_base(source: RobotSource) -> Optional[str]:
+    """The namespace of the node or topic a description comes from (names resolved); None
+    for a file."""
+    if source.kind == "parameter":
+        return source.node.rsplit("/", 1)[0]
+    if source.kind == "topic":
+        return source.topic.rsplit("/", 1)[0]
+    return None
 
 
 def _fixed_frame(robot: _Robot, model: RobotModel) -> str:

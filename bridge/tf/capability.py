@@ -452,6 +452,11 @@ class TfBridges:
             return frame.lstrip("/")
         return self._prefix + frame
 
+    @property
+    def topics(self) -> tuple[str, str]:
+        """The tf and tf_static topics the buffer reads (fully qualified)."""
+        return self._tf_topic, self._tf_static_topic
+
     def resolve_client_frame(self, frame: str, field: str) -> str:
         """A request's frame id (`Op.client_frames`) -> the buffer's; the dispatcher maps
         each request's frames once with it. An id that maps to nothing is refused."""
@@ -695,7 +700,7 @@ class TfBridges:
         """The shared tf buffer (not a bridge: every lookup reads it), naming only the
         frames ``guard`` lets a client see."""
         return {"tf_buffer": {
-            "topics": [self._tf_topic, self._tf_static_topic], "frame_prefix": self._prefix,
+            "topics": list(self.topics), "frame_prefix": self._prefix,
             "frames": guard.visible_frames(self.buffer.frames()),
             "received": dict(self.received), "cache_time_s": self.buffer.cache_time_s}}
 

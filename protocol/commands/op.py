@@ -105,10 +105,11 @@ class FrameUse:
 
 @dataclass(frozen=True)
 class FileUse:
-    """A file on the daemon's machine the op makes it read."""
+    """A file on the daemon's machine the op makes it read, or write (``writes``)."""
 
     field: str
     path: str
+    writes: bool = False
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,26 @@ def check(policy: SecurityPolicy, op: str, args: dict) -> None:
     policy.check_request(parsed(op, args), "/lab/slicer_bridge")
 
 
+def test_recordings_write_only_inside_the_record_folders(tmp_path: Path) -> None:
+    inside_dir = tmp_path / "bags"
+    inside_dir.mkdir()
+    (inside_dir / "out").symlink_to("/etc")  # a link inside pointing outside
+    (inside_dir / "x.mcap").symlink_to("/etc/x.mcap")
+    policy = SecurityPolicy(record_dirs=(str(inside_dir),))
+    check(policy, "start_recording", {"path": f"{inside_dir}/a.mcap"})
+    check(policy, "start_recording", {"path": f"{inside_dir}/new_folder/a.mcap"})
+    for path in ("/etc/a.mcap", f"{inside_dir}/../a.mcap", f"{inside_dir}/out/a.mcap",
+                 f"{inside_dir}/x.mcap"):
+        with pytest.raises(ForbiddenError) as refused:
+            check(policy, "start_recording", {"path": path})
+        assert refused.value.field == "path" and "--record-dir" in str(refused.value), path
+    with pytest.raises(ForbiddenError, match="none: start the daemon with --record-dir"):
+        check(SecurityPolicy(), "start_recording", {"path": f"{inside_dir}/a.mcap"})
+    # The operator's own config is trusted (as its robots' files are).
+    SecurityPolicy().check_request(parsed("start_recording", {"path": "/etc/a.mcap"}),
+                                   "/lab/slicer_bridge", from_client=False)
+
+
 def test_deny_wins_and_any_allow_glob_makes_an_allow_list() -> None:
     rules = NameRules(allow=("/robot/*",), deny=("/robot/cmd_*",))
     assert rules.permits("/robot/joint_states")
@@ -57,6 +77,8 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
         "cancel_goal": {"action": "/a", "goal_id": "0" * 32},
         "advertise_action": {"action": "/a", "type": "control_msgs/action/GripperCommand"},
         "action_feedback": {"action": "/a", "goal_id": "0" * 32, "feedback": {}},
+        "start_recording": {"path": "/data/s.mcap"},  # a file on the daemon's host
+        "stop_recording": {"path": "/data/s.mcap"},
     }
     # The declarations say what writes: this list is the expectation they are held to.
     assert set(writes) == {op for op, cls in c.REQUEST_TYPES.items() if cls.writes}
@@ -69,6 +91,7 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
                      "create_tf_lookup": {"parent": "a", "child": "b"},
                      "get_parameters": {"node": "/n", "names": ["p"]},
                      "list_actions": {},
+                     "recording_status": {"path": "/data/s.mcap"},
                      "hello": {}}.items():
         check(policy, op, args)
     # Watching an action: its goal status topic.

@@ -97,6 +97,8 @@ names_tuples = st.lists(param_names, max_size=5).map(tuple)
 action_types = st.sampled_from(["control_msgs/action/FollowJointTrajectory",
                                 "control_msgs/GripperCommand"])
 goal_ids = st.uuids().map(lambda u: u.hex)
+bag_paths = st.from_regex(r"[A-Za-z0-9_ .-]{1,30}", fullmatch=True).map(
+    lambda name: f"/data/{name}.mcap")
 
 STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.Hello: st.builds(c.Hello, client=st.none() | st.text(min_size=1, max_size=30),
@@ -187,6 +189,12 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.DescribeType: st.builds(c.DescribeType, type=st.sampled_from(
         ["PoseArray", "geometry_msgs/msg/PoseStamped", "vtkMRMLROS2ServiceClientSpawnNode",
          "control_msgs/action/GripperCommand"]), kind=st.sampled_from(c.INTERFACE_KINDS)),
+    c.StartRecording: st.builds(c.StartRecording, path=bag_paths,
+                                topics=st.lists(ros_names, max_size=4).map(tuple),
+                                overwrite=st.booleans(),
+                                compression=st.sampled_from(c.COMPRESSIONS)),
+    c.StopRecording: st.builds(c.StopRecording, path=bag_paths),
+    c.RecordingStatus: st.builds(c.RecordingStatus, path=bag_paths),
 }
 
 

@@ -87,6 +87,11 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "action_cancel": ({"action": "/a", "goal_id": "0" * 32}, set()),
     "action_decide": ({"action": "/a", "type": "control_msgs/GripperCommand", "goal": {}},
                       set()),
+    "start_recording": ({"path": "/data/s.mcap", "topics": ["/a", "/b"]},
+                        {("file", "path", "/data/s.mcap"), ("topic", "topics", "/a"),
+                         ("topic", "topics", "/b")}),
+    "stop_recording": ({"path": "/data/s.mcap"}, set()),
+    "recording_status": ({"path": "/data/s.mcap"}, set()),
 }
 
 
@@ -138,7 +143,8 @@ def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
         "create_publisher", "publish", "create_tf_broadcaster", "broadcast_transform",
         "set_parameters", "server_declare_parameter", "server_set_parameter",
         "server_undeclare_parameter", "call_service", "advertise_service",
-        "set_robot_joints", "send_goal", "cancel_goal", "advertise_action", "action_feedback"}
+        "set_robot_joints", "send_goal", "cancel_goal", "advertise_action", "action_feedback",
+        "start_recording", "stop_recording"}
 
 
 def test_a_publisher_declares_its_frame_and_labels_topic() -> None:

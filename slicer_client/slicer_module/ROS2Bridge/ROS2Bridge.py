@@ -145,7 +145,8 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                 (ui.removeMarkersButton, "clicked(bool)", self.onRemoveMarkers),
                 (ui.sendNodeSelector, "currentNodeChanged(vtkMRMLNode*)", self.onSendNodeChanged),
                 (ui.sendButton, "clicked(bool)", self.onSend),
-                (ui.showJointsButton, "clicked(bool)", self.onShowJoints)):
+                (ui.showJointsButton, "clicked(bool)", self.onShowJoints),
+                (ui.recordButton, "toggled(bool)", self.onRecordToggled)):
             button.connect(signal, handler)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
                          self.onSceneStartClose)
@@ -210,6 +211,12 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         ui.robotStatusLabel.text = "\n".join(logic.robotLines())
         ui.problemsLabel.text = "\n".join(logic.problems[-5:])
         ui.staleLabel.text = "\n".join(logic.staleLines())
+        ui.recordLabel.text = logic.recordingLine()
+        recording = logic.recording is not None and logic.recording.running
+        if ui.recordButton.checked != recording:  # stopped by another client, a full disk
+            wasBlocked = ui.recordButton.blockSignals(True)
+            ui.recordButton.checked = recording
+            ui.recordButton.blockSignals(wasBlocked)
         active = logic.isActive()
         if ui.connectButton.checked != active:  # e.g. after a scene close
             wasBlocked = ui.connectButton.blockSignals(True)
@@ -298,6 +305,15 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                 widget.connect("valueChanged(double)", self.onSliderMoved)
                 self._sliderWidgets[spec.name] = widget
                 form.addRow(spec.name + ":", widget)
+
+    def onRecordToggled(self, on: bool) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to start or stop the recording.",
+                                             waitCursor=True):
+            if on:
+                self.logic.startRecording(self._parameters().recordPath)
+            else:
+                self.logic.stopRecording()
+        self.updateStatus()
 
     def onSliderMoved(self, _value: float) -> None:
         with slicer.util.tryWithErrorDisplay("Failed to move the robot."):

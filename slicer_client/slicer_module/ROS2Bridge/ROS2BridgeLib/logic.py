@@ -19,6 +19,7 @@ from protocol import commands as c
 from protocol.polydata import RGBA_ATTRIBUTE
 from slicer_client.bridge_state import BridgeState
 from slicer_client.client import Client, read_key_file
+from slicer_client.recording import Recording
 from slicer_client.joint_sliders import JointSlider, joint_sliders, slider_positions
 from slicer_client.reference.logic import ROS2Logic
 from slicer_client.reference.nodes import ROS2Node, RobotNode
@@ -62,6 +63,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.client: Optional[Client] = None
         self._key: Optional[bytes] = None  # the writers' key, when connect() was given one
         self.problems: list[str] = []  # errors met outside a button's handler, shown in the GUI
+        self.recording: Optional[Recording] = None  # the last one started from here
         self._planned: set[str] = set()  # node ids already placed
         self._timer = qt.QTimer()
         self._timer.setInterval(200)  # new connector nodes are placed within 0.2 s
@@ -351,6 +353,39 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         return publisher
 
     # --- moving a robot -----------------------------------------------------------------
+    # --- recording (a ROS 2 bag the daemon writes on its machine) ---------------------------
+    def startRecording(self, path: str, topics: Sequence[str] = (),
+                       overwrite: bool = False) -> Recording:
+        """Have the daemon record into ``path`` (absolute, .mcap, on the daemon's machine):
+        ``topics``, or without any what it bridges. One recording at a time from here."""
+        if self.recording is not None and self.recording.running:
+            raise RuntimeError(f"already recording into {self.recording.path}: stop it first")
+        if not path.strip():
+            raise ValueError("expected a bag path on the daemon's machine (/data/x.mcap), "
+                             "got an empty one")
+        self.recording = self.requireClient().record(path.strip(), list(topics),
+                                                     overwrite=overwrite)
+        return self.recording
+
+    def stopRecording(self) -> dict[str, Any]:
+        """Finish the bag; its final counts."""
+        if self.recording is None or not self.recording.running:
+            raise RuntimeError("not recording")
+        return self.recording.stop()
+
+    def recordingLine(self) -> str:
+        """The file and the elapsed time while recording (no round trip: the GUI's timer
+        calls it), the final counts after."""
+        rec = self.recording
+        if rec is None:
+            return ""
+        if rec.running:
+            return f"Recording {rec.path}: {rec.elapsed:.0f} s"
+        final = rec.status()
+        error = f"; {final['error']}" if final.get("error") else ""
+        return (f"Recorded {rec.path}: {final['messages']} messages, {final['dropped']} "
+                f"dropped, {rec.elapsed:.1f} s{error}")
+
     def _robot(self, robotName: str) -> Robot:
         robot = self.requireClient().find(c.CreateRobot.op, robotName)
         if not isinstance(robot, Robot):

@@ -26,6 +26,8 @@ class ROS2BridgeParameterNode:
     # The writers' key (`slicer-ros2-bridge keygen`): presented on each connection, so this
     # module may change ROS on a daemon that asks for it (docs/deployment.md).
     keyFile: str = ""
+    # Where the Record button has the daemon write its bag (a path on the daemon's machine).
+    recordPath: str = "/tmp/slicer-ros2-session.mcap"
     bridgeState: str = ""
 
     if TYPE_CHECKING:

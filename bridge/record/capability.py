@@ -1,0 +1,171 @@
+"""The daemon's recordings: ``start_recording``, ``stop_recording``, ``recording_status``.
+
+A recording is a `Recorder` on the daemon's node writing a bag on the daemon's machine.
+Without topics it records what the daemon bridges, looked at again every
+`bridge.record.recorder.POLL_S` (bridges made later are recorded from then on): the tf
+topics its buffer reads (/tf, /tf_static), joint_states, each robot's joint states and
+description topic, with its meshes attached,
+every subscribed topic (streams and markers) and every topic clients publish on.
+
+Opening the file and finishing the bag (the last chunk, the index) run in the client's
+lane, off the event loop; recordings outlive the client that started them.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Mapping, Optional
+
+from bridge.core.content_guards import ContentGuard
+from bridge.core.dispatch import Handler, Result
+from bridge.core.heavy import OffLoop
+from bridge.record.bag import BagPathError, BagWriter
+from bridge.record.recorder import Recorder
+from protocol.commands import (JOINT_STATE_TYPE, CommandFailedError, ErrorCode, ForbiddenError,
+                               Op, RecordingStatus, StartRecording, StopRecording)
+
+if TYPE_CHECKING:
+    from bridge.markers.capability import MarkerBridges
+    from bridge.robots.capability import RobotBridges
+    from bridge.ros.ros_node import RosNode
+    from bridge.tf.capability import TfBridges
+    from bridge.topics.capability import TopicBridges
+
+__all__ = ["RecordBridges"]
+
+log = logging.getLogger(__name__)
+
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+FINISHED_KEPT = 16  # finished recordings whose last status stays asked for
+_PATH_CODES = {"missing": ErrorCode.NOT_FOUND, "exists": ErrorCode.ALREADY_EXISTS,
+               "unavailable": ErrorCode.NOT_SUPPORTED}
+
+
+class RecordBridges:
+    """Recordings by path (running, and the last `FINISHED_KEPT` finished)."""
+
+    def __init__(self, ros: RosNode, *, topics: TopicBridges, tf: TfBridges,
+                 markers: MarkerBridges, robots: RobotBridges) -> None:
+        self._ros = ros
+        self._topics = topics
+        self._tf = tf
+        self._markers = markers
+        self._robots = robots
+        self.running: dict[str, Recorder] = {}
+        self._opening: set[str] = set()  # started, the file not open yet
+        self._finished: dict[str, dict[str, Any]] = {}
+
+    def bridged(self) -> dict[str, Optional[str]]:
+        """What the daemon bridges now, topic -> type (any thread: copies of the dicts)."""
+        # tf (what the buffer reads), and joint states even before a robot is loaded.
+        wanted: dict[str, Optional[str]] = {topic: TF_TYPE for topic in self._tf.topics}
+        wanted[self._ros.resolve_topic("joint_states")] = JOINT_STATE_TYPE
+        for topic, bridge in tuple(self._topics.subscribers.items()):
+            wanted[topic] = bridge.codec.ros_type
+        for topic, publisher in tuple(self._topics.publishers.items()):
+            wanted[topic] = publisher.codec.ros_type
+        for topic, sub in tuple(self._markers.subscriptions.items()):
+            wanted[topic] = sub.request.ros_type
+        wanted.update(self._robots.recorded_topics())
+        return wanted
+
+    # ------------------------------------------------------------------ ops
+
+    def start(self, request: StartRecording) -> OffLoop[Result]:
+        path = str(Path(request.path))  # absolute and .mcap: checked by the schema
+        if path in self.running or path in self._opening:
+            raise CommandFailedError("path", "a path no recording writes to", f"{path} "
+                                     "(being recorded: stop_recording first)",
+                                     code=ErrorCode.ALREADY_EXISTS)
+        self._opening.add(path)  # a second start of the same path is refused meanwhile
+
+        def work() -> dict[str, Any]:
+            try:
+                return self._open(path, request)
+            finally:
+                self._opening.discard(path)
+        return OffLoop(work)
+
+    def _open(self, path: str, request: StartRecording) -> dict[str, Any]:
+        """Open the bag and start recording (the client's lane)."""
+        topics = request.topics
+        try:
+            bag = BagWriter(path, overwrite=request.overwrite, compression=request.compression)
+        except BagPathError as error:
+            if error.reason == "forbidden":
+                raise ForbiddenError("path", error.expected, error.got) from None
+            raise CommandFailedError("path", error.expected, error.got,
+                                     code=_PATH_CODES.get(error.reason,
+                                                          ErrorCode.OUT_OF_RANGE)) from None
+        wanted = (lambda: dict.fromkeys(topics)) if topics else self.bridged
+        recorder = Recorder(self._ros, bag, wanted,
+                            attachments=(dict if topics else self._robots.mesh_files))
+        try:
+            recorder.start()
+        except BaseException:
+            recorder.stop()
+            raise
+        self.running[path] = recorder
+        self._finished.pop(path, None)
+        log.info("recording into %s: %s", path,
+                 ", ".join(topics) if topics else "what the daemon bridges")
+        return recorder.status()
+
+    def _find(self, path: str) -> Recorder:
+        recorder = self.running.get(str(Path(path)))
+        if recorder is None:
+            raise CommandFailedError("path", "the path of a running recording",
+                                     f"{path} ({self._known()})", code=ErrorCode.NOT_FOUND)
+        return recorder
+
+    def _known(self) -> str:
+        running = list(self.running)
+        return "running: " + ", ".join(running) if running else "none is running"
+
+    def stop(self, request: StopRecording) -> OffLoop[Result]:
+        recorder = self._find(request.path)
+        path = str(recorder.bag.path)
+
+        def work() -> dict[str, Any]:
+            pending = recorder.status()["pending"]
+            stats = recorder.stop().to_dict()
+            stats["pending"] = pending
+            self._remember(path, stats)
+            log.info("recording into %s stopped: %d messages, %d dropped", path,
+                     stats["messages"], stats["dropped"])
+            return stats
+        self.running.pop(path, None)
+        return OffLoop(work)
+
+    def status(self, request: RecordingStatus) -> dict[str, Any]:
+        path = str(Path(request.path))
+        if path in self._finished:
+            return self._finished[path]
+        return self._find(path).status()
+
+    def _remember(self, path: str, stats: dict[str, Any]) -> None:
+        self._finished[path] = stats
+        while len(self._finished) > FINISHED_KEPT:
+            del self._finished[next(iter(self._finished))]
+
+    # ------------------------------------------------------------------ capability
+
+    def handlers(self) -> Mapping[type[Op], Handler]:
+        return {StartRecording: lambda request, _: self.start(request),
+                StopRecording: lambda request, _: self.stop(request),
+                RecordingStatus: lambda request, _: self.status(request)}
+
+    def describe(self) -> list[dict[str, Any]]:
+        return []
+
+    def state(self, guard: ContentGuard) -> dict[str, Any]:
+        return {"recordings": [{k: v for k, v in r.status().items() if k != "topics"}
+                               for r in tuple(self.running.values())]}
+
+    def close(self) -> None:
+        for path, recorder in tuple(self.running.items()):
+            stats = recorder.stop()
+            log.info("recording into %s finished at shutdown: %d messages", path,
+                     stats.messages)
+        self.running.clear()
