@@ -282,6 +282,20 @@ class TfLookups:
         """Store one batch (metres) and deliver the lookups it changed (any thread)."""
         self._store(transforms, static=static)
 
+    def reset(self, static: list[StampedTransform], moving: list[StampedTransform]) -> None:
+        """Forget every frame and hold these instead (a player's seek: its time jumps), in
+        one step: no lookup is evaluated on a buffer half filled."""
+        changed: set[str] = set()
+        with self._deliver_lock:
+            self.buffer.clear()
+            for batch, is_static in ((static, True), (moving, False)):
+                try:
+                    changed |= self.buffer.set_transforms(batch, static=is_static)
+                except RejectedTransformsError as error:
+                    self._warn_rejected(error, is_static)
+                    changed |= error.changed
+        self._deliver(changed)
+
     # ------------------------------------------------------------------ ROS thread
 
     def _store_cdr(self, data: Union[bytes, memoryview], *, static: bool) -> None:
