@@ -50,8 +50,11 @@ class RobotBag:
 
 
 def joint_values(k: int) -> dict[str, float]:
-    """Joint positions of state ``k``, inside the demo robot's limits."""
-    return {name: 0.6 * math.sin(0.05 * k + i) for i, name in enumerate(JOINTS)}
+    """Joint positions of state ``k``, inside the demo robot's limits (the right finger
+    mimics the left: not in the message, as a gripper's driver leaves it out)."""
+    values = {name: 0.6 * math.sin(0.05 * k + i) for i, name in enumerate(JOINTS)}
+    values["finger_left_joint"] = 0.0125 + 0.01 * math.sin(0.07 * k)
+    return values
 
 
 def base_translation(k: int) -> tuple[float, float, float]:

@@ -58,7 +58,7 @@ from protocol import commands as c
 from protocol.commands import CommandFailedError, ErrorCode, Op
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
 
-__all__ = ["LiveRefusals", "PlayOptions", "Player", "PlayerGraph"]
+__all__ = ["PlayOptions", "Player", "PlayerGraph", "run_player"]
 
 log = logging.getLogger(__name__)
 
@@ -117,6 +117,17 @@ class PlayerGraph:
         return name if name.startswith("/") else "/" + name.lstrip("~/")
 
 
+def bag_type_resolver(bag: Bag) -> Callable[[str], str]:
+    """A request's type name -> ``pkg/msg/Type`` by the protocol's grammar, a bare name
+    looked up among the bag's types (not among installed ROS packages: there are none)."""
+    types = tuple(sorted(set(bag.topics().values())))
+
+    def resolve(name: str) -> str:
+        return c.resolve_message_type(name, packages_of=lambda bare: tuple(
+            t.split("/")[0] for t in types if t.endswith("/" + bare)), known=types)
+    return resolve
+
+
 # ---------------------------------------------------------------------------- topics
 
 
@@ -152,9 +163,7 @@ class PlayedTopics:
         if bag_type is None:
             raise CommandFailedError("topic", "a topic of the bag (" + ", ".join(sorted(types))
                                      + ")", topic, code=ErrorCode.NOT_FOUND)
-        ros_type = c.resolve_message_type(request.type, packages_of=lambda bare: tuple(
-            t.split("/")[0] for t in types.values() if t.endswith("/" + bare)),
-            known=types.values())
+        ros_type = bag_type_resolver(self._bag)(request.type)
         if ros_type != bag_type:
             raise CommandFailedError("type", f"{bag_type} (what the bag holds on {topic})",
                                      ros_type, code=ErrorCode.WRONG_TYPE)
@@ -294,30 +303,6 @@ def _with_attachments(urdf: str, files: Mapping[str, Path]) -> str:
     return urdf
 
 
-# ---------------------------------------------------------------------------- playback ops
-
-
-class LiveRefusals:
-    """The playback ops on the live daemon: refused, saying where they belong."""
-
-    def handlers(self) -> dict[type[Op], Handler]:
-        def refuse(request: Op, client: Any) -> dict[str, Any]:
-            raise CommandFailedError("op", "a player (slicer-ros2-bridge play BAG.mcap)",
-                                     f"{request.op} sent to the live daemon, which plays ROS, "
-                                     "not a bag", code=ErrorCode.NOT_SUPPORTED)
-        return {cls: refuse for cls in (c.PlaybackStatus, c.PausePlayback, c.ResumePlayback,
-                                        c.SeekPlayback, c.SetPlaybackRate)}
-
-    def describe(self) -> list[dict[str, Any]]:
-        return []
-
-    def state(self, guard: ContentGuard) -> dict[str, Any]:
-        return {}
-
-    def close(self) -> None:
-        pass
-
-
 # ---------------------------------------------------------------------------- the player
 
 
@@ -348,7 +333,8 @@ class Player:
                                    package_paths=package_paths,
                                    attachment_files=attachment_files)
         roots = (workdir, *package_paths.values())
-        self.policy = SecurityPolicy(robot_dirs=tuple(str(r) for r in roots))
+        self.policy = SecurityPolicy(robot_dirs=tuple(str(r) for r in roots),
+                                     resolve_type=bag_type_resolver(bag))
         self.dispatcher = Dispatcher(PlayerGraph(bag), self.hub,
                                      [self.topics, self.tf, self.robots, _Controls(self)],
                                      policy=self.policy,

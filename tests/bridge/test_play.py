@@ -1,0 +1,354 @@
+"""`slicer-ros2-bridge play`: a bag written by rosbags (not by us, not by ROS) served over
+OpenIGTLink, in a process where every ROS import fails.
+
+Issue 45: nothing put a bag into Slicer, and a laptop without ROS could not review one.
+Here a rosbags bag with the demo robot's description, /tf, /joint_states and an image
+plays into a raw OpenIGTLink reader (protocol/ only): the link poses equal forward
+kinematics computed by yourdfpy at the bag's joint states (0.01 mm), the image's bytes are
+the bag's; pause, seek and rate work from the Pythonic client, and after a seek the first
+pose shown is the one at the seek time."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any, Iterator, Optional
+
+import numpy as np
+import pytest
+
+import slicer_client
+from protocol.framing import Decoder, encode
+from protocol.messages import Command, Image, Message, PolyData, Status, Transform
+from protocol.naming import NameKey, device_name_for
+from support import Child, Processes, scaled, wait_until
+
+pytest.importorskip("rosbags", reason="the test extra's rosbags writes the bags")
+pytest.importorskip("mcap_ros2", reason="the play extra (mcap-ros2-support) reads them")
+
+from bags import NS, RobotBag, write_robot_bag  # noqa: E402
+
+pytestmark = pytest.mark.integration
+
+# Every ROS import fails in the player's process: rclpy, the rosidl runtime, and the
+# message packages a ROS install has (the guard names each refused import on stderr).
+NO_ROS_SITECUSTOMIZE = '''
+import importlib.abc
+import sys
+
+ROS = ("rclpy", "rcl", "rosidl", "rmw", "ament", "launch", "tf2", "rosbag2", "rpyutils",
+       "builtin_interfaces", "std_msgs", "sensor_msgs", "geometry_msgs",
+       "visualization_msgs", "shape_msgs", "nav_msgs", "trajectory_msgs", "action_msgs",
+       "unique_identifier_msgs", "lifecycle_msgs", "std_srvs", "example_interfaces",
+       "control_msgs", "rosgraph_msgs", "service_msgs", "type_description_interfaces",
+       "statistics_msgs", "diagnostic_msgs", "stereo_msgs", "actionlib_msgs")
+
+
+class NoRos(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        top = name.split(".")[0]
+        if top.startswith(ROS) or top.endswith(("_msgs", "_interfaces")):
+            sys.stderr.write(f"NO-ROS GUARD: refused import of {name}\\n")
+            raise ImportError(f"no ROS here: {name}")
+        return None
+
+
+sys.meta_path.insert(0, NoRos())
+'''
+
+
+@pytest.fixture(scope="module")
+def no_ros(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    """The environment of a process where `import rclpy` (and every ROS import) fails."""
+    folder = tmp_path_factory.mktemp("no-ros")
+    (folder / "sitecustomize.py").write_text(NO_ROS_SITECUSTOMIZE)
+    return {"PYTHONPATH": str(folder)}
+
+
+@pytest.fixture(scope="module")
+def demo() -> tuple[str, str]:
+    """The demo robot's URDF text and its package folder (meshes by --package-path)."""
+    from bridge.robots.demo import demo_urdf_path
+    from bridge.robots.demo.urdf import DEMO_PACKAGE
+
+    urdf, packages = demo_urdf_path()
+    return urdf.read_text(), f"{DEMO_PACKAGE}={packages[DEMO_PACKAGE]}"
+
+
+@pytest.fixture(scope="module")
+def robot_bag(tmp_path_factory: pytest.TempPathFactory, demo: tuple[str, str]) -> RobotBag:
+    return write_robot_bag(tmp_path_factory.mktemp("bags") / "robot", demo[0])
+
+
+def start_player(processes: Processes, env: dict[str, str], *args: str) -> tuple[Child, int]:
+    child = processes.start("play", [sys.executable, "-u", "-m", "bridge.console", "play",
+                                     *args, "--port", "0"], env=env)
+    line = child.wait_for_output("listening on", timeout=60)
+    match = re.search(r"listening on [\d.]+:(\d+)", line)
+    assert match, line
+    return child, int(match.group(1))
+
+
+# ------------------------------------------------------------------ a raw reader
+
+
+class RawReader:
+    """OpenIGTLink over one socket with protocol/ alone: every message decoded, the newest
+    per device kept, COMMANDs answered by their command id."""
+
+    def __init__(self, port: int) -> None:
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=30)
+        self.sock.sendall(encode(Message("", Status(text="raw reader")), header_version=2))
+        self.latest: dict[str, Message] = {}
+        self.replies: dict[int, dict[str, Any]] = {}
+        self.cond = threading.Condition()
+        self._ids = iter(range(1, 1 << 30))
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        decoder = Decoder(max_body_size=1 << 28)
+        try:
+            while True:
+                data = self.sock.recv(1 << 20)
+                if not data:
+                    return
+                decoder.feed(data)
+                while (message := decoder.next_message()) is not None:
+                    with self.cond:
+                        if message.type_name == "RTS_COMMAND":
+                            self.replies[message.body.command_id] = json.loads(
+                                message.body.text)
+                        else:
+                            self.latest[message.device_name] = message
+                        self.cond.notify_all()
+        except OSError:
+            return
+
+    def command(self, op: str, arguments: Optional[dict[str, Any]] = None) -> dict[str, Any]:
+        command_id = next(self._ids)
+        self.sock.sendall(encode(Message("raw", Command(command_id=command_id, name=op,
+                                                        text=json.dumps(arguments or {}))),
+                                 header_version=2))
+        with self.cond:
+            assert self.cond.wait_for(lambda: command_id in self.replies, scaled(30)), op
+            return self.replies.pop(command_id)
+
+    def wait(self, predicate: Any, what: str, timeout: float = 30.0) -> None:
+        with self.cond:
+            assert self.cond.wait_for(lambda: predicate(self.latest), scaled(timeout)), what
+
+    def close(self) -> None:
+        self.sock.close()
+        self._thread.join(5)
+
+
+@pytest.fixture()
+def raw_reader() -> Iterator[list[RawReader]]:
+    readers: list[RawReader] = []
+    yield readers
+    for reader in readers:
+        reader.close()
+
+
+# ------------------------------------------------------------------ independent references
+
+
+def expected_link_poses(bag: RobotBag, index: int) -> dict[str, np.ndarray]:
+    """world <- link (mm) at state ``index``: yourdfpy's forward kinematics at the bag's
+    joint values, after the bag's world -> base_link transform."""
+    import yourdfpy
+
+    robot = yourdfpy.URDF.load(_urdf_file(bag), load_meshes=False, build_scene_graph=True)
+    robot.update_cfg(bag.joints[index])
+    world = np.eye(4)
+    world[:3, 3] = bag.base[index]
+    out = {}
+    for link in robot.link_map:
+        pose = world @ robot.get_transform(link, robot.base_link)
+        pose[:3, 3] *= 1000.0
+        out[link] = pose
+    return out
+
+
+def _urdf_file(bag: RobotBag) -> str:
+    path = bag.path.parent / "robot.urdf"
+    path.write_text(bag.urdf)
+    return str(path)
+
+
+def link_devices(reply: dict[str, Any]) -> dict[str, str]:
+    return {link["link"]: link["device"] for link in reply["result"]["links"]}
+
+
+def assert_poses(reader: RawReader, devices: dict[str, str],
+                 expected: dict[str, np.ndarray]) -> None:
+    def all_match(latest: dict[str, Message]) -> bool:
+        for link, device in devices.items():
+            message = latest.get(device)
+            if not isinstance(message, Message) or not isinstance(message.body, Transform):
+                return False
+            if not np.allclose(message.body.matrix[:3, 3], expected[link][:3, 3], atol=0.01):
+                return False
+        return True
+    try:
+        reader.wait(all_match, "every link at its forward-kinematics pose")
+    except AssertionError:
+        for link, device in devices.items():  # say which link and by how much
+            got = reader.latest.get(device)
+            got_t = None if got is None else np.asarray(got.body.matrix)[:3, 3]
+            print(link, got_t, expected[link][:3, 3])
+        raise
+    for link, device in devices.items():
+        matrix = np.asarray(reader.latest[device].body.matrix)
+        np.testing.assert_allclose(matrix[:3, :3], expected[link][:3, :3], atol=1e-5)
+
+
+# ------------------------------------------------------------------ tests
+
+
+def test_the_no_ros_guard_refuses_rclpy(no_ros: dict[str, str]) -> None:
+    """The environment the player runs in below: importing rclpy fails there."""
+    done = subprocess.run([sys.executable, "-c", "import rclpy"], capture_output=True,
+                          text=True, env={**os.environ, **no_ros}, timeout=scaled(60))
+    assert done.returncode != 0
+    assert "NO-ROS GUARD: refused import of rclpy" in done.stderr
+    assert "ImportError: no ROS here: rclpy" in done.stderr
+
+
+def test_a_rosbags_bag_plays_into_a_raw_reader_without_ros(
+        processes: Processes, no_ros: dict[str, str], robot_bag: RobotBag,
+        demo: tuple[str, str], raw_reader: list[RawReader]) -> None:
+    """Paused 1.2 s in: the robot's links at forward kinematics of the joint state then,
+    under the bag's world -> base_link; the image then, byte for byte; the devices named
+    as the live daemon names them."""
+    player, port = start_player(processes, no_ros, str(robot_bag.mcap), "--paused",
+                                "--start", "1.2", "--package-path", demo[1])
+    reader = RawReader(port)
+    raw_reader.append(reader)
+    hello = reader.command("hello", {})
+    assert hello["ok"] and "seek_playback" in hello["result"]["ops"]
+    reply = reader.command("create_robot", {"name": "demo", "fixed_frame": "world"})
+    assert reply["ok"], reply
+    devices = link_devices(reply)
+    assert devices == {link: device_name_for(NameKey.robot_link("demo", link))
+                       for link in devices}
+    t = robot_bag.times[0] - NS // 100 + int(1.2 * NS)  # T0 + 1.2 s
+    index = robot_bag.state_at(t)
+    expected = expected_link_poses(robot_bag, index)
+    assert set(devices) == set(expected)
+    assert_poses(reader, devices, expected)
+    # Every visual's mesh came (by the package path), under its link.
+    visuals = [v["device"] for v in reply["result"]["visuals"]]
+    assert len(visuals) >= 8
+    reader.wait(lambda latest: all(isinstance(getattr(latest.get(v), "body", None), PolyData)
+                                   for v in visuals), "every mesh")
+    # The image at 1.2 s, intact.
+    sub = reader.command("create_subscriber", {"topic": "/camera/image",
+                                               "type": "sensor_msgs/msg/Image"})
+    assert sub["ok"], sub
+    device = sub["result"]["device"]
+    assert device == device_name_for(NameKey.subscriber("/camera/image"))
+    reader.wait(lambda latest: isinstance(getattr(latest.get(device), "body", None), Image),
+                "the image at the clock's time")
+    image = reader.latest[device]
+    pixels = np.asarray(image.body.pixels)
+    assert pixels.shape == (1, 48, 64, 3)
+    assert pixels.tobytes() == robot_bag.image_at(t)
+    assert image.metadata["ros2.type"] == "sensor_msgs/msg/Image"
+    # A tf lookup, as the daemon answers it.
+    lookup = reader.command("lookup_transform", {"parent": "world", "child": "tool_flange"})
+    assert lookup["ok"], lookup
+    np.testing.assert_allclose(np.asarray(lookup["result"]["matrix"]),
+                               expected["tool_flange"], atol=1e-6)
+    # Played to the end at rate 20: the last state shown.
+    reader.command("set_playback_rate", {"rate": 20})
+    reader.command("resume_playback")
+    wait_until(lambda: reader.command("playback_status")["result"]["ended"], timeout=30,
+               what="the end of the bag")
+    assert_poses(reader, devices, expected_link_poses(robot_bag, len(robot_bag.times) - 1))
+    assert "NO-ROS GUARD" not in player.output()
+    assert "Traceback" not in player.output()
+
+
+def test_pause_seek_and_rate_from_the_pythonic_client(
+        processes: Processes, no_ros: dict[str, str], robot_bag: RobotBag,
+        demo: tuple[str, str]) -> None:
+    """After a seek the first pose shown is the one at the seek time; pause holds the
+    clock; the rate moves it that many times faster; the clock is the bag's."""
+    player, port = start_player(processes, no_ros, str(robot_bag.mcap), "--paused",
+                                "--package-path", demo[1])
+    poses: list[tuple[float, np.ndarray]] = []
+    lock = threading.Lock()
+
+    def on_link(kind: str, link: str, value: Any) -> None:
+        if kind == "transform" and link == "tool_flange":
+            with lock:
+                poses.append((time.monotonic(), np.array(value)))
+
+    with slicer_client.connect("127.0.0.1", port) as ros:
+        status = ros.playback()
+        assert status.paused and status.offset == 0.0 and status.duration == pytest.approx(2.0)
+        assert (status.start.sec, status.start.nanosec) == divmod(robot_bag.times[0]
+                                                                  - NS // 100, NS)
+        robot = ros.robot("demo", fixed_frame="world", callback=on_link)
+        wait_until(lambda: robot.state == "loaded", timeout=30, what="the robot")
+        assert robot.transforms == {}  # at the bag's start: no joint state yet, no pose
+        for offset in (1.5, 0.3, 1.93):
+            with lock:
+                poses.clear()
+            after = ros.seek(offset)
+            assert after.paused and after.offset == pytest.approx(offset)
+            t = robot_bag.times[0] - NS // 100 + int(round(offset * NS))
+            want = expected_link_poses(robot_bag, robot_bag.state_at(t))["tool_flange"]
+            wait_until(lambda: bool(poses), timeout=30, what="a pose after the seek")
+            with lock:
+                first = poses[0][1]
+            np.testing.assert_allclose(first[:3, 3], want[:3, 3], atol=0.01)
+        # Paused: the clock holds (read twice, the bag's topics listed between).
+        held = ros.playback().offset
+        assert {t["topic"] for t in ros.list_topics()} >= {"/tf", "/joint_states"}
+        assert ros.playback().offset == held
+        # Running at rate 2, the bag's clock moves twice as fast as the wall clock: each
+        # status is read between two clock readings here, which bound the ratio.
+        ros.seek(0.0)
+        ros.set_rate(2.0)
+        ros.resume()
+        a0 = time.monotonic()
+        first = ros.playback()
+        a1 = time.monotonic()
+        wait_until(lambda: ros.playback().offset >= 1.0, timeout=30,
+                   what="a second of bag time")
+        b0 = time.monotonic()
+        second = ros.playback()
+        b1 = time.monotonic()
+        moved = second.offset - first.offset
+        assert 2.0 * (b0 - a1) - 1e-3 <= moved <= 2.0 * (b1 - a0) + 1e-3, (moved, b0 - a1,
+                                                                          b1 - a0)
+        paused = ros.pause()
+        assert paused.paused and paused.rate == 2.0
+        assert (paused.time.sec * NS + paused.time.nanosec
+                == robot_bag.times[0] - NS // 100 + int(round(paused.offset * NS)))
+    assert "NO-ROS GUARD" not in player.output()
+
+
+def test_the_live_daemons_refusal_names_the_player() -> None:
+    """On the live daemon the playback ops are refused, saying where they belong."""
+    from bridge.playback.refusals import LiveRefusals
+    from protocol import commands as c
+    from protocol.commands import CommandFailedError, ErrorCode
+
+    handlers = LiveRefusals().handlers()
+    assert set(handlers) == {c.PlaybackStatus, c.PausePlayback, c.ResumePlayback,
+                             c.SeekPlayback, c.SetPlaybackRate}
+    with pytest.raises(CommandFailedError) as refused:
+        handlers[c.SeekPlayback](c.SeekPlayback(offset=1.0), None)
+    assert refused.value.error_code == ErrorCode.NOT_SUPPORTED
+    assert "slicer-ros2-bridge play" in str(refused.value)
