@@ -63,24 +63,18 @@ class BagMessage:
 
 
 def _compression_works(name: str) -> bool:
-    if name == "":
-        return True
-    if name == "lz4":
-        try:
-            import lz4.frame  # noqa: F401
-        except ImportError:
-            return False
-        return True
-    if name == "zstd":
-        try:
-            import zstandard  # noqa: F401
-        except ImportError:
-            try:
-                from backports import zstd  # noqa: F401
-            except ImportError:
-                return False
-        return True
-    return False
+    """Does mcap's reader decompress ``name`` here (its own optional modules, as it sees
+    them)?"""
+    from mcap import stream_reader
+
+    available = {"": True, "lz4": getattr(stream_reader, "lz4", None) is not None,
+                 "zstd": getattr(stream_reader, "zstandard", None) is not None}
+    return available.get(name, False)
+
+
+def _describe(error: BaseException) -> str:
+    text = str(error)
+    return f"{type(error).__name__}: {text}" if text else type(error).__name__
 
 
 def _mcap_file(path: Path) -> Path:
@@ -117,13 +111,16 @@ class Bag:
             raise BagError(f"{self.path}: not an MCAP file (its first bytes are "
                            f"{magic[:8]!r}, an MCAP file starts with b'\\x89MCAP0\\r\\n')")
         self._stream.seek(0)
-        self._reader: McapReader = SeekingReader(self._stream)
+        # Chunk CRCs checked (where the writer set them): a corrupt chunk is skipped, named,
+        # rather than played as wrong poses or pixels.
+        self._reader: McapReader = SeekingReader(self._stream, validate_crcs=True)
         try:
             summary = self._reader.get_summary()
         except _READ_ERRORS as error:  # no footer: cut short
             summary = None
             self.problems.append(f"{self.path.name}: no index (the file ends early, at "
-                                 f"{self.path.stat().st_size} bytes: {error}); its messages "
+                                 f"{self.path.stat().st_size} bytes: {_describe(error)}); "
+                                 "its messages "
                                  "are read in one pass up to where it ends, and seeking "
                                  "re-reads from the start")
         self.indexed = summary is not None and bool(summary.chunk_indexes)
@@ -168,9 +165,9 @@ class Bag:
                 ) -> Iterator[BagMessage]:
         """Messages in file order, up to where the file ends or breaks (said once)."""
         self._stream.seek(0, io.SEEK_SET)
-        reader = NonSeekingReader(self._stream)
+        reader = NonSeekingReader(self._stream, validate_crcs=True)
         try:
-            for schema, channel, message in reader.iter_messages():
+            for schema, channel, message in reader.iter_messages(log_time_order=False):
                 known = self.channels.get(channel.id)
                 if known is None:
                     known = self.channels[channel.id] = Channel(
@@ -182,8 +179,8 @@ class Bag:
                     continue
                 yield BagMessage(known, message.log_time, message.data)
         except _READ_ERRORS as error:
-            self._said(f"{self.path.name}: read up to where it breaks off ({error}); the "
-                       "rest is lost")
+            self._said(f"{self.path.name}: read up to where it breaks off "
+                       f"({_describe(error)}); the rest is lost")
 
     def _said(self, problem: str) -> None:
         if problem not in self.problems:
@@ -253,11 +250,11 @@ class Bag:
                         found[k] = message
             return sorted(set(found.values()), key=lambda m: m.log_time,)
         try:
-            for _schema, channel, message in self._reader.iter_messages(
+            for _schema, channel, record in self._reader.iter_messages(
                     topics=wanted, start_time=begin, end_time=t_ns + 1,
                     log_time_order=True, reverse=True):
-                bag_message = BagMessage(self.channels[channel.id], message.log_time,
-                                         message.data)
+                bag_message = BagMessage(self.channels[channel.id], record.log_time,
+                                         record.data)
                 for k in key(bag_message):
                     found.setdefault(k, bag_message)
                 if keys is not None and keys <= found.keys():

@@ -12,13 +12,11 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import socket
 import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 from typing import Any, Iterator, Optional
 
 import numpy as np
@@ -28,73 +26,15 @@ import slicer_client
 from protocol.framing import Decoder, encode
 from protocol.messages import Command, Image, Message, PolyData, Status, Transform
 from protocol.naming import NameKey, device_name_for
-from support import Child, Processes, scaled, wait_until
+from support import Processes, scaled, wait_until
 
 pytest.importorskip("rosbags", reason="the test extra's rosbags writes the bags")
 pytest.importorskip("mcap_ros2", reason="the play extra (mcap-ros2-support) reads them")
 
-from bags import NS, RobotBag, write_robot_bag  # noqa: E402
+from bags import NS, RobotBag  # noqa: E402
+from play_support import expected_link_poses, start_player  # noqa: E402
 
 pytestmark = pytest.mark.integration
-
-# Every ROS import fails in the player's process: rclpy, the rosidl runtime, and the
-# message packages a ROS install has (the guard names each refused import on stderr).
-NO_ROS_SITECUSTOMIZE = '''
-import importlib.abc
-import sys
-
-ROS = ("rclpy", "rcl", "rosidl", "rmw", "ament", "launch", "tf2", "rosbag2", "rpyutils",
-       "builtin_interfaces", "std_msgs", "sensor_msgs", "geometry_msgs",
-       "visualization_msgs", "shape_msgs", "nav_msgs", "trajectory_msgs", "action_msgs",
-       "unique_identifier_msgs", "lifecycle_msgs", "std_srvs", "example_interfaces",
-       "control_msgs", "rosgraph_msgs", "service_msgs", "type_description_interfaces",
-       "statistics_msgs", "diagnostic_msgs", "stereo_msgs", "actionlib_msgs")
-
-
-class NoRos(importlib.abc.MetaPathFinder):
-    def find_spec(self, name, path=None, target=None):
-        top = name.split(".")[0]
-        if top.startswith(ROS) or top.endswith(("_msgs", "_interfaces")):
-            sys.stderr.write(f"NO-ROS GUARD: refused import of {name}\\n")
-            raise ImportError(f"no ROS here: {name}")
-        return None
-
-
-sys.meta_path.insert(0, NoRos())
-'''
-
-
-@pytest.fixture(scope="module")
-def no_ros(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    """The environment of a process where `import rclpy` (and every ROS import) fails."""
-    folder = tmp_path_factory.mktemp("no-ros")
-    (folder / "sitecustomize.py").write_text(NO_ROS_SITECUSTOMIZE)
-    return {"PYTHONPATH": str(folder)}
-
-
-@pytest.fixture(scope="module")
-def demo() -> tuple[str, str]:
-    """The demo robot's URDF text and its package folder (meshes by --package-path)."""
-    from bridge.robots.demo import demo_urdf_path
-    from bridge.robots.demo.urdf import DEMO_PACKAGE
-
-    urdf, packages = demo_urdf_path()
-    return urdf.read_text(), f"{DEMO_PACKAGE}={packages[DEMO_PACKAGE]}"
-
-
-@pytest.fixture(scope="module")
-def robot_bag(tmp_path_factory: pytest.TempPathFactory, demo: tuple[str, str]) -> RobotBag:
-    return write_robot_bag(tmp_path_factory.mktemp("bags") / "robot", demo[0])
-
-
-def start_player(processes: Processes, env: dict[str, str], *args: str) -> tuple[Child, int]:
-    child = processes.start("play", [sys.executable, "-u", "-m", "bridge.console", "play",
-                                     *args, "--port", "0"], env=env)
-    line = child.wait_for_output("listening on", timeout=60)
-    match = re.search(r"listening on [\d.]+:(\d+)", line)
-    assert match, line
-    return child, int(match.group(1))
-
 
 # ------------------------------------------------------------------ a raw reader
 
@@ -156,32 +96,6 @@ def raw_reader() -> Iterator[list[RawReader]]:
     yield readers
     for reader in readers:
         reader.close()
-
-
-# ------------------------------------------------------------------ independent references
-
-
-def expected_link_poses(bag: RobotBag, index: int) -> dict[str, np.ndarray]:
-    """world <- link (mm) at state ``index``: yourdfpy's forward kinematics at the bag's
-    joint values, after the bag's world -> base_link transform."""
-    import yourdfpy
-
-    robot = yourdfpy.URDF.load(_urdf_file(bag), load_meshes=False, build_scene_graph=True)
-    robot.update_cfg(bag.joints[index])
-    world = np.eye(4)
-    world[:3, 3] = bag.base[index]
-    out = {}
-    for link in robot.link_map:
-        pose = world @ robot.get_transform(link, robot.base_link)
-        pose[:3, 3] *= 1000.0
-        out[link] = pose
-    return out
-
-
-def _urdf_file(bag: RobotBag) -> str:
-    path = bag.path.parent / "robot.urdf"
-    path.write_text(bag.urdf)
-    return str(path)
 
 
 def link_devices(reply: dict[str, Any]) -> dict[str, str]:

@@ -143,7 +143,9 @@ def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
         "create_publisher", "publish", "create_tf_broadcaster", "broadcast_transform",
         "set_parameters", "server_declare_parameter", "server_set_parameter",
         "server_undeclare_parameter", "call_service", "advertise_service",
-        "set_robot_joints", "send_goal", "cancel_goal", "advertise_action", "action_feedback"}
+        "set_robot_joints", "send_goal", "cancel_goal", "advertise_action", "action_feedback",
+        # A player's clock: every client of the player sees what these change.
+        "pause_playback", "resume_playback", "seek_playback", "set_playback_rate"}
 
 
 def test_a_publisher_declares_its_frame_and_labels_topic() -> None:
