@@ -39,10 +39,14 @@ def _seconds(text: str) -> float:
 
 
 def _package_path(text: str) -> tuple[str, str]:
-    name, sep, folder = text.partition("=")
-    if not sep or not name or not folder:
-        raise argparse.ArgumentTypeError(f"expected NAME=DIR, got {text!r}")
-    return name, folder
+    from bridge.robots.errors import RobotError
+    from bridge.robots.resources import parse_package_path_option
+
+    try:
+        name, folder = parse_package_path_option(text)
+    except RobotError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+    return name, str(folder)
 
 
 def build_parser(prog: str = "slicer-ros2-bridge play") -> argparse.ArgumentParser:
@@ -90,10 +94,7 @@ def main(argv: Optional[list[str]] = None) -> int:
                           package_paths=tuple(args.package_path))
     try:
         asyncio.run(run_player(options))
-    except BagError as error:
-        print(f"slicer-ros2-bridge play: {error}", file=sys.stderr)
-        return 2
-    except PortInUseError as error:
+    except (BagError, PortInUseError) as error:  # the start's own error: one line
         print(f"slicer-ros2-bridge play: {error}", file=sys.stderr)
         return 2
     return 0

@@ -47,7 +47,7 @@ from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.security import SecurityPolicy
 from bridge.core.server import BridgeServer
 from bridge.core.session import SessionLimits
-from bridge.playback.bag import Bag, BagMessage, Channel
+from bridge.playback.bag import Bag, BagMessage
 from bridge.playback.clock import PlayClock
 from bridge.robots.capability import RobotServing, _Robot
 from bridge.robots.errors import RobotError
@@ -70,6 +70,9 @@ DESCRIPTION_TYPE = "std_msgs/msg/String"
 # (the tf buffer's own history, tf2's default): a frame silent longer is not shown.
 PRIME_WINDOW_NS = 10 * _NS_PER_S
 PLAYER_NODE = "/slicer_bridge_player"
+# Messages already due are played together, at most this many (a lookup is then evaluated
+# once per burst, not once per message).
+BURST = 256
 
 
 @dataclass(frozen=True)
@@ -487,8 +490,25 @@ class Player:
                         return
                     continue
             if self._wait_until(pending.log_time):
-                self._play(pending)
-                pending = None
+                pending = self._play_due(pending, messages)
+
+    def _play_due(self, first: BagMessage, messages: Iterator[BagMessage]
+                  ) -> Optional[BagMessage]:
+        """Play ``first`` and the messages after it that are due already (a rate the
+        thread barely holds, or kHz topics: up to `BURST`), together; the next message,
+        not due yet (None: the bag's end, or a full burst)."""
+        with self._cond:
+            now = self.clock.bag_time(time.monotonic_ns())
+        burst = [first]
+        following: Optional[BagMessage] = None
+        while len(burst) < BURST:
+            following = next(messages, None)
+            if following is None or following.log_time > now:
+                break
+            burst.append(following)
+            following = None
+        self._play_many(burst)
+        return following
 
     def _at_end(self) -> bool:
         """The bag played out: loop, or wait for a seek (True: stopped)."""
@@ -553,37 +573,50 @@ class Player:
         return [] if msg is None else tf_message_to_transforms(msg)
 
     def _play(self, message: BagMessage) -> None:
-        topic = message.channel.topic
-        static = self._tf_topics.get(topic)
-        if static is not None:
-            self.tf.store_transforms(self._transforms(message), static=static)
-            return
-        descriptions = self._by_joint_topic.get(topic)
-        subscribed = topic in self.topics.subscribers
-        if descriptions is None and not subscribed:
-            self.bag.decoder(message.channel)  # a topic without schema is named once
-            return
-        msg = self.bag.decode(message)
-        if msg is None:
-            return
-        if descriptions is not None and message.channel.type == JOINT_STATE_TYPE:
-            self._joint_state(message.channel, msg, message.log_time, descriptions)
-        if subscribed:
-            self.topics.play(topic, msg)
+        self._play_many([message])
 
-    def _joint_state(self, channel: Channel, msg: Any, log_time: int,
-                     descriptions: list[_Description]) -> None:
+    def _play_many(self, messages: list[BagMessage]) -> None:
+        """Messages due together. Their transforms (tf, and the links joint states move)
+        are stored as one batch per kind, as the daemon stores a burst of /tf: the lookups
+        they change are evaluated and sent once for the burst. Other topics go in order."""
+        batch: dict[bool, list[StampedTransform]] = {False: [], True: []}
+        for message in messages:
+            topic = message.channel.topic
+            static = self._tf_topics.get(topic)
+            if static is not None:
+                batch[static].extend(self._transforms(message))
+                continue
+            descriptions = self._by_joint_topic.get(topic)
+            subscribed = topic in self.topics.subscribers
+            if descriptions is None and not subscribed:
+                self.bag.decoder(message.channel)  # a topic without schema is named once
+                continue
+            msg = self.bag.decode(message)
+            if msg is None:
+                continue
+            if descriptions is not None and message.channel.type == JOINT_STATE_TYPE:
+                batch[False].extend(self._joint_state(msg, message.log_time, descriptions))
+            if subscribed:
+                self.topics.play(topic, msg)
+        for static, transforms in batch.items():
+            if transforms:
+                self.tf.store_transforms(transforms, static=static)
+
+    def _joint_state(self, msg: Any, log_time: int,
+                     descriptions: list[_Description]) -> list[StampedTransform]:
+        """The link transforms a joint state moves, stamped as robot_state_publisher does
+        (the message's stamp; its log time if that is zero)."""
         stamp = msg.header.stamp
         stamp_ns = int(stamp.sec) * _NS_PER_S + int(stamp.nanosec) or log_time
+        out: list[StampedTransform] = []
         for description in descriptions:
             tracker = description.tracker
             if tracker is None:
                 continue
             moved = tracker.update(list(msg.name), [float(p) for p in msg.position])
-            frames = joint_frames(tracker.description, moved)
-            self.tf.store_transforms([StampedTransform(f.parent, f.child, stamp_ns,
-                                                       f.translation, f.rotation)
-                                      for f in frames], static=False)
+            out.extend(StampedTransform(f.parent, f.child, stamp_ns, f.translation, f.rotation)
+                       for f in joint_frames(tracker.description, moved))
+        return out
 
     # ------------------------------------------------------------------ serving
 
