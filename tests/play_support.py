@@ -3,13 +3,18 @@ a player, and forward kinematics computed independently (yourdfpy)."""
 
 from __future__ import annotations
 
+import json
 import re
+import socket
 import sys
+import threading
+from typing import TYPE_CHECKING, Any, Optional
 
 import numpy as np
-from typing import TYPE_CHECKING
 
-from support import Child, Processes
+from protocol.framing import Decoder, encode
+from protocol.messages import Command, Message, Status
+from support import Child, Processes, scaled
 
 if TYPE_CHECKING:  # rosbags: the test extra
     from bags import RobotBag
@@ -76,3 +81,55 @@ def _urdf_file(bag: RobotBag) -> str:
     return str(path)
 
 
+# ------------------------------------------------------------------ a raw reader
+
+
+class RawReader:
+    """OpenIGTLink over one socket with protocol/ alone: every message decoded, the newest
+    per device kept, COMMANDs answered by their command id."""
+
+    def __init__(self, port: int) -> None:
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=30)
+        self.sock.sendall(encode(Message("", Status(text="raw reader")), header_version=2))
+        self.latest: dict[str, Message] = {}
+        self.replies: dict[int, dict[str, Any]] = {}
+        self.cond = threading.Condition()
+        self._ids = iter(range(1, 1 << 30))
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        decoder = Decoder(max_body_size=1 << 28)
+        try:
+            while True:
+                data = self.sock.recv(1 << 20)
+                if not data:
+                    return
+                decoder.feed(data)
+                while (message := decoder.next_message()) is not None:
+                    with self.cond:
+                        if message.type_name == "RTS_COMMAND":
+                            self.replies[message.body.command_id] = json.loads(
+                                message.body.text)
+                        else:
+                            self.latest[message.device_name] = message
+                        self.cond.notify_all()
+        except OSError:
+            return
+
+    def command(self, op: str, arguments: Optional[dict[str, Any]] = None) -> dict[str, Any]:
+        command_id = next(self._ids)
+        self.sock.sendall(encode(Message("raw", Command(command_id=command_id, name=op,
+                                                        text=json.dumps(arguments or {}))),
+                                 header_version=2))
+        with self.cond:
+            assert self.cond.wait_for(lambda: command_id in self.replies, scaled(30)), op
+            return self.replies.pop(command_id)
+
+    def wait(self, predicate: Any, what: str, timeout: float = 30.0) -> None:
+        with self.cond:
+            assert self.cond.wait_for(lambda: predicate(self.latest), scaled(timeout)), what
+
+    def close(self) -> None:
+        self.sock.close()
+        self._thread.join(5)

@@ -10,21 +10,19 @@ pose shown is the one at the seek time."""
 
 from __future__ import annotations
 
-import json
 import os
-import socket
+from pathlib import Path
 import subprocess
 import sys
 import threading
 import time
-from typing import Any, Iterator, Optional
+from typing import Any, Iterator
 
 import numpy as np
 import pytest
 
 import slicer_client
-from protocol.framing import Decoder, encode
-from protocol.messages import Command, Image, Message, PolyData, Status, Transform
+from protocol.messages import Image, Message, PolyData, Transform
 from protocol.naming import NameKey, device_name_for
 from support import Processes, scaled, wait_until
 
@@ -32,63 +30,9 @@ pytest.importorskip("rosbags", reason="the test extra's rosbags writes the bags"
 pytest.importorskip("mcap_ros2", reason="the play extra (mcap-ros2-support) reads them")
 
 from bags import NS, RobotBag  # noqa: E402
-from play_support import expected_link_poses, start_player  # noqa: E402
+from play_support import RawReader, expected_link_poses, start_player  # noqa: E402
 
 pytestmark = pytest.mark.integration
-
-# ------------------------------------------------------------------ a raw reader
-
-
-class RawReader:
-    """OpenIGTLink over one socket with protocol/ alone: every message decoded, the newest
-    per device kept, COMMANDs answered by their command id."""
-
-    def __init__(self, port: int) -> None:
-        self.sock = socket.create_connection(("127.0.0.1", port), timeout=30)
-        self.sock.sendall(encode(Message("", Status(text="raw reader")), header_version=2))
-        self.latest: dict[str, Message] = {}
-        self.replies: dict[int, dict[str, Any]] = {}
-        self.cond = threading.Condition()
-        self._ids = iter(range(1, 1 << 30))
-        self._thread = threading.Thread(target=self._read, daemon=True)
-        self._thread.start()
-
-    def _read(self) -> None:
-        decoder = Decoder(max_body_size=1 << 28)
-        try:
-            while True:
-                data = self.sock.recv(1 << 20)
-                if not data:
-                    return
-                decoder.feed(data)
-                while (message := decoder.next_message()) is not None:
-                    with self.cond:
-                        if message.type_name == "RTS_COMMAND":
-                            self.replies[message.body.command_id] = json.loads(
-                                message.body.text)
-                        else:
-                            self.latest[message.device_name] = message
-                        self.cond.notify_all()
-        except OSError:
-            return
-
-    def command(self, op: str, arguments: Optional[dict[str, Any]] = None) -> dict[str, Any]:
-        command_id = next(self._ids)
-        self.sock.sendall(encode(Message("raw", Command(command_id=command_id, name=op,
-                                                        text=json.dumps(arguments or {}))),
-                                 header_version=2))
-        with self.cond:
-            assert self.cond.wait_for(lambda: command_id in self.replies, scaled(30)), op
-            return self.replies.pop(command_id)
-
-    def wait(self, predicate: Any, what: str, timeout: float = 30.0) -> None:
-        with self.cond:
-            assert self.cond.wait_for(lambda: predicate(self.latest), scaled(timeout)), what
-
-    def close(self) -> None:
-        self.sock.close()
-        self._thread.join(5)
-
 
 @pytest.fixture()
 def raw_reader() -> Iterator[list[RawReader]]:
@@ -266,3 +210,49 @@ def test_the_live_daemons_refusal_names_the_player() -> None:
         handlers[c.SeekPlayback](c.SeekPlayback(offset=1.0), None)
     assert refused.value.error_code == ErrorCode.NOT_SUPPORTED
     assert "slicer-ros2-bridge play" in str(refused.value)
+
+
+def test_point_clouds_and_text_play_as_the_daemon_sends_them(
+        processes: Processes, no_ros: dict[str, str], tmp_path: Path,
+        raw_reader: list[RawReader]) -> None:
+    """A rosbags bag with a sensor_msgs/PointCloud2 and a std_msgs/String: the cloud as
+    POLYDATA points in mm, the text as STRING, on the daemon's device names."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from bags import T0, typestore
+
+    ts = typestore()
+    T = ts.types
+    points = np.array([[0.1, 0.2, 0.3], [-0.5, 0.0, 1.25], [2.0, -1.0, 0.004]], np.float32)
+    fields = [T["sensor_msgs/msg/PointField"](name=name, offset=4 * i, datatype=7, count=1)
+              for i, name in enumerate("xyz")]
+    header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](
+        sec=T0 // NS, nanosec=0), frame_id="world")
+    cloud = T["sensor_msgs/msg/PointCloud2"](
+        header=header, height=1, width=len(points), fields=fields, is_bigendian=False,
+        point_step=12, row_step=12 * len(points),
+        data=np.frombuffer(points.tobytes(), np.uint8), is_dense=True)
+    folder = tmp_path / "cloud"
+    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        c1 = writer.add_connection("/cloud", "sensor_msgs/msg/PointCloud2", typestore=ts)
+        c2 = writer.add_connection("/note", "std_msgs/msg/String", typestore=ts)
+        writer.write(c1, T0, ts.serialize_cdr(cloud, "sensor_msgs/msg/PointCloud2"))
+        writer.write(c2, T0 + 1, ts.serialize_cdr(T["std_msgs/msg/String"](data="incision"),
+                                                  "std_msgs/msg/String"))
+    player, port = start_player(processes, no_ros, str(folder), "--paused", "--start", "1")
+    reader = RawReader(port)
+    raw_reader.append(reader)
+    devices = {}
+    for topic, type_name in (("/cloud", "PointCloud2"), ("/note", "String")):
+        reply = reader.command("create_subscriber", {"topic": topic, "type": type_name})
+        assert reply["ok"], reply
+        devices[topic] = reply["result"]["device"]
+        assert devices[topic] == device_name_for(NameKey.subscriber(topic))
+    reader.wait(lambda latest: all(d in latest for d in devices.values()), "both messages")
+    polydata = reader.latest[devices["/cloud"]].body
+    assert isinstance(polydata, PolyData)
+    np.testing.assert_allclose(np.asarray(polydata.points), points * 1000.0, rtol=1e-6)
+    text = reader.latest[devices["/note"]]
+    assert text.body.text == "incision"
+    assert text.metadata["ros2.type"] == "std_msgs/msg/String"
+    assert "Traceback" not in player.output() and "NO-ROS GUARD" not in player.output()
