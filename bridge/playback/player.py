@@ -353,6 +353,7 @@ class Player:
                                paused=options.paused)
         self.clock.seek(start, time.monotonic_ns())
         self._seek_to: Optional[int] = self.clock.anchor_bag_ns  # the thread primes first
+        self._seek_waiters: list[asyncio.Future[None]] = []  # seeks answered once primed
         self._shown: list[str] = []  # topics whose new subscriber waits for its message
         self._stopped = False
         self.ended = False
@@ -431,9 +432,14 @@ class Player:
             self._cond.notify_all()
         return self.status()
 
-    def seek(self, offset_s: float) -> dict[str, Any]:
+    async def seek(self, offset_s: float) -> dict[str, Any]:
+        """Move the clock; answered once the state at the new time is sent, so a client
+        has the poses at that time by the reply."""
+        shown: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         with self._cond:
             self._seek(self.bag.start_ns + int(offset_s * _NS_PER_S))
+            self._seek_waiters.append(shown)
+        await shown
         return self.status()
 
     def _seek(self, bag_ns: int) -> None:  # under the condition
@@ -455,8 +461,16 @@ class Player:
     def stop(self) -> None:
         with self._cond:
             self._stopped = True
+            waiters, self._seek_waiters = self._seek_waiters, []
             self._cond.notify_all()
         self._thread.join(timeout=10)
+        for waiter in waiters:
+            waiter.cancel()
+
+    def _answer(self, waiters: list[asyncio.Future[None]]) -> None:
+        """The seeks the state just sent answers (player thread -> loop)."""
+        for waiter in waiters:
+            self.hub.call_soon(_settle, waiter)
 
     # ------------------------------------------------------------------ the thread
 
@@ -474,9 +488,11 @@ class Player:
                 if self._stopped:
                     return
                 seek, self._seek_to = self._seek_to, None
+                waiters, self._seek_waiters = self._seek_waiters, []
                 shown, self._shown = self._shown, []
             if seek is not None:
                 self._prime(seek, self._all_topics())
+                self._answer(waiters)
                 messages, pending = iter(self.bag.messages(seek + 1)), None
             elif shown:
                 with self._cond:
@@ -598,6 +614,8 @@ class Player:
                 batch[False].extend(self._joint_state(msg, message.log_time, descriptions))
             if subscribed:
                 self.topics.play(topic, msg)
+        if self._seek_to is not None:
+            return  # a seek came meanwhile: its state is shown next, not this burst's
         for static, transforms in batch.items():
             if transforms:
                 self.tf.store_transforms(transforms, static=static)
@@ -631,6 +649,11 @@ class Player:
         self.dispatcher.close()
         self.heavy.close()
         self.bag.close()
+
+
+def _settle(waiter: asyncio.Future[None]) -> None:
+    if not waiter.done():
+        waiter.set_result(None)
 
 
 def _stamp(ns: int) -> dict[str, int]:

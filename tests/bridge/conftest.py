@@ -2,18 +2,14 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Iterator
+from typing import Iterator
 
 import pytest
 
 import slicer_client
 from slicer_client.client import Client
 from slicer_client.connection import Connection
-from play_support import NO_ROS_SITECUSTOMIZE
 from support import Processes, RunningDaemon, assert_clean_exit, start_daemon
-
-if TYPE_CHECKING:  # rosbags (the test extra): imported by the player's tests only
-    from bags import RobotBag
 
 
 @pytest.fixture(scope="module")
@@ -48,30 +44,3 @@ def tf_store(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) ->
         pytest.skip("the compiled tf store was not built (no C compiler or Cython at install)")
     monkeypatch.setattr(buffer, "COMPILED", request.param == "compiled")
     return str(request.param)
-
-
-# --- the player's tests (test_play*.py): no ROS, the demo robot's bag by rosbags ---------
-
-@pytest.fixture(scope="module")
-def no_ros(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    """The environment of a process where `import rclpy` (and every ROS import) fails."""
-    folder = tmp_path_factory.mktemp("no-ros")
-    (folder / "sitecustomize.py").write_text(NO_ROS_SITECUSTOMIZE)
-    return {"PYTHONPATH": str(folder)}
-
-
-@pytest.fixture(scope="module")
-def demo() -> tuple[str, str]:
-    """The demo robot's URDF text and its package folder (meshes by --package-path)."""
-    from bridge.robots.demo import demo_urdf_path
-    from bridge.robots.demo.urdf import DEMO_PACKAGE
-
-    urdf, packages = demo_urdf_path()
-    return urdf.read_text(), f"{DEMO_PACKAGE}={packages[DEMO_PACKAGE]}"
-
-
-@pytest.fixture(scope="module")
-def robot_bag(tmp_path_factory: pytest.TempPathFactory, demo: tuple[str, str]) -> "RobotBag":
-    from bags import write_robot_bag
-
-    return write_robot_bag(tmp_path_factory.mktemp("bags") / "robot", demo[0])

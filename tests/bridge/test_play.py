@@ -190,6 +190,16 @@ def test_pause_seek_and_rate_from_the_pythonic_client(
         moved = second.offset - first.offset
         assert 2.0 * (b0 - a1) - 1e-3 <= moved <= 2.0 * (b1 - a0) + 1e-3, (moved, b0 - a1,
                                                                           b1 - a0)
+        # A seek while running: by its reply the robot is at the seek time (its state then,
+        # or one played since), never where it was before.
+        after = ros.seek(0.3)
+        assert not after.paused
+        pose = robot.transforms["tool_flange"]
+        seek_t = robot_bag.times[0] - NS // 100 + int(0.3 * NS)
+        first = robot_bag.state_at(seek_t)
+        later = robot_bag.state_at(seek_t + int((after.offset - 0.3 + 0.5) * NS))
+        assert any(np.allclose(pose[:3, 3], expected_link_poses(robot_bag, k)["tool_flange"]
+                               [:3, 3], atol=0.01) for k in range(first, later + 1))
         paused = ros.pause()
         assert paused.paused and paused.rate == 2.0
         assert (paused.time.sec * NS + paused.time.nanosec

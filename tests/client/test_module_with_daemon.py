@@ -333,3 +333,46 @@ def test_point_clouds_and_points_markers_get_a_vertex_per_point(
     rgba = vtk_to_numpy(cloud_node().GetPolyData().GetPointData().GetArray("RGBA"))
     np.testing.assert_allclose(rgba * 255, [[40 * i, 80, 120, 255] for i in range(4)],
                                atol=1e-3)
+
+
+def test_the_module_plays_a_bag_and_seeks_it(widget: Any, processes: Processes,
+                                             no_ros: dict[str, str], robot_bag: Any,
+                                             demo: tuple[str, str]) -> None:
+    """Issue 45: the module connects to a player (a process without ROS) as to the daemon;
+    its logic reads the bag's clock, seeks, sets the rate and pauses, and the robot's link
+    transform nodes in the scene follow: after a seek, the pose at the seek time."""
+    pytest.importorskip("mcap_ros2", reason="the play extra (mcap-ros2-support)")
+    from bags import NS
+    from play_support import expected_link_poses, start_player
+
+    player, port = start_player(processes, no_ros, str(robot_bag.mcap), "--paused",
+                                "--start", "1.0", "--package-path", demo[1])
+    connect(widget, port)
+    logic = widget.logic
+    status = logic.playbackStatus()
+    assert status.paused and status.offset == 1.0 and status.duration == pytest.approx(2.0)
+    logic.loadRobot("demo", "/robot_state_publisher", "robot_description")
+
+    def flange() -> Any:
+        return next((n for n in scene_nodes("vtkMRMLLinearTransformNode")
+                     if n.GetName() == "demo:tool_flange"), None)
+
+    def at(offset: float) -> np.ndarray:
+        """base_link <- tool_flange (mm) at ``offset`` s: the robot's fixed frame is its root."""
+        t = robot_bag.times[0] - NS // 100 + int(round(offset * NS))
+        poses = expected_link_poses(robot_bag, robot_bag.state_at(t))
+        return np.linalg.inv(poses["base_link"]) @ poses["tool_flange"]
+
+    for offset in (1.0, 0.4, 1.7):
+        if offset != 1.0:
+            assert logic.seekPlayback(offset).offset == pytest.approx(offset)
+        want = at(offset)
+        pump_until(lambda want=want: flange() is not None and np.allclose(
+            flange().matrix[:3, 3], want[:3, 3], atol=0.01), what=f"the pose at {offset} s")
+    assert logic.setPlaybackRate(3.0).rate == 3.0
+    assert not logic.resumePlayback().paused
+    pump_until(lambda: logic.playbackStatus().ended, what="the end of the bag")
+    pump_until(lambda: np.allclose(flange().matrix[:3, 3], at(2.0)[:3, 3], atol=0.01),
+               what="the last pose")
+    assert logic.pausePlayback().paused
+    assert "NO-ROS GUARD" not in player.output() and "Traceback" not in player.output()
