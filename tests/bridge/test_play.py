@@ -266,3 +266,20 @@ def test_point_clouds_and_text_play_as_the_daemon_sends_them(
     assert text.body.text == "incision"
     assert text.metadata["ros2.type"] == "std_msgs/msg/String"
     assert "Traceback" not in player.output() and "NO-ROS GUARD" not in player.output()
+
+
+def test_loop_starts_again_at_the_end(processes: Processes, no_ros: dict[str, str],
+                                      robot_bag: RobotBag) -> None:
+    """--loop: at the end the clock goes back to the start and plays on, never ended."""
+    player, port = start_player(processes, no_ros, str(robot_bag.mcap), "--loop",
+                                "--rate", "20")
+    with slicer_client.connect("127.0.0.1", port) as ros:
+        seen: list[float] = []
+
+        def wrapped() -> bool:
+            status = ros.playback()
+            assert status.loop and not status.ended
+            seen.append(status.offset)
+            return len(seen) > 1 and seen[-1] < seen[-2]
+        wait_until(wrapped, timeout=30, what="the clock going back to the start")
+    assert "played to the end" not in player.output()
