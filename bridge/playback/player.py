@@ -47,6 +47,7 @@ from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.security import SecurityPolicy
 from bridge.core.server import BridgeServer
 from bridge.core.session import SessionLimits
+from bridge.markers.capability import MarkerServing
 from bridge.playback.bag import Bag, BagMessage
 from bridge.playback.clock import PlayClock
 from bridge.robots.capability import RobotServing, _Robot
@@ -241,6 +242,41 @@ class PlayedTopics:
         self.subscribers.clear()
 
 
+# ---------------------------------------------------------------------------- markers
+
+
+class PlayedMarkers(MarkerServing):
+    """``create_marker_subscriber`` of a bag's Marker, MarkerArray, Path, PolygonStamped or
+    PointStamped topic: its messages (decoded from the bag) go to the daemon's marker
+    workers, as a ROS subscription's do."""
+
+    def __init__(self, hub: Hub, names: DeviceNameRegistry, *, tf: TfLookups, bag: Bag,
+                 package_paths: Mapping[str, Path], on_new: Callable[[str], None]) -> None:
+        super().__init__(hub, names, tf=tf, package_paths=package_paths)
+        self._bag = bag
+        self._on_new = on_new
+
+    def _check_source(self, topic: str, ros_type: str, type_name: str) -> tuple[Any, bool]:
+        types = self._bag.topics()
+        bag_type = types.get(topic)
+        if bag_type is None:
+            raise CommandFailedError("topic", "a topic of the bag (" + ", ".join(sorted(types))
+                                     + ")", topic, code=ErrorCode.NOT_FOUND)
+        if bag_type != ros_type:
+            raise CommandFailedError("type", f"{bag_type} (what the bag holds on {topic})",
+                                     type_name, code=ErrorCode.WRONG_TYPE)
+        return None, False  # decoded by the player, not read as CDR
+
+    def _open_source(self, sub: Any) -> None:
+        self._on_new(sub.topic)
+
+    def play(self, topic: str, msg: Any) -> None:
+        """One decoded message of ``topic`` to its marker worker (player thread)."""
+        sub = self.subscriptions.get(topic)
+        if sub is not None and not sub.closed:
+            sub.on_message(msg)
+
+
 # ---------------------------------------------------------------------------- robots
 
 
@@ -331,6 +367,8 @@ class Player:
             self._by_joint_topic.setdefault(description.joint_states_topic, []).append(
                 description)
         self.topics = PlayedTopics(self.hub, names, bag, self._show_topic)
+        self.markers = PlayedMarkers(self.hub, names, tf=self.tf, bag=bag,
+                                     package_paths=package_paths, on_new=self._show_topic)
         self.robots = PlayedRobots(self.hub, names, tf=self.tf,
                                    descriptions=self.descriptions,
                                    package_paths=package_paths,
@@ -339,7 +377,8 @@ class Player:
         self.policy = SecurityPolicy(robot_dirs=tuple(str(r) for r in roots),
                                      resolve_type=bag_type_resolver(bag))
         self.dispatcher = Dispatcher(PlayerGraph(bag), self.hub,
-                                     [self.topics, self.tf, self.robots, _Controls(self)],
+                                     [self.topics, self.tf, self.robots, self.markers,
+                                      _Controls(self)],
                                      policy=self.policy,
                                      resolve_frame=self.tf.resolve_client_frame,
                                      resolve_file=self.robots.file_path, heavy=self.heavy)
@@ -555,7 +594,8 @@ class Player:
                 self._cond.wait(wait_ns / _NS_PER_S)
 
     def _all_topics(self) -> list[str]:
-        return [*self._tf_topics, *self._by_joint_topic, *self.topics.subscribers]
+        return [*self._tf_topics, *self._by_joint_topic, *self.topics.subscribers,
+                *self.markers.subscriptions]
 
     def _prime(self, t_ns: int, topics: list[str], *, reset: bool = True) -> None:
         """Show the state at ``t_ns``: each frame's, joint state topic's and subscribed
@@ -604,7 +644,8 @@ class Player:
                 continue
             descriptions = self._by_joint_topic.get(topic)
             subscribed = topic in self.topics.subscribers
-            if descriptions is None and not subscribed:
+            marked = topic in self.markers.subscriptions
+            if descriptions is None and not subscribed and not marked:
                 self.bag.decoder(message.channel)  # a topic without schema is named once
                 continue
             msg = self.bag.decode(message)
@@ -614,6 +655,8 @@ class Player:
                 batch[False].extend(self._joint_state(msg, message.log_time, descriptions))
             if subscribed:
                 self.topics.play(topic, msg)
+            if marked:
+                self.markers.play(topic, msg)
         if self._seek_to is not None:
             return  # a seek came meanwhile: its state is shown next, not this burst's
         for static, transforms in batch.items():

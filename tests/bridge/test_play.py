@@ -283,3 +283,59 @@ def test_loop_starts_again_at_the_end(processes: Processes, no_ros: dict[str, st
             return len(seen) > 1 and seen[-1] < seen[-2]
         wait_until(wrapped, timeout=30, what="the clock going back to the start")
     assert "played to the end" not in player.output()
+
+
+def test_markers_play_as_the_daemon_shows_them(processes: Processes, no_ros: dict[str, str],
+                                               tmp_path: Path) -> None:
+    """A rosbags bag with a MarkerArray (a cube, frame-locked to base_link) and /tf moving
+    base_link: the marker's model comes in mm in its frame and its frame's pose with it,
+    so the cube sits where tf put base_link then, 100 mm above it."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from bags import T0, base_translation, tf_message, typestore
+
+    ts = typestore()
+    T = ts.types
+    header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](
+        sec=T0 // NS, nanosec=0), frame_id="base_link")
+    pose = T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.1),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
+    cube = T["visualization_msgs/msg/Marker"](
+        header=header, ns="tools", id=1, type=1, action=0, pose=pose,
+        scale=T["geometry_msgs/msg/Vector3"](x=0.02, y=0.02, z=0.02),
+        color=T["std_msgs/msg/ColorRGBA"](r=1.0, g=0.0, b=0.0, a=1.0),
+        lifetime=T["builtin_interfaces/msg/Duration"](sec=0, nanosec=0), frame_locked=True,
+        points=[], colors=[], texture_resource="",
+        texture=T["sensor_msgs/msg/CompressedImage"](header=header, format="",
+                                                    data=np.zeros(0, np.uint8)),
+        uv_coordinates=[], text="", mesh_resource="",
+        mesh_file=T["visualization_msgs/msg/MeshFile"](filename="",
+                                                       data=np.zeros(0, np.uint8)),
+        mesh_use_embedded_materials=False)
+    folder = tmp_path / "markers"
+    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        tf = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=ts)
+        markers = writer.add_connection("/markers", "visualization_msgs/msg/MarkerArray",
+                                        typestore=ts)
+        for k in range(10):
+            t = T0 + k * NS // 10
+            writer.write(tf, t, ts.serialize_cdr(tf_message(ts, t, "world", "base_link",
+                                                            base_translation(k)),
+                                                 "tf2_msgs/msg/TFMessage"))
+        writer.write(markers, T0 + 1, ts.serialize_cdr(
+            T["visualization_msgs/msg/MarkerArray"](markers=[cube]),
+            "visualization_msgs/msg/MarkerArray"))
+    player, port = start_player(processes, no_ros, str(folder), "--paused", "--start", "0.55")
+    with slicer_client.connect("127.0.0.1", port) as ros:
+        shown = ros.markers("/markers", "MarkerArray", "world")
+        shown.wait_for_markers(lambda m: len(m) == 1, timeout=30)
+        item = shown.find("tools", 1)
+        assert item is not None and item.kind == "cube"
+        points = shown.points_in_fixed_frame(item)
+        assert points is not None
+        want = np.array(base_translation(5)) * 1000.0 + [0.0, 0.0, 100.0]
+        np.testing.assert_allclose(points.mean(axis=0), want, atol=0.01)
+        np.testing.assert_allclose(points.max(axis=0) - points.min(axis=0), [20.0] * 3,
+                                   atol=1e-3)
+    assert "Traceback" not in player.output() and "NO-ROS GUARD" not in player.output()
