@@ -10,7 +10,10 @@ baseline in the same run:
    the library-alone process that read the whole bag;
 3. time to the first robot: from starting `play` (the demo robot's bag) to a client holding
    every link's TRANSFORM and every mesh; baseline: a process that only opens the bag,
-   reads the description and loads the robot model (no serving).
+   reads the description and loads the robot model (no serving);
+4. a seek to 90 % of the long bag, until its reply (sent once the state there is); baseline:
+   the library reading the bag from its start up to there (what a seek without the index
+   would cost).
 
 usage: python bench/bench_play.py [--minutes 10] [--hz 1000] [--rates 1,2,5,10,20,50]
                                   [--window 3]
@@ -37,6 +40,7 @@ from raw_client import RawSession  # noqa: E402
 from protocol.conversions import igtl_timestamp_to_seconds  # noqa: E402
 
 NS = 1_000_000_000
+SEEK_FRACTION = 0.9  # the seek bench goes this far into the bag
 
 LIBRARY_ALONE = """
 import sys, time
@@ -46,16 +50,23 @@ start = time.perf_counter()
 count = 0
 decoders = {}
 factory = DecoderFactory()
+reached = None  # when the read got to the seek bench's target (a fraction of the bag)
 with open(sys.argv[1], "rb") as f:
-    for schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
+    reader = make_reader(f)
+    stats = reader.get_summary().statistics
+    target = stats.message_start_time + float(sys.argv[2]) * (
+        stats.message_end_time - stats.message_start_time)
+    for schema, channel, message in reader.iter_messages(log_time_order=True):
         decode = decoders.get(channel.id)
         if decode is None:
             decode = decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
         decode(message.data)
         count += 1
+        if reached is None and message.log_time >= target:
+            reached = time.perf_counter() - start
 took = time.perf_counter() - start
 peak = [l for l in open("/proc/self/status") if l.startswith("VmHWM")][0].split()[1]
-print(count, took, peak)
+print(count, took, peak, reached)
 """
 
 ROBOT_ALONE = """
@@ -127,10 +138,11 @@ def bag_seconds(status: dict[str, Any]) -> float:
     return status["time"]["sec"] + status["time"]["nanosec"] / NS
 
 
-def rates_held(bag: Path, rates: list[float], window: float
-               ) -> tuple[list[tuple[float, float, int]], subprocess.Popen[str]]:
-    """(rate, lag in wall seconds at the window's end, messages received) per rate, and
-    the player (still running: its memory is read after)."""
+def rates_held(bag: Path, rates: list[float], window: float, seek_to: float
+               ) -> tuple[list[tuple[float, float, int]], float, subprocess.Popen[str]]:
+    """(rate, lag in wall seconds at the window's end, messages received) per rate; how
+    long a seek to ``seek_to`` s took to be answered (the state there sent); and the player
+    (still running: its memory is read after)."""
     child, port, _ = start_player(str(bag), "--paused")
     session = RawSession(port, name="bench-play")
     session.command("create_tf_lookup", {"parent": "world", "child": "base_link"})
@@ -149,8 +161,11 @@ def rates_held(bag: Path, rates: list[float], window: float
         got = igtl_timestamp_to_seconds(stamp) if stamp else 0.0
         lag_wall = max(clock - got, 0.0) / rate
         rows.append((rate, lag_wall, session.received.messages.get("TRANSFORM", 0) - before))
+    began = time.perf_counter()
+    session.command("seek_playback", {"offset": seek_to})
+    seek_s = time.perf_counter() - began
     session.close()
-    return rows, child
+    return rows, seek_s, child
 
 
 def main() -> None:
@@ -174,12 +189,15 @@ def main() -> None:
               f"{bag.stat().st_size / 1e6:.0f} MB) with rosbags in "
               f"{time.perf_counter() - began:.0f} s", flush=True)
 
-        alone = subprocess.run([sys.executable, "-c", LIBRARY_ALONE, str(bag)], cwd=REPO,
+        alone = subprocess.run([sys.executable, "-c", LIBRARY_ALONE, str(bag),
+                                str(SEEK_FRACTION)], cwd=REPO,
                                capture_output=True, text=True, check=True).stdout.split()
         read, took, peak_kb = int(alone[0]), float(alone[1]), int(alone[2])
+        scan_to_seek = float(alone[3])
         library_rate = read / took / args.hz
 
-        rows, child = rates_held(bag, rates, args.window)
+        rows, seek_s, child = rates_held(bag, rates, args.window,
+                                         SEEK_FRACTION * args.minutes * 60)
         rss, hwm = kb(child.pid, "VmRSS"), kb(child.pid, "VmHWM")
         stop(child)
         held = [rate for rate, lag, _ in rows if lag <= 0.1]
@@ -210,6 +228,9 @@ def main() -> None:
           f"{peak_kb / 1024:.0f} peak (the library alone, whole bag read)")
     print(f"{'time to first robot, s':<44} | {first_robot:>12.2f} | {robot_alone:.2f} "
           f"(open bag + load the robot model, no serving)")
+    print(f"{f'seek to {SEEK_FRACTION:.0%} of the bag, s (reply: state sent)':<44} | "
+          f"{seek_s:>12.3f} | {scan_to_seek:.2f} (the library reading up to there from the "
+          f"start)")
     print()
     print(f"command: python bench/bench_play.py --minutes {args.minutes:g} --hz {args.hz:g} "
           f"--rates {args.rates} --window {args.window:g}")
