@@ -37,6 +37,7 @@ class Received:
     messages: dict[str, int] = field(default_factory=dict)
     bytes: int = 0
     statuses: list[tuple[str, int, str]] = field(default_factory=list)  # device, code, text
+    stamps: dict[str, int] = field(default_factory=dict)  # device -> its last IGTL time stamp
 
 
 class RawSession:
@@ -97,12 +98,14 @@ class RawSession:
                 buffer += data
                 offset = 0
                 while len(buffer) - offset >= _HEADER.size:
-                    type_raw, body_size = _HEADER.unpack_from(buffer, offset)[1:5:3]
+                    _, type_raw, device, stamp, body_size, _ = _HEADER.unpack_from(buffer,
+                                                                                    offset)
                     end = offset + _HEADER.size + body_size
                     if end > len(buffer):
                         break
                     kind = type_raw.rstrip(b"\0").decode("ascii", "replace")
                     self.received.messages[kind] = self.received.messages.get(kind, 0) + 1
+                    self.received.stamps[device.rstrip(b"\0").decode("utf-8", "replace")] = stamp
                     if kind in ("RTS_COMMAND", "STATUS"):
                         decoder = Decoder(max_body_size=body_size)
                         decoder.feed(bytes(buffer[offset:end]))

@@ -1,4 +1,4 @@
-"""The `slicer-ros2-bridge` command line: `run`, `demo`, `record`, `state-publisher`."""
+"""The `slicer-ros2-bridge` command line: `run`, `demo`, `record`, `play`, `state-publisher`."""
 
 from __future__ import annotations
 
@@ -229,6 +229,9 @@ def build_parser() -> argparse.ArgumentParser:
     commands.add_parser("state-publisher", add_help=False,
                         help="a robot state publisher for any URDF (robot_description, /tf "
                              "from joint_states, /tf_static); see state-publisher --help")
+    commands.add_parser("play", add_help=False,
+                        help="serve a ROS 2 bag (MCAP) to 3D Slicer, without ROS; see "
+                             "play --help")
     return parser
 
 
@@ -438,6 +441,10 @@ def _shm_unlock(wait_s: float) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["play"]:  # no ROS: a bag plays where ROS is not installed
+        from bridge.playback import cli as play
+
+        return play.main(argv[1:])
     if argv[:1] == ["state-publisher"]:
         lacking = missing_runtime_line()
         if lacking is not None:

@@ -33,6 +33,7 @@ from bridge.core.threads import fatal_failure
 from bridge.core.stream_health import StreamHealth
 from bridge.markers.capability import MarkerBridges
 from bridge.parameters.capability import ParameterBridges
+from bridge.playback.refusals import LiveRefusals
 from bridge.record.capability import RecordBridges
 from bridge.robots.capability import RobotBridges
 from bridge.types import InterfaceTypes
@@ -112,7 +113,8 @@ class Daemon:
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
                                                           self.robots, self.markers,
-                                                          InterfaceTypes(), self.recordings],
+                                                          InterfaceTypes(), self.recordings,
+                                                          LiveRefusals()],
                                      policy=policy, resolve_frame=self.tf.resolve_client_frame,
                                      resolve_file=self.robots.file_path, heavy=self.heavy)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,

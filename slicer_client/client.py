@@ -584,6 +584,26 @@ class Client:
                                                 timeout=timeout), timeout=timeout + 5.0)
         return as_numpy(result.matrix, field="lookup_transform.matrix", rigid=False)
 
+    # --- a player's clock (`slicer-ros2-bridge play BAG`; the live daemon refuses these) --
+    def playback(self) -> c.PlaybackResult:
+        """The player's clock: the bag's time now (``time``, ``offset`` s from its start),
+        its ``rate``, and whether it is ``paused``, loops or has ``ended``."""
+        return self.request(c.PlaybackStatus())
+
+    def pause(self) -> c.PlaybackResult:
+        return self.request(c.PausePlayback())
+
+    def resume(self) -> c.PlaybackResult:
+        return self.request(c.ResumePlayback())
+
+    def seek(self, offset: float) -> c.PlaybackResult:
+        """Play from ``offset`` seconds into the bag; what is shown next is the state then
+        (each stream's last message at or before it)."""
+        return self.request(c.SeekPlayback(offset=float(offset)))
+
+    def set_rate(self, rate: float) -> c.PlaybackResult:
+        return self.request(c.SetPlaybackRate(rate=float(rate)))
+
     def latest(self, device: str) -> Optional[Message]:
         with self._lock:
             return self._latest.get(device)

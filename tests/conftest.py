@@ -28,16 +28,20 @@ import signal
 import tempfile
 import time
 from pathlib import Path
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator
 
 import pytest
 from hypothesis import settings
 
 from interface_builds import BuildUnavailable, BuiltInterfaces, use_test_interfaces
 from reference_suite import as_the_suite, stop_group
+from play_support import NO_ROS_SITECUSTOMIZE
 from support import (DOMAIN_BLOCK, DOMAIN_LOCKS, Child, Processes, RunningDaemon,
                      assert_clean_exit, children_of, pick_free_port, release_left_port_locks,
                      scaled, start_daemon)
+
+if TYPE_CHECKING:  # rosbags (the test extra): imported by the player's tests only
+    from bags import RobotBag
 
 
 _DOMAIN_LOCKS: list[object] = []  # the open lock files of this session's domains
@@ -187,3 +191,30 @@ def no_leftover_children() -> Iterator[None]:
         except ProcessLookupError:
             pass
     assert not left, f"the test left child processes behind: {left}"
+
+
+# --- the player's tests (test_play*.py): no ROS, the demo robot's bag by rosbags ---------
+
+@pytest.fixture(scope="module")
+def no_ros(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    """The environment of a process where `import rclpy` (and every ROS import) fails."""
+    folder = tmp_path_factory.mktemp("no-ros")
+    (folder / "sitecustomize.py").write_text(NO_ROS_SITECUSTOMIZE)
+    return {"PYTHONPATH": str(folder)}
+
+
+@pytest.fixture(scope="module")
+def demo() -> tuple[str, str]:
+    """The demo robot's URDF text and its package folder (meshes by --package-path)."""
+    from bridge.robots.demo import demo_urdf_path
+    from bridge.robots.demo.urdf import DEMO_PACKAGE
+
+    urdf, packages = demo_urdf_path()
+    return urdf.read_text(), f"{DEMO_PACKAGE}={packages[DEMO_PACKAGE]}"
+
+
+@pytest.fixture(scope="module")
+def robot_bag(tmp_path_factory: pytest.TempPathFactory, demo: tuple[str, str]) -> "RobotBag":
+    from bags import write_robot_bag
+
+    return write_robot_bag(tmp_path_factory.mktemp("bags") / "robot", demo[0])

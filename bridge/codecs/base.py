@@ -27,8 +27,9 @@ from typing import Any, ClassVar, Union
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import message_to_yaml
 from bridge.codecs.registry import message_class
+from protocol.conversions import igtl_stamp_or_now, igtl_timestamp_now
 from protocol.errors import ProtocolError
-from protocol.messages import String
+from protocol.messages import Message, String
 # The codecs' metadata keys live in the protocol, next to the other ros2.* keys.
 from protocol.naming import KEY_ENCODING, KEY_FORMAT, KEY_FRAME, KEY_LABELS, KEY_SHAPE, KEY_TYPE
 
@@ -46,6 +47,7 @@ __all__ = [
     "make_header",
     "parse_json_text",
     "stamp_of",
+    "stream_message",
     "string_text",
     "text_body",
 ]
@@ -65,6 +67,15 @@ class Encoded:
     body: Body
     metadata: dict[str, str] = field(default_factory=dict)
     stamp: tuple[int, int] | None = None
+
+
+def stream_message(device: str, metadata: Mapping[str, str], encoded: Encoded) -> Message:
+    """A subscriber's message to clients: on ``device``, the bridge's ``metadata`` with the
+    codec's over it, time-stamped with the message's own stamp (else now)."""
+    stamp = igtl_stamp_or_now(*encoded.stamp) if encoded.stamp else igtl_timestamp_now()
+    merged = dict(metadata)
+    merged.update(encoded.metadata)
+    return Message(device_name=device, body=encoded.body, timestamp=stamp, metadata=merged)
 
 
 def stamp_of(msg: Any) -> tuple[int, int] | None:
@@ -166,6 +177,11 @@ class TypeCodec:
     def encode(self, msg: Any) -> Encoded:
         """ROS message -> body, metadata and stamp. Raises `CodecError` only."""
         self._check_message(msg)
+        return self._encode_checked(msg)
+
+    def encode_fields(self, msg: Any) -> Encoded:
+        """As `encode`, for a message another library read (a bag's, decoded from its
+        schema): any object with the type's field names, not only an rclpy message."""
         return self._encode_checked(msg)
 
     def encode_serialized(self, data: bytes) -> Encoded | None:

@@ -35,7 +35,6 @@ from functools import cache
 from typing import Any
 
 import numpy as np
-from rosidl_parser import definition as rdef
 
 from bridge.codecs.errors import CodecError
 from bridge.codecs.registry import message_class, resolve_type, ros_type_of
@@ -100,6 +99,8 @@ class _Field:
 
 
 def _basic_kind(t: Any) -> tuple[str, str, int | None]:
+    from rosidl_parser import definition as rdef  # ROS's: only rclpy messages have plans
+
     if isinstance(t, rdef.BasicType):
         name = t.typename
         if name == "boolean":
@@ -120,6 +121,8 @@ def _basic_kind(t: Any) -> tuple[str, str, int | None]:
 
 @cache
 def _plan(cls: Any) -> tuple[_Field, ...]:
+    from rosidl_parser import definition as rdef  # ROS's: only rclpy messages have plans
+
     fields = []
     for name, slot in zip(cls.get_fields_and_field_types().keys(), cls.SLOT_TYPES):
         container: str | None = None

@@ -31,7 +31,6 @@ from dataclasses import dataclass
 from typing import Any, Callable, ClassVar
 
 import numpy as np
-from rclpy.serialization import serialize_message
 
 from bridge.codecs.base import Body, TypeCodec, Stamp
 from bridge.codecs.errors import CodecError
@@ -307,6 +306,8 @@ class MarkerCodec(GenericJsonCodec):
         template, points = self._template(body, metadata)
 
         def finish(probe: Any) -> bytes:
+            from rclpy.serialization import serialize_message  # to ROS only: the daemon's
+
             return splice_points(serialize_message(probe), _points_count_offset(probe), points)
         return template, finish
 

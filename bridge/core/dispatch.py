@@ -37,7 +37,6 @@ from bridge.core.hub import Hub, Replier
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.security import (OPERATOR, WRITES, BridgeKey, BridgeOwners, BridgeQuota,
                                   FileResolver, SecurityPolicy, strip_frame)
-from bridge.ros.ros_node import RosNode
 from protocol.auth import new_challenge, verify
 from protocol.freshness import daemon_clock_ms
 from protocol import commands as c
@@ -68,6 +67,19 @@ Handler = Callable[..., Outcome]
 DAEMON_VERSION = "0.1.0"
 # A command text longer than this is parsed off the loop (in its client's lane).
 LARGE_COMMAND_CHARS = 64 * 1024
+
+
+class RosGraph(Protocol):
+    """What the dispatcher asks of ROS: the daemon's `bridge.ros.ros_node.RosNode`, or the
+    player's bag (bridge/playback), which serves the same ops without ROS."""
+
+    # get_topic_names_and_types(), count_publishers(topic), get_service_names_and_types()
+    node: Any
+
+    @property
+    def fully_qualified_name(self) -> str: ...
+
+    def resolve_name(self, name: str, field: str) -> str: ...
 
 
 class Capability(Protocol):
@@ -173,7 +185,7 @@ class BridgeLocks:
 
 
 class Dispatcher:
-    def __init__(self, ros: RosNode, hub: Hub, capabilities: Sequence[Capability], *,
+    def __init__(self, ros: RosGraph, hub: Hub, capabilities: Sequence[Capability], *,
                  policy: SecurityPolicy | None = None,
                  resolve_frame: NameResolver = _as_given,
                  resolve_file: FileResolver | None = None,

@@ -220,6 +220,9 @@ class SecurityPolicy:
     # Listening beyond loopback (set by the daemon from --host): then, without a key, only
     # this machine's own connections and --trust networks may write.
     beyond_loopback: bool = False
+    # How a request's type name becomes ``pkg/msg/Type``: among the packages installed
+    # (the daemon), or among a bag's types (the player, which imports no ROS package).
+    resolve_type: Callable[[str], str] = field(default=resolve_type, repr=False, compare=False)
 
     # --- who may write ---------------------------------------------------------------------
     def grant_at_accept(self, address: str) -> WriteGrant:
@@ -317,7 +320,7 @@ class SecurityPolicy:
         action = hidden_action(topic, ACTION_TOPICS)
         if action is not None:
             self._judge_action(use.field, action)
-        ros_type = _resolved(resolve_type, use.type)
+        ros_type = _resolved(self.resolve_type, use.type)
         # A tf topic carries frames: only a TFMessage can be judged transform by transform
         # (the bridge's MessageGuard does it); another type on /tf cannot be judged.
         if self.frames.active and topic in _TF_TOPICS and use.type is not None \
@@ -408,7 +411,7 @@ class SecurityPolicy:
         if "messages" in declared:
             topic = next(use for use in uses if isinstance(use, TopicUse))
             guard = replace(guard, messages=self._message_guard(
-                topic.name, _resolved(resolve_type, topic.type) or "", topic.writes))
+                topic.name, _resolved(self.resolve_type, topic.type) or "", topic.writes))
         if "parameters" in declared:
             for use in uses:
                 if isinstance(use, ServiceUse):

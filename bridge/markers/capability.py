@@ -70,10 +70,9 @@ import time
 from collections import deque
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional, Union, cast
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Optional, Union, cast
 
 import numpy as np
-from rclpy.serialization import deserialize_message
 
 from bridge.codecs import CodecError, codec_for
 from bridge.codecs.cdr import CdrError
@@ -89,9 +88,6 @@ from bridge.markers.cdr import layout_supported, read_marker, read_marker_array
 from bridge.markers.convert import ADD, DELETE, DELETEALL, MarkerEvent, events_of
 from bridge.markers.geometry import (MarkerError, MarkerModel, MarkerSpec, build_model,
                                      model_bytes, packed, warm_up)
-from bridge.ros.graph_types import refuse_other_type
-from bridge.ros.qos import qos_profile
-from bridge.ros.ros_node import RosNode
 from bridge.tf.buffer import TfBuffer
 from bridge.tf.errors import ExtrapolationError, TfError
 from bridge.tf.lookups import LookupKey, LookupStreams
@@ -104,7 +100,11 @@ from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_FORMAT, KEY_MARKER_TYPE
                              KEY_PARENT_DEVICE, UNITS_MM, DeviceNameRegistry, NameKey,
                              NamingError, metadata_for)
 
-__all__ = ["MAX_MARKERS", "MAX_QUEUED", "MarkerBridges", "place_unlocked"]
+if TYPE_CHECKING:  # ROS where the daemon subscribes: `MarkerServing` is ROS-free (a
+    # player feeds it a bag's messages)
+    from bridge.ros.ros_node import RosNode
+
+__all__ = ["MAX_MARKERS", "MAX_QUEUED", "MarkerBridges", "MarkerServing", "place_unlocked"]
 
 log = logging.getLogger(__name__)
 
@@ -400,6 +400,8 @@ class _Worker:
                 return (read_marker_array(msg) if sub.ros_type == MARKER_ARRAY_TYPE
                         else read_marker(msg))
             except CdrError:  # another encoding: the ordinary way
+                from rclpy.serialization import deserialize_message
+
                 msg = deserialize_message(msg, sub.message_class)
         return events_of(sub.ros_type, msg)
 
@@ -486,7 +488,7 @@ class _Subscription:
     fixed_frame: str
     topic_key: NameKey
     device: str
-    owner: MarkerBridges
+    owner: MarkerServing
     guard: ContentGuard  # which marker frames a client may see (from its create request)
     markers: dict[MarkerKey, _Live] = field(default_factory=dict)
     withheld: dict[MarkerKey, str] = field(default_factory=dict)
@@ -513,13 +515,14 @@ class _Subscription:
         self.owner.hub_call(self.owner.apply, self, updates)
 
 
-class MarkerBridges:
-    """Marker subscribers: models per marker, a TRANSFORM per frame, lifetimes."""
+class MarkerServing:
+    """Marker subscribers: models per marker, a TRANSFORM per frame, lifetimes. Where the
+    messages come from is a subclass's (`_open_source`, `_close_source`): the daemon's
+    `MarkerBridges` subscribes to ROS, the player (bridge/playback) feeds a bag's."""
 
-    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: LookupStreams,
+    def __init__(self, hub: Hub, names: DeviceNameRegistry, *, tf: LookupStreams,
                  package_paths: Optional[Mapping[str, Path]] = None,
                  max_model_bytes: int = DEFAULT_MAX_MARKER_BYTES) -> None:
-        self._ros = ros
         self._hub = hub
         self._names = names
         self._tf = tf
@@ -534,6 +537,21 @@ class MarkerBridges:
         self.budget = ModelBudget(max_model_bytes)
         hub.add_closed_listener(self._client_left)
         self._meshing = threading.Lock()  # one topic's worker meshes at a time
+
+    # ------------------------------------------------------------------ sources
+
+    def _check_source(self, topic: str, ros_type: str, type_name: str) -> tuple[Any, bool]:
+        """Refuse a topic the source cannot give as ``ros_type`` (``type_name`` as the
+        request spelt it); (the message class, or None, and whether messages come as CDR
+        bytes for bridge.markers.cdr)."""
+        raise NotImplementedError
+
+    def _open_source(self, sub: _Subscription) -> None:
+        """Start feeding ``sub.on_message``."""
+        raise NotImplementedError
+
+    def _close_source(self, sub: _Subscription) -> None:
+        pass
 
     def hub_call(self, callback: Any, *args: Any) -> None:
         self._hub.call_soon(callback, *args)
@@ -561,28 +579,18 @@ class MarkerBridges:
             raise CommandFailedError("topic", "a topic without a marker subscriber "
                                      "(remove_marker_subscriber first, or repeat the same "
                                      "request)", topic, code=ErrorCode.ALREADY_EXISTS)
-        refuse_other_type(self._ros, topic, ros_type, "type")
-        try:
-            message_class = codec_for(ros_type).message_class
-        except CodecError as error:
-            raise CommandFailedError("type", "a message type installed in the daemon's "
-                                     "environment", f"{request.type!r} ({error})",
-                                     code=ErrorCode.UNKNOWN_ROS_TYPE) from None
+        message_class, raw = self._check_source(topic, ros_type, request.type)
         topic_key = NameKey.marker_topic(topic)
         device = self._names.register(topic_key)
         sub = _Subscription(topic, ros_type, request, request.fixed_frame.lstrip("/"),
                             topic_key, device, self, guard, message_class=message_class,
                             audience=None if client is None else {client})
         self._limit(sub, device)
-        # Markers are read from their bytes when the installed Marker is the one the CDR
-        # reader knows (a 1000-marker array: a few ms instead of ~100 through rclpy).
-        sub.raw = ros_type in (MARKER_TYPE, MARKER_ARRAY_TYPE) and layout_supported(
-            codec_for(MARKER_TYPE).message_class.get_fields_and_field_types())
+        sub.raw = raw
         sub.worker = _Worker(sub, guard.readable_roots(), self._package_paths, budget=self.budget,
                              gate=self._meshing)
         try:
-            sub.subscription = self._ros.stream_node.create_subscription(
-                message_class, topic, sub.on_message, qos_profile(request.qos), raw=sub.raw)
+            self._open_source(sub)
         except BaseException:
             sub.worker.stop()
             self._hub.forget(device)
@@ -909,9 +917,7 @@ class MarkerBridges:
             del self.subscriptions[sub.topic]
         if sub.worker is not None:
             sub.worker.stop()
-        if sub.subscription is not None:
-            self._ros.destroy(sub.subscription)
-            sub.subscription = None
+        self._close_source(sub)
         gone: list[str] = []
         for key in list(sub.markers):
             self._drop(sub, key, gone)
@@ -950,4 +956,44 @@ class MarkerBridges:
             self._timer = None
         for sub in list(self.subscriptions.values()):
             self._close(sub)
+
+
+class MarkerBridges(MarkerServing):
+    """The daemon's marker subscribers: each a ROS subscription (markers taken raw where
+    the installed Marker is the layout bridge.markers.cdr reads)."""
+
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: LookupStreams,
+                 package_paths: Optional[Mapping[str, Path]] = None,
+                 max_model_bytes: int = DEFAULT_MAX_MARKER_BYTES) -> None:
+        super().__init__(hub, names, tf=tf, package_paths=package_paths,
+                         max_model_bytes=max_model_bytes)
+        self._ros = ros
+
+    def _check_source(self, topic: str, ros_type: str, type_name: str) -> tuple[Any, bool]:
+        from bridge.ros.graph_types import refuse_other_type
+
+        refuse_other_type(self._ros, topic, ros_type, "type")
+        try:
+            message_class = codec_for(ros_type).message_class
+        except CodecError as error:
+            raise CommandFailedError("type", "a message type installed in the daemon's "
+                                     "environment", f"{type_name!r} ({error})",
+                                     code=ErrorCode.UNKNOWN_ROS_TYPE) from None
+        # Markers are read from their bytes when the installed Marker is the one the CDR
+        # reader knows (a 1000-marker array: a few ms instead of ~100 through rclpy).
+        raw = ros_type in (MARKER_TYPE, MARKER_ARRAY_TYPE) and layout_supported(
+            codec_for(MARKER_TYPE).message_class.get_fields_and_field_types())
+        return message_class, raw
+
+    def _open_source(self, sub: _Subscription) -> None:
+        from bridge.ros.qos import qos_profile
+
+        sub.subscription = self._ros.stream_node.create_subscription(
+            sub.message_class, sub.topic, sub.on_message, qos_profile(sub.request.qos),
+            raw=sub.raw)
+
+    def _close_source(self, sub: _Subscription) -> None:
+        if sub.subscription is not None:
+            self._ros.destroy(sub.subscription)
+            sub.subscription = None
 

@@ -48,19 +48,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Optional
 
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import JointState
-from std_msgs.msg import String as StringMsg
-
 from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
-from bridge.parameters.watch import ParameterWatch, ParameterWatcher
 from bridge.robots.errors import RobotError
 from bridge.robots.joints import describe_joints, joint_positions
 from bridge.robots.resources import PackageResolver
-from bridge.ros.graph_types import refuse_other_type
-from bridge.ros.ros_node import RosNode
 from bridge.tf.lookups import LookupKey, LookupStreams
 from protocol.commands import (JOINT_STATE_TYPE, CommandFailedError, CreateRobot,
                                DescribeRobotJoints, ErrorCode, ForbiddenError, ListRobots, Op,
@@ -71,10 +64,13 @@ from protocol.naming import (KEY_CHILD, KEY_COLOR, KEY_LINK_COUNT, KEY_PARENT, K
                              KEY_VISUAL_COUNT, KEY_WARNINGS, UNITS_MM,
                              DeviceNameRegistry, NameKey, NamingError, metadata_for)
 
-if TYPE_CHECKING:  # bridge.robots.model (trimesh, yourdfpy) loads with the first robot
+if TYPE_CHECKING:  # bridge.robots.model (trimesh, yourdfpy) loads with the first robot;
+    # ROS only where the daemon reads a description from it (`RobotServing` is ROS-free)
+    from bridge.parameters.watch import ParameterWatch, ParameterWatcher
     from bridge.robots.model import RobotModel, VisualMesh
+    from bridge.ros.ros_node import RosNode
 
-__all__ = ["RobotBridges"]
+__all__ = ["RobotBridges", "RobotServing"]
 
 log = logging.getLogger(__name__)
 
@@ -86,14 +82,24 @@ _TOPIC_WAIT_S = 2.0
 _REFUSE_AFTER_S = 10.0
 _JOINT_STATES_TYPE = "sensor_msgs/msg/JointState"
 _DESCRIPTION_TYPE = "std_msgs/msg/String"
-# robot_state_publisher's own profile for robot_description: a late subscriber gets it.
-# As joint_states publishers do (robot_state_publisher subscribes reliable, depth 10).
-_JOINT_STATES_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE)
-_DESCRIPTION_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def _joint_states_qos() -> Any:
+    """As joint_states publishers do (robot_state_publisher subscribes reliable, depth 10)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def _description_qos() -> Any:
+    """robot_state_publisher's own profile for robot_description: a late subscriber gets it."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 @dataclass
@@ -146,7 +152,7 @@ class _Robot:
     warnings: tuple[str, ...] = ()
     loads: int = 0
     generation: int = 0  # bumped per description received: only the newest load applies
-    watch: Optional[ParameterWatch] = None
+    watch: Optional["ParameterWatch"] = None
     subscription: Any = None
     first_description: Optional[asyncio.Future[str]] = None
     removed: bool = False
@@ -159,21 +165,18 @@ class _Robot:
     joint_topic: str = ""
 
 
-class RobotBridges:
-    """Robots from URDF: meshes once per connection, link transforms from tf."""
+class RobotServing:
+    """Robots from URDF: meshes once per connection, link transforms from tf. Where the
+    description comes from is a subclass's: the daemon's `RobotBridges` reads it from ROS,
+    the player (bridge/playback) from a bag; this part needs no ROS."""
 
-    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: LookupStreams,
-                 parameters: ParameterWatcher,
-                 package_paths: Mapping[str, Path] | None = None,
-                 topic_wait_s: float = _TOPIC_WAIT_S) -> None:
-        self._ros = ros
+    def __init__(self, hub: Hub, names: DeviceNameRegistry, *, tf: LookupStreams,
+                 package_paths: Mapping[str, Path] | None = None) -> None:
         self._hub = hub
         self._names = names
         self._tf = tf
-        self._parameters = parameters
         self._package_paths = {name: Path(folder) for name, folder in
                                (package_paths or {}).items()}
-        self._topic_wait_s = topic_wait_s
         self.robots: dict[str, _Robot] = {}
         self._tasks: set[asyncio.Task[None]] = set()
 
@@ -240,82 +243,13 @@ class RobotBridges:
     # ------------------------------------------------------------------ sources
 
     async def _first_description(self, robot: _Robot) -> Optional[str]:
-        """The URDF text now, or None (then ``robot.reason`` says what it waits for)."""
-        source = robot.source
-        if source.kind == "file":
-            return None if robot.removed else "<file>"  # read by the loader (see _load)
-        if source.kind == "parameter":
-            robot.watch, value = await self._parameters.watch_parameter(
-                source.node, source.parameter,
-                lambda v: self._on_parameter(robot, v),
-                ready_wait_s=None if robot.request.wait else _REFUSE_AFTER_S)
-            if value is None:
-                robot.reason = (f"parameter {source.parameter} of {source.node}: "
-                                + (f"{robot.watch.unanswered}; asked again while the node is up"
-                                   if robot.watch.unanswered else "node not available yet"))
-                if not robot.watch.unanswered:  # a node that is there but slow still waits
-                    _refuse_unless_waiting(robot, "source.node", f"a node on the ROS graph "
-                                           f"holding parameter {source.parameter}",
-                                           f"{source.node}: no such node (its parameter "
-                                           f"services not found in {_REFUSE_AFTER_S:g} s)")
-                return None
-            return self._text_of(robot, value, initial=True)
-        # topic
-        loop = asyncio.get_running_loop()
-        robot.first_description = loop.create_future()
-        refuse_other_type(self._ros, source.topic, _DESCRIPTION_TYPE, "source.topic")
+        """The URDF text now, or None (then ``robot.reason`` says what it waits for);
+        ``"<file>"`` for a file source (read by the loader)."""
+        raise NotImplementedError
 
-        def on_message(msg: StringMsg) -> None:  # on an executor thread
-            self._hub.call_soon(self._on_topic, robot, msg.data)
-
-        robot.subscription = self._ros.node.create_subscription(
-            StringMsg, source.topic, on_message, _DESCRIPTION_QOS)
-        bound = self._topic_wait_s if robot.request.wait else _REFUSE_AFTER_S
-        try:
-            return await asyncio.wait_for(asyncio.shield(robot.first_description), bound)
-        except asyncio.TimeoutError:
-            robot.reason = f"topic {source.topic}: no description published yet"
-            _refuse_unless_waiting(robot, "source.topic", "a URDF published (latched) on it",
-                                   f"{source.topic}: nothing within {bound:g} s")
-            return None
-
-    def _text_of(self, robot: _Robot, value: ParameterValue, *, initial: bool,
-                 ) -> Optional[str]:
-        source = robot.source
-        if value.type == "not_set":
-            robot.reason = f"parameter {source.parameter} of {source.node}: not set yet"
-            if initial:
-                _refuse_unless_waiting(robot, "source.parameter", f"a parameter set on "
-                                       f"{source.node}", f"{source.parameter}: not set")
-            return None
-        if value.type != "string":
-            problem = CommandFailedError(
-                "source.parameter", f"a string parameter holding URDF XML "
-                f"({source.parameter} of {source.node})", f"a {value.type} parameter",
-                code=ErrorCode.WRONG_TYPE)
-            if initial:
-                raise problem
-            self._load_failed(robot, str(problem))
-            return None
-        return str(value.value)
-
-    def _on_parameter(self, robot: _Robot, value: ParameterValue) -> None:
-        """The watched parameter changed, or its node (re)appeared (loop thread)."""
-        if robot.removed:
-            return
-        text = self._text_of(robot, value, initial=False)
-        if text is not None:
-            self._reload(robot, text)
-
-    def _on_topic(self, robot: _Robot, text: str) -> None:
-        """A description arrived on the robot's topic (loop thread)."""
-        if robot.removed:
-            return
-        first = robot.first_description
-        if first is not None and not first.done():
-            first.set_result(text)  # create_robot is still waiting for it: it loads
-            return
-        self._reload(robot, text)
+    def _joint_states_topic(self, robot: _Robot) -> str:
+        """Where this robot's joint states come from (`describe_robot_joints`)."""
+        raise NotImplementedError
 
     # ------------------------------------------------------------------ loading
 
@@ -517,17 +451,6 @@ class RobotBridges:
         robot.visuals = {}
         self._hub.forget(robot.description_device)
         self._names.release(robot.description_key)
-        if robot.watch is not None:
-            self._parameters.unwatch_parameter(robot.watch)
-            robot.watch = None
-        if robot.subscription is not None:
-            self._ros.destroy(robot.subscription)
-            robot.subscription = None
-        if robot.joint_publisher is not None:
-            self._ros.destroy(robot.joint_publisher)
-            robot.joint_publisher = None
-        if robot.first_description is not None and not robot.first_description.done():
-            robot.first_description.cancel()
 
     # ------------------------------------------------------------------ capability
 
@@ -537,7 +460,6 @@ class RobotBridges:
             RemoveRobot: lambda request, _: self.remove_robot(request),
             ListRobots: lambda request, _: self.list_robots(request),
             DescribeRobotJoints: lambda request, _: self.describe_robot_joints(request),
-            SetRobotJoints: lambda request, _: self.set_robot_joints(request),
         }
 
     # ------------------------------------------------------------------ recording
@@ -595,43 +517,16 @@ class RobotBridges:
                                      code=ErrorCode.UNAVAILABLE)
         return robot, robot.model
 
-    def _joint_states_topic(self, robot: _Robot) -> str:
-        """Where this robot's state publisher listens: robot_state_publisher subscribes
-        the relative ``joint_states``, so in the namespace of the node whose parameter
-        holds the description (``/PSM1/robot_state_publisher`` -> ``/PSM1/joint_states``),
-        of the description topic, or for a file the robot's namespace."""
-        base = _source_base(robot.source)
-        if base is None:
-            namespace = robot.request.namespace.strip("/")
-            return self._ros.resolve_name(f"{namespace}/joint_states" if namespace
-                                          else "joint_states", "topic")
-        return f"{base}/joint_states"
-
     def describe_robot_joints(self, request: DescribeRobotJoints) -> dict[str, Any]:
         robot, model = self._loaded(request.name)
         return {"name": robot.name, "robot": model.name,
                 "joint_states_topic": self._joint_states_topic(robot),
                 "joints": describe_joints(model.joints)}
 
-    def set_robot_joints(self, request: SetRobotJoints) -> dict[str, Any]:
-        robot, model = self._loaded(request.name)
-        positions = joint_positions(model.joints, request.positions)
-        topic = request.topic
-        if robot.joint_publisher is None or robot.joint_topic != topic:
-            if robot.joint_publisher is not None:
-                self._ros.destroy(robot.joint_publisher)
-                robot.joint_publisher = None
-            refuse_other_type(self._ros, topic, _JOINT_STATES_TYPE, "topic")
-            robot.joint_publisher = self._ros.node.create_publisher(
-                JointState, topic, _JOINT_STATES_QOS)
-            robot.joint_topic = topic
-        msg = JointState()
-        msg.header.stamp = self._ros.node.get_clock().now().to_msg()
-        msg.name = list(positions)
-        msg.position = list(positions.values())
-        robot.joint_publisher.publish(msg)
-        return {"name": robot.name, "topic": topic, "positions": positions,
-                "subscribers": int(robot.joint_publisher.get_subscription_count())}
+    def _unposed(self, robot: _Robot) -> Optional[dict[str, Any]]:
+        """The links of a loaded robot tf cannot place in its fixed frame now, and why
+        (None: all placed)."""
+        return None
 
     def _summary(self, robot: _Robot) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -649,32 +544,6 @@ class RobotBridges:
         if unposed is not None:
             out["unposed"] = unposed
         return out
-
-    def _unposed(self, robot: _Robot) -> Optional[dict[str, Any]]:
-        """The links of a loaded robot tf cannot place in its fixed frame now, and why: a
-        client whose wait for every link's transform timed out says the cause."""
-        model = robot.model
-        if model is None:
-            return None
-        missing = [name for name, link in robot.links.items()
-                   if not self._tf.buffer.can_transform(robot.fixed_frame, link.frame)]
-        if not missing:
-            return None
-        lacking = set(missing)
-        # Where the tree breaks: the joints from a placed link to one that is not.
-        moving = [joint.name for joint in model.joints.values()
-                  if joint.child in lacking and joint.parent not in lacking and joint.moves]
-        if moving:
-            topic = self._joint_states_topic(robot)
-            publishers = int(self._ros.node.count_publishers(topic))
-            given = (f"nothing publishes joint states on {topic}" if not publishers else
-                     f"{topic} has {publishers} publisher(s), which gave none of them yet")
-            reason = (f"the links after moving joint(s) {', '.join(moving)} get tf from a "
-                      f"state publisher only once it has those joints' states, and {given}")
-        else:
-            reason = (f"nothing placed them in tf from {robot.fixed_frame}: is a state "
-                      f"publisher (robot_state_publisher) running for this URDF?")
-        return {"links": missing, "reason": reason}
 
     def _describe(self, robot: _Robot) -> dict[str, Any]:
         model = robot.model
@@ -705,6 +574,191 @@ class RobotBridges:
             task.cancel()
         for robot in list(self.robots.values()):
             self._drop(robot)
+
+
+class RobotBridges(RobotServing):
+    """The daemon's robots: descriptions from a node's parameter, a latched topic or a
+    file; `set_robot_joints` publishes joint states to ROS."""
+
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: LookupStreams,
+                 parameters: ParameterWatcher,
+                 package_paths: Mapping[str, Path] | None = None,
+                 topic_wait_s: float = _TOPIC_WAIT_S) -> None:
+        super().__init__(hub, names, tf=tf, package_paths=package_paths)
+        self._ros = ros
+        self._parameters = parameters
+        self._topic_wait_s = topic_wait_s
+
+    def handlers(self) -> dict[type[Op], Handler]:
+        return {**super().handlers(),
+                SetRobotJoints: lambda request, _: self.set_robot_joints(request)}
+
+    # ------------------------------------------------------------------ sources
+
+    async def _first_description(self, robot: _Robot) -> Optional[str]:
+        """The URDF text now, or None (then ``robot.reason`` says what it waits for)."""
+        source = robot.source
+        if source.kind == "file":
+            return None if robot.removed else "<file>"  # read by the loader (see _load)
+        if source.kind == "parameter":
+            robot.watch, value = await self._parameters.watch_parameter(
+                source.node, source.parameter,
+                lambda v: self._on_parameter(robot, v),
+                ready_wait_s=None if robot.request.wait else _REFUSE_AFTER_S)
+            if value is None:
+                robot.reason = (f"parameter {source.parameter} of {source.node}: "
+                                + (f"{robot.watch.unanswered}; asked again while the node is up"
+                                   if robot.watch.unanswered else "node not available yet"))
+                if not robot.watch.unanswered:  # a node that is there but slow still waits
+                    _refuse_unless_waiting(robot, "source.node", f"a node on the ROS graph "
+                                           f"holding parameter {source.parameter}",
+                                           f"{source.node}: no such node (its parameter "
+                                           f"services not found in {_REFUSE_AFTER_S:g} s)")
+                return None
+            return self._text_of(robot, value, initial=True)
+        # topic
+        from std_msgs.msg import String as StringMsg
+
+        from bridge.ros.graph_types import refuse_other_type
+
+        loop = asyncio.get_running_loop()
+        robot.first_description = loop.create_future()
+        refuse_other_type(self._ros, source.topic, _DESCRIPTION_TYPE, "source.topic")
+
+        def on_message(msg: StringMsg) -> None:  # on an executor thread
+            self._hub.call_soon(self._on_topic, robot, msg.data)
+
+        robot.subscription = self._ros.node.create_subscription(
+            StringMsg, source.topic, on_message, _description_qos())
+        bound = self._topic_wait_s if robot.request.wait else _REFUSE_AFTER_S
+        try:
+            return await asyncio.wait_for(asyncio.shield(robot.first_description), bound)
+        except asyncio.TimeoutError:
+            robot.reason = f"topic {source.topic}: no description published yet"
+            _refuse_unless_waiting(robot, "source.topic", "a URDF published (latched) on it",
+                                   f"{source.topic}: nothing within {bound:g} s")
+            return None
+
+    def _text_of(self, robot: _Robot, value: ParameterValue, *, initial: bool,
+                 ) -> Optional[str]:
+        source = robot.source
+        if value.type == "not_set":
+            robot.reason = f"parameter {source.parameter} of {source.node}: not set yet"
+            if initial:
+                _refuse_unless_waiting(robot, "source.parameter", f"a parameter set on "
+                                       f"{source.node}", f"{source.parameter}: not set")
+            return None
+        if value.type != "string":
+            problem = CommandFailedError(
+                "source.parameter", f"a string parameter holding URDF XML "
+                f"({source.parameter} of {source.node})", f"a {value.type} parameter",
+                code=ErrorCode.WRONG_TYPE)
+            if initial:
+                raise problem
+            self._load_failed(robot, str(problem))
+            return None
+        return str(value.value)
+
+    def _on_parameter(self, robot: _Robot, value: ParameterValue) -> None:
+        """The watched parameter changed, or its node (re)appeared (loop thread)."""
+        if robot.removed:
+            return
+        text = self._text_of(robot, value, initial=False)
+        if text is not None:
+            self._reload(robot, text)
+
+    def _on_topic(self, robot: _Robot, text: str) -> None:
+        """A description arrived on the robot's topic (loop thread)."""
+        if robot.removed:
+            return
+        first = robot.first_description
+        if first is not None and not first.done():
+            first.set_result(text)  # create_robot is still waiting for it: it loads
+            return
+        self._reload(robot, text)
+
+    def _drop(self, robot: _Robot) -> None:
+        super()._drop(robot)
+        if robot.watch is not None:
+            self._parameters.unwatch_parameter(robot.watch)
+            robot.watch = None
+        if robot.subscription is not None:
+            self._ros.destroy(robot.subscription)
+            robot.subscription = None
+        if robot.joint_publisher is not None:
+            self._ros.destroy(robot.joint_publisher)
+            robot.joint_publisher = None
+        if robot.first_description is not None and not robot.first_description.done():
+            robot.first_description.cancel()
+
+
+    # ------------------------------------------------------------------ joints
+
+    def _joint_states_topic(self, robot: _Robot) -> str:
+        """Where this robot's state publisher listens: robot_state_publisher subscribes
+        the relative ``joint_states``, so in the namespace of the node whose parameter
+        holds the description (``/PSM1/robot_state_publisher`` -> ``/PSM1/joint_states``),
+        of the description topic, or for a file the robot's namespace."""
+        source = robot.source  # names already resolved (absolute)
+        if source.kind == "parameter":
+            base = source.node.rsplit("/", 1)[0]
+        elif source.kind == "topic":
+            base = source.topic.rsplit("/", 1)[0]
+        else:
+            namespace = robot.request.namespace.strip("/")
+            return self._ros.resolve_name(f"{namespace}/joint_states" if namespace
+                                          else "joint_states", "topic")
+        return f"{base}/joint_states"
+
+    def set_robot_joints(self, request: SetRobotJoints) -> dict[str, Any]:
+        from sensor_msgs.msg import JointState
+
+        from bridge.ros.graph_types import refuse_other_type
+
+        robot, model = self._loaded(request.name)
+        positions = joint_positions(model.joints, request.positions)
+        topic = request.topic
+        if robot.joint_publisher is None or robot.joint_topic != topic:
+            if robot.joint_publisher is not None:
+                self._ros.destroy(robot.joint_publisher)
+                robot.joint_publisher = None
+            refuse_other_type(self._ros, topic, _JOINT_STATES_TYPE, "topic")
+            robot.joint_publisher = self._ros.node.create_publisher(
+                JointState, topic, _joint_states_qos())
+            robot.joint_topic = topic
+        msg = JointState()
+        msg.header.stamp = self._ros.node.get_clock().now().to_msg()
+        msg.name = list(positions)
+        msg.position = list(positions.values())
+        robot.joint_publisher.publish(msg)
+        return {"name": robot.name, "topic": topic, "positions": positions,
+                "subscribers": int(robot.joint_publisher.get_subscription_count())}
+
+    def _unposed(self, robot: _Robot) -> Optional[dict[str, Any]]:
+        """The links of a loaded robot tf cannot place in its fixed frame now, and why: a
+        client whose wait for every link's transform timed out says the cause."""
+        model = robot.model
+        if model is None:
+            return None
+        missing = [name for name, link in robot.links.items()
+                   if not self._tf.buffer.can_transform(robot.fixed_frame, link.frame)]
+        if not missing:
+            return None
+        lacking = set(missing)
+        # Where the tree breaks: the joints from a placed link to one that is not.
+        moving = [joint.name for joint in model.joints.values()
+                  if joint.child in lacking and joint.parent not in lacking and joint.moves]
+        if moving:
+            topic = self._joint_states_topic(robot)
+            publishers = int(self._ros.node.count_publishers(topic))
+            given = (f"nothing publishes joint states on {topic}" if not publishers else
+                     f"{topic} has {publishers} publisher(s), which gave none of them yet")
+            reason = (f"the links after moving joint(s) {', '.join(moving)} get tf from a "
+                      f"state publisher only once it has those joints' states, and {given}")
+        else:
+            reason = (f"nothing placed them in tf from {robot.fixed_frame}: is a state "
+                      f"publisher (robot_state_publisher) running for this URDF?")
+        return {"links": missing, "reason": reason}
 
 
 def _refuse_unless_waiting(robot: _Robot, field_name: str, expected: str,

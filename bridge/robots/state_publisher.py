@@ -44,10 +44,9 @@ from tf2_msgs.msg import TFMessage
 from bridge.robots._spin import inherited_parent_pid, ros_session, spin_until_signal
 from bridge.robots.description import RobotDescription, parse_urdf
 from bridge.robots.errors import RobotError
-from bridge.robots.kinematics import Kinematics
+from bridge.robots.joint_states import JointStateTracker, joint_frames
 from bridge.robots.resources import PackageResolver, parse_package_path_option
 from bridge.ros.qos import LATCHED_QOS, TF_QOS
-from protocol.conversions import rotation_to_quaternion
 
 __all__ = ["DEFAULT_NODE_NAME", "StatePublisherNode", "transforms_message", "main"]
 
@@ -63,23 +62,17 @@ def transforms_message(description: RobotDescription, transforms: Mapping[str, n
                        stamp: object, frame_prefix: str = "") -> TFMessage:
     """A TFMessage with one TransformStamped per joint of ``transforms`` (4x4, metres):
     parent link -> child link, frame ids prefixed."""
-    names = list(transforms)
     message = TFMessage()
-    if not names:
-        return message
-    matrices = np.stack([transforms[n] for n in names])
-    quats = rotation_to_quaternion(matrices[:, :3, :3]).reshape(-1, 4)  # x, y, z, w
     out = []
-    for name, matrix, q in zip(names, matrices, quats):
-        joint = description.joints[name]
+    for frame in joint_frames(description, transforms, frame_prefix):
         t = TransformStamped()
         t.header.stamp = stamp
-        t.header.frame_id = frame_prefix + joint.parent
-        t.child_frame_id = frame_prefix + joint.child
+        t.header.frame_id = frame.parent
+        t.child_frame_id = frame.child
         tr = t.transform.translation
-        tr.x, tr.y, tr.z = float(matrix[0, 3]), float(matrix[1, 3]), float(matrix[2, 3])
+        tr.x, tr.y, tr.z = frame.translation
         r = t.transform.rotation
-        r.x, r.y, r.z, r.w = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+        r.x, r.y, r.z, r.w = frame.rotation
         out.append(t)
     message.transforms = out
     return message
@@ -92,9 +85,8 @@ class StatePublisherNode(Node):
                  frame_prefix: str = "", **node_kwargs: object) -> None:
         super().__init__(node_name, namespace=namespace, **node_kwargs)  # type: ignore[arg-type]
         self._description = parse_urdf(urdf)  # raises UrdfError before any ROS entity exists
-        self._kinematics = Kinematics(self._description)
-        self._positions: dict[str, float] = {}
         self._warned: set[str] = set()
+        self._state = JointStateTracker(self._description, self._warn_once)
         self.declare_parameter("robot_description", urdf,
                                ParameterDescriptor(description="The robot's URDF (XML)."))
         self.declare_parameter("frame_prefix", frame_prefix,
@@ -118,43 +110,18 @@ class StatePublisherNode(Node):
 
     def _publish_description(self) -> None:
         self._description_pub.publish(String(data=self._description.xml))
-        static = self._kinematics.fixed_joint_transforms()
+        static = self._state.kinematics.fixed_joint_transforms()
         self._static_pub.publish(transforms_message(
             self._description, static, self.get_clock().now().to_msg(), self._frame_prefix))
         self.get_logger().info(  # type: ignore[no-untyped-call]  # rclpy: unannotated
             f"robot {self._description.name!r}: {len(self._description.links)} links, "
-            f"{len(self._kinematics.moving_joints)} moving joints, {len(static)} static "
+            f"{len(self._state.kinematics.moving_joints)} moving joints, {len(static)} static "
             f"transforms on /tf_static")
 
     def _on_joint_state(self, msg: JointState) -> None:
-        if len(msg.name) != len(msg.position):
-            self._warn_once("lengths", f"joint state with {len(msg.name)} names and "
-                            f"{len(msg.position)} positions ignored")
+        transforms = self._state.update(list(msg.name), list(msg.position))
+        if not transforms:
             return
-        joints = self._description.joints
-        named: list[str] = []
-        for name, value in zip(msg.name, msg.position):
-            joint = joints.get(name)
-            if joint is None or not joint.moves:
-                continue
-            if not np.isfinite(value):
-                self._warn_once(f"nan:{name}", f"joint {name!r}: non-finite position ignored")
-                continue
-            self._positions[name] = float(value)
-            named.append(name)
-        if not named:
-            return
-        wanted = set(named)
-        # Mimic joints follow their (possibly chained) source.
-        for name, joint in joints.items():
-            source = joint.mimic
-            while source is not None and source.joint not in wanted:
-                nxt = joints[source.joint].mimic
-                source = nxt
-            if source is not None and joint.moves:
-                wanted.add(name)
-        transforms = self._kinematics.joint_transforms(
-            self._positions, [n for n in self._kinematics.moving_joints if n in wanted])
         stamp = msg.header.stamp
         if stamp.sec == 0 and stamp.nanosec == 0:
             stamp = self.get_clock().now().to_msg()
@@ -189,8 +156,7 @@ class StatePublisherNode(Node):
             self._frame_prefix = new_prefix
         if new_description is not None:
             self._description = new_description
-            self._kinematics = Kinematics(new_description)
-            self._positions = {}
+            self._state = JointStateTracker(new_description, self._warn_once)
         if new_description is not None or new_prefix is not None:
             self._publish_description()
         return SetParametersResult(successful=True)

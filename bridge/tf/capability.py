@@ -39,14 +39,10 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Awaitable, Optional, Union
+from typing import TYPE_CHECKING, Any, Awaitable, Optional, Union
 
 import numpy as np
 import numpy.typing as npt
-from geometry_msgs.msg import TransformStamped
-from bridge.ros.qos import LATCHED_QOS, TF_QOS, TF_STATIC_SUBSCRIBER_QOS
-from rclpy.serialization import deserialize_message
-from tf2_msgs.msg import TFMessage
 
 from bridge.codecs.cdr import CdrError, read_tf_message
 from bridge.codecs.fast import pack_transform, transform_body
@@ -56,8 +52,6 @@ from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.outbox import Frame, TemplateFrame
-from bridge.ros.raw_reader import RawTopic
-from bridge.ros.ros_node import RosNode
 from bridge.tf.buffer import MAX_FRAMES, StampedTransform, TfBuffer
 from bridge.tf.errors import (
     ConnectivityError,
@@ -91,7 +85,11 @@ from protocol.framing import StreamTemplate
 from protocol.messages import Message, Status, StatusCode, Transform
 from protocol.naming import UNITS_MM, DeviceNameRegistry, NameKey, metadata_for
 
-__all__ = ["TfBridges", "tf_message_to_transforms", "status_for_error"]
+if TYPE_CHECKING:  # ROS is imported where the daemon subscribes and publishes: `TfLookups`
+    # serves a bag without it (bridge/playback)
+    from bridge.ros.ros_node import RosNode
+
+__all__ = ["TfBridges", "TfLookups", "tf_message_to_transforms", "status_for_error"]
 
 log = logging.getLogger(__name__)
 
@@ -125,6 +123,9 @@ def tf_cdr_to_transforms(data: bytes) -> list[StampedTransform]:
     try:
         raw = read_tf_message(data)
     except CdrError:  # another CDR encoding: the ordinary way
+        from rclpy.serialization import deserialize_message
+        from tf2_msgs.msg import TFMessage
+
         return tf_message_to_transforms(deserialize_message(data, TFMessage))
     return [StampedTransform(frame, child, sec * _NS_PER_S + nanosec, (tx, ty, tz),
                              (x, y, z, w))
@@ -132,6 +133,8 @@ def tf_cdr_to_transforms(data: bytes) -> list[StampedTransform]:
 
 
 def _transform_stamped(st: StampedTransform) -> Any:
+    from geometry_msgs.msg import TransformStamped
+
     msg = TransformStamped()
     sec, nanosec = divmod(st.stamp_ns, _NS_PER_S)
     msg.header.stamp.sec = sec
@@ -237,29 +240,29 @@ class _Broadcaster:
     messages: int = 0
 
 
-class TfBridges:
-    """The tf capability of the daemon: lookups, one-shot lookups, broadcasters.
+class TfLookups:
+    """Lookups of the tf buffer, streamed (``create_tf_lookup``, and `stream_lookup` for
+    robots) and one-shot (``lookup_transform``): what serves tf to clients, whoever fills
+    the buffer (`store_transforms`, from any thread). Without ROS: the daemon's `TfBridges`
+    feeds it from /tf, the player (bridge/playback) from a bag.
 
     Keyword options: ``frame_prefix`` (see the module docstring), ``cache_time_s`` (how much
     history the buffer keeps per frame, tf2's default 10 s), ``tf_topic`` and
-    ``tf_static_topic``.
+    ``tf_static_topic`` (resolved: the names its state and warnings give).
     """
 
-    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
+    def __init__(self, hub: Hub, names: DeviceNameRegistry, *,
                  frame_prefix: str = "", cache_time_s: float = 10.0,
                  tf_topic: str = "/tf", tf_static_topic: str = "/tf_static") -> None:
-        self._ros = ros
         self._hub = hub
         self._names = names
         self._prefix = frame_prefix.lstrip("/")
         self.buffer = TfBuffer(cache_time_s)
         self.registry = LookupRegistry(self.buffer)
         self.lookups: dict[tuple[str, str], _Lookup] = {}
-        self.broadcasters: dict[tuple[str, str], _Broadcaster] = {}
         self._by_key: dict[LookupKey, _Lookup] = {}
-        self._by_device: dict[str, _Broadcaster] = {}
-        self._tf_topic = ros.resolve_topic(tf_topic)
-        self._tf_static_topic = ros.resolve_topic(tf_static_topic)
+        self._tf_topic = tf_topic
+        self._tf_static_topic = tf_static_topic
         # Evaluation + writing of lookups, from either thread (see the module docstring).
         self._deliver_lock = threading.Lock()
         # Streams thread -> loop: at most one call scheduled at a time.
@@ -274,45 +277,26 @@ class TfBridges:
         self._closed = False
         self.received = {"tf": 0, "tf_static": 0}
         self.updates = 0  # tf batches that changed a frame some lookup follows or waits for
-        # Publishers are made on first use, so a daemon that never broadcasts does not show
-        # up as a /tf publisher in the ROS graph.
-        self._tf_publisher: Any = None
-        self._static_publisher: Any = None
-        self._static_transforms: dict[str, Any] = {}  # child -> TransformStamped (latched)
-        # The EventsExecutor's node, taken raw: /tf may come at kHz rates, and rclpy builds
-        # six Python objects per transform (most of the daemon's CPU in a 1 kHz robot).
-        # Where the compiled rcl reader is built, /tf is taken without the interpreter's
-        # lock (rclpy held it about 20 ms for a peer's 10 MB TFMessage, stalling every
-        # client's stream): bridge/ros/raw_reader.py.
-        self._reader = ros.raw_reader([
-            RawTopic(self._tf_topic, TFMessage, TF_QOS, self._on_tf),
-            RawTopic(self._tf_static_topic, TFMessage, TF_STATIC_SUBSCRIBER_QOS,
-                     self._on_tf_static)], name="tf-reader")
-        node = ros.stream_node
-        self._subscriptions = [] if self._reader is not None else [
-            node.create_subscription(TFMessage, self._tf_topic, self._on_tf, TF_QOS, raw=True),
-            node.create_subscription(TFMessage, self._tf_static_topic, self._on_tf_static,
-                                     TF_STATIC_SUBSCRIBER_QOS, raw=True),
-        ]
 
-    def store_in_use(self) -> str:
-        """Which store the buffer runs on, and how /tf is taken, for the start-up log."""
-        taken = ("; /tf taken without the interpreter's lock (rcl reader)" if self._reader
-                 is not None else "; /tf taken through rclpy (the rcl reader is not built here)")
-        if self.buffer.compiled:
-            return "compiled store" + taken
-        return ("pure Python store (the compiled one is not built here, is from an older "
-                "build, or SLICER_BRIDGE_PURE_PYTHON_TF=1)" + taken)
+    def store_transforms(self, transforms: list[StampedTransform], *, static: bool) -> None:
+        """Store one batch (metres) and deliver the lookups it changed (any thread)."""
+        self._store(transforms, static=static)
+
+    def reset(self, static: list[StampedTransform], moving: list[StampedTransform]) -> None:
+        """Forget every frame and hold these instead (a player's seek: its time jumps), in
+        one step: no lookup is evaluated on a buffer half filled."""
+        changed: set[str] = set()
+        with self._deliver_lock:
+            self.buffer.clear()
+            for batch, is_static in ((static, True), (moving, False)):
+                try:
+                    changed |= self.buffer.set_transforms(batch, static=is_static)
+                except RejectedTransformsError as error:
+                    self._warn_rejected(error, is_static)
+                    changed |= error.changed
+        self._deliver(changed)
 
     # ------------------------------------------------------------------ ROS thread
-
-    def _on_tf(self, data: Union[bytes, memoryview]) -> None:
-        self.received["tf"] += 1
-        self._store_cdr(data, static=False)
-
-    def _on_tf_static(self, data: Union[bytes, memoryview]) -> None:
-        self.received["tf_static"] += 1
-        self._store_cdr(data, static=True)
 
     def _store_cdr(self, data: Union[bytes, memoryview], *, static: bool) -> None:
         """Store one serialized TFMessage (rclpy's bytes, or the raw reader's view, valid
@@ -566,6 +550,119 @@ class TfBridges:
             except asyncio.TimeoutError:
                 pass
 
+    # ------------------------------------------------------------------ capability
+
+    def handlers(self) -> dict[type[Op], Handler]:
+        return {
+            CreateTfLookup: lambda request, _: self.create_lookup(request),
+            RemoveTfLookup: lambda request, _: self.remove_lookup(request),
+            LookupTransform: lambda request, _: self.lookup_transform(request),
+        }
+
+    def describe(self) -> list[dict[str, Any]]:
+        return [self._describe_lookup(lookup) for lookup in self.lookups.values()]
+
+    def state(self, guard: ContentGuard) -> dict[str, Any]:
+        """The shared tf buffer (not a bridge: every lookup reads it), naming only the
+        frames ``guard`` lets a client see."""
+        return {"tf_buffer": {
+            "topics": list(self.topics), "frame_prefix": self._prefix,
+            "frames": guard.visible_frames(self.buffer.frames()),
+            "received": dict(self.received), "cache_time_s": self.buffer.cache_time_s}}
+
+    def _describe_lookup(self, lookup: _Lookup) -> dict[str, Any]:
+        last = self.registry.last_sent(lookup.key)
+        if isinstance(last, StampedTransform):
+            state = "streaming"
+        elif isinstance(last, TfError):
+            state = "error"
+        else:
+            state = "pending"  # no result yet: a frame is unknown, or not evaluated yet
+        out: dict[str, Any] = {"kind": "tf_lookup", "parent": lookup.key.parent,
+                               "child": lookup.key.child, "device": lookup.device,
+                               "igtl_type": Transform.TYPE, "state": state,
+                               "messages": lookup.messages}
+        if isinstance(last, TfError):
+            out["error"] = last.message
+        if lookup.rate_hz:
+            out["rate_hz"] = lookup.rate_hz
+        return out
+
+    def close(self) -> None:
+        with self._deliver_lock:  # a delivery under way ends before the devices are forgotten
+            self._closed = True
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        for lookup in self.lookups.values():
+            self._hub.forget(lookup.device)
+        self.lookups.clear()
+        self._by_key.clear()
+
+
+class TfBridges(TfLookups):
+    """The tf capability of the daemon: `TfLookups` fed from /tf and /tf_static, and
+    broadcasters publishing clients' transforms.
+
+    Keyword options: as `TfLookups`; ``tf_topic`` and ``tf_static_topic`` may be relative
+    (resolved in the node's namespace).
+    """
+
+    def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
+                 frame_prefix: str = "", cache_time_s: float = 10.0,
+                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static") -> None:
+        from tf2_msgs.msg import TFMessage
+
+        from bridge.ros.qos import TF_QOS, TF_STATIC_SUBSCRIBER_QOS
+        from bridge.ros.raw_reader import RawTopic
+
+        super().__init__(hub, names, frame_prefix=frame_prefix, cache_time_s=cache_time_s,
+                         tf_topic=ros.resolve_topic(tf_topic),
+                         tf_static_topic=ros.resolve_topic(tf_static_topic))
+        self._ros = ros
+        self.broadcasters: dict[tuple[str, str], _Broadcaster] = {}
+        self._by_device: dict[str, _Broadcaster] = {}
+        # Publishers are made on first use, so a daemon that never broadcasts does not show
+        # up as a /tf publisher in the ROS graph.
+        self._tf_publisher: Any = None
+        self._static_publisher: Any = None
+        self._static_transforms: dict[str, Any] = {}  # child -> TransformStamped (latched)
+        # The EventsExecutor's node, taken raw: /tf may come at kHz rates, and rclpy builds
+        # six Python objects per transform (most of the daemon's CPU in a 1 kHz robot).
+        # Where the compiled rcl reader is built, /tf is taken without the interpreter's
+        # lock (rclpy held it about 20 ms for a peer's 10 MB TFMessage, stalling every
+        # client's stream): bridge/ros/raw_reader.py.
+        self._reader = ros.raw_reader([
+            RawTopic(self._tf_topic, TFMessage, TF_QOS, self._on_tf),
+            RawTopic(self._tf_static_topic, TFMessage, TF_STATIC_SUBSCRIBER_QOS,
+                     self._on_tf_static)], name="tf-reader")
+        node = ros.stream_node
+        self._subscriptions = [] if self._reader is not None else [
+            node.create_subscription(TFMessage, self._tf_topic, self._on_tf, TF_QOS, raw=True),
+            node.create_subscription(TFMessage, self._tf_static_topic, self._on_tf_static,
+                                     TF_STATIC_SUBSCRIBER_QOS, raw=True),
+        ]
+
+    def store_in_use(self) -> str:
+        """Which store the buffer runs on, and how /tf is taken, for the start-up log."""
+        taken = ("; /tf taken without the interpreter's lock (rcl reader)" if self._reader
+                 is not None else "; /tf taken through rclpy (the rcl reader is not built here)")
+        if self.buffer.compiled:
+            return "compiled store" + taken
+        return ("pure Python store (the compiled one is not built here, is from an older "
+                "build, or SLICER_BRIDGE_PURE_PYTHON_TF=1)" + taken)
+
+
+    # ------------------------------------------------------------------ ROS thread
+
+    def _on_tf(self, data: Union[bytes, memoryview]) -> None:
+        self.received["tf"] += 1
+        self._store_cdr(data, static=False)
+
+    def _on_tf_static(self, data: Union[bytes, memoryview]) -> None:
+        self.received["tf_static"] += 1
+        self._store_cdr(data, static=True)
+
     # ------------------------------------------------------------------ broadcasters
 
     def create_broadcaster(self, request: CreateTfBroadcaster) -> Created:
@@ -593,6 +690,8 @@ class TfBridges:
         return Created(self._describe_broadcaster(broadcaster), existed=False)
 
     def remove_broadcaster(self, request: RemoveTfBroadcaster) -> dict[str, Any]:
+        from tf2_msgs.msg import TFMessage
+
         pair = (request.parent, request.child)  # mapped by the dispatcher
         broadcaster = self.broadcasters.pop(pair, None)
         if broadcaster is None:
@@ -642,6 +741,8 @@ class TfBridges:
 
     def _send(self, broadcaster: _Broadcaster, matrix_mm: npt.NDArray[np.float64],
               stamp_ns: int) -> int:
+        from tf2_msgs.msg import TFMessage
+
         static = broadcaster.static
         # The stamp goes out even for a static transform (tf2 ignores it there, but a
         # stamp of 0 tells a reader nothing); the buffer ignores it for static data too.
@@ -664,6 +765,10 @@ class TfBridges:
         return int(publisher.get_subscription_count())
 
     def _publisher(self, static: bool) -> Any:
+        from tf2_msgs.msg import TFMessage
+
+        from bridge.ros.qos import LATCHED_QOS, TF_QOS
+
         node = self._ros.node
         if static:
             if self._static_publisher is None:
@@ -682,44 +787,15 @@ class TfBridges:
 
     def handlers(self) -> dict[type[Op], Handler]:
         return {
-            CreateTfLookup: lambda request, _: self.create_lookup(request),
-            RemoveTfLookup: lambda request, _: self.remove_lookup(request),
-            LookupTransform: lambda request, _: self.lookup_transform(request),
+            **super().handlers(),
             CreateTfBroadcaster: lambda request, _: self.create_broadcaster(request),
             RemoveTfBroadcaster: lambda request, _: self.remove_broadcaster(request),
             BroadcastTransform: lambda request, _: self.broadcast(request),
         }
 
     def describe(self) -> list[dict[str, Any]]:
-        out: list[dict[str, Any]] = [self._describe_lookup(lookup)
-                                     for lookup in self.lookups.values()]
+        out = super().describe()
         out.extend(self._describe_broadcaster(b) for b in self.broadcasters.values())
-        return out
-
-    def state(self, guard: ContentGuard) -> dict[str, Any]:
-        """The shared tf buffer (not a bridge: every lookup reads it), naming only the
-        frames ``guard`` lets a client see."""
-        return {"tf_buffer": {
-            "topics": list(self.topics), "frame_prefix": self._prefix,
-            "frames": guard.visible_frames(self.buffer.frames()),
-            "received": dict(self.received), "cache_time_s": self.buffer.cache_time_s}}
-
-    def _describe_lookup(self, lookup: _Lookup) -> dict[str, Any]:
-        last = self.registry.last_sent(lookup.key)
-        if isinstance(last, StampedTransform):
-            state = "streaming"
-        elif isinstance(last, TfError):
-            state = "error"
-        else:
-            state = "pending"  # no result yet: a frame is unknown, or not evaluated yet
-        out: dict[str, Any] = {"kind": "tf_lookup", "parent": lookup.key.parent,
-                               "child": lookup.key.child, "device": lookup.device,
-                               "igtl_type": Transform.TYPE, "state": state,
-                               "messages": lookup.messages}
-        if isinstance(last, TfError):
-            out["error"] = last.message
-        if lookup.rate_hz:
-            out["rate_hz"] = lookup.rate_hz
         return out
 
     def _describe_broadcaster(self, broadcaster: _Broadcaster) -> dict[str, Any]:
@@ -730,18 +806,10 @@ class TfBridges:
         return out
 
     def close(self) -> None:
-        with self._deliver_lock:  # a delivery under way ends before the devices are forgotten
-            self._closed = True
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
-        for lookup in self.lookups.values():
-            self._hub.forget(lookup.device)
+        super().close()
         for broadcaster in self.broadcasters.values():
             self._hub.unroute(broadcaster.device)
-        self.lookups.clear()
         self.broadcasters.clear()
-        self._by_key.clear()
         self._by_device.clear()
         if self._reader is not None:
             self._reader.close()

@@ -23,7 +23,7 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String as StringMsg
 
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
-from bridge.codecs.base import Encoded
+from bridge.codecs.base import Encoded, stream_message
 from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
 from bridge.codecs.fast_image import RawImageStream
 from bridge.codecs.image import ImageCodec
@@ -343,11 +343,7 @@ class SubscriberBridge:
         self._post(encoded)
 
     def _post(self, encoded: Encoded) -> Message:
-        stamp = igtl_stamp_or_now(*encoded.stamp) if encoded.stamp else igtl_timestamp_now()
-        metadata = dict(self._metadata)
-        metadata.update(encoded.metadata)
-        message = Message(device_name=self.device, body=encoded.body, timestamp=stamp,
-                          metadata=metadata)
+        message = stream_message(self.device, self._metadata, encoded)
         self._hub.post_frame(self._channel, frame_for(message))
         return message
 

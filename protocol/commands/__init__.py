@@ -21,6 +21,7 @@ The package, by job:
     op          the op base class, its declarations and the registry; parsing
     graph, topics, parameters, tf, robots, services, markers, actions, interfaces,
     recording
+    playback
                 the ops, by area (adding an op: a class in one of these, and a handler)
     replies     the Reply and error replies
 
@@ -61,10 +62,13 @@ from protocol.commands.interfaces import *  # noqa: F403
 from protocol.commands.interfaces import __all__ as _interfaces
 from protocol.commands.recording import *  # noqa: F403
 from protocol.commands.recording import __all__ as _recording
+from protocol.commands.playback import *  # noqa: F403
+from protocol.commands.playback import __all__ as _playback
 from protocol.commands.replies import *  # noqa: F403
 from protocol.commands.replies import __all__ as _replies
 
 __all__ = [*_errors, *_wire, *_values, *_types, *_results, *_op, *_graph, *_topics, *_parameters,
-           *_tf, *_robots, *_services, *_markers, *_actions, *_interfaces, *_recording, *_replies]
+           *_tf, *_robots, *_services, *_markers, *_actions, *_interfaces, *_recording,
+           *_playback, *_replies]
 
 bridge_kinds()  # noqa: F405 - a create op without its remove op fails here, at import

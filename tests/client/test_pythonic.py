@@ -187,3 +187,16 @@ def test_a_wait_on_a_topic_nobody_publishes_says_so(ros: slicer_client.Client,
     with pytest.raises(TimeoutError) as error:
         posed.wait_for_message(timeout=0.5, predicate=lambda matrix: False)
     assert "no publisher" not in str(error.value)
+
+
+def test_the_live_daemon_refuses_the_players_ops(ros: slicer_client.Client) -> None:
+    """Pause, seek and the rest are a player's (`slicer-ros2-bridge play`): the live daemon
+    refuses each, saying so, and keeps serving."""
+    from support import refused
+
+    for call in (ros.playback, ros.pause, ros.resume, lambda: ros.seek(1.0),
+                 lambda: ros.set_rate(2.0)):
+        error = refused(call)
+        assert error.code == ErrorCode.NOT_SUPPORTED
+        assert "slicer-ros2-bridge play" in str(error)
+    assert ros.list_topics() is not None

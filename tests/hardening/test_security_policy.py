@@ -79,6 +79,9 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
         "action_feedback": {"action": "/a", "goal_id": "0" * 32, "feedback": {}},
         "start_recording": {"path": "/data/s.mcap"},  # a file on the daemon's host
         "stop_recording": {"path": "/data/s.mcap"},
+        # A player's clock (slicer-ros2-bridge play): every client of it sees the change.
+        "pause_playback": {}, "resume_playback": {}, "seek_playback": {"offset": 1.0},
+        "set_playback_rate": {"rate": 2.0},
     }
     # The declarations say what writes: this list is the expectation they are held to.
     assert set(writes) == {op for op, cls in c.REQUEST_TYPES.items() if cls.writes}
@@ -92,6 +95,7 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
                      "get_parameters": {"node": "/n", "names": ["p"]},
                      "list_actions": {},
                      "recording_status": {"path": "/data/s.mcap"},
+                     "playback_status": {},
                      "hello": {}}.items():
         check(policy, op, args)
     # Watching an action: its goal status topic.

@@ -151,6 +151,12 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.RemoveRobot: st.builds(c.RemoveRobot, name=robot_names),
     c.ListRobots: st.just(c.ListRobots()),
     c.DescribeRobotJoints: st.builds(c.DescribeRobotJoints, name=robot_names),
+    c.PlaybackStatus: st.just(c.PlaybackStatus()),
+    c.PausePlayback: st.just(c.PausePlayback()),
+    c.ResumePlayback: st.just(c.ResumePlayback()),
+    c.SeekPlayback: st.builds(c.SeekPlayback, offset=st.floats(0.0, c.MAX_SEEK_S)),
+    c.SetPlaybackRate: st.builds(c.SetPlaybackRate,
+                                 rate=st.floats(0.0, c.MAX_PLAYBACK_RATE, exclude_min=True)),
     c.SetRobotJoints: st.builds(
         c.SetRobotJoints, name=robot_names, topic=ros_names,
         positions=st.dictionaries(st.text(min_size=1, max_size=20), finite,

@@ -59,6 +59,11 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "remove_robot": ({"name": "r"}, set()),
     "list_robots": ({}, set()),
     "describe_robot_joints": ({"name": "r"}, set()),
+    "playback_status": ({}, set()),
+    "pause_playback": ({}, set()),
+    "resume_playback": ({}, set()),
+    "seek_playback": ({"offset": 1.5}, set()),
+    "set_playback_rate": ({"rate": 2.0}, set()),
     "set_robot_joints": ({"name": "r", "positions": {"j": 0.5}, "topic": "/PSM1/joint_states"},
                          {("topic", "topic", "/PSM1/joint_states")}),
     "call_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
@@ -144,7 +149,9 @@ def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
         "set_parameters", "server_declare_parameter", "server_set_parameter",
         "server_undeclare_parameter", "call_service", "advertise_service",
         "set_robot_joints", "send_goal", "cancel_goal", "advertise_action", "action_feedback",
-        "start_recording", "stop_recording"}
+        "start_recording", "stop_recording",
+        # A player's clock: every client of the player sees what these change.
+        "pause_playback", "resume_playback", "seek_playback", "set_playback_rate"}
 
 
 def test_a_publisher_declares_its_frame_and_labels_topic() -> None:

@@ -215,6 +215,24 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
     def RemoveRobot(self, robotName: str) -> bool:  # noqa: N802,N803
         return self.referenceLogic().RemoveRobot(robotName)
 
+    # --- a player's clock (slicer-ros2-bridge play BAG) ------------------------------------
+    def playbackStatus(self) -> c.PlaybackResult:
+        """The bag's clock when connected to a player (the live daemon refuses it)."""
+        return self.requireClient().playback()
+
+    def pausePlayback(self) -> c.PlaybackResult:
+        return self.requireClient().pause()
+
+    def resumePlayback(self) -> c.PlaybackResult:
+        return self.requireClient().resume()
+
+    def seekPlayback(self, offset: float) -> c.PlaybackResult:
+        """Play from ``offset`` s into the bag: the robot shows its pose at that time."""
+        return self.requireClient().seek(offset)
+
+    def setPlaybackRate(self, rate: float) -> c.PlaybackResult:
+        return self.requireClient().set_rate(rate)
+
     # --- robots and bridges -------------------------------------------------------------
     def loadRobot(self, name: str, node: str, parameter: str) -> Robot:
         robot = self.requireClient().robot(name, node=node, parameter=parameter)
