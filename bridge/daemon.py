@@ -31,6 +31,7 @@ from bridge.core.shutdown import StopSignals
 from bridge.core.threads import fatal_failure
 from bridge.core.stream_health import StreamHealth
 from bridge.markers.capability import MarkerBridges
+from bridge.motion.capability import MotionBridges
 from bridge.parameters.capability import ParameterBridges
 from bridge.robots.capability import RobotBridges
 from bridge.types import InterfaceTypes
@@ -102,10 +103,12 @@ class Daemon:
         self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
                                      package_paths=package_paths,
                                      max_model_bytes=policy.max_marker_bytes)
+        # Motion computes with the robots' models: handed the robots' public lookup only.
+        self.motion = MotionBridges(self.ros, robots=self.robots.loaded_model)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
                                                           self.robots, self.markers,
-                                                          InterfaceTypes()],
+                                                          self.motion, InterfaceTypes()],
                                      policy=policy, resolve_frame=self.tf.resolve_client_frame,
                                      resolve_file=self.robots.file_path, heavy=self.heavy)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,

@@ -20,6 +20,7 @@ import numpy as np
 
 from protocol import commands as c
 from protocol.commands.fields import Args
+from protocol.conversions import quaternion_to_rotation
 from protocol.messages import (Message, Point, PointElement, PolyData, Status, StatusCode,
                                String, Transform, cells_from_array)
 from protocol.naming import (KEY_COLOR, KEY_COUNT, KEY_FRAME, KEY_LINK, KEY_LINK_COUNT,
@@ -27,7 +28,8 @@ from protocol.naming import (KEY_COLOR, KEY_COUNT, KEY_FRAME, KEY_LINK, KEY_LINK
                              KEY_PARENT_DEVICE, KEY_POSITION, KEY_ROLE, KEY_TOPIC, KEY_VISUAL,
                              KEY_VISUAL_COUNT, KEY_WARNINGS)
 from slicer_client.bridge_state import BridgeSpec
-from slicer_client.errors import BridgeClientError, PointsError, RobotNotLoadedError
+from slicer_client.errors import (BridgeClientError, IkFailedError, PointsError,
+                                  RobotNotLoadedError)
 from slicer_client.matrices import as_numpy, as_rows
 from slicer_client.owner import ResourceOwner
 from slicer_client.transport import CommandFn, request_with
@@ -711,6 +713,26 @@ class Robot(Resource):
             timeout=timeout)
         return result.positions
 
+    def solve_ik(self, target: Any, *, tip: str, seed: Optional[Mapping[str, float]] = None,
+                 collisions: bool = True, timeout: float = 10.0) -> Dict[str, float]:
+        """Joint positions (radians, metres) putting link ``tip`` at ``target``, in the
+        robot's root link frame, in MILLIMETRES: a 4x4 matrix (numpy, rows, vtkMatrix4x4)
+        or a pose ``(position_mm, quaternion_xyzw)``. Starts from ``seed`` (omitted: the
+        robot's current joint state), within the URDF's limits, clear of the robot's
+        obstacles unless ``collisions`` is False. The robot does not move: pass the result
+        to `set_joints` to move it. Raises `IkFailedError` (reason, residual) when no
+        solution exists."""
+        request = c.SolveIk(
+            name=self.name, tip=tip, target=c.matrix_from(_target_rows(target), "target"),
+            seed=None if seed is None else tuple((str(k), float(v)) for k, v in seed.items()),
+            collisions=collisions)
+        result = self._client.request(request, timeout=timeout)
+        if not result.solved:
+            raise IkFailedError(self.name, tip, result.failure or {},
+                                residual_mm=result.residual_mm,
+                                residual_deg=result.residual_deg, positions=result.positions)
+        return result.positions
+
     def wait_until_loaded(self, timeout: float = 30.0) -> None:
         """Wait until every link named in the create reply has a transform and every
         visual its mesh."""
@@ -754,6 +776,20 @@ class Robot(Resource):
             if summary.get("name") == self.name:
                 return dict(summary.get("unposed") or {})
         return {}
+
+
+def _target_rows(target: Any) -> List[List[float]]:
+    """An IK target as 4 rows (mm): a 4x4 as it is, a (position_mm, quaternion_xyzw) pose
+    through the protocol's one quaternion conversion."""
+    if isinstance(target, (tuple, list)) and len(target) == 2 and np.shape(target[1]) == (4,):
+        position = np.asarray(target[0], dtype=np.float64)
+        if position.shape != (3,):
+            raise PointsError("a position of 3 numbers (mm)", f"shape {position.shape}")
+        matrix = np.eye(4)
+        matrix[:3, :3] = quaternion_to_rotation(target[1])
+        matrix[:3, 3] = position
+        return as_rows(matrix, field="target")
+    return as_rows(target, field="target")
 
 
 @dataclass

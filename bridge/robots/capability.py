@@ -568,6 +568,12 @@ class RobotBridges:
                                           else "joint_states", "topic")
         return f"{base}/joint_states"
 
+    def loaded_model(self, name: str) -> tuple[RobotModel, str]:
+        """A loaded robot's model and its joint-states topic, for the capabilities that
+        compute with it (motion); refused as `describe_robot_joints` refuses."""
+        robot, model = self._loaded(name)
+        return model, self._joint_states_topic(robot)
+
     def describe_robot_joints(self, request: DescribeRobotJoints) -> dict[str, Any]:
         robot, model = self._loaded(request.name)
         return {"name": robot.name, "robot": model.name,

@@ -32,7 +32,7 @@ __all__ = ["AdvertiseActionResult", "Answered", "AuthenticateResult", "CallServi
            "ListParametersResult", "ListServicesResult", "ListTopicsResult",
            "LookupTransformResult", "ObserveParametersResult", "ParameterOutcome",
            "PublishResult", "Result", "ResultFormatError", "SendGoalResult",
-           "SetParametersResult", "SetRobotJointsResult"]
+           "SetParametersResult", "SetRobotJointsResult", "SolveIkResult"]
 
 _U32 = (1 << 32) - 1
 _COUNT_MAX = (1 << 63) - 1
@@ -336,3 +336,39 @@ class AdvertiseActionResult(Result):
     @classmethod
     def read(cls, a: Args) -> AdvertiseActionResult:
         return cls(device=_device(a))
+
+
+@dataclass(frozen=True)
+class SolveIkResult(Result):
+    """A solve_ik answer: ``solved``, the actuated joints' ``positions`` (of the solution,
+    or of the best attempt), the residual of that attempt (mm, degrees), and when not
+    solved the ``failure`` (``reason``: unreachable, joint_limit or collision; ``text``;
+    ``joints`` past their limits; ``link`` and ``obstacle`` in contact)."""
+
+    solved: bool
+    positions: dict[str, float]
+    residual_mm: float
+    residual_deg: float
+    iterations: int
+    attempts: int
+    seed: str  # where the start came from: "given", "joint_states" or "zero"
+    failure: Optional[dict[str, Any]] = None
+
+    @classmethod
+    def read(cls, a: Args) -> SolveIkResult:
+        path = a.path("positions")
+        positions = {}
+        for joint, value in _object(a, "positions").items():
+            check_str(joint, path, 1 << 10, False, None, "")
+            positions[joint] = check_float(value, f"{path}.{joint}", float("-inf"),
+                                           float("inf"), False)
+        failure = a.raw("failure", False)
+        return cls(solved=a.opt_bool("solved", False), positions=positions,
+                   residual_mm=cast(float, a.opt_float("residual_mm", 0.0, low=0.0,
+                                                       high=float("inf"))),
+                   residual_deg=cast(float, a.opt_float("residual_deg", 0.0, low=0.0,
+                                                        high=180.0)),
+                   iterations=a.req_int("iterations", low=0, high=_COUNT_MAX),
+                   attempts=a.req_int("attempts", low=0, high=_COUNT_MAX),
+                   seed=a.req_str("seed"),
+                   failure=dict(failure) if isinstance(failure, dict) else None)

@@ -149,6 +149,11 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.RemoveRobot: st.builds(c.RemoveRobot, name=robot_names),
     c.ListRobots: st.just(c.ListRobots()),
     c.DescribeRobotJoints: st.builds(c.DescribeRobotJoints, name=robot_names),
+    c.SolveIk: st.builds(
+        c.SolveIk, name=robot_names, tip=st.text(min_size=1, max_size=20), target=matrices,
+        seed=st.none() | st.dictionaries(st.text(min_size=1, max_size=20), finite,
+                                         max_size=5).map(lambda d: tuple(d.items())),
+        collisions=st.booleans()),
     c.SetRobotJoints: st.builds(
         c.SetRobotJoints, name=robot_names, topic=ros_names,
         positions=st.dictionaries(st.text(min_size=1, max_size=20), finite,

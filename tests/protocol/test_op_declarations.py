@@ -61,6 +61,7 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "describe_robot_joints": ({"name": "r"}, set()),
     "set_robot_joints": ({"name": "r", "positions": {"j": 0.5}, "topic": "/PSM1/joint_states"},
                          {("topic", "topic", "/PSM1/joint_states")}),
+    "solve_ik": ({"name": "r", "tip": "tool", "target": IDENTITY}, set()),  # a read
     "call_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
                      {("service", "service", "/s")}),
     "advertise_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
