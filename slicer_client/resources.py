@@ -713,6 +713,17 @@ class Robot(Resource):
             timeout=timeout)
         return result.positions
 
+    def ik(self, target: Any, *, tip: str, seed: Optional[Mapping[str, float]] = None,
+           collisions: bool = True, timeout: float = 10.0) -> c.SolveIkResult:
+        """`solve_ik`'s whole answer, solved or not, without raising: the positions, the
+        residual, the failure, and each link's pose at those positions (``links``, mm, in
+        the root link's frame), which is what a preview of the solution draws."""
+        request = c.SolveIk(
+            name=self.name, tip=tip, target=c.matrix_from(_target_rows(target), "target"),
+            seed=None if seed is None else tuple((str(k), float(v)) for k, v in seed.items()),
+            collisions=collisions)
+        return self._client.request(request, timeout=timeout)
+
     def solve_ik(self, target: Any, *, tip: str, seed: Optional[Mapping[str, float]] = None,
                  collisions: bool = True, timeout: float = 10.0) -> Dict[str, float]:
         """Joint positions (radians, metres) putting link ``tip`` at ``target``, in the
@@ -722,11 +733,7 @@ class Robot(Resource):
         obstacles unless ``collisions`` is False. The robot does not move: pass the result
         to `set_joints` to move it. Raises `IkFailedError` (reason, residual) when no
         solution exists."""
-        request = c.SolveIk(
-            name=self.name, tip=tip, target=c.matrix_from(_target_rows(target), "target"),
-            seed=None if seed is None else tuple((str(k), float(v)) for k, v in seed.items()),
-            collisions=collisions)
-        result = self._client.request(request, timeout=timeout)
+        result = self.ik(target, tip=tip, seed=seed, collisions=collisions, timeout=timeout)
         if not result.solved:
             raise IkFailedError(self.name, tip, result.failure or {},
                                 residual_mm=result.residual_mm,

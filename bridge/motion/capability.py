@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable, Optional
 
 import numpy as np
+import numpy.typing as npt
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
@@ -29,7 +30,7 @@ from bridge.core.heavy import OffLoop
 from bridge.ros.ros_node import RosNode
 from bridge.motion.errors import MotionError
 from protocol.commands import Op, OutOfRangeError, SolveIk
-from protocol.conversions import mm_to_metres
+from protocol.conversions import metres_to_mm, mm_to_metres
 
 if TYPE_CHECKING:  # pinocchio and coal load with the first motion query
     from bridge.motion.collisions import CollisionWorld
@@ -130,11 +131,13 @@ class MotionBridges:
                     result = solve_ik(robot.model, target_m, request.tip, seed, world=world)
                 except MotionError as error:  # the request's fault: a refusal, not a bug
                     raise OutOfRangeError(error.field, error.expected, error.got) from None
+                links = robot.model.link_poses(result.theta)
             out: dict[str, Any] = {
                 "name": robot.name, "tip": request.tip, "solved": result.ok,
                 "positions": result.positions, "residual_mm": result.residual_mm,
                 "residual_deg": result.residual_deg, "iterations": result.iterations,
-                "attempts": result.attempts, "seed": seed_from}
+                "attempts": result.attempts, "seed": seed_from,
+                "links": {link: _mm_rows(pose) for link, pose in links.items()}}
             if result.failure is not None:
                 out["failure"] = result.failure.to_dict()
             return out
@@ -163,3 +166,10 @@ class MotionBridges:
             self._robots.clear()
         for robot in robots:
             self._forget(robot)
+
+
+def _mm_rows(pose_m: npt.NDArray[np.float64]) -> list[list[float]]:
+    """A pose in metres as the wire's 4 rows in millimetres."""
+    rows = np.array(pose_m, dtype=np.float64)
+    rows[:3, 3] = metres_to_mm(rows[:3, 3])
+    return [[float(v) for v in row] for row in rows]

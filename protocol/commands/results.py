@@ -17,7 +17,7 @@ one it may leave out has the default the client always assumed.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Generic, Optional, TypeVar, cast, get_args, get_origin
 
 from protocol.commands.errors import CommandError, WrongTypeError
@@ -353,9 +353,17 @@ class SolveIkResult(Result):
     attempts: int
     seed: str  # where the start came from: "given", "joint_states" or "zero"
     failure: Optional[dict[str, Any]] = None
+    # Each link's pose at those positions, in the root link's frame (mm): a preview's.
+    links: dict[str, Matrix4] = field(default_factory=dict)
 
     @classmethod
     def read(cls, a: Args) -> SolveIkResult:
+        links_path = a.path("links")
+        links = {}
+        for link, rows in (_object(a, "links") if a.raw("links", False) is not None
+                           else {}).items():
+            check_str(link, links_path, 1 << 10, False, None, "")
+            links[link] = matrix_from(rows, f"{links_path}.{link}")
         path = a.path("positions")
         positions = {}
         for joint, value in _object(a, "positions").items():
@@ -371,4 +379,5 @@ class SolveIkResult(Result):
                    iterations=a.req_int("iterations", low=0, high=_COUNT_MAX),
                    attempts=a.req_int("attempts", low=0, high=_COUNT_MAX),
                    seed=a.req_str("seed"),
-                   failure=dict(failure) if isinstance(failure, dict) else None)
+                   failure=dict(failure) if isinstance(failure, dict) else None,
+                   links=links)

@@ -145,7 +145,9 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                 (ui.removeMarkersButton, "clicked(bool)", self.onRemoveMarkers),
                 (ui.sendNodeSelector, "currentNodeChanged(vtkMRMLNode*)", self.onSendNodeChanged),
                 (ui.sendButton, "clicked(bool)", self.onSend),
-                (ui.showJointsButton, "clicked(bool)", self.onShowJoints)):
+                (ui.showJointsButton, "clicked(bool)", self.onShowJoints),
+                (ui.motionSolveButton, "clicked(bool)", self.onSolveIk),
+                (ui.motionFollowCheckBox, "toggled(bool)", self.onFollowToggled)):
             button.connect(signal, handler)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
                          self.onSceneStartClose)
@@ -210,6 +212,7 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         ui.robotStatusLabel.text = "\n".join(logic.robotLines())
         ui.problemsLabel.text = "\n".join(logic.problems[-5:])
         ui.staleLabel.text = "\n".join(logic.staleLines())
+        ui.motionStatusLabel.text = logic.motionStatus  # a followed target's newest solve
         active = logic.isActive()
         if ui.connectButton.checked != active:  # e.g. after a scene close
             wasBlocked = ui.connectButton.blockSignals(True)
@@ -303,6 +306,28 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         with slicer.util.tryWithErrorDisplay("Failed to move the robot."):
             values = {name: float(widget.value) for name, widget in self._sliderWidgets.items()}
             self.logic.setJoints(self._slidersRobot, self._sliders, values)
+
+    def onSolveIk(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to solve for the target.",
+                                             waitCursor=True):
+            self.logic.solveIk(self.ui.robotCombo.currentText,
+                               self.ui.motionTargetSelector.currentNode(),
+                               self.ui.motionTipEdit.text.strip())
+        self.ui.motionStatusLabel.text = self.logic.motionStatus
+
+    def onFollowToggled(self, on: bool) -> None:
+        if not on:
+            self.logic.stopFollowing()
+            return
+        with slicer.util.tryWithErrorDisplay("Failed to follow the target."):
+            try:
+                self.logic.followTarget(self.ui.robotCombo.currentText,
+                                        self.ui.motionTargetSelector.currentNode(),
+                                        self.ui.motionTipEdit.text.strip())
+            except Exception:
+                self.ui.motionFollowCheckBox.checked = False
+                raise
+        self.ui.motionStatusLabel.text = self.logic.motionStatus
 
     def _refreshRobots(self) -> None:
         self.ui.robotCombo.clear()

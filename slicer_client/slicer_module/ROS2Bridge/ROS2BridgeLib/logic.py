@@ -29,6 +29,7 @@ from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER, NodePlan,
                                       vertex_per_point)
 from slicer_client.send_plan import KIND_ORDER, plan_send
 
+from .motion import MotionPreview, ik_status, target_matrix
 from .parameters import ROS2BridgeParameterNode
 from .scene_nodes import SceneNodes, register_node_classes
 from .transport import ConnectorTransport
@@ -38,6 +39,7 @@ __all__ = ["CONNECTOR_NAME", "CONNECT_WAIT_S", "SPIN_INTERVAL_MS", "ROS2BridgeLo
 
 CONNECTOR_NAME = "ROS2BridgeConnector"
 SPIN_INTERVAL_MS = 20  # the reference spins its node at 50 Hz
+MOTION_INTERVAL_MS = 33  # a dragged target is solved again at most this often (30 Hz)
 CONNECT_WAIT_S = 10.0  # a script's first reference call waits this long for the daemon
 log = logging.getLogger("ROS2Bridge")
 
@@ -66,6 +68,15 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._timer = qt.QTimer()
         self._timer.setInterval(200)  # new connector nodes are placed within 0.2 s
         self._timer.connect("timeout()", self._onTimer)
+        # Motion (issue 46): the followed target, re-solved at the display's rate.
+        self._previews: dict[str, MotionPreview] = {}
+        self._following: Optional[tuple[str, Any, str]] = None  # robot, target node, tip
+        self._targetMoved = False
+        self.motionStatus = ""
+        self.lastIk: Optional[c.SolveIkResult] = None
+        self._motionTimer = qt.QTimer()
+        self._motionTimer.setInterval(MOTION_INTERVAL_MS)
+        self._motionTimer.connect("timeout()", self._onMotionTimer)
         self._spinTimer = qt.QTimer()
         self._spinTimer.setInterval(SPIN_INTERVAL_MS)
         self._spinTimer.connect("timeout()", self.Spin)
@@ -356,6 +367,68 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         if not isinstance(robot, Robot):
             raise RuntimeError(f"no robot {robotName!r}: load it first")
         return robot
+
+    # --- motion from Slicer (issue 46) -------------------------------------------------
+    def solveIk(self, robotName: str, targetNode: Any, tip: str) -> c.SolveIkResult:
+        """Solve for `tip` of the robot at `targetNode` (a transform node or a markups
+        point, anywhere in the scene) and place the robot's preview at the answer: green
+        when solved, red at the best attempt when not. The robot does not move. Returns the
+        daemon's answer; `motionStatus` says it in words."""
+        robot = self._robot(robotName)
+        preview = self._previews.get(robotName)
+        if preview is None:
+            preview = self._previews[robotName] = MotionPreview(slicer.mrmlScene, robotName)
+        target_world = target_matrix(targetNode)
+        if preview.root is None:  # once per robot: which scene transform is its root link
+            preview.find_root(robot.ik(np.eye(4), tip=tip).links)
+        # The daemon takes the target in the root link's frame.
+        root_world = preview.root_world()
+        result = robot.ik(np.linalg.inv(root_world) @ target_world, tip=tip)
+        preview.show(result.links, root_world, result.solved)
+        self.lastIk = result
+        self.motionStatus = ik_status(tip, result)
+        return result
+
+    def followTarget(self, robotName: str, targetNode: Any, tip: str) -> None:
+        """Solve again whenever `targetNode` moves, at most once per display frame (the
+        newest position wins); `stopFollowing` ends it."""
+        self.stopFollowing()
+        self.solveIk(robotName, targetNode, tip)  # refuses a bad robot, target or tip now
+        self._following = (robotName, targetNode, tip)
+        event = (slicer.vtkMRMLTransformNode.TransformModifiedEvent
+                 if targetNode.IsA("vtkMRMLTransformNode")
+                 else slicer.vtkMRMLMarkupsNode.PointModifiedEvent)
+        self.addObserver(targetNode, event, self._onTargetMoved)
+        self._motionTimer.start()
+
+    def stopFollowing(self) -> None:
+        if self._following is not None:
+            target = self._following[1]
+            for event in (slicer.vtkMRMLTransformNode.TransformModifiedEvent,
+                          slicer.vtkMRMLMarkupsNode.PointModifiedEvent):
+                if self.hasObserver(target, event, self._onTargetMoved):
+                    self.removeObserver(target, event, self._onTargetMoved)
+        self._following = None
+        self._targetMoved = False
+        self._motionTimer.stop()
+
+    def removePreview(self, robotName: str) -> None:
+        preview = self._previews.pop(robotName, None)
+        if preview is not None:
+            preview.remove()
+
+    def _onTargetMoved(self, caller: Any = None, event: Any = None) -> None:
+        self._targetMoved = True  # solved at the next tick: drags come faster than frames
+
+    def _onMotionTimer(self) -> None:
+        if self._following is None or not self._targetMoved:
+            return
+        self._targetMoved = False
+        try:
+            self.solveIk(*self._following)
+        except Exception as error:  # noqa: BLE001 - a failed solve must not stop the timer
+            log.exception("solving for the moved target failed")
+            self.motionStatus = f"Not solved: {error}"
 
     def jointSliders(self, robotName: str) -> list[JointSlider]:
         """One slider spec per actuated joint of a loaded robot (mimic joints follow)."""

@@ -1,0 +1,72 @@
+"""The ROS2Bridge module's Motion logic in a real Slicer scene against `make demo`'s daemon
+(issue 46): targets from the scene solved by the daemon's IK and shown by the preview robot
+(scenes/motion.py). The target is the tool flange at joint positions chosen here, by
+yourdfpy's forward kinematics (not the daemon's)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge.robots.demo import demo_urdf_path
+from support import RunningDaemon
+
+pytestmark = pytest.mark.ros
+yourdfpy = pytest.importorskip("yourdfpy")
+
+TIP = "tool_flange"
+GOAL = {"joint_1": 0.4, "joint_2": -0.6, "joint_3": 1.1, "joint_4": -0.3, "joint_5": 0.8,
+        "joint_6": 0.2}
+
+
+def _flange_mm(tmp_path: Path) -> list[list[float]]:
+    urdf, _ = demo_urdf_path(tmp_path)
+    model = yourdfpy.URDF.load(str(urdf), load_meshes=False, load_collision_meshes=False,
+                               build_collision_scene_graph=False)
+    model.update_cfg(GOAL)
+    matrix = np.array(model.get_transform(frame_to=TIP, frame_from="base_link"))
+    matrix[:3, 3] *= 1000.0
+    return matrix.tolist()
+
+
+def _distance_mm(a: list[list[float]], b: list[list[float]]) -> float:
+    return float(np.linalg.norm(np.array(a)[:3, 3] - np.array(b)[:3, 3]))
+
+
+def _angle_deg(a: list[list[float]], b: list[list[float]]) -> float:
+    ra, rb = np.array(a)[:3, :3], np.array(b)[:3, :3]
+    return math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(ra.T @ rb) - 1.0) / 2.0))))
+
+
+def test_the_motion_preview_follows_targets_from_the_scene(
+        run_scene, demo: RunningDaemon, tmp_path: Path) -> None:
+    got = run_scene("motion", timeout=300, port=demo.port, robot="demo", models=14,
+                    tip=TIP, root="base_link", target_in_root=_flange_mm(tmp_path))
+    target = got["target_world"]
+    # A transform node: solved; the preview's flange is at the target; preview models green.
+    first = got["transform"]
+    assert first["solved"] and first["status"].startswith("Solved: tool_flange"), first
+    assert _distance_mm(first["preview_tip"], target) <= 0.1
+    assert _angle_deg(first["preview_tip"], target) <= 0.1
+    assert first["preview_models"] == 14
+    assert all(c == pytest.approx([0.25, 0.8, 0.35]) for c in first["colours"])
+    # Dragged 20 times between two frames: solved fewer times than it moved, and the
+    # preview ends at the newest position.
+    dragged = got["dragged"]
+    assert 1 <= dragged["solves"] < dragged["moves"], dragged
+    assert _distance_mm(dragged["preview_tip"], dragged["target"]) <= 0.1, dragged
+    # Unreachable: refused with the reason, the best attempt shown red.
+    far = got["unreachable"]
+    assert not far["solved"] and far["reason"] == "unreachable", far
+    assert far["status"].startswith("Not solved (unreachable)")
+    assert all(c == pytest.approx([0.9, 0.1, 0.1]) for c in far["colours"])
+    # A markups point with the same orientation: solved to the same pose.
+    assert got["markups"]["solved"]
+    assert _distance_mm(got["markups"]["preview_tip"], target) <= 0.1
+    assert _angle_deg(got["markups"]["preview_tip"], target) <= 0.1
+    # The preview is removed whole. (That solving never moves the arm is checked where
+    # the arm stands still: tests/client/test_motion_solve_ik.py; the demo's arm moves.)
+    assert got["previews_left"] == 0
