@@ -733,6 +733,35 @@ class Robot(Resource):
                                 residual_deg=result.residual_deg, positions=result.positions)
         return result.positions
 
+    def set_obstacle(self, obstacle: str, topic: str, *, type: str = "Marker",
+                     frame: Optional[str] = None, timeout: float = 10.0) -> Dict[str, Any]:
+        """Make the model published on ROS ``topic`` (`Client.publish_model`: a Marker, in
+        its frame, or a Mesh, in ``frame``) obstacle ``obstacle`` of this robot: solve_ik
+        avoids it and `obstacle_distances` measures it. It follows its tf frame."""
+        return self._client.request(c.SetObstacle(
+            name=self.name, obstacle=obstacle, topic=topic, type=type, frame=frame),
+            timeout=timeout)
+
+    def remove_obstacle(self, obstacle: str, timeout: float = 10.0) -> None:
+        self._client.request(c.RemoveObstacle(name=self.name, obstacle=obstacle),
+                             timeout=timeout)
+
+    def obstacle_distances(self, link: str, timeout: float = 10.0) -> Dict[str, Any]:
+        """At the robot's current joint state: ``distances`` (each ``obstacle``,
+        ``distance_mm``, nearest points ``on_link_mm`` / ``on_obstacle_mm``), ``contacts``
+        (``link``, ``obstacle``) and the ``positions`` used."""
+        return self._client.request(c.ObstacleDistances(name=self.name, link=link),
+                                    timeout=timeout)
+
+    def publish_distance(self, link: str, obstacle: str, topic: str, *,
+                         rate_hz: float = 50.0, timeout: float = 10.0) -> Dict[str, Any]:
+        """Have the daemon publish the distance from ``link`` to ``obstacle`` on ROS
+        ``topic`` as std_msgs/Float64 (metres), ``rate_hz`` times a second (0 stops);
+        read it back with ``subscribe(topic, "Float64")``."""
+        return self._client.request(c.PublishDistance(
+            name=self.name, link=link, obstacle=obstacle, topic=topic, rate_hz=rate_hz),
+            timeout=timeout)
+
     def wait_until_loaded(self, timeout: float = 30.0) -> None:
         """Wait until every link named in the create reply has a transform and every
         visual its mesh."""

@@ -154,6 +154,16 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
         seed=st.none() | st.dictionaries(st.text(min_size=1, max_size=20), finite,
                                          max_size=5).map(lambda d: tuple(d.items())),
         collisions=st.booleans()),
+    c.SetObstacle: st.one_of(
+        st.builds(c.SetObstacle, name=robot_names, obstacle=robot_names, topic=ros_names),
+        st.builds(c.SetObstacle, name=robot_names, obstacle=robot_names, topic=ros_names,
+                  type=st.just("Mesh"), frame=st.none() | frames)),
+    c.RemoveObstacle: st.builds(c.RemoveObstacle, name=robot_names, obstacle=robot_names),
+    c.ObstacleDistances: st.builds(c.ObstacleDistances, name=robot_names,
+                                   link=st.text(min_size=1, max_size=20)),
+    c.PublishDistance: st.builds(c.PublishDistance, name=robot_names,
+                                 link=st.text(min_size=1, max_size=20), obstacle=robot_names,
+                                 topic=ros_names, rate_hz=st.floats(0.0, 1000.0)),
     c.SetRobotJoints: st.builds(
         c.SetRobotJoints, name=robot_names, topic=ros_names,
         positions=st.dictionaries(st.text(min_size=1, max_size=20), finite,
