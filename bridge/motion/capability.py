@@ -12,13 +12,19 @@
                     at every query, so it follows its transforms
     obstacle_distances ─► link-to-obstacle distances and contacts at the current state
     publish_distance ─► a timer publishing one distance as std_msgs/Float64 (metres)
+    plan_motion ─► a straight joint-space path from the current state to a goal, within
+                   limits, checked for contact every `resolution` (rad or m)
+    execute_motion ─► the same plan; if clear, a FollowJointTrajectory goal sent through
+                   the actions capability's goal sender (handed over by the daemon), so
+                   its feedback, result and cancel are a send_goal's
 
 solve_ik is a read: nothing is published, the robot does not move. Units: the ops speak mm
 (Slicer's), the solver metres, converted by `protocol.conversions`; the Float64 topic is
 metres, as ROS has it.
 
 This capability never imports another's handlers: the daemon hands it the robots
-capability's public `loaded_model` as a plain function.
+capability's public `loaded_model`, the tf buffer's lookup and the goal sender's
+`send_goal` as plain functions.
 """
 
 from __future__ import annotations
@@ -26,8 +32,10 @@ from __future__ import annotations
 import logging
 import threading
 from dataclasses import dataclass, field
+import asyncio
+import math
 from contextlib import contextmanager
-from typing import TYPE_CHECKING, Any, Callable, Iterator, Optional
+from typing import TYPE_CHECKING, Any, Awaitable, Callable, Iterator, Optional
 
 import numpy as np
 import numpy.typing as npt
@@ -42,9 +50,12 @@ from bridge.core.heavy import OffLoop
 from bridge.ros.ros_node import RosNode
 from bridge.motion.errors import MotionError
 from bridge.ros.graph_types import refuse_other_type
-from protocol.commands import (MAX_OBSTACLES, CommandFailedError, ErrorCode, LimitReachedError,
-                               ObstacleDistances, Op, OutOfRangeError, PublishDistance,
-                               RemoveObstacle, SetObstacle, SolveIk)
+from bridge.core.hub import Replier
+from protocol.commands import (FOLLOW_JOINT_TRAJECTORY, MAX_OBSTACLES, CommandFailedError,
+                               ErrorCode, ExecuteMotion, LimitReachedError, ObstacleDistances,
+                               Op, OutOfRangeError, PlanMotion, PublishDistance,
+                               RemoveObstacle, SendGoal, SetObstacle, SolveIk)
+from protocol.commands.fields import Args
 from protocol.conversions import mm_to_metres, pose_to_matrix
 
 if TYPE_CHECKING:  # pinocchio and coal load with the first motion query
@@ -64,6 +75,13 @@ F64 = npt.NDArray[np.float64]
 RobotLookup = Callable[[str], "tuple[RobotModel, str, str]"]
 # tf: target <- source, latest (the daemon's buffer); raises a TfError when it cannot.
 FrameLookup = Callable[[str, str], Any]
+# The actions capability's send_goal: (request, client) -> its reply.
+GoalSender = Callable[[SendGoal, Optional[Replier]], Awaitable[dict[str, Any]]]
+
+_MAX_TRAJECTORY_POINTS = 50
+# How long a robot's first motion request waits for its first joint state (discovery).
+_FIRST_STATE_S = 2.0
+_DEFAULT_SPEED = 0.5  # rad/s (m/s) for a joint whose URDF gives no velocity limit
 
 # A model published once (latched) or streamed: reliable, and transient local takes both.
 _OBSTACLE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
@@ -119,15 +137,24 @@ class _Robot:
     positions: dict[str, float] = field(default_factory=dict)
     subscription: Any = None
     obstacles: dict[str, _Obstacle] = field(default_factory=dict)
+    heard: threading.Event = field(default_factory=threading.Event)  # a first joint state
+
+    def current(self) -> dict[str, float]:
+        """The latest joint positions (worker thread): the first request after the robot's
+        subscription began waits a little for the first state to come."""
+        self.heard.wait(_FIRST_STATE_S)
+        return dict(self.positions)
 
 
 class MotionBridges:
     """solve_ik for loaded robots."""
 
-    def __init__(self, ros: RosNode, *, robots: RobotLookup, frames: FrameLookup) -> None:
+    def __init__(self, ros: RosNode, *, robots: RobotLookup, frames: FrameLookup,
+                 send_goal: GoalSender) -> None:
         self._ros = ros
         self._lookup = robots
         self._frames = frames
+        self._send_goal = send_goal
         self._robots: dict[str, _Robot] = {}
         self._watches: dict[str, _Watch] = {}  # by topic
         self._lock = threading.Lock()  # _robots: the loop adds, lanes read
@@ -160,6 +187,7 @@ class MotionBridges:
         """A joint state of the robot (executor thread): positions kept as given."""
         for name, position in zip(msg.name, msg.position):
             robot.positions[str(name)] = float(position)
+        robot.heard.set()
 
     def _forget(self, robot: _Robot) -> None:
         if robot.subscription is not None:
@@ -175,15 +203,17 @@ class MotionBridges:
         robot = self._robot(request.name)
         target_m = np.array(request.target, dtype=np.float64)
         target_m[:3, 3] = mm_to_metres(target_m[:3, 3])
-        if request.seed is not None:
-            seed, seed_from = dict(request.seed), "given"
-        elif robot.positions:
-            seed, seed_from = dict(robot.positions), "joint_states"
-        else:
-            seed, seed_from = {}, "zero"
 
         def work() -> Result:
             from bridge.motion.ik import solve_ik
+
+            current = robot.current() if request.seed is None else {}
+            if request.seed is not None:
+                seed, seed_from = dict(request.seed), "given"
+            elif current:
+                seed, seed_from = current, "joint_states"
+            else:
+                seed, seed_from = {}, "zero"
 
             with robot.lock:  # one pinocchio Data per robot
                 unplaced: list[dict[str, str]] = []
@@ -323,9 +353,9 @@ class MotionBridges:
 
     def obstacle_distances(self, request: ObstacleDistances) -> OffLoop[Result]:
         robot = self._robot(request.name)
-        positions = dict(robot.positions)
 
         def work() -> Result:
+            positions = robot.current()
             with robot.lock:
                 if robot.world is None:
                     raise OutOfRangeError("name", "a robot with obstacles (set_obstacle)",
@@ -393,6 +423,100 @@ class MotionBridges:
         watch.warned = ""
         watch.publisher.publish(Float64(data=distance.distance_m))
 
+    # ------------------------------------------------------------------ plan, execute
+
+    def _plan(self, robot: _Robot, goal: tuple[tuple[str, float], ...],
+              resolution: float) -> dict[str, Any]:
+        """The straight joint-space path from the current state to ``goal`` (worker
+        thread), checked for limits (the goal; the box of limits holds the whole line) and
+        for contact at every ``resolution``."""
+        from bridge.robots.joints import joint_positions
+
+        current = robot.current()
+        if not current:
+            raise CommandFailedError("name", f"the robot's current joint state (on "
+                                     f"{robot.topic})", f"none heard in {_FIRST_STATE_S:g} s",
+                                     code=ErrorCode.UNAVAILABLE)
+        joint_positions(robot.source.joints, goal)  # names and limits, refused by field
+        model = robot.model
+        with robot.lock:
+            start = model.theta_of(current)
+            end = start.copy()
+            index = {name: i for i, name in enumerate(model.joint_names)}
+            for name, value in goal:
+                end[index[name]] = value
+            delta = end - start
+            steps = max(1, math.ceil(float(np.max(np.abs(delta), initial=0.0)) / resolution))
+            path = start + np.outer(np.linspace(0.0, 1.0, steps + 1), delta)
+            collision: Optional[dict[str, Any]] = None
+            unplaced: list[dict[str, str]] = []
+            if robot.world is not None and robot.obstacles:
+                with self._placed(robot) as (world, unplaced):
+                    hit = world.path_contact(path) if world.obstacles else None
+                if hit is not None:
+                    step, contact = hit
+                    collision = {"link": contact.link, "obstacle": contact.obstacle,
+                                 "step": step, "fraction": step / steps,
+                                 "positions": model.positions_of(path[step])}
+        moving = [i for i in range(len(delta)) if abs(delta[i]) > 0.0]
+        duration = 1.0
+        for i in moving:
+            joint = robot.source.joints[model.joint_names[i]]
+            speed = (joint.limits.velocity if joint.limits is not None and
+                     joint.limits.velocity else 2 * _DEFAULT_SPEED) * 0.5
+            duration = max(duration, abs(float(delta[i])) / speed)
+        return {"name": robot.name, "joints": [model.joint_names[i] for i in moving],
+                "start": model.positions_of(start), "goal": model.positions_of(end),
+                "path": [[float(row[i]) for i in moving] for row in path],
+                "resolution": resolution, "checked": len(path), "clear": collision is None,
+                "collision": collision, "unplaced": unplaced, "duration_s": duration}
+
+    async def plan_motion(self, request: PlanMotion) -> dict[str, Any]:
+        robot = self._robot(request.name)
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(
+            None, lambda: self._plan(robot, request.positions, request.resolution))
+
+    async def execute_motion(self, request: ExecuteMotion,
+                             client: Optional[Replier]) -> dict[str, Any]:
+        robot = self._robot(request.name)
+        loop = asyncio.get_running_loop()
+        plan = await loop.run_in_executor(
+            None, lambda: self._plan(robot, request.positions, request.resolution))
+        collision = plan["collision"]
+        if collision is not None:
+            raise CommandFailedError(
+                "positions", f"a path clear of the robot's obstacles (checked every "
+                f"{request.resolution:g} rad or m)", f"link {collision['link']!r} touches "
+                f"obstacle {collision['obstacle']!r} {collision['fraction']:.0%} of the way "
+                f"(configuration {collision['step']} of {plan['checked'] - 1}); nothing sent",
+                code=ErrorCode.REJECTED)
+        duration = request.duration_s or plan["duration_s"]
+        path = plan["path"]
+        picks = np.unique(np.linspace(0, len(path) - 1,
+                                      min(len(path), _MAX_TRAJECTORY_POINTS)).round().astype(int))
+        points = []
+        for k in picks[1:] if len(picks) > 1 else picks:
+            at = duration * k / max(1, len(path) - 1)
+            sec = int(at)
+            points.append({"positions": path[k], "time_from_start": {
+                "sec": sec, "nanosec": int(round((at - sec) * 1e9)) % 1_000_000_000}})
+        goal = {"trajectory": {"joint_names": plan["joints"], "points": points}}
+        fields: dict[str, Any] = {"action": request.action, "type": FOLLOW_JOINT_TRAJECTORY,
+                                  "goal": goal, "timeout": request.timeout}
+        if request.result_timeout is not None:
+            fields["result_timeout"] = request.result_timeout
+        if request.goal_id is not None:
+            fields["goal_id"] = request.goal_id
+        send = SendGoal.from_args(Args(fields, ""))  # its own checks (the goal id's form)
+        reply = await self._send_goal(send, client)
+        log.info("motion: robot %s: %d joint(s) to %s in %.2f s, %d configurations clear "
+                 "(every %g)", robot.name, len(plan["joints"]), request.action, duration,
+                 plan["checked"], request.resolution)
+        return {**reply, "name": robot.name, "joints": plan["joints"],
+                "checked": plan["checked"], "resolution": request.resolution,
+                "duration_s": duration, "unplaced": plan["unplaced"]}
+
     # ------------------------------------------------------------------ capability
 
     def handlers(self) -> dict[type[Op], Handler]:
@@ -400,7 +524,9 @@ class MotionBridges:
                 SetObstacle: lambda request, _: self.set_obstacle(request),
                 RemoveObstacle: lambda request, _: self.remove_obstacle(request),
                 ObstacleDistances: lambda request, _: self.obstacle_distances(request),
-                PublishDistance: lambda request, _: self.publish_distance(request)}
+                PublishDistance: lambda request, _: self.publish_distance(request),
+                PlanMotion: lambda request, _: self.plan_motion(request),
+                ExecuteMotion: self.execute_motion}
 
     def describe(self) -> list[dict[str, Any]]:
         return []

@@ -11,13 +11,19 @@ from protocol.commands.fields import (MAX_NAME, MISSING, ROBOT_NAME, Args, check
                                       check_str)
 from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import ROS_NAME, ROS_NAME_DESC
-from protocol.commands.op import Op, Resource, TopicUse
-from protocol.commands.results import Answered, SolveIkResult
+from protocol.commands.op import ActionUse, Op, Resource, TopicUse
+from protocol.commands.results import Answered, SendGoalResult, SolveIkResult
 from protocol.commands.robots import MAX_JOINTS
 from protocol.commands.values import Matrix4, matrix_from
 
-__all__ = ["MAX_OBSTACLES", "OBSTACLE_TYPES", "ObstacleDistances", "PublishDistance",
-           "RemoveObstacle", "SetObstacle", "SolveIk"]
+__all__ = ["DEFAULT_TRAJECTORY_ACTION", "FOLLOW_JOINT_TRAJECTORY", "MAX_OBSTACLES",
+           "OBSTACLE_TYPES", "ExecuteMotion", "ObstacleDistances", "PlanMotion",
+           "PublishDistance", "RemoveObstacle", "SetObstacle", "SolveIk"]
+
+FOLLOW_JOINT_TRAJECTORY = "control_msgs/action/FollowJointTrajectory"
+# ros2_control's joint trajectory controller's action (and the demo's).
+DEFAULT_TRAJECTORY_ACTION = "/joint_trajectory_controller/follow_joint_trajectory"
+_MAX_RESOLUTION = 1.0  # rad (or m) between two checked configurations, at most
 
 MAX_OBSTACLES = 16  # per robot: each one a subscription and a bounding-volume hierarchy
 # The types a Slicer model reaches ROS as (publish_model): short name -> ROS type.
@@ -170,3 +176,87 @@ class PublishDistance(Op, op="publish_distance", ros_names=("topic",), writes=Tr
         return cls(name=_robot(a), link=a.req_str("link"), obstacle=_obstacle(a),
                    topic=a.req_str("topic", pattern=ROS_NAME, desc=ROS_NAME_DESC),
                    rate_hz=float(rate if rate is not None else 50.0))
+
+
+def _goal(a: Args) -> tuple[tuple[str, float], ...]:
+    """The ``positions`` object: joint -> a finite position (radians, metres)."""
+    raw = a.req_obj_raw("positions")
+    if len(raw) > MAX_JOINTS:
+        raise TooLargeError(a.path("positions"), f"at most {MAX_JOINTS} joints", str(len(raw)))
+    pairs = []
+    for joint, value in raw.items():
+        path = f"{a.path('positions')}.{joint}"
+        check_str(joint, path, MAX_NAME, False, None, "")
+        pairs.append((joint, check_float(value, path, float("-inf"), float("inf"), False)))
+    return tuple(pairs)
+
+
+def _resolution(a: Args) -> float:
+    value = a.opt_float("resolution", 0.01, low=0.0, high=_MAX_RESOLUTION, low_open=True)
+    return float(value if value is not None else 0.01)
+
+
+@dataclass(frozen=True)
+class PlanMotion(Op, op="plan_motion", writes=False):
+    """A joint-space path of robot ``name`` from its current joint state to ``positions``
+    (actuated joints; the others stay), a straight line within the URDF's limits, checked
+    for contact with the robot's obstacles at every ``resolution`` (rad or m: the largest
+    joint step between two checked configurations). A read: for a preview."""
+
+    name: str
+    positions: tuple[tuple[str, float], ...]
+    resolution: float = 0.01
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()
+
+    def to_args(self) -> dict[str, Any]:
+        out = super().to_args()
+        out["positions"] = dict(self.positions)
+        return out
+
+    @classmethod
+    def from_args(cls, a: Args) -> PlanMotion:
+        return cls(name=_robot(a), positions=_goal(a), resolution=_resolution(a))
+
+
+@dataclass(frozen=True)
+class ExecuteMotion(Op, Answered[SendGoalResult], op="execute_motion", ros_names=("action",),
+                    writes=True):
+    """Plan as `PlanMotion` does, then, if the path is clear, send it as a goal to the
+    robot's control_msgs/FollowJointTrajectory ``action`` (as `SendGoal`: feedback and
+    result come as goal events, ``goal_id`` the client may choose, ``timeout`` for the
+    server to accept); refused with ``REJECTED`` naming the link, the obstacle and where on
+    the path when it is not. ``duration_s``: the motion's time (omitted: from the URDF's
+    velocity limits, at half of them, at least 1 s). A write: it moves the robot."""
+
+    name: str
+    positions: tuple[tuple[str, float], ...]
+    action: str = DEFAULT_TRAJECTORY_ACTION
+    resolution: float = 0.01
+    duration_s: float | None = None
+    timeout: float = 4.0
+    result_timeout: float | None = None
+    goal_id: str | None = None
+
+    def resources(self) -> tuple[Resource, ...]:
+        return (ActionUse("action", self.action, FOLLOW_JOINT_TRAJECTORY, writes=True),)
+
+    def to_args(self) -> dict[str, Any]:
+        out = super().to_args()
+        out["positions"] = dict(self.positions)
+        return out
+
+    @classmethod
+    def from_args(cls, a: Args) -> ExecuteMotion:
+        return cls(name=_robot(a), positions=_goal(a),
+                   action=a.opt_str("action", DEFAULT_TRAJECTORY_ACTION, pattern=ROS_NAME,
+                                    desc=ROS_NAME_DESC) or DEFAULT_TRAJECTORY_ACTION,
+                   resolution=_resolution(a),
+                   duration_s=a.opt_float("duration_s", None, low=0.0, high=3600.0,
+                                          low_open=True),
+                   timeout=float(a.opt_float("timeout", 4.0, low=0.0, high=300.0,
+                                             low_open=True) or 4.0),
+                   result_timeout=a.opt_float("result_timeout", None, low=0.0,
+                                              high=86_400.0, low_open=True),
+                   goal_id=a.opt_str("goal_id", None, max_len=64))

@@ -15,27 +15,14 @@ import numpy as np
 import pytest
 
 import slicer_client
-from protocol.commands import ErrorCode
+from motion_robots import ARM_URDF, BARE_URDF, RADIUS, box_mm, wait_loaded as _loaded
 from support import Processes, RunningDaemon, assert_clean_exit, start_daemon, wait_until
 
 pytestmark = pytest.mark.ros
 pytest.importorskip("pinocchio", reason="motion needs pin (pyproject's dependencies)")
 trimesh = pytest.importorskip("trimesh")
 
-RADIUS = 0.05  # the tool: a sphere 0.5 m from the swing axis
-ARM_URDF = """<robot name="swing_arm">
-  <link name="base"/><link name="arm"/>
-  <link name="tool"><collision><geometry><sphere radius="0.05"/></geometry></collision></link>
-  <joint name="swing" type="revolute"><parent link="base"/><child link="arm"/>
-    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
-  <joint name="mount" type="fixed"><parent link="arm"/><child link="tool"/>
-    <origin xyz="0.5 0 0"/></joint>
-</robot>"""
-BARE_URDF = """<robot name="bare"><link name="base"/><link name="tip"/>
-  <joint name="j" type="revolute"><parent link="base"/><child link="tip"/>
-    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
-</robot>"""
-BOX_MM = trimesh.creation.box((100.0, 100.0, 100.0))  # a 10 cm block, centred on its frame
+BOX_MM = box_mm()
 BLOCK_AT_M = np.array([0.2, 0.45, 0.0])  # in the robot's base frame (via tf)
 
 
@@ -60,17 +47,6 @@ def _expected_mm(swing: float, block_at_m: np.ndarray) -> float:
     box = trimesh.Trimesh(BOX_MM.vertices / 1000.0 + block_at_m, BOX_MM.faces)
     _, distance, _ = trimesh.proximity.closest_point(box, [centre])
     return (float(distance[0]) - RADIUS) * 1000.0
-
-
-def _loaded(robot: Any) -> None:
-    def described() -> bool:
-        try:
-            robot.joints(refresh=True)
-        except slicer_client.CommandRefusedError as error:
-            assert error.code == ErrorCode.UNAVAILABLE, error
-            return False
-        return True
-    wait_until(described, timeout=30, what=f"robot {robot.name} loaded")
 
 
 def test_the_tool_distance_to_a_slicer_model(daemon: RunningDaemon, robot_dir: Path,

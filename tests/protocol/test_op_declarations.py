@@ -68,6 +68,9 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "obstacle_distances": ({"name": "r", "link": "tool"}, set()),
     "publish_distance": ({"name": "r", "link": "tool", "obstacle": "skull", "topic": "/d"},
                          {("topic", "topic", "/d")}),
+    "plan_motion": ({"name": "r", "positions": {"j": 0.5}}, set()),
+    "execute_motion": ({"name": "r", "positions": {"j": 0.5}, "action": "/arm/fjt"},
+                       {("action", "action", "/arm/fjt")}),
     "call_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
                      {("service", "service", "/s")}),
     "advertise_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
@@ -146,7 +149,7 @@ def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
         "set_parameters", "server_declare_parameter", "server_set_parameter",
         "server_undeclare_parameter", "call_service", "advertise_service",
         "set_robot_joints", "send_goal", "cancel_goal", "advertise_action", "action_feedback",
-        "publish_distance"}
+        "publish_distance", "execute_motion"}
 
 
 def test_a_publisher_declares_its_frame_and_labels_topic() -> None:
