@@ -104,7 +104,9 @@ class Daemon:
                                      package_paths=package_paths,
                                      max_model_bytes=policy.max_marker_bytes)
         # Motion computes with the robots' models: handed the robots' public lookup only.
-        self.motion = MotionBridges(self.ros, robots=self.robots.loaded_model)
+        self.motion = MotionBridges(self.ros, robots=self.robots.loaded_model,
+                                    frames=self.tf.buffer.lookup,
+                                    send_goal=self.actions.sender.send_goal)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
                                                           self.robots, self.markers,

@@ -740,6 +740,64 @@ class Robot(Resource):
                                 residual_deg=result.residual_deg, positions=result.positions)
         return result.positions
 
+    def set_obstacle(self, obstacle: str, topic: str, *, type: str = "Marker",
+                     frame: Optional[str] = None, timeout: float = 10.0) -> Dict[str, Any]:
+        """Make the model published on ROS ``topic`` (`Client.publish_model`: a Marker, in
+        its frame, or a Mesh, in ``frame``) obstacle ``obstacle`` of this robot: solve_ik
+        avoids it and `obstacle_distances` measures it. It follows its tf frame."""
+        return self._client.request(c.SetObstacle(
+            name=self.name, obstacle=obstacle, topic=topic, type=type, frame=frame),
+            timeout=timeout)
+
+    def remove_obstacle(self, obstacle: str, timeout: float = 10.0) -> None:
+        self._client.request(c.RemoveObstacle(name=self.name, obstacle=obstacle),
+                             timeout=timeout)
+
+    def obstacle_distances(self, link: str, timeout: float = 10.0) -> Dict[str, Any]:
+        """At the robot's current joint state: ``distances`` (each ``obstacle``,
+        ``distance_mm``, nearest points ``on_link_mm`` / ``on_obstacle_mm``), ``contacts``
+        (``link``, ``obstacle``) and the ``positions`` used."""
+        return self._client.request(c.ObstacleDistances(name=self.name, link=link),
+                                    timeout=timeout)
+
+    def publish_distance(self, link: str, obstacle: str, topic: str, *,
+                         rate_hz: float = 50.0, timeout: float = 10.0) -> Dict[str, Any]:
+        """Have the daemon publish the distance from ``link`` to ``obstacle`` on ROS
+        ``topic`` as std_msgs/Float64 (metres), ``rate_hz`` times a second (0 stops);
+        read it back with ``subscribe(topic, "Float64")``."""
+        return self._client.request(c.PublishDistance(
+            name=self.name, link=link, obstacle=obstacle, topic=topic, rate_hz=rate_hz),
+            timeout=timeout)
+
+    def plan(self, positions: Mapping[str, float], *, resolution: float = 0.01,
+             timeout: float = 10.0) -> Dict[str, Any]:
+        """A straight joint-space path from the robot's current joint state to
+        ``positions`` (radians, metres; the joints not given stay), within limits, checked
+        for contact with its obstacles every ``resolution`` (rad or m): ``path`` (rows of
+        ``joints``), ``clear``, ``collision`` (link, obstacle, where), ``duration_s``. A
+        read, for a preview: nothing moves."""
+        return self._client.request(c.PlanMotion(
+            name=self.name, positions=tuple((str(k), float(v)) for k, v in positions.items()),
+            resolution=resolution), timeout=timeout)
+
+    def execute(self, positions: Mapping[str, float], *,
+                action: str = c.DEFAULT_TRAJECTORY_ACTION, resolution: float = 0.01,
+                duration_s: Optional[float] = None, feedback: Optional[Any] = None,
+                timeout: float = 4.0, result_timeout: Optional[float] = None) -> Any:
+        """Move the robot to ``positions`` along the path `plan` gives, through its
+        control_msgs/FollowJointTrajectory ``action``: a `GoalHandle` (``result()``,
+        ``cancel()``, feedback) once the controller accepted it. A path touching an
+        obstacle is refused before anything is sent (`CommandRefusedError`, code
+        REJECTED, naming the link and the obstacle). A write."""
+        goal = tuple((str(k), float(v)) for k, v in positions.items())
+        owner: Any = self._client
+        return owner.action(action, c.FOLLOW_JOINT_TRAJECTORY).send_goal_by(
+            lambda goal_id: c.ExecuteMotion(
+                name=self.name, positions=goal, action=action, resolution=resolution,
+                duration_s=duration_s, timeout=timeout, result_timeout=result_timeout,
+                goal_id=goal_id),
+            feedback=feedback, timeout=timeout)
+
     def wait_until_loaded(self, timeout: float = 30.0) -> None:
         """Wait until every link named in the create reply has a transform and every
         visual its mesh."""

@@ -568,11 +568,12 @@ class RobotBridges:
                                           else "joint_states", "topic")
         return f"{base}/joint_states"
 
-    def loaded_model(self, name: str) -> tuple[RobotModel, str]:
-        """A loaded robot's model and its joint-states topic, for the capabilities that
-        compute with it (motion); refused as `describe_robot_joints` refuses."""
+    def loaded_model(self, name: str) -> tuple[RobotModel, str, str]:
+        """A loaded robot's model, its joint-states topic and its root link's tf frame, for
+        the capabilities that compute with it (motion); refused as `describe_robot_joints`
+        refuses."""
         robot, model = self._loaded(name)
-        return model, self._joint_states_topic(robot)
+        return model, self._joint_states_topic(robot), robot.tf_prefix + model.root_link
 
     def describe_robot_joints(self, request: DescribeRobotJoints) -> dict[str, Any]:
         robot, model = self._loaded(request.name)

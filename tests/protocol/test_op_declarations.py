@@ -62,6 +62,15 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "set_robot_joints": ({"name": "r", "positions": {"j": 0.5}, "topic": "/PSM1/joint_states"},
                          {("topic", "topic", "/PSM1/joint_states")}),
     "solve_ik": ({"name": "r", "tip": "tool", "target": IDENTITY}, set()),  # a read
+    "set_obstacle": ({"name": "r", "obstacle": "skull", "topic": "/skull"},
+                     {("topic", "topic", "/skull")}),
+    "remove_obstacle": ({"name": "r", "obstacle": "skull"}, set()),
+    "obstacle_distances": ({"name": "r", "link": "tool"}, set()),
+    "publish_distance": ({"name": "r", "link": "tool", "obstacle": "skull", "topic": "/d"},
+                         {("topic", "topic", "/d")}),
+    "plan_motion": ({"name": "r", "positions": {"j": 0.5}}, set()),
+    "execute_motion": ({"name": "r", "positions": {"j": 0.5}, "action": "/arm/fjt"},
+                       {("action", "action", "/arm/fjt")}),
     "call_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
                      {("service", "service", "/s")}),
     "advertise_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
@@ -139,7 +148,8 @@ def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
         "create_publisher", "publish", "create_tf_broadcaster", "broadcast_transform",
         "set_parameters", "server_declare_parameter", "server_set_parameter",
         "server_undeclare_parameter", "call_service", "advertise_service",
-        "set_robot_joints", "send_goal", "cancel_goal", "advertise_action", "action_feedback"}
+        "set_robot_joints", "send_goal", "cancel_goal", "advertise_action", "action_feedback",
+        "publish_distance", "execute_motion"}
 
 
 def test_a_publisher_declares_its_frame_and_labels_topic() -> None:
