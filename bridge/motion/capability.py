@@ -47,6 +47,7 @@ from visualization_msgs.msg import Marker
 
 from bridge.core.dispatch import Handler, Result
 from bridge.core.heavy import OffLoop
+from bridge.core.threads import OnFailure, start_thread
 from bridge.ros.ros_node import RosNode
 from bridge.motion.errors import MotionError
 from bridge.ros.graph_types import refuse_other_type
@@ -158,6 +159,10 @@ class MotionBridges:
         self._robots: dict[str, _Robot] = {}
         self._watches: dict[str, _Watch] = {}  # by topic
         self._lock = threading.Lock()  # _robots: the loop adds, lanes read
+        # pinocchio and coal take a second or more to import on a busy machine: imported
+        # now, off the loop, the first motion request does not stall every client's replies
+        # and heartbeats (one that comes sooner waits on the import lock for the rest).
+        start_thread("motion-import", _import_motion_libraries, OnFailure.RESTART)
 
     # ------------------------------------------------------------------ robots
 
@@ -553,3 +558,11 @@ def _mm_rows(pose_m: npt.NDArray[np.float64]) -> list[list[float]]:
     rows = np.array(pose_m, dtype=np.float64)
     rows[:3, 3] = metres_to_mm(rows[:3, 3])
     return [[float(v) for v in row] for row in rows]
+
+
+def _import_motion_libraries() -> None:
+    try:
+        import bridge.motion.collisions  # noqa: F401  (pinocchio and coal)
+        import bridge.motion.model  # noqa: F401
+    except Exception as error:  # noqa: BLE001 - the motion ops say so when asked
+        log.info("motion: its libraries did not load (%s); the motion ops are refused", error)

@@ -5,18 +5,23 @@ yourdfpy's forward kinematics (not the daemon's)."""
 
 from __future__ import annotations
 
+import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from bridge.robots.demo import demo_urdf_path
-from support import RunningDaemon
+from motion_robots import ARM_URDF
+from support import Processes, RunningDaemon, start_daemon, wait_until
 
 pytestmark = pytest.mark.ros
 yourdfpy = pytest.importorskip("yourdfpy")
 
+ACTION = "/swing/follow_joint_trajectory"
+GOAL_RAD = 1.5  # the swing arm's goal, behind the block
 TIP = "tool_flange"
 GOAL = {"joint_1": 0.4, "joint_2": -0.6, "joint_3": 1.1, "joint_4": -0.3, "joint_5": 0.8,
         "joint_6": 0.2}
@@ -70,3 +75,33 @@ def test_the_motion_preview_follows_targets_from_the_scene(
     # The preview is removed whole. (That solving never moves the arm is checked where
     # the arm stands still: tests/client/test_motion_solve_ik.py; the demo's arm moves.)
     assert got["previews_left"] == 0
+
+
+def test_a_scene_model_as_obstacle_refuses_then_allows_execution(
+        run_scene, processes: Processes, tmp_path: Path) -> None:
+    """Issue 46's second "Done when" through the module: a Slicer model in the arm's way
+    refuses execution naming the link and the obstacle; moved away, the arm reaches the
+    goal, read on /swing/joint_states by an rclpy subscriber in another process."""
+    (tmp_path / "swing.urdf").write_text(ARM_URDF)
+    daemon = start_daemon(processes, "--robot-dir", str(tmp_path))
+    motion = processes.start("swing-motion", [
+        sys.executable, "-u", "-m", "bridge.robots.demo.joint_motion",
+        str(tmp_path / "swing.urdf"), "--namespace", "swing", "--rate", "20",
+        "--trajectory-action", ACTION, "--yield-s", "0"])
+    motion.wait_for_output("joint motion ready", timeout=30)
+    echo = processes.python("echo_swing", "echo_subscriber.py", "/swing/joint_states",
+                            "sensor_msgs/msg/JointState")
+    echo.wait_for_output("READY", timeout=30)
+    got = run_scene("motion_execute", timeout=300, port=daemon.port,
+                    urdf=str(tmp_path / "swing.urdf"), action=ACTION, goal=GOAL_RAD)
+    assert got["first"] == "succeeded" and got["obstacle"] == "block"
+    assert "link 'tool' touches obstacle 'block'" in got["refused"], got["refused"]
+    assert got["plans"][-1] is True and False in got["plans"]
+    assert got["second"] == {"status": "succeeded", "error_code": 0}
+
+    def swing() -> list[float]:
+        return [dict(zip(m["name"], m["position"]))["swing"]
+                for m in (json.loads(line[4:]) for line in echo.lines()
+                          if line.startswith("MSG "))]
+    wait_until(lambda: swing() and swing()[-1] == pytest.approx(GOAL_RAD, abs=1e-6),
+               timeout=30, what="the arm at the goal on /swing/joint_states")

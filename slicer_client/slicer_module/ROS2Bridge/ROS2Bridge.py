@@ -147,7 +147,9 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                 (ui.sendButton, "clicked(bool)", self.onSend),
                 (ui.showJointsButton, "clicked(bool)", self.onShowJoints),
                 (ui.motionSolveButton, "clicked(bool)", self.onSolveIk),
-                (ui.motionFollowCheckBox, "toggled(bool)", self.onFollowToggled)):
+                (ui.motionFollowCheckBox, "toggled(bool)", self.onFollowToggled),
+                (ui.motionExecuteButton, "clicked(bool)", self.onExecuteMotion),
+                (ui.addObstacleButton, "clicked(bool)", self.onAddObstacle)):
             button.connect(signal, handler)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
                          self.onSceneStartClose)
@@ -212,7 +214,7 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         ui.robotStatusLabel.text = "\n".join(logic.robotLines())
         ui.problemsLabel.text = "\n".join(logic.problems[-5:])
         ui.staleLabel.text = "\n".join(logic.staleLines())
-        ui.motionStatusLabel.text = logic.motionStatus  # a followed target's newest solve
+        ui.motionStatusLabel.text = logic.motionLine()  # a followed target's newest solve
         active = logic.isActive()
         if ui.connectButton.checked != active:  # e.g. after a scene close
             wasBlocked = ui.connectButton.blockSignals(True)
@@ -328,6 +330,19 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                 self.ui.motionFollowCheckBox.checked = False
                 raise
         self.ui.motionStatusLabel.text = self.logic.motionStatus
+
+    def onExecuteMotion(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to execute the motion.", waitCursor=True):
+            self.logic.executeMotion(self.ui.robotCombo.currentText)
+        self.ui.motionStatusLabel.text = self.logic.motionStatus
+
+    def onAddObstacle(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to make the model an obstacle.",
+                                             waitCursor=True):
+            name = self.logic.addObstacle(self.ui.robotCombo.currentText,
+                                          self.ui.obstacleSelector.currentNode(),
+                                          self.ui.obstacleFrameEdit.text.strip())
+            self.ui.motionStatusLabel.text = f"Obstacle {name} added"
 
     def _refreshRobots(self) -> None:
         self.ui.robotCombo.clear()

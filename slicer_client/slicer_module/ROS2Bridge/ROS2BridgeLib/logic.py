@@ -29,7 +29,8 @@ from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER, NodePlan,
                                       vertex_per_point)
 from slicer_client.send_plan import KIND_ORDER, plan_send
 
-from .motion import MotionPreview, ik_status, target_matrix
+from .motion import (OBSTACLE_TOPICS, OBSTACLE_TYPE, MotionPreview, ik_status, obstacle_name,
+                     target_matrix)
 from .parameters import ROS2BridgeParameterNode
 from .scene_nodes import SceneNodes, register_node_classes
 from .transport import ConnectorTransport
@@ -74,6 +75,10 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._targetMoved = False
         self.motionStatus = ""
         self.lastIk: Optional[c.SolveIkResult] = None
+        # model node ID -> (robot, topic, frame, obstacle); those moved since last sent
+        self._obstacles: dict[str, tuple[str, str, str, str]] = {}
+        self._obstaclesMoved: set[str] = set()
+        self.execution: Any = None  # the GoalHandle of the latest executeMotion
         self._motionTimer = qt.QTimer()
         self._motionTimer.setInterval(MOTION_INTERVAL_MS)
         self._motionTimer.connect("timeout()", self._onMotionTimer)
@@ -410,17 +415,86 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
                     self.removeObserver(target, event, self._onTargetMoved)
         self._following = None
         self._targetMoved = False
-        self._motionTimer.stop()
+        if not self._obstacles:
+            self._motionTimer.stop()
 
     def removePreview(self, robotName: str) -> None:
         preview = self._previews.pop(robotName, None)
         if preview is not None:
             preview.remove()
 
+    def addObstacle(self, robotName: str, modelNode: Any, frame: str) -> str:
+        """Make a model of the scene an obstacle of the robot: sent to ROS as a Marker
+        (``/slicer/obstacles/<name>``, its surface in the scene's world, which is `frame`:
+        the frame the robot is shown in), and sent again whenever it moves or changes, at
+        most every 33 ms. Solving, planning and executing then keep clear of it; returns
+        the obstacle's name (the model's, made a ROS name)."""
+        if modelNode is None or not modelNode.IsA("vtkMRMLModelNode"):
+            raise ValueError("choose a model node as the obstacle")
+        name = obstacle_name(modelNode.GetName())
+        topic = f"{OBSTACLE_TOPICS}/{name}"
+        robot = self._robot(robotName)
+        robot.set_obstacle(name, topic, type="Marker")  # sent as OBSTACLE_TYPE below
+        self.sendToROS(modelNode, topic, frame, OBSTACLE_TYPE)
+        self._obstacles[modelNode.GetID()] = (robotName, topic, frame, name)
+        for event in (slicer.vtkMRMLTransformableNode.TransformModifiedEvent,
+                      slicer.vtkMRMLModelNode.MeshModifiedEvent):
+            if not self.hasObserver(modelNode, event, self._onObstacleMoved):
+                self.addObserver(modelNode, event, self._onObstacleMoved)
+        self._motionTimer.start()
+        return name
+
+    def removeObstacle(self, modelNode: Any) -> None:
+        entry = self._obstacles.pop(modelNode.GetID(), None)
+        if entry is None:
+            return
+        for event in (slicer.vtkMRMLTransformableNode.TransformModifiedEvent,
+                      slicer.vtkMRMLModelNode.MeshModifiedEvent):
+            if self.hasObserver(modelNode, event, self._onObstacleMoved):
+                self.removeObserver(modelNode, event, self._onObstacleMoved)
+        self._robot(entry[0]).remove_obstacle(entry[3])
+
+    def executeMotion(self, robotName: str, positions: Optional[Mapping[str, float]] = None,
+                      *, action: str = c.DEFAULT_TRAJECTORY_ACTION,
+                      durationS: Optional[float] = None) -> Any:  # noqa: N803
+        """Move the robot to `positions` (default: the last solve's, when it solved) along
+        the planned joint-space path, through its FollowJointTrajectory `action`. A path
+        that touches an obstacle is refused before anything moves (the error names the
+        link and the obstacle). A write. Returns the goal's handle (also `execution`)."""
+        if positions is None:
+            if self.lastIk is None or not self.lastIk.solved:
+                raise RuntimeError("nothing to execute: solve for a target first")
+            positions = self.lastIk.positions
+        self.execution = self._robot(robotName).execute(positions, action=action,
+                                                        duration_s=durationS)
+        self.motionStatus = f"Executing on {action}"
+        return self.execution
+
+    def motionLine(self) -> str:
+        """The Motion section's status: the last solve, or the execution and its state."""
+        if self.execution is not None and self.motionStatus.startswith("Executing"):
+            return f"{self.motionStatus}: {self.execution.status}"
+        return self.motionStatus
+
     def _onTargetMoved(self, caller: Any = None, event: Any = None) -> None:
         self._targetMoved = True  # solved at the next tick: drags come faster than frames
 
+    def _onObstacleMoved(self, caller: Any = None, event: Any = None) -> None:
+        if caller is not None:
+            self._obstaclesMoved.add(caller.GetID())  # sent at the next tick
+
     def _onMotionTimer(self) -> None:
+        moved, self._obstaclesMoved = self._obstaclesMoved, set()
+        for nodeId in moved:
+            entry = self._obstacles.get(nodeId)
+            node = slicer.mrmlScene.GetNodeByID(nodeId)
+            if entry is None or node is None:
+                continue
+            try:
+                self.sendToROS(node, entry[1], entry[2], OBSTACLE_TYPE)
+            except Exception as error:  # noqa: BLE001 - the others still go
+                log.exception("sending the moved obstacle %s failed", entry[3])
+                self.problems.append(f"The obstacle {entry[3]} was not sent again: {error}")
         if self._following is None or not self._targetMoved:
             return
         self._targetMoved = False

@@ -6,6 +6,7 @@ move: solving is a read."""
 
 from __future__ import annotations
 
+import re
 from typing import Any, Mapping, Optional
 
 import numpy as np
@@ -15,13 +16,16 @@ import vtk
 
 from slicer_client.matrices import fill_vtk
 
-__all__ = ["FAILED_COLOUR", "MotionPreview", "PREVIEW_OPACITY", "SOLVED_COLOUR", "ik_status",
+__all__ = ["FAILED_COLOUR", "MotionPreview", "OBSTACLE_TOPICS", "OBSTACLE_TYPE", "PREVIEW_OPACITY",
+           "SOLVED_COLOUR", "ik_status", "obstacle_name",
            "target_matrix", "world_matrix"]
 
 ROBOT_ATTRIBUTE = "OpenIGTLink.ros2.robot"
 LINK_ATTRIBUTE = "OpenIGTLink.ros2.link"
 PREVIEW_ATTRIBUTE = "ROS2Bridge.preview"  # the robot a preview node shows
 PREVIEW_OPACITY = 0.4
+OBSTACLE_TOPICS = "/slicer/obstacles"  # a model made an obstacle goes to <this>/<name>
+OBSTACLE_TYPE = "visualization_msgs/msg/Marker"
 SOLVED_COLOUR = (0.25, 0.8, 0.35)
 FAILED_COLOUR = (0.9, 0.1, 0.1)
 
@@ -161,3 +165,10 @@ def ik_status(tip: str, result: Any) -> str:
     detail = failure.get("text", "")
     return (f"Not solved ({reason}): {detail}; best {result.residual_mm:.1f} mm, "
             f"{result.residual_deg:.1f}° away")
+
+
+def obstacle_name(node_name: str) -> str:
+    """A model's name as an obstacle's and a ROS name's part: letters, digits and ``_``,
+    not starting with a digit."""
+    name = re.sub(r"[^A-Za-z0-9_]+", "_", node_name).strip("_") or "model"
+    return f"m_{name}" if name[0].isdigit() else name
