@@ -770,15 +770,17 @@ class Robot(Resource):
             timeout=timeout)
 
     def plan(self, positions: Mapping[str, float], *, resolution: float = 0.01,
-             timeout: float = 10.0) -> Dict[str, Any]:
+             preview: int = 0, timeout: float = 10.0) -> Dict[str, Any]:
         """A straight joint-space path from the robot's current joint state to
         ``positions`` (radians, metres; the joints not given stay), within limits, checked
         for contact with its obstacles every ``resolution`` (rad or m): ``path`` (rows of
-        ``joints``), ``clear``, ``collision`` (link, obstacle, where), ``duration_s``. A
-        read, for a preview: nothing moves."""
+        ``joints``), ``clear``, ``collision`` (link, obstacle, where), ``duration_s``; with
+        ``preview`` = n, also ``preview``: n configurations picked evenly along it, each
+        with its ``step``, ``time_s`` and every link's pose (``links``, mm, the root link's
+        frame). A read, for a preview: nothing moves."""
         return self._client.request(c.PlanMotion(
             name=self.name, positions=tuple((str(k), float(v)) for k, v in positions.items()),
-            resolution=resolution), timeout=timeout)
+            resolution=resolution, preview=preview), timeout=timeout)
 
     def execute(self, positions: Mapping[str, float], *,
                 action: str = c.DEFAULT_TRAJECTORY_ACTION, resolution: float = 0.01,

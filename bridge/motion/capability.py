@@ -433,7 +433,7 @@ class MotionBridges:
     # ------------------------------------------------------------------ plan, execute
 
     def _plan(self, robot: _Robot, goal: tuple[tuple[str, float], ...],
-              resolution: float) -> dict[str, Any]:
+              resolution: float, preview: int = 0) -> dict[str, Any]:
         """The straight joint-space path from the current state to ``goal`` (worker
         thread), checked for limits (the goal; the box of limits holds the whole line) and
         for contact at every ``resolution``."""
@@ -465,6 +465,9 @@ class MotionBridges:
                     collision = {"link": contact.link, "obstacle": contact.obstacle,
                                  "step": step, "fraction": step / steps,
                                  "positions": model.positions_of(path[step])}
+            picks: list[int] = (np.unique(np.linspace(0, len(path) - 1, min(preview, len(path)))
+                                          .round().astype(int)).tolist() if preview else [])
+            poses = [(k, model.link_poses(path[k])) for k in picks]
         moving = [i for i in range(len(delta)) if abs(delta[i]) > 0.0]
         duration = 1.0
         for i in moving:
@@ -472,17 +475,23 @@ class MotionBridges:
             speed = (joint.limits.velocity if joint.limits is not None and
                      joint.limits.velocity else 2 * _DEFAULT_SPEED) * 0.5
             duration = max(duration, abs(float(delta[i])) / speed)
-        return {"name": robot.name, "joints": [model.joint_names[i] for i in moving],
-                "start": model.positions_of(start), "goal": model.positions_of(end),
-                "path": [[float(row[i]) for i in moving] for row in path],
-                "resolution": resolution, "checked": len(path), "clear": collision is None,
-                "collision": collision, "unplaced": unplaced, "duration_s": duration}
+        out = {"name": robot.name, "joints": [model.joint_names[i] for i in moving],
+               "start": model.positions_of(start), "goal": model.positions_of(end),
+               "path": [[float(row[i]) for i in moving] for row in path],
+               "resolution": resolution, "checked": len(path), "clear": collision is None,
+               "collision": collision, "unplaced": unplaced, "duration_s": duration}
+        if preview:
+            out["preview"] = [{"step": k, "time_s": duration * k / max(1, len(path) - 1),
+                               "links": {link: _mm_rows(pose) for link, pose in links.items()}}
+                              for k, links in poses]
+        return out
 
     async def plan_motion(self, request: PlanMotion) -> dict[str, Any]:
         robot = self._robot(request.name)
         loop = asyncio.get_running_loop()
         return await loop.run_in_executor(
-            None, lambda: self._plan(robot, request.positions, request.resolution))
+            None, lambda: self._plan(robot, request.positions, request.resolution,
+                                     request.preview))
 
     async def execute_motion(self, request: ExecuteMotion,
                              client: Optional[Replier]) -> dict[str, Any]:

@@ -17,12 +17,13 @@ from protocol.commands.robots import MAX_JOINTS
 from protocol.commands.values import Matrix4, matrix_from
 
 __all__ = ["DEFAULT_TRAJECTORY_ACTION", "FOLLOW_JOINT_TRAJECTORY", "MAX_OBSTACLES",
-           "OBSTACLE_TYPES", "ExecuteMotion", "ObstacleDistances", "PlanMotion",
+           "MAX_PLAN_PREVIEW", "OBSTACLE_TYPES", "ExecuteMotion", "ObstacleDistances", "PlanMotion",
            "PublishDistance", "RemoveObstacle", "SetObstacle", "SolveIk"]
 
 FOLLOW_JOINT_TRAJECTORY = "control_msgs/action/FollowJointTrajectory"
 # ros2_control's joint trajectory controller's action (and the demo's).
 DEFAULT_TRAJECTORY_ACTION = "/joint_trajectory_controller/follow_joint_trajectory"
+MAX_PLAN_PREVIEW = 200  # configurations of a plan's preview (each: every link's pose)
 _MAX_RESOLUTION = 1.0  # rad (or m) between two checked configurations, at most
 
 MAX_OBSTACLES = 16  # per robot: each one a subscription and a bounding-volume hierarchy
@@ -206,6 +207,9 @@ class PlanMotion(Op, op="plan_motion", writes=False):
     name: str
     positions: tuple[tuple[str, float], ...]
     resolution: float = 0.01
+    # Also each link's pose (mm, the root link's frame) at this many configurations picked
+    # evenly along the path, both ends included: what a preview of the motion draws.
+    preview: int = 0
 
     def resources(self) -> tuple[Resource, ...]:
         return ()
@@ -217,7 +221,8 @@ class PlanMotion(Op, op="plan_motion", writes=False):
 
     @classmethod
     def from_args(cls, a: Args) -> PlanMotion:
-        return cls(name=_robot(a), positions=_goal(a), resolution=_resolution(a))
+        return cls(name=_robot(a), positions=_goal(a), resolution=_resolution(a),
+                   preview=int(a.opt_int("preview", 0, low=0, high=MAX_PLAN_PREVIEW) or 0))
 
 
 @dataclass(frozen=True)

@@ -27,11 +27,12 @@ GOAL = {"joint_1": 0.4, "joint_2": -0.6, "joint_3": 1.1, "joint_4": -0.3, "joint
         "joint_6": 0.2}
 
 
-def _flange_mm(tmp_path: Path) -> list[list[float]]:
+def _flange_mm(tmp_path: Path, positions: dict[str, float] = GOAL) -> list[list[float]]:
+    """The demo's flange in its base frame (mm) at `positions`, by yourdfpy's FK."""
     urdf, _ = demo_urdf_path(tmp_path)
     model = yourdfpy.URDF.load(str(urdf), load_meshes=False, load_collision_meshes=False,
                                build_collision_scene_graph=False)
-    model.update_cfg(GOAL)
+    model.update_cfg(positions)
     matrix = np.array(model.get_transform(frame_to=TIP, frame_from="base_link"))
     matrix[:3, 3] *= 1000.0
     return matrix.tolist()
@@ -58,6 +59,18 @@ def test_the_motion_preview_follows_targets_from_the_scene(
     assert _angle_deg(first["preview_tip"], target) <= 0.1
     assert first["preview_models"] == 14
     assert all(c == pytest.approx([0.25, 0.8, 0.35]) for c in first["colours"])
+    # The planned path in Slicer's sequence browser: its first, middle and last items put
+    # the preview's flange where yourdfpy's FK puts it at those configurations (the last:
+    # at the target), at their times along the path.
+    path = got["path"]
+    assert path["clear"] and path["items"] == min(50, path["checked"]), path
+    assert path["status"].startswith("Path planned:")
+    root = np.array(path["root_world"])
+    for item in path["scrubbed"]:
+        want = (root @ np.array(_flange_mm(tmp_path, item["positions"]))).tolist()
+        assert _distance_mm(item["preview_tip"], want) <= 0.1, item
+        assert float(item["index_value"]) == pytest.approx(item["time_s"], abs=1e-5)
+    assert _distance_mm(path["scrubbed"][-1]["preview_tip"], target) <= 0.1
     # Dragged 20 times between two frames: solved fewer times than it moved, and the
     # preview ends at the newest position.
     dragged = got["dragged"]

@@ -148,6 +148,7 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                 (ui.showJointsButton, "clicked(bool)", self.onShowJoints),
                 (ui.motionSolveButton, "clicked(bool)", self.onSolveIk),
                 (ui.motionFollowCheckBox, "toggled(bool)", self.onFollowToggled),
+                (ui.motionPathButton, "clicked(bool)", self.onPreviewPath),
                 (ui.motionExecuteButton, "clicked(bool)", self.onExecuteMotion),
                 (ui.addObstacleButton, "clicked(bool)", self.onAddObstacle)):
             button.connect(signal, handler)
@@ -329,6 +330,11 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
             except Exception:
                 self.ui.motionFollowCheckBox.checked = False
                 raise
+        self.ui.motionStatusLabel.text = self.logic.motionStatus
+
+    def onPreviewPath(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to plan the path.", waitCursor=True):
+            self.logic.previewPath(self.ui.robotCombo.currentText)
         self.ui.motionStatusLabel.text = self.logic.motionStatus
 
     def onExecuteMotion(self) -> None:

@@ -51,6 +51,24 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
                         "preview_tip": preview_tip(), "colours": preview_colours(),
                         "preview_models": len(preview_colours())}
 
+    # 1b. The path to that solution, scrubbed in Slicer's sequence browser.
+    plan = logic.previewPath(name)
+    browser = logic.pathBrowser
+    items = browser.GetMasterSequenceNode().GetNumberOfDataNodes()
+    scrubbed = []
+    for number in (0, items // 2, items - 1):
+        browser.SetSelectedItemNumber(number)
+        session.pump(0.05)
+        step = plan["preview"][number]["step"]
+        scrubbed.append({"step": step, "time_s": plan["preview"][number]["time_s"],
+                         "index_value": browser.GetMasterSequenceNode().GetNthIndexValue(number),
+                         "positions": {**plan["start"], **dict(zip(plan["joints"],
+                                                                   plan["path"][step]))},
+                         "preview_tip": preview_tip()})
+    out["path"] = {"clear": plan["clear"], "items": items, "checked": plan["checked"],
+                   "status": logic.motionStatus, "scrubbed": scrubbed,
+                   "root_world": root_world.tolist()}
+
     # 2. Dragged: many moves between two frames, solved at most once a frame, the newest.
     moved = target_world.copy()
     logic.followTarget(name, target, tip)

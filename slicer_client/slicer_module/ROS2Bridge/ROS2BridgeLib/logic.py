@@ -40,6 +40,7 @@ __all__ = ["CONNECTOR_NAME", "CONNECT_WAIT_S", "SPIN_INTERVAL_MS", "ROS2BridgeLo
 
 CONNECTOR_NAME = "ROS2BridgeConnector"
 SPIN_INTERVAL_MS = 20  # the reference spins its node at 50 Hz
+PATH_PREVIEW_SAMPLES = 50  # configurations of a planned path the preview scrubs through
 MOTION_INTERVAL_MS = 33  # a dragged target is solved again at most this often (30 Hz)
 CONNECT_WAIT_S = 10.0  # a script's first reference call waits this long for the daemon
 log = logging.getLogger("ROS2Bridge")
@@ -79,6 +80,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._obstacles: dict[str, tuple[str, str, str, str]] = {}
         self._obstaclesMoved: set[str] = set()
         self.execution: Any = None  # the GoalHandle of the latest executeMotion
+        self.pathBrowser: Any = None  # the sequence browser of the latest previewPath
         self._motionTimer = qt.QTimer()
         self._motionTimer.setInterval(MOTION_INTERVAL_MS)
         self._motionTimer.connect("timeout()", self._onMotionTimer)
@@ -393,6 +395,29 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.lastIk = result
         self.motionStatus = ik_status(tip, result)
         return result
+
+    def previewPath(self, robotName: str, positions: Optional[Mapping[str, float]] = None,
+                    *, samples: int = PATH_PREVIEW_SAMPLES) -> dict[str, Any]:
+        """Plan the joint-space path to `positions` (default: the last solve's) and show
+        it as a sequence the preview robot scrubs through (Slicer's sequence browser
+        ``<robot>:preview path``, index: time in s). A read: nothing moves. Returns the
+        plan (``clear``, ``collision`` naming the link and the obstacle when it is not)."""
+        if positions is None:
+            if self.lastIk is None or not self.lastIk.solved:
+                raise RuntimeError("nothing to plan to: solve for a target first")
+            positions = self.lastIk.positions
+        robot = self._robot(robotName)
+        preview = self._previews.get(robotName)
+        if preview is None or preview.root is None:
+            raise RuntimeError("solve for a target first: the preview robot shows the path")
+        plan = robot.plan(positions, preview=samples)
+        self.pathBrowser = preview.show_path(plan["preview"], preview.root_world())
+        collision = plan.get("collision") or {}
+        self.motionStatus = (f"Path planned: {plan['checked']} configurations clear, "
+                             f"{plan['duration_s']:.1f} s" if plan["clear"] else
+                             f"Path blocked: link {collision.get('link')!r} touches "
+                             f"obstacle {collision.get('obstacle')!r}")
+        return plan
 
     def followTarget(self, robotName: str, targetNode: Any, tip: str) -> None:
         """Solve again whenever `targetNode` moves, at most once per display frame (the

@@ -76,6 +76,8 @@ class MotionPreview:
         self.transforms: dict[str, Any] = {}
         self.models: list[Any] = []
         self.root: Optional[str] = None  # the robot's root link, once an answer showed it
+        self.browser: Optional[Any] = None  # the planned path's sequence browser
+        self.sequences: list[Any] = []
 
     def robot_links(self) -> dict[str, tuple[Any, list[Any]]]:
         """The robot's link transforms in the scene, each with the models under it."""
@@ -143,7 +145,50 @@ class MotionPreview:
                 copy.SetAndObserveTransformNodeID(preview.GetID())
                 self.models.append(copy)
 
+    def show_path(self, preview: Any, root_world: F64) -> Any:
+        """The preview robot along a planned path: one sequence per link transform of the
+        preview (index: time in s), synchronized by a sequence browser whose proxies are
+        the preview's transforms, so scrubbing the browser moves the preview. `preview`:
+        a plan's ``preview`` (each configuration's ``time_s`` and ``links``). Returns the
+        browser (``<robot>:preview path``), made again for each plan."""
+        if not self.transforms:
+            self._make()
+        self._remove_path()
+        browser = self.scene.AddNewNodeByClass("vtkMRMLSequenceBrowserNode",
+                                               f"{self.robot}:preview path")
+        browser.SetAttribute(PREVIEW_ATTRIBUTE, self.robot)
+        matrix = vtk.vtkMatrix4x4()
+        for link, proxy in self.transforms.items():
+            sequence = self.scene.AddNewNodeByClass("vtkMRMLSequenceNode",
+                                                    f"{self.robot}:preview path:{link}")
+            sequence.SetAttribute(PREVIEW_ATTRIBUTE, self.robot)
+            sequence.SetIndexName("time")
+            sequence.SetIndexUnit("s")
+            sequence.SetIndexType(sequence.NumericIndex)
+            for item in preview:
+                pose = item["links"].get(link)
+                if pose is None:
+                    continue
+                step = slicer.vtkMRMLLinearTransformNode()
+                step.SetMatrixTransformToParent(
+                    fill_vtk(root_world @ np.asarray(pose, dtype=float), matrix))
+                sequence.SetDataNodeAtValue(step, f"{float(item['time_s']):.6f}")
+            browser.AddSynchronizedSequenceNode(sequence)
+            browser.AddProxyNode(proxy, sequence, False)
+            self.sequences.append(sequence)
+        self.browser = browser
+        browser.SetSelectedItemNumber(0)
+        return browser
+
+    def _remove_path(self) -> None:
+        for node in [self.browser, *self.sequences]:
+            if node is not None and node.GetScene() is not None:
+                self.scene.RemoveNode(node)
+        self.browser = None
+        self.sequences = []
+
     def remove(self) -> None:
+        self._remove_path()
         for node in [*self.models, *self.transforms.values()]:
             if node.GetScene() is not None:
                 display: Optional[Any] = (node.GetDisplayNode()
