@@ -32,6 +32,7 @@ from bridge.core.shutdown import StopSignals
 from bridge.core.threads import fatal_failure
 from bridge.core.stream_health import StreamHealth
 from bridge.markers.capability import MarkerBridges
+from bridge.motion.capability import MotionBridges
 from bridge.parameters.capability import ParameterBridges
 from bridge.playback.refusals import LiveRefusals
 from bridge.record.capability import RecordBridges
@@ -110,11 +111,15 @@ class Daemon:
                                      max_model_bytes=policy.max_marker_bytes)
         self.recordings = RecordBridges(self.ros, topics=self.topics, tf=self.tf,
                                         markers=self.markers, robots=self.robots)
+        # Motion computes with the robots' models: handed the robots' public lookup only.
+        self.motion = MotionBridges(self.ros, robots=self.robots.loaded_model,
+                                    frames=self.tf.buffer.lookup,
+                                    send_goal=self.actions.sender.send_goal)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
                                                           self.robots, self.markers,
-                                                          InterfaceTypes(), self.recordings,
-                                                          LiveRefusals()],
+                                                          self.motion, InterfaceTypes(),
+                                                          self.recordings, LiveRefusals()],
                                      policy=policy, resolve_frame=self.tf.resolve_client_frame,
                                      resolve_file=self.robots.file_path, heavy=self.heavy)
         self.server = BridgeServer(self.hub, self.dispatcher.handle, host=config.host,

@@ -11,13 +11,14 @@ from slicer_client.bridge_state import BridgeSpec, BridgeState, StateFormatError
 from slicer_client.client import Client, connect
 from slicer_client.errors import (BridgeClientError, CommandRefusedError, CommandTimeoutError,
                                   ConnectionClosedError, DaemonUnreachableError, DeadLinkError,
-                                  KeyFileError, NotTheDaemonError, ParameterRejectedError,
-                                  RobotNotLoadedError)
+                                  IkFailedError, KeyFileError, NotTheDaemonError,
+                                  ParameterRejectedError, RobotNotLoadedError)
 from slicer_client.matrices import MatrixError, as_numpy, to_vtk
 from slicer_client.recording import Recording
 
 __all__ = ["BridgeClientError", "BridgeSpec", "BridgeState", "Client",
            "CommandRefusedError", "CommandTimeoutError", "ConnectionClosedError",
-           "DaemonUnreachableError", "DeadLinkError", "KeyFileError", "MatrixError",
-           "NotTheDaemonError", "ParameterRejectedError", "Recording", "RobotNotLoadedError",
+           "DaemonUnreachableError", "DeadLinkError", "IkFailedError", "KeyFileError",
+           "MatrixError", "NotTheDaemonError", "ParameterRejectedError", "Recording",
+           "RobotNotLoadedError",
            "StateFormatError", "as_numpy", "connect", "to_vtk"]

@@ -137,12 +137,22 @@ class Action:
         """Send a goal (its fields as a dict); returns once the server accepted it.
         `feedback(fields)` runs for each feedback. Raises `CommandRefusedError`: code
         REJECTED (the server refused the goal), UNAVAILABLE (no server), TIMEOUT."""
+        return self.send_goal_by(
+            lambda goal_id: c.SendGoal(action=self.name, type=self.type, goal=dict(goal or {}),
+                                       timeout=timeout, result_timeout=result_timeout,
+                                       goal_id=goal_id),
+            feedback=feedback, timeout=timeout)
+
+    def send_goal_by(self, make_request: Callable[[str], c.Answered[c.SendGoalResult]], *,
+                     feedback: Optional[FeedbackCallback] = None,
+                     timeout: float = 4.0) -> GoalHandle:
+        """Send a goal through an op that sends it on the daemon's side (``send_goal``, or
+        ``execute_motion``, which plans the goal first), made by ``make_request(goal_id)``;
+        its events come to the returned handle as a `send_goal`'s do."""
         handle = GoalHandle(self, uuid.uuid4().hex, feedback)
         with self._lock:
             self._router[handle.goal_id] = handle
-        request = c.SendGoal(action=self.name, type=self.type, goal=dict(goal or {}),
-                             timeout=timeout, result_timeout=result_timeout,
-                             goal_id=handle.goal_id)
+        request = make_request(handle.goal_id)
         try:
             reply = self._client.request(request, timeout=timeout + 2.0)
         except BaseException:

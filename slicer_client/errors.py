@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from typing import Any, Mapping, Optional, Sequence
 
 from protocol.auth import KeyFileError
 from slicer_client.connection import (BridgeClientError, CommandRefusedError,
@@ -12,7 +12,8 @@ from slicer_client.connection import (BridgeClientError, CommandRefusedError,
 
 __all__ = ["BridgeClientError", "CommandRefusedError", "CommandTimeoutError",
            "ConnectionClosedError", "DaemonUnreachableError", "DeadLinkError", "KeyFileError",
-           "NotTheDaemonError", "ParameterRejectedError", "PointsError", "RobotNotLoadedError"]
+           "IkFailedError", "NotTheDaemonError", "ParameterRejectedError", "PointsError",
+           "RobotNotLoadedError"]
 
 
 class ParameterRejectedError(BridgeClientError):
@@ -55,3 +56,27 @@ class PointsError(BridgeClientError, ValueError):
         super().__init__(f"points: expected {expected}, got {got}")
         self.expected = expected
         self.got = got
+
+
+class IkFailedError(BridgeClientError):
+    """No joint positions put the tip at the target: ``reason`` is ``unreachable``,
+    ``joint_limit`` (``joints`` past their limits) or ``collision`` (``link`` touching
+    ``obstacle``); ``residual_mm`` / ``residual_deg`` and ``positions`` are the best
+    attempt's. The robot did not move (solving is a read)."""
+
+    def __init__(self, robot: str, tip: str, failure: Mapping[str, Any], *,
+                 residual_mm: float, residual_deg: float,
+                 positions: Mapping[str, float]) -> None:
+        self.robot = robot
+        self.tip = tip
+        self.reason = str(failure.get("reason", ""))
+        self.text = str(failure.get("text", ""))
+        self.joints = tuple(str(j) for j in failure.get("joints", ()))
+        self.link = str(failure.get("link", ""))
+        self.obstacle = str(failure.get("obstacle", ""))
+        self.residual_mm = residual_mm
+        self.residual_deg = residual_deg
+        self.positions = dict(positions)
+        super().__init__(f"robot {robot!r}: no solution for {tip!r} ({self.reason}): "
+                         f"{self.text}; best residual {residual_mm:.3f} mm, "
+                         f"{residual_deg:.3f} deg")

@@ -20,6 +20,7 @@ import numpy as np
 
 from protocol import commands as c
 from protocol.commands.fields import Args
+from protocol.conversions import quaternion_to_rotation
 from protocol.messages import (Message, Point, PointElement, PolyData, Status, StatusCode,
                                String, Transform, cells_from_array)
 from protocol.naming import (KEY_COLOR, KEY_COUNT, KEY_FRAME, KEY_LINK, KEY_LINK_COUNT,
@@ -27,7 +28,8 @@ from protocol.naming import (KEY_COLOR, KEY_COUNT, KEY_FRAME, KEY_LINK, KEY_LINK
                              KEY_PARENT_DEVICE, KEY_POSITION, KEY_ROLE, KEY_TOPIC, KEY_VISUAL,
                              KEY_VISUAL_COUNT, KEY_WARNINGS)
 from slicer_client.bridge_state import BridgeSpec
-from slicer_client.errors import BridgeClientError, PointsError, RobotNotLoadedError
+from slicer_client.errors import (BridgeClientError, IkFailedError, PointsError,
+                                  RobotNotLoadedError)
 from slicer_client.matrices import as_numpy, as_rows
 from slicer_client.owner import ResourceOwner
 from slicer_client.transport import CommandFn, request_with
@@ -711,6 +713,93 @@ class Robot(Resource):
             timeout=timeout)
         return result.positions
 
+    def ik(self, target: Any, *, tip: str, seed: Optional[Mapping[str, float]] = None,
+           collisions: bool = True, timeout: float = 10.0) -> c.SolveIkResult:
+        """`solve_ik`'s whole answer, solved or not, without raising: the positions, the
+        residual, the failure, and each link's pose at those positions (``links``, mm, in
+        the root link's frame), which is what a preview of the solution draws."""
+        request = c.SolveIk(
+            name=self.name, tip=tip, target=c.matrix_from(_target_rows(target), "target"),
+            seed=None if seed is None else tuple((str(k), float(v)) for k, v in seed.items()),
+            collisions=collisions)
+        return self._client.request(request, timeout=timeout)
+
+    def solve_ik(self, target: Any, *, tip: str, seed: Optional[Mapping[str, float]] = None,
+                 collisions: bool = True, timeout: float = 10.0) -> Dict[str, float]:
+        """Joint positions (radians, metres) putting link ``tip`` at ``target``, in the
+        robot's root link frame, in MILLIMETRES: a 4x4 matrix (numpy, rows, vtkMatrix4x4)
+        or a pose ``(position_mm, quaternion_xyzw)``. Starts from ``seed`` (omitted: the
+        robot's current joint state), within the URDF's limits, clear of the robot's
+        obstacles unless ``collisions`` is False. The robot does not move: pass the result
+        to `set_joints` to move it. Raises `IkFailedError` (reason, residual) when no
+        solution exists."""
+        result = self.ik(target, tip=tip, seed=seed, collisions=collisions, timeout=timeout)
+        if not result.solved:
+            raise IkFailedError(self.name, tip, result.failure or {},
+                                residual_mm=result.residual_mm,
+                                residual_deg=result.residual_deg, positions=result.positions)
+        return result.positions
+
+    def set_obstacle(self, obstacle: str, topic: str, *, type: str = "Marker",
+                     frame: Optional[str] = None, timeout: float = 10.0) -> Dict[str, Any]:
+        """Make the model published on ROS ``topic`` (`Client.publish_model`: a Marker, in
+        its frame, or a Mesh, in ``frame``) obstacle ``obstacle`` of this robot: solve_ik
+        avoids it and `obstacle_distances` measures it. It follows its tf frame."""
+        return self._client.request(c.SetObstacle(
+            name=self.name, obstacle=obstacle, topic=topic, type=type, frame=frame),
+            timeout=timeout)
+
+    def remove_obstacle(self, obstacle: str, timeout: float = 10.0) -> None:
+        self._client.request(c.RemoveObstacle(name=self.name, obstacle=obstacle),
+                             timeout=timeout)
+
+    def obstacle_distances(self, link: str, timeout: float = 10.0) -> Dict[str, Any]:
+        """At the robot's current joint state: ``distances`` (each ``obstacle``,
+        ``distance_mm``, nearest points ``on_link_mm`` / ``on_obstacle_mm``), ``contacts``
+        (``link``, ``obstacle``) and the ``positions`` used."""
+        return self._client.request(c.ObstacleDistances(name=self.name, link=link),
+                                    timeout=timeout)
+
+    def publish_distance(self, link: str, obstacle: str, topic: str, *,
+                         rate_hz: float = 50.0, timeout: float = 10.0) -> Dict[str, Any]:
+        """Have the daemon publish the distance from ``link`` to ``obstacle`` on ROS
+        ``topic`` as std_msgs/Float64 (metres), ``rate_hz`` times a second (0 stops);
+        read it back with ``subscribe(topic, "Float64")``."""
+        return self._client.request(c.PublishDistance(
+            name=self.name, link=link, obstacle=obstacle, topic=topic, rate_hz=rate_hz),
+            timeout=timeout)
+
+    def plan(self, positions: Mapping[str, float], *, resolution: float = 0.01,
+             preview: int = 0, timeout: float = 10.0) -> Dict[str, Any]:
+        """A straight joint-space path from the robot's current joint state to
+        ``positions`` (radians, metres; the joints not given stay), within limits, checked
+        for contact with its obstacles every ``resolution`` (rad or m): ``path`` (rows of
+        ``joints``), ``clear``, ``collision`` (link, obstacle, where), ``duration_s``; with
+        ``preview`` = n, also ``preview``: n configurations picked evenly along it, each
+        with its ``step``, ``time_s`` and every link's pose (``links``, mm, the root link's
+        frame). A read, for a preview: nothing moves."""
+        return self._client.request(c.PlanMotion(
+            name=self.name, positions=tuple((str(k), float(v)) for k, v in positions.items()),
+            resolution=resolution, preview=preview), timeout=timeout)
+
+    def execute(self, positions: Mapping[str, float], *,
+                action: str = c.DEFAULT_TRAJECTORY_ACTION, resolution: float = 0.01,
+                duration_s: Optional[float] = None, feedback: Optional[Any] = None,
+                timeout: float = 4.0, result_timeout: Optional[float] = None) -> Any:
+        """Move the robot to ``positions`` along the path `plan` gives, through its
+        control_msgs/FollowJointTrajectory ``action``: a `GoalHandle` (``result()``,
+        ``cancel()``, feedback) once the controller accepted it. A path touching an
+        obstacle is refused before anything is sent (`CommandRefusedError`, code
+        REJECTED, naming the link and the obstacle). A write."""
+        goal = tuple((str(k), float(v)) for k, v in positions.items())
+        owner: Any = self._client
+        return owner.action(action, c.FOLLOW_JOINT_TRAJECTORY).send_goal_by(
+            lambda goal_id: c.ExecuteMotion(
+                name=self.name, positions=goal, action=action, resolution=resolution,
+                duration_s=duration_s, timeout=timeout, result_timeout=result_timeout,
+                goal_id=goal_id),
+            feedback=feedback, timeout=timeout)
+
     def wait_until_loaded(self, timeout: float = 30.0) -> None:
         """Wait until every link named in the create reply has a transform and every
         visual its mesh."""
@@ -754,6 +843,20 @@ class Robot(Resource):
             if summary.get("name") == self.name:
                 return dict(summary.get("unposed") or {})
         return {}
+
+
+def _target_rows(target: Any) -> List[List[float]]:
+    """An IK target as 4 rows (mm): a 4x4 as it is, a (position_mm, quaternion_xyzw) pose
+    through the protocol's one quaternion conversion."""
+    if isinstance(target, (tuple, list)) and len(target) == 2 and np.shape(target[1]) == (4,):
+        position = np.asarray(target[0], dtype=np.float64)
+        if position.shape != (3,):
+            raise PointsError("a position of 3 numbers (mm)", f"shape {position.shape}")
+        matrix = np.eye(4)
+        matrix[:3, :3] = quaternion_to_rotation(target[1])
+        matrix[:3, 3] = position
+        return as_rows(matrix, field="target")
+    return as_rows(target, field="target")
 
 
 @dataclass

@@ -22,8 +22,9 @@ _EXPORTS = {
     "bridge.robots.errors": ("MeshError", "ResourceError", "RobotError", "UrdfError"),
     "bridge.robots.kinematics": ("Kinematics",),
     "bridge.robots.meshes": ("DEFAULT_MESH_CACHE", "MeshCache"),
-    "bridge.robots.model": ("DEFAULT_RGBA", "LoadOptions", "RobotModel",
-                            "VisualMesh", "load_robot", "load_robot_file", "to_polydata"),
+    "bridge.robots.model": ("DEFAULT_RGBA", "LoadOptions", "MeshSource", "RobotModel",
+                            "VisualMesh", "load_robot", "load_robot_file", "mesh_for",
+                            "to_polydata"),
     "bridge.robots.resources": ("PackageResolver", "parse_package_path_option"),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
@@ -46,6 +47,7 @@ __all__ = [
     "LoadOptions",
     "MeshCache",
     "MeshError",
+    "MeshSource",
     "Mimic",
     "PackageResolver",
     "ResourceError",
@@ -57,6 +59,7 @@ __all__ = [
     "VisualSpec",
     "load_robot",
     "load_robot_file",
+    "mesh_for",
     "parse_package_path_option",
     "parse_urdf",
     "to_polydata",

@@ -517,6 +517,13 @@ class RobotServing:
                                      code=ErrorCode.UNAVAILABLE)
         return robot, robot.model
 
+    def loaded_model(self, name: str) -> tuple[RobotModel, str, str]:
+        """A loaded robot's model, its joint-states topic and its root link's tf frame, for
+        the capabilities that compute with it (motion); refused as `describe_robot_joints`
+        refuses."""
+        robot, model = self._loaded(name)
+        return model, self._joint_states_topic(robot), robot.tf_prefix + model.root_link
+
     def describe_robot_joints(self, request: DescribeRobotJoints) -> dict[str, Any]:
         robot, model = self._loaded(request.name)
         return {"name": robot.name, "robot": model.name,

@@ -71,8 +71,13 @@ class VisualSpec:
 
 @dataclass(frozen=True)
 class LinkSpec:
+    """``collisions``: the link's ``<collision>`` elements as the same spec (no colour); one
+    whose geometry cannot be read is left out with a line in
+    `RobotDescription.collision_warnings` (the robot still loads: Slicer shows visuals)."""
+
     name: str
     visuals: tuple[VisualSpec, ...] = ()
+    collisions: tuple[VisualSpec, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -122,6 +127,8 @@ class RobotDescription:
     parent_joint: Mapping[str, str]
     child_joints: Mapping[str, tuple[str, ...]]
     warnings: tuple[str, ...] = field(default=())
+    # <collision> elements that could not be read (only motion planning uses them).
+    collision_warnings: tuple[str, ...] = field(default=())
 
     @property
     def moving_joints(self) -> tuple[str, ...]:
@@ -265,6 +272,21 @@ def _visuals(raw_link: Any, named: Mapping[str, Rgba],
     return tuple(out)
 
 
+def _collisions(raw_link: Any, warnings: list[str]) -> tuple[VisualSpec, ...]:
+    out = []
+    for index, raw in enumerate(raw_link.collisions):
+        what = f"link {raw_link.name!r} collision {index}"
+        try:
+            spec = VisualSpec(raw_link.name, index, raw.name,
+                              _origin(raw.origin, f"{what} <origin>"),
+                              _geometry(raw.geometry, what), None, None)
+        except UrdfError as error:
+            warnings.append(f"{what} left out: {error}")
+            continue
+        out.append(spec)
+    return tuple(out)
+
+
 def _joint(raw: Any, warnings: list[str]) -> JointSpec:
     what = f"joint {raw.name!r}"
     if raw.type not in JOINT_TYPES:
@@ -340,6 +362,7 @@ def parse_urdf(xml: str | bytes) -> RobotDescription:
 
     links: dict[str, LinkSpec] = {}
     inline_named: dict[str, Rgba] = {}
+    collision_warnings: list[str] = []
     for el in root.iterfind("link"):
         name = _element_name(el, "link")
         if name in links:
@@ -351,7 +374,8 @@ def parse_urdf(xml: str | bytes) -> RobotDescription:
         except Exception as exc:
             raise UrdfError(f"link {name!r}{_where(el)}", "a valid <link>",
                             _explain(exc)) from None
-        links[name] = LinkSpec(name, _visuals(raw, named, inline_named, warnings))
+        links[name] = LinkSpec(name, _visuals(raw, named, inline_named, warnings),
+                               _collisions(raw, collision_warnings))
     if not links:
         raise UrdfError(f"robot {robot_name!r}", "at least one <link>", "none")
 
@@ -416,7 +440,7 @@ def parse_urdf(xml: str | bytes) -> RobotDescription:
         joints=MappingProxyType(joints), materials=MappingProxyType(named),
         root_link=roots[0], parent_joint=MappingProxyType(parent_joint),
         child_joints=MappingProxyType({k: tuple(v) for k, v in children.items()}),
-        warnings=tuple(warnings))
+        warnings=tuple(warnings), collision_warnings=tuple(collision_warnings))
 
 
 def _reachable(root: str, children: Mapping[str, list[str]],

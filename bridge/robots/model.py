@@ -42,10 +42,12 @@ from protocol.polydata import NORMALS_ATTRIBUTE, colour_attribute, point_attribu
 __all__ = [
     "DEFAULT_RGBA",
     "LoadOptions",
+    "MeshSource",
     "VisualMesh",
     "RobotModel",
     "load_robot",
     "load_robot_file",
+    "mesh_for",
     "to_polydata",
 ]
 
@@ -92,6 +94,16 @@ class VisualMesh:
 
 
 @dataclass(frozen=True, eq=False)
+class MeshSource:
+    """Where a robot's meshes were read from: its resolver (package paths, and the folders
+    it may read, as the robot's request allowed) and the mesh cache. Whoever reads more of
+    the robot's meshes later (its collision geometry) reads them under the same rules."""
+
+    resolver: PackageResolver
+    cache: MeshCache
+
+
+@dataclass(frozen=True, eq=False)
 class RobotModel:
     """A loaded robot: its description, its visuals and forward kinematics."""
 
@@ -99,6 +111,7 @@ class RobotModel:
     visuals: tuple[VisualMesh, ...]
     warnings: tuple[str, ...]
     kinematics: Kinematics
+    meshes: Optional[MeshSource] = None
 
     @property
     def name(self) -> str:
@@ -139,8 +152,10 @@ class RobotModel:
 # ---------------------------------------------------------------------------- loading
 
 
-def _mesh_for(spec: VisualSpec, resolver: PackageResolver, cache: MeshCache,
-              options: LoadOptions) -> tuple[MeshData, str]:
+def mesh_for(spec: VisualSpec, resolver: PackageResolver, cache: MeshCache,
+             options: LoadOptions) -> tuple[MeshData, str]:
+    """The triangle mesh (metres, the geometry's own frame, scale applied) of one visual or
+    collision spec, and where it came from. Raises `ResourceError` / `MeshError`."""
     g = spec.geometry
     if g.kind == "mesh":
         assert g.filename is not None
@@ -199,7 +214,7 @@ def _load(description: RobotDescription, resolver: PackageResolver, cache: MeshC
     for number, spec in enumerate(specs, 1):
         what = f"link {spec.link!r} visual {spec.index}"
         try:
-            mesh, source = _mesh_for(spec, resolver, cache, options)
+            mesh, source = mesh_for(spec, resolver, cache, options)
         except ResourceError as exc:
             message = (f"{what}: mesh {spec.geometry.filename!r} not found: expected "
                        f"{exc.expected}, got {exc.got}; the visual is left out")
@@ -222,7 +237,8 @@ def _load(description: RobotDescription, resolver: PackageResolver, cache: MeshC
     if reported:
         logger.info("robot %r: %d visuals of %d links loaded in %.1f s", description.name,
                     len(visuals), len(description.links), time.monotonic() - start)
-    return RobotModel(description, tuple(visuals), tuple(warnings), Kinematics(description))
+    return RobotModel(description, tuple(visuals), tuple(warnings), Kinematics(description),
+                      MeshSource(resolver, cache))
 
 
 def load_robot(urdf: str | bytes, *, package_paths: Optional[Mapping[str, Path]] = None,

@@ -19,9 +19,8 @@ The package, by job:
     types       the one grammar of ROS type names
     results     the typed results of the ops a client reads (`Answered`), parsed in one place
     op          the op base class, its declarations and the registry; parsing
-    graph, topics, parameters, tf, robots, services, markers, actions, interfaces,
-    recording
-    playback
+    graph, topics, parameters, tf, robots, services, markers, motion, actions,
+    interfaces, recording, playback
                 the ops, by area (adding an op: a class in one of these, and a handler)
     replies     the Reply and error replies
 
@@ -55,6 +54,8 @@ from protocol.commands.robots import __all__ as _robots
 from protocol.commands.services import *  # noqa: F403
 from protocol.commands.markers import *  # noqa: F403
 from protocol.commands.markers import __all__ as _markers
+from protocol.commands.motion import *  # noqa: F403
+from protocol.commands.motion import __all__ as _motion
 from protocol.commands.services import __all__ as _services
 from protocol.commands.actions import *  # noqa: F403
 from protocol.commands.actions import __all__ as _actions
@@ -68,7 +69,7 @@ from protocol.commands.replies import *  # noqa: F403
 from protocol.commands.replies import __all__ as _replies
 
 __all__ = [*_errors, *_wire, *_values, *_types, *_results, *_op, *_graph, *_topics, *_parameters,
-           *_tf, *_robots, *_services, *_markers, *_actions, *_interfaces, *_recording,
-           *_playback, *_replies]
+           *_tf, *_robots, *_services, *_markers, *_motion, *_actions, *_interfaces,
+           *_recording, *_playback, *_replies]
 
 bridge_kinds()  # noqa: F405 - a create op without its remove op fails here, at import

@@ -17,7 +17,7 @@ one it may leave out has the default the client always assumed.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Generic, Optional, TypeVar, cast, get_args, get_origin
 
 from protocol.commands.errors import CommandError, WrongTypeError
@@ -32,7 +32,7 @@ __all__ = ["AdvertiseActionResult", "Answered", "AuthenticateResult", "CallServi
            "ListParametersResult", "ListServicesResult", "ListTopicsResult",
            "LookupTransformResult", "ObserveParametersResult", "ParameterOutcome",
            "PublishResult", "Result", "ResultFormatError", "SendGoalResult",
-           "SetParametersResult", "SetRobotJointsResult"]
+           "SetParametersResult", "SetRobotJointsResult", "SolveIkResult"]
 
 _U32 = (1 << 32) - 1
 _COUNT_MAX = (1 << 63) - 1
@@ -336,3 +336,48 @@ class AdvertiseActionResult(Result):
     @classmethod
     def read(cls, a: Args) -> AdvertiseActionResult:
         return cls(device=_device(a))
+
+
+@dataclass(frozen=True)
+class SolveIkResult(Result):
+    """A solve_ik answer: ``solved``, the actuated joints' ``positions`` (of the solution,
+    or of the best attempt), the residual of that attempt (mm, degrees), and when not
+    solved the ``failure`` (``reason``: unreachable, joint_limit or collision; ``text``;
+    ``joints`` past their limits; ``link`` and ``obstacle`` in contact)."""
+
+    solved: bool
+    positions: dict[str, float]
+    residual_mm: float
+    residual_deg: float
+    iterations: int
+    attempts: int
+    seed: str  # where the start came from: "given", "joint_states" or "zero"
+    failure: Optional[dict[str, Any]] = None
+    # Each link's pose at those positions, in the root link's frame (mm): a preview's.
+    links: dict[str, Matrix4] = field(default_factory=dict)
+
+    @classmethod
+    def read(cls, a: Args) -> SolveIkResult:
+        links_path = a.path("links")
+        links = {}
+        for link, rows in (_object(a, "links") if a.raw("links", False) is not None
+                           else {}).items():
+            check_str(link, links_path, 1 << 10, False, None, "")
+            links[link] = matrix_from(rows, f"{links_path}.{link}")
+        path = a.path("positions")
+        positions = {}
+        for joint, value in _object(a, "positions").items():
+            check_str(joint, path, 1 << 10, False, None, "")
+            positions[joint] = check_float(value, f"{path}.{joint}", float("-inf"),
+                                           float("inf"), False)
+        failure = a.raw("failure", False)
+        return cls(solved=a.opt_bool("solved", False), positions=positions,
+                   residual_mm=cast(float, a.opt_float("residual_mm", 0.0, low=0.0,
+                                                       high=float("inf"))),
+                   residual_deg=cast(float, a.opt_float("residual_deg", 0.0, low=0.0,
+                                                        high=180.0)),
+                   iterations=a.req_int("iterations", low=0, high=_COUNT_MAX),
+                   attempts=a.req_int("attempts", low=0, high=_COUNT_MAX),
+                   seed=a.req_str("seed"),
+                   failure=dict(failure) if isinstance(failure, dict) else None,
+                   links=links)

@@ -64,3 +64,25 @@ def test_the_publish_guard_judges_header_and_path_frames() -> None:
     path.header.frame_id = "/secret_room"  # judged as tf holds it: no leading '/'
     with pytest.raises(ForbiddenError, match="secret_room"):
         check(path)
+
+
+def test_motion_execute_is_a_write_judged_on_its_action_and_the_rest_are_reads() -> None:
+    """Issue 46: executing moves a robot (the writers' rule and the action globs judge it);
+    solving, planning and distances are reads; publishing a distance writes a topic."""
+    execute = {"name": "demo", "positions": {"joint_1": 0.1},
+               "action": "/arm/follow_joint_trajectory"}
+    with pytest.raises(ForbiddenError, match="read-only"):
+        _check(SecurityPolicy(read_only=True), "execute_motion", execute)
+    with pytest.raises(ForbiddenError) as caught:
+        _check(SecurityPolicy(actions=NameRules(deny=("/arm/*",))), "execute_motion", execute)
+    assert caught.value.field == "action"
+    _check(SecurityPolicy(), "execute_motion", execute)
+    with pytest.raises(ForbiddenError, match="read-only"):
+        _check(SecurityPolicy(read_only=True), "publish_distance",
+               {"name": "demo", "link": "tool_flange", "obstacle": "o", "topic": "/d"})
+    identity = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+    for op, args in (("solve_ik", {"name": "demo", "tip": "tool_flange", "target": identity}),
+                     ("plan_motion", {"name": "demo", "positions": {"joint_1": 0.1}}),
+                     ("obstacle_distances", {"name": "demo", "link": "tool_flange"}),
+                     ("set_obstacle", {"name": "demo", "obstacle": "o", "topic": "/o"})):
+        _check(SecurityPolicy(read_only=True), op, args)

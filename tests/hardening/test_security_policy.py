@@ -73,6 +73,8 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
         "call_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
         "advertise_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
         "set_robot_joints": {"name": "r", "positions": {"j": 0.1}},
+        "publish_distance": {"name": "r", "link": "tool", "obstacle": "o", "topic": "/d"},
+        "execute_motion": {"name": "r", "positions": {"j": 0.1}},
         "send_goal": {"action": "/a", "type": "control_msgs/action/GripperCommand"},
         "cancel_goal": {"action": "/a", "goal_id": "0" * 32},
         "advertise_action": {"action": "/a", "type": "control_msgs/action/GripperCommand"},

@@ -157,6 +157,31 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
     c.SeekPlayback: st.builds(c.SeekPlayback, offset=st.floats(0.0, c.MAX_SEEK_S)),
     c.SetPlaybackRate: st.builds(c.SetPlaybackRate,
                                  rate=st.floats(0.0, c.MAX_PLAYBACK_RATE, exclude_min=True)),
+    c.SolveIk: st.builds(
+        c.SolveIk, name=robot_names, tip=st.text(min_size=1, max_size=20), target=matrices,
+        seed=st.none() | st.dictionaries(st.text(min_size=1, max_size=20), finite,
+                                         max_size=5).map(lambda d: tuple(d.items())),
+        collisions=st.booleans()),
+    c.SetObstacle: st.one_of(
+        st.builds(c.SetObstacle, name=robot_names, obstacle=robot_names, topic=ros_names),
+        st.builds(c.SetObstacle, name=robot_names, obstacle=robot_names, topic=ros_names,
+                  type=st.just("Mesh"), frame=st.none() | frames)),
+    c.RemoveObstacle: st.builds(c.RemoveObstacle, name=robot_names, obstacle=robot_names),
+    c.ObstacleDistances: st.builds(c.ObstacleDistances, name=robot_names,
+                                   link=st.text(min_size=1, max_size=20)),
+    c.PublishDistance: st.builds(c.PublishDistance, name=robot_names,
+                                 link=st.text(min_size=1, max_size=20), obstacle=robot_names,
+                                 topic=ros_names, rate_hz=st.floats(0.0, 1000.0)),
+    c.PlanMotion: st.builds(
+        c.PlanMotion, name=robot_names, resolution=st.floats(0.001, 1.0),
+        positions=st.dictionaries(st.text(min_size=1, max_size=20), finite, min_size=1,
+                                  max_size=5).map(lambda d: tuple(d.items()))),
+    c.ExecuteMotion: st.builds(
+        c.ExecuteMotion, name=robot_names, action=ros_names, resolution=st.floats(0.001, 1.0),
+        positions=st.dictionaries(st.text(min_size=1, max_size=20), finite, min_size=1,
+                                  max_size=5).map(lambda d: tuple(d.items())),
+        duration_s=st.none() | st.floats(0.1, 100.0), timeout=st.floats(0.1, 300.0),
+        result_timeout=st.none() | st.floats(0.1, 1000.0)),
     c.SetRobotJoints: st.builds(
         c.SetRobotJoints, name=robot_names, topic=ros_names,
         positions=st.dictionaries(st.text(min_size=1, max_size=20), finite,

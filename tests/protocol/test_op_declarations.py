@@ -66,6 +66,16 @@ EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "set_playback_rate": ({"rate": 2.0}, set()),
     "set_robot_joints": ({"name": "r", "positions": {"j": 0.5}, "topic": "/PSM1/joint_states"},
                          {("topic", "topic", "/PSM1/joint_states")}),
+    "solve_ik": ({"name": "r", "tip": "tool", "target": IDENTITY}, set()),  # a read
+    "set_obstacle": ({"name": "r", "obstacle": "skull", "topic": "/skull"},
+                     {("topic", "topic", "/skull")}),
+    "remove_obstacle": ({"name": "r", "obstacle": "skull"}, set()),
+    "obstacle_distances": ({"name": "r", "link": "tool"}, set()),
+    "publish_distance": ({"name": "r", "link": "tool", "obstacle": "skull", "topic": "/d"},
+                         {("topic", "topic", "/d")}),
+    "plan_motion": ({"name": "r", "positions": {"j": 0.5}}, set()),
+    "execute_motion": ({"name": "r", "positions": {"j": 0.5}, "action": "/arm/fjt"},
+                       {("action", "action", "/arm/fjt")}),
     "call_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
                      {("service", "service", "/s")}),
     "advertise_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
@@ -151,7 +161,8 @@ def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
         "set_robot_joints", "send_goal", "cancel_goal", "advertise_action", "action_feedback",
         "start_recording", "stop_recording",
         # A player's clock: every client of the player sees what these change.
-        "pause_playback", "resume_playback", "seek_playback", "set_playback_rate"}
+        "pause_playback", "resume_playback", "seek_playback", "set_playback_rate",
+        "publish_distance", "execute_motion"}
 
 
 def test_a_publisher_declares_its_frame_and_labels_topic() -> None:

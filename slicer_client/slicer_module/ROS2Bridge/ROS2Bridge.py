@@ -146,7 +146,12 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                 (ui.sendNodeSelector, "currentNodeChanged(vtkMRMLNode*)", self.onSendNodeChanged),
                 (ui.sendButton, "clicked(bool)", self.onSend),
                 (ui.showJointsButton, "clicked(bool)", self.onShowJoints),
-                (ui.recordButton, "toggled(bool)", self.onRecordToggled)):
+                (ui.recordButton, "toggled(bool)", self.onRecordToggled),
+                (ui.motionSolveButton, "clicked(bool)", self.onSolveIk),
+                (ui.motionFollowCheckBox, "toggled(bool)", self.onFollowToggled),
+                (ui.motionPathButton, "clicked(bool)", self.onPreviewPath),
+                (ui.motionExecuteButton, "clicked(bool)", self.onExecuteMotion),
+                (ui.addObstacleButton, "clicked(bool)", self.onAddObstacle)):
             button.connect(signal, handler)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
                          self.onSceneStartClose)
@@ -217,6 +222,7 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
             wasBlocked = ui.recordButton.blockSignals(True)
             ui.recordButton.checked = recording
             ui.recordButton.blockSignals(wasBlocked)
+        ui.motionStatusLabel.text = logic.motionLine()  # a followed target's newest solve
         active = logic.isActive()
         if ui.connectButton.checked != active:  # e.g. after a scene close
             wasBlocked = ui.connectButton.blockSignals(True)
@@ -319,6 +325,46 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
         with slicer.util.tryWithErrorDisplay("Failed to move the robot."):
             values = {name: float(widget.value) for name, widget in self._sliderWidgets.items()}
             self.logic.setJoints(self._slidersRobot, self._sliders, values)
+
+    def onSolveIk(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to solve for the target.",
+                                             waitCursor=True):
+            self.logic.solveIk(self.ui.robotCombo.currentText,
+                               self.ui.motionTargetSelector.currentNode(),
+                               self.ui.motionTipEdit.text.strip())
+        self.ui.motionStatusLabel.text = self.logic.motionStatus
+
+    def onFollowToggled(self, on: bool) -> None:
+        if not on:
+            self.logic.stopFollowing()
+            return
+        with slicer.util.tryWithErrorDisplay("Failed to follow the target."):
+            try:
+                self.logic.followTarget(self.ui.robotCombo.currentText,
+                                        self.ui.motionTargetSelector.currentNode(),
+                                        self.ui.motionTipEdit.text.strip())
+            except Exception:
+                self.ui.motionFollowCheckBox.checked = False
+                raise
+        self.ui.motionStatusLabel.text = self.logic.motionStatus
+
+    def onPreviewPath(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to plan the path.", waitCursor=True):
+            self.logic.previewPath(self.ui.robotCombo.currentText)
+        self.ui.motionStatusLabel.text = self.logic.motionStatus
+
+    def onExecuteMotion(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to execute the motion.", waitCursor=True):
+            self.logic.executeMotion(self.ui.robotCombo.currentText)
+        self.ui.motionStatusLabel.text = self.logic.motionStatus
+
+    def onAddObstacle(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to make the model an obstacle.",
+                                             waitCursor=True):
+            name = self.logic.addObstacle(self.ui.robotCombo.currentText,
+                                          self.ui.obstacleSelector.currentNode(),
+                                          self.ui.obstacleFrameEdit.text.strip())
+            self.ui.motionStatusLabel.text = f"Obstacle {name} added"
 
     def _refreshRobots(self) -> None:
         self.ui.robotCombo.clear()

@@ -30,6 +30,8 @@ from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER, NodePlan,
                                       vertex_per_point)
 from slicer_client.send_plan import KIND_ORDER, plan_send
 
+from .motion import (OBSTACLE_TOPICS, OBSTACLE_TYPE, MotionPreview, ik_status, obstacle_name,
+                     target_matrix)
 from .parameters import ROS2BridgeParameterNode
 from .scene_nodes import SceneNodes, register_node_classes
 from .transport import ConnectorTransport
@@ -39,6 +41,8 @@ __all__ = ["CONNECTOR_NAME", "CONNECT_WAIT_S", "SPIN_INTERVAL_MS", "ROS2BridgeLo
 
 CONNECTOR_NAME = "ROS2BridgeConnector"
 SPIN_INTERVAL_MS = 20  # the reference spins its node at 50 Hz
+PATH_PREVIEW_SAMPLES = 50  # configurations of a planned path the preview scrubs through
+MOTION_INTERVAL_MS = 33  # a dragged target is solved again at most this often (30 Hz)
 CONNECT_WAIT_S = 10.0  # a script's first reference call waits this long for the daemon
 log = logging.getLogger("ROS2Bridge")
 
@@ -68,6 +72,20 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._timer = qt.QTimer()
         self._timer.setInterval(200)  # new connector nodes are placed within 0.2 s
         self._timer.connect("timeout()", self._onTimer)
+        # Motion (issue 46): the followed target, re-solved at the display's rate.
+        self._previews: dict[str, MotionPreview] = {}
+        self._following: Optional[tuple[str, Any, str]] = None  # robot, target node, tip
+        self._targetMoved = False
+        self.motionStatus = ""
+        self.lastIk: Optional[c.SolveIkResult] = None
+        # model node ID -> (robot, topic, frame, obstacle); those moved since last sent
+        self._obstacles: dict[str, tuple[str, str, str, str]] = {}
+        self._obstaclesMoved: set[str] = set()
+        self.execution: Any = None  # the GoalHandle of the latest executeMotion
+        self.pathBrowser: Any = None  # the sequence browser of the latest previewPath
+        self._motionTimer = qt.QTimer()
+        self._motionTimer.setInterval(MOTION_INTERVAL_MS)
+        self._motionTimer.connect("timeout()", self._onMotionTimer)
         self._spinTimer = qt.QTimer()
         self._spinTimer.setInterval(SPIN_INTERVAL_MS)
         self._spinTimer.connect("timeout()", self.Spin)
@@ -409,6 +427,160 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         if not isinstance(robot, Robot):
             raise RuntimeError(f"no robot {robotName!r}: load it first")
         return robot
+
+    # --- motion from Slicer (issue 46) -------------------------------------------------
+    def solveIk(self, robotName: str, targetNode: Any, tip: str) -> c.SolveIkResult:
+        """Solve for `tip` of the robot at `targetNode` (a transform node or a markups
+        point, anywhere in the scene) and place the robot's preview at the answer: green
+        when solved, red at the best attempt when not. The robot does not move. Returns the
+        daemon's answer; `motionStatus` says it in words."""
+        robot = self._robot(robotName)
+        preview = self._previews.get(robotName)
+        if preview is None:
+            preview = self._previews[robotName] = MotionPreview(slicer.mrmlScene, robotName)
+        target_world = target_matrix(targetNode)
+        if preview.root is None:  # once per robot: which scene transform is its root link
+            preview.find_root(robot.ik(np.eye(4), tip=tip).links)
+        # The daemon takes the target in the root link's frame.
+        root_world = preview.root_world()
+        result = robot.ik(np.linalg.inv(root_world) @ target_world, tip=tip)
+        preview.show(result.links, root_world, result.solved)
+        self.lastIk = result
+        self.motionStatus = ik_status(tip, result)
+        return result
+
+    def previewPath(self, robotName: str, positions: Optional[Mapping[str, float]] = None,
+                    *, samples: int = PATH_PREVIEW_SAMPLES) -> dict[str, Any]:
+        """Plan the joint-space path to `positions` (default: the last solve's) and show
+        it as a sequence the preview robot scrubs through (Slicer's sequence browser
+        ``<robot>:preview path``, index: time in s). A read: nothing moves. Returns the
+        plan (``clear``, ``collision`` naming the link and the obstacle when it is not)."""
+        if positions is None:
+            if self.lastIk is None or not self.lastIk.solved:
+                raise RuntimeError("nothing to plan to: solve for a target first")
+            positions = self.lastIk.positions
+        robot = self._robot(robotName)
+        preview = self._previews.get(robotName)
+        if preview is None or preview.root is None:
+            raise RuntimeError("solve for a target first: the preview robot shows the path")
+        plan = robot.plan(positions, preview=samples)
+        self.pathBrowser = preview.show_path(plan["preview"], preview.root_world())
+        collision = plan.get("collision") or {}
+        self.motionStatus = (f"Path planned: {plan['checked']} configurations clear, "
+                             f"{plan['duration_s']:.1f} s" if plan["clear"] else
+                             f"Path blocked: link {collision.get('link')!r} touches "
+                             f"obstacle {collision.get('obstacle')!r}")
+        return plan
+
+    def followTarget(self, robotName: str, targetNode: Any, tip: str) -> None:
+        """Solve again whenever `targetNode` moves, at most once per display frame (the
+        newest position wins); `stopFollowing` ends it."""
+        self.stopFollowing()
+        self.solveIk(robotName, targetNode, tip)  # refuses a bad robot, target or tip now
+        self._following = (robotName, targetNode, tip)
+        event = (slicer.vtkMRMLTransformNode.TransformModifiedEvent
+                 if targetNode.IsA("vtkMRMLTransformNode")
+                 else slicer.vtkMRMLMarkupsNode.PointModifiedEvent)
+        self.addObserver(targetNode, event, self._onTargetMoved)
+        self._motionTimer.start()
+
+    def stopFollowing(self) -> None:
+        if self._following is not None:
+            target = self._following[1]
+            for event in (slicer.vtkMRMLTransformNode.TransformModifiedEvent,
+                          slicer.vtkMRMLMarkupsNode.PointModifiedEvent):
+                if self.hasObserver(target, event, self._onTargetMoved):
+                    self.removeObserver(target, event, self._onTargetMoved)
+        self._following = None
+        self._targetMoved = False
+        if not self._obstacles:
+            self._motionTimer.stop()
+
+    def removePreview(self, robotName: str) -> None:
+        preview = self._previews.pop(robotName, None)
+        if preview is not None:
+            preview.remove()
+
+    def addObstacle(self, robotName: str, modelNode: Any, frame: str) -> str:
+        """Make a model of the scene an obstacle of the robot: sent to ROS as a Marker
+        (``/slicer/obstacles/<name>``, its surface in the scene's world, which is `frame`:
+        the frame the robot is shown in), and sent again whenever it moves or changes, at
+        most every 33 ms. Solving, planning and executing then keep clear of it; returns
+        the obstacle's name (the model's, made a ROS name)."""
+        if modelNode is None or not modelNode.IsA("vtkMRMLModelNode"):
+            raise ValueError("choose a model node as the obstacle")
+        name = obstacle_name(modelNode.GetName())
+        topic = f"{OBSTACLE_TOPICS}/{name}"
+        robot = self._robot(robotName)
+        robot.set_obstacle(name, topic, type="Marker")  # sent as OBSTACLE_TYPE below
+        self.sendToROS(modelNode, topic, frame, OBSTACLE_TYPE)
+        self._obstacles[modelNode.GetID()] = (robotName, topic, frame, name)
+        for event in (slicer.vtkMRMLTransformableNode.TransformModifiedEvent,
+                      slicer.vtkMRMLModelNode.MeshModifiedEvent):
+            if not self.hasObserver(modelNode, event, self._onObstacleMoved):
+                self.addObserver(modelNode, event, self._onObstacleMoved)
+        self._motionTimer.start()
+        return name
+
+    def removeObstacle(self, modelNode: Any) -> None:
+        entry = self._obstacles.pop(modelNode.GetID(), None)
+        if entry is None:
+            return
+        for event in (slicer.vtkMRMLTransformableNode.TransformModifiedEvent,
+                      slicer.vtkMRMLModelNode.MeshModifiedEvent):
+            if self.hasObserver(modelNode, event, self._onObstacleMoved):
+                self.removeObserver(modelNode, event, self._onObstacleMoved)
+        self._robot(entry[0]).remove_obstacle(entry[3])
+
+    def executeMotion(self, robotName: str, positions: Optional[Mapping[str, float]] = None,
+                      *, action: str = c.DEFAULT_TRAJECTORY_ACTION,
+                      durationS: Optional[float] = None) -> Any:  # noqa: N803
+        """Move the robot to `positions` (default: the last solve's, when it solved) along
+        the planned joint-space path, through its FollowJointTrajectory `action`. A path
+        that touches an obstacle is refused before anything moves (the error names the
+        link and the obstacle). A write. Returns the goal's handle (also `execution`)."""
+        if positions is None:
+            if self.lastIk is None or not self.lastIk.solved:
+                raise RuntimeError("nothing to execute: solve for a target first")
+            positions = self.lastIk.positions
+        self.execution = self._robot(robotName).execute(positions, action=action,
+                                                        duration_s=durationS)
+        self.motionStatus = f"Executing on {action}"
+        return self.execution
+
+    def motionLine(self) -> str:
+        """The Motion section's status: the last solve, or the execution and its state."""
+        if self.execution is not None and self.motionStatus.startswith("Executing"):
+            return f"{self.motionStatus}: {self.execution.status}"
+        return self.motionStatus
+
+    def _onTargetMoved(self, caller: Any = None, event: Any = None) -> None:
+        self._targetMoved = True  # solved at the next tick: drags come faster than frames
+
+    def _onObstacleMoved(self, caller: Any = None, event: Any = None) -> None:
+        if caller is not None:
+            self._obstaclesMoved.add(caller.GetID())  # sent at the next tick
+
+    def _onMotionTimer(self) -> None:
+        moved, self._obstaclesMoved = self._obstaclesMoved, set()
+        for nodeId in moved:
+            entry = self._obstacles.get(nodeId)
+            node = slicer.mrmlScene.GetNodeByID(nodeId)
+            if entry is None or node is None:
+                continue
+            try:
+                self.sendToROS(node, entry[1], entry[2], OBSTACLE_TYPE)
+            except Exception as error:  # noqa: BLE001 - the others still go
+                log.exception("sending the moved obstacle %s failed", entry[3])
+                self.problems.append(f"The obstacle {entry[3]} was not sent again: {error}")
+        if self._following is None or not self._targetMoved:
+            return
+        self._targetMoved = False
+        try:
+            self.solveIk(*self._following)
+        except Exception as error:  # noqa: BLE001 - a failed solve must not stop the timer
+            log.exception("solving for the moved target failed")
+            self.motionStatus = f"Not solved: {error}"
 
     def jointSliders(self, robotName: str) -> list[JointSlider]:
         """One slider spec per actuated joint of a loaded robot (mimic joints follow)."""

@@ -1,0 +1,46 @@
+"""Robots and an obstacle for the motion tests through a daemon (issue 46)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+import slicer_client
+from protocol.commands import ErrorCode
+from support import wait_until
+
+RADIUS = 0.05  # the tool: a sphere 0.5 m from the swing axis
+ARM_URDF = """<robot name="swing_arm">
+  <link name="base"/><link name="arm"/>
+  <link name="tool"><collision><geometry><sphere radius="0.05"/></geometry></collision></link>
+  <joint name="swing" type="revolute"><parent link="base"/><child link="arm"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="mount" type="fixed"><parent link="arm"/><child link="tool"/>
+    <origin xyz="0.5 0 0"/></joint>
+</robot>"""
+BARE_URDF = """<robot name="bare"><link name="base"/><link name="tip"/>
+  <joint name="j" type="revolute"><parent link="base"/><child link="tip"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>"""
+
+
+def box_mm() -> Any:
+    """A 10 cm block (trimesh), in mm, centred on its frame."""
+    import trimesh
+
+    box = trimesh.creation.box((100.0, 100.0, 100.0))
+    assert np.allclose(box.bounds, [[-50.0] * 3, [50.0] * 3])
+    return box
+
+
+def wait_loaded(robot: Any) -> None:
+    """Until the daemon has the robot's URDF (describe_robot_joints answers)."""
+    def described() -> bool:
+        try:
+            robot.joints(refresh=True)
+        except slicer_client.CommandRefusedError as error:
+            assert error.code == ErrorCode.UNAVAILABLE, error
+            return False
+        return True
+    wait_until(described, timeout=30, what=f"robot {robot.name} loaded")
