@@ -109,8 +109,9 @@ class Daemon:
         self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
                                      package_paths=package_paths,
                                      max_model_bytes=policy.max_marker_bytes)
-        self.recordings = RecordBridges(self.ros, topics=self.topics, tf=self.tf,
-                                        markers=self.markers, robots=self.robots)
+        self.recordings = RecordBridges(
+            self.ros, sources=[self.tf, self.topics, self.markers, self.robots],
+            meshes=self.robots)
         # Motion computes with the robots' models: handed the robots' public lookup only.
         self.motion = MotionBridges(self.ros, robots=self.robots.loaded_model,
                                     frames=self.tf.buffer.lookup,

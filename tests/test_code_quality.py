@@ -42,8 +42,11 @@ def test_the_daemon_starts_without_the_mesh_libraries() -> None:
     assert out.stdout.strip() == "[]", out.stderr
 
 
+# Shared machinery, and the player (bridge/playback), which like bridge/daemon.py wires
+# capabilities together into a server of its own.
 CAPABILITIES = sorted(p.parent.name for p in (REPO / "bridge").glob("*/__init__.py")
-                      if p.parent.name not in ("core", "ros", "codecs", "interfaces"))
+                      if p.parent.name not in ("core", "ros", "codecs", "interfaces",
+                                               "playback"))
 
 
 def _imports(path: Path) -> set[str]:

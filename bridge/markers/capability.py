@@ -944,6 +944,10 @@ class MarkerServing:
             "model_bytes": self.budget.of_topic(sub.topic)}
         return out
 
+    def recorded_topics(self) -> dict[str, Optional[str]]:
+        """What a recording takes from here (any thread): every marker topic."""
+        return {topic: sub.request.ros_type for topic, sub in tuple(self.subscriptions.items())}
+
     def describe(self) -> list[dict[str, Any]]:
         return [self._describe(sub) for sub in self.subscriptions.values()]
 

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
+from bridge.core.content_guards import TF_MESSAGE_TYPE
 from bridge.codecs.base import TypeCodec, stream_message
 from bridge.codecs.catalog import SPECIFIC_CODECS
 from bridge.codecs.errors import CodecError
@@ -64,7 +65,6 @@ __all__ = ["PlayOptions", "Player", "PlayerGraph", "run_player"]
 log = logging.getLogger(__name__)
 
 _NS_PER_S = 1_000_000_000
-TF_TYPE = "tf2_msgs/msg/TFMessage"
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 DESCRIPTION_TYPE = "std_msgs/msg/String"
 # How far back a seek looks for each frame's latest transform and each topic's joint state
@@ -357,7 +357,7 @@ class Player:
         names = DeviceNameRegistry()
         topics = bag.topics()
         self._tf_topics = {t: t.endswith("tf_static") for t, ty in topics.items()
-                           if ty == TF_TYPE}
+                           if ty == TF_MESSAGE_TYPE}
         self.tf = TfLookups(self.hub, names)
         package_paths, attachment_files = _extract_attachments(bag, workdir)
         package_paths.update({name: Path(folder) for name, folder in options.package_paths})

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping, Optional
+from typing import TYPE_CHECKING, Any, Mapping, Optional, Protocol, Sequence
 
 from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Handler, Result
@@ -26,17 +26,26 @@ from protocol.commands import (JOINT_STATE_TYPE, CommandFailedError, ErrorCode, 
                                Op, RecordingStatus, StartRecording, StopRecording)
 
 if TYPE_CHECKING:
-    from bridge.markers.capability import MarkerBridges
-    from bridge.robots.capability import RobotBridges
     from bridge.ros.ros_node import RosNode
-    from bridge.tf.capability import TfBridges
-    from bridge.topics.capability import TopicBridges
 
-__all__ = ["RecordBridges"]
+
+class RecordedTopics(Protocol):
+    """A capability whose topics a recording without topics takes: what it bridges now,
+    topic -> type (any thread). The daemon hands each to `RecordBridges`."""
+
+    def recorded_topics(self) -> Mapping[str, Optional[str]]: ...
+
+
+class MeshFiles(Protocol):
+    """The robots' meshes, by their URI as the URDF writes it: a bag's attachments."""
+
+    def mesh_files(self) -> dict[str, Path]: ...
+
+
+__all__ = ["MeshFiles", "RecordBridges", "RecordedTopics"]
 
 log = logging.getLogger(__name__)
 
-TF_TYPE = "tf2_msgs/msg/TFMessage"
 FINISHED_KEPT = 16  # finished recordings whose last status stays asked for
 _PATH_CODES = {"missing": ErrorCode.NOT_FOUND, "exists": ErrorCode.ALREADY_EXISTS,
                "unavailable": ErrorCode.NOT_SUPPORTED}
@@ -45,29 +54,22 @@ _PATH_CODES = {"missing": ErrorCode.NOT_FOUND, "exists": ErrorCode.ALREADY_EXIST
 class RecordBridges:
     """Recordings by path (running, and the last `FINISHED_KEPT` finished)."""
 
-    def __init__(self, ros: RosNode, *, topics: TopicBridges, tf: TfBridges,
-                 markers: MarkerBridges, robots: RobotBridges) -> None:
+    def __init__(self, ros: RosNode, *, sources: Sequence[RecordedTopics],
+                 meshes: MeshFiles) -> None:
         self._ros = ros
-        self._topics = topics
-        self._tf = tf
-        self._markers = markers
-        self._robots = robots
+        self._sources = tuple(sources)
+        self._meshes = meshes
         self.running: dict[str, Recorder] = {}
         self._opening: set[str] = set()  # started, the file not open yet
         self._finished: dict[str, dict[str, Any]] = {}
 
     def bridged(self) -> dict[str, Optional[str]]:
         """What the daemon bridges now, topic -> type (any thread: copies of the dicts)."""
-        # tf (what the buffer reads), and joint states even before a robot is loaded.
-        wanted: dict[str, Optional[str]] = {topic: TF_TYPE for topic in self._tf.topics}
-        wanted[self._ros.resolve_topic("joint_states")] = JOINT_STATE_TYPE
-        for topic, bridge in tuple(self._topics.subscribers.items()):
-            wanted[topic] = bridge.codec.ros_type
-        for topic, publisher in tuple(self._topics.publishers.items()):
-            wanted[topic] = publisher.codec.ros_type
-        for topic, sub in tuple(self._markers.subscriptions.items()):
-            wanted[topic] = sub.request.ros_type
-        wanted.update(self._robots.recorded_topics())
+        # Joint states even before a robot is loaded; then what each capability bridges.
+        wanted: dict[str, Optional[str]] = {
+            self._ros.resolve_topic("joint_states"): JOINT_STATE_TYPE}
+        for source in self._sources:
+            wanted.update(source.recorded_topics())
         return wanted
 
     # ------------------------------------------------------------------ ops
@@ -100,7 +102,7 @@ class RecordBridges:
                                                           ErrorCode.OUT_OF_RANGE)) from None
         wanted = (lambda: dict.fromkeys(topics)) if topics else self.bridged
         recorder = Recorder(self._ros, bag, wanted,
-                            attachments=(dict if topics else self._robots.mesh_files))
+                            attachments=(dict if topics else self._meshes.mesh_files))
         try:
             recorder.start()
         except BaseException:

@@ -47,7 +47,7 @@ import numpy.typing as npt
 from bridge.codecs.cdr import CdrError, read_tf_message
 from bridge.codecs.fast import pack_transform, transform_body
 
-from bridge.core.content_guards import ContentGuard
+from bridge.core.content_guards import TF_MESSAGE_TYPE, ContentGuard
 from bridge.core.dispatch import Created, Handler
 from bridge.core.hub import Hub, Replier
 from bridge.core.logging_limits import RateLimitedLog
@@ -440,6 +440,10 @@ class TfLookups:
     def topics(self) -> tuple[str, str]:
         """The tf and tf_static topics the buffer reads (fully qualified)."""
         return self._tf_topic, self._tf_static_topic
+
+    def recorded_topics(self) -> dict[str, Optional[str]]:
+        """What a recording takes from tf: the topics the buffer reads."""
+        return {topic: TF_MESSAGE_TYPE for topic in self.topics}
 
     def resolve_client_frame(self, frame: str, field: str) -> str:
         """A request's frame id (`Op.client_frames`) -> the buffer's; the dispatcher maps

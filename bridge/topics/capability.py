@@ -728,6 +728,15 @@ class TopicBridges:
             GetLastMessage: lambda request, _: self.get_last_message(request),
         }
 
+    def recorded_topics(self) -> dict[str, Optional[str]]:
+        """What a recording takes from here (any thread): every subscribed topic and
+        every topic clients publish on, with its type."""
+        topics: dict[str, Optional[str]] = {
+            topic: bridge.codec.ros_type for topic, bridge in tuple(self.subscribers.items())}
+        topics.update((topic, publisher.codec.ros_type)
+                      for topic, publisher in tuple(self.publishers.items()))
+        return topics
+
     def describe(self) -> list[dict[str, Any]]:
         bridges: list[SubscriberBridge | PublisherBridge] = [*self.subscribers.values(),
                                                             *self.publishers.values()]
