@@ -204,7 +204,7 @@ def no_ros(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
 
 
 @pytest.fixture(scope="module")
-def demo() -> tuple[str, str]:
+def demo_files() -> tuple[str, str]:
     """The demo robot's URDF text and its package folder (meshes by --package-path)."""
     from bridge.robots.demo import demo_urdf_path
     from bridge.robots.demo.urdf import DEMO_PACKAGE
@@ -214,7 +214,8 @@ def demo() -> tuple[str, str]:
 
 
 @pytest.fixture(scope="module")
-def robot_bag(tmp_path_factory: pytest.TempPathFactory, demo: tuple[str, str]) -> "RobotBag":
+def robot_bag(tmp_path_factory: pytest.TempPathFactory,
+              demo_files: tuple[str, str]) -> "RobotBag":
     from bags import write_robot_bag
 
-    return write_robot_bag(tmp_path_factory.mktemp("bags") / "robot", demo[0])
+    return write_robot_bag(tmp_path_factory.mktemp("bags") / "robot", demo_files[0])

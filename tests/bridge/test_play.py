@@ -83,12 +83,12 @@ def test_the_no_ros_guard_refuses_rclpy(no_ros: dict[str, str]) -> None:
 
 def test_a_rosbags_bag_plays_into_a_raw_reader_without_ros(
         processes: Processes, no_ros: dict[str, str], robot_bag: RobotBag,
-        demo: tuple[str, str], raw_reader: list[RawReader]) -> None:
+        demo_files: tuple[str, str], raw_reader: list[RawReader]) -> None:
     """Paused 1.2 s in: the robot's links at forward kinematics of the joint state then,
     under the bag's world -> base_link; the image then, byte for byte; the devices named
     as the live daemon names them."""
     player, port = start_player(processes, no_ros, str(robot_bag.mcap), "--paused",
-                                "--start", "1.2", "--package-path", demo[1])
+                                "--start", "1.2", "--package-path", demo_files[1])
     reader = RawReader(port)
     raw_reader.append(reader)
     hello = reader.command("hello", {})
@@ -138,11 +138,11 @@ def test_a_rosbags_bag_plays_into_a_raw_reader_without_ros(
 
 def test_pause_seek_and_rate_from_the_pythonic_client(
         processes: Processes, no_ros: dict[str, str], robot_bag: RobotBag,
-        demo: tuple[str, str]) -> None:
+        demo_files: tuple[str, str]) -> None:
     """After a seek the first pose shown is the one at the seek time; pause holds the
     clock; the rate moves it that many times faster; the clock is the bag's."""
     player, port = start_player(processes, no_ros, str(robot_bag.mcap), "--paused",
-                                "--package-path", demo[1])
+                                "--package-path", demo_files[1])
     poses: list[tuple[float, np.ndarray]] = []
     lock = threading.Lock()
 

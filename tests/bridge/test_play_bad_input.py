@@ -85,10 +85,10 @@ def tool_pose(robot: Any) -> np.ndarray:
 
 def test_meshes_from_attachments_and_topics_without_a_readable_schema(
         processes: Processes, no_ros: dict[str, str], robot_bag: RobotBag,
-        demo: tuple[str, str], tmp_path: Path) -> None:
+        demo_files: tuple[str, str], tmp_path: Path) -> None:
     """Meshes come from the bag itself; a channel without schema and one whose schema does
     not parse are each named once and skipped; the robot plays to its last pose."""
-    mesh_folder = Path(demo[1].split("=", 1)[1]) / "meshes"
+    mesh_folder = Path(demo_files[1].split("=", 1)[1]) / "meshes"
     bag = rewrite(robot_bag.mcap, tmp_path / "attached.mcap",
                   extra=with_meshes_and_bad_topics(mesh_folder))
     player, port = start_player(processes, no_ros, str(bag), "--paused")
@@ -121,7 +121,7 @@ def _chunk_compressions(data: bytes) -> list[int]:
 
 def test_an_unknown_compression_and_a_corrupt_chunk_skip_their_messages_only(
         processes: Processes, no_ros: dict[str, str], robot_bag: RobotBag,
-        demo: tuple[str, str], tmp_path: Path) -> None:
+        demo_files: tuple[str, str], tmp_path: Path) -> None:
     bag = rewrite(robot_bag.mcap, tmp_path / "chunked.mcap", chunk_size=24 * 1024)
     data = bytearray(bag.read_bytes())
     names = _chunk_compressions(bytes(data))
@@ -135,7 +135,7 @@ def test_an_unknown_compression_and_a_corrupt_chunk_skip_their_messages_only(
     data[inside:inside + 64] = bytes(range(64))
     bag.write_bytes(bytes(data))
     player, port = start_player(processes, no_ros, str(bag), "--paused",
-                                "--package-path", demo[1])
+                                "--package-path", demo_files[1])
     with slicer_client.connect("127.0.0.1", port) as ros:
         robot = ros.robot("demo", fixed_frame="world")
         wait_until(lambda: robot.state == "loaded", timeout=30, what="the robot")
@@ -151,14 +151,14 @@ def test_an_unknown_compression_and_a_corrupt_chunk_skip_their_messages_only(
 
 def test_a_truncated_bag_plays_what_it_holds(
         processes: Processes, no_ros: dict[str, str], robot_bag: RobotBag,
-        demo: tuple[str, str], tmp_path: Path) -> None:
+        demo_files: tuple[str, str], tmp_path: Path) -> None:
     """A recording cut short (no summary, no index): read in one pass to where it ends,
     said so; the robot reaches a pose of the bag before the cut."""
     bag = rewrite(robot_bag.mcap, tmp_path / "cut.mcap", chunk_size=24 * 1024)
     data = bag.read_bytes()
     bag.write_bytes(data[:int(len(data) * 0.6)])
     player, port = start_player(processes, no_ros, str(bag), "--paused",
-                                "--package-path", demo[1])
+                                "--package-path", demo_files[1])
     with slicer_client.connect("127.0.0.1", port) as ros:
         robot = ros.robot("demo", fixed_frame="world")
         wait_until(lambda: robot.state == "loaded", timeout=30, what="the robot")
