@@ -15,6 +15,7 @@ import slicer
 from igtl_peer import IgtlPeer
 from protocol.liveness import HEARTBEAT_DEVICE, stream_condition
 from protocol.messages import Message, Status, String
+from scene_tools import error_of
 from slicer_client.send_plan import plan_send
 
 
@@ -26,14 +27,6 @@ def until(condition: Callable[[], bool], what: str, step: Callable[[], Any],
             raise AssertionError(f"not within {seconds} s: {what}")
         step()
         time.sleep(0.005)
-
-
-def error_of(call: Callable[[], Any]) -> list[str]:
-    try:
-        call()
-    except Exception as error:  # noqa: BLE001 - the test asserts on its type and text
-        return [type(error).__name__, str(error)]
-    return []
 
 
 def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
