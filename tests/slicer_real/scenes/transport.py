@@ -145,6 +145,28 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     connector.InvokeEvent(State.ConnectedEvent)
     out["loss"] = [event[:1] + ([event[1]] if event[0] == "up" else []) for event in seen]
 
+    # A silent link whose socket the daemon resets while the connector reconnects at once
+    # (a pulled cable put back: the daemon's knock). OpenIGTLinkIO's connection thread makes
+    # the new socket within one turn, so no Disconnected/ConnectedEvent comes; data flows
+    # on the new socket (a stream), no heartbeat (the daemon sends one after a hello only).
+    events: list[str] = []
+    for name in ("ConnectedEvent", "DisconnectedEvent"):
+        connector.AddObserver(getattr(State, name), lambda c, e, n=name: events.append(n))
+    now[0] += 3.5
+    transport.poll()  # silent: the link is lost
+    seen.clear()
+    connections = peer.connections
+    peer.kick()
+    until(lambda: peer.connections > connections, "the connector's new socket",
+          lambda: session.pump(0.01))
+    peer.send(Message("or_pose", Status(code=1, error_name="live")))
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline and not seen:
+        session.pump(0.05)
+        transport.poll()
+    out["quick_reconnect"] = {"connector_events": events, "told": list(seen),
+                              "silent": transport.silent}
+
     # Stopped: commands are refused at once.
     transport.close()
     connector.Stop()
