@@ -2,7 +2,7 @@
 `Slicer --no-main-window --python-script slicer_client/slicer_module/selftest.py`.
 Here it is only skipped (never reported as passing) unless `slicer` is importable. The
 module's code runs in a real Slicer scene in tests/slicer_real/ (its transport over
-Slicer's connector: test_transport_in_slicer.py)."""
+Slicer's connector: test_transport_and_widget_in_slicer.py)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The ROS2Bridge module's GUI file: the .ui's widgets are the ones the code names, its
 parameter fields are the parameter node's, its defaults the code's; without the client
 packages the module says what to install. The widget itself runs in a real Slicer scene
-(tests/slicer_real/test_widget_in_slicer.py: each control reaches the logic)."""
+(tests/slicer_real/test_transport_and_widget_in_slicer.py: each control reaches the logic)."""
 
 from __future__ import annotations
 

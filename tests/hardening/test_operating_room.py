@@ -253,21 +253,13 @@ def test_a_plain_connector_s_dead_link_is_reset_and_no_old_pose_comes_back(
     assert max(out.after) < FRESHNESS_S * 1000 + 1000  # no pose from before the pull
 
 
-@pytest.mark.xfail(run=False, strict=True, reason=(
-    "Found on Slicer's real connector (issue 42): after the cable is back, OpenIGTLinkIO's "
-    "client reconnects within one 100 ms turn of its connection thread "
-    "(igtlioConnector::ConnectionAcceptThreadFunction: the old socket dropped and a new one "
-    "made before its state check), so no Disconnected/ConnectedEvent reaches MRML; the "
-    "module, silent since the pull, waits for a heartbeat the daemon sends only after a "
-    "hello on the new socket, and stays 'LINK LOST' while poses flow. Not run: the wait for "
-    "the reconnect takes 3 minutes to fail. The stand-in's connector announced every "
-    "reconnect and hid this."))
 def test_the_slicer_module_notices_a_pulled_cable_and_shows_no_old_pose(
         room: Room, processes: Processes) -> None:
     """The ROS2Bridge module's own transport, over Slicer's own connector in a real scene
     (tests/peers/module_link_reader.py): the connector's socket looks connected while the
     cable is out; the daemon's heartbeat going silent tells the module, and the daemon cuts
-    its end as for any plain connector."""
+    its end as for any plain connector. Once the cable is back the connector reconnects
+    with no event (OpenIGTLinkIO); the poses on the new socket bring the module's link up."""
     reader = module_reader_on(room, processes, "module")
     out = pull_for(room, reader, DEAD_AFTER_S + 2.0)
     noticed = [(t - out.pulled, rest) for t, rest in lines(reader, "LOST")

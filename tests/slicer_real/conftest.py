@@ -92,3 +92,9 @@ class SceneRunner:
 def run_scene(slicer_python: Path, processes: Processes) -> SceneRunner:
     return SceneRunner(slicer_python, processes)
 
+
+@pytest.fixture(scope="module")
+def module_run_scene(slicer_python: Path, module_processes: Processes) -> SceneRunner:
+    """run_scene for one scene run whose result several tests of a module assert on."""
+    return SceneRunner(slicer_python, module_processes)
+

@@ -1,6 +1,7 @@
 """The module's self-test: it passes in a real Slicer scene against a daemon, checks the
-scene alone without a daemon port, fails (saying so) where no daemon listens, and skips
-cleanly (exit 2, saying why) where `slicer` imports but there is no 3D Slicer application."""
+scene alone without a daemon port, and skips cleanly (exit 2, saying why) where `slicer`
+imports but there is no 3D Slicer application. (Its failure where no daemon listens is not
+run here: it waits its own 10 s for the link first.)"""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from support import REPO, RunningDaemon, pick_free_port, scaled
+from support import REPO, RunningDaemon, scaled
 
 SELFTEST = REPO / "slicer_client" / "slicer_module" / "selftest.py"
 
@@ -19,8 +20,7 @@ def test_the_self_test_passes_in_a_real_scene(run_scene, daemon: RunningDaemon,
                                               subject_hierarchy: bool) -> None:
     """Also where nothing made subject-hierarchy items for new nodes (Slicer's Qt plugins
     do, its core does not): the module files its nodes itself."""
-    unused = pick_free_port()
-    ports = [daemon.port] if subject_hierarchy else [daemon.port, None, unused]
+    ports = [daemon.port] if subject_hierarchy else [daemon.port, None]
     got = run_scene("selftest", ports=ports, session={"subject_hierarchy": subject_hierarchy})
     passed = got["runs"][0]
     assert passed["code"] == 0, passed["stdout"] + passed["stderr"]
@@ -29,14 +29,11 @@ def test_the_self_test_passes_in_a_real_scene(run_scene, daemon: RunningDaemon,
     assert passed["stdout"].strip().endswith("ROS2Bridge self-test passed")
     if subject_hierarchy:
         return
-    scene_only, no_daemon = got["runs"][1:]
+    (scene_only,) = got["runs"][1:]
     assert scene_only["code"] == 0, scene_only["stdout"] + scene_only["stderr"]
     assert scene_only["displayed"][-2:] == [
         "Scene placement passed", "ROS2BRIDGE_TEST_PORT not set: daemon round trip skipped"]
     assert scene_only["stdout"].strip().endswith("ROS2Bridge self-test passed")
-    assert no_daemon["code"] == 1
-    assert "ROS2Bridge self-test FAILED" in no_daemon["stdout"]
-    assert f"no daemon at 127.0.0.1:{unused}" in no_daemon["stderr"]
 
 
 def test_the_self_test_skips_where_slicer_has_no_application(slicer_python: Path) -> None:

@@ -20,6 +20,7 @@ class IgtlPeer:
         self._server = socket.create_server(("127.0.0.1", 0))
         self.port: int = self._server.getsockname()[1]
         self.received: list[Message] = []
+        self.connections = 0  # accepted so far
         self._conn: Optional[socket.socket] = None
         self._lock = threading.Lock()
         self.resume()
@@ -38,6 +39,7 @@ class IgtlPeer:
             except OSError:
                 return  # closed
             self._conn = conn
+            self.connections += 1
             decoder = framing.Decoder()
             try:
                 while data := conn.recv(1 << 16):
@@ -56,6 +58,12 @@ class IgtlPeer:
     def of_type(self, type_name: str, device: str = "") -> list[Message]:
         return [m for m in list(self.received)
                 if m.type_name == type_name and (not device or m.device_name == device)]
+
+    def kick(self) -> None:
+        """Close the connection and go on listening (the connector reconnects at once)."""
+        conn = self._conn
+        if conn is not None:
+            conn.shutdown(socket.SHUT_RDWR)
 
     def drop(self) -> None:
         """Close the connection and stop listening until `resume` (the connector retries)."""

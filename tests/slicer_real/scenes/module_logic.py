@@ -6,19 +6,11 @@ and a scene close disconnecting."""
 from __future__ import annotations
 
 import json
-from typing import Any, Callable
+from typing import Any
 
 import slicer
 
-from scene_tools import nodes
-
-
-def error_of(call: Callable[[], Any]) -> str:
-    try:
-        call()
-    except Exception as error:  # noqa: BLE001 - the test asserts on its text
-        return f"{type(error).__name__}: {error}"
-    return ""
+from scene_tools import error_of, nodes
 
 
 def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:

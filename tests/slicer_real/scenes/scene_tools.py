@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import slicer
 import vtk
@@ -65,3 +65,12 @@ def repeat_until_told(session: Any, flag: str, action: Any, *, every: float = 0.
         count += 1
         session.pump(every)
     return count
+
+
+def error_of(call: Callable[[], Any]) -> str:
+    """What `call()` raised, as "TypeName: message" ("" if nothing): tests assert on it."""
+    try:
+        call()
+    except Exception as error:  # noqa: BLE001 - returned for the test to judge
+        return f"{type(error).__name__}: {error}"
+    return ""

@@ -1,7 +1,7 @@
 """The module's self-test (slicer_client/slicer_module/selftest.py, what users run inside
 3D Slicer), run in the real scene once per entry of args["ports"]: a daemon's port (scene
-placement and the round trip through Slicer's connector), a port nobody listens on (it
-fails, saying so), or None (ROS2BRIDGE_TEST_PORT unset: the scene part only)."""
+placement and the round trip through Slicer's connector), or None (ROS2BRIDGE_TEST_PORT
+unset: the scene part only)."""
 
 from __future__ import annotations
 

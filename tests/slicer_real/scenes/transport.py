@@ -15,6 +15,7 @@ import slicer
 from igtl_peer import IgtlPeer
 from protocol.liveness import HEARTBEAT_DEVICE, stream_condition
 from protocol.messages import Message, Status, String
+from scene_tools import error_of
 from slicer_client.send_plan import plan_send
 
 
@@ -26,14 +27,6 @@ def until(condition: Callable[[], bool], what: str, step: Callable[[], Any],
             raise AssertionError(f"not within {seconds} s: {what}")
         step()
         time.sleep(0.005)
-
-
-def error_of(call: Callable[[], Any]) -> list[str]:
-    try:
-        call()
-    except Exception as error:  # noqa: BLE001 - the test asserts on its type and text
-        return [type(error).__name__, str(error)]
-    return []
 
 
 def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
@@ -151,6 +144,28 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     until(lambda: len(seen) >= 2, "the link back at the listener", lambda: session.pump(0.01))
     connector.InvokeEvent(State.ConnectedEvent)
     out["loss"] = [event[:1] + ([event[1]] if event[0] == "up" else []) for event in seen]
+
+    # A silent link whose socket the daemon resets while the connector reconnects at once
+    # (a pulled cable put back: the daemon's knock). OpenIGTLinkIO's connection thread makes
+    # the new socket within one turn, so no Disconnected/ConnectedEvent comes; data flows
+    # on the new socket (a stream), no heartbeat (the daemon sends one after a hello only).
+    events: list[str] = []
+    for name in ("ConnectedEvent", "DisconnectedEvent"):
+        connector.AddObserver(getattr(State, name), lambda c, e, n=name: events.append(n))
+    now[0] += 3.5
+    transport.poll()  # silent: the link is lost
+    seen.clear()
+    connections = peer.connections
+    peer.kick()
+    until(lambda: peer.connections > connections, "the connector's new socket",
+          lambda: session.pump(0.01))
+    peer.send(Message("or_pose", Status(code=1, error_name="live")))
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline and not seen:
+        session.pump(0.05)
+        transport.poll()
+    out["quick_reconnect"] = {"connector_events": events, "told": list(seen),
+                              "silent": transport.silent}
 
     # Stopped: commands are refused at once.
     transport.close()

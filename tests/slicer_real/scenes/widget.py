@@ -8,19 +8,12 @@ from __future__ import annotations
 
 import logging
 from types import SimpleNamespace
-from typing import Any, Callable
+from typing import Any
 
 import slicer
 
+from scene_tools import error_of
 from slicer_client.joint_sliders import JointSlider
-
-
-def error_of(call: Callable[[], Any]) -> str:
-    try:
-        call()
-    except Exception as error:  # noqa: BLE001 - the test asserts on its text
-        return f"{type(error).__name__}: {error}"
-    return ""
 
 
 class Shown(logging.Handler):

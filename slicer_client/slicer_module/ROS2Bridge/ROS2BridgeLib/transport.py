@@ -63,6 +63,12 @@ class ConnectorTransport:
     keeps its socket: the daemon resets its end and knocks it once the cable is back
     (bridge/core/knock.py), and the connector then reconnects at once. (Restarting the connector
     here would start a blocking connect() with no timeout, which a later Stop() waits for.)
+    That reconnect is announced by nothing: OpenIGTLinkIO's connection thread makes the new
+    socket within one turn (igtlioConnector::ConnectionAcceptThreadFunction), before it
+    checks its state, so no Disconnected/ConnectedEvent comes, and the daemon sends a new
+    socket no heartbeat before a hello. So while silent, any message the connector puts into
+    its incoming nodes (a stream's value, a new node) also means a socket carries data
+    again, and the link is taken up (hello, bridges) as after a ConnectedEvent.
     """
 
     watches_silence = True
@@ -87,6 +93,8 @@ class ConnectorTransport:
         self._heard = 0.0  # when the last heartbeat came (clock)
         # When the heartbeat went missing on a socket still up (clock); None while heard.
         self._silent_since: Optional[float] = None
+        # The incoming nodes then: (how many, their newest modification time).
+        self._silent_incoming = (0, 0)
         self._heartbeat: Optional[Observer] = None  # (node, tag) of the heartbeat's STATUS node
         self.heartbeats = 0  # heard on this transport
         # Slicer's connector and scene belong to the main thread (the one that made this):
@@ -188,7 +196,9 @@ class ConnectorTransport:
             return
         now = self._clock()
         if self._silent_since is not None:
-            if self._heard > self._silent_since:  # the same socket carries data again
+            count, newest = self._incomingNow()
+            if self._heard > self._silent_since or count > self._silent_incoming[0] \
+                    or newest > self._silent_incoming[1]:  # a socket carries data again
                 try:
                     self._up()
                 except Exception:  # noqa: BLE001 - the next loss or reconnect retries
@@ -197,9 +207,18 @@ class ConnectorTransport:
         silence = now - self._heard
         if self._up_now and silence > self._dead_after:
             self._silent_since = now
+            self._silent_incoming = self._incomingNow()
             self._down(f"no heartbeat from the daemon for {silence:.1f} s: the link to "
                        f"{self.address} is down (a pulled cable?); the connector reconnects "
                        "when it is back")
+
+    def _incomingNow(self) -> tuple[int, int]:
+        """How many incoming nodes the connector has, and their newest modification time
+        (VTK's MTime): either grows only as messages come in while the link is silent (the
+        module changes an incoming node only as it arrives)."""
+        count = self.connector.GetNumberOfIncomingMRMLNodes()
+        nodes = (self.connector.GetIncomingMRMLNode(i) for i in range(count))
+        return count, max((int(n.GetMTime()) for n in nodes if n is not None), default=0)
 
     def _down(self, reason: str) -> None:
         if not self._up_now or self._listener is None:
