@@ -79,6 +79,7 @@ FrameLookup = Callable[[str, str], Any]
 GoalSender = Callable[[SendGoal, Optional[Replier]], Awaitable[dict[str, Any]]]
 
 _MAX_TRAJECTORY_POINTS = 50
+_MAX_WATCHES = 64  # publish_distance topics, all robots together
 # How long a robot's first motion request waits for its first joint state (discovery).
 _FIRST_STATE_S = 2.0
 _DEFAULT_SPEED = 0.5  # rad/s (m/s) for a joint whose URDF gives no velocity limit
@@ -164,7 +165,11 @@ class MotionBridges:
     def _robot(self, name: str) -> _Robot:
         """The motion state of robot ``name``, rebuilt when its description was reloaded
         (on the loop: it may subscribe)."""
-        source, topic, root_frame = self._lookup(name)
+        try:
+            source, topic, root_frame = self._lookup(name)
+        except CommandFailedError:
+            self._drop(name)  # removed (or not loaded any more): nothing of it stays here
+            raise
         with self._lock:
             robot = self._robots.get(name)
         if robot is not None and robot.source is source and robot.topic == topic:
@@ -180,7 +185,25 @@ class MotionBridges:
             self._robots[name] = fresh
         log.info("motion: robot %s (%d actuated joints), current state from %s", name,
                  len(fresh.model.joint_names), topic)
+        if robot is not None:  # a reloaded description keeps its obstacles
+            for obstacle in robot.obstacles.values():
+                self.set_obstacle(obstacle.request)
         return fresh
+
+    def _drop(self, name: str) -> None:
+        with self._lock:
+            robot = self._robots.pop(name, None)
+        if robot is not None:
+            self._forget(robot)
+        for topic, watch in list(self._watches.items()):
+            if watch.request.name == name:
+                self._stop_watch(topic)
+
+    def _stop_watch(self, topic: str) -> None:
+        watch = self._watches.pop(topic, None)
+        if watch is not None:
+            self._ros.destroy(watch.timer)
+            self._ros.destroy(watch.publisher)
 
     @staticmethod
     def _on_joint_state(robot: _Robot, msg: JointState) -> None:
@@ -377,10 +400,7 @@ class MotionBridges:
 
     def publish_distance(self, request: PublishDistance) -> dict[str, Any]:
         robot = self._robot(request.name)
-        old = self._watches.pop(request.topic, None)
-        if old is not None:
-            self._ros.destroy(old.timer)
-            self._ros.destroy(old.publisher)
+        self._stop_watch(request.topic)
         if request.rate_hz == 0:
             return {"name": robot.name, "topic": request.topic, "publishing": False}
         if request.obstacle not in robot.obstacles:
@@ -389,18 +409,40 @@ class MotionBridges:
                                      request.obstacle, code=ErrorCode.NOT_FOUND)
         if request.link not in robot.model.link_names:
             raise OutOfRangeError("link", f"a link of robot {robot.name!r}", request.link)
+        if len(self._watches) >= _MAX_WATCHES:
+            raise LimitReachedError("topic", f"at most {_MAX_WATCHES} distance topics",
+                                    "one more (stop one with rate_hz 0)")
         refuse_other_type(self._ros, request.topic, "std_msgs/msg/Float64", "topic")
         publisher = self._ros.node.create_publisher(Float64, request.topic, 10)
         watch = _Watch(request, publisher, None)
         watch.timer = self._ros.node.create_timer(1.0 / request.rate_hz,
-                                                  lambda: self._tick(robot, watch))
+                                                  lambda: self._tick(watch))
         self._watches[request.topic] = watch
         return {"name": robot.name, "topic": request.topic, "publishing": True,
                 "rate_hz": request.rate_hz}
 
-    def _tick(self, robot: _Robot, watch: _Watch) -> None:
-        """One distance on a watch's topic (executor thread); nothing while it cannot be
-        measured (said once in the log)."""
+    def _tick(self, watch: _Watch) -> None:
+        """One distance on a watch's topic (executor thread), for the robot of that name as
+        it is now (a reloaded description included); nothing while it cannot be measured
+        (said once in the log)."""
+        request = watch.request
+        why = ""
+        with self._lock:
+            robot = self._robots.get(request.name)
+        if robot is None:
+            why = f"robot {request.name!r} is gone"
+        else:
+            why = self._measure(robot, watch)
+        if why:
+            if why != watch.warned:
+                log.warning("motion: %s: no distance from %s to %s: %s", request.topic,
+                            request.link, request.obstacle, why)
+                watch.warned = why
+            return
+        watch.warned = ""
+
+    def _measure(self, robot: _Robot, watch: _Watch) -> str:
+        """Publish one distance on the watch's topic, or say why not."""
         request = watch.request
         why = ""
         with robot.lock:
@@ -414,14 +456,9 @@ class MotionBridges:
                     else:
                         [distance] = world.distances(robot.model.theta_of(robot.positions),
                                                      request.link)
-        if why:
-            if why != watch.warned:
-                log.warning("motion: %s: no distance from %s to %s: %s", request.topic,
-                            request.link, request.obstacle, why)
-                watch.warned = why
-            return
-        watch.warned = ""
-        watch.publisher.publish(Float64(data=distance.distance_m))
+        if not why:
+            watch.publisher.publish(Float64(data=distance.distance_m))
+        return why
 
     # ------------------------------------------------------------------ plan, execute
 
@@ -535,10 +572,8 @@ class MotionBridges:
         return {}
 
     def close(self) -> None:
-        for watch in self._watches.values():
-            self._ros.destroy(watch.timer)
-            self._ros.destroy(watch.publisher)
-        self._watches.clear()
+        for topic in list(self._watches):
+            self._stop_watch(topic)
         with self._lock:
             robots = list(self._robots.values())
             self._robots.clear()
