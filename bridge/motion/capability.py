@@ -34,6 +34,7 @@ import threading
 from dataclasses import dataclass, field
 import asyncio
 import math
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, Awaitable, Callable, Iterator, Optional
 
@@ -94,6 +95,12 @@ _JOINT_STATES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                                durability=DurabilityPolicy.VOLATILE)
 
 
+def _built(done: Any) -> None:
+    """A bug in an obstacle's build is said, not lost in its future."""
+    if not done.cancelled() and done.exception() is not None:
+        log.error("motion: an obstacle mesh failed to build", exc_info=done.exception())
+
+
 def _pose_m(translation_m: Any, quaternion_xyzw: Any) -> F64:
     """A ROS pose as a 4x4 in METRES (the protocol's conversion gives Slicer's mm)."""
     matrix = pose_to_matrix(translation_m, quaternion_xyzw)
@@ -113,6 +120,7 @@ class _Obstacle:
     pose: F64 = field(default_factory=lambda: np.eye(4))
     triangles: int = 0
     error: str = "no message yet"
+    pending: Any = None  # the newest message not built yet
 
 
 @dataclass(eq=False)
@@ -158,6 +166,8 @@ class MotionBridges:
         self._send_goal = send_goal
         self._robots: dict[str, _Robot] = {}
         self._watches: dict[str, _Watch] = {}  # by topic
+        # Obstacle meshes are read and built here, one at a time, off the ROS executor.
+        self._builder = ThreadPoolExecutor(1, thread_name_prefix="motion-obstacles")
         self._lock = threading.Lock()  # _robots: the loop adds, lanes read
 
     # ------------------------------------------------------------------ robots
@@ -332,7 +342,24 @@ class MotionBridges:
                 "type": request.type, "links": list(robot.world.links)}
 
     def _on_obstacle(self, robot: _Robot, obstacle: _Obstacle, msg: Any) -> None:
-        """A model on an obstacle's topic (executor thread): its mesh replaces the last."""
+        """A model on an obstacle's topic (executor thread): handed to the builder thread
+        (reading 100k triangles out of a message and building their hierarchy takes most of
+        a second: never on the executor, which delivers every other ROS message). Only the
+        newest message waiting is built."""
+        with self._lock:
+            queued = obstacle.pending is not None
+            obstacle.pending = msg
+        if not queued:
+            self._builder.submit(self._build, robot, obstacle).add_done_callback(_built)
+
+    def _build(self, robot: _Robot, obstacle: _Obstacle) -> None:
+        """The newest model of an obstacle into its collision world (builder thread)."""
+        from bridge.motion.collisions import mesh_bvh
+
+        with self._lock:
+            msg, obstacle.pending = obstacle.pending, None
+        if msg is None:
+            return
         if isinstance(msg, Marker):
             points = np.array([(p.x, p.y, p.z) for p in msg.points], dtype=np.float64)
             triangles = np.arange(len(points) - len(points) % 3).reshape(-1, 3)
@@ -342,20 +369,24 @@ class MotionBridges:
             frame = msg.header.frame_id
         else:
             points = np.array([(p.x, p.y, p.z) for p in msg.vertices], dtype=np.float64)
-            triangles = np.array([t.vertex_indices for t in msg.triangles], dtype=np.int64)
+            triangles = np.array([t.vertex_indices for t in msg.triangles],
+                                 dtype=np.int64).reshape(-1, 3)
             pose, frame = np.eye(4), obstacle.frame
+        try:
+            bvh = mesh_bvh(points, triangles, f"obstacle {obstacle.name!r}")
+        except MotionError as error:
+            bvh, problem = None, str(error)
         with robot.lock:
             world = robot.world
             if world is None or robot.obstacles.get(obstacle.name) is not obstacle:
                 return  # removed meanwhile
-            try:
-                world.set_obstacle(obstacle.name, points, triangles.reshape(-1, 3))
-            except MotionError as error:
-                obstacle.error = str(error)
+            if bvh is None:
+                obstacle.error = problem
                 world.obstacles.pop(obstacle.name, None)
                 log.warning("motion: robot %s: obstacle %s from %s not used: %s", robot.name,
-                            obstacle.name, obstacle.request.topic, error)
+                            obstacle.name, obstacle.request.topic, problem)
                 return
+            world.put_obstacle(obstacle.name, bvh)
             obstacle.frame, obstacle.pose = frame or robot.root_frame, pose
             obstacle.triangles, obstacle.error = len(triangles), ""
 
@@ -574,6 +605,7 @@ class MotionBridges:
     def close(self) -> None:
         for topic in list(self._watches):
             self._stop_watch(topic)
+        self._builder.shutdown(wait=False, cancel_futures=True)
         with self._lock:
             robots = list(self._robots.values())
             self._robots.clear()
