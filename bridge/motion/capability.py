@@ -200,14 +200,20 @@ class MotionBridges:
                 self.set_obstacle(obstacle.request)
         return fresh
 
+    def robot_removed(self, name: str) -> None:
+        """The robots capability removed robot ``name`` (loop): its motion state goes."""
+        self._drop(name)
+
     def _drop(self, name: str) -> None:
         with self._lock:
             robot = self._robots.pop(name, None)
+        topics = [t for t, watch in self._watches.items() if watch.request.name == name]
+        for topic in topics:
+            self._stop_watch(topic)
         if robot is not None:
+            log.info("motion: robot %s dropped (%d obstacle(s), %d distance topic(s))", name,
+                     len(robot.obstacles), len(topics))
             self._forget(robot)
-        for topic, watch in list(self._watches.items()):
-            if watch.request.name == name:
-                self._stop_watch(topic)
 
     def _stop_watch(self, topic: str) -> None:
         watch = self._watches.pop(topic, None)

@@ -150,6 +150,11 @@ def test_the_tool_distance_to_a_slicer_model(daemon: RunningDaemon, robot_dir: P
         with pytest.raises(slicer_client.CommandRefusedError) as caught:
             robot.obstacle_distances("no_link")
         assert caught.value.field == "link"
+
+        # The robot removed: its obstacles' subscriptions and its distance topic go too.
+        ros.command("remove_robot", {"name": "swing"})
+        wait_until(lambda: "motion: robot swing dropped (1 obstacle(s), 1 distance topic(s))"
+                   in daemon.child.output(), timeout=30, what="the motion state dropped")
     finally:
         ros.close()
 
