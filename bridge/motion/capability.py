@@ -156,7 +156,8 @@ class _Robot:
 
 
 class MotionBridges:
-    """solve_ik for loaded robots."""
+    """Inverse kinematics, obstacles, distances, plans and their execution for the robots
+    the robots capability loaded."""
 
     def __init__(self, ros: RosNode, *, robots: RobotLookup, frames: FrameLookup,
                  send_goal: GoalSender) -> None:
@@ -187,6 +188,7 @@ class MotionBridges:
         from bridge.motion.model import MotionModel
 
         fresh = _Robot(name, source, MotionModel(source), topic, root_frame)
+        kept = [o.request for o in robot.obstacles.values()] if robot is not None else []
         if robot is not None:
             self._forget(robot)
         fresh.subscription = self._ros.node.create_subscription(
@@ -195,9 +197,8 @@ class MotionBridges:
             self._robots[name] = fresh
         log.info("motion: robot %s (%d actuated joints), current state from %s", name,
                  len(fresh.model.joint_names), topic)
-        if robot is not None:  # a reloaded description keeps its obstacles
-            for obstacle in robot.obstacles.values():
-                self.set_obstacle(obstacle.request)
+        for request in kept:  # a reloaded description keeps its obstacles
+            self.set_obstacle(request)
         return fresh
 
     def robot_removed(self, name: str) -> None:

@@ -257,3 +257,42 @@ def test_execute_is_refused_through_an_obstacle_and_reaches_the_goal_without_it(
         assert moved == sorted(moved)
     finally:
         ros.close()
+
+
+def test_a_reloaded_robot_keeps_its_obstacles(daemon: RunningDaemon) -> None:
+    """The robot's description changes (a new URDF on its topic): motion rebuilds its model
+    and sets its obstacles again on it, so solves and distances go on avoiding them."""
+    ros = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
+    try:
+        description = ros.publisher("/reloading/robot_description", "std_msgs/msg/String",
+                                    qos={"durability": "transient_local", "depth": 1})
+        description.publish(ARM_URDF)
+        robot = ros.robot("reloading", source={"kind": "topic",
+                                               "topic": "/reloading/robot_description"})
+        wait_robot_described(robot)
+        robot.set_obstacle("block", "/reloading/block")
+        model = ros.publish_model("/reloading/block", (BOX_MM.vertices, BOX_MM.faces),
+                                  frame="base", type="visualization_msgs/msg/Marker")
+
+        def measured() -> bool:
+            robot.set_joints({"swing": 0.0}, topic="/joint_states")
+            model.send_model((BOX_MM.vertices + (300.0, 0.0, 0.0), BOX_MM.faces))
+            got = robot.obstacle_distances("tool")
+            return bool(got["distances"]) and not got["unplaced"]
+        wait_until(measured, timeout=30, what="the block measured")
+        # A new description (the tool 10 cm further out): the robot reloads.
+        description.publish(ARM_URDF.replace('xyz="0.5 0 0"', 'xyz="0.6 0 0"'))
+        wait_until(lambda: any(r["name"] == "reloading" and r["loads"] == 2 for r in
+                               ros.command("list_robots", {})["robots"]),
+                   timeout=30, what="the reload")
+        answers: list[dict[str, Any]] = []
+
+        def again() -> bool:
+            model.send_model((BOX_MM.vertices + (300.0, 0.0, 0.0), BOX_MM.faces))
+            answers.append(robot.obstacle_distances("tool"))
+            return bool(answers[-1]["distances"]) and not answers[-1]["unplaced"]
+        wait_until(again, timeout=30, what="the block measured after the reload")
+        # The block spans x 0.25..0.35 m; the tool (r 0.05) now at 0.6 m: 0.2 m away.
+        assert answers[-1]["distances"][0]["distance_mm"] == pytest.approx(200.0, abs=0.1)
+    finally:
+        ros.close()
