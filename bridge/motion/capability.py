@@ -46,6 +46,7 @@ from shape_msgs.msg import Mesh
 from std_msgs.msg import Float64
 from visualization_msgs.msg import Marker
 
+from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Handler, Result
 from bridge.core.heavy import OffLoop
 from bridge.ros.ros_node import RosNode
@@ -82,7 +83,7 @@ GoalSender = Callable[[SendGoal, Optional[Replier]], Awaitable[dict[str, Any]]]
 _MAX_TRAJECTORY_POINTS = 50
 _MAX_WATCHES = 64  # publish_distance topics, all robots together
 # How long a robot's first motion request waits for its first joint state (discovery).
-_FIRST_STATE_S = 2.0
+_FIRST_STATE_S = 5.0
 _DEFAULT_SPEED = 0.5  # rad/s (m/s) for a joint whose URDF gives no velocity limit
 
 # A model published once (latched) or streamed: reliable, and transient local takes both.
@@ -115,6 +116,7 @@ class _Obstacle:
 
     name: str
     request: SetObstacle
+    guard: ContentGuard  # the frames its client may see (a Marker names its own)
     subscription: Any = None
     frame: str = ""
     pose: F64 = field(default_factory=lambda: np.eye(4))
@@ -188,7 +190,7 @@ class MotionBridges:
         from bridge.motion.model import MotionModel
 
         fresh = _Robot(name, source, MotionModel(source), topic, root_frame)
-        kept = [o.request for o in robot.obstacles.values()] if robot is not None else []
+        kept = [(o.request, o.guard) for o in robot.obstacles.values()] if robot else []
         if robot is not None:
             self._forget(robot)
         fresh.subscription = self._ros.node.create_subscription(
@@ -197,8 +199,8 @@ class MotionBridges:
             self._robots[name] = fresh
         log.info("motion: robot %s (%d actuated joints), current state from %s", name,
                  len(fresh.model.joint_names), topic)
-        for request in kept:  # a reloaded description keeps its obstacles
-            self.set_obstacle(request)
+        for request, guard in kept:  # a reloaded description keeps its obstacles
+            self.set_obstacle(request, guard)
         return fresh
 
     def robot_removed(self, name: str) -> None:
@@ -297,6 +299,11 @@ class MotionBridges:
             if only is not None and obstacle.name != only:
                 hidden[obstacle.name] = world.obstacles.pop(obstacle.name)
                 continue
+            refusal = obstacle.guard.frame_refusal(obstacle.frame.lstrip("/"))
+            if refusal is not None:  # a Marker's frame_id its client may not see
+                unplaced.append({"obstacle": obstacle.name, "reason": refusal})
+                hidden[obstacle.name] = world.obstacles.pop(obstacle.name)
+                continue
             try:
                 if obstacle.frame.lstrip("/") == robot.root_frame:
                     frame = np.eye(4)
@@ -315,7 +322,7 @@ class MotionBridges:
 
     # ------------------------------------------------------------------ obstacles
 
-    def set_obstacle(self, request: SetObstacle) -> dict[str, Any]:
+    def set_obstacle(self, request: SetObstacle, guard: ContentGuard) -> dict[str, Any]:
         robot = self._robot(request.name)
         with robot.lock:
             if robot.world is None:
@@ -336,7 +343,7 @@ class MotionBridges:
             self._ros.destroy(old.subscription)
             with robot.lock:
                 robot.world.obstacles.pop(request.obstacle, None)
-        obstacle = _Obstacle(request.obstacle, request,
+        obstacle = _Obstacle(request.obstacle, request, guard,
                              frame=request.frame or robot.root_frame)
         kind = Marker if request.type == "Marker" else Mesh
         obstacle.subscription = self._ros.node.create_subscription(
@@ -596,7 +603,7 @@ class MotionBridges:
 
     def handlers(self) -> dict[type[Op], Handler]:
         return {SolveIk: lambda request, _: self.solve_ik(request),
-                SetObstacle: lambda request, _: self.set_obstacle(request),
+                SetObstacle: lambda request, _, guard: self.set_obstacle(request, guard),
                 RemoveObstacle: lambda request, _: self.remove_obstacle(request),
                 ObstacleDistances: lambda request, _: self.obstacle_distances(request),
                 PublishDistance: lambda request, _: self.publish_distance(request),

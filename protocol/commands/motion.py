@@ -8,7 +8,7 @@ from typing import Any
 
 from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import MISSING, ROBOT_NAME, ROS_NAME, ROS_NAME_DESC, Args
-from protocol.commands.op import ActionUse, Op, Resource, TopicUse
+from protocol.commands.op import ActionUse, FrameUse, Op, Resource, TopicUse
 from protocol.commands.results import Answered, SendGoalResult, SolveIkResult
 from protocol.commands.robots import joint_values
 from protocol.commands.values import Matrix4, matrix_from
@@ -74,13 +74,15 @@ def _obstacle(a: Args) -> str:
 
 
 @dataclass(frozen=True)
-class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False):
+class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False,
+                  content=("frames",)):
     """Make the model published on ``topic`` an obstacle of robot ``name``: a Slicer model
     sent to ROS (``publish_model``) as a visualization_msgs/Marker TRIANGLE_LIST (placed in
     its frame_id, by tf, at every query: it follows its transforms) or a shape_msgs/Mesh
     (in ``frame``, default the robot's root link). Each new message replaces the mesh.
     Robot links touching it fail solve_ik; distances to it are measured. Setting the same
-    name again replaces it; at most `MAX_OBSTACLES` per robot."""
+    name again replaces it; at most `MAX_OBSTACLES` per robot. Its frame is judged by the
+    frame globs (a Marker's as it arrives: a denied one leaves the obstacle unplaced)."""
 
     name: str
     obstacle: str
@@ -93,7 +95,10 @@ class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False):
         return OBSTACLE_TYPES[self.type]
 
     def resources(self) -> tuple[Resource, ...]:
-        return (TopicUse("topic", self.topic, self.ros_type),)
+        uses: list[Resource] = [TopicUse("topic", self.topic, self.ros_type)]
+        if self.frame:
+            uses.append(FrameUse("frame", self.frame, client_frame=False))
+        return tuple(uses)
 
     @classmethod
     def from_args(cls, a: Args) -> SetObstacle:

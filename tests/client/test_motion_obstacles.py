@@ -43,7 +43,8 @@ def robot_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def daemon(module_processes: Processes, robot_dir: Path) -> Iterator[RunningDaemon]:
-    running = start_daemon(module_processes, "--robot-dir", str(robot_dir))
+    running = start_daemon(module_processes, "--robot-dir", str(robot_dir),
+                           "--deny-frame", "secret*")
     yield running
     assert_clean_exit(running)
 
@@ -141,6 +142,12 @@ def test_the_tool_distance_to_a_slicer_model(daemon: RunningDaemon, robot_dir: P
         wait_until(refused, timeout=30, what="the flat mesh refused")
         assert "triangles with an area" in reasons[0]
 
+        # A frame the policy denies: a Mesh's frame is refused with the request (a Marker's
+        # frame_id is judged as it arrives; this client cannot publish one there anyway).
+        with pytest.raises(slicer_client.CommandRefusedError) as caught:
+            robot.set_obstacle("hidden", "/obstacles/hidden", type="Mesh", frame="secret_room")
+        assert caught.value.field == "frame" and caught.value.code == ErrorCode.FORBIDDEN
+
         # A robot with no geometry at all cannot have obstacles: refused, naming it.
         bare = ros.robot("bare", source={"kind": "file", "path": str(robot_dir / "bare.urdf")})
         wait_robot_described(bare)
@@ -196,6 +203,15 @@ def test_execute_is_refused_through_an_obstacle_and_reaches_the_goal_without_it(
         robot = ros.robot("driven", namespace="swing",  # the other test's "swing" lives on
                           source={"kind": "file", "path": str(robot_dir / "swing.urdf")})
         wait_robot_described(robot)
+        # The daemon hears the arm's joint states (discovery may take a while here).
+        def heard() -> bool:
+            try:
+                robot.plan({"swing": -1.0})
+            except slicer_client.CommandRefusedError as error:
+                assert error.code == ErrorCode.UNAVAILABLE, error
+                return False
+            return True
+        wait_until(heard, timeout=30, what="the arm's joint states heard by the daemon")
         # First to -1.0, no obstacle yet: the controller then holds it there.
         first = robot.execute({"swing": -1.0}, action=ACTION, duration_s=1.0)
         assert first.result(timeout=scaled(30))["error_code"] == 0
