@@ -35,7 +35,7 @@ COPY protocol /src/protocol
 COPY bridge /src/bridge
 COPY slicer_client /src/slicer_client
 RUN pip install --no-cache-dir \
-        pyigtl==0.3.4 yourdfpy==0.0.60 trimesh==5.2.0 pycollada==0.9.3 crcmod==1.7 \
+        pyigtl==0.3.4 yourdfpy==0.0.60 trimesh==5.2.0 pycollada==0.9.3 crcmod==1.7 pin==4.1.0 \
         mcap==1.6.0 \
     && pip install --no-cache-dir --no-deps /src
 

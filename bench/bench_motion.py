@@ -37,7 +37,9 @@ import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
 import trimesh  # noqa: E402
 
-from bridge.motion import CollisionWorld, MotionModel, solve_ik  # noqa: E402
+from bridge.motion.collisions import CollisionWorld  # noqa: E402
+from bridge.motion.ik import solve_ik  # noqa: E402
+from bridge.motion.model import MotionModel  # noqa: E402
 from bridge.robots import load_robot  # noqa: E402
 from seven_dof_urdf import SEVEN_DOF_URDF  # noqa: E402
 

@@ -116,6 +116,7 @@ class Daemon:
         self.motion = MotionBridges(self.ros, robots=self.robots.loaded_model,
                                     frames=self.tf.buffer.lookup,
                                     send_goal=self.actions.sender.send_goal)
+        self.robots.removed_listeners.append(self.motion.robot_removed)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
                                                           self.robots, self.markers,

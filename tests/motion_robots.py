@@ -6,9 +6,6 @@ from typing import Any
 
 import numpy as np
 
-import slicer_client
-from protocol.commands import ErrorCode
-from support import wait_until
 
 RADIUS = 0.05  # the tool: a sphere 0.5 m from the swing axis
 ARM_URDF = """<robot name="swing_arm">
@@ -32,15 +29,3 @@ def box_mm() -> Any:
     box = trimesh.creation.box((100.0, 100.0, 100.0))
     assert np.allclose(box.bounds, [[-50.0] * 3, [50.0] * 3])
     return box
-
-
-def wait_loaded(robot: Any) -> None:
-    """Until the daemon has the robot's URDF (describe_robot_joints answers)."""
-    def described() -> bool:
-        try:
-            robot.joints(refresh=True)
-        except slicer_client.CommandRefusedError as error:
-            assert error.code == ErrorCode.UNAVAILABLE, error
-            return False
-        return True
-    wait_until(described, timeout=30, what=f"robot {robot.name} loaded")

@@ -273,3 +273,19 @@ def assert_clean_exit(daemon: RunningDaemon) -> None:
     assert code == 0, output[-3000:]
     assert "Traceback" not in output, output[-3000:]
     assert not re.search(r" (ERROR|CRITICAL) ", output), output[-3000:]
+
+
+def wait_robot_described(robot: object, timeout: float = 30) -> None:
+    """Until the daemon has a client robot's URDF (its describe_robot_joints answers): a
+    parameter or file source may still be 'waiting' right after create_robot."""
+    from protocol.commands import ErrorCode
+
+    def described() -> bool:
+        try:
+            robot.joints(refresh=True)  # type: ignore[attr-defined]
+        except CommandRefusedError as error:
+            assert error.code == ErrorCode.UNAVAILABLE, error
+            return False
+        return True
+    wait_until(described, timeout=timeout,
+               what=f"robot {getattr(robot, 'name', '?')} loaded")

@@ -34,6 +34,7 @@ import threading
 from dataclasses import dataclass, field
 import asyncio
 import math
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, Awaitable, Callable, Iterator, Optional
 
@@ -45,6 +46,7 @@ from shape_msgs.msg import Mesh
 from std_msgs.msg import Float64
 from visualization_msgs.msg import Marker
 
+from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Handler, Result
 from bridge.core.heavy import OffLoop
 from bridge.core.threads import OnFailure, start_thread
@@ -80,8 +82,9 @@ FrameLookup = Callable[[str, str], Any]
 GoalSender = Callable[[SendGoal, Optional[Replier]], Awaitable[dict[str, Any]]]
 
 _MAX_TRAJECTORY_POINTS = 50
+_MAX_WATCHES = 64  # publish_distance topics, all robots together
 # How long a robot's first motion request waits for its first joint state (discovery).
-_FIRST_STATE_S = 2.0
+_FIRST_STATE_S = 5.0
 _DEFAULT_SPEED = 0.5  # rad/s (m/s) for a joint whose URDF gives no velocity limit
 
 # A model published once (latched) or streamed: reliable, and transient local takes both.
@@ -92,6 +95,12 @@ _OBSTACLE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 _JOINT_STATES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                                reliability=ReliabilityPolicy.BEST_EFFORT,
                                durability=DurabilityPolicy.VOLATILE)
+
+
+def _built(done: Any) -> None:
+    """A bug in an obstacle's build is said, not lost in its future."""
+    if not done.cancelled() and done.exception() is not None:
+        log.error("motion: an obstacle mesh failed to build", exc_info=done.exception())
 
 
 def _pose_m(translation_m: Any, quaternion_xyzw: Any) -> F64:
@@ -108,11 +117,13 @@ class _Obstacle:
 
     name: str
     request: SetObstacle
+    guard: ContentGuard  # the frames its client may see (a Marker names its own)
     subscription: Any = None
     frame: str = ""
     pose: F64 = field(default_factory=lambda: np.eye(4))
     triangles: int = 0
     error: str = "no message yet"
+    pending: Any = None  # the newest message not built yet
 
 
 @dataclass(eq=False)
@@ -148,7 +159,8 @@ class _Robot:
 
 
 class MotionBridges:
-    """solve_ik for loaded robots."""
+    """Inverse kinematics, obstacles, distances, plans and their execution for the robots
+    the robots capability loaded."""
 
     def __init__(self, ros: RosNode, *, robots: RobotLookup, frames: FrameLookup,
                  send_goal: GoalSender) -> None:
@@ -158,6 +170,8 @@ class MotionBridges:
         self._send_goal = send_goal
         self._robots: dict[str, _Robot] = {}
         self._watches: dict[str, _Watch] = {}  # by topic
+        # Obstacle meshes are read and built here, one at a time, off the ROS executor.
+        self._builder = ThreadPoolExecutor(1, thread_name_prefix="motion-obstacles")
         self._lock = threading.Lock()  # _robots: the loop adds, lanes read
         # pinocchio and coal take a second or more to import on a busy machine: imported
         # now, off the loop, the first motion request does not stall every client's replies
@@ -169,7 +183,11 @@ class MotionBridges:
     def _robot(self, name: str) -> _Robot:
         """The motion state of robot ``name``, rebuilt when its description was reloaded
         (on the loop: it may subscribe)."""
-        source, topic, root_frame = self._lookup(name)
+        try:
+            source, topic, root_frame = self._lookup(name)
+        except CommandFailedError:
+            self._drop(name)  # removed (or not loaded any more): nothing of it stays here
+            raise
         with self._lock:
             robot = self._robots.get(name)
         if robot is not None and robot.source is source and robot.topic == topic:
@@ -177,6 +195,7 @@ class MotionBridges:
         from bridge.motion.model import MotionModel
 
         fresh = _Robot(name, source, MotionModel(source), topic, root_frame)
+        kept = [(o.request, o.guard) for o in robot.obstacles.values()] if robot else []
         if robot is not None:
             self._forget(robot)
         fresh.subscription = self._ros.node.create_subscription(
@@ -185,7 +204,30 @@ class MotionBridges:
             self._robots[name] = fresh
         log.info("motion: robot %s (%d actuated joints), current state from %s", name,
                  len(fresh.model.joint_names), topic)
+        for request, guard in kept:  # a reloaded description keeps its obstacles
+            self.set_obstacle(request, guard)
         return fresh
+
+    def robot_removed(self, name: str) -> None:
+        """The robots capability removed robot ``name`` (loop): its motion state goes."""
+        self._drop(name)
+
+    def _drop(self, name: str) -> None:
+        with self._lock:
+            robot = self._robots.pop(name, None)
+        topics = [t for t, watch in self._watches.items() if watch.request.name == name]
+        for topic in topics:
+            self._stop_watch(topic)
+        if robot is not None:
+            log.info("motion: robot %s dropped (%d obstacle(s), %d distance topic(s))", name,
+                     len(robot.obstacles), len(topics))
+            self._forget(robot)
+
+    def _stop_watch(self, topic: str) -> None:
+        watch = self._watches.pop(topic, None)
+        if watch is not None:
+            self._ros.destroy(watch.timer)
+            self._ros.destroy(watch.publisher)
 
     @staticmethod
     def _on_joint_state(robot: _Robot, msg: JointState) -> None:
@@ -264,6 +306,11 @@ class MotionBridges:
             if only is not None and obstacle.name != only:
                 hidden[obstacle.name] = world.obstacles.pop(obstacle.name)
                 continue
+            refusal = obstacle.guard.frame_refusal(obstacle.frame.lstrip("/"))
+            if refusal is not None:  # a Marker's frame_id its client may not see
+                unplaced.append({"obstacle": obstacle.name, "reason": refusal})
+                hidden[obstacle.name] = world.obstacles.pop(obstacle.name)
+                continue
             try:
                 if obstacle.frame.lstrip("/") == robot.root_frame:
                     frame = np.eye(4)
@@ -282,7 +329,7 @@ class MotionBridges:
 
     # ------------------------------------------------------------------ obstacles
 
-    def set_obstacle(self, request: SetObstacle) -> dict[str, Any]:
+    def set_obstacle(self, request: SetObstacle, guard: ContentGuard) -> dict[str, Any]:
         robot = self._robot(request.name)
         with robot.lock:
             if robot.world is None:
@@ -303,7 +350,7 @@ class MotionBridges:
             self._ros.destroy(old.subscription)
             with robot.lock:
                 robot.world.obstacles.pop(request.obstacle, None)
-        obstacle = _Obstacle(request.obstacle, request,
+        obstacle = _Obstacle(request.obstacle, request, guard,
                              frame=request.frame or robot.root_frame)
         kind = Marker if request.type == "Marker" else Mesh
         obstacle.subscription = self._ros.node.create_subscription(
@@ -316,7 +363,24 @@ class MotionBridges:
                 "type": request.type, "links": list(robot.world.links)}
 
     def _on_obstacle(self, robot: _Robot, obstacle: _Obstacle, msg: Any) -> None:
-        """A model on an obstacle's topic (executor thread): its mesh replaces the last."""
+        """A model on an obstacle's topic (executor thread): handed to the builder thread
+        (reading 100k triangles out of a message and building their hierarchy takes most of
+        a second: never on the executor, which delivers every other ROS message). Only the
+        newest message waiting is built."""
+        with self._lock:
+            queued = obstacle.pending is not None
+            obstacle.pending = msg
+        if not queued:
+            self._builder.submit(self._build, robot, obstacle).add_done_callback(_built)
+
+    def _build(self, robot: _Robot, obstacle: _Obstacle) -> None:
+        """The newest model of an obstacle into its collision world (builder thread)."""
+        from bridge.motion.collisions import mesh_bvh
+
+        with self._lock:
+            msg, obstacle.pending = obstacle.pending, None
+        if msg is None:
+            return
         if isinstance(msg, Marker):
             points = np.array([(p.x, p.y, p.z) for p in msg.points], dtype=np.float64)
             triangles = np.arange(len(points) - len(points) % 3).reshape(-1, 3)
@@ -326,20 +390,24 @@ class MotionBridges:
             frame = msg.header.frame_id
         else:
             points = np.array([(p.x, p.y, p.z) for p in msg.vertices], dtype=np.float64)
-            triangles = np.array([t.vertex_indices for t in msg.triangles], dtype=np.int64)
+            triangles = np.array([t.vertex_indices for t in msg.triangles],
+                                 dtype=np.int64).reshape(-1, 3)
             pose, frame = np.eye(4), obstacle.frame
+        try:
+            bvh = mesh_bvh(points, triangles, f"obstacle {obstacle.name!r}")
+        except MotionError as error:
+            bvh, problem = None, str(error)
         with robot.lock:
             world = robot.world
             if world is None or robot.obstacles.get(obstacle.name) is not obstacle:
                 return  # removed meanwhile
-            try:
-                world.set_obstacle(obstacle.name, points, triangles.reshape(-1, 3))
-            except MotionError as error:
-                obstacle.error = str(error)
+            if bvh is None:
+                obstacle.error = problem
                 world.obstacles.pop(obstacle.name, None)
                 log.warning("motion: robot %s: obstacle %s from %s not used: %s", robot.name,
-                            obstacle.name, obstacle.request.topic, error)
+                            obstacle.name, obstacle.request.topic, problem)
                 return
+            world.put_obstacle(obstacle.name, bvh)
             obstacle.frame, obstacle.pose = frame or robot.root_frame, pose
             obstacle.triangles, obstacle.error = len(triangles), ""
 
@@ -384,10 +452,7 @@ class MotionBridges:
 
     def publish_distance(self, request: PublishDistance) -> dict[str, Any]:
         robot = self._robot(request.name)
-        old = self._watches.pop(request.topic, None)
-        if old is not None:
-            self._ros.destroy(old.timer)
-            self._ros.destroy(old.publisher)
+        self._stop_watch(request.topic)
         if request.rate_hz == 0:
             return {"name": robot.name, "topic": request.topic, "publishing": False}
         if request.obstacle not in robot.obstacles:
@@ -396,18 +461,40 @@ class MotionBridges:
                                      request.obstacle, code=ErrorCode.NOT_FOUND)
         if request.link not in robot.model.link_names:
             raise OutOfRangeError("link", f"a link of robot {robot.name!r}", request.link)
+        if len(self._watches) >= _MAX_WATCHES:
+            raise LimitReachedError("topic", f"at most {_MAX_WATCHES} distance topics",
+                                    "one more (stop one with rate_hz 0)")
         refuse_other_type(self._ros, request.topic, "std_msgs/msg/Float64", "topic")
         publisher = self._ros.node.create_publisher(Float64, request.topic, 10)
         watch = _Watch(request, publisher, None)
         watch.timer = self._ros.node.create_timer(1.0 / request.rate_hz,
-                                                  lambda: self._tick(robot, watch))
+                                                  lambda: self._tick(watch))
         self._watches[request.topic] = watch
         return {"name": robot.name, "topic": request.topic, "publishing": True,
                 "rate_hz": request.rate_hz}
 
-    def _tick(self, robot: _Robot, watch: _Watch) -> None:
-        """One distance on a watch's topic (executor thread); nothing while it cannot be
-        measured (said once in the log)."""
+    def _tick(self, watch: _Watch) -> None:
+        """One distance on a watch's topic (executor thread), for the robot of that name as
+        it is now (a reloaded description included); nothing while it cannot be measured
+        (said once in the log)."""
+        request = watch.request
+        why = ""
+        with self._lock:
+            robot = self._robots.get(request.name)
+        if robot is None:
+            why = f"robot {request.name!r} is gone"
+        else:
+            why = self._measure(robot, watch)
+        if why:
+            if why != watch.warned:
+                log.warning("motion: %s: no distance from %s to %s: %s", request.topic,
+                            request.link, request.obstacle, why)
+                watch.warned = why
+            return
+        watch.warned = ""
+
+    def _measure(self, robot: _Robot, watch: _Watch) -> str:
+        """Publish one distance on the watch's topic, or say why not."""
         request = watch.request
         why = ""
         with robot.lock:
@@ -421,14 +508,9 @@ class MotionBridges:
                     else:
                         [distance] = world.distances(robot.model.theta_of(robot.positions),
                                                      request.link)
-        if why:
-            if why != watch.warned:
-                log.warning("motion: %s: no distance from %s to %s: %s", request.topic,
-                            request.link, request.obstacle, why)
-                watch.warned = why
-            return
-        watch.warned = ""
-        watch.publisher.publish(Float64(data=distance.distance_m))
+        if not why:
+            watch.publisher.publish(Float64(data=distance.distance_m))
+        return why
 
     # ------------------------------------------------------------------ plan, execute
 
@@ -537,7 +619,7 @@ class MotionBridges:
 
     def handlers(self) -> dict[type[Op], Handler]:
         return {SolveIk: lambda request, _: self.solve_ik(request),
-                SetObstacle: lambda request, _: self.set_obstacle(request),
+                SetObstacle: lambda request, _, guard: self.set_obstacle(request, guard),
                 RemoveObstacle: lambda request, _: self.remove_obstacle(request),
                 ObstacleDistances: lambda request, _: self.obstacle_distances(request),
                 PublishDistance: lambda request, _: self.publish_distance(request),
@@ -551,10 +633,9 @@ class MotionBridges:
         return {}
 
     def close(self) -> None:
-        for watch in self._watches.values():
-            self._ros.destroy(watch.timer)
-            self._ros.destroy(watch.publisher)
-        self._watches.clear()
+        for topic in list(self._watches):
+            self._stop_watch(topic)
+        self._builder.shutdown(wait=False, cancel_futures=True)
         with self._lock:
             robots = list(self._robots.values())
             self._robots.clear()

@@ -191,9 +191,14 @@ class CollisionWorld:
                      pose_m: Optional[F64] = None) -> None:
         """Add or replace obstacle ``name`` (vertices in its own frame, posed by ``pose_m``
         in the robot's root link frame)."""
-        bvh = mesh_bvh(vertices_m, triangles, f"obstacle {name!r}")
+        self.put_obstacle(name, mesh_bvh(vertices_m, triangles, f"obstacle {name!r}"), pose_m)
+
+    def put_obstacle(self, name: str, bvh: coal.BVHModelOBBRSS,
+                     pose_m: Optional[F64] = None) -> None:
+        """Add or replace obstacle ``name`` from a hierarchy `mesh_bvh` built (which may
+        take a while: outside any lock a query holds)."""
         self.obstacles[name] = _Obstacle(name, bvh, self._checked_pose(pose_m, name),
-                                         int(np.asarray(triangles).shape[0]))
+                                         int(bvh.num_tris))
 
     def move_obstacle(self, name: str, pose_m: F64) -> None:
         self._obstacle(name).pose = self._checked_pose(pose_m, name)

@@ -46,7 +46,7 @@ import hashlib
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping, Optional
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Optional
 
 from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Created, Handler
@@ -179,6 +179,8 @@ class RobotServing:
                                (package_paths or {}).items()}
         self.robots: dict[str, _Robot] = {}
         self._tasks: set[asyncio.Task[None]] = set()
+        # Told a robot's name when it is removed (on the loop): what others keep of it goes.
+        self.removed_listeners: list[Callable[[str], None]] = []
 
     # ------------------------------------------------------------------ ops
 
@@ -444,6 +446,8 @@ class RobotServing:
         robot.removed = True
         if self.robots.get(robot.name) is robot:
             del self.robots[robot.name]
+            for listener in self.removed_listeners:
+                listener(robot.name)
         self._forget_links(robot, set(robot.links))
         for device, info in robot.visuals.items():
             self._hub.forget(device)

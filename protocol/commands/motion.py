@@ -6,14 +6,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from protocol.commands.errors import TooLargeError
-from protocol.commands.fields import (MAX_NAME, MISSING, ROBOT_NAME, Args, check_float,
-                                      check_str)
 from protocol.commands.errors import OutOfRangeError
-from protocol.commands.fields import ROS_NAME, ROS_NAME_DESC
-from protocol.commands.op import ActionUse, Op, Resource, TopicUse
+from protocol.commands.fields import MISSING, ROBOT_NAME, ROS_NAME, ROS_NAME_DESC, Args
+from protocol.commands.op import ActionUse, FrameUse, Op, Resource, TopicUse
 from protocol.commands.results import Answered, SendGoalResult, SolveIkResult
-from protocol.commands.robots import MAX_JOINTS
+from protocol.commands.robots import joint_values
 from protocol.commands.values import Matrix4, matrix_from
 
 __all__ = ["DEFAULT_TRAJECTORY_ACTION", "FOLLOW_JOINT_TRAJECTORY", "MAX_OBSTACLES",
@@ -61,19 +58,7 @@ class SolveIk(Op, Answered[SolveIkResult], op="solve_ik", writes=False):
 
     @classmethod
     def from_args(cls, a: Args) -> SolveIk:
-        seed = None
-        if a.raw("seed", False) is not MISSING:
-            raw = a.req_obj_raw("seed")
-            if len(raw) > MAX_JOINTS:
-                raise TooLargeError(a.path("seed"), f"at most {MAX_JOINTS} joints",
-                                    str(len(raw)))
-            pairs = []
-            for joint, value in raw.items():
-                path = f"{a.path('seed')}.{joint}"
-                check_str(joint, path, MAX_NAME, False, None, "")
-                pairs.append((joint, check_float(value, path, float("-inf"), float("inf"),
-                                                 False)))
-            seed = tuple(pairs)
+        seed = joint_values(a, "seed") if a.raw("seed", False) is not MISSING else None
         return cls(name=a.req_str("name", max_len=64, pattern=ROBOT_NAME,
                                   desc="a robot name of letters, digits and _"),
                    tip=a.req_str("tip"),
@@ -90,13 +75,15 @@ def _obstacle(a: Args) -> str:
 
 
 @dataclass(frozen=True)
-class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False):
+class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False,
+                  content=("frames",)):
     """Make the model published on ``topic`` an obstacle of robot ``name``: a Slicer model
     sent to ROS (``publish_model``) as a visualization_msgs/Marker TRIANGLE_LIST (placed in
     its frame_id, by tf, at every query: it follows its transforms) or a shape_msgs/Mesh
     (in ``frame``, default the robot's root link). Each new message replaces the mesh.
     Robot links touching it fail solve_ik; distances to it are measured. Setting the same
-    name again replaces it; at most `MAX_OBSTACLES` per robot."""
+    name again replaces it; at most `MAX_OBSTACLES` per robot. Its frame is judged by the
+    frame globs (a Marker's as it arrives: a denied one leaves the obstacle unplaced)."""
 
     name: str
     obstacle: str
@@ -109,7 +96,10 @@ class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False):
         return OBSTACLE_TYPES[self.type]
 
     def resources(self) -> tuple[Resource, ...]:
-        return (TopicUse("topic", self.topic, self.ros_type),)
+        uses: list[Resource] = [TopicUse("topic", self.topic, self.ros_type)]
+        if self.frame:
+            uses.append(FrameUse("frame", self.frame, client_frame=False))
+        return tuple(uses)
 
     @classmethod
     def from_args(cls, a: Args) -> SetObstacle:
@@ -179,19 +169,6 @@ class PublishDistance(Op, op="publish_distance", ros_names=("topic",), writes=Tr
                    rate_hz=float(rate if rate is not None else 50.0))
 
 
-def _goal(a: Args) -> tuple[tuple[str, float], ...]:
-    """The ``positions`` object: joint -> a finite position (radians, metres)."""
-    raw = a.req_obj_raw("positions")
-    if len(raw) > MAX_JOINTS:
-        raise TooLargeError(a.path("positions"), f"at most {MAX_JOINTS} joints", str(len(raw)))
-    pairs = []
-    for joint, value in raw.items():
-        path = f"{a.path('positions')}.{joint}"
-        check_str(joint, path, MAX_NAME, False, None, "")
-        pairs.append((joint, check_float(value, path, float("-inf"), float("inf"), False)))
-    return tuple(pairs)
-
-
 def _resolution(a: Args) -> float:
     value = a.opt_float("resolution", 0.01, low=0.0, high=_MAX_RESOLUTION, low_open=True)
     return float(value if value is not None else 0.01)
@@ -221,7 +198,8 @@ class PlanMotion(Op, op="plan_motion", writes=False):
 
     @classmethod
     def from_args(cls, a: Args) -> PlanMotion:
-        return cls(name=_robot(a), positions=_goal(a), resolution=_resolution(a),
+        return cls(name=_robot(a), positions=joint_values(a, "positions"),
+                   resolution=_resolution(a),
                    preview=int(a.opt_int("preview", 0, low=0, high=MAX_PLAN_PREVIEW) or 0))
 
 
@@ -254,7 +232,7 @@ class ExecuteMotion(Op, Answered[SendGoalResult], op="execute_motion", ros_names
 
     @classmethod
     def from_args(cls, a: Args) -> ExecuteMotion:
-        return cls(name=_robot(a), positions=_goal(a),
+        return cls(name=_robot(a), positions=joint_values(a, "positions"),
                    action=a.opt_str("action", DEFAULT_TRAJECTORY_ACTION, pattern=ROS_NAME,
                                     desc=ROS_NAME_DESC) or DEFAULT_TRAJECTORY_ACTION,
                    resolution=_resolution(a),

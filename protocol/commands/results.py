@@ -298,13 +298,18 @@ class SetRobotJointsResult(Result):
 
     @classmethod
     def read(cls, a: Args) -> SetRobotJointsResult:
-        path = a.path("positions")
-        positions = {}
-        for joint, value in _object(a, "positions").items():
-            check_str(joint, path, 1 << 10, False, None, "")
-            positions[joint] = check_float(value, f"{path}.{joint}", float("-inf"),
-                                           float("inf"), False)
-        return cls(positions=positions)
+        return cls(positions=_positions(a))
+
+
+def _positions(a: Args) -> dict[str, float]:
+    """A result's ``positions``: joint -> a finite number."""
+    path = a.path("positions")
+    positions = {}
+    for joint, value in _object(a, "positions").items():
+        check_str(joint, path, 1 << 10, False, None, "")
+        positions[joint] = check_float(value, f"{path}.{joint}", float("-inf"), float("inf"),
+                                       False)
+    return positions
 
 
 @dataclass(frozen=True)
@@ -364,14 +369,8 @@ class SolveIkResult(Result):
                            else {}).items():
             check_str(link, links_path, 1 << 10, False, None, "")
             links[link] = matrix_from(rows, f"{links_path}.{link}")
-        path = a.path("positions")
-        positions = {}
-        for joint, value in _object(a, "positions").items():
-            check_str(joint, path, 1 << 10, False, None, "")
-            positions[joint] = check_float(value, f"{path}.{joint}", float("-inf"),
-                                           float("inf"), False)
         failure = a.raw("failure", False)
-        return cls(solved=a.opt_bool("solved", False), positions=positions,
+        return cls(solved=a.opt_bool("solved", False), positions=_positions(a),
                    residual_mm=cast(float, a.opt_float("residual_mm", 0.0, low=0.0,
                                                        high=float("inf"))),
                    residual_deg=cast(float, a.opt_float("residual_deg", 0.0, low=0.0,

@@ -16,11 +16,25 @@ from protocol.commands.results import (Answered, DescribeRobotJointsResult,
 from protocol.commands.values import RobotSource
 
 __all__ = ["JOINT_STATE_TYPE", "MAX_JOINTS", "CreateRobot", "DescribeRobotJoints",
-           "ListRobots", "RemoveRobot", "SetRobotJoints"]
+           "ListRobots", "RemoveRobot", "SetRobotJoints", "joint_values"]
 
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 MAX_JOINTS = 1000  # per set_robot_joints: far above any URDF's joint count
 _ROBOT_DESC = "a robot name of letters, digits and _"
+
+
+def joint_values(a: Args, name: str) -> tuple[tuple[str, float], ...]:
+    """The object ``name``: joint -> a finite position (radians, metres), at most
+    `MAX_JOINTS` of them, in the order given (set_robot_joints, motion's goals and seeds)."""
+    raw = a.req_obj_raw(name)
+    if len(raw) > MAX_JOINTS:
+        raise TooLargeError(a.path(name), f"at most {MAX_JOINTS} joints", str(len(raw)))
+    pairs = []
+    for joint, value in raw.items():
+        path = f"{a.path(name)}.{joint}"
+        check_str(joint, path, MAX_NAME, False, None, "")
+        pairs.append((joint, check_float(value, path, float("-inf"), float("inf"), False)))
+    return tuple(pairs)
 
 
 @dataclass(frozen=True)
@@ -171,17 +185,7 @@ class SetRobotJoints(Op, Answered[SetRobotJointsResult], op="set_robot_joints",
 
     @classmethod
     def from_args(cls, a: Args) -> SetRobotJoints:
-        raw = a.req_obj_raw("positions")
-        if len(raw) > MAX_JOINTS:
-            raise TooLargeError(a.path("positions"), f"at most {MAX_JOINTS} joints",
-                                str(len(raw)))
-        positions = []
-        for joint, value in raw.items():
-            path = f"{a.path('positions')}.{joint}"
-            check_str(joint, path, MAX_NAME, False, None, "")
-            positions.append((joint, check_float(value, path, float("-inf"), float("inf"),
-                                                 False)))
         return cls(name=a.req_str("name", max_len=64, pattern=ROBOT_NAME, desc=_ROBOT_DESC),
-                   positions=tuple(positions),
+                   positions=joint_values(a, "positions"),
                    topic=cast(str, a.opt_str("topic", "joint_states", pattern=ROS_NAME,
                                              desc=ROS_NAME_DESC)))

@@ -20,7 +20,9 @@ from support import require_shared
 pytest.importorskip("pinocchio", reason="motion needs pin (pyproject's dependencies)")
 yourdfpy = pytest.importorskip("yourdfpy")
 
-from bridge.motion import MotionInputError, MotionModel, solve_ik  # noqa: E402
+from bridge.motion.errors import MotionInputError  # noqa: E402
+from bridge.motion.ik import solve_ik  # noqa: E402
+from bridge.motion.model import MotionModel  # noqa: E402
 from bridge.motion.ik import COLLISION, JOINT_LIMIT, UNREACHABLE  # noqa: E402
 
 TARGETS = 300  # per robot; >= 99 % must be solved
@@ -171,7 +173,7 @@ def test_a_target_beyond_a_limit_names_the_joint() -> None:
 
 
 def test_a_solution_through_an_obstacle_is_refused_naming_both() -> None:
-    from bridge.motion import CollisionWorld
+    from bridge.motion.collisions import CollisionWorld
 
     model = MotionModel(load_robot(ONE_JOINT.replace(
         '<link name="tip"/>',

@@ -1,13 +1,19 @@
-"""robot.solve_ik through a real `slicer-ros2-bridge demo` over real TCP (issue 46): the
-target is the tool flange's pose (mm) at joint positions chosen here, computed by
-yourdfpy's FK, not the daemon's; the solution is checked by the same independent FK. The
-solve starts from the demo's live /joint_states, and the arm does not move for it."""
+"""Motion on a real `slicer-ros2-bridge demo` over real TCP (issue 46).
+
+robot.solve_ik: the target is the tool flange's pose (mm) at joint positions chosen here,
+computed by yourdfpy's FK, not the daemon's; the solution is checked by the same
+independent FK. The solve starts from the demo's live /joint_states.
+
+Execute on the demo arm: with a Slicer model placed in the arm's way, executing to a goal
+behind it is refused naming the link and the obstacle; with the model removed the arm
+reaches the goal, checked by an rclpy subscriber in another process on /joint_states."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import numpy as np
 import pytest
@@ -15,22 +21,26 @@ import pytest
 import slicer_client
 from bridge.robots.demo import demo_urdf_path
 from protocol.conversions import rotation_to_quaternion
-from support import Processes, RunningDaemon, spare_domain, wait_until
+from protocol.commands import ErrorCode
+from support import Processes, RunningDaemon, scaled, spare_domain, wait_until
 
 pytestmark = pytest.mark.ros
 pytest.importorskip("pinocchio", reason="motion needs pin (pyproject's dependencies)")
 yourdfpy = pytest.importorskip("yourdfpy")
+trimesh = pytest.importorskip("trimesh")
 
 TIP = "tool_flange"
 GOAL = {"joint_1": 0.4, "joint_2": -0.6, "joint_3": 1.1, "joint_4": -0.3, "joint_5": 0.8,
         "joint_6": 0.2}
 
 
+DOMAIN = spare_domain(1)
+
+
 @pytest.fixture(scope="module")
 def demo(module_processes: Processes) -> Iterator[RunningDaemon]:
     """`slicer-ros2-bridge demo` on a ROS domain of its own, once it says it is up."""
-    child = module_processes.bridge("demo", "--port", "0",
-                                    env={"ROS_DOMAIN_ID": spare_domain(1)})
+    child = module_processes.bridge("demo", "--port", "0", env={"ROS_DOMAIN_ID": DOMAIN})
     line = child.wait_for_output(" (OpenIGTLink); ROS node", timeout=60)
     port = int(line.split(" (OpenIGTLink)")[0].rsplit(":", 1)[1])
     child.wait_for_output("Stop with Ctrl-C", timeout=90)
@@ -115,3 +125,65 @@ def test_solve_ik_from_the_client_reaches_the_target(demo: RunningDaemon, fk,  #
         ros.close()
     output = demo.child.output()
     assert "Traceback" not in output, output[-4000:]
+
+
+def _states(echo: Any) -> list[dict[str, float]]:
+    return [dict(zip(m["name"], m["position"])) for m in
+            (json.loads(line[4:]) for line in echo.lines() if line.startswith("MSG "))]
+
+
+def test_executing_through_a_model_is_refused_and_without_it_the_arm_gets_there(
+        demo: RunningDaemon, fk, processes: Processes) -> None:  # type: ignore[no-untyped-def]
+    echo = processes.python("echo_demo", "echo_subscriber.py", "/joint_states",
+                            "sensor_msgs/msg/JointState", env={"ROS_DOMAIN_ID": DOMAIN})
+    echo.wait_for_output("READY", timeout=30)
+    ros = slicer_client.connect("127.0.0.1", demo.port, reconnect=False)
+    try:
+        robot = ros.robot("demo")
+        robot.wait_until_loaded()
+        reach = {"joint_2": 0.6, "joint_3": 0.6, "joint_4": 0.0, "joint_5": 0.5,
+                 "joint_6": 0.0}  # the flange 0.59 m out: joint_1 sweeps it on an arc
+        start = {**reach, "joint_1": -0.8}
+        goal = {**reach, "joint_1": 0.8}
+        # To the start, nothing in the way: the demo's controller then holds the arm there.
+        first = robot.execute(start, duration_s=1.0)
+        assert first.result(timeout=scaled(30))["error_code"] == 0
+        wait_until(lambda: bool(_states(echo)) and _states(echo)[-1]["joint_1"] ==
+                   pytest.approx(-0.8, abs=1e-6), timeout=30, what="the arm at the start")
+
+        # A 6 cm block where the tool flange passes half-way (joint_1 = 0), from Slicer.
+        middle = fk({**reach, "joint_1": 0.0})[:3, 3]
+        block = trimesh.creation.box((60.0, 60.0, 60.0))
+        robot.set_obstacle("block", "/demo/obstacles/block")
+        model = ros.publish_model("/demo/obstacles/block",
+                                  (block.vertices + middle, block.faces), frame="base_link",
+                                  type="visualization_msgs/msg/Marker")
+        plans: list[dict[str, Any]] = []
+
+        def planned() -> bool:
+            model.send_model((block.vertices + middle, block.faces))
+            plans.append(robot.plan(goal))
+            return not plans[-1]["clear"]
+        wait_until(planned, timeout=30, what="the block in the plan")
+        collision = plans[-1]["collision"]
+        assert collision["obstacle"] == "block" and 0.2 < collision["fraction"] < 0.5
+        seen = len(_states(echo))
+        with pytest.raises(slicer_client.CommandRefusedError) as refused:
+            robot.execute(goal)
+        assert refused.value.code == ErrorCode.REJECTED
+        assert f"link {collision['link']!r} touches obstacle 'block'" in str(refused.value)
+        wait_until(lambda: len(_states(echo)) >= seen + 10, timeout=30,
+                   what="ten more joint states")
+        assert all(s["joint_1"] == pytest.approx(-0.8, abs=1e-6) for s in _states(echo)[seen:])
+
+        # The model taken away: the arm reaches the goal.
+        robot.remove_obstacle("block")
+        assert robot.plan(goal)["clear"]
+        handle = robot.execute(goal, duration_s=2.0)
+        assert handle.result(timeout=scaled(30))["error_code"] == 0
+        wait_until(lambda: _states(echo)[-1]["joint_1"] == pytest.approx(0.8, abs=1e-6),
+                   timeout=30, what="the arm at the goal on /joint_states")
+        reached = _states(echo)[-1]
+        assert {j: reached[j] for j in goal} == pytest.approx(goal, abs=1e-6)
+    finally:
+        ros.close()

@@ -21,7 +21,8 @@ from protocol.commands import ErrorCode
 from protocol.framing import encode
 from protocol.messages import Message, PolyData, RawBody
 from jointy_urdf import JOINTY_URDF
-from support import Child, Processes, RunningDaemon, assert_clean_exit, start_daemon, wait_until
+from support import (Child, Processes, RunningDaemon, assert_clean_exit, start_daemon,
+                     wait_robot_described, wait_until)
 from tests.protocol.igtl_captures import CUBE_CORNERS_MM, CUBE_QUADS, OPENIGTLINK3_TCOORDS_CUBE
 
 pytestmark = pytest.mark.ros
@@ -71,19 +72,6 @@ def _until_received(child: Child, send: Any, what: str, count: int = 1) -> list[
         return False
     wait_until(received, timeout=30, what=what)
     return _messages(child)
-
-
-def _loaded(robot: Any) -> None:
-    """Wait until the daemon has the robot's URDF (a parameter source may still be
-    'waiting' for the node right after it printed ready)."""
-    def described() -> bool:
-        try:
-            robot.joints(refresh=True)
-        except slicer_client.CommandRefusedError as error:
-            assert error.code == ErrorCode.UNAVAILABLE, error
-            return False
-        return True
-    wait_until(described, timeout=30, what=f"robot {robot.name} loaded")
 
 
 def _xyz(points: list[dict[str, float]]) -> np.ndarray:
@@ -303,7 +291,7 @@ def test_the_robot_follows_its_joints_through_a_state_publisher(
     publisher.wait_for_output("ready", timeout=30)
     node = ros.GetDefaultROS2Node().CreateAndAddRobotNode(
         "follow", "/follow/robot_state_publisher", "robot_description")
-    _loaded(node.resource)
+    wait_robot_described(node.resource)
     assert node.GetJointNames() == ["shoulder", "spin", "slide"]
     assert node.GetJointLimits("slide") == (0.0, 0.04) and node.GetJointLimits("spin") is None
     assert node.resource.joints()["joint_states_topic"] == "/follow/joint_states"
@@ -343,7 +331,7 @@ def test_the_demo_motion_yields_to_joints_set_from_slicer(
     sp.wait_for_output("ready", timeout=30)
     echo = _echo(processes, "/yielding/joint_states", "sensor_msgs/msg/JointState")
     robot = ros.robot("yielding", namespace="yielding")
-    _loaded(robot)
+    wait_robot_described(robot)
     assert robot.joints()["joint_states_topic"] == "/yielding/joint_states"
 
     def ours(m: dict[str, Any]) -> bool:
