@@ -117,6 +117,7 @@ class Daemon:
                                     frames=self.tf.buffer.lookup,
                                     send_goal=self.actions.sender.send_goal)
         self.robots.removed_listeners.append(self.motion.robot_removed)
+        self.robots.loaded_listeners.append(self.motion.robot_loaded)
         self.dispatcher = Dispatcher(self.ros, self.hub, [self.topics, self.tf, self.parameters,
                                                           self.services, self.actions,
                                                           self.robots, self.markers,

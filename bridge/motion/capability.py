@@ -173,10 +173,17 @@ class MotionBridges:
         # Obstacle meshes are read and built here, one at a time, off the ROS executor.
         self._builder = ThreadPoolExecutor(1, thread_name_prefix="motion-obstacles")
         self._lock = threading.Lock()  # _robots: the loop adds, lanes read
-        # pinocchio and coal take a second or more to import on a busy machine: imported
-        # now, off the loop, the first motion request does not stall every client's replies
-        # and heartbeats (one that comes sooner waits on the import lock for the rest).
-        start_thread("motion-import", _import_motion_libraries, OnFailure.RESTART)
+        self._importing = False
+
+    def robot_loaded(self, name: str) -> None:
+        """A robot's model was loaded (loop): pinocchio and coal are imported now, off the
+        loop, in a thread of their own. Imported by the first motion request instead, on
+        the loop, they stalled every client's replies and heartbeats (past 3 s under load,
+        and Slicer's module took the link for lost); a daemon with no robot never loads
+        them."""
+        if not self._importing:
+            self._importing = True
+            start_thread("motion-import", _import_motion_libraries, OnFailure.RESTART)
 
     # ------------------------------------------------------------------ robots
 

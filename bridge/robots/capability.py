@@ -181,6 +181,8 @@ class RobotServing:
         self._tasks: set[asyncio.Task[None]] = set()
         # Told a robot's name when it is removed (on the loop): what others keep of it goes.
         self.removed_listeners: list[Callable[[str], None]] = []
+        # Told a robot's name when a model of it is loaded (on the loop).
+        self.loaded_listeners: list[Callable[[str], None]] = []
 
     # ------------------------------------------------------------------ ops
 
@@ -331,6 +333,8 @@ class RobotServing:
 
     def _apply(self, robot: _Robot, model: RobotModel, text: str) -> None:
         """Publish the meshes and (re)wire the link lookups of a freshly loaded model."""
+        for listener in self.loaded_listeners:
+            listener(robot.name)
         prefix = robot.tf_prefix
         fixed = _fixed_frame(robot, model)
         if fixed != robot.fixed_frame:  # every lookup starts from the fixed frame: redo all
