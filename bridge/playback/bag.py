@@ -163,9 +163,14 @@ class Bag:
 
     def _linear(self, topics: Optional[set[str]], start_ns: Optional[int]
                 ) -> Iterator[BagMessage]:
-        """Messages in file order, up to where the file ends or breaks (said once)."""
-        self._stream.seek(0, io.SEEK_SET)
-        reader = NonSeekingReader(self._stream, validate_crcs=True)
+        """Messages in file order, up to where the file ends or breaks (said once). Each
+        pass reads its own handle: a seek's look back may run while the playing pass waits."""
+        with open(self.path, "rb") as stream:
+            yield from self._linear_in(NonSeekingReader(stream, validate_crcs=True), topics,
+                                       start_ns)
+
+    def _linear_in(self, reader: NonSeekingReader, topics: Optional[set[str]],
+                   start_ns: Optional[int]) -> Iterator[BagMessage]:
         try:
             for schema, channel, message in reader.iter_messages(log_time_order=False):
                 known = self.channels.get(channel.id)
