@@ -253,7 +253,14 @@ class Bag:
                     old = found.get(k)
                     if old is None or old.log_time <= message.log_time:
                         found[k] = message
-            return sorted(set(found.values()), key=lambda m: m.log_time,)
+        else:
+            self._latest_indexed(t_ns, wanted, key, begin, keys, found)
+        unique = {id(m): m for m in found.values()}  # one message may be several keys' latest
+        return sorted(unique.values(), key=lambda m: m.log_time)
+
+    def _latest_indexed(self, t_ns: int, wanted: set[str],
+                        key: Callable[[BagMessage], Iterable[Any]], begin: int,
+                        keys: Optional[set[Any]], found: dict[Any, BagMessage]) -> None:
         try:
             for _schema, channel, record in self._reader.iter_messages(
                     topics=wanted, start_time=begin, end_time=t_ns + 1,
@@ -266,9 +273,7 @@ class Bag:
                     break
         except _READ_ERRORS as error:
             self._said(f"{self.path.name}: the state before {t_ns} ns is partial: "
-                       f"{type(error).__name__}: {error}")
-        unique = {id(m): m for m in found.values()}
-        return sorted(unique.values(), key=lambda m: m.log_time)
+                       f"{_describe(error)}")
 
     def decoder(self, channel: Channel) -> Optional[Callable[[bytes], Any]]:
         """The decoder of ``channel``'s messages from its schema, or None (named once)."""

@@ -395,6 +395,7 @@ class Player:
         self._seek_waiters: list[asyncio.Future[None]] = []  # seeks answered once primed
         self._shown: list[str] = []  # topics whose new subscriber waits for its message
         self._stopped = False
+        self._failed = ""  # why the playing thread stopped (a bug), for the clock's ops
         self.ended = False
         self._warned: set[str] = set()
         self._thread = threading.Thread(target=self._run, name="player", daemon=True)
@@ -476,10 +477,19 @@ class Player:
         has the poses at that time by the reply."""
         shown: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         with self._cond:
+            self._refuse_if_failed()
             self._seek(self.bag.start_ns + int(offset_s * _NS_PER_S))
             self._seek_waiters.append(shown)
         await shown
+        with self._cond:
+            self._refuse_if_failed()
         return self.status()
+
+    def _refuse_if_failed(self) -> None:  # under the condition
+        if self._failed:
+            raise CommandFailedError("op", "a player that is playing", "its playing thread "
+                                     f"stopped on an error ({self._failed}; its log has it)",
+                                     code=ErrorCode.INTERNAL)
 
     def _seek(self, bag_ns: int) -> None:  # under the condition
         self._seek_to = self.clock.seek(bag_ns, time.monotonic_ns())
@@ -516,8 +526,12 @@ class Player:
     def _run(self) -> None:
         try:
             self._play_all()
-        except Exception:  # noqa: BLE001 - said, and the clients keep what they have
+        except Exception as error:  # noqa: BLE001 - said; clients keep what they have
             log.exception("playing stopped: an unexpected error")
+            with self._cond:
+                self._failed = f"{type(error).__name__}: {error}"
+                waiters, self._seek_waiters = self._seek_waiters, []
+            self._answer(waiters)
 
     def _play_all(self) -> None:
         messages: Iterator[BagMessage] = iter(())
