@@ -305,9 +305,13 @@ class Bag:
         try:
             return decode(message.data)
         except Exception as error:  # noqa: BLE001 - bad bytes: one line per topic
-            self._said(f"topic {message.channel.topic}: a message that does not decode as "
-                       f"{message.channel.type} skipped ({type(error).__name__}: {error})")
+            self.skip_message(message, error)
             return None
+
+    def skip_message(self, message: BagMessage, error: BaseException) -> None:
+        """A message whose bytes do not read as its type: skipped, said once per topic."""
+        self._said(f"topic {message.channel.topic}: a message that does not decode as "
+                   f"{message.channel.type} skipped ({_describe(error)})")
 
     def attachments(self) -> Iterator[tuple[str, bytes]]:
         """(name, data) of every attachment (meshes a recording carried)."""

@@ -54,7 +54,7 @@ from bridge.robots.capability import RobotServing, _Robot
 from bridge.robots.errors import RobotError
 from bridge.robots.joint_states import JointStateTracker, joint_frames
 from bridge.tf.buffer import StampedTransform
-from bridge.tf.capability import TfLookups, tf_message_to_transforms
+from bridge.tf.capability import TfLookups, tf_cdr_to_transforms
 from protocol import commands as c
 from protocol.commands import CommandFailedError, ErrorCode, Op
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
@@ -633,14 +633,25 @@ class Player:
             self._play(message)
 
     def _frames_of(self, message: BagMessage) -> tuple[str, ...]:
-        msg = self.bag.decode(message)
-        if msg is None:
-            return ()
-        return tuple(t.child_frame_id for t in msg.transforms)
+        return tuple(t.child for t in self._transforms(message))
 
     def _transforms(self, message: BagMessage) -> list[StampedTransform]:
-        msg = self.bag.decode(message)
-        return [] if msg is None else tf_message_to_transforms(msg)
+        """A tf message's transforms, read as the daemon reads /tf (its own reader of the
+        plain CDR TFMessage, bridge/codecs/cdr.py); bytes it does not take go to the bag's
+        decoder. The decoder still judges the channel's schema first (named once)."""
+        if self.bag.decoder(message.channel) is None:
+            return []
+        try:
+            return tf_cdr_to_transforms(message.data, self._decode_tf(message))
+        except Exception as error:  # noqa: BLE001 - bad bytes: said once per topic
+            self.bag.skip_message(message, error)
+            return []
+
+    def _decode_tf(self, message: BagMessage) -> Callable[[bytes], Any]:
+        def decode(data: bytes) -> Any:  # None: not decodable, named by the bag already
+            msg = self.bag.decode(message)
+            return _NO_TRANSFORMS if msg is None else msg
+        return decode
 
     def _play(self, message: BagMessage) -> None:
         self._play_many([message])
@@ -706,6 +717,14 @@ class Player:
         self.dispatcher.close()
         self.heavy.close()
         self.bag.close()
+
+
+@dataclass(frozen=True)
+class _NoTransforms:
+    transforms: tuple[Any, ...] = ()
+
+
+_NO_TRANSFORMS = _NoTransforms()
 
 
 def _settle(waiter: asyncio.Future[None]) -> None:

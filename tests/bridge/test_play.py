@@ -340,3 +340,30 @@ def test_markers_play_as_the_daemon_shows_them(processes: Processes, no_ros: dic
         np.testing.assert_allclose(points.max(axis=0) - points.min(axis=0), [20.0] * 3,
                                    atol=1e-3)
     assert "Traceback" not in player.output() and "NO-ROS GUARD" not in player.output()
+
+
+def test_tf_in_another_cdr_encoding_is_read_by_the_bags_decoder(
+        processes: Processes, no_ros: dict[str, str], tmp_path: Path) -> None:
+    """/tf goes through the daemon's own reader of plain little-endian CDR; a bag whose tf
+    is big-endian CDR (rosbags writes it so on request) is read by mcap-ros2-support from
+    the bag's schema instead, with the same values."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from bags import T0, tf_message, typestore
+
+    ts = typestore()
+    folder = tmp_path / "big_endian"
+    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        tf = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=ts)
+        for k in range(3):
+            writer.write(tf, T0 + k * NS // 10, bytes(ts.serialize_cdr(
+                tf_message(ts, T0 + k * NS // 10, "world", "probe", (0.1 * k, -0.25, 1.5),
+                           (0.0, 0.0, 0.6, 0.8)),
+                "tf2_msgs/msg/TFMessage", little_endian=False)))
+    player, port = start_player(processes, no_ros, str(folder), "--paused", "--start", "0.15")
+    with slicer_client.connect("127.0.0.1", port) as ros:
+        matrix = ros.lookup_transform("world", "probe", timeout=10)
+    np.testing.assert_allclose(matrix[:3, 3], [100.0, -250.0, 1500.0], atol=1e-6)
+    np.testing.assert_allclose(matrix[:3, :3], [[0.28, -0.96, 0], [0.96, 0.28, 0], [0, 0, 1]],
+                               atol=1e-9)
+    assert "Traceback" not in player.output() and "skipped" not in player.output()
