@@ -44,7 +44,7 @@ from bridge.core.dispatch import Created, Dispatcher, Handler
 from bridge.core.heavy import HeavyWork
 from bridge.core.hub import Hub, StreamChannel, Subscriber, frame_for
 from bridge.core.logging_limits import RateLimitedLog
-from bridge.core.security import SecurityPolicy
+from bridge.core.security import SecurityPolicy, is_loopback_host
 from bridge.core.server import BridgeServer
 from bridge.core.session import SessionLimits
 from bridge.markers.capability import MarkerServing
@@ -374,8 +374,11 @@ class Player:
                                    package_paths=package_paths,
                                    attachment_files=attachment_files)
         roots = (workdir, *package_paths.values())
+        # The daemon's rule for who may write (here: move the clock): on loopback every
+        # client; listening beyond it, only loopback clients (play takes no key).
         self.policy = SecurityPolicy(robot_dirs=tuple(str(r) for r in roots),
-                                     resolve_type=bag_type_resolver(bag))
+                                     resolve_type=bag_type_resolver(bag),
+                                     beyond_loopback=not is_loopback_host(options.host))
         self.dispatcher = Dispatcher(PlayerGraph(bag), self.hub,
                                      [self.topics, self.tf, self.robots, self.markers,
                                       _Controls(self)],
