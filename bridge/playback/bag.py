@@ -206,11 +206,12 @@ class Bag:
         if not self.indexed:
             yield from self._linear(wanted, start_ns)
             return
-        at = start_ns
+        at = start_ns  # after a broken chunk, from the last time given, inclusive: a
+        # message of that time may be given twice (harmless: the same value), none is lost
         while True:
             try:
                 for _schema, channel, message in self._reader.iter_messages(
-                        topics=wanted, start_time=at, log_time_order=True):
+                        topics=wanted, starting_at=at, log_time_order=True):
                     at = message.log_time
                     yield BagMessage(self.channels[channel.id], message.log_time,
                                      message.data)
@@ -263,7 +264,7 @@ class Bag:
                         keys: Optional[set[Any]], found: dict[Any, BagMessage]) -> None:
         try:
             for _schema, channel, record in self._reader.iter_messages(
-                    topics=wanted, start_time=begin, end_time=t_ns + 1,
+                    topics=wanted, starting_at=begin, ending_before=t_ns + 1,
                     log_time_order=True, reverse=True):
                 bag_message = BagMessage(self.channels[channel.id], record.log_time,
                                          record.data)

@@ -367,3 +367,29 @@ def test_tf_in_another_cdr_encoding_is_read_by_the_bags_decoder(
     np.testing.assert_allclose(matrix[:3, :3], [[0.28, -0.96, 0], [0.96, 0.28, 0], [0, 0, 1]],
                                atol=1e-9)
     assert "Traceback" not in player.output() and "skipped" not in player.output()
+
+
+def test_beyond_loopback_only_loopback_clients_move_the_clock(robot_bag: RobotBag,
+                                                              tmp_path: Path) -> None:
+    """The daemon's rule for writers holds in the player: listening on every address, a
+    client from another machine may read but not pause, seek or set the rate."""
+    import asyncio
+
+    from bridge.playback.bag import open_bag
+    from bridge.playback.player import Player, PlayOptions
+    from protocol import commands as c
+
+    async def grants() -> tuple[bool, bool, bool]:
+        bag = open_bag(robot_bag.mcap)
+        player = Player(PlayOptions(bag=robot_bag.mcap, host="0.0.0.0", port=0), bag,
+                        asyncio.get_running_loop(), tmp_path)
+        try:
+            remote = player.policy.grant_at_accept("192.0.2.7")
+            local = player.policy.grant_at_accept("127.0.0.1")
+            seek = c.parse_request("seek_playback", '{"offset": 1}')
+            return remote.writes, local.writes, type(seek).writes
+        finally:
+            player.dispatcher.close()
+            player.heavy.close()
+            bag.close()
+    assert asyncio.run(grants()) == (False, True, True)
