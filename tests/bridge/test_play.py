@@ -393,3 +393,34 @@ def test_beyond_loopback_only_loopback_clients_move_the_clock(robot_bag: RobotBa
             player.heavy.close()
             bag.close()
     assert asyncio.run(grants()) == (False, True, True)
+
+
+def test_the_reference_facade_reads_a_played_bag(processes: Processes, no_ros: dict[str, str],
+                                                robot_bag: RobotBag,
+                                                demo: tuple[str, str]) -> None:
+    """SlicerROS2's API (the CamelCase facade) against a player as against the daemon: a
+    subscriber node gets the bag's image, a tf lookup node the pose at the clock's time."""
+    player, port = start_player(processes, no_ros, str(robot_bag.mcap), "--paused",
+                                "--start", "1.0", "--package-path", demo[1])
+    ros = slicer_client.connect("127.0.0.1", port)
+    try:
+        ros_logic = ros.logic
+        ros_node = ros_logic.GetDefaultROS2Node()
+        sub = ros_node.CreateAndAddSubscriberNode("Image", "/camera/image")
+        lookup = ros_node.CreateAndAddTf2LookupNode("world", "tool_flange")
+
+        def arrived() -> bool:
+            ros_logic.Spin()
+            return bool(sub.GetNumberOfMessages()) and lookup.GetMatrixTransformToParent() \
+                is not None
+        wait_until(arrived, timeout=30, what="the image and the lookup")
+        t = robot_bag.times[0] - NS // 100 + NS
+        pixels = np.asarray(sub.GetLastMessage())
+        assert pixels.tobytes() == robot_bag.image_at(t)
+        matrix = lookup.GetMatrixTransformToParent()
+        got = np.array([[matrix.GetElement(i, j) for j in range(4)] for i in range(4)])
+        want = expected_link_poses(robot_bag, robot_bag.state_at(t))["tool_flange"]
+        np.testing.assert_allclose(got[:3, 3], want[:3, 3], atol=0.01)
+    finally:
+        ros.close()
+    assert "NO-ROS GUARD" not in player.output() and "Traceback" not in player.output()
