@@ -163,9 +163,14 @@ class Bag:
 
     def _linear(self, topics: Optional[set[str]], start_ns: Optional[int]
                 ) -> Iterator[BagMessage]:
-        """Messages in file order, up to where the file ends or breaks (said once)."""
-        self._stream.seek(0, io.SEEK_SET)
-        reader = NonSeekingReader(self._stream, validate_crcs=True)
+        """Messages in file order, up to where the file ends or breaks (said once). Each
+        pass reads its own handle: a seek's look back may run while the playing pass waits."""
+        with open(self.path, "rb") as stream:
+            yield from self._linear_in(NonSeekingReader(stream, validate_crcs=True), topics,
+                                       start_ns)
+
+    def _linear_in(self, reader: NonSeekingReader, topics: Optional[set[str]],
+                   start_ns: Optional[int]) -> Iterator[BagMessage]:
         try:
             for schema, channel, message in reader.iter_messages(log_time_order=False):
                 known = self.channels.get(channel.id)
@@ -201,11 +206,12 @@ class Bag:
         if not self.indexed:
             yield from self._linear(wanted, start_ns)
             return
-        at = start_ns
+        at = start_ns  # after a broken chunk, from the last time given, inclusive: a
+        # message of that time may be given twice (harmless: the same value), none is lost
         while True:
             try:
                 for _schema, channel, message in self._reader.iter_messages(
-                        topics=wanted, start_time=at, log_time_order=True):
+                        topics=wanted, starting_at=at, log_time_order=True):
                     at = message.log_time
                     yield BagMessage(self.channels[channel.id], message.log_time,
                                      message.data)
@@ -248,10 +254,17 @@ class Bag:
                     old = found.get(k)
                     if old is None or old.log_time <= message.log_time:
                         found[k] = message
-            return sorted(set(found.values()), key=lambda m: m.log_time,)
+        else:
+            self._latest_indexed(t_ns, wanted, key, begin, keys, found)
+        unique = {id(m): m for m in found.values()}  # one message may be several keys' latest
+        return sorted(unique.values(), key=lambda m: m.log_time)
+
+    def _latest_indexed(self, t_ns: int, wanted: set[str],
+                        key: Callable[[BagMessage], Iterable[Any]], begin: int,
+                        keys: Optional[set[Any]], found: dict[Any, BagMessage]) -> None:
         try:
             for _schema, channel, record in self._reader.iter_messages(
-                    topics=wanted, start_time=begin, end_time=t_ns + 1,
+                    topics=wanted, starting_at=begin, ending_before=t_ns + 1,
                     log_time_order=True, reverse=True):
                 bag_message = BagMessage(self.channels[channel.id], record.log_time,
                                          record.data)
@@ -261,9 +274,7 @@ class Bag:
                     break
         except _READ_ERRORS as error:
             self._said(f"{self.path.name}: the state before {t_ns} ns is partial: "
-                       f"{type(error).__name__}: {error}")
-        unique = {id(m): m for m in found.values()}
-        return sorted(unique.values(), key=lambda m: m.log_time)
+                       f"{_describe(error)}")
 
     def decoder(self, channel: Channel) -> Optional[Callable[[bytes], Any]]:
         """The decoder of ``channel``'s messages from its schema, or None (named once)."""
@@ -295,9 +306,13 @@ class Bag:
         try:
             return decode(message.data)
         except Exception as error:  # noqa: BLE001 - bad bytes: one line per topic
-            self._said(f"topic {message.channel.topic}: a message that does not decode as "
-                       f"{message.channel.type} skipped ({type(error).__name__}: {error})")
+            self.skip_message(message, error)
             return None
+
+    def skip_message(self, message: BagMessage, error: BaseException) -> None:
+        """A message whose bytes do not read as its type: skipped, said once per topic."""
+        self._said(f"topic {message.channel.topic}: a message that does not decode as "
+                   f"{message.channel.type} skipped ({_describe(error)})")
 
     def attachments(self) -> Iterator[tuple[str, bytes]]:
         """(name, data) of every attachment (meshes a recording carried)."""

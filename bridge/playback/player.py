@@ -45,7 +45,7 @@ from bridge.core.dispatch import Created, Dispatcher, Handler
 from bridge.core.heavy import HeavyWork
 from bridge.core.hub import Hub, StreamChannel, Subscriber, frame_for
 from bridge.core.logging_limits import RateLimitedLog
-from bridge.core.security import SecurityPolicy
+from bridge.core.security import SecurityPolicy, is_loopback_host
 from bridge.core.server import BridgeServer
 from bridge.core.session import SessionLimits
 from bridge.markers.capability import MarkerServing
@@ -55,7 +55,7 @@ from bridge.robots.capability import RobotServing, _Robot
 from bridge.robots.errors import RobotError
 from bridge.robots.joint_states import JointStateTracker, joint_frames
 from bridge.tf.buffer import StampedTransform
-from bridge.tf.capability import TfLookups, tf_message_to_transforms
+from bridge.tf.capability import TfLookups, tf_cdr_to_transforms
 from protocol import commands as c
 from protocol.commands import CommandFailedError, ErrorCode, Op
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
@@ -374,8 +374,11 @@ class Player:
                                    package_paths=package_paths,
                                    attachment_files=attachment_files)
         roots = (workdir, *package_paths.values())
+        # The daemon's rule for who may write (here: move the clock): on loopback every
+        # client; listening beyond it, only loopback clients (play takes no key).
         self.policy = SecurityPolicy(robot_dirs=tuple(str(r) for r in roots),
-                                     resolve_type=bag_type_resolver(bag))
+                                     resolve_type=bag_type_resolver(bag),
+                                     beyond_loopback=not is_loopback_host(options.host))
         self.dispatcher = Dispatcher(PlayerGraph(bag), self.hub,
                                      [self.topics, self.tf, self.robots, self.markers,
                                       _Controls(self)],
@@ -395,6 +398,7 @@ class Player:
         self._seek_waiters: list[asyncio.Future[None]] = []  # seeks answered once primed
         self._shown: list[str] = []  # topics whose new subscriber waits for its message
         self._stopped = False
+        self._failed = ""  # why the playing thread stopped (a bug), for the clock's ops
         self.ended = False
         self._warned: set[str] = set()
         self._thread = threading.Thread(target=self._run, name="player", daemon=True)
@@ -476,10 +480,19 @@ class Player:
         has the poses at that time by the reply."""
         shown: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         with self._cond:
+            self._refuse_if_failed()
             self._seek(self.bag.start_ns + int(offset_s * _NS_PER_S))
             self._seek_waiters.append(shown)
         await shown
+        with self._cond:
+            self._refuse_if_failed()
         return self.status()
+
+    def _refuse_if_failed(self) -> None:  # under the condition
+        if self._failed:
+            raise CommandFailedError("op", "a player that is playing", "its playing thread "
+                                     f"stopped on an error ({self._failed}; its log has it)",
+                                     code=ErrorCode.INTERNAL)
 
     def _seek(self, bag_ns: int) -> None:  # under the condition
         self._seek_to = self.clock.seek(bag_ns, time.monotonic_ns())
@@ -516,8 +529,12 @@ class Player:
     def _run(self) -> None:
         try:
             self._play_all()
-        except Exception:  # noqa: BLE001 - said, and the clients keep what they have
+        except Exception as error:  # noqa: BLE001 - said; clients keep what they have
             log.exception("playing stopped: an unexpected error")
+            with self._cond:
+                self._failed = f"{type(error).__name__}: {error}"
+                waiters, self._seek_waiters = self._seek_waiters, []
+            self._answer(waiters)
 
     def _play_all(self) -> None:
         messages: Iterator[BagMessage] = iter(())
@@ -619,14 +636,25 @@ class Player:
             self._play(message)
 
     def _frames_of(self, message: BagMessage) -> tuple[str, ...]:
-        msg = self.bag.decode(message)
-        if msg is None:
-            return ()
-        return tuple(t.child_frame_id for t in msg.transforms)
+        return tuple(t.child for t in self._transforms(message))
 
     def _transforms(self, message: BagMessage) -> list[StampedTransform]:
-        msg = self.bag.decode(message)
-        return [] if msg is None else tf_message_to_transforms(msg)
+        """A tf message's transforms, read as the daemon reads /tf (its own reader of the
+        plain CDR TFMessage, bridge/codecs/cdr.py); bytes it does not take go to the bag's
+        decoder. The decoder still judges the channel's schema first (named once)."""
+        if self.bag.decoder(message.channel) is None:
+            return []
+        try:
+            return tf_cdr_to_transforms(message.data, self._decode_tf(message))
+        except Exception as error:  # noqa: BLE001 - bad bytes: said once per topic
+            self.bag.skip_message(message, error)
+            return []
+
+    def _decode_tf(self, message: BagMessage) -> Callable[[bytes], Any]:
+        def decode(data: bytes) -> Any:  # None: not decodable, named by the bag already
+            msg = self.bag.decode(message)
+            return _NO_TRANSFORMS if msg is None else msg
+        return decode
 
     def _play(self, message: BagMessage) -> None:
         self._play_many([message])
@@ -692,6 +720,14 @@ class Player:
         self.dispatcher.close()
         self.heavy.close()
         self.bag.close()
+
+
+@dataclass(frozen=True)
+class _NoTransforms:
+    transforms: tuple[Any, ...] = ()
+
+
+_NO_TRANSFORMS = _NoTransforms()
 
 
 def _settle(waiter: asyncio.Future[None]) -> None:

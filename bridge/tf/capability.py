@@ -39,7 +39,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Awaitable, Optional, Union
+from typing import TYPE_CHECKING, Any, Awaitable, Callable, Optional, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -89,7 +89,8 @@ if TYPE_CHECKING:  # ROS is imported where the daemon subscribes and publishes: 
     # serves a bag without it (bridge/playback)
     from bridge.ros.ros_node import RosNode
 
-__all__ = ["TfBridges", "TfLookups", "tf_message_to_transforms", "status_for_error"]
+__all__ = ["TfBridges", "TfLookups", "status_for_error", "tf_cdr_to_transforms",
+           "tf_message_to_transforms"]
 
 log = logging.getLogger(__name__)
 
@@ -117,12 +118,17 @@ def tf_message_to_transforms(msg: Any) -> list[StampedTransform]:
     return out
 
 
-def tf_cdr_to_transforms(data: bytes) -> list[StampedTransform]:
+def tf_cdr_to_transforms(data: bytes, decode: Optional[Callable[[bytes], Any]] = None,
+                         ) -> list[StampedTransform]:
     """A serialized TFMessage -> `StampedTransform`s, read without rclpy messages (the same
-    values as `tf_message_to_transforms` of the deserialized message)."""
+    values as `tf_message_to_transforms` of the deserialized message). Bytes of a CDR
+    encoding the reader does not take are deserialized the ordinary way: by ``decode``
+    (a bag's decoder, from its schema) or else by rclpy."""
     try:
         raw = read_tf_message(data)
     except CdrError:  # another CDR encoding: the ordinary way
+        if decode is not None:
+            return tf_message_to_transforms(decode(data))
         from rclpy.serialization import deserialize_message
         from tf2_msgs.msg import TFMessage
 

@@ -163,6 +163,10 @@ def test_a_truncated_bag_plays_what_it_holds(
         robot = ros.robot("demo", fixed_frame="world")
         wait_until(lambda: robot.state == "loaded", timeout=30, what="the robot")
         assert 0.3 < ros.playback().duration < 2.0
+        # Seeks and a new subscriber's look back read the file again from its start.
+        ros.seek(0.25)
+        image = ros.subscribe("/camera/image", "Image")
+        wait_until(lambda: image.count >= 1, timeout=30, what="the image at 0.25 s")
         play_to_end(ros)
         wait_until(lambda: "tool_flange" in robot.transforms, timeout=30, what="a pose")
         got = tool_pose(robot)[:3, 3]
