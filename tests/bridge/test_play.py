@@ -397,11 +397,11 @@ def test_beyond_loopback_only_loopback_clients_move_the_clock(robot_bag: RobotBa
 
 def test_the_reference_facade_reads_a_played_bag(processes: Processes, no_ros: dict[str, str],
                                                 robot_bag: RobotBag,
-                                                demo: tuple[str, str]) -> None:
+                                                demo_files: tuple[str, str]) -> None:
     """SlicerROS2's API (the CamelCase facade) against a player as against the daemon: a
     subscriber node gets the bag's image, a tf lookup node the pose at the clock's time."""
     player, port = start_player(processes, no_ros, str(robot_bag.mcap), "--paused",
-                                "--start", "1.0", "--package-path", demo[1])
+                                "--start", "1.0", "--package-path", demo_files[1])
     ros = slicer_client.connect("127.0.0.1", port)
     try:
         ros_logic = ros.logic
