@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from support import Child, Processes
 
 
 RADIUS = 0.05  # the tool: a sphere 0.5 m from the swing axis
@@ -29,3 +33,21 @@ def box_mm() -> Any:
     box = trimesh.creation.box((100.0, 100.0, 100.0))
     assert np.allclose(box.bounds, [[-50.0] * 3, [50.0] * 3])
     return box
+
+
+SWING_ACTION = "/swing/follow_joint_trajectory"
+
+
+def start_swing(processes: Processes, urdf: Path) -> tuple[Child, Child]:
+    """The swing arm's controller (the demo's joint motion process serving
+    FollowJointTrajectory on `SWING_ACTION`) and an rclpy subscriber of its joint states,
+    both in processes of their own, once each is ready."""
+    motion = processes.start("swing-motion", [
+        sys.executable, "-u", "-m", "bridge.robots.demo.joint_motion", str(urdf),
+        "--namespace", "swing", "--rate", "20", "--trajectory-action", SWING_ACTION,
+        "--yield-s", "0"])
+    motion.wait_for_output("joint motion ready", timeout=30)
+    echo = processes.python("echo_swing", "echo_subscriber.py", "/swing/joint_states",
+                            "sensor_msgs/msg/JointState")
+    echo.wait_for_output("READY", timeout=30)
+    return motion, echo

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -21,7 +20,7 @@ import pytest
 
 import slicer_client
 from protocol.commands import ErrorCode
-from motion_robots import ARM_URDF, BARE_URDF, RADIUS, box_mm
+from motion_robots import ARM_URDF, BARE_URDF, RADIUS, SWING_ACTION, box_mm, start_swing
 from support import (Child, Processes, RunningDaemon, assert_clean_exit, scaled, start_daemon,
                      wait_robot_described, wait_until)
 
@@ -168,7 +167,7 @@ def test_the_tool_distance_to_a_slicer_model(daemon: RunningDaemon, robot_dir: P
 
 # ---------------------------------------------------------------------------- execute
 
-ACTION = "/swing/follow_joint_trajectory"
+ACTION = SWING_ACTION
 GOAL = 1.5  # rad; the arm is first sent to -1.0
 
 
@@ -190,14 +189,7 @@ def _at(angle: float) -> np.ndarray:
 
 def test_execute_is_refused_through_an_obstacle_and_reaches_the_goal_without_it(
         daemon: RunningDaemon, robot_dir: Path, processes: Processes) -> None:
-    motion = processes.start("swing-motion", [
-        sys.executable, "-u", "-m", "bridge.robots.demo.joint_motion",
-        str(robot_dir / "swing.urdf"), "--namespace", "swing", "--rate", "20",
-        "--trajectory-action", ACTION, "--yield-s", "0"])
-    motion.wait_for_output("joint motion ready", timeout=30)
-    echo = processes.python("echo_swing", "echo_subscriber.py", "/swing/joint_states",
-                            "sensor_msgs/msg/JointState")
-    echo.wait_for_output("READY", timeout=30)
+    _, echo = start_swing(processes, robot_dir / "swing.urdf")
     ros = slicer_client.connect("127.0.0.1", daemon.port, reconnect=False)
     try:
         robot = ros.robot("driven", namespace="swing",  # the other test's "swing" lives on

@@ -7,20 +7,19 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from bridge.robots.demo import demo_urdf_path
-from motion_robots import ARM_URDF
+from motion_robots import ARM_URDF, SWING_ACTION, start_swing
 from support import Processes, RunningDaemon, start_daemon, wait_until
 
 pytestmark = pytest.mark.ros
 yourdfpy = pytest.importorskip("yourdfpy")
 
-ACTION = "/swing/follow_joint_trajectory"
+ACTION = SWING_ACTION
 GOAL_RAD = 1.5  # the swing arm's goal, behind the block
 TIP = "tool_flange"
 GOAL = {"joint_1": 0.4, "joint_2": -0.6, "joint_3": 1.1, "joint_4": -0.3, "joint_5": 0.8,
@@ -97,14 +96,7 @@ def test_a_scene_model_as_obstacle_refuses_then_allows_execution(
     goal, read on /swing/joint_states by an rclpy subscriber in another process."""
     (tmp_path / "swing.urdf").write_text(ARM_URDF)
     daemon = start_daemon(processes, "--robot-dir", str(tmp_path))
-    motion = processes.start("swing-motion", [
-        sys.executable, "-u", "-m", "bridge.robots.demo.joint_motion",
-        str(tmp_path / "swing.urdf"), "--namespace", "swing", "--rate", "20",
-        "--trajectory-action", ACTION, "--yield-s", "0"])
-    motion.wait_for_output("joint motion ready", timeout=30)
-    echo = processes.python("echo_swing", "echo_subscriber.py", "/swing/joint_states",
-                            "sensor_msgs/msg/JointState")
-    echo.wait_for_output("READY", timeout=30)
+    _, echo = start_swing(processes, tmp_path / "swing.urdf")
     got = run_scene("motion_execute", timeout=300, port=daemon.port,
                     urdf=str(tmp_path / "swing.urdf"), action=ACTION, goal=GOAL_RAD)
     assert got["first"] == "succeeded" and got["obstacle"] == "block"
