@@ -409,18 +409,22 @@ def test_the_reference_facade_reads_a_played_bag(processes: Processes, no_ros: d
         sub = ros_node.CreateAndAddSubscriberNode("Image", "/camera/image")
         lookup = ros_node.CreateAndAddTf2LookupNode("world", "tool_flange")
 
-        def arrived() -> bool:
-            ros_logic.Spin()
-            return bool(sub.GetNumberOfMessages()) and lookup.GetMatrixTransformToParent() \
-                is not None
-        wait_until(arrived, timeout=30, what="the image and the lookup")
         t = robot_bag.times[0] - NS // 100 + NS
+        want = expected_link_poses(robot_bag, robot_bag.state_at(t))["tool_flange"]
+
+        def looked_up() -> np.ndarray:
+            matrix = lookup.GetMatrixTransformToParent()
+            if matrix is None:
+                return np.zeros(3)
+            return np.array([matrix.GetElement(i, 3) for i in range(3)])
+
+        def arrived() -> bool:  # the lookup's node holds the identity until its first value
+            ros_logic.Spin()
+            return bool(sub.GetNumberOfMessages()) and np.allclose(looked_up(), want[:3, 3],
+                                                                   atol=0.01)
+        wait_until(arrived, timeout=30, what=f"the image and the flange at {want[:3, 3]}")
         pixels = np.asarray(sub.GetLastMessage())
         assert pixels.tobytes() == robot_bag.image_at(t)
-        matrix = lookup.GetMatrixTransformToParent()
-        got = np.array([[matrix.GetElement(i, j) for j in range(4)] for i in range(4)])
-        want = expected_link_poses(robot_bag, robot_bag.state_at(t))["tool_flange"]
-        np.testing.assert_allclose(got[:3, 3], want[:3, 3], atol=0.01)
     finally:
         ros.close()
     assert "NO-ROS GUARD" not in player.output() and "Traceback" not in player.output()

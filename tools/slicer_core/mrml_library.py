@@ -47,7 +47,8 @@ def build_mrml_library(prefix: Path, python: Path, log: Path) -> None:
     if (stamp_file.exists() and stamp_file.read_text() == stamp
             and (package_dir / "__init__.py").exists()):
         return
-    build = prefix / "build-ros2bridge-mrml"
+    # In this checkout: a peer another checkout built (SLICER_PEER_PREFIX) keeps its own.
+    build = REPO / ".cache" / "build-ros2bridge-mrml"
     sdk = prefix / "vtk-sdk"
     configure = ["cmake", "-S", str(CMAKE_PROJECT), "-B", str(build),
                  "-DCMAKE_BUILD_TYPE=Release", f"-DSITE={site[0]}",
