@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 
 from bridge.robots.demo import demo_urdf_path
-from motion_robots import ARM_URDF, SWING_ACTION, start_swing
+from motion_robots import ARM_URDF, RADIUS, SWING_ACTION, box_mm, start_swing
 from support import Processes, RunningDaemon, start_daemon, wait_until
 
 pytestmark = pytest.mark.ros
 yourdfpy = pytest.importorskip("yourdfpy")
+trimesh = pytest.importorskip("trimesh")
 
 ACTION = SWING_ACTION
 GOAL_RAD = 1.5  # the swing arm's goal, behind the block
@@ -100,6 +101,15 @@ def test_a_scene_model_as_obstacle_refuses_then_allows_execution(
     got = run_scene("motion_execute", timeout=300, port=daemon.port,
                     urdf=str(tmp_path / "swing.urdf"), action=ACTION, goal=GOAL_RAD)
     assert got["first"] == "succeeded" and got["obstacle"] == "block"
+    # The distance streamed to the scene, against trimesh's closest point on the same block
+    # (a 10 cm cube at 0.3 rad on the 500 mm circle) from the tool sphere (r 50 mm) at -1.0.
+    block = box_mm()
+    block.apply_translation((500.0 * math.cos(0.3), 500.0 * math.sin(0.3), 0.0))
+    centre = np.array([[500.0 * math.cos(-1.0), 500.0 * math.sin(-1.0), 0.0]])
+    nearest, _, _ = trimesh.proximity.closest_point(block, centre)
+    want = float(np.linalg.norm(nearest[0] - centre[0])) - RADIUS * 1000.0
+    assert got["distance_mm"] == pytest.approx(want, abs=0.1), (got["distance_mm"], want)
+    assert got["distance_line"] == f"tool to block: {want:.1f} mm"
     assert "link 'tool' touches obstacle 'block'" in got["refused"], got["refused"]
     assert got["plans"][-1] is True and False in got["plans"]
     assert got["second"] == {"status": "succeeded", "error_code": 0}

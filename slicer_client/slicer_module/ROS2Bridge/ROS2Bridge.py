@@ -151,7 +151,8 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                 (ui.motionFollowCheckBox, "toggled(bool)", self.onFollowToggled),
                 (ui.motionPathButton, "clicked(bool)", self.onPreviewPath),
                 (ui.motionExecuteButton, "clicked(bool)", self.onExecuteMotion),
-                (ui.addObstacleButton, "clicked(bool)", self.onAddObstacle)):
+                (ui.addObstacleButton, "clicked(bool)", self.onAddObstacle),
+                (ui.watchDistanceButton, "clicked(bool)", self.onWatchDistance)):
             button.connect(signal, handler)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
                          self.onSceneStartClose)
@@ -365,6 +366,13 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                                           self.ui.obstacleSelector.currentNode(),
                                           self.ui.obstacleFrameEdit.text.strip())
             self.ui.motionStatusLabel.text = f"Obstacle {name} added"
+
+    def onWatchDistance(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to stream the distance.",
+                                             waitCursor=True):
+            self.logic.watchDistance(self.ui.robotCombo.currentText,
+                                     self.ui.motionTipEdit.text.strip(),
+                                     self.logic.lastObstacle)
 
     def _refreshRobots(self) -> None:
         self.ui.robotCombo.clear()

@@ -16,6 +16,7 @@ from slicer.ScriptedLoadableModule import ScriptedLoadableModuleLogic
 from slicer.util import VTKObservationMixin
 
 from protocol import commands as c
+from protocol.conversions import metres_to_mm
 from protocol.polydata import RGBA_ATTRIBUTE
 from slicer_client.bridge_state import BridgeState
 from slicer_client.client import Client, read_key_file
@@ -41,6 +42,8 @@ __all__ = ["CONNECTOR_NAME", "CONNECT_WAIT_S", "SPIN_INTERVAL_MS", "ROS2BridgeLo
 
 CONNECTOR_NAME = "ROS2BridgeConnector"
 SPIN_INTERVAL_MS = 20  # the reference spins its node at 50 Hz
+DISTANCE_TOPICS = "/slicer/distance"  # watchDistance's topics: <this>/<link>_to_<obstacle>
+DISTANCE_RATE_HZ = 30.0  # what a display shows
 PATH_PREVIEW_SAMPLES = 50  # configurations of a planned path the preview scrubs through
 MOTION_INTERVAL_MS = 33  # a dragged target is solved again at most this often (30 Hz)
 CONNECT_WAIT_S = 10.0  # a script's first reference call waits this long for the daemon
@@ -83,6 +86,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._obstaclesMoved: set[str] = set()
         self.execution: Any = None  # the GoalHandle of the latest executeMotion
         self.pathBrowser: Any = None  # the sequence browser of the latest previewPath
+        self.distance: Optional[tuple[str, str, Any]] = None  # link, obstacle, subscriber
+        self.lastObstacle = ""  # the obstacle addObstacle made last
         self._motionTimer = qt.QTimer()
         self._motionTimer.setInterval(MOTION_INTERVAL_MS)
         self._motionTimer.connect("timeout()", self._onMotionTimer)
@@ -515,6 +520,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         robot.set_obstacle(name, topic, type="Marker")  # sent as OBSTACLE_TYPE below
         self.sendToROS(modelNode, topic, frame, OBSTACLE_TYPE)
         self._obstacles[modelNode.GetID()] = (robotName, topic, frame, name)
+        self.lastObstacle = name
         for event in (slicer.vtkMRMLTransformableNode.TransformModifiedEvent,
                       slicer.vtkMRMLModelNode.MeshModifiedEvent):
             if not self.hasObserver(modelNode, event, self._onObstacleMoved):
@@ -548,11 +554,39 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.motionStatus = f"Executing on {action}"
         return self.execution
 
+    def watchDistance(self, robotName: str, link: str, obstacle: str) -> Any:
+        """Stream the distance from `link` to `obstacle` to this scene: the daemon publishes
+        it on ROS (std_msgs/Float64, metres, `DISTANCE_RATE_HZ`; a write) and this module
+        subscribes to that topic, so it arrives as other streams do, with no request per
+        value. Returns the subscriber; `distanceLine()` shows the newest value in mm."""
+        topic = f"{DISTANCE_TOPICS}/{obstacle_name(link)}_to_{obstacle_name(obstacle)}"
+        self._robot(robotName).publish_distance(link, obstacle, topic,
+                                                rate_hz=DISTANCE_RATE_HZ)
+        self.distance = (link, obstacle, self.requireClient().subscribe(topic, "Float64"))
+        self._saveState()
+        return self.distance[2]
+
+    def distanceMm(self) -> Optional[float]:
+        """The newest streamed distance (mm), None before the first."""
+        if self.distance is None or self.distance[2].last_value is None:
+            return None
+        return float(metres_to_mm(float(self.distance[2].last_value)))
+
+    def distanceLine(self) -> str:
+        value = self.distanceMm()
+        if self.distance is None:
+            return ""
+        link, obstacle, _ = self.distance
+        return (f"{link} to {obstacle}: waiting for the first distance" if value is None
+                else f"{link} to {obstacle}: {value:.1f} mm")
+
     def motionLine(self) -> str:
         """The Motion section's status: the last solve, or the execution and its state."""
+        line = self.motionStatus
         if self.execution is not None and self.motionStatus.startswith("Executing"):
-            return f"{self.motionStatus}: {self.execution.status}"
-        return self.motionStatus
+            line = f"{self.motionStatus}: {self.execution.status}"
+        distance = self.distanceLine()
+        return f"{line}\n{distance}" if line and distance else line or distance
 
     def _onTargetMoved(self, caller: Any = None, event: Any = None) -> None:
         self._targetMoved = True  # solved at the next tick: drags come faster than frames
