@@ -113,6 +113,15 @@ def test_a_scene_model_as_obstacle_refuses_then_allows_execution(
     assert "link 'tool' touches obstacle 'block'" in got["refused"], got["refused"]
     assert got["plans"][-1] is True and False in got["plans"]
     assert got["second"] == {"status": "succeeded", "error_code": 0}
+    # A segmentation (a cube segment at -2.0 rad) as an obstacle: its distance from the tool,
+    # now at the goal, as trimesh has it.
+    assert got["segmentation_obstacle"] == "organ"
+    organ = box_mm()
+    organ.apply_translation((500.0 * math.cos(-2.0), 500.0 * math.sin(-2.0), 0.0))
+    tool = np.array([[500.0 * math.cos(GOAL_RAD), 500.0 * math.sin(GOAL_RAD), 0.0]])
+    nearest, _, _ = trimesh.proximity.closest_point(organ, tool)
+    want_organ = float(np.linalg.norm(nearest[0] - tool[0])) - RADIUS * 1000.0
+    assert got["organ_distance_mm"] == pytest.approx(want_organ, abs=0.1)
 
     def swing() -> list[float]:
         return [dict(zip(m["name"], m["position"]))["swing"]

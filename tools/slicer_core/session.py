@@ -66,6 +66,7 @@ def open_session(*, subject_hierarchy: bool = True) -> Session:
 
     from tools.slicer_core import qt_layer
     app = slicer_app.SlicerApp(subject_hierarchy=subject_hierarchy)
+    _register_segmentation_converters()
     slicer_qt = qt_layer.install(app)
     import ROS2Bridge
     ROS2Bridge.ROS2Bridge(None)
@@ -73,3 +74,19 @@ def open_session(*, subject_hierarchy: bool = True) -> Session:
     slicer_qt.logics["ROS2Bridge"] = logic
     slicer_qt.startupCompleted()
     return Session(app, slicer_qt, ROS2Bridge, logic)
+
+
+def _register_segmentation_converters() -> None:
+    """What Slicer's Segmentations module does as it starts (qSlicerSegmentationsModule::
+    setup): the representation conversion rules, with which a segmentation makes its
+    closed surfaces. slicer-core has the rules but not that module's start-up."""
+    import slicer
+
+    factory = slicer.vtkSegmentationConverterFactory.GetInstance()
+    for name in ("vtkBinaryLabelmapToClosedSurfaceConversionRule",
+                 "vtkClosedSurfaceToBinaryLabelmapConversionRule",
+                 "vtkClosedSurfaceToFractionalLabelmapConversionRule",
+                 "vtkFractionalLabelmapToClosedSurfaceConversionRule"):
+        rule = getattr(slicer, name, None)
+        if rule is not None:
+            factory.RegisterConverterRule(rule())

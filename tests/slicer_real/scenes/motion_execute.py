@@ -10,6 +10,7 @@ import math
 import time
 from typing import Any
 
+import slicer
 import vtk
 
 from scene_tools import connect
@@ -82,6 +83,33 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
                  what="the second goal's end")
     out["second"] = {"status": handle.status,
                      "error_code": handle.result(timeout=1)["error_code"]}
+
+    # A segmentation as an obstacle: a 10 cm cube segment (closed surface as its source),
+    # under a transform at -2.0 rad on the tool's circle; its distance from the tool.
+    segmentation = scene.AddNewNodeByClass("vtkMRMLSegmentationNode", "organ")
+    segmentation.GetSegmentation().SetSourceRepresentationName(
+        slicer.vtkSegmentationConverter.GetSegmentationClosedSurfaceRepresentationName())
+    segmentation.AddSegmentFromClosedSurfaceRepresentation(cube.GetOutput(), "cube",
+                                                          [1.0, 0.0, 0.0])
+    organ_place = scene.AddNewNodeByClass("vtkMRMLLinearTransformNode", "organ place")
+    organ_place.SetMatrixTransformToParent(_placed(-2.0))
+    segmentation.SetAndObserveTransformNodeID(organ_place.GetID())
+    out["segmentation_obstacle"] = logic.addObstacle("swing", segmentation, "base")
+
+    def organ_distance() -> Any:
+        frame.broadcast(vtk.vtkMatrix4x4())
+        found = [d for d in robot.obstacle_distances("tool")["distances"]
+                 if d["obstacle"] == "organ"]
+        return found[0]["distance_mm"] if found else None
+    last[0] = 0.0
+
+    def measured() -> bool:
+        if time.monotonic() - last[0] < 0.2:
+            return False
+        last[0] = time.monotonic()
+        out["organ_distance_mm"] = organ_distance()
+        return out["organ_distance_mm"] is not None
+    session.pump(60, until=measured, what="the segmentation's distance")
     return out
 
 

@@ -32,7 +32,7 @@ from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER, NodePlan,
 from slicer_client.send_plan import KIND_ORDER, plan_send
 
 from .motion import (OBSTACLE_TOPICS, OBSTACLE_TYPE, MotionPreview, ik_status, obstacle_name,
-                     target_matrix)
+                     segmentation_surface, target_matrix)
 from .parameters import ROS2BridgeParameterNode
 from .scene_nodes import SceneNodes, register_node_classes
 from .transport import ConnectorTransport
@@ -507,14 +507,20 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             preview.remove()
 
     def addObstacle(self, robotName: str, modelNode: Any, frame: str) -> str:
-        """Make a model of the scene an obstacle of the robot: sent to ROS as a Marker
+        """Make a model (or a segmentation: its segments' closed surfaces, as one model
+        under its transform) of the scene an obstacle of the robot: sent to ROS as a Marker
         (``/slicer/obstacles/<name>``, its surface in the scene's world, which is `frame`:
         the frame the robot is shown in), and sent again whenever it moves or changes, at
         most every 33 ms. Solving, planning and executing then keep clear of it; returns
         the obstacle's name (the model's, made a ROS name)."""
-        if modelNode is None or not modelNode.IsA("vtkMRMLModelNode"):
-            raise ValueError("choose a model node as the obstacle")
+        if modelNode is None:
+            raise ValueError("choose a model or a segmentation node as the obstacle")
         name = obstacle_name(modelNode.GetName())
+        if modelNode.IsA("vtkMRMLSegmentationNode"):
+            modelNode = segmentation_surface(modelNode)
+        if not modelNode.IsA("vtkMRMLModelNode"):
+            raise ValueError(f"expected a model or a segmentation node as the obstacle, got "
+                             f"{modelNode.GetClassName()} {modelNode.GetName()!r}")
         topic = f"{OBSTACLE_TOPICS}/{name}"
         robot = self._robot(robotName)
         robot.set_obstacle(name, topic, type="Marker")  # sent as OBSTACLE_TYPE below

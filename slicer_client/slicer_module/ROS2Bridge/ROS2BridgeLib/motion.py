@@ -17,7 +17,7 @@ import vtk
 from slicer_client.matrices import fill_vtk
 
 __all__ = ["FAILED_COLOUR", "MotionPreview", "OBSTACLE_TOPICS", "OBSTACLE_TYPE", "PREVIEW_OPACITY",
-           "SOLVED_COLOUR", "ik_status", "obstacle_name",
+           "SOLVED_COLOUR", "ik_status", "obstacle_name", "segmentation_surface",
            "target_matrix", "world_matrix"]
 
 ROBOT_ATTRIBUTE = "OpenIGTLink.ros2.robot"
@@ -217,3 +217,34 @@ def obstacle_name(node_name: str) -> str:
     not starting with a digit."""
     name = re.sub(r"[^A-Za-z0-9_]+", "_", node_name).strip("_") or "model"
     return f"m_{name}" if name[0].isdigit() else name
+
+
+def segmentation_surface(segmentation: Any) -> Any:
+    """A segmentation as an obstacle: its segments' closed surfaces (as Slicer shows them)
+    in one model, ``<segmentation>: obstacle surface``, under the segmentation's transform,
+    so it moves with it. Made again on each call (a segment edited meanwhile)."""
+    scene = segmentation.GetScene()
+    segmentation.CreateClosedSurfaceRepresentation()
+    ids = vtk.vtkStringArray()
+    segmentation.GetSegmentation().GetSegmentIDs(ids)
+    if ids.GetNumberOfValues() == 0:
+        raise ValueError(f"the segmentation {segmentation.GetName()!r} has no segment")
+    append = vtk.vtkAppendPolyData()
+    for i in range(ids.GetNumberOfValues()):
+        surface = vtk.vtkPolyData()
+        if not segmentation.GetClosedSurfaceRepresentation(ids.GetValue(i), surface):
+            raise ValueError(f"no closed surface for segment {ids.GetValue(i)!r} of "
+                             f"{segmentation.GetName()!r}")
+        append.AddInputData(surface)
+    append.Update()
+    name = f"{segmentation.GetName()}: obstacle surface"
+    model = scene.GetFirstNode(name, "vtkMRMLModelNode")
+    if model is None:
+        model = scene.AddNewNodeByClass("vtkMRMLModelNode", name)
+        model.CreateDefaultDisplayNodes()
+        model.GetDisplayNode().SetVisibility(False)  # the segmentation shows itself
+    surface = vtk.vtkPolyData()
+    surface.DeepCopy(append.GetOutput())
+    model.SetAndObservePolyData(surface)
+    model.SetAndObserveTransformNodeID(segmentation.GetTransformNodeID())
+    return model
