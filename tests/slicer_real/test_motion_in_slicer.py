@@ -108,6 +108,7 @@ def test_a_scene_model_as_obstacle_refuses_then_allows_execution(
     centre = np.array([[500.0 * math.cos(-1.0), 500.0 * math.sin(-1.0), 0.0]])
     nearest, _, _ = trimesh.proximity.closest_point(block, centre)
     want = float(np.linalg.norm(nearest[0] - centre[0])) - RADIUS * 1000.0
+    assert got["watched"] == ["block"]
     assert got["distance_mm"] == pytest.approx(want, abs=0.1), (got["distance_mm"], want)
     assert got["distance_line"] == f"tool to block: {want:.1f} mm"
     assert "link 'tool' touches obstacle 'block'" in got["refused"], got["refused"]

@@ -370,9 +370,8 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
     def onWatchDistance(self) -> None:
         with slicer.util.tryWithErrorDisplay("Failed to stream the distance.",
                                              waitCursor=True):
-            self.logic.watchDistance(self.ui.robotCombo.currentText,
-                                     self.ui.motionTipEdit.text.strip(),
-                                     self.logic.lastObstacle)
+            self.logic.watchDistances(self.ui.robotCombo.currentText,
+                                      self.ui.motionTipEdit.text.strip())
 
     def _refreshRobots(self) -> None:
         self.ui.robotCombo.clear()

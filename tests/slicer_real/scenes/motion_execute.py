@@ -64,9 +64,10 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     session.pump(60, until=lambda: plan_is(False), what="a plan through the block")
     # The tool's distance to the block, streamed to the scene (the daemon publishes it on
     # ROS, the module subscribes), while the arm holds at -1.0.
-    logic.watchDistance("swing", "tool", "block")
-    session.pump(60, until=lambda: logic.distanceMm() is not None, what="a streamed distance")
-    out["distance_mm"] = logic.distanceMm()
+    out["watched"] = logic.watchDistances("swing", "tool")
+    session.pump(60, until=lambda: logic.distanceMm("tool", "block") is not None,
+                 what="a streamed distance")
+    out["distance_mm"] = logic.distanceMm("tool", "block")
     out["distance_line"] = logic.distanceLine()
     try:
         logic.executeMotion("swing", {"swing": args["goal"]}, action=action)

@@ -86,8 +86,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._obstaclesMoved: set[str] = set()
         self.execution: Any = None  # the GoalHandle of the latest executeMotion
         self.pathBrowser: Any = None  # the sequence browser of the latest previewPath
-        self.distance: Optional[tuple[str, str, Any]] = None  # link, obstacle, subscriber
-        self.lastObstacle = ""  # the obstacle addObstacle made last
+        self.distances: dict[tuple[str, str], Any] = {}  # (link, obstacle) -> subscriber
         self._motionTimer = qt.QTimer()
         self._motionTimer.setInterval(MOTION_INTERVAL_MS)
         self._motionTimer.connect("timeout()", self._onMotionTimer)
@@ -526,7 +525,6 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         robot.set_obstacle(name, topic, type="Marker")  # sent as OBSTACLE_TYPE below
         self.sendToROS(modelNode, topic, frame, OBSTACLE_TYPE)
         self._obstacles[modelNode.GetID()] = (robotName, topic, frame, name)
-        self.lastObstacle = name
         for event in (slicer.vtkMRMLTransformableNode.TransformModifiedEvent,
                       slicer.vtkMRMLModelNode.MeshModifiedEvent):
             if not self.hasObserver(modelNode, event, self._onObstacleMoved):
@@ -564,27 +562,39 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         """Stream the distance from `link` to `obstacle` to this scene: the daemon publishes
         it on ROS (std_msgs/Float64, metres, `DISTANCE_RATE_HZ`; a write) and this module
         subscribes to that topic, so it arrives as other streams do, with no request per
-        value. Returns the subscriber; `distanceLine()` shows the newest value in mm."""
+        value. Returns the subscriber; `distanceLine()` shows the newest values in mm."""
         topic = f"{DISTANCE_TOPICS}/{obstacle_name(link)}_to_{obstacle_name(obstacle)}"
         self._robot(robotName).publish_distance(link, obstacle, topic,
                                                 rate_hz=DISTANCE_RATE_HZ)
-        self.distance = (link, obstacle, self.requireClient().subscribe(topic, "Float64"))
+        subscriber = self.requireClient().subscribe(topic, "Float64")
+        self.distances[(link, obstacle)] = subscriber
         self._saveState()
-        return self.distance[2]
+        return subscriber
 
-    def distanceMm(self) -> Optional[float]:
+    def watchDistances(self, robotName: str, link: str) -> list[str]:
+        """`watchDistance` from `link` to each obstacle this module made for the robot;
+        their names."""
+        obstacles = [entry[3] for entry in self._obstacles.values() if entry[0] == robotName]
+        if not obstacles:
+            raise RuntimeError(f"robot {robotName!r} has no obstacle: make a model one first")
+        for obstacle in obstacles:
+            self.watchDistance(robotName, link, obstacle)
+        return obstacles
+
+    def distanceMm(self, link: str, obstacle: str) -> Optional[float]:
         """The newest streamed distance (mm), None before the first."""
-        if self.distance is None or self.distance[2].last_value is None:
+        subscriber = self.distances.get((link, obstacle))
+        if subscriber is None or subscriber.last_value is None:
             return None
-        return float(metres_to_mm(float(self.distance[2].last_value)))
+        return float(metres_to_mm(float(subscriber.last_value)))
 
     def distanceLine(self) -> str:
-        value = self.distanceMm()
-        if self.distance is None:
-            return ""
-        link, obstacle, _ = self.distance
-        return (f"{link} to {obstacle}: waiting for the first distance" if value is None
-                else f"{link} to {obstacle}: {value:.1f} mm")
+        lines = []
+        for link, obstacle in self.distances:
+            value = self.distanceMm(link, obstacle)
+            lines.append(f"{link} to {obstacle}: " + ("waiting for the first distance"
+                                                      if value is None else f"{value:.1f} mm"))
+        return "\n".join(lines)
 
     def motionLine(self) -> str:
         """The Motion section's status: the last solve, or the execution and its state."""
