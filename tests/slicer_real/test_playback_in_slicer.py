@@ -43,3 +43,29 @@ def test_the_module_plays_a_bag_and_seeks_it(run_scene, processes: Processes,
     assert got["rate"] == 3.0 and got["resumed_paused"] is False
     assert got["paused_at_end"] is True
     assert "NO-ROS GUARD" not in player.output() and "Traceback" not in player.output()
+
+
+def test_a_played_bag_becomes_sequences_and_browsing_moves_the_robot(
+        run_scene, processes: Processes, no_ros: dict[str, str], robot_bag: Any,
+        demo_files: tuple[str, str]) -> None:
+    """The module records a played bag as Slicer sequences (one per streamed node, on the
+    bag's clock, under one browser whose proxies are the nodes): browsing item i shows the
+    robot's pose at its time t_i, by yourdfpy's FK of the bag's joint state then."""
+    pytest.importorskip("mcap_ros2", reason="the play extra (mcap-ros2-support)")
+    from bags import NS
+    from play_support import expected_link_poses, start_player
+
+    player, port = start_player(processes, no_ros, str(robot_bag.mcap), "--paused",
+                                "--package-path", demo_files[1])
+    got = run_scene("bag_sequences", timeout=300, port=port, start=0.5, step=0.25,
+                    items=[0, 3, 6])
+    assert got["items"] == 7  # 0.5, 0.75 ... 2.0 s
+    assert "demo:tool_flange (bag)" in got["sequences"]
+    assert got["models_under_links"] == 14  # the models stay under their link transforms
+    for index, shown in got["shown"].items():
+        t = robot_bag.times[0] - NS // 100 + int(round(float(index) * NS))
+        poses = expected_link_poses(robot_bag, robot_bag.state_at(t))
+        want = np.linalg.inv(poses["base_link"]) @ poses["tool_flange"]
+        np.testing.assert_allclose(np.array(shown)[:3, 3], want[:3, 3], atol=0.01,
+                                   err_msg=f"item at {index} s")
+    assert "Traceback" not in player.output()

@@ -74,7 +74,7 @@ from slicer.ScriptedLoadableModule import (ScriptedLoadableModule, ScriptedLoada
 from slicer.util import VTKObservationMixin
 
 # ROS2BridgeLib first: it says what to install when the client packages are missing.
-from ROS2BridgeLib.logic import ROS2BridgeLogic, nodeKind
+from ROS2BridgeLib.logic import ROS2BridgeLogic, nodeKind, playback_line
 from ROS2BridgeLib.parameters import DEFAULT_FRAME, ROS2BridgeParameterNode
 from ROS2BridgeLib.reference import installReferenceEntryPoints
 from ROS2BridgeLib.transport import ConnectorTransport
@@ -152,7 +152,11 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                 (ui.motionPathButton, "clicked(bool)", self.onPreviewPath),
                 (ui.motionExecuteButton, "clicked(bool)", self.onExecuteMotion),
                 (ui.addObstacleButton, "clicked(bool)", self.onAddObstacle),
-                (ui.watchDistanceButton, "clicked(bool)", self.onWatchDistance)):
+                (ui.watchDistanceButton, "clicked(bool)", self.onWatchDistance),
+                (ui.playbackPauseButton, "toggled(bool)", self.onPauseToggled),
+                (ui.seekButton, "clicked(bool)", self.onSeek),
+                (ui.rateButton, "clicked(bool)", self.onSetRate),
+                (ui.toSequencesButton, "clicked(bool)", self.onBagToSequences)):
             button.connect(signal, handler)
         self.addObserver(slicer.mrmlScene, slicer.mrmlScene.StartCloseEvent,
                          self.onSceneStartClose)
@@ -372,6 +376,27 @@ class ROS2BridgeWidget(ScriptedLoadableModuleWidget, VTKObservationMixin):
                                              waitCursor=True):
             self.logic.watchDistances(self.ui.robotCombo.currentText,
                                       self.ui.motionTipEdit.text.strip())
+
+    def onPauseToggled(self, on: bool) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to pause or resume the bag."):
+            status = self.logic.pausePlayback() if on else self.logic.resumePlayback()
+            self.ui.playbackLabel.text = playback_line(status)
+
+    def onSeek(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to seek the bag.", waitCursor=True):
+            self.ui.playbackLabel.text = playback_line(
+                self.logic.seekPlayback(float(self.ui.seekSpin.value)))
+
+    def onSetRate(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to set the bag's rate."):
+            self.ui.playbackLabel.text = playback_line(
+                self.logic.setPlaybackRate(float(self.ui.rateSpin.value)))
+
+    def onBagToSequences(self) -> None:
+        with slicer.util.tryWithErrorDisplay("Failed to make the bag sequences.",
+                                             waitCursor=True):
+            browser = self.logic.bagToSequences(step=float(self.ui.sequenceStepSpin.value))
+            self.ui.playbackLabel.text = f"Sequences made: browse {browser.GetName()}"
 
     def _refreshRobots(self) -> None:
         self.ui.robotCombo.clear()

@@ -35,6 +35,7 @@ from .motion import (OBSTACLE_TOPICS, OBSTACLE_TYPE, MotionPreview, ik_status, o
                      segmentation_surface, target_matrix)
 from .parameters import ROS2BridgeParameterNode
 from .scene_nodes import SceneNodes, register_node_classes
+from .sequences import record_bag
 from .transport import ConnectorTransport
 
 __all__ = ["CONNECTOR_NAME", "CONNECT_WAIT_S", "SPIN_INTERVAL_MS", "ROS2BridgeLogic",
@@ -44,10 +45,18 @@ CONNECTOR_NAME = "ROS2BridgeConnector"
 SPIN_INTERVAL_MS = 20  # the reference spins its node at 50 Hz
 DISTANCE_TOPICS = "/slicer/distance"  # watchDistance's topics: <this>/<link>_to_<obstacle>
 DISTANCE_RATE_HZ = 30.0  # what a display shows
+MAX_BAG_SAMPLES = 2000  # bagToSequences: each sample is a copy of every streamed node
 PATH_PREVIEW_SAMPLES = 50  # configurations of a planned path the preview scrubs through
 MOTION_INTERVAL_MS = 33  # a dragged target is solved again at most this often (30 Hz)
 CONNECT_WAIT_S = 10.0  # a script's first reference call waits this long for the daemon
 log = logging.getLogger("ROS2Bridge")
+
+
+def playback_line(status: c.PlaybackResult) -> str:
+    """A player's clock in words, for the Playback section."""
+    state = "ended" if status.ended else "paused" if status.paused else "playing"
+    return (f"{status.bag}: {status.offset:.2f} of {status.duration:.2f} s, {state}, "
+            f"rate {status.rate:g}" + (", looping" if status.loop else ""))
 
 
 def nodeKind(node: Any) -> str:
@@ -254,6 +263,26 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
 
     def setPlaybackRate(self, rate: float) -> c.PlaybackResult:
         return self.requireClient().set_rate(rate)
+
+    def bagToSequences(self, start: float = 0.0, end: Optional[float] = None,
+                       step: float = 0.1) -> Any:
+        """The bag a player plays (or the part from `start` to `end` s) as Slicer sequences:
+        the player is paused and sought to every `step` s; what the connector's nodes hold
+        at each time (link transforms, tf lookups, images, point clouds, text) is recorded,
+        one sequence per node, indexed by the bag's clock, under one sequence browser whose
+        proxies are the nodes: scrubbing it moves the robot. Returns the browser."""
+        status = self.pausePlayback()
+        last = status.duration if end is None else min(float(end), status.duration)
+        if not (step > 0 and 0 <= start <= last):
+            raise ValueError(f"expected 0 <= start <= end <= {status.duration:g} s and a "
+                             f"step > 0, got {start:g}, {last:g}, {step:g}")
+        count = int(round((last - start) / step)) + 1
+        if count > MAX_BAG_SAMPLES:
+            raise ValueError(f"expected at most {MAX_BAG_SAMPLES} samples, got {count} (a "
+                             f"larger step, or a part of the bag)")
+        offsets = [min(last, start + i * step) for i in range(count)]
+        return record_bag(slicer.mrmlScene, self.connector, status.bag, offsets,
+                          self.seekPlayback)
 
     # --- robots and bridges -------------------------------------------------------------
     def loadRobot(self, name: str, node: str, parameter: str) -> Robot:
