@@ -246,3 +246,43 @@ def test_make_client_wheel_needs_no_ros_set_up(tmp_path: Path) -> None:
     assert plan.returncode == 0, plan.stderr
     assert "tools/build_client_wheel.py --out dist" in plan.stdout
     assert "setup_env.py" not in plan.stdout and ".venv" not in plan.stdout, plan.stdout
+
+
+def test_the_player_wheel_plays_a_bag_in_a_venv_without_ros(
+        tmp_path: Path, processes: Processes, robot_bag: Any,
+        demo_files: tuple[str, str]) -> None:
+    """Issue 45: `slicer-ros2-bridge-play` from the player's wheel (no ROS 2 wheel; what a
+    Windows or macOS laptop installs) in a fresh venv where `import rclpy` fails, serving a
+    bag written by rosbags: the client places the robot's flange at the bag's pose."""
+    import re
+
+    import slicer_client
+    from bags import NS
+    from play_support import expected_link_poses
+
+    from tools.build_client_wheel import build
+
+    wheel = build(tmp_path / "dist", "player")
+    python = _fresh_venv(tmp_path / "venv")
+    _pip_install(python, str(wheel))
+    no_rclpy = _run([str(python), "-c", "import rclpy"])
+    assert no_rclpy.returncode != 0 and "No module named 'rclpy'" in no_rclpy.stderr
+    player = processes.start("player-wheel", [
+        str(python.parent / "slicer-ros2-bridge-play"), str(robot_bag.mcap), "--paused",
+        "--start", "1.0", "--package-path", demo_files[1], "--port", "0"])
+    match = re.search(r"listening on [\d.]+:(\d+)",
+                      player.wait_for_output("listening on", timeout=60))
+    assert match
+    ros = slicer_client.connect("127.0.0.1", int(match.group(1)), reconnect=False)
+    try:
+        robot = ros.robot("demo")
+        robot.wait_until_loaded(60)
+        t = robot_bag.times[0] - NS // 100 + NS
+        poses = expected_link_poses(robot_bag, robot_bag.state_at(t))
+        want = np.linalg.inv(poses["base_link"]) @ poses["tool_flange"]
+        got = robot.links["tool_flange"].matrix
+        assert got is not None
+        np.testing.assert_allclose(np.asarray(got)[:3, 3], want[:3, 3], atol=0.01)
+    finally:
+        ros.close()
+    assert "Traceback" not in player.output()
