@@ -16,6 +16,8 @@ import vtk
 
 from slicer_client.matrices import fill_vtk
 
+from .sequences import time_sequence
+
 __all__ = ["FAILED_COLOUR", "MotionPreview", "OBSTACLE_TOPICS", "OBSTACLE_TYPE", "PREVIEW_OPACITY",
            "SOLVED_COLOUR", "ik_status", "obstacle_name", "segmentation_surface",
            "target_matrix", "world_matrix"]
@@ -159,12 +161,8 @@ class MotionPreview:
         browser.SetAttribute(PREVIEW_ATTRIBUTE, self.robot)
         matrix = vtk.vtkMatrix4x4()
         for link, proxy in self.transforms.items():
-            sequence = self.scene.AddNewNodeByClass("vtkMRMLSequenceNode",
-                                                    f"{self.robot}:preview path:{link}")
-            sequence.SetAttribute(PREVIEW_ATTRIBUTE, self.robot)
-            sequence.SetIndexName("time")
-            sequence.SetIndexUnit("s")
-            sequence.SetIndexType(sequence.NumericIndex)
+            sequence = time_sequence(self.scene, f"{self.robot}:preview path:{link}",
+                                     PREVIEW_ATTRIBUTE, self.robot)
             for item in preview:
                 pose = item["links"].get(link)
                 if pose is None:

@@ -12,7 +12,7 @@ from typing import Any, Callable
 
 import slicer
 
-__all__ = ["SequenceRecorder", "record_bag", "recorded_nodes", "settle"]
+__all__ = ["SequenceRecorder", "record_bag", "recorded_nodes", "settle", "time_sequence"]
 
 ROLE_ATTRIBUTE = "OpenIGTLink.ros2.role"
 # What does not change along a bag: a robot's meshes (their link transforms move them).
@@ -22,6 +22,16 @@ RECORDED_CLASSES = ("vtkMRMLLinearTransformNode", "vtkMRMLScalarVolumeNode",
 SEQUENCE_ATTRIBUTE = "ROS2Bridge.bag"  # the bag a sequence or browser was made from
 SETTLE_QUIET_S = 0.05  # a seek's state is one burst: this long without a change ends it
 SETTLE_TIMEOUT_S = 1.0  # no change at all this long: the new time shows the same state
+
+
+def time_sequence(scene: Any, name: str, attribute: str, value: str) -> Any:
+    """A sequence node indexed by time in seconds (numeric), marked with `attribute`."""
+    sequence = scene.AddNewNodeByClass("vtkMRMLSequenceNode", name)
+    sequence.SetAttribute(attribute, value)
+    sequence.SetIndexName("time")
+    sequence.SetIndexUnit("s")
+    sequence.SetIndexType(sequence.NumericIndex)
+    return sequence
 
 
 def recorded_nodes(connector: Any) -> list[Any]:
@@ -54,13 +64,8 @@ class SequenceRecorder:
             entry[1].SetDataNodeAtValue(node, f"{offset:.6f}")
 
     def _sequence_of(self, node: Any) -> Any:
-        sequence = self.scene.AddNewNodeByClass("vtkMRMLSequenceNode",
-                                                f"{node.GetName()} (bag)")
-        sequence.SetAttribute(SEQUENCE_ATTRIBUTE, self.bag)
-        sequence.SetIndexName("time")
-        sequence.SetIndexUnit("s")
-        sequence.SetIndexType(sequence.NumericIndex)
-        return sequence
+        return time_sequence(self.scene, f"{node.GetName()} (bag)", SEQUENCE_ATTRIBUTE,
+                             self.bag)
 
     def finish(self, name: str) -> Any:
         """The browser of the sequences, its proxies the nodes themselves, at item 0."""
