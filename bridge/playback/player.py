@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
+from bridge.core.threads import OnFailure, start_thread
 from bridge.core.content_guards import TF_MESSAGE_TYPE
 from bridge.codecs.base import TypeCodec, stream_message
 from bridge.codecs.catalog import SPECIFIC_CODECS
@@ -401,7 +402,7 @@ class Player:
         self._failed = ""  # why the playing thread stopped (a bug), for the clock's ops
         self.ended = False
         self._warned: set[str] = set()
-        self._thread = threading.Thread(target=self._run, name="player", daemon=True)
+        self._thread: Optional[threading.Thread] = None  # started by start()
 
     # ------------------------------------------------------------------ set-up
 
@@ -446,7 +447,8 @@ class Player:
     # ------------------------------------------------------------------ control (loop)
 
     def start(self) -> None:
-        self._thread.start()
+        # It says its own failure (the clock's ops report it): a thread that cannot die.
+        self._thread = start_thread("player", self._run, OnFailure.RESTART)
 
     def status(self) -> dict[str, Any]:
         with self._cond:
@@ -515,7 +517,8 @@ class Player:
             self._stopped = True
             waiters, self._seek_waiters = self._seek_waiters, []
             self._cond.notify_all()
-        self._thread.join(timeout=10)
+        if self._thread is not None:
+            self._thread.join(timeout=10)
         for waiter in waiters:
             waiter.cancel()
 

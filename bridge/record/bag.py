@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional, Union
 
+from bridge.core.threads import OnFailure, start_thread
 from protocol.commands import BAG_SUFFIX, COMPRESSIONS, bag_path_problem
 
 try:  # a daemon installed without it serves on; recording says what to install
@@ -234,8 +235,8 @@ class BagWriter:
             raise BagPathError("forbidden", "room for the bag", f"{self.path} "
                                f"({error.error.strerror})") from None
         self._floor = self._sink.offset
-        self._thread = threading.Thread(target=self._run, name="bag-writer", daemon=True)
-        self._thread.start()
+        # `_run` ends the bag itself on any failure: a thread that cannot die.
+        self._thread = start_thread("bag-writer", self._run, OnFailure.RESTART)
 
     # ------------------------------------------------------------------ any thread
 
