@@ -34,7 +34,7 @@ def test_the_packages_are_mypy_strict_clean() -> None:
 
 def test_the_daemon_starts_without_the_mesh_libraries() -> None:
     """yourdfpy and trimesh (about 80 MB of RSS) load with the first robot or marker mesh,
-    pinocchio and coal (about 50 MB) with the first motion query, not at start: a daemon
+    pinocchio and coal (about 50 MB) when the first robot loads, not at start: a daemon
     that only streams topics stays small."""
     code = ("import sys; import bridge.daemon; print(sorted(m for m in ('trimesh', "
             "'yourdfpy', 'pinocchio', 'coal') if m in sys.modules))")

@@ -61,7 +61,7 @@ from protocol.commands import (FOLLOW_JOINT_TRAJECTORY, MAX_OBSTACLES, CommandFa
 from protocol.commands.fields import Args
 from protocol.conversions import metres_to_mm, mm_to_metres, pose_to_matrix
 
-if TYPE_CHECKING:  # pinocchio and coal load with the first motion query
+if TYPE_CHECKING:  # pinocchio and coal load when the first robot does (robot_loaded)
     from bridge.motion.collisions import CollisionWorld
     from bridge.motion.model import MotionModel
     from bridge.robots.model import RobotModel
