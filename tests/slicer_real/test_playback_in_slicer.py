@@ -50,7 +50,8 @@ def test_a_played_bag_becomes_sequences_and_browsing_moves_the_robot(
         demo_files: tuple[str, str]) -> None:
     """The module records a played bag as Slicer sequences (one per streamed node, on the
     bag's clock, under one browser whose proxies are the nodes): browsing item i shows the
-    robot's pose at its time t_i, by yourdfpy's FK of the bag's joint state then."""
+    robot's pose at its time t_i, by yourdfpy's FK of the bag's joint state then, and the
+    bag's image at t_i as a volume."""
     pytest.importorskip("mcap_ros2", reason="the play extra (mcap-ros2-support)")
     from bags import NS
     from play_support import expected_link_poses, start_player
@@ -66,6 +67,10 @@ def test_a_played_bag_becomes_sequences_and_browsing_moves_the_robot(
         t = robot_bag.times[0] - NS // 100 + int(round(float(index) * NS))
         poses = expected_link_poses(robot_bag, robot_bag.state_at(t))
         want = np.linalg.inv(poses["base_link"]) @ poses["tool_flange"]
-        np.testing.assert_allclose(np.array(shown)[:3, 3], want[:3, 3], atol=0.01,
+        np.testing.assert_allclose(np.array(shown["flange"])[:3, 3], want[:3, 3], atol=0.01,
                                    err_msg=f"item at {index} s")
+        # The image as a volume, in step: the bag's image at that time (its pixels' sum,
+        # whatever order Slicer's volume holds them in).
+        pixels = np.frombuffer(robot_bag.image_at(t), dtype=np.uint8)
+        assert shown["image_sum"] == int(pixels.sum(dtype=np.int64)), f"image at {index} s"
     assert "Traceback" not in player.output()
