@@ -17,6 +17,10 @@ __all__ = ["call_ros_service", "wait_until_ready"]
 
 # How often an async wait re-checks that a service server has been discovered.
 _READY_POLL_S = 0.05
+# How long a request that must not be sent twice waits after its server is first seen:
+# this side matching the server does not mean the server has matched this side yet, and a
+# request that reaches its (volatile) reader before then is dropped, never resent.
+FRESH_MATCH_SETTLE_S = 0.5
 
 
 async def wait_until_ready(client: Client, wait_s: float) -> bool:
@@ -43,7 +47,9 @@ async def call_ros_service(hub: Hub, client: Client, request: Any, *, timeout: f
     that interval until an answer comes, and the first answer wins. A server seen in the
     graph may not have matched this client's request writer or response reader yet (Fast
     DDS waits 100 ms for the latter, then drops the response: ros2/rmw_fastrtps#392), so on
-    a busy machine the first request or its answer can be lost outright.
+    a busy machine the first request or its answer can be lost outright. A request sent
+    once only (no ``resend_every``) to a server just found (not ready at the first look)
+    waits `FRESH_MATCH_SETTLE_S` more, so that the server's side of the match can happen.
     """
     loop = asyncio.get_running_loop()
     start = loop.time()
@@ -59,10 +65,13 @@ async def call_ros_service(hub: Hub, client: Client, request: Any, *, timeout: f
             lambda done: hub.call_soon(_transfer, done, outcome))
 
     try:
+        found_just_now = not client.service_is_ready()
         if not await wait_until_ready(client, min(timeout, ready_wait)):
             raise CommandFailedError(field, f"{what} to be available",
                                      f"no server after {min(timeout, ready_wait):g} s",
                                      code=ErrorCode.UNAVAILABLE)
+        if found_just_now and resend_every is None:
+            await asyncio.sleep(min(FRESH_MATCH_SETTLE_S, max(0.0, deadline - loop.time())))
         send()
         while True:
             left = deadline - loop.time()
