@@ -14,7 +14,6 @@ import asyncio
 import dataclasses
 import gc
 import logging
-import os
 import sys
 import tempfile
 from pathlib import Path
@@ -40,7 +39,9 @@ from bridge.robots.capability import RobotBridges
 from bridge.types import InterfaceTypes
 from bridge.ros.receive_priority import (RECEIVE_SLICE_NS, ReceivePriorityError,
                                          raise_receive_threads, shorten_receive_slices)
+from bridge.ros.ros_args import domain_id_from_environment
 from bridge.ros.ros_node import RosNode, RosOptions
+from bridge.ros.shm_locks import ports_of_domains
 from bridge.ros.shm_ports import ShmPortWatch
 from bridge.services.capability import ServiceBridges
 from bridge.tf.capability import TfBridges
@@ -88,7 +89,8 @@ class Daemon:
         # Streams that go stale (publisher gone, silent past their period) are said so.
         self.health = StreamHealth(self.hub, loop)
         # ROS data Fast DDS loses in a replaced shared-memory port is said so in the log.
-        self.shm_ports = ShmPortWatch()
+        self.shm_ports = ShmPortWatch(
+            lock_ports=ports_of_domains([domain_id_from_environment()]))
         # No capability gets the policy: the dispatcher judges each request and hands a
         # handler the guard for the content its op declares (bridge.core.content_guards).
         self.topics = TopicBridges(self.ros, self.hub, names, health=self.health)
@@ -192,7 +194,7 @@ class Daemon:
                             "a second daemon? Peers cannot tell the two apart; start this "
                             "one with --node-name, or on another ROS_DOMAIN_ID",
                             self.ros.fully_qualified_name,
-                            os.environ.get("ROS_DOMAIN_ID", "0"))
+                            domain_id_from_environment())
                 return
             await asyncio.sleep(_NAMESAKE_POLL_S)
 

@@ -70,8 +70,8 @@ def _reserve_domains() -> int:
 
 
 _DOMAIN_ID = _reserve_domains()
-release_left_port_locks()  # an earlier session's killed process must not hang this one
 os.environ["ROS_DOMAIN_ID"] = str(_DOMAIN_ID)
+release_left_port_locks()  # an earlier session's killed process must not hang this one
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_STATIC_PEERS", None)
 os.environ["ROS_LOG_DIR"] = tempfile.mkdtemp(prefix="slicer-ros2-bridge-roslog-")

@@ -16,7 +16,8 @@ from typing import Callable, Optional, Sequence
 
 import pytest
 
-from bridge.ros.shm_locks import release_stuck, remove_dead_segments, remove_unfinished
+from bridge.ros.shm_locks import (ports_of_domains, release_stuck, remove_dead_segments,
+                                  remove_unfinished)
 from slicer_client.connection import CommandRefusedError, Connection
 
 REPO = Path(__file__).resolve().parent.parent
@@ -169,14 +170,22 @@ class Processes:
         release_left_port_locks()
 
 
+def session_domains() -> range:
+    """The session's block of ROS domains (ROS_DOMAIN_ID is its first)."""
+    first = int(os.environ["ROS_DOMAIN_ID"])
+    return range(first, first + DOMAIN_BLOCK)
+
+
 def release_left_port_locks() -> None:
     """A ROS process killed while opening a Fast DDS shared-memory port (a test's kill -9,
     or the SIGKILL of `Child.stop`) leaves the port's lock taken, and every later ROS
     process of the host that opens that port hangs: every test after it would fail (ci71:
-    8). Released here, and said (pytest shows it with the test's output)."""
-    for path in remove_unfinished():
+    8). Released here, and said (pytest shows it with the test's output). Only the ports
+    of the session's domains: another session's tests hold some of theirs on purpose."""
+    ports = ports_of_domains(session_domains())
+    for path in remove_unfinished(ports=ports):
         print(f"removed Fast DDS port segment {path}, never finished", file=sys.stderr)
-    for name in release_stuck():
+    for name in release_stuck(ports=ports):
         print(f"released Fast DDS port lock {name}, left taken by a killed ROS process",
               file=sys.stderr)
     remove_dead_segments()  # a killed process's segment stays in RAM until removed

@@ -37,6 +37,7 @@ from typing import Optional
 from bridge.config import DaemonConfig
 from bridge.daemon import Daemon, run_daemon
 from bridge.robots._spin import PARENT_PID_ENV
+from bridge.ros.ros_args import domain_id_from_environment
 
 __all__ = ["DemoChildren", "run_demo"]
 
@@ -153,7 +154,7 @@ def _banner(daemon: Daemon, robot: dict[str, object]) -> str:
                       f"moving (devices demo:<link> and demo:<link>:<n>)")
     else:
         robot_line = f"robot 'demo': {state} ({robot.get('reason', '')})"
-    domain = os.environ.get("ROS_DOMAIN_ID", "0")
+    domain = domain_id_from_environment()
     return "\n".join([
         "",
         "slicer-ros2-bridge demo is running",

@@ -21,6 +21,7 @@ the `--config` file's `security:` section, then the default.
 from __future__ import annotations
 
 import argparse
+import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -185,3 +186,10 @@ def _convert(action: argparse.Action, name: str, value: Any) -> Any:
     if len(converted) != 1:
         raise RosArgsError(f"-p {name}: expected one value, got {value!r}")
     return converted[0]
+
+
+def domain_id_from_environment() -> int:
+    """The ROS domain this process's ROS joins, as rcl reads it (ROS_DOMAIN_ID, default 0;
+    rcl refuses a bad value at init, so one here counts as 0)."""
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    return int(text) if text.isdigit() else 0

@@ -43,6 +43,8 @@ from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
 
 from bridge.core.threads import OnFailure, start_thread
+from bridge.ros.ros_args import domain_id_from_environment
+from bridge.ros.shm_locks import ports_of_domains
 from bridge.ros.shm_ports import release_left_locks
 from bridge.ros.raw_reader import (BatchTopic, RawReader, RawSubscription, RawTopic,
                                    ReaderError)
@@ -93,7 +95,8 @@ class RosNode:
         self.context = Context()
         # Not sys.argv: its --ros-args are the main node's alone (a global __node remap would
         # give the stream node the same name).
-        release_left_locks()  # one a killed ROS process left taken would hang init
+        # One a killed ROS process left taken would hang init.
+        release_left_locks(ports_of_domains([domain_id_from_environment()]))
         rclpy.init(args=["slicer-ros2-bridge"], context=self.context,
                    signal_handler_options=SignalHandlerOptions.NO)
         try:

@@ -11,6 +11,10 @@ LOCALHOST the discovery ports are shared by every domain of the host.
 A lock is judged left behind when it stays taken for `STUCK_AFTER_S`, far longer than
 Fast DDS holds one. Linux only (elsewhere nothing is found).
 
+A process only opens the ports of its own ROS domain and those below every domain's
+(`ports_of_domains`): a daemon looks after those alone, and leaves another domain's
+ports to the processes on it (a test there may hold one on purpose).
+
 A port segment can be left unfinished too: made, but its Boost header never marked
 initialized (a process killed between the two, or any file put there). Every process that
 opens it waits for that mark forever, holding the port's lock. One older than
@@ -34,9 +38,10 @@ import stat
 import struct
 import time
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Iterable, Optional
 
-__all__ = ["MAX_STUCK_AFTER_S", "MIN_STUCK_AFTER_S", "STUCK_AFTER_S", "release", "release_stuck",
+__all__ = ["MAX_STUCK_AFTER_S", "MIN_STUCK_AFTER_S", "PortFilter", "STUCK_AFTER_S",
+           "every_port", "ports_of_domains", "release", "release_stuck",
            "remove_dead_segments", "remove_unfinished", "stuck_port_locks", "unfinished_ports"]
 
 SHM_DIR = Path("/dev/shm")
@@ -45,6 +50,32 @@ STUCK_AFTER_S = 5.0
 # release one that is only busy.
 MIN_STUCK_AFTER_S = 2.0
 MAX_STUCK_AFTER_S = 3600.0
+
+PortFilter = Callable[[int], bool]
+# The RTPS well-known ports (DDSI-RTPS 9.6.1.1): domain d's are PB + DG * d onwards, DG each.
+_PORT_BASE = 7400
+_DOMAIN_GAIN = 250
+
+
+def every_port(port: int) -> bool:
+    return True
+
+
+def ports_of_domains(domains: Iterable[int]) -> PortFilter:
+    """The ports a process on one of `domains` may open: theirs, and those below every
+    domain's (shared by all of them)."""
+    chosen = frozenset(domains)
+
+    def opened_there(port: int) -> bool:
+        return port < _PORT_BASE or (port - _PORT_BASE) // _DOMAIN_GAIN in chosen
+    return opened_there
+
+
+def _port_number(name: str, prefix: str, suffix: str = "") -> Optional[int]:
+    """N of `<prefix>N<suffix>`, or None for another name (a segment's lock files)."""
+    digits = name[len(prefix):len(name) - len(suffix)]
+    return int(digits) if name.startswith(prefix) and name.endswith(suffix) \
+        and digits.isdigit() else None
 
 
 class _Timespec(ctypes.Structure):
@@ -78,16 +109,24 @@ def _semaphore_name(path: Path) -> bytes:
     return b"/" + path.name[len("sem."):].encode()
 
 
+def _port_locks(shm_dir: Path, ports: PortFilter) -> list[Path]:
+    found = []
+    for path in sorted(shm_dir.glob("sem.fastrtps_port*_mutex")):
+        number = _port_number(path.name, "sem.fastrtps_port", "_mutex")
+        if number is not None and ports(number):
+            found.append(path)
+    return found
+
+
 def stuck_port_locks(wait_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
-                     ports: str = "*") -> list[str]:
+                     ports: PortFilter = every_port) -> list[str]:
     """The port locks (semaphore names, as '/fastrtps_port7005_mutex') taken now and
-    still taken after `wait_s` seconds; `ports` is a glob of the port numbers looked at.
+    still taken after `wait_s` seconds, of the port numbers `ports` accepts.
     Each one that comes free is given back at once; several are waited for together."""
     libc = _libc()
     if libc is None:
         return []
-    candidates = [path for path in sorted(shm_dir.glob(f"sem.fastrtps_port{ports}_mutex"))
-                  if _taken_now(path)]
+    candidates = [path for path in _port_locks(shm_dir, ports) if _taken_now(path)]
     if not candidates:
         return []
     deadline = time.time() + wait_s
@@ -124,7 +163,7 @@ def release(name: str, shm_dir: Path = SHM_DIR) -> bool:
 
 
 def release_stuck(wait_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
-                  ports: str = "*") -> list[str]:
+                  ports: PortFilter = every_port) -> list[str]:
     """Release every port lock left taken; the names released."""
     return [name for name in stuck_port_locks(wait_s, shm_dir, ports)
             if release(name, shm_dir)]
@@ -134,13 +173,14 @@ _INITIALIZED = 2  # Boost's mark in a managed segment's first word, once it is u
 
 
 def unfinished_ports(min_age_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
-                     ports: str = "*") -> list[Path]:
+                     ports: PortFilter = every_port) -> list[Path]:
     """Port segments never marked initialized, last changed `min_age_s` or more ago."""
     found: list[Path] = []
     now = time.time()
-    for path in sorted(shm_dir.glob(f"fastrtps_port{ports}")):
-        if not path.name[len("fastrtps_port"):].isdigit():
-            continue  # its lock files (_el, _sl)
+    for path in sorted(shm_dir.glob("fastrtps_port*")):
+        number = _port_number(path.name, "fastrtps_port")
+        if number is None or not ports(number):
+            continue  # its lock files (_el, _sl), or another domain's
         try:
             with path.open("rb") as file:
                 head = file.read(4)
@@ -154,7 +194,7 @@ def unfinished_ports(min_age_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
 
 
 def remove_unfinished(min_age_s: float = STUCK_AFTER_S, shm_dir: Path = SHM_DIR,
-                      ports: str = "*") -> list[str]:
+                      ports: PortFilter = every_port) -> list[str]:
     """Remove the unfinished port segments; the paths removed."""
     removed: list[str] = []
     for path in unfinished_ports(min_age_s, shm_dir, ports):

@@ -31,7 +31,8 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from bridge.core.threads import OnFailure, start_thread
-from bridge.ros.shm_locks import release_stuck, remove_dead_segments, remove_unfinished
+from bridge.ros.shm_locks import (PortFilter, every_port, release_stuck, remove_dead_segments,
+                                  remove_unfinished)
 
 __all__ = ["CHECK_INTERVAL_S", "REPORT_AFTER_S", "ShmPortWatch", "file_inode",
            "release_left_locks", "replaced_ports"]
@@ -81,8 +82,11 @@ class ShmPortWatch:
 
     def __init__(self, *, maps: Path = MAPS, clock: Callable[[], float] = time.monotonic,
                  check_interval_s: float = CHECK_INTERVAL_S,
-                 report_after_s: float = REPORT_AFTER_S) -> None:
+                 report_after_s: float = REPORT_AFTER_S,
+                 lock_ports: PortFilter = every_port) -> None:
+        """`lock_ports`: the ports whose left locks and segments it clears (its domain's)."""
         self._maps = maps
+        self._lock_ports = lock_ports
         self._clock = clock
         self._check_interval_s = check_interval_s
         self._report_after_s = report_after_s
@@ -109,7 +113,7 @@ class ShmPortWatch:
                 self.check(self._maps.read_text(errors="replace"))
             except OSError as error:
                 log.debug("cannot read %s: %s", self._maps, error)
-            release_left_locks()  # this thread waits on a taken one, nobody else
+            release_left_locks(self._lock_ports)  # this thread waits on a taken one
 
     def check(self, maps: str) -> list[str]:
         """Note what `maps` shows now; return the ports reported by this call."""
@@ -132,14 +136,15 @@ class ShmPortWatch:
         return reported
 
 
-def release_left_locks() -> None:
+def release_left_locks(ports: PortFilter) -> None:
     """Remove the unfinished Fast DDS port segments and release the port locks a killed
-    process left taken (`shm_locks`): the daemon would hang on one the first time it
-    writes to a peer on that port. Remove the segments of killed processes too: RAM."""
-    for path in remove_unfinished():
+    process left taken (`shm_locks`), of `ports`: the daemon would hang on one the first
+    time it writes to a peer on that port. Remove the segments of killed processes too
+    (any: their owner is surely gone, and they hold RAM)."""
+    for path in remove_unfinished(ports=ports):
         log.warning("removed Fast DDS port segment %s: it was never finished (a process "
                     "killed while making it), and every process opening it hung", path)
-    for name in release_stuck():
+    for name in release_stuck(ports=ports):
         log.warning("released Fast DDS port lock %s: a ROS process killed while opening "
                     "that port had left it taken, and every process opening the port "
                     "hung on it", name)

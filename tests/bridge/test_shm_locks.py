@@ -1,6 +1,7 @@
 """Fast DDS port locks a killed process left taken are found and released
 (`bridge.ros.shm_locks`), on real POSIX named semaphores made here as Fast DDS makes its
-own (``sem.fastrtps_port<N>_mutex``), numbered above any real port."""
+own (``sem.fastrtps_port<N>_mutex``), numbered among the session's own domain's ports
+where no participant of the suite reaches (another session's daemons leave them alone)."""
 
 from __future__ import annotations
 
@@ -19,8 +20,9 @@ from typing import Iterator
 
 import pytest
 
-from bridge.ros.shm_locks import (release, release_stuck, remove_dead_segments,
-                                  remove_unfinished, stuck_port_locks, unfinished_ports)
+from bridge.ros.shm_locks import (ports_of_domains, release, release_stuck,
+                                  remove_dead_segments, remove_unfinished, stuck_port_locks,
+                                  unfinished_ports)
 from support import Processes, start_daemon
 
 pytestmark = pytest.mark.skipif(not Path("/dev/shm").is_dir(), reason="no /dev/shm here")
@@ -32,7 +34,14 @@ LIBC.sem_close.argtypes = [ctypes.c_void_p]
 LIBC.sem_unlink.argtypes = [ctypes.c_char_p]
 LIBC.sem_wait.argtypes = [ctypes.c_void_p]
 O_CREAT = 0o100
-PORT = "99997"  # above any real port: the checks here touch no real lock
+# The last ports of the session's domain: participant ids 118-119, which nothing here has.
+_DOMAIN_FIRST_PORT = 7400 + 250 * int(os.environ["ROS_DOMAIN_ID"])
+PORT = _DOMAIN_FIRST_PORT + 249  # the lock's
+UNFINISHED_PORT = _DOMAIN_FIRST_PORT + 247  # a segment never finished
+
+
+def only_port(number: int) -> bool:
+    return number == PORT
 
 
 def value(name: str) -> int:
@@ -62,7 +71,7 @@ def _segment(directory: Path, ident: str, age_s: float) -> tuple[Path, Path]:
 @pytest.fixture
 def lock() -> Iterator[str]:
     """A port lock made taken, as a process killed while holding it leaves it."""
-    name = "/fastrtps_port99997_mutex"
+    name = f"/fastrtps_port{PORT}_mutex"
     LIBC.sem_unlink(name.encode())
     handle = LIBC.sem_open(name.encode(), O_CREAT, 0o644, 0)
     assert handle, ctypes.get_errno()
@@ -73,12 +82,27 @@ def lock() -> Iterator[str]:
 
 def test_a_lock_left_taken_is_found_and_released(lock: str) -> None:
     assert value(lock) == 0
-    assert lock in stuck_port_locks(wait_s=0.2, ports=PORT)
+    assert lock in stuck_port_locks(wait_s=0.2, ports=only_port)
     assert release(lock)
     assert value(lock) == 1
     assert not release(lock)  # not taken: never given back twice
     assert value(lock) == 1
-    assert lock not in stuck_port_locks(wait_s=0.2, ports=PORT)  # free now: not even waited for
+    assert lock not in stuck_port_locks(wait_s=0.2, ports=only_port)  # free: not waited for
+
+
+def test_a_domain_looks_after_its_own_ports_and_the_shared_ones_only(lock: str) -> None:
+    """Fast DDS's domain d uses ports 7400 + 250 d onwards; those below 7400 every domain
+    shares. A daemon clears what its own domain may open: another session's test lock, on
+    another domain, stays as that test holds it."""
+    domain = int(os.environ["ROS_DOMAIN_ID"])
+    mine, other = ports_of_domains([domain]), ports_of_domains([domain + 1])
+    assert mine(7000) and other(7000)  # shared
+    assert mine(PORT) and not other(PORT)
+    assert [mine(7400 + 250 * domain + offset) for offset in (-1, 0, 249, 250)] == \
+        [domain == 0, True, True, False]
+    assert lock not in release_stuck(wait_s=0.2, ports=other)
+    assert value(lock) == 0
+    assert lock in release_stuck(wait_s=0.2, ports=mine)
 
 
 def test_a_lock_given_back_while_waited_for_is_only_busy(lock: str) -> None:
@@ -96,7 +120,7 @@ libc.sem_post(handle)
     try:
         assert holder.stdout is not None and holder.stdout.readline().strip() == "HOLDING"
         started = time.monotonic()
-        assert lock not in stuck_port_locks(wait_s=10.0, ports=PORT)
+        assert lock not in stuck_port_locks(wait_s=10.0, ports=only_port)
         assert time.monotonic() - started < 10.0
         assert value(lock) == 1  # taken by the check for a moment, then given back
     finally:
@@ -104,7 +128,7 @@ libc.sem_post(handle)
 
 
 def test_release_stuck_names_what_it_released(lock: str) -> None:
-    assert lock in release_stuck(wait_s=0.2, ports=PORT)
+    assert lock in release_stuck(wait_s=0.2, ports=only_port)
     assert value(lock) == 1
 
 
@@ -119,7 +143,7 @@ def test_the_command_releases_them(lock: str) -> None:
                      done.stdout), done.stdout
     assert not dead.exists() and not dead_lock.exists()
     assert value(lock) == 1
-    assert lock not in stuck_port_locks(wait_s=0.2, ports=PORT)
+    assert lock not in stuck_port_locks(wait_s=0.2, ports=only_port)
 
 
 def test_a_port_segment_never_finished_is_removed_once_old(tmp_path: Path) -> None:
@@ -155,7 +179,7 @@ def test_the_command_refuses_a_wait_short_enough_to_release_a_busy_lock(wait: st
 def test_a_running_daemon_releases_one_and_says_so(lock: str, processes: Processes) -> None:
     """Taken before the daemon starts: released before ROS starts (or it could hang there);
     taken again while it runs: released by its watch, within its 5 s checks and 5 s wait."""
-    unfinished = Path("/dev/shm/fastrtps_port99991")  # and a segment never finished
+    unfinished = Path(f"/dev/shm/fastrtps_port{UNFINISHED_PORT}")  # and one never finished
     unfinished.write_bytes(b"\0" * 4096)
     os.utime(unfinished, (time.time() - 60, time.time() - 60))
     dead, _ = _segment(Path("/dev/shm"), "00000000000000d4", 60)  # and a killed one's
