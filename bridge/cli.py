@@ -13,7 +13,7 @@ from typing import Any, Callable, Coroutine, TypeVar
 
 from bridge import graph_inspect
 from bridge.config import (DEFAULT_HOST, DEFAULT_PORT, DEFAULT_TLS_PORT, ConfigError,
-                           DaemonConfig, TlsListener)
+                           DaemonConfig, FastPaths, TlsListener)
 from bridge.config import ConfigFile, build_security, load_config_file
 from bridge.core.allocator import keep_large_buffers_returnable
 from bridge.interfaces import missing_runtime_line
@@ -172,6 +172,19 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
                              "(a VGA image with Fast DDS's defaults) then reaches the daemon "
                              "without a resend's 10 ms, whatever else runs. Needs "
                              "CAP_SYS_NICE or `ulimit -r` at least this high")
+    paths = parser.add_argument_group(
+        "fast paths", "each compiled path has a slower twin with the same results: turn one "
+                      "off to compare them, or to rule it out (bridge/platform/README.md)")
+    paths.add_argument("--tf-store", choices=("compiled", "python"), default="compiled",
+                       help="where the tf buffer keeps its samples: the compiled store "
+                            "(default, where built) or the pure-Python one")
+    paths.add_argument("--ros-take", choices=("rcl", "rclpy"), default="rcl",
+                       help="how subscriptions are taken: by rcl in reader threads, without "
+                            "the interpreter's lock, poses written to clients from there "
+                            "(default, where built), or through rclpy's executor")
+    paths.add_argument("--send-batch", choices=("on", "off"), default="on",
+                       help="a streamed message to every client in one io_uring call "
+                            "(default, where the system allows) or one sendmsg per client")
 
 
 def _receive_priority(text: str) -> int:
@@ -273,7 +286,10 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
                         limits=limits, frame_prefix=args.frame_prefix,
                         ros_args=tuple(getattr(args, "ros_args", ())),
                         stop_timeout_s=args.stop_timeout, tls=tls,
-                        receive_priority=args.receive_priority)
+                        receive_priority=args.receive_priority,
+                        fast_paths=FastPaths(compiled_tf=args.tf_store == "compiled",
+                                             rcl_take=args.ros_take == "rcl",
+                                             send_batch=args.send_batch == "on"))
 
 
 def _configure_logging(level: str) -> None:

@@ -58,6 +58,17 @@ class StartupCommand:
 
 
 @dataclass(frozen=True)
+class FastPaths:
+    """Which compiled fast paths the daemon takes where they are built. Each has a slower
+    twin that gives the same results; turning one off is for comparing them (bench/) or
+    ruling one out (bridge/platform/README.md)."""
+
+    compiled_tf: bool = True  # --tf-store: compiled, or the pure-Python reference store
+    rcl_take: bool = True  # --ros-take: rcl without the interpreter's lock, or rclpy
+    send_batch: bool = True  # --send-batch: one io_uring call for all clients, or one each
+
+
+@dataclass(frozen=True)
 class DaemonConfig:
     host: str = DEFAULT_HOST
     port: int = DEFAULT_PORT
@@ -78,6 +89,7 @@ class DaemonConfig:
     tls: Optional[TlsListener] = None
     # SCHED_FIFO priority of the DDS receive threads (bridge/ros/receive_priority.py).
     receive_priority: Optional[int] = None
+    fast_paths: FastPaths = field(default_factory=FastPaths)
 
 
 @dataclass(frozen=True)

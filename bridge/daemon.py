@@ -70,11 +70,12 @@ class ThreadFailedError(Exception):
 class Daemon:
     def __init__(self, config: DaemonConfig, loop: asyncio.AbstractEventLoop) -> None:
         self.config = config
-        self.hub = Hub(loop)
+        fast = config.fast_paths
+        self.hub = Hub(loop, send_batch=fast.send_batch)
         # Decoding, conversions and listings too heavy for the loop: one lane per client.
         self.heavy = HeavyWork()
         self.ros = RosNode(RosOptions(node_name=config.node_name, namespace=config.namespace,
-                                      ros_args=config.ros_args))
+                                      ros_args=config.ros_args, rcl_take=fast.rcl_take))
         self._namesake: Optional[asyncio.Future[None]] = None
         names = DeviceNameRegistry()
         # Clients' robots may read files (URDF, meshes) from the --package-path folders too.
@@ -94,7 +95,8 @@ class Daemon:
         # No capability gets the policy: the dispatcher judges each request and hands a
         # handler the guard for the content its op declares (bridge.core.content_guards).
         self.topics = TopicBridges(self.ros, self.hub, names, health=self.health)
-        self.tf = TfBridges(self.ros, self.hub, names, frame_prefix=config.frame_prefix)
+        self.tf = TfBridges(self.ros, self.hub, names, frame_prefix=config.frame_prefix,
+                            compiled_store=None if fast.compiled_tf else False)
         self.parameters = ParameterBridges(self.ros, self.hub, names)
         # One correlator for the COMMANDs sent to clients: its command ids never collide.
         replies = ClientReplies(self.hub)
@@ -180,6 +182,7 @@ class Daemon:
             if warning is not None:
                 log.warning("%s", warning)
         log.info("tf buffer on the %s", self.tf.store_in_use())
+        log.info("streams written to clients %s", self.hub.send_mode())
         self._namesake = asyncio.ensure_future(self._warn_of_a_namesake())
 
     async def _warn_of_a_namesake(self) -> None:

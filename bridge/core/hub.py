@@ -127,7 +127,10 @@ ClosedListener = Callable[[Replier], None]
 
 
 class Hub:
-    def __init__(self, loop: asyncio.AbstractEventLoop, *, direct_writes: bool = True) -> None:
+    def __init__(self, loop: asyncio.AbstractEventLoop, *, direct_writes: bool = True,
+                 send_batch: bool = True) -> None:
+        """``send_batch``: the native lanes write a message to every client in one system
+        call where the system allows (`native_stream.new_fanout`)."""
         self._loop = loop
         self._direct_writes = direct_writes
         self.clients: set[Subscriber] = set()
@@ -161,8 +164,16 @@ class Hub:
         self.direct = 0  # values written to every client from the posting thread
         # The native lanes' clients (None where they are not built) and lanes: device ->
         # (lane, what makes a `Frame` of its `latest()`).
-        self.fanout = new_fanout()
+        self.fanout = new_fanout(batch=send_batch)
         self._lanes: dict[str, tuple[Any, Callable[[Any], Frame]]] = {}
+
+    def send_mode(self) -> str:
+        """How streamed values reach the clients, for the start-up log."""
+        if self.fanout is None:
+            return "from the loop (the native lane is not built here)"
+        if self.fanout.batched:
+            return "one io_uring call for all clients at a time (--send-batch on)"
+        return ("one sendmsg per client (--send-batch off, or io_uring not allowed here)")
 
     # --- clients -------------------------------------------------------------------------
     def attach(self, client: Subscriber) -> None:

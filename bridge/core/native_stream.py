@@ -10,7 +10,6 @@ interpreter. Without the compiled module, `PySlot` does the same in Python and n
 
 from __future__ import annotations
 
-import os
 import socket
 import threading
 import weakref
@@ -113,17 +112,13 @@ def new_slot(owner: Any) -> Any:
     return _native_stream.Slot(ref) if available() else PySlot(ref)
 
 
-# Set to 0 to write a message to the clients one system call each, not in one batch (to
-# compare, or to rule it out).
-SEND_BATCH_ENV = "SLICER_BRIDGE_SEND_BATCH"
-
-
-def new_fanout() -> Any:
-    """A hub's `Fanout`, or None where the native lane is not built. It writes each message
-    to every client in one system call where the system allows (`Fanout.batched`)."""
+def new_fanout(*, batch: bool = True) -> Any:
+    """A hub's `Fanout`, or None where the native lane is not built. With ``batch`` it
+    writes each message to every client in one system call where the system allows
+    (`Fanout.batched`); without, one each (`--send-batch off`)."""
     if not available():
         return None
-    return _native_stream.Fanout(CLOCK_MODULUS, batch=os.environ.get(SEND_BATCH_ENV) != "0")
+    return _native_stream.Fanout(CLOCK_MODULUS, batch=batch)
 
 
 # ROS type -> the lane's kind of message.

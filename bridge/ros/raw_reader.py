@@ -19,7 +19,6 @@ the caller subscribes through rclpy.
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
 from dataclasses import dataclass
@@ -56,15 +55,11 @@ ReaderError: type[RuntimeError] = (_rcl_reader.ReaderError if _rcl_reader is not
                                    else _NotBuilt)
 
 
-# Set to 1 to take every raw subscription through rclpy (to compare, or to rule it out).
-RCLPY_TAKE_ENV = "SLICER_BRIDGE_RCLPY_TAKE"
-
-
 def available() -> bool:
-    """Whether the compiled reader was built here, for this wrapper (and not ruled out)."""
+    """Whether the compiled reader was built here, for this wrapper (`--ros-take rclpy`
+    rules it out in `RosNode`)."""
     return (_rcl_reader is not None
-            and getattr(_rcl_reader, "INTERFACE", None) == READER_INTERFACE
-            and os.environ.get(RCLPY_TAKE_ENV, "") != "1")
+            and getattr(_rcl_reader, "INTERFACE", None) == READER_INTERFACE)
 
 
 @dataclass(frozen=True)

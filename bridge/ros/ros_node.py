@@ -83,6 +83,8 @@ class RosOptions:
     namespace: str = ""
     # What followed --ros-args: remaps (__node, __ns, topics), parameters, ... for `node`.
     ros_args: tuple[str, ...] = ()
+    # Raw subscriptions taken by rcl in reader threads where built (--ros-take rcl).
+    rcl_take: bool = True
 
 
 class RosArgumentsError(Exception):
@@ -185,7 +187,7 @@ class RosNode:
         """`topics` subscribed raw on ``stream_node`` and read without the interpreter's
         lock in the thread ``name`` (bridge/ros/raw_reader.py); None where the compiled reader
         is not built (then subscribe through rclpy). Closed by `stop` at the latest."""
-        if not raw_reader_available():
+        if not (self.options.rcl_take and raw_reader_available()):
             return None
         try:
             reader = RawReader(self.stream_node, topics, name, batches=batches)
@@ -203,7 +205,7 @@ class RosNode:
         None where the compiled reader is not built, or it takes `MAX_READ_STREAMS` topics
         already, or the middleware cannot tell it new messages (then subscribe through
         rclpy): one thread for all. `RawSubscription.close` ends it."""
-        if not raw_reader_available() or self._stopping.is_set():
+        if not (self.options.rcl_take and raw_reader_available()) or self._stopping.is_set():
             return None
         with self._stream_reader_lock:
             reader = self._stream_reader

@@ -31,9 +31,8 @@ validation of incoming transforms (`_check`, the one place that words a refusal)
 results; the store holds the samples and walks the tree. Two stores give the same results
 to the bit: the compiled one (``_compiled_store.pyx``, built by ``make setup`` where a C
 compiler is found), used by default, and the pure Python one (``store.py``), the reference
-and the fallback. Set ``SLICER_BRIDGE_PURE_PYTHON_TF=1`` to run the pure Python one. Per /tf
-message of a 7-link robot with 7 lookups, reading and storing cost 2 us on the compiled store
-and 20 us on the Python one; with the evaluation, 12 us and 53 us (bench/bench_tf.py).
+and the fallback. The daemon's `--tf-store python` runs the pure Python one; what each costs
+is bench/bench_tf.py's to say.
 """
 
 from __future__ import annotations
@@ -41,7 +40,6 @@ from __future__ import annotations
 import heapq
 import math
 import operator
-import os
 import threading
 import time
 from dataclasses import dataclass
@@ -91,9 +89,8 @@ LOOKED_UP_RESERVE = MAX_FRAMES // 10
 FORGET_SHARE = 10
 # Refusals of one TFMessage's CDR worded one by one; the others are counted.
 _WORDED_REFUSALS = 8
-# Set to 1 to run every TfBuffer on the pure Python store (to compare, or to rule it out).
-PURE_PYTHON_ENV = "SLICER_BRIDGE_PURE_PYTHON_TF"
-COMPILED = CompiledFrameStore is not None and os.environ.get(PURE_PYTHON_ENV, "") != "1"
+# Whether the compiled store was built here: a buffer's default.
+COMPILED = CompiledFrameStore is not None
 # tf2's tolerance on |q|^2 (QUATERNION_NORMALIZATION_TOLERANCE in buffer_core.cpp).
 _QUATERNION_TOLERANCE = 1e-2
 

@@ -259,11 +259,13 @@ class TfLookups:
 
     def __init__(self, hub: Hub, names: DeviceNameRegistry, *,
                  frame_prefix: str = "", cache_time_s: float = 10.0,
-                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static") -> None:
+                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static",
+                 compiled_store: Optional[bool] = None) -> None:
+        """``compiled_store``: `TfBuffer`'s ``compiled`` (None: the compiled one where built)."""
         self._hub = hub
         self._names = names
         self._prefix = frame_prefix.lstrip("/")
-        self.buffer = TfBuffer(cache_time_s)
+        self.buffer = TfBuffer(cache_time_s, compiled=compiled_store)
         self.registry = LookupRegistry(self.buffer)
         self.lookups: dict[tuple[str, str], _Lookup] = {}
         self._by_key: dict[LookupKey, _Lookup] = {}
@@ -620,7 +622,8 @@ class TfBridges(TfLookups):
 
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *,
                  frame_prefix: str = "", cache_time_s: float = 10.0,
-                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static") -> None:
+                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static",
+                 compiled_store: Optional[bool] = None) -> None:
         from tf2_msgs.msg import TFMessage
 
         from bridge.ros.qos import TF_QOS, TF_STATIC_SUBSCRIBER_QOS
@@ -628,7 +631,8 @@ class TfBridges(TfLookups):
 
         super().__init__(hub, names, frame_prefix=frame_prefix, cache_time_s=cache_time_s,
                          tf_topic=ros.resolve_topic(tf_topic),
-                         tf_static_topic=ros.resolve_topic(tf_static_topic))
+                         tf_static_topic=ros.resolve_topic(tf_static_topic),
+                         compiled_store=compiled_store)
         self._ros = ros
         self.broadcasters: dict[tuple[str, str], _Broadcaster] = {}
         self._by_device: dict[str, _Broadcaster] = {}
@@ -660,7 +664,7 @@ class TfBridges(TfLookups):
         if self.buffer.compiled:
             return "compiled store" + taken
         return ("pure Python store (the compiled one is not built here, is from an older "
-                "build, or SLICER_BRIDGE_PURE_PYTHON_TF=1)" + taken)
+                "build, or --tf-store python)" + taken)
 
 
     # ------------------------------------------------------------------ ROS thread

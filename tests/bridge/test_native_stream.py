@@ -23,6 +23,7 @@ from protocol.conversions import (FLOAT32_BOUND, fits_float32, igtl_timestamp_fr
                                   igtl_timestamp_now)
 from protocol.crc64 import crc64
 from protocol.freshness import CLOCK_MODULUS
+from support import Processes, start_daemon
 
 pytestmark = pytest.mark.skipif(
     not native_stream.available(),
@@ -214,7 +215,7 @@ def pair() -> tuple[socket.socket, socket.socket]:
 
 
 # A message's writes to every client in one io_uring call, or one sendmsg each (where
-# io_uring is not allowed, or SLICER_BRIDGE_SEND_BATCH=0): the same results either way.
+# io_uring is not allowed, or --send-batch off): the same results either way.
 WRITES = pytest.mark.parametrize("batch", [True, False], ids=["one-call", "one-write-each"])
 
 
@@ -452,12 +453,18 @@ def _io_uring_allowed() -> tuple[bool, str]:
     return True, ""
 
 
+@pytest.mark.ros
 def test_the_daemons_fanout_writes_in_one_call_where_allowed_unless_told_not_to(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+        processes: Processes) -> None:
+    """`--send-batch on` (the default) and `off`, from the daemon's command line."""
     allowed, why = _io_uring_allowed()
     if not allowed:
         pytest.skip(why)
-    monkeypatch.delenv(native_stream.SEND_BATCH_ENV, raising=False)
     assert native_stream.new_fanout().batched
-    monkeypatch.setenv(native_stream.SEND_BATCH_ENV, "0")
-    assert not native_stream.new_fanout().batched
+    assert not native_stream.new_fanout(batch=False).batched
+    for args, mode in (((), "one io_uring call for all clients at a time (--send-batch on)"),
+                       (("--send-batch", "off"), "one sendmsg per client")):
+        daemon = start_daemon(processes, *args)
+        daemon.child.wait_for_output("streams written to clients", timeout=30)
+        assert f"streams written to clients {mode}" in daemon.child.output()
+        daemon.child.stop()

@@ -30,8 +30,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.skipif(
 
 
 @pytest.fixture
-def ros(monkeypatch: pytest.MonkeyPatch) -> Iterator[RosNode]:
-    monkeypatch.delenv(raw_reader.RCLPY_TAKE_ENV, raising=False)
+def ros() -> Iterator[RosNode]:
     node = RosNode(RosOptions(node_name="raw_reader_test"))
     node.start()
     try:
@@ -117,13 +116,6 @@ def test_stop_closes_a_reader_that_waits(ros: RosNode) -> None:
     assert thread is not None and thread.is_alive()
     ros.stop()
     assert not thread.is_alive()
-
-
-def test_rclpy_take_rules_the_reader_out(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv(raw_reader.RCLPY_TAKE_ENV, "1")
-    assert not raw_reader.available()
-    monkeypatch.setenv(raw_reader.RCLPY_TAKE_ENV, "0")
-    assert raw_reader.available()
 
 
 def _deep_reliable() -> QoSProfile:

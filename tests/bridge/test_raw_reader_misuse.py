@@ -24,8 +24,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.skipif(
 
 
 @pytest.fixture
-def ros(monkeypatch: pytest.MonkeyPatch) -> Iterator[RosNode]:
-    monkeypatch.delenv(raw_reader.RCLPY_TAKE_ENV, raising=False)
+def ros() -> Iterator[RosNode]:
     node = RosNode(RosOptions(node_name="raw_reader_misuse_test"))
     node.start()
     try:
@@ -34,13 +33,17 @@ def ros(monkeypatch: pytest.MonkeyPatch) -> Iterator[RosNode]:
         node.stop()
 
 
-def test_a_reader_ruled_out_is_refused_and_the_node_gives_none(
-        ros: RosNode, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv(raw_reader.RCLPY_TAKE_ENV, "1")
+def test_a_reader_ruled_out_gives_none_and_the_caller_takes_rclpy() -> None:
+    """`--ros-take rclpy`: the node gives no reader and no read stream, where it would."""
     topics = [RawTopic("/rr_out", PoseStamped, TF_QOS, lambda view: None)]
-    with pytest.raises(RuntimeError, match="not built here"):
-        RawReader(ros.stream_node, topics, "rr-out")
-    assert ros.raw_reader(topics, name="rr-out") is None  # the caller subscribes via rclpy
+    for rcl_take in (True, False):
+        node = RosNode(RosOptions(node_name="raw_reader_ruled_out", rcl_take=rcl_take))
+        node.start()
+        try:
+            reader = node.raw_reader(topics, name="rr-out")
+            assert (reader is not None) is rcl_take
+        finally:
+            node.stop()
 
 
 def test_a_topic_rclpy_refuses_leaves_no_subscription(ros: RosNode) -> None:

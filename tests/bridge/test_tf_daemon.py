@@ -493,10 +493,10 @@ def test_a_daemon_serves_lookups_on_either_tf_store(processes: Processes, pure_p
         pytest.skip("the compiled tf store was not built (no C compiler or Cython at install)")
     if not rclpy_take and _rcl_reader is None:
         pytest.skip("the rcl reader was not built (no rcl headers, C compiler or Cython)")
-    env = {"SLICER_BRIDGE_PURE_PYTHON_TF": "1" if pure_python else "0",
-           "SLICER_BRIDGE_RCLPY_TAKE": "1" if rclpy_take else "0"}
+    paths = ["--tf-store", "python" if pure_python else "compiled",
+             "--ros-take", "rclpy" if rclpy_take else "rcl"]
     port = pick_free_port()
-    daemon = processes.bridge("run", "--port", str(port), env=env)
+    daemon = processes.bridge("run", "--port", str(port), *paths)
     daemon.wait_for_output("tf buffer on the", timeout=30)  # logged after "listening on"
     expected = "pure Python" if pure_python else "compiled"
     assert f"tf buffer on the {expected} store" in daemon.output()

@@ -29,8 +29,7 @@ def test_a_flood_filling_the_buffer_cannot_keep_a_new_frame_out(
 
     if not pure_python and CompiledFrameStore is None:
         pytest.skip("the compiled tf store was not built (no C compiler or Cython at install)")
-    daemon = start_daemon(
-        processes, env={"SLICER_BRIDGE_PURE_PYTHON_TF": "1" if pure_python else "0"})
+    daemon = start_daemon(processes, "--tf-store", "python" if pure_python else "compiled")
     p = f"flood{next(_prefixes)}_"
     stamp = [] if flood_sec is None else ["--sec", str(flood_sec)]
     peer = processes.python("flood", "tf_flood_publisher.py", p, *stamp)

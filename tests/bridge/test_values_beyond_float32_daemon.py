@@ -29,15 +29,15 @@ from slicer_client.connection import CommandRefusedError, Connection
 from support import Processes, RunningDaemon, assert_clean_exit, scaled, start_daemon
 
 _names = itertools.count()
-RCLPY_TAKE = {"SLICER_BRIDGE_RCLPY_TAKE": "1"}  # no rcl reader, so no native lane
+RCLPY_TAKE = ("--ros-take", "rclpy")  # no rcl reader, so no native lane
 
 
 @pytest.fixture(params=["native lane", "python path"])
 def daemon_of(request: pytest.FixtureRequest, processes: Processes) -> Iterator[RunningDaemon]:
     if request.param == "native lane" and not native_stream.available():
         pytest.skip("the native lane is not built here (no Cython or C compiler)")
-    running = start_daemon(processes, env=RCLPY_TAKE if request.param == "python path"
-                           else None)
+    running = start_daemon(processes, *(RCLPY_TAKE if request.param == "python path"
+                                         else ()))
     yield running
     assert_clean_exit(running)
 

@@ -106,4 +106,4 @@ def test_the_install_built_the_compiled_tf_store() -> None:
     assert buffer.CompiledFrameStore is not None, (
         "the compiled tf store was not built, or is from an older build: see "
         ".cache/pip-install.log")
-    assert buffer.TfBuffer().compiled or os.environ.get(buffer.PURE_PYTHON_ENV) == "1"
+    assert buffer.TfBuffer().compiled
