@@ -72,7 +72,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "bench"))
 
-from bridge.ros import receive_priority  # noqa: E402
+from bridge.platform import receive_priority  # noqa: E402
 from peers import POSE_DEPTH  # noqa: E402
 
 PEERS = REPO / "bench" / "peers.py"
@@ -390,7 +390,7 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
         finally:
             floor.stop()
         for kind in ("bridge", "naive"):
-            relay = Relay(kind, {"pose": POSE_TOPIC}, args.daemon_profile)
+            relay = Relay(kind, {"pose": POSE_TOPIC}, args.daemon_profile, args.daemon_arg)
             try:
                 readers = readers_for(relay.port, 1, v1=kind == "naive")
                 try:
@@ -461,7 +461,7 @@ def isolation_phase(args: argparse.Namespace, results: Results) -> None:
     the same with one more client that stops reading for STOP_S and reads on: the 32's
     figures side by side, and what the stopped one read when it resumed."""
     publisher = peer("pose publisher", "publish", "pose", POSE_TOPIC)
-    relay = Relay("bridge", {"pose": POSE_TOPIC}, args.daemon_profile)
+    relay = Relay("bridge", {"pose": POSE_TOPIC}, args.daemon_profile, args.daemon_arg)
     readers = readers_for(relay.port, ISOLATION_CLIENTS)
     facade = peer("facade client", "facade", str(relay.port), POSE_TOPIC)
     seconds = STOP_S + 3.0
@@ -511,7 +511,7 @@ def resumed_text(results: Results) -> str:
 
 def tf_phase(args: argparse.Namespace, results: Results) -> None:
     publisher = peer("tf publisher", "publish", "tf", "/tf")
-    relay = Relay("bridge", {}, args.daemon_profile)
+    relay = Relay("bridge", {}, args.daemon_profile, args.daemon_arg)
     setup = [{"op": "create_tf_lookup", "arguments": {"parent": "base", "child": f"link{i}"}}
              for i in range(1, LINKS + 1)]
     readers = readers_for(relay.port, 8, setup=setup)
@@ -564,7 +564,7 @@ def image_phase(args: argparse.Namespace, results: Results) -> None:
                 floor = peer("rclpy floor", "floor", "image", IMAGE_TOPIC)
                 relay = Relay("naive" if kind == "naive" else "bridge",
                               {"image": IMAGE_TOPIC, "pose": POSE_TOPIC}, args.daemon_profile,
-                              daemon_args)
+                              (*args.daemon_arg, *daemon_args))
                 readers = readers_for(relay.port, 1, v1=kind == "naive")
                 try:
                     reports, cpu, avg = run_phase(publisher, [*readers, floor], 30,
@@ -770,7 +770,12 @@ def main() -> int:
                         help="a Fast DDS profiles file that the daemon alone loads "
                              "(FASTRTPS_DEFAULT_PROFILES_FILE), such as "
                              "bench/fastdds_reader_at_once.xml; the baselines keep the defaults")
+    parser.add_argument("--daemon-arg", action="append", default=[], metavar="ARG",
+                        help="an option for the daemon alone (repeatable), such as "
+                             "--daemon-arg=--send-batch=off: a fast path turned off, to "
+                             "weigh it (bridge/platform/README.md)")
     args = parser.parse_args()
+    args.daemon_arg = tuple(args.daemon_arg)
     if args.daemon_profile is not None and not args.daemon_profile.is_file():
         parser.error(f"--daemon-profile: expected a Fast DDS profiles file, got "
                      f"{args.daemon_profile} (no such file)")
@@ -787,6 +792,7 @@ def main() -> int:
     print(f"{os.cpu_count()} CPUs, load {load()} at the start; "
           f"{'quick' if args.quick else 'full'} run"
           + (f"; the daemon loads {args.daemon_profile}" if args.daemon_profile else "")
+          + (f"; the daemon runs with {' '.join(args.daemon_arg)}" if args.daemon_arg else "")
           + (f"; {args.busy} CPU-bound processes beside it" if args.busy else ""),
           flush=True)
     results = Results()

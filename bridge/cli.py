@@ -15,15 +15,15 @@ from bridge import graph_inspect
 from bridge.config import (DEFAULT_HOST, DEFAULT_PORT, DEFAULT_TLS_PORT, ConfigError,
                            DaemonConfig, FastPaths, TlsListener)
 from bridge.config import ConfigFile, build_security, load_config_file
-from bridge.core.allocator import keep_large_buffers_returnable
+from bridge.platform.allocator import keep_large_buffers_returnable
 from bridge.interfaces import missing_runtime_line
 from bridge.record import cli as record_cli
 from protocol.auth import new_key_text
 from bridge.core.security import (DEFAULT_MAX_BRIDGES, DEFAULT_MAX_BRIDGES_PER_CLIENT,
                                   DEFAULT_MAX_CLIENTS)
-from bridge.ros.receive_priority import MAX_PRIORITY, MIN_PRIORITY
+from bridge.platform.receive_priority import MAX_PRIORITY, MIN_PRIORITY
 from bridge.ros.ros_args import RosArgsError, apply_parameters, split_ros_args
-from bridge.ros.shm_locks import (MAX_STUCK_AFTER_S, MIN_STUCK_AFTER_S, STUCK_AFTER_S,
+from bridge.platform.shm_locks import (MAX_STUCK_AFTER_S, MIN_STUCK_AFTER_S, STUCK_AFTER_S,
                                   release_stuck, remove_dead_segments, remove_unfinished)
 
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")

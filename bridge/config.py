@@ -87,7 +87,7 @@ class DaemonConfig:
     ros_args: tuple[str, ...] = ()
     # A second listener, OpenIGTLink over TLS, for the project's own clients (--tls-cert).
     tls: Optional[TlsListener] = None
-    # SCHED_FIFO priority of the DDS receive threads (bridge/ros/receive_priority.py).
+    # SCHED_FIFO priority of the DDS receive threads (bridge/platform/receive_priority.py).
     receive_priority: Optional[int] = None
     fast_paths: FastPaths = field(default_factory=FastPaths)
 

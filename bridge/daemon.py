@@ -12,9 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import gc
 import logging
-import sys
 import tempfile
 from pathlib import Path
 from typing import Awaitable, Callable, Optional
@@ -37,12 +35,13 @@ from bridge.playback.refusals import LiveRefusals
 from bridge.record.capability import RecordBridges
 from bridge.robots.capability import RobotBridges
 from bridge.types import InterfaceTypes
-from bridge.ros.receive_priority import (RECEIVE_SLICE_NS, ReceivePriorityError,
+from bridge.platform.receive_priority import (RECEIVE_SLICE_NS, ReceivePriorityError,
                                          raise_receive_threads, shorten_receive_slices)
 from bridge.ros.ros_args import domain_id_from_environment
 from bridge.ros.ros_node import RosNode, RosOptions
-from bridge.ros.shm_locks import ports_of_domains
-from bridge.ros.shm_ports import ShmPortWatch
+from bridge.platform.interpreter import settle_the_collector, shorten_gil_switches
+from bridge.platform.shm_locks import ports_of_domains
+from bridge.platform.shm_ports import ShmPortWatch
 from bridge.services.capability import ServiceBridges
 from bridge.tf.capability import TfBridges
 from bridge.topics.capability import TopicBridges
@@ -51,8 +50,6 @@ from protocol.errors import ProtocolError
 
 log = logging.getLogger("bridge")
 
-GIL_SWITCH_INTERVAL_S = 0.0005
-GC_THRESHOLDS = (100_000, 50, 100)  # CPython's default: (700, 10, 10)
 # How long after start the graph is watched for another node of the daemon's name (a
 # second daemon on the same domain): discovery takes seconds on a busy machine.
 NAMESAKE_WATCH_S = 10.0
@@ -218,22 +215,13 @@ async def run_daemon(config: DaemonConfig,
     """Run until SIGINT/SIGTERM/SIGHUP; `started` runs once the daemon serves and
     `stopping` when the stop begins (used by `demo`). After the signal the process ends
     within ``config.stop_timeout_s``."""
-    # Two busy threads (ROS executor, asyncio loop) share the GIL; with the default 5 ms
-    # switch interval, a frame handed to the loop under load waits up to 5 ms to be sent.
-    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+    shorten_gil_switches()
     loop = asyncio.get_running_loop()
     signals = StopSignals(loop, timeout_s=config.stop_timeout_s)
     signals.install()
     daemon = Daemon(config, loop)
     await daemon.start()
-    # The cyclic collector holds the interpreter while it walks: what start-up made
-    # (modules, ROS types, the nodes) lives as long as the daemon, out of its sight; and
-    # it runs a hundred times less often, so that the tens of thousands of objects a large
-    # request makes for a moment (a megabyte of JSON, a message of 23,809 points) are
-    # gone before it looks, instead of promoted and walked again (pauses of 40 ms,
-    # every other thread waiting, measured with the default thresholds).
-    gc.freeze()
-    gc.set_threshold(*GC_THRESHOLDS)
+    settle_the_collector()
     try:
         if started is not None:
             await started(daemon)

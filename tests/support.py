@@ -16,7 +16,7 @@ from typing import Callable, Optional, Sequence
 
 import pytest
 
-from bridge.ros.shm_locks import (ports_of_domains, release_stuck, remove_dead_segments,
+from bridge.platform.shm_locks import (ports_of_domains, release_stuck, remove_dead_segments,
                                   remove_unfinished)
 from slicer_client.connection import CommandRefusedError, Connection
 

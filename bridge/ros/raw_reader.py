@@ -12,7 +12,7 @@ wake per message); what the lane leaves to Python comes to the reader's thread, 
 
 The subscriptions are real ones on the given node (the ROS graph lists them), made outside
 rclpy's `Node.create_subscription`, so no executor waits on them too. `available()` says
-whether the compiled module was built here; without it (or with ``SLICER_BRIDGE_RCLPY_TAKE=1``)
+whether the compiled module was built here; without it (or with the daemon's `--ros-take rclpy`)
 the caller subscribes through rclpy.
 """
 

@@ -44,8 +44,8 @@ from rclpy.utilities import try_shutdown
 
 from bridge.core.threads import OnFailure, start_thread
 from bridge.ros.ros_args import domain_id_from_environment
-from bridge.ros.shm_locks import ports_of_domains
-from bridge.ros.shm_ports import release_left_locks
+from bridge.platform.shm_locks import ports_of_domains
+from bridge.platform.shm_ports import release_left_locks
 from bridge.ros.raw_reader import (BatchTopic, RawReader, RawSubscription, RawTopic,
                                    ReaderError)
 from protocol.commands import OutOfRangeError

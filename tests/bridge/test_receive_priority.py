@@ -1,4 +1,4 @@
-"""How the daemon's DDS receive threads are scheduled (bridge/ros/receive_priority.py),
+"""How the daemon's DDS receive threads are scheduled (bridge/platform/receive_priority.py),
 read back from the kernel: a short slice by default, SCHED_FIFO with `--receive-priority`,
 which is refused in one line where the system does not allow it. What each buys (a pose on
 a busy machine, a VGA image without Fast DDS's resend) is measured by
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from bridge.ros.receive_priority import RECEIVE_SLICE_NS, allowed, thread_slice_ns
+from bridge.platform.receive_priority import RECEIVE_SLICE_NS, allowed, thread_slice_ns
 from support import REPO, Processes, assert_clean_exit, start_daemon
 
 PRIORITY = 10

@@ -1,5 +1,5 @@
 """Fast DDS port locks a killed process left taken are found and released
-(`bridge.ros.shm_locks`), on real POSIX named semaphores made here as Fast DDS makes its
+(`bridge.platform.shm_locks`), on real POSIX named semaphores made here as Fast DDS makes its
 own (``sem.fastrtps_port<N>_mutex``), numbered among the session's own domain's ports
 where no participant of the suite reaches (another session's daemons leave them alone)."""
 
@@ -20,7 +20,7 @@ from typing import Iterator
 
 import pytest
 
-from bridge.ros.shm_locks import (ports_of_domains, release, release_stuck,
+from bridge.platform.shm_locks import (ports_of_domains, release, release_stuck,
                                   remove_dead_segments, remove_unfinished, stuck_port_locks,
                                   unfinished_ports)
 from support import Processes, start_daemon
@@ -189,10 +189,10 @@ def test_a_running_daemon_releases_one_and_says_so(lock: str, processes: Process
         existed = unfinished.exists()
         unfinished.unlink(missing_ok=True)
     before_ros = running.child.output().split("(OpenIGTLink); ROS node")[0]
-    assert re.search(r"INFO bridge.ros.shm_ports: removed \d+ Fast DDS shared-memory "
+    assert re.search(r"INFO bridge.platform.shm_ports: removed \d+ Fast DDS shared-memory "
                      r"segment\(s\) of killed processes", before_ros), before_ros
     assert not dead.exists()
-    assert f"WARNING bridge.ros.shm_ports: released Fast DDS port lock {lock}" in before_ros
+    assert f"WARNING bridge.platform.shm_ports: released Fast DDS port lock {lock}" in before_ros
     assert value(lock) == 1
     assert f"removed Fast DDS port segment {unfinished}" in before_ros and not existed
     take(lock)

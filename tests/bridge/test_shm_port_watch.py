@@ -1,5 +1,5 @@
 """The daemon says so when Fast DDS keeps a shared-memory port another process replaced
-(`bridge.ros.shm_ports`). The swap itself is made for real: this process maps a port file,
+(`bridge.platform.shm_ports`). The swap itself is made for real: this process maps a port file,
 which is then unlinked and made anew under the same name, and the kernel's map of this
 process is read, as the daemon reads its own; a real daemon's map shows its real ports,
 and a daemon logs a port replaced under it."""
@@ -18,7 +18,7 @@ from typing import Iterator
 
 import pytest
 
-from bridge.ros.shm_ports import REPORT_AFTER_S, ShmPortWatch, file_inode, replaced_ports
+from bridge.platform.shm_ports import REPORT_AFTER_S, ShmPortWatch, file_inode, replaced_ports
 from support import Processes, RunningDaemon, spare_domain, wait_until
 
 
@@ -81,7 +81,7 @@ def logged(caplog: pytest.LogCaptureFixture) -> list[str]:
 
 @pytest.fixture
 def watched(caplog: pytest.LogCaptureFixture) -> Iterator[Watched]:
-    with caplog.at_level(logging.ERROR, logger="bridge.ros.shm_ports"):
+    with caplog.at_level(logging.ERROR, logger="bridge.platform.shm_ports"):
         yield Watched()
 
 
@@ -141,7 +141,7 @@ def test_the_watch_reads_a_map_on_its_thread_until_closed(
         mapped_port: Path, caplog: pytest.LogCaptureFixture) -> None:
     """Started as the daemon starts it, on this process's own map, with short periods."""
     watch = ShmPortWatch(check_interval_s=0.05, report_after_s=0.2)
-    with caplog.at_level(logging.ERROR, logger="bridge.ros.shm_ports"):
+    with caplog.at_level(logging.ERROR, logger="bridge.platform.shm_ports"):
         watch.start()
         try:
             replace(mapped_port)

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from bridge.core.threads import OnFailure, start_thread
-from bridge.ros.shm_locks import (PortFilter, every_port, release_stuck, remove_dead_segments,
+from bridge.platform.shm_locks import (PortFilter, every_port, release_stuck, remove_dead_segments,
                                   remove_unfinished)
 
 __all__ = ["CHECK_INTERVAL_S", "REPORT_AFTER_S", "ShmPortWatch", "file_inode",
