@@ -8,4 +8,5 @@
 - ros_clients.py: the cached rclpy service and action clients.
 - ros_args.py: `--ros-args` mapped onto the daemon's own options.
 - graph_types.py: one topic, one type: the check before a subscription or a publisher.
+- service_calls.py: a ROS service called from the asyncio loop (services, parameters).
 """

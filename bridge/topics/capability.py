@@ -582,9 +582,14 @@ class TopicBridges:
         if existing is None:
             return False
         if existing.codec.ros_type != ros_type:
-            raise CommandFailedError("type", f"{existing.codec.ros_type} (the bridge on "
-                                     f"{topic} has it)", ros_type,
-                                     code=ErrorCode.ALREADY_EXISTS)
+            kind = "subscriber" if isinstance(existing, SubscriberBridge) else "publisher"
+            raise CommandFailedError(
+                "type", f"{existing.codec.ros_type} (the {kind} bridge on {topic} has it; "
+                f"a bridge outlives the client that made it. Ask with that type to share "
+                f"it, or remove it first: op remove_{kind} "
+                f"{{\"topic\": \"{topic}\"}}; Python: "
+                f"ros.remove_bridge(\"create_{kind}\", \"{topic}\"))", ros_type,
+                code=ErrorCode.ALREADY_EXISTS)
         return True
 
     def create_subscriber(self, request: CreateSubscriber, client: Optional[Subscriber],

@@ -200,3 +200,24 @@ def test_the_live_daemon_refuses_the_players_ops(ros: slicer_client.Client) -> N
         assert error.code == ErrorCode.NOT_SUPPORTED
         assert "slicer-ros2-bridge play" in str(error)
     assert ros.list_topics() is not None
+
+
+def test_a_type_clash_with_a_left_bridge_says_how_to_share_or_remove_it(
+        daemon: RunningDaemon) -> None:
+    """Issue 43, item 7: a script's bridge on /py_force (Float64) outlives it; a later
+    script asking for Float32 is told the type there and how to remove the bridge, and the
+    removal it names works."""
+    with slicer_client.connect("127.0.0.1", daemon.port) as first:
+        first.subscribe("/py_force", "std_msgs/msg/Float64")
+    with slicer_client.connect("127.0.0.1", daemon.port) as later:
+        with pytest.raises(slicer_client.CommandRefusedError) as clash:
+            later.subscribe("/py_force", "std_msgs/msg/Float32")
+        assert clash.value.code == ErrorCode.ALREADY_EXISTS
+        message = str(clash.value)
+        assert "expected std_msgs/msg/Float64 (the subscriber bridge on /py_force has it" \
+            in message
+        assert 'op remove_subscriber {"topic": "/py_force"}' in message
+        assert 'ros.remove_bridge("create_subscriber", "/py_force")' in message
+        assert later.remove_bridge("create_subscriber", "/py_force") is True
+        assert later.subscribe("/py_force", "std_msgs/msg/Float32").type == \
+            "std_msgs/msg/Float32"
