@@ -13,7 +13,7 @@ from typing import Any, Callable, Coroutine, TypeVar
 
 from bridge import graph_inspect
 from bridge.config import (DEFAULT_HOST, DEFAULT_PORT, DEFAULT_TLS_PORT, ConfigError,
-                           DaemonConfig, FastPaths, TlsListener)
+                           WORKAROUNDS, DaemonConfig, FastPaths, TlsListener)
 from bridge.config import ConfigFile, build_security, load_config_file
 from bridge.platform.allocator import keep_large_buffers_returnable
 from bridge.interfaces import missing_runtime_line
@@ -172,6 +172,13 @@ def _add_daemon_options(parser: argparse.ArgumentParser) -> None:
                              "(a VGA image with Fast DDS's defaults) then reaches the daemon "
                              "without a resend's 10 ms, whatever else runs. Needs "
                              "CAP_SYS_NICE or `ulimit -r` at least this high")
+    parser.add_argument("--without", action="append", choices=WORKAROUNDS, default=[],
+                        metavar="WORKAROUND",
+                        help="leave out a host workaround, to weigh it (repeatable; "
+                             "bridge/platform/README.md says what each wins): receive-slice "
+                             "(the DDS receive threads' short scheduler slice), gil-switch "
+                             "(a 0.5 ms GIL switch interval), collector (start-up frozen, "
+                             "rarer collections), mmap-threshold (glibc's fixed at 4 MiB)")
     paths = parser.add_argument_group(
         "fast paths", "each compiled path has a slower twin with the same results: turn one "
                       "off to compare them, or to rule it out (bridge/platform/README.md)")
@@ -289,7 +296,8 @@ def _config_from(args: argparse.Namespace) -> DaemonConfig:
                         receive_priority=args.receive_priority,
                         fast_paths=FastPaths(compiled_tf=args.tf_store == "compiled",
                                              rcl_take=args.ros_take == "rcl",
-                                             send_batch=args.send_batch == "on"))
+                                             send_batch=args.send_batch == "on"),
+                        without=frozenset(args.without))
 
 
 def _configure_logging(level: str) -> None:
@@ -311,7 +319,8 @@ def run_with_config(args: argparse.Namespace,
         print(f"slicer-ros2-bridge: {error}", file=sys.stderr)
         return 2
     _configure_logging(config.log_level)
-    keep_large_buffers_returnable()  # before ROS starts its threads
+    if "mmap-threshold" not in config.without:
+        keep_large_buffers_returnable()  # before ROS starts its threads
     try:
         asyncio.run(main(config))
     except PortInUseError as error:

@@ -68,6 +68,10 @@ class FastPaths:
     send_batch: bool = True  # --send-batch: one io_uring call for all clients, or one each
 
 
+# The host workarounds (bridge/platform/) a daemon can run without, to weigh each one.
+WORKAROUNDS = ("receive-slice", "gil-switch", "collector", "mmap-threshold")
+
+
 @dataclass(frozen=True)
 class DaemonConfig:
     host: str = DEFAULT_HOST
@@ -90,6 +94,8 @@ class DaemonConfig:
     # SCHED_FIFO priority of the DDS receive threads (bridge/platform/receive_priority.py).
     receive_priority: Optional[int] = None
     fast_paths: FastPaths = field(default_factory=FastPaths)
+    # Host workarounds left out (`--without`; names from WORKAROUNDS).
+    without: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)

@@ -131,9 +131,11 @@ class Daemon:
                                    policy=policy, heavy=self.heavy, tls=config.tls)
 
     @staticmethod
-    def _schedule_receive_threads(priority: Optional[int]) -> str:
-        """SCHED_FIFO at ``priority``, else a short slice; what to log once the daemon is up
-        (a start that fails says its error alone)."""
+    def _schedule_receive_threads(priority: Optional[int], *, short_slice: bool) -> str:
+        """SCHED_FIFO at ``priority``, else a short slice (unless not ``short_slice``); what
+        to log once the daemon is up (a start that fails says its error alone)."""
+        if priority is None and not short_slice:
+            return "DDS receive threads on the kernel's usual slice (--without receive-slice)"
         if priority is None:
             names = shorten_receive_slices()
             if not names:
@@ -154,7 +156,9 @@ class Daemon:
             # them (own one, remove one, make one fail with another type).
             await self.server.start(serving=False)
             self.ros.start()
-            scheduling = self._schedule_receive_threads(self.config.receive_priority)
+            scheduling = self._schedule_receive_threads(
+                self.config.receive_priority, short_slice="receive-slice" not in
+                self.config.without)
             self.shm_ports.start()
             for command in self.config.startup:
                 try:
@@ -166,6 +170,9 @@ class Daemon:
             await self.stop()
             raise
         log.info("%s", scheduling)
+        if self.config.without:
+            log.info("host workarounds left out (--without): %s",
+                     ", ".join(sorted(self.config.without)))
         log.info("listening on %s:%d (OpenIGTLink); ROS node %s", self.config.host,
                  self.server.port, self.ros.fully_qualified_name)
         if self.config.tls is not None:
@@ -215,13 +222,15 @@ async def run_daemon(config: DaemonConfig,
     """Run until SIGINT/SIGTERM/SIGHUP; `started` runs once the daemon serves and
     `stopping` when the stop begins (used by `demo`). After the signal the process ends
     within ``config.stop_timeout_s``."""
-    shorten_gil_switches()
+    if "gil-switch" not in config.without:
+        shorten_gil_switches()
     loop = asyncio.get_running_loop()
     signals = StopSignals(loop, timeout_s=config.stop_timeout_s)
     signals.install()
     daemon = Daemon(config, loop)
     await daemon.start()
-    settle_the_collector()
+    if "collector" not in config.without:
+        settle_the_collector()
     try:
         if started is not None:
             await started(daemon)

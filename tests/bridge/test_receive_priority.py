@@ -81,6 +81,35 @@ def test_by_default_the_receive_threads_ask_for_a_short_slice_and_the_rest_keep_
 
 
 @pytest.mark.ros
+@pytest.mark.skipif(not _kernel_at_least(6, 12),
+                    reason=f"an ordinary thread's own slice needs Linux 6.12 or later, this is "
+                           f"{platform.release()}")
+def test_without_the_workarounds_the_threads_keep_the_kernels_slice_and_the_log_says_so(
+        processes: Processes) -> None:
+    """`--without`, to weigh a host workaround (bridge/platform/README.md): left out, the
+    receive threads keep the usual slice, and the start-up log names what was left out."""
+    running = start_daemon(processes, "--without", "receive-slice", "--without", "collector",
+                           "--without", "gil-switch", "--without", "mmap-threshold")
+    receive = {thread_slice_ns(int(task.name))
+               for task in Path(f"/proc/{running.child.pid}/task").iterdir()
+               if RECEIVE_THREAD.fullmatch((task / "comm").read_text().strip())}
+    assert receive and RECEIVE_SLICE_NS not in receive, receive
+    output = running.child.output()
+    assert "DDS receive threads on the kernel's usual slice (--without receive-slice)" in output
+    assert ("host workarounds left out (--without): collector, gil-switch, mmap-threshold, "
+            "receive-slice") in output
+    assert_clean_exit(running)
+
+
+def test_a_workaround_the_daemon_does_not_have_is_refused_with_the_list() -> None:
+    done = subprocess.run([sys.executable, "-m", "bridge.console", "run", "--without",
+                           "turbo"], capture_output=True, text=True, timeout=60, cwd=REPO)
+    assert done.returncode == 2
+    assert ("argument --without: invalid choice: 'turbo' (choose from 'receive-slice', "
+            "'gil-switch', 'collector', 'mmap-threshold')") in done.stderr
+
+
+@pytest.mark.ros
 @pytest.mark.skipif(not (shutil.which("setpriv") and shutil.which("prlimit")),
                     reason="needs util-linux's setpriv and prlimit to take the right away")
 def test_where_the_system_refuses_the_daemon_says_what_it_needs_in_one_line() -> None:
