@@ -134,7 +134,7 @@ class Transform:
     def pack(self) -> bytes:
         m = self.matrix
         if isinstance(m, np.ndarray) and m.shape == (4, 4) and m.dtype.kind == "f":
-            # Fast path (about 1 us): the same gather as conversions.matrix_to_igtl12, via the
+            # Fast path: the same gather as conversions.matrix_to_igtl12, via the
             # index table derived from it, packed from Python floats (numpy's per-call
             # overhead is most of the cost for 12 numbers); anything unusual (NaN, a value
             # beyond float32) goes through the checked path, which says what.

@@ -4,8 +4,8 @@
 every client's socket, all without the interpreter (the stream reader calls `PoseLane`'s
 handler with the interpreter's lock released).
 
-Why it exists: at 1 kHz each pose cost the daemon 60-80 us of interpreter time (cold caches
-after every 1 ms wait), four times what its conversion needs (bench/bench_pose_path.py).
+Why it exists: at 1 kHz the interpreter's time per pose (cold caches after every wait) is
+several times what its conversion needs; bench/bench_pose_path.py measures both paths.
 
 The Python path stays the reference, and this file follows it step by step:
 - reading: bridge/codecs/cdr.py (`read_pose`, `read_pose_stamped`, `read_transform_stamped`);

@@ -18,10 +18,9 @@ or an rtprio limit (`ulimit -r`) at least that high.
 Without it, the receive threads ask for a short scheduler slice (Linux 6.12 and later:
 EEVDF's custom slice, `sched_attr.sched_runtime` for an ordinary thread; no privilege).
 A thread with a shorter slice than the running one's takes the CPU when it wakes, rather
-than waiting for that slice to end, but gets no larger share of it: on a machine kept busy
-by other processes, a pose reached one client at p99 0.08-1.70 ms in three runs, against
-2.57 and 5.08 ms in two without (bench/bench_daemon.py --busy 2), and a flooding peer still
-gets only its fair share.
+than waiting for that slice to end, but gets no larger share of it, so a flooding peer
+still gets only its fair share. What it wins on a busy machine: bridge/platform/README.md
+(`--without receive-slice` leaves it out).
 """
 
 from __future__ import annotations

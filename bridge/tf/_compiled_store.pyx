@@ -4,8 +4,8 @@
 the bit, with each frame's samples in one C array and the walks in C.
 
 Why it exists: a 7-link robot's /tf at 1 kHz is 7,000 samples stored and 7,000 lookups
-composed a second. Reading and storing one such message costs 20 us in store.py and 2 us
-here (bench/bench_tf.py). store.py is the reference: read it first, this file follows it
+composed a second; bench/bench_tf.py measures what reading and storing one such message
+costs in store.py and here. store.py is the reference: read it first, this file follows it
 function by function (same names), and tests/bridge/test_tf_store_equivalence.py runs both
 on the same random histories. Built by setup.py where a C compiler is found (Cython, build-time only);
 `TfBuffer` falls back to store.py otherwise.

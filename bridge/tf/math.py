@@ -6,9 +6,9 @@ has no quaternion product, inverse or slerp, because nothing crossing the wire n
 The tf buffer composes chains of links many thousands of times a second, so it needs that
 algebra, and it needs it fast.
 
-Why tuples of floats and not numpy: every value here is a 3-vector or a quaternion. A numpy
-call costs about a microsecond of overhead whatever the size, while the whole quaternion
-product in plain floats costs a few hundred nanoseconds. bench/bench_tf.py measures both
+Why tuples of floats and not numpy: every value here is a 3-vector or a quaternion, and a
+numpy call's fixed overhead, whatever the size, is more than the whole quaternion product
+in plain floats. bench/bench_tf.py measures both
 (``compose``: tuples vs the same formulas on numpy arrays) and the tuples win by several
 times. Batch work (many transforms at once) would favour numpy; the buffer never has that.
 
