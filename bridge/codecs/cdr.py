@@ -4,9 +4,9 @@ geometry_msgs Pose, PoseStamped and TransformStamped, and tf2_msgs TFMessage; an
 sensor_msgs Image, whose pixels are then read in place (rclpy would copy them twice).
 
 rclpy builds six to ten Python objects for one PoseStamped; reading its numbers with one
-precompiled `struct` is far cheaper (bench/bench_pose_path.py weighs both). Only little-endian plain CDR
-(what every ROS 2 middleware sends on x86 and ARM) is read here; anything else raises
-`CdrError` and the caller deserializes the message the ordinary way.
+precompiled `struct` is far cheaper (bench/bench_pose_path.py weighs both). Only
+little-endian plain CDR (what every ROS 2 middleware sends on x86 and ARM) is read here;
+anything else raises `CdrError` and the caller deserializes the message the ordinary way.
 
 Layout (XCDR1, offsets after the 4-byte encapsulation header; primitives aligned to their
 size from there): ``Time`` = int32 sec, uint32 nanosec; ``string`` = uint32 length
