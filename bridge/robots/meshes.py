@@ -85,27 +85,48 @@ def _frozen(array: np.ndarray) -> Any:
 # ---------------------------------------------------------------------------- merging
 
 
+# Odd 64-bit multipliers (splitmix/xxhash constants) mixing a vertex's bytes into one key.
+_MIX = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9,
+                 0x27D4EB2F165667C5], dtype=np.uint64)
+
+
 def _merge_exact(vertices: F64, triangles: U32, colours: Optional[U8]
                  ) -> tuple[F64, U32, Optional[U8]]:
-    """Merge vertices whose position (and colour) bytes are equal; drop unused ones."""
+    """Merge vertices whose position (and colour) bytes are equal; drop unused ones. The
+    vertices keep the order in which the triangles first use them.
+
+    Each vertex's bytes are mixed into one 64-bit key, and the keys sorted (np.unique on
+    uint64: a quarter of the time of sorting the rows as bytes); the merged vertices are
+    then checked byte for byte against every vertex merged into them, and on a collision
+    of two different vertices (about 1 in 2**64 per pair) the rows are sorted as they are.
+    """
     if len(vertices) == 0:
         return vertices, triangles, colours
     pos = np.ascontiguousarray(vertices, dtype=np.float64)
-    if colours is not None:
-        key_arr = np.concatenate([pos.view(np.uint8).reshape(len(pos), 24),
-                                  np.ascontiguousarray(colours, dtype=np.uint8)], axis=1)
-    else:
-        key_arr = pos.view(np.uint8).reshape(len(pos), 24)
-    key_arr = np.ascontiguousarray(key_arr)
-    # One opaque value per row, so np.unique sorts rows as a whole (fast, vectorised).
-    keys = key_arr.view(np.dtype((np.void, key_arr.shape[1]))).ravel()
     used = np.zeros(len(pos), dtype=bool)
     used[triangles.ravel()] = True
-    keys_used_idx = np.flatnonzero(used)
-    _, first, inverse = np.unique(keys[keys_used_idx], return_index=True, return_inverse=True)
+    used_idx = np.flatnonzero(used)
+    columns = [pos[used_idx].view(np.uint64)]
+    if colours is not None:
+        columns.append(np.ascontiguousarray(colours[used_idx], dtype=np.uint8)
+                       .view(np.uint32).astype(np.uint64))
+    rows = np.concatenate(columns, axis=1) if len(columns) > 1 else columns[0]
+    with np.errstate(over="ignore"):
+        key = rows[:, 0] * _MIX[0]
+        for k in range(1, rows.shape[1]):
+            key ^= rows[:, k] * _MIX[k]
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    if not np.array_equal(rows[first][inverse], rows):  # a collision: sort the rows
+        keys = np.ascontiguousarray(rows).view(np.dtype((np.void, rows.shape[1] * 8))).ravel()
+        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        inverse = inverse.ravel()
+    order = np.argsort(first, kind="stable")  # merged vertices in order of first use
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[order] = np.arange(len(first))
     remap = np.zeros(len(pos), dtype=np.int64)
-    remap[keys_used_idx] = inverse.ravel()
-    keep = keys_used_idx[first]
+    remap[used_idx] = rank[inverse]
+    keep = used_idx[first[order]]
     new_colours = colours[keep] if colours is not None else None
     return pos[keep], remap[triangles].astype(np.uint32), new_colours
 
@@ -188,7 +209,8 @@ def _read_geometries(path: Path) -> tuple[list[trimesh.Trimesh], float]:
                         f"suffix {suffix or '(none)'}")
     try:
         # process=False: keep the file's vertices; merging is ours (exact, see module doc).
-        loaded = trimesh.load(str(path), process=False, force="scene")
+        loaded = _load_collada(path) if suffix == ".dae" else \
+            trimesh.load(str(path), process=False, force="scene")
     except MeshError:
         raise
     except Exception as exc:  # trimesh raises many types for a corrupt file
@@ -204,6 +226,22 @@ def _read_geometries(path: Path) -> tuple[list[trimesh.Trimesh], float]:
         geoms = [loaded]
     meshes = [g for g in geoms if isinstance(g, trimesh.Trimesh) and len(g.faces) > 0]
     return meshes, scale
+
+
+def _load_collada(path: Path) -> Any:
+    """A COLLADA file as a trimesh scene with its vertices as the file has them.
+    `trimesh.load` does not hand ``process=False`` on to a COLLADA scene's geometries: each
+    was merged within trimesh's tolerance (a third of the file's reading time), then again
+    exactly here."""
+    from trimesh.exchange.dae import load_collada
+    from trimesh.resolvers import FilePathResolver
+
+    with path.open("rb") as file:
+        kwargs = load_collada(file, resolver=FilePathResolver(str(path)))
+    for geometry in kwargs.get("geometry", {}).values():
+        if isinstance(geometry, dict):
+            geometry["process"] = False
+    return trimesh.load(kwargs, force="scene")
 
 
 def _explain_empty_collada(path: Path) -> None:
