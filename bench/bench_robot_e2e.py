@@ -17,18 +17,25 @@ of ``--links`` links (a trunk with arms, 3/4 of its joints revolute), one mesh f
 link, each its own shape of 2,000-5,000 triangles, written as binary STL, COLLADA and OBJ
 in turn into a package folder (about what a real robot package holds).
 
-Rows per robot:
-- cold: the first request to a daemon started for it (its node already up), so the
-  daemon finds the state publisher, reads and converts every mesh;
-- warm: the robot removed and asked for again (median of the next ``--repeat``): meshes
-  from the daemon's cache;
-- baseline, description fetch: a plain rclpy process asks the state publisher for
-  ``robot_description`` (GetParameters): from its request to the text, finding the node
-  included as for cold, then again once found (the ROS floor for any way of doing this);
-- baseline, naive Python: yourdfpy's ``URDF.load`` with its meshes (trimesh) in a fresh
-  process, the usual way to get a URDF's meshes in Python; no network, no poses.
+Cases (each daemon started for the bench and waited for until it sees the state
+publishers' nodes, as a daemon that has been running does; the robots' joint motion runs
+throughout):
+- first robot of a new daemon: the mesh libraries (trimesh, yourdfpy) are imported and
+  every mesh file parsed (an empty mesh cache folder);
+- new daemon, mesh cache folder: the same request to a daemon started again, whose mesh
+  cache folder (~/.cache/slicer-ros2-bridge/meshes) holds the robot's meshes;
+- second robot (meshes unread): the libraries loaded by an earlier robot, this robot's
+  meshes never read;
+- again: the robot removed and asked for again (median of ``--repeat``): meshes from the
+  daemon's memory.
 
-The load average is printed before each robot: on the 2-core machine latency depends on it.
+Baselines in the same run: a plain rclpy process asking the state publisher for
+``robot_description`` (GetParameters), from a new process (finding the node) and again
+(the ROS floor for any way of doing this); yourdfpy's ``URDF.load`` with its meshes
+(trimesh) in a new process and again, the usual way to get a URDF's meshes in Python (no
+network, no poses).
+
+The load average is printed before each daemon: on the 2-core machine latency depends on it.
 """
 
 from __future__ import annotations
@@ -153,7 +160,7 @@ def run_json(argv: list[str], timeout: float = 300) -> dict[str, Any]:
 # ------------------------------------------------------------------------------ client side
 
 
-def time_one_load(ros: Any, name: str) -> dict[str, Any]:
+def time_one_load(ros: Any, name: str, node: str, tf_prefix: str) -> dict[str, Any]:
     """Ask for robot `name` once: seconds to the reply, the last mesh and the last pose."""
     import threading
 
@@ -171,7 +178,7 @@ def time_one_load(ros: Any, name: str) -> dict[str, Any]:
             changed.notify_all()
 
     start = time.perf_counter()
-    robot = ros.robot(name, callback=on_change, timeout=60)
+    robot = ros.robot(name, node=node, tf_prefix=tf_prefix, callback=on_change, timeout=60)
     reply = time.perf_counter()
     robot.wait_until_loaded(120)
     # What the callbacks were told (they run on the client's dispatcher thread, a little
@@ -189,14 +196,16 @@ def time_one_load(ros: Any, name: str) -> dict[str, Any]:
     return result
 
 
-def client_main(port: int, name: str, repeat: int) -> int:
-    """The user: connect, ask for the robot, time its meshes and poses; `repeat` + 1 loads."""
+def client_main(port: int, plan: list[dict[str, Any]]) -> int:
+    """The user: connect, then for each robot of `plan` (name, node, tf_prefix, loads) ask
+    for it `loads` times in turn, timing its meshes and poses."""
     import slicer_client
 
     ros = slicer_client.connect("127.0.0.1", port)
-    loads = [time_one_load(ros, name) for _ in range(repeat + 1)]
+    out = [[time_one_load(ros, step["name"], step["node"], step["tf_prefix"])
+            for _ in range(step["loads"])] for step in plan]
     ros.close()
-    print(json.dumps(loads))
+    print(json.dumps(out))
     return 0
 
 
@@ -247,54 +256,105 @@ def naive_main(urdf: str, package: str, folder: str) -> int:
 # ------------------------------------------------------------------------------ the bench
 
 
-def bench_robot(label: str, urdf: Path, package: str, folder: Path, repeat: int,
-                log_dir: Path, profile: Optional[Path]) -> dict[str, Any]:
+class Robot:
+    """One robot of the bench: its URDF and package, and the ROS names it is served under."""
+
+    def __init__(self, label: str, urdf: Path, package: str, folder: Path,
+                 namespace: str) -> None:
+        self.label, self.urdf, self.package, self.folder = label, urdf, package, folder
+        self.namespace = namespace
+        self.node = f"/{namespace}/robot_state_publisher" if namespace else \
+            "/robot_state_publisher"
+        self.tf_prefix = f"{namespace}/" if namespace else ""
+
+    def step(self, loads: int) -> dict[str, Any]:
+        return {"name": "r" + self.label.replace(" ", "_"), "node": self.node,
+                "tf_prefix": self.tf_prefix, "loads": loads}
+
+
+def serve(robots: list[Robot], log_dir: Path, children: list[Child]) -> None:
+    """A state publisher and a joint motion node (50 Hz) per robot, as a robot runs."""
     py = [sys.executable, "-u"]
-    port = free_port()
-    children: list[Child] = []
-    try:
-        daemon_argv = [*py, "-m", "bridge.cli", "run", "--port", str(port), "--log-level",
-                       "INFO", "--package-path", f"{package}={folder}"]
-        if profile is not None:
-            daemon_argv = ["py-spy", "record", "-o", str(profile), "-f", "speedscope",
-                           "--threads", "--", *daemon_argv]
-        daemon = Child(f"daemon-{label}", daemon_argv, log_dir)
-        children.append(daemon)
-        daemon.wait_for("listening on")
-        publisher = Child(f"state-publisher-{label}",
-                          [*py, "-m", "bridge.robots.state_publisher", str(urdf),
-                           f"--package-path={package}={folder}"], log_dir)
+    for robot in robots:
+        tag = robot.label.replace(" ", "-")
+        publisher = Child(f"state-publisher-{tag}", [
+            *py, "-m", "bridge.robots.state_publisher", str(robot.urdf),
+            f"--package-path={robot.package}={robot.folder}", "--namespace", robot.namespace,
+            "--frame-prefix", robot.tf_prefix], log_dir)
         children.append(publisher)
         publisher.wait_for("ready")
-        motion = Child(f"joint-motion-{label}",
-                       [*py, "-m", "bridge.robots.demo.joint_motion", str(urdf), "--rate", "50",
-                        "--no-trajectory-action"], log_dir)
+        motion = Child(f"joint-motion-{tag}", [
+            *py, "-m", "bridge.robots.demo.joint_motion", str(robot.urdf), "--rate", "50",
+            "--namespace", robot.namespace, "--no-trajectory-action"], log_dir)
         children.append(motion)
         motion.wait_for("joint motion ready")
-        fetch = run_json([*py, __file__, "--fetch", "/robot_state_publisher"])
-        naive = run_json([*py, __file__, "--naive", str(urdf), package, str(folder)])
-        loads = run_json([*py, __file__, "--client", str(port), "robot", "--repeat",
-                          str(repeat)])
+
+
+def with_daemon(tag: str, robots: list[Robot], mesh_home: Path, plan: list[dict[str, Any]],
+                log_dir: Path, profile: Optional[Path]) -> list[list[dict[str, Any]]]:
+    """Start a daemon (its mesh cache folder under `mesh_home`), wait until it has seen the
+    robots' state publishers (the parameter nodes, as a long-running daemon has), run the
+    client's `plan`, stop it."""
+    py = [sys.executable, "-u"]
+    port = free_port()
+    argv = [*py, "-m", "bridge.cli", "run", "--port", str(port), "--log-level", "INFO"]
+    for robot in robots:
+        argv += ["--package-path", f"{robot.package}={robot.folder}"]
+    if profile is not None:
+        argv = ["py-spy", "record", "-o", str(profile), "-f", "speedscope", "--threads", "--",
+                *argv]
+    env_home = os.environ.get("XDG_CACHE_HOME")
+    os.environ["XDG_CACHE_HOME"] = str(mesh_home)
+    try:
+        daemon = Child(f"daemon-{tag}", argv, log_dir)
     finally:
-        for child in reversed(children):
-            child.stop()
-    return {"loads": loads, "fetch": fetch, "naive": naive}
+        if env_home is None:
+            os.environ.pop("XDG_CACHE_HOME")
+        else:
+            os.environ["XDG_CACHE_HOME"] = env_home
+    try:
+        daemon.wait_for("listening on")
+        run_json([*py, __file__, "--graph", str(port),
+                  json.dumps([robot.node for robot in robots])])
+        return run_json([*py, __file__, "--client", str(port), json.dumps(plan)])  # type: ignore[return-value]
+    finally:
+        daemon.stop()
+
+
+def graph_main(port: int, nodes: list[str]) -> int:
+    """Wait until the daemon sees these nodes on the ROS graph (not part of any timing)."""
+    import slicer_client
+
+    ros = slicer_client.connect("127.0.0.1", port)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        services = {s["service"] for s in ros.list_services()}
+        if all(f"{node}/get_parameters" in services for node in nodes):
+            break
+        time.sleep(0.1)
+    else:
+        raise SystemExit(f"the daemon did not see {nodes}")
+    ros.close()
+    print("{}")
+    return 0
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--links", type=int, default=130)
     parser.add_argument("--repeat", type=int, default=5, help="warm loads per robot")
-    parser.add_argument("--only", choices=("demo", "generated"), default=None)
     parser.add_argument("--profile", type=Path, default=None,
-                        help="run the generated robot's daemon under py-spy, output here")
-    parser.add_argument("--client", nargs=2, metavar=("PORT", "NAME"), help=argparse.SUPPRESS)
+                        help="run the first daemon under py-spy, its profile here")
+    parser.add_argument("--client", nargs=2, metavar=("PORT", "PLAN"), help=argparse.SUPPRESS)
+    parser.add_argument("--graph", nargs=2, metavar=("PORT", "NODES"), help=argparse.SUPPRESS)
     parser.add_argument("--fetch", metavar="NODE", help=argparse.SUPPRESS)
     parser.add_argument("--naive", nargs=3, metavar=("URDF", "PACKAGE", "DIR"),
                         help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.client:
-        return client_main(int(args.client[0]), args.client[1], args.repeat)
+        return client_main(int(args.client[0]), json.loads(args.client[1]))
+    if args.graph:
+        return graph_main(int(args.graph[0]), json.loads(args.graph[1]))
     if args.fetch:
         return fetch_main(args.fetch)
     if args.naive:
@@ -304,49 +364,74 @@ def main() -> int:
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="bench-roslog-"))
     log_dir = Path(tempfile.mkdtemp(prefix="bench-robot-e2e-"))
+    from bridge.robots import MeshCache, load_robot_file
     from bridge.robots.demo import DEMO_PACKAGE, demo_urdf_path
 
-    robots: list[tuple[str, Path, str, Path]] = []
-    if args.only in (None, "demo"):
-        demo_urdf, demo_packages = demo_urdf_path(log_dir / "demo")
-        robots.append(("demo arm", demo_urdf, DEMO_PACKAGE, demo_packages[DEMO_PACKAGE]))
-    if args.only in (None, "generated"):
-        folder = log_dir / PACKAGE
-        robots.append((f"{args.links} links", make_robot(folder, args.links), PACKAGE,
-                       folder))
-    from bridge.robots import MeshCache, load_robot_file
-
-    rows = []
-    for label, urdf, package, folder in robots:
-        model = load_robot_file(urdf, package_paths={package: folder}, cache=MeshCache())
-        triangles = sum(len(v.triangles) for v in model.visuals)
-        print(f"{label}: load average {os.getloadavg()[0]:.2f} (logs in {log_dir})",
+    demo_urdf, demo_packages = demo_urdf_path(log_dir / "demo")
+    demo = Robot("demo arm", demo_urdf, DEMO_PACKAGE, demo_packages[DEMO_PACKAGE], "demo")
+    folder = log_dir / PACKAGE
+    big = Robot(f"{args.links} links", make_robot(folder, args.links), PACKAGE, folder, "")
+    triangles = {}
+    for robot in (demo, big):
+        model = load_robot_file(robot.urdf, package_paths={robot.package: robot.folder},
+                                cache=MeshCache())
+        triangles[robot.label] = sum(len(v.triangles) for v in model.visuals)
+    py = [sys.executable, "-u"]
+    children: list[Child] = []
+    rows: list[tuple[str, str, dict[str, float]]] = []
+    try:
+        serve([demo, big], log_dir, children)
+        print(f"load average {os.getloadavg()[0]:.2f}: daemon 1, the demo arm first, "
+              f"then the {big.label} (logs in {log_dir})", flush=True)
+        home1 = log_dir / "cache-1"
+        first = with_daemon("1", [demo, big], home1,
+                            [demo.step(args.repeat + 1), big.step(args.repeat + 1)],
+                            log_dir, args.profile)
+        print(f"load average {os.getloadavg()[0]:.2f}: daemon 2, the {big.label} first",
               flush=True)
-        result = bench_robot(label.replace(" ", "-"), urdf, package, folder, args.repeat,
-                             log_dir, args.profile if "links" in label else None)
-        rows.append((label, triangles, result))
+        fresh = with_daemon("2", [demo, big], log_dir / "cache-2", [big.step(1)], log_dir,
+                            None)
+        print(f"load average {os.getloadavg()[0]:.2f}: daemon 3, daemon 1's mesh cache "
+              f"folder", flush=True)
+        again = with_daemon("3", [demo, big], home1, [big.step(1)], log_dir, None)
+        print(f"load average {os.getloadavg()[0]:.2f}: baselines", flush=True)
+        fetch = run_json([*py, __file__, "--fetch", big.node])
+        naive = {robot.label: run_json([*py, __file__, "--naive", str(robot.urdf),
+                                        robot.package, str(robot.folder)])
+                 for robot in (demo, big)}
+    finally:
+        for child in reversed(children):
+            child.stop()
 
+    def median(loads: list[dict[str, Any]]) -> dict[str, float]:
+        return {k: statistics.median(load[k] for load in loads)
+                for k in ("reply", "meshes", "poses")}
+
+    rows = [
+        (demo.label, "first robot of a new daemon", first[0][0]),
+        (demo.label, f"again (median of {args.repeat})", median(first[0][1:])),
+        (big.label, "first robot of a new daemon", fresh[0][0]),
+        (big.label, "new daemon, mesh cache folder", again[0][0]),
+        (big.label, "second robot (meshes unread)", first[1][0]),
+        (big.label, f"again (median of {args.repeat})", median(first[1][1:])),
+    ]
     ms = 1000.0
-    print(f"\nrobot load, request -> last item at the client (ms); warm = median of "
-          f"{args.repeat}; load average now {os.getloadavg()[0]:.2f}")
-    print(f"{'robot':<10} {'links':>5} {'meshes':>6} {'triangles':>9} {'':<5} "
-          f"{'reply':>7} {'meshes':>7} {'poses':>7} | {'fetch URDF':>10} {'yourdfpy':>9}")
-    for label, triangles, result in rows:
-        loads = result["loads"]
-        cold, warm = loads[0], loads[1:]
-        med = {k: statistics.median(load[k] for load in warm) for k in
-               ("reply", "meshes", "poses")}
-        for which, row, fetch, naive in (("cold", cold, result["fetch"]["first"],
-                                          result["naive"]["first"]),
-                                         ("warm", med, result["fetch"]["again"],
-                                          result["naive"]["again"])):
-            print(f"{label:<10} {cold['links']:>5} {cold['visuals']:>6} "
-                  f"{triangles:>9} {which:<5} {row['reply'] * ms:>7.0f} "
-                  f"{row['meshes'] * ms:>7.0f} {row['poses'] * ms:>7.0f} | "
-                  f"{fetch * ms:>10.0f} {naive * ms:>9.0f}")
-    print("fetch URDF: a plain rclpy GetParameters of robot_description (cold: node not yet "
-          "found; warm: again); yourdfpy: URDF.load with meshes in one process (cold: "
-          "first; warm: again)")
+    print(f"\nrobot load, request -> last item at a client's callbacks (ms); load average "
+          f"now {os.getloadavg()[0]:.2f}")
+    print(f"{'robot':<10} {'links':>5} {'meshes':>6} {'triangles':>9}  {'case':<30} "
+          f"{'reply':>6} {'meshes':>7} {'poses':>6}")
+    for label, case, row in rows:
+        loads = first[0][0] if label == demo.label else first[1][0]
+        print(f"{label:<10} {loads['links']:>5} {loads['visuals']:>6} "
+              f"{triangles[label]:>9}  {case:<30} {row['reply'] * ms:>6.0f} "
+              f"{row['meshes'] * ms:>7.0f} {row['poses'] * ms:>6.0f}")
+    print("\nbaselines, same run (ms):")
+    print(f"  plain rclpy GetParameters of {big.node}'s robot_description "
+          f"({fetch['bytes']:,} bytes): {fetch['first'] * ms:.0f} from a new process "
+          f"(finding the node), {fetch['again'] * ms:.1f} again")
+    for label, result in naive.items():
+        print(f"  yourdfpy URDF.load with meshes, {label}: {result['first'] * ms:.0f} "
+              f"(a new process), {result['again'] * ms:.0f} again; no network, no poses")
     return 0
 
 
