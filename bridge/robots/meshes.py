@@ -574,6 +574,9 @@ class MeshCache:
 # Bumped when what a kept mesh holds, or how a file is read, changes: older ones are unused.
 _FOLDER_FORMAT = 1
 MESH_FOLDER_ENTRIES = 4096
+# The folder is pruned at this process's first write and every this many writes after it.
+_PRUNE_EVERY = 256
+_written = 0
 
 
 def default_mesh_folder() -> Path:
@@ -640,13 +643,17 @@ def _keep(kept: Path, mesh: MeshData) -> None:
         with tempfile.NamedTemporaryFile(dir=kept.parent, suffix=".part", delete=False) as out:
             out.write(b"".join(parts))
         os.replace(out.name, kept)
-        _prune(kept.parent)
+        global _written
+        _written += 1
+        if (_written - 1) % _PRUNE_EVERY == 0:  # listing a full folder takes ms: not always
+            _prune(kept.parent)
     except OSError as exc:
         _log.debug("mesh cache %s not written (%s)", kept.parent, exc)
 
 
 def _prune(folder: Path) -> None:
-    """At most `MESH_FOLDER_ENTRIES` kept meshes: the least recently used go."""
+    """At most `MESH_FOLDER_ENTRIES` kept meshes (a few hundred more between two prunings):
+    the least recently used go."""
     entries = [e for e in os.scandir(folder) if e.name.endswith(".mesh")]
     if len(entries) <= MESH_FOLDER_ENTRIES:
         return

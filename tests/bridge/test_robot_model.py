@@ -486,6 +486,28 @@ def test_a_cache_folder_gives_another_process_the_meshes_as_read(tmp_path: Path)
     assert edited.folder_hits == 0
 
 
+def test_a_cache_folder_keeps_the_most_recently_used_meshes(tmp_path: Path,
+                                                            monkeypatch) -> None:
+    import os
+
+    from bridge.robots import meshes
+
+    monkeypatch.setattr(meshes, "MESH_FOLDER_ENTRIES", 2)
+    monkeypatch.setattr(meshes, "_PRUNE_EVERY", 1)
+    folder = tmp_path / "kept"
+    files = [write_stl(tmp_path / f"m{i}.stl", TETRA * (i + 1)) for i in range(3)]
+    for number, path in enumerate(files):
+        MeshCache(folder=folder).mesh_file(path)
+        when = time.time() - 100 + number * 10  # used in this order, 10 s apart
+        os.utime(max(folder.iterdir(), key=lambda p: p.stat().st_mtime_ns), (when, when))
+    assert len(list(folder.iterdir())) == 2
+    last = MeshCache(folder=folder)
+    last.mesh_file(files[2])
+    last.mesh_file(files[1])
+    last.mesh_file(files[0])  # the oldest went: read from its file
+    assert last.folder_hits == 2
+
+
 def test_progress_is_logged_when_loading_is_slow(tmp_path: Path, caplog) -> None:
     caplog.set_level(logging.INFO, logger="bridge.robots")
     load_robot(robot(link("a", visual('<box size="1 1 1"/>'))),
