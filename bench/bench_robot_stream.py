@@ -177,6 +177,8 @@ def main() -> int:
     os.environ["ROS_DOMAIN_ID"] = str(random.randint(1, 100))
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="bench-roslog-"))
+    # An empty mesh cache folder for the daemon: "cold" reads every mesh file.
+    os.environ["XDG_CACHE_HOME"] = tempfile.mkdtemp(prefix="bench-cache-")
     log_dir = Path(tempfile.mkdtemp(prefix="bench-robot-"))
     urdf, packages = demo_urdf_path()
     py = [sys.executable, "-u"]

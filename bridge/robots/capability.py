@@ -44,6 +44,7 @@ import json
 import functools
 import hashlib
 import logging
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Optional
@@ -67,6 +68,7 @@ from protocol.naming import (KEY_CHILD, KEY_COLOR, KEY_LINK_COUNT, KEY_PARENT, K
 if TYPE_CHECKING:  # bridge.robots.model (trimesh, yourdfpy) loads with the first robot;
     # ROS only where the daemon reads a description from it (`RobotServing` is ROS-free)
     from bridge.parameters.watch import ParameterWatch, ParameterWatcher
+    from bridge.robots.description import RobotDescription
     from bridge.robots.model import RobotModel, VisualMesh
     from bridge.ros.ros_node import RosNode
 
@@ -159,6 +161,12 @@ class _Robot:
     # Meshes only from these folders; None: an operator's URDF file, trusted.
     mesh_roots: Optional[tuple[Path, ...]] = None
     loaded: asyncio.Event = field(default_factory=asyncio.Event)
+    # While a worker reads a description: (its generation, the parsed description), once
+    # its links are wired; the meshes it has sent so far (device -> info), and by
+    # (generation, link, visual index), so that the load's end does not send them again.
+    reading: Optional[tuple[int, Any]] = None
+    streamed: dict[str, _VisualInfo] = field(default_factory=dict)
+    sent: dict[tuple[int, str, int], _VisualInfo] = field(default_factory=dict)
     # set_robot_joints: one JointState publisher per robot (its latest topic), so the op
     # creates at most one ROS entity per robot whatever clients send.
     joint_publisher: Any = None
@@ -209,6 +217,8 @@ class RobotServing:
                        request.tf_prefix, description_key, description_device, guard,
                        mesh_roots=guard.readable_roots())
         self.robots[robot.name] = robot
+        if "bridge.robots.model" not in sys.modules:  # the first robot: while its URDF comes
+            asyncio.get_running_loop().run_in_executor(None, _import_mesh_libraries)
         try:
             text = await self._first_description(robot)
             if text is not None:
@@ -269,19 +279,27 @@ class RobotServing:
     async def _load(self, robot: _Robot, text: str, generation: int, *,
                     initial: bool) -> None:
         """Load in a worker thread, then apply on the loop unless a newer description came.
-        A failure raises at creation (the error reply) and is reported otherwise."""
-        from bridge.robots.model import load_robot, load_robot_file
+        A failure raises at creation (the error reply) and is reported otherwise.
 
+        The worker tells the loop the parsed description first (the link poses start
+        streaming) and then each visual as it is made (its mesh goes out while the rest
+        are read): a client has the robot as soon as its last mesh is read, not after all
+        of them are and then sent (issue 44)."""
         source = robot.source
         loop = asyncio.get_running_loop()
+        post = self._hub.call_soon
+        listeners = {
+            "on_description": lambda description: post(self._described, robot, generation,
+                                                       description),
+            "on_visual": lambda visual: post(self._visual_read, robot, generation, visual)}
         if source.kind == "file":
             path = self._file_path(source.path)
-            call = functools.partial(load_robot_file, path, package_paths=self._package_paths,
-                                     allowed_roots=robot.mesh_roots)
+            call = functools.partial(_read_robot_file, path, package_paths=self._package_paths,
+                                     allowed_roots=robot.mesh_roots, **listeners)
             field_name = "source.path"
         else:
-            call = functools.partial(load_robot, text, package_paths=self._package_paths,
-                                     allowed_roots=robot.mesh_roots)
+            call = functools.partial(_read_robot, text, package_paths=self._package_paths,
+                                     allowed_roots=robot.mesh_roots, **listeners)
             field_name = "source.parameter" if source.kind == "parameter" else "source.topic"
         try:
             model = await loop.run_in_executor(None, call)
@@ -311,6 +329,32 @@ class RobotServing:
             return
         self._apply(robot, model, text)
 
+    def _current(self, robot: _Robot, generation: int,
+                 description: RobotDescription) -> bool:
+        """Is what a worker reads for `generation` still wanted, and may its frames go
+        out (the robot's fixed frame allowed)? Loop thread."""
+        if robot.removed or generation != robot.generation:
+            return False
+        return robot.guard.frame_refusal(_fixed_frame(robot, description)) is None
+
+    def _described(self, robot: _Robot, generation: int,
+                   description: RobotDescription) -> None:
+        """A worker parsed the description: its links' poses start streaming (loop)."""
+        if self._current(robot, generation, description):
+            self._apply_links(robot, description)
+            robot.reading = (generation, description)
+
+    def _visual_read(self, robot: _Robot, generation: int, visual: VisualMesh) -> None:
+        """A worker made one visual: its mesh goes out now (loop)."""
+        if robot.reading is None or robot.reading[0] != generation or \
+                not self._current(robot, generation, robot.reading[1]):
+            return
+        if visual.link in robot.withheld or visual.link not in robot.links:
+            return
+        info = self._publish_visual(robot, visual)
+        robot.streamed[info.device] = info
+        robot.sent[(generation, visual.link, visual.index)] = info
+
     def file_path(self, spec: str) -> Path:
         """The file a file source names (the security policy checks where it lies)."""
         return self._file_path(spec)
@@ -332,46 +376,30 @@ class RobotServing:
         self._status(robot, StatusCode.CONFIG_ERROR, f"description not loaded: {reason}")
 
     def _apply(self, robot: _Robot, model: RobotModel, text: str) -> None:
-        """Publish the meshes and (re)wire the link lookups of a freshly loaded model."""
+        """Publish the meshes and (re)wire the link lookups of a freshly loaded model (what
+        the worker's listeners did not send yet: all of it where there were none)."""
         for listener in self.loaded_listeners:
             listener(robot.name)
-        prefix = robot.tf_prefix
-        fixed = _fixed_frame(robot, model)
-        if fixed != robot.fixed_frame:  # every lookup starts from the fixed frame: redo all
-            self._forget_links(robot, set(robot.links))
-        refusals = {name: robot.guard.frame_refusal(prefix + name) for name in model.links}
-        robot.withheld = {name: why for name, why in refusals.items() if why is not None}
-        wanted = set(model.links) - set(robot.withheld)
-        self._forget_links(robot, set(robot.links) - wanted)
-        robot.fixed_frame = fixed
-        for name in model.links:
-            if name in robot.withheld:
-                continue
-            link = robot.links.get(name)
-            if link is None:
-                frame = prefix + name
-                key = NameKey.robot_link(robot.name, name)
-                device = self._names.register(key)
-                metadata = metadata_for(key, frame=fixed, units=UNITS_MM)
-                metadata[KEY_PARENT] = fixed
-                metadata[KEY_CHILD] = frame
-                handle = self._tf.stream_lookup(fixed, frame, device=device,
-                                                metadata=metadata)
-                robot.links[name] = _Link(name, frame, key, device, handle)
-            robot.links[name].visuals = []
+        if robot.reading is None or robot.reading[1] is not model.description:
+            self._apply_links(robot, model.description)
+        for link in robot.links.values():
+            link.visuals = []
         # Meshes: publish_persistent replaces a device's mesh; stale devices are forgotten.
         fresh: dict[str, _VisualInfo] = {}
         for visual in model.visuals:
             if visual.link in robot.withheld:
                 continue
-            info = self._publish_visual(robot, visual)
+            info = robot.sent.get((robot.generation, visual.link, visual.index)) or \
+                self._publish_visual(robot, visual)
             fresh[info.device] = info
             robot.links[visual.link].visuals.append(info.device)
-        for device, info in robot.visuals.items():
+        for device, info in {**robot.streamed, **robot.visuals}.items():
             if device not in fresh:
                 self._hub.forget(device)
                 self._names.release(info.key)
         robot.visuals = fresh
+        robot.streamed, robot.sent, robot.reading = {}, {}, None
+        fixed = robot.fixed_frame
         robot.model = model
         robot.urdf_digest = _digest(text)
         robot.warnings = model.warnings
@@ -394,6 +422,31 @@ class RobotServing:
                       KEY_WARNINGS: json.dumps(list(model.warnings))})
         # The loader logged each warning as it met it: the log counts them, once.
         log.info("robot %s %s%s", robot.name, summary, warned + " (above)" if warned else "")
+
+    def _apply_links(self, robot: _Robot, description: RobotDescription) -> None:
+        """(Re)wire the link lookups of a description: its links' TRANSFORMs stream from
+        tf, those the frame policy refuses are withheld, links gone are forgotten."""
+        prefix = robot.tf_prefix
+        fixed = _fixed_frame(robot, description)
+        if fixed != robot.fixed_frame:  # every lookup starts from the fixed frame: redo all
+            self._forget_links(robot, set(robot.links))
+        names = list(description.links)
+        refusals = {name: robot.guard.frame_refusal(prefix + name) for name in names}
+        robot.withheld = {name: why for name, why in refusals.items() if why is not None}
+        wanted = set(names) - set(robot.withheld)
+        self._forget_links(robot, set(robot.links) - wanted)
+        robot.fixed_frame = fixed
+        for name in names:
+            if name in robot.withheld or name in robot.links:
+                continue
+            frame = prefix + name
+            key = NameKey.robot_link(robot.name, name)
+            device = self._names.register(key)
+            metadata = metadata_for(key, frame=fixed, units=UNITS_MM)
+            metadata[KEY_PARENT] = fixed
+            metadata[KEY_CHILD] = frame
+            handle = self._tf.stream_lookup(fixed, frame, device=device, metadata=metadata)
+            robot.links[name] = _Link(name, frame, key, device, handle)
 
     def _publish_visual(self, robot: _Robot, visual: VisualMesh) -> _VisualInfo:
         key = NameKey.robot_visual(robot.name, visual.link, visual.index)
@@ -453,10 +506,10 @@ class RobotServing:
             for listener in self.removed_listeners:
                 listener(robot.name)
         self._forget_links(robot, set(robot.links))
-        for device, info in robot.visuals.items():
+        for device, info in {**robot.streamed, **robot.visuals}.items():
             self._hub.forget(device)
             self._names.release(info.key)
-        robot.visuals = {}
+        robot.visuals, robot.streamed, robot.sent, robot.reading = {}, {}, {}, None
         self._hub.forget(robot.description_device)
         self._names.release(robot.description_key)
 
@@ -795,9 +848,33 @@ def _source_base(source: RobotSource) -> Optional[str]:
     return None
 
 
-def _fixed_frame(robot: _Robot, model: RobotModel) -> str:
+def _fixed_frame(robot: _Robot, model: RobotModel | RobotDescription) -> str:
     """The frame every link's pose is given in: the request's, else the prefixed root."""
     return (robot.request.fixed_frame or robot.tf_prefix + model.root_link).lstrip("/")
+
+
+def _import_mesh_libraries() -> None:
+    """trimesh and yourdfpy (most of a second), imported off the loop while the first
+    robot's description is fetched; `_read_robot` waits for them if they are not in yet."""
+    try:
+        import bridge.robots.model  # noqa: F401
+    except Exception:  # noqa: BLE001 - the load itself imports again and says why
+        log.debug("importing the mesh libraries failed", exc_info=True)
+
+
+def _read_robot(text: str, **options: Any) -> RobotModel:
+    """`load_robot` in a worker thread: the mesh libraries (trimesh, yourdfpy: most of a
+    second) are imported there, never on the loop, the first time."""
+    from bridge.robots.model import load_robot
+
+    return load_robot(text, **options)
+
+
+def _read_robot_file(path: Path, **options: Any) -> RobotModel:
+    """`load_robot_file` in a worker thread (see `_read_robot`)."""
+    from bridge.robots.model import load_robot_file
+
+    return load_robot_file(path, **options)
 
 
 def _digest(text: str) -> str:

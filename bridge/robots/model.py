@@ -25,7 +25,7 @@ import time
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Mapping, Optional
+from typing import Callable, Mapping, Optional
 
 import numpy as np
 import numpy.typing as npt
@@ -59,6 +59,12 @@ U32 = npt.NDArray[np.uint32]
 Rgba = tuple[float, float, float, float]
 
 DEFAULT_RGBA: Rgba = (0.7, 0.7, 0.7, 1.0)
+
+# Told the parsed description before any mesh is read, then each visual as it is made (on
+# the loading thread): whoever serves the robot starts its link poses and sends each mesh
+# while the rest are read (`bridge.robots.capability`).
+DescriptionListener = Callable[[RobotDescription], None]
+VisualListener = Callable[["VisualMesh"], None]
 
 
 @dataclass(frozen=True)
@@ -203,7 +209,11 @@ def _visual_mesh(spec: VisualSpec, mesh: MeshData, source: str,
 
 
 def _load(description: RobotDescription, resolver: PackageResolver, cache: MeshCache,
-          options: LoadOptions, logger: logging.Logger) -> RobotModel:
+          options: LoadOptions, logger: logging.Logger,
+          on_description: Optional[DescriptionListener] = None,
+          on_visual: Optional[VisualListener] = None) -> RobotModel:
+    if on_description is not None:
+        on_description(description)
     warnings = list(description.warnings)
     for w in description.warnings:
         logger.warning("robot %r: %s", description.name, w)
@@ -224,6 +234,8 @@ def _load(description: RobotDescription, resolver: PackageResolver, cache: MeshC
                        f"{exc.expected}, got {exc.got}; the visual is left out")
         else:
             visuals.append(_visual_mesh(spec, mesh, source, options))
+            if on_visual is not None:
+                on_visual(visuals[-1])
             message = ""
         if message:
             warnings.append(message)
@@ -245,26 +257,32 @@ def load_robot(urdf: str | bytes, *, package_paths: Optional[Mapping[str, Path]]
                base_dir: Optional[Path] = None, options: LoadOptions = LoadOptions(),
                cache: Optional[MeshCache] = None,
                logger: Optional[logging.Logger] = None,
-               allowed_roots: Optional[tuple[Path, ...]] = None) -> RobotModel:
+               allowed_roots: Optional[tuple[Path, ...]] = None,
+               on_description: Optional[DescriptionListener] = None,
+               on_visual: Optional[VisualListener] = None) -> RobotModel:
     """Load a robot from URDF TEXT (for example a ``robot_description`` parameter).
 
     ``package_paths`` maps package names to folders for ``package://`` URIs (searched
     before ROS_PACKAGE_PATH and the ament index, see `bridge.robots.resources`);
     relative mesh paths are taken relative to ``base_dir`` (default: current directory).
     ``allowed_roots``: meshes only from inside these folders (a client's robot).
+    ``on_description``, ``on_visual``: told the parsed URDF, then each visual as it is made
+    (on this thread), before the whole model is returned.
     Raises `UrdfError` for a malformed URDF; mesh problems become ``warnings``.
     """
     description = parse_urdf(urdf)
     resolver = PackageResolver(dict(package_paths or {}), base_dir=base_dir,
                                allowed_roots=allowed_roots)
     return _load(description, resolver, cache if cache is not None else DEFAULT_MESH_CACHE,
-                 options, logger or _log)
+                 options, logger or _log, on_description, on_visual)
 
 
 def load_robot_file(path: str | Path, *, package_paths: Optional[Mapping[str, Path]] = None,
                     options: LoadOptions = LoadOptions(), cache: Optional[MeshCache] = None,
                     logger: Optional[logging.Logger] = None,
-                    allowed_roots: Optional[tuple[Path, ...]] = None) -> RobotModel:
+                    allowed_roots: Optional[tuple[Path, ...]] = None,
+                    on_description: Optional[DescriptionListener] = None,
+                    on_visual: Optional[VisualListener] = None) -> RobotModel:
     """Load a robot from a URDF FILE; relative mesh paths are relative to its folder."""
     p = Path(path)
     try:
@@ -275,7 +293,8 @@ def load_robot_file(path: str | Path, *, package_paths: Optional[Mapping[str, Pa
                         exc.strerror or type(exc).__name__) from None
     return load_robot(data, package_paths=package_paths, base_dir=p.resolve().parent,
                       options=options, cache=cache, logger=logger,
-                      allowed_roots=allowed_roots)
+                      allowed_roots=allowed_roots, on_description=on_description,
+                      on_visual=on_visual)
 
 
 # ---------------------------------------------------------------------------- POLYDATA

@@ -445,6 +445,69 @@ def test_cache_reuses_meshes_and_rereads_an_edited_file(tmp_path: Path) -> None:
     np.testing.assert_allclose(extent(third.visuals[0]), (3000, 6000, 9000))
 
 
+def test_a_cache_folder_gives_another_process_the_meshes_as_read(tmp_path: Path) -> None:
+    """A mesh kept in a cache's folder comes back equal, colours, counts and description
+    included, without the file being parsed; a damaged entry and an edited file are read
+    again from the file."""
+    import os
+
+    from bridge.robots.demo import demo_urdf_path
+
+    urdf, packages = demo_urdf_path(tmp_path / "demo")  # STL, OBJ, COLLADA, colours
+    folder = tmp_path / "kept"
+    first_cache = MeshCache(folder=folder)
+    first = load_robot_file(urdf, package_paths=packages, cache=first_cache)
+    files = sorted(folder.iterdir())
+    assert first_cache.folder_hits == 0 and len(files) == 4  # one per mesh file
+    later = MeshCache(folder=folder)  # as a daemon started again would have
+    second = load_robot_file(urdf, package_paths=packages, cache=later)
+    assert later.folder_hits == 4
+    for a, b in zip(first.visuals, second.visuals, strict=True):
+        np.testing.assert_array_equal(a.vertices, b.vertices)
+        np.testing.assert_array_equal(a.triangles, b.triangles)
+        assert (a.rgba, a.source, a.colour_source) == (b.rgba, b.source, b.colour_source)
+        assert (a.vertex_rgba is None) == (b.vertex_rgba is None)
+        if a.vertex_rgba is not None:
+            np.testing.assert_array_equal(a.vertex_rgba, b.vertex_rgba)
+        assert not b.vertices.flags.writeable
+    files[0].write_bytes(files[0].read_bytes()[:-5])  # damaged: read from the file
+    third = MeshCache(folder=folder)
+    load_robot_file(urdf, package_paths=packages, cache=third)
+    assert third.folder_hits == 3
+
+    mesh = write_stl(tmp_path / "m.stl")
+    text = robot(link("a", visual(f'<mesh filename="{mesh}"/>')))
+    load_robot(text, cache=MeshCache(folder=folder))
+    write_stl(mesh, TETRA * 3)
+    os.utime(mesh, ns=(time.time_ns(), time.time_ns() + 10_000_000))
+    edited = MeshCache(folder=folder)
+    np.testing.assert_allclose(extent(load_robot(text, cache=edited).visuals[0]),
+                               (3000, 6000, 9000))
+    assert edited.folder_hits == 0
+
+
+def test_a_cache_folder_keeps_the_most_recently_used_meshes(tmp_path: Path,
+                                                            monkeypatch) -> None:
+    import os
+
+    from bridge.robots import meshes
+
+    monkeypatch.setattr(meshes, "MESH_FOLDER_ENTRIES", 2)
+    monkeypatch.setattr(meshes, "_PRUNE_EVERY", 1)
+    folder = tmp_path / "kept"
+    files = [write_stl(tmp_path / f"m{i}.stl", TETRA * (i + 1)) for i in range(3)]
+    for number, path in enumerate(files):
+        MeshCache(folder=folder).mesh_file(path)
+        when = time.time() - 100 + number * 10  # used in this order, 10 s apart
+        os.utime(max(folder.iterdir(), key=lambda p: p.stat().st_mtime_ns), (when, when))
+    assert len(list(folder.iterdir())) == 2
+    last = MeshCache(folder=folder)
+    last.mesh_file(files[2])
+    last.mesh_file(files[1])
+    last.mesh_file(files[0])  # the oldest went: read from its file
+    assert last.folder_hits == 2
+
+
 def test_progress_is_logged_when_loading_is_slow(tmp_path: Path, caplog) -> None:
     caplog.set_level(logging.INFO, logger="bridge.robots")
     load_robot(robot(link("a", visual('<box size="1 1 1"/>'))),
