@@ -1,8 +1,9 @@
 """Test harness shared by the whole suite.
 
 - ROS isolation: this host is shared, so the session gets its own ROS_DOMAIN_ID, discovery
-  stays on localhost, and rcl logs go to a temporary folder. Set at import time, before any
-  test module imports rclpy, and inherited by every process a test starts.
+  stays on localhost, rcl logs go to a temporary folder, and so does $XDG_CACHE_HOME. Set
+  at import time, before any test module imports rclpy, and inherited by every process a
+  test starts.
 - `free_port`: a TCP port nobody listens on.
 - `processes`: starts a child (the daemon, an rclpy peer) and guarantees it is stopped.
 - `module_processes`: the same, shared by the tests of one module.
@@ -21,9 +22,11 @@
 
 from __future__ import annotations
 
+import atexit
 import fcntl
 import os
 import random
+import shutil
 import signal
 import tempfile
 import time
@@ -75,6 +78,13 @@ release_left_port_locks()  # an earlier session's killed process must not hang t
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_STATIC_PEERS", None)
 os.environ["ROS_LOG_DIR"] = tempfile.mkdtemp(prefix="slicer-ros2-bridge-roslog-")
+# The robot code keeps the demo package and the meshes it read in $XDG_CACHE_HOME between
+# runs: the session keeps its own, so no test meets another run's entries and nothing is
+# written in the home folder (pip's cache stays where it was).
+os.environ.setdefault("PIP_CACHE_DIR", os.path.join(
+    os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "pip"))
+os.environ["XDG_CACHE_HOME"] = tempfile.mkdtemp(prefix="slicer-ros2-bridge-cache-")
+atexit.register(shutil.rmtree, os.environ["XDG_CACHE_HOME"], True)
 os.environ["RCUTILS_LOGGING_BUFFERED_STREAM"] = "0"
 os.environ["PYTHONUNBUFFERED"] = "1"
 

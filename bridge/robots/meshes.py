@@ -29,6 +29,7 @@ import numpy.typing as npt
 import trimesh
 import trimesh.units
 
+from bridge.robots.cache_folder import user_cache_dir
 from bridge.robots.errors import MeshError
 
 __all__ = [
@@ -580,9 +581,7 @@ _written = 0
 
 
 def default_mesh_folder() -> Path:
-    """``$XDG_CACHE_HOME/slicer-ros2-bridge/meshes`` (default ``~/.cache/...``)."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "slicer-ros2-bridge" / "meshes"
+    return user_cache_dir() / "meshes"
 
 
 def _read_kept(kept: Path) -> Optional[MeshData]:
@@ -609,6 +608,8 @@ def _read_kept(kept: Path) -> Optional[MeshData]:
             at += n * 4
         if at != len(data):
             raise ValueError(f"{len(data) - at} bytes more than its header says")
+        if m and int(triangles.max()) >= n:
+            raise ValueError(f"a triangle names vertex {int(triangles.max())} of {n}")
         rgba = head["rgba"]
         mesh = MeshData(_frozen(vertices), _frozen(triangles),
                         None if rgba is None else (float(rgba[0]), float(rgba[1]),

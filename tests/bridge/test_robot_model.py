@@ -3,6 +3,7 @@ resource resolution, broken meshes, malformed URDFs and the mesh cache."""
 
 from __future__ import annotations
 
+import json
 import logging
 import struct
 import time
@@ -474,6 +475,16 @@ def test_a_cache_folder_gives_another_process_the_meshes_as_read(tmp_path: Path)
     third = MeshCache(folder=folder)
     load_robot_file(urdf, package_paths=packages, cache=third)
     assert third.folder_hits == 3
+    # An entry whose triangles name a vertex it does not have is read from the file too.
+    head, body = files[1].read_bytes().split(b"\n", 1)
+    counts = json.loads(head)
+    at = counts["vertices"] * 24  # the first triangle's first index, after the vertices
+    bad = body[:at] + np.uint32(counts["vertices"]).tobytes() + body[at + 4:]
+    files[1].write_bytes(head + b"\n" + bad)
+    fourth = MeshCache(folder=folder)
+    again = load_robot_file(urdf, package_paths=packages, cache=fourth)
+    assert fourth.folder_hits == 3
+    assert all(int(v.triangles.max()) < len(v.vertices) for v in again.visuals)
 
     mesh = write_stl(tmp_path / "m.stl")
     text = robot(link("a", visual(f'<mesh filename="{mesh}"/>')))

@@ -23,10 +23,11 @@ import tempfile
 from pathlib import Path
 from typing import Optional
 
+from bridge.robots.cache_folder import user_cache_dir
 from bridge.robots.demo import meshgen
 from bridge.robots.demo.urdf import DEMO_PACKAGE, DEMO_URDF
 
-__all__ = ["DEMO_PACKAGE", "DEMO_URDF", "demo_urdf_path", "default_cache_dir"]
+__all__ = ["DEMO_PACKAGE", "DEMO_URDF", "demo_urdf_path"]
 
 _URDF_NAME = "demo_arm.urdf"
 _PACKAGE_XML = f"""<?xml version="1.0"?>
@@ -46,12 +47,6 @@ def _content_hash() -> str:
     return digest.hexdigest()[:12]
 
 
-def default_cache_dir() -> Path:
-    """``$XDG_CACHE_HOME/slicer-ros2-bridge`` (default ``~/.cache/slicer-ros2-bridge``)."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "slicer-ros2-bridge"
-
-
 def _write_package(root: Path) -> None:
     package = root / DEMO_PACKAGE
     (package / "urdf").mkdir(parents=True)
@@ -63,10 +58,10 @@ def _write_package(root: Path) -> None:
 def demo_urdf_path(cache_dir: Optional[Path] = None) -> tuple[Path, dict[str, Path]]:
     """(path of the demo URDF, package_paths for it); generates the files on first use.
 
-    ``cache_dir``: where to keep them (default `default_cache_dir()`); a folder
+    ``cache_dir``: where to keep them (default `user_cache_dir()`); a folder
     ``demo-<hash>`` is made inside it.
     """
-    base = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    base = Path(cache_dir) if cache_dir is not None else user_cache_dir()
     target = base / f"demo-{_content_hash()}"
     package = target / DEMO_PACKAGE
     urdf = package / "urdf" / _URDF_NAME
