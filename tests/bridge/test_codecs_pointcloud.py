@@ -146,6 +146,29 @@ def test_float64_fields_odd_offsets_row_padding_and_intensity() -> None:
     assert [f.name for f in back.fields] == ["x", "y", "z", "rgb", "intensity"]
 
 
+def test_float32_cloud_gives_the_bytes_of_the_same_numbers_as_float64() -> None:
+    # float32 x, y, z take their own path (float32 mm straight): the same POLYDATA, NaN
+    # rows, rows beyond float32 in mm, colours and scalars dropped alike.
+    xyz = RNG.normal(size=(300, 3)).astype(np.float32) * np.float32(10.0) ** RNG.integers(
+        -40, 39, size=(300, 3)).astype(np.float32)
+    xyz[::7, 1] = np.nan
+    top = np.float32(np.finfo(np.float32).max / 1000.0)  # the last length finite in mm
+    xyz[5] = (0.1, 0.2, top)
+    xyz[6] = (np.nextafter(top, np.float32(np.inf)), 0.0, 0.0)
+    rgb = _packed(*(RNG.integers(0, 256, size=(3, 300))))
+    intensity = RNG.random(300).astype(np.float32)
+    codec = codec_for("PointCloud2")
+    single = codec.encode(_cloud(xyz, rgb=rgb, intensity=intensity, height=2, row_pad=3))
+    double = codec.encode(_cloud(xyz.astype(np.float64), rgb=rgb, intensity=intensity,
+                                 height=2, row_pad=3, xyz_type="f8", point_step=48,
+                                 offsets=(0, 8, 16, 24)))
+    assert single.body.pack() == double.body.pack()
+    assert single.metadata == double.metadata
+    assert single.metadata["ros2.dropped"] == str(300 - single.body.points.shape[0])
+    assert np.finfo(np.float32).max in single.body.points[:, 2]  # row 5 kept, row 6 not
+    assert not np.isin(single.body.points[:, 0], [np.inf, -np.inf]).any()
+
+
 def test_big_endian_cloud_and_rgba_field() -> None:
     xyz = np.array([[0.001, 0.002, 0.003]], dtype=np.float32)
     msg = _cloud(xyz, rgb=_packed(np.array([1]), np.array([2]), np.array([3]), np.array([128])),
