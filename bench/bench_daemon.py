@@ -213,9 +213,11 @@ class Relay:
                                                                     "naive_relay.py"),
                                                str(self.port), topics.get("pose", POSE_TOPIC),
                                                topics.get("image", IMAGE_TOPIC),
-                                               str(POSE_DEPTH)])
+                                               str(POSE_DEPTH),
+                                               *([topics["cloud"]] if "cloud" in topics
+                                                 else [])])
             threading.Thread(target=self._drain_output, daemon=True).start()
-            self.devices = {"pose": "pose", "image": "camera"}
+            self.devices = {"pose": "pose", "image": "camera", "cloud": "cloud"}
 
     def _drain_output(self) -> None:
         assert self.child.popen.stdout is not None
