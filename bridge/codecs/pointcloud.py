@@ -31,7 +31,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from bridge.codecs.base import KEY_SHAPE, Body, TypeCodec
+from bridge.codecs.base import KEY_SHAPE, Body, Encoded, TypeCodec
+from bridge.codecs.cdr import CdrError, read_point_cloud2
 from bridge.codecs.errors import CodecError
 from bridge.codecs.generic import numeric_array
 from protocol.conversions import (fit_float32_mm, float32_metres_to_mm, metres_to_mm,
@@ -189,7 +190,7 @@ def cloud2_polydata(msg: Any) -> tuple[PolyData, int]:
     without float64 where x, y and z are float32 (the same POLYDATA)."""
     table, colour, scalar_names = _cloud2_table(msg)
     n = table.size
-    fields = table.dtype.fields or {}
+    fields: Any = table.dtype.fields or {}
     if n == 0 or any(fields[c][0].kind != "f" or fields[c][0].itemsize != 4 for c in "xyz"):
         cloud = cloud2_arrays(msg)
         return arrays_to_polydata(cloud), cloud.dropped
@@ -406,6 +407,15 @@ class PointCloud2Codec(TypeCodec):
     "rgba": [[r, g, b, a] 0..255...]}`` (rgba only if coloured)."""
 
     bulk: ClassVar[bool] = True
+
+    def encode_serialized(self, data: bytes) -> Encoded | None:
+        """The points are read where they lie in the serialized message (rclpy's
+        deserialization would copy the 5 MB of a VGA cloud, and build the message)."""
+        try:
+            raw = read_point_cloud2(data)
+        except CdrError:
+            return None
+        return self._encode_checked(raw)
 
     def _to_igtl(self, msg: Any) -> tuple[Body, dict[str, str]]:
         body, dropped = cloud2_polydata(msg)

@@ -688,9 +688,9 @@ class ClientSession(asyncio.Protocol):
                 return False
             if not isinstance(data, bytes) and _size(data) > LARGE_KERNEL_UNSENT_BYTES:
                 # More than the kernel takes at once (a VGA point cloud: 9 MB): written here,
-                # its rest would be copied twice (the stash, then asyncio's buffer), 12 ms of
-                # the loop's time a cloud; the loop writes it from its own parts instead,
-                # a chunk at a time (`_write_large`).
+                # its rest would be copied three times (the stash, a bytes, asyncio's
+                # buffer), 12 ms of the loop's time a cloud; the loop writes it from its own
+                # parts instead, a chunk at a time (`_write_large`).
                 slot.open = False
                 return False
             slot.header_version = self.header_version
