@@ -64,6 +64,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Optional
@@ -185,6 +186,7 @@ class Relay:
                  daemon_profile: Optional[Path] = None, daemon_args: tuple[str, ...] = ()) -> None:
         self.kind = kind
         self.port = free_port()
+        self.tail: deque[str] = deque(maxlen=50)  # its last lines of output
         if kind == "bridge":
             env = (None if daemon_profile is None
                    else {"FASTRTPS_DEFAULT_PROFILES_FILE": str(daemon_profile)})
@@ -221,8 +223,8 @@ class Relay:
 
     def _drain_output(self) -> None:
         assert self.child.popen.stdout is not None
-        for _ in self.child.popen.stdout:
-            pass
+        for line in self.child.popen.stdout:
+            self.tail.append(line)
 
     def stop(self) -> None:
         self.child.popen.terminate()
