@@ -64,6 +64,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Optional
@@ -185,6 +186,7 @@ class Relay:
                  daemon_profile: Optional[Path] = None, daemon_args: tuple[str, ...] = ()) -> None:
         self.kind = kind
         self.port = free_port()
+        self.tail: deque[str] = deque(maxlen=50)  # its last lines of output
         if kind == "bridge":
             env = (None if daemon_profile is None
                    else {"FASTRTPS_DEFAULT_PROFILES_FILE": str(daemon_profile)})
@@ -213,14 +215,16 @@ class Relay:
                                                                     "naive_relay.py"),
                                                str(self.port), topics.get("pose", POSE_TOPIC),
                                                topics.get("image", IMAGE_TOPIC),
-                                               str(POSE_DEPTH)])
+                                               str(POSE_DEPTH),
+                                               *([topics["cloud"]] if "cloud" in topics
+                                                 else [])])
             threading.Thread(target=self._drain_output, daemon=True).start()
-            self.devices = {"pose": "pose", "image": "camera"}
+            self.devices = {"pose": "pose", "image": "camera", "cloud": "cloud"}
 
     def _drain_output(self) -> None:
         assert self.child.popen.stdout is not None
-        for _ in self.child.popen.stdout:
-            pass
+        for line in self.child.popen.stdout:
+            self.tail.append(line)
 
     def stop(self) -> None:
         self.child.popen.terminate()

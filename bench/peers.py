@@ -2,11 +2,11 @@
 by the daemon): a publisher that sleeps between messages, a plain rclpy subscriber (the
 ROS floor), and a raw OpenIGTLink reader with any number of connections.
 
-    peers.py publish KIND TOPIC      KIND: pose | image | tf
+    peers.py publish KIND TOPIC      KIND: pose | image | tf | cloud
     peers.py floor KIND TOPIC
     peers.py read PORT CLIENTS [--setup JSON]
     peers.py watch PORT PARENT CHILD [--hello-hz HZ]
-    peers.py facade PORT TOPIC
+    peers.py facade PORT TOPIC [--cloud]
 
 Every peer prints READY when it can start, then obeys lines on stdin:
 
@@ -22,7 +22,10 @@ Every peer prints READY when it can start, then obeys lines on stdin:
   then says what it read first (``resumed``);
 * facade: a `slicer_client` subscriber of TOPIC (PoseStamped) whose callback reads each
   message, as a script or the ROS2Bridge module would: a client that decodes everything in
-  Python. ``REPORT`` prints ``{"received": N}``;
+  Python. ``REPORT`` prints ``{"received": N}``. With ``--cloud``, a PointCloud2 subscriber
+  made through the CamelCase facade (``GetDefaultROS2Node().CreateAndAddSubscriberNode``)
+  with a ModifiedEvent observer that counts (``received``), and the node's
+  ``GetNumberOfMessages()`` as ``messages``;
 * watcher (the other client of bench/attacks.py): one raw connection that streams the tf
   lookup PARENT <- CHILD (stream ``tf``) and sends ``hello`` at HZ, each one's round trip
   recorded as stream ``hello`` (stamp: when it was sent); a hello still unanswered at
@@ -31,7 +34,8 @@ Every peer prints READY when it can start, then obeys lines on stdin:
 Latency is ``arrival - stamp`` in one host clock (``time.time_ns``). The reader takes the
 arrival time when `recv` returns the chunk that completes a message: for an image, its
 last byte. It parses only the 58-byte OpenIGTLink header (timestamp, body size), so its
-own cost is the same whichever relay it reads.
+own cost is the same whichever relay it reads. It records TRANSFORM, IMAGE and POLYDATA
+messages that carry a time stamp.
 
 The reader also asks the kernel when that chunk's last segment reached its socket
 (SO_TIMESTAMPNS): ``queued - stamp`` is the latency before the reader's own scheduling adds
@@ -61,11 +65,17 @@ _HEADER = struct.Struct(">H12s20sQQQ")
 # next heartbeat, ~0.1 s) does not overflow the history of any of them.
 POSE_DEPTH = 5000
 _NS = 1_000_000_000
+# Kinds of message a frame each (images, clouds): depth 10, as a camera driver's.
+_BULK = ("image", "cloud")
 # <asm-generic/socket.h> (x86_64 and aarch64 alike); the socket module does not name it.
 # The kernel then hands each recvmsg the time its last segment arrived (a timespec).
 _SO_TIMESTAMPNS = 35
 _TIMESPEC = struct.Struct("@qq")
 _ANCILLARY_SIZE = socket.CMSG_SPACE(_TIMESPEC.size)
+
+
+# The message types a reader records (the first 5 bytes of the header's type).
+_RECORDED = (b"TRANS", b"IMAGE", b"POLYD")
 
 
 def _stamp_ns(igtl_timestamp: int) -> int:
@@ -263,7 +273,7 @@ def read(port: int, clients: int, setup: list[dict[str, Any]], v2: bool) -> None
                     if end > len(buffer):
                         break
                     offset = end
-                    if stamp and type_raw[:5] in (b"TRANS", b"IMAGE"):
+                    if stamp and type_raw[:5] in _RECORDED:
                         name = name_raw.rstrip(b"\0").decode()
                         recorder.add(f"{index}:{name}", arrival, _stamp_ns(stamp), queued)
                         if recorder.resumed_at and arrival >= recorder.resumed_at:
@@ -451,13 +461,52 @@ def _message(kind: str) -> tuple[Any, Any, Callable[[Any, int], None]]:
                 t.transform.translation.x = tick[0] * 1e-5
 
         return TFMessage, message, tf_stamp
-    raise SystemExit(f"unknown kind {kind!r}: expected pose, image or tf")
+    if kind == "cloud":
+        from sensor_msgs.msg import PointCloud2
+
+        return PointCloud2, organised_cloud(), header_stamp
+    raise SystemExit(f"unknown kind {kind!r}: expected pose, image, tf or cloud")
+
+
+# An organised depth-camera cloud: VGA, and the share of its pixels with no return.
+CLOUD_WIDTH, CLOUD_HEIGHT = 640, 480
+CLOUD_NAN_SHARE = 0.1
+
+
+def organised_cloud() -> Any:
+    """A 640x480 organised PointCloud2 as a depth camera's driver publishes it through PCL:
+    x, y, z and a packed ``rgb`` float32 (0x00RRGGBB in its bytes), point_step 16, not
+    dense: a tenth of the pixels (edges and scattered ones) have no return, x = y = z = NaN."""
+    import numpy as np
+    from sensor_msgs.msg import PointCloud2, PointField
+
+    h, w = CLOUD_HEIGHT, CLOUD_WIDTH
+    rng = np.random.default_rng(0)
+    v, u = np.mgrid[0:h, 0:w].astype(np.float32)
+    depth = 1.0 + 0.5 * rng.random((h, w), dtype=np.float32)  # m
+    table = np.zeros((h, w), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("rgb", "<u4")])
+    fx = fy = 525.0  # a VGA depth camera's focal length, pixels
+    table["x"] = (u - w / 2) * depth / fx
+    table["y"] = (v - h / 2) * depth / fy
+    table["z"] = depth
+    colour = rng.integers(0, 256, (h, w, 3), dtype=np.uint32)
+    table["rgb"] = (colour[..., 0] << 16) | (colour[..., 1] << 8) | colour[..., 2]
+    holes = rng.random((h, w)) < CLOUD_NAN_SHARE
+    for name in ("x", "y", "z"):
+        table[name][holes] = np.nan
+    cloud = PointCloud2(height=h, width=w, is_bigendian=False, point_step=16,
+                        row_step=16 * w, is_dense=False)
+    cloud.header.frame_id = "camera_depth_optical_frame"
+    cloud.fields = [PointField(name=name, offset=4 * i, datatype=PointField.FLOAT32, count=1)
+                    for i, name in enumerate(("x", "y", "z", "rgb"))]
+    cloud.data.frombytes(table.tobytes())
+    return cloud
 
 
 def publish(kind: str, topic: str) -> None:
     node = _ros_setup()
     cls, message, set_stamp = _message(kind)
-    depth = 10 if kind == "image" else POSE_DEPTH
+    depth = 10 if kind in _BULK else POSE_DEPTH
     publisher = node.create_publisher(cls, topic, depth)
     print("READY", flush=True)
     for line in sys.stdin:
@@ -503,7 +552,7 @@ def floor(kind: str, topic: str) -> None:
         with recorder.lock:
             recorder.add(kind, arrival, stamp.sec * _NS + stamp.nanosec)
 
-    node.create_subscription(cls, topic, on_message, 10 if kind == "image" else POSE_DEPTH)
+    node.create_subscription(cls, topic, on_message, 10 if kind in _BULK else POSE_DEPTH)
     # QUIT ends the spin through the context: the participant is then destroyed, and Fast
     # DDS removes its shared-memory segment (an exit that skips it leaves 0.5 MB in /dev/shm).
     threading.Thread(target=_serve_commands, args=(recorder, rclpy.shutdown),
@@ -517,24 +566,37 @@ def floor(kind: str, topic: str) -> None:
     rclpy.try_shutdown()
 
 
-def facade(port: int, topic: str) -> None:
+def facade(port: int, topic: str, cloud: bool = False) -> None:
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     import slicer_client
 
     received = [0]
     ros = slicer_client.connect("127.0.0.1", port)
-    pose = ros.subscribe(topic, "PoseStamped")
+    node: Any = None
+    if cloud:  # as a script in Slicer would: the reference's CamelCase API
+        node = ros.GetDefaultROS2Node().CreateAndAddSubscriberNode(
+            "sensor_msgs/msg/PointCloud2", topic)
 
-    def on_pose(message: Any) -> None:  # reads the message, as a user's observer does
-        received[0] += 1
-        del message
+        def on_modified(caller: Any, event: str) -> None:
+            received[0] += 1
 
-    pose.add_callback(on_pose)
+        node.AddObserver("ModifiedEvent", on_modified)
+    else:
+        pose = ros.subscribe(topic, "PoseStamped")
+
+        def on_pose(message: Any) -> None:  # reads the message, as a user's observer does
+            received[0] += 1
+            del message
+
+        pose.add_callback(on_pose)
     print("READY", flush=True)
     for line in sys.stdin:
         word = line.strip()
         if word == "REPORT":
-            print(json.dumps({"received": received[0]}), flush=True)
+            figures = {"received": received[0]}
+            if node is not None:
+                figures["messages"] = node.GetNumberOfMessages()
+            print(json.dumps(figures), flush=True)
         elif word == "QUIT":
             break
     ros.close()
@@ -546,7 +608,7 @@ def main() -> None:
     sub = parser.add_subparsers(dest="role", required=True)
     for role in ("publish", "floor"):
         p = sub.add_parser(role)
-        p.add_argument("kind", choices=("pose", "image", "tf"))
+        p.add_argument("kind", choices=("pose", "image", "tf", "cloud"))
         p.add_argument("topic")
     p = sub.add_parser("read")
     p.add_argument("port", type=int)
@@ -561,6 +623,8 @@ def main() -> None:
     p = sub.add_parser("facade")
     p.add_argument("port", type=int)
     p.add_argument("topic")
+    p.add_argument("--cloud", action="store_true",
+                   help="a PointCloud2 subscriber node through the CamelCase facade")
     args = parser.parse_args()
     if args.role == "publish":
         publish(args.kind, args.topic)
@@ -569,7 +633,7 @@ def main() -> None:
     elif args.role == "watch":
         watch(args.port, args.parent, args.child, args.hello_hz)
     elif args.role == "facade":
-        facade(args.port, args.topic)
+        facade(args.port, args.topic, args.cloud)
     else:
         read(args.port, args.clients, json.loads(args.setup), not args.v1)
 

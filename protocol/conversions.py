@@ -32,6 +32,7 @@ __all__ = [
     "MM_PER_M",
     "ConversionError",
     "fit_float32_mm",
+    "float32_metres_to_mm",
     "fits_float32",
     "igtl12_to_matrix",
     "igtl_timestamp_from_ros",
@@ -105,6 +106,20 @@ def fit_float32_mm(lengths_m: ArrayLike) -> npt.NDArray[np.bool_]:
         mm = np.asarray(lengths_m, dtype=np.float64) * MM_PER_M
         return np.asarray(np.abs(mm) < FLOAT32_BOUND)
 
+
+
+def float32_metres_to_mm(x: ArrayLike, out: npt.NDArray[np.float32] | None = None
+                         ) -> npt.NDArray[np.float32]:
+    """float32 metres to float32 millimetres in one float32 multiply, for clouds of a
+    million points: the same numbers as ``metres_to_mm(x).astype(np.float32)`` (a float32
+    times 1000 is exact in float64, so both round once, to the nearest float32), and
+    infinite exactly where `fit_float32_mm` is False (NaN stays NaN). ``x`` holds float32
+    values (any byte order; a float64 array raises TypeError rather than being rounded
+    first); written into ``out`` if given."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        result: npt.NDArray[np.float32] = np.multiply(x, np.float32(MM_PER_M), out=out,
+                                                      dtype=np.float32, casting="safe")
+    return result
 
 
 def metres_to_mm(x: ArrayLike) -> FloatArray:

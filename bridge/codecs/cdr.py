@@ -19,9 +19,9 @@ import struct
 from dataclasses import dataclass
 from typing import Callable
 
-__all__ = ["CdrError", "RawImage", "RawPose", "RAW_POSE_READERS", "plain_little_endian",
-           "read_image", "read_pose", "read_pose_stamped", "read_tf_message",
-           "read_transform_stamped"]
+__all__ = ["CdrError", "RawImage", "RawPointCloud2", "RawPointField", "RawPose",
+           "RAW_POSE_READERS", "plain_little_endian", "read_image", "read_point_cloud2",
+           "read_pose", "read_pose_stamped", "read_tf_message", "read_transform_stamped"]
 
 _CDR_LE = b"\x00\x01"
 _STAMP = struct.Struct("<iiI")  # sec, nanosec, frame_id length (all at offset 4)
@@ -159,6 +159,31 @@ class RawImage:
 
 
 _HEIGHT_WIDTH = struct.Struct("<II")
+_U8_U32 = struct.Struct("<B3xI")  # a PointField's datatype, padding, count
+
+
+@dataclass(frozen=True)
+class RawPointField:
+    name: str
+    offset: int
+    datatype: int
+    count: int
+
+
+@dataclass(frozen=True)
+class RawPointCloud2:
+    """A sensor_msgs/PointCloud2 read from its bytes, with the message's field names (a
+    codec reads it as an rclpy PointCloud2); ``data`` is a view on the serialized bytes."""
+
+    header: _Header
+    height: int
+    width: int
+    fields: tuple[RawPointField, ...]
+    is_bigendian: int
+    point_step: int
+    row_step: int
+    data: memoryview
+    is_dense: int
 
 
 def read_image(data: bytes) -> RawImage:
@@ -184,3 +209,41 @@ def read_image(data: bytes) -> RawImage:
                         ((12, frame_end), (sizes, offset), (steps, start)))
     except (struct.error, UnicodeDecodeError, IndexError) as error:
         raise CdrError("a whole Image", str(error)) from None
+
+
+def read_point_cloud2(data: bytes) -> RawPointCloud2:
+    """sensor_msgs/PointCloud2: header, height, width, fields (uint32 count, then each
+    name, offset, datatype, count), is_bigendian, point_step, row_step, data (uint32
+    count, then the bytes), is_dense."""
+    _check(data)
+    try:
+        sec, nanosec = _SEC_NANOSEC.unpack_from(data, 4)
+        frame, offset = _string(data, 12)
+        offset += -offset & 3
+        height, width = _HEIGHT_WIDTH.unpack_from(data, offset)
+        (nfields,) = _U32.unpack_from(data, offset + 8)
+        offset += 12
+        if nfields > len(data) // 13:  # each takes 13 bytes or more
+            raise CdrError("a field count within the message", str(nfields))
+        fields = []
+        for _ in range(nfields):
+            name, offset = _string(data, offset)
+            offset += -offset & 3
+            (field_offset,) = _U32.unpack_from(data, offset)
+            datatype, count = _U8_U32.unpack_from(data, offset + 4)
+            fields.append(RawPointField(name, field_offset, datatype, count))
+            offset += 12
+        is_bigendian = data[offset]
+        offset += 1
+        offset += -offset & 3
+        point_step, row_step = _HEIGHT_WIDTH.unpack_from(data, offset)
+        (size,) = _U32.unpack_from(data, offset + 8)
+        start = offset + 12
+        if start + size >= len(data):  # is_dense follows the data
+            raise CdrError("the cloud's data within the message",
+                           f"{size} bytes at offset {start} of {len(data)}")
+        return RawPointCloud2(_Header(_Time(sec, nanosec), frame), height, width,
+                              tuple(fields), is_bigendian, point_step, row_step,
+                              memoryview(data)[start:start + size], data[start + size])
+    except (struct.error, UnicodeDecodeError, IndexError) as error:
+        raise CdrError("a whole PointCloud2", str(error)) from None

@@ -686,6 +686,13 @@ class ClientSession(asyncio.Protocol):
                     or transport.get_write_buffer_size()):
                 slot.open = False
                 return False
+            if not isinstance(data, bytes) and _size(data) > LARGE_KERNEL_UNSENT_BYTES:
+                # More than the kernel takes at once (a VGA point cloud: 9 MB): written here,
+                # its rest would be copied three times (the stash, a bytes, asyncio's
+                # buffer), 12 ms of the loop's time a cloud; the loop writes it from its own
+                # parts instead, a chunk at a time (`_write_large`).
+                slot.open = False
+                return False
             slot.header_version = self.header_version
             if isinstance(data, bytes):
                 result = slot.send(data)
@@ -777,6 +784,11 @@ class ClientSession(asyncio.Protocol):
                 "coalesced": self._outbox.coalesced, "waiting": self._outbox.frames_waiting,
                 "waiting_bytes": self._outbox.pending_bytes,
                 "receiving_bytes": self._decoder.buffered, "decoding": self._decoding}
+
+
+def _size(parts: tuple[Buffer, ...]) -> int:
+    """The bytes of a frame's parts (a memoryview's len counts items, not bytes)."""
+    return sum(p.nbytes if isinstance(p, memoryview) else len(p) for p in parts)
 
 
 def _status_of(error: MessageError) -> int:

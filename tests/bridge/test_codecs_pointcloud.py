@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 from geometry_msgs.msg import Point32
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import ChannelFloat32, PointCloud, PointCloud2, PointField
 
 from bridge.codecs import CodecError, codec_for
@@ -144,6 +145,55 @@ def test_float64_fields_odd_offsets_row_padding_and_intensity() -> None:
     np.testing.assert_allclose(attrs["RGBA"].data[0], [1.0, 128 / 255, 0.0, 1.0])
     back = codec_for("PointCloud2").from_igtl(_wire(body))
     assert [f.name for f in back.fields] == ["x", "y", "z", "rgb", "intensity"]
+
+
+def test_float32_cloud_gives_the_bytes_of_the_same_numbers_as_float64() -> None:
+    # float32 x, y, z take their own path (float32 mm straight): the same POLYDATA, NaN
+    # rows, rows beyond float32 in mm, colours and scalars dropped alike.
+    xyz = RNG.normal(size=(300, 3)).astype(np.float32) * np.float32(10.0) ** RNG.integers(
+        -40, 39, size=(300, 3)).astype(np.float32)
+    xyz[::7, 1] = np.nan
+    top = np.float32(np.finfo(np.float32).max / 1000.0)  # the last length finite in mm
+    xyz[5] = (0.1, 0.2, top)
+    xyz[6] = (np.nextafter(top, np.float32(np.inf)), 0.0, 0.0)
+    rgb = _packed(*(RNG.integers(0, 256, size=(3, 300))))
+    intensity = RNG.random(300).astype(np.float32)
+    codec = codec_for("PointCloud2")
+    single = codec.encode(_cloud(xyz, rgb=rgb, intensity=intensity, height=2, row_pad=3))
+    double = codec.encode(_cloud(xyz.astype(np.float64), rgb=rgb, intensity=intensity,
+                                 height=2, row_pad=3, xyz_type="f8", point_step=48,
+                                 offsets=(0, 8, 16, 24)))
+    assert single.body.pack() == double.body.pack()
+    assert single.metadata == double.metadata
+    assert single.metadata["ros2.dropped"] == str(300 - single.body.points.shape[0])
+    assert np.finfo(np.float32).max in single.body.points[:, 2]  # row 5 kept, row 6 not
+    assert not np.isin(single.body.points[:, 0], [np.inf, -np.inf]).any()
+
+
+@pytest.mark.parametrize("frame_id", ["", "c", "camera_depth_optical_frame"])
+def test_a_cloud_read_from_its_bytes_gives_what_the_message_gives(frame_id: str) -> None:
+    # The daemon reads a subscribed cloud from its serialized bytes (no rclpy message):
+    # the same body, metadata and stamp, whatever the alignment the frame id leaves.
+    xyz = RNG.normal(size=(60, 3)).astype(np.float32)
+    xyz[::9, 0] = np.nan
+    rgb = _packed(*(RNG.integers(0, 256, size=(3, 60))))
+    clouds = [_cloud(xyz, rgb=rgb, intensity=RNG.random(60).astype(np.float32), height=3,
+                     row_pad=3),
+              _cloud(xyz, rgb=rgb, big_endian=True, colour_name="rgba", point_step=16,
+                     offsets=(0, 4, 8, 12)),
+              _cloud(xyz.astype(np.float64), xyz_type="f8", point_step=48,
+                     offsets=(8, 16, 24, 32)),
+              _cloud(np.zeros((0, 3), np.float32))]
+    codec = codec_for("PointCloud2")
+    for msg in clouds:
+        msg.header.frame_id = frame_id
+        msg.header.stamp.sec, msg.header.stamp.nanosec = 1_700_000_000, 123_456_789
+        read = codec.encode_serialized(serialize_message(msg))
+        made = codec.encode(msg)
+        assert read is not None
+        assert read.body.pack() == made.body.pack()
+        assert (read.metadata, read.stamp) == (made.metadata, made.stamp)
+    assert codec.encode_serialized(b"\x00\x00" + serialize_message(clouds[0])[2:]) is None
 
 
 def test_big_endian_cloud_and_rgba_field() -> None:

@@ -17,7 +17,7 @@ import numpy as np
 from bridge.core.hub import Hub, frame_for
 from bridge.core.outbox import BulkFrame, Frame
 from bridge.core.server import BridgeServer
-from bridge.core.session import SessionLimits
+from bridge.core.session import LARGE_KERNEL_UNSENT_BYTES, SessionLimits
 from protocol.framing import Decoder
 from protocol.messages import Image, Message
 from support import scaled
@@ -84,6 +84,38 @@ def test_a_reading_client_gets_every_image_whole_and_in_order() -> None:
                     size = 58 + int.from_bytes(got[42:50], "big")
         assert received_images(bytes(got)) == list(range(10))
         assert hub.direct == 10
+        writer.close()
+    run(scenario)
+
+
+def test_a_frame_larger_than_the_kernel_takes_at_once_goes_through_the_loop_whole() -> None:
+    """A VGA point cloud's POLYDATA is 9 MB: more than `LARGE_KERNEL_UNSENT_BYTES`. Written
+    from the ROS thread its rest would be copied into the slot's stash and again into
+    asyncio's buffer; the loop writes it instead, from its own parts."""
+    shape = (1, 1536, 2048, 3)  # 9.4 MB of pixels
+    assert np.prod(shape) > LARGE_KERNEL_UNSENT_BYTES
+
+    async def scenario(hub: Hub, server: BridgeServer) -> None:
+        reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
+        await until(lambda: len(hub.clients) == 1, "the client attached")
+        (session,) = server.sessions
+        channel = hub.open_channel("cloud")
+        decoder = Decoder(max_body_size=1 << 26)
+        firsts: list[int] = []
+        for n in range(3):  # one at a time, read before the next
+            big = Message(device_name="cloud", body=Image(pixels=np.full(shape, n, np.uint8)),
+                          timestamp=(1 << 32) + n)
+            poster = threading.Thread(target=hub.post_frame, args=(channel, frame_for(big)))
+            poster.start()
+            poster.join()
+            while len(firsts) < n + 1:
+                decoder.feed(await asyncio.wait_for(reader.read(1 << 20), scaled(10)))
+                for message in decoder.messages():
+                    pixels = message.body.pixels
+                    assert (pixels == pixels.flat[0]).all(), "a frame is whole"
+                    firsts.append(int(pixels.flat[0]))
+        assert firsts == [0, 1, 2]  # each whole, in order
+        assert int(session.slot.sent) == 0  # none written (or stashed) by the posting thread
         writer.close()
     run(scenario)
 

@@ -17,6 +17,7 @@ from protocol.conversions import (
     ConversionError,
     fit_float32_mm,
     fits_float32,
+    float32_metres_to_mm,
     igtl12_to_matrix,
     igtl_timestamp_from_ros,
     igtl_timestamp_from_seconds,
@@ -245,6 +246,47 @@ def test_fit_float32_mm_is_fits_float32_of_each_length_in_mm() -> None:
     want = [[fits_float32(v * MM_PER_M) for v in row] for row in lengths.tolist()]
     assert fit_float32_mm(lengths).tolist() == want == [[True] * 3, [True, True, False],
                                                         [False] * 3]
+
+
+def _float32_mm_edges() -> np.ndarray:
+    """float32 lengths (m) around the last one finite in mm, and the usual oddities."""
+    top = np.float32(np.finfo(np.float32).max / MM_PER_M)
+    around = [top]
+    for toward in (np.float32(np.inf), np.float32(0.0)):
+        x = top
+        for _ in range(3):
+            x = np.nextafter(x, toward)
+            around.append(x)
+    values = np.array(around + [0.0, -0.0, 1e-45, -1e-45, 1e-38, 0.001, 0.1, 1.5, 3.4e35,
+                                1e36, 3.4e38, math.nan, math.inf, -math.inf], dtype=np.float32)
+    return np.concatenate([values, -values])
+
+
+def test_float32_metres_to_mm_is_metres_to_mm_rounded_once_and_infinite_where_it_does_not_fit(
+        ) -> None:
+    x = _float32_mm_edges()
+    with np.errstate(over="ignore"):
+        want = metres_to_mm(x).astype(np.float32)
+    got = float32_metres_to_mm(x)
+    assert got.dtype == np.float32
+    assert got.tobytes() == want.tobytes()
+    assert np.isfinite(got).tolist() == fit_float32_mm(x).tolist()
+    # the last length finite in mm, the 3 float32 above it, the 3 below
+    assert np.isfinite(got[:7]).tolist() == [True, False, False, False, True, True, True]
+    out = np.zeros((x.size, 2), dtype=np.float32)
+    float32_metres_to_mm(x.astype(">f4"), out=out[:, 1])  # a column; big-endian input
+    assert out[:, 1].tobytes() == want.tobytes() and not out[:, 0].any()
+    with pytest.raises(TypeError):
+        float32_metres_to_mm(x.astype(np.float64))  # would be rounded to float32 first
+
+
+@given(st.floats(width=32))
+@settings(max_examples=300, deadline=None)
+def test_float32_metres_to_mm_matches_the_float64_path(x_m: float) -> None:
+    x = np.array([x_m], dtype=np.float32)
+    with np.errstate(over="ignore"):
+        want = metres_to_mm(x).astype(np.float32)
+    assert float32_metres_to_mm(x).tobytes() == want.tobytes()
 
 
 @pytest.mark.parametrize("x_m", [1e306, 1e36, -1e36, FLOAT32_BOUND / 1000 * 1.0000001])
