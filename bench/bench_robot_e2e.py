@@ -44,8 +44,6 @@ import argparse
 import json
 import os
 import random
-import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -56,6 +54,7 @@ from typing import Any, Optional
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "bench"))
 
 PACKAGE = "bench_robot"
 
@@ -115,37 +114,8 @@ def make_robot(folder: Path, links: int, seed: int = 7) -> Path:
 # ------------------------------------------------------------------------------ processes
 
 
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
-class Child:
-    def __init__(self, name: str, argv: list[str], log_dir: Path) -> None:
-        self.name = name
-        self.log = log_dir / f"{name}.log"
-        with self.log.open("wb") as out:
-            self.popen = subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT,
-                                          stdin=subprocess.DEVNULL, cwd=str(REPO),
-                                          start_new_session=True)
-
-    def wait_for(self, needle: str, timeout: float = 90.0) -> None:
-        deadline = time.monotonic() + timeout
-        while needle not in self.log.read_text(errors="replace"):
-            if self.popen.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"{self.name} did not print {needle!r}:\n"
-                                   f"{self.log.read_text(errors='replace')[-2000:]}")
-            time.sleep(0.05)
-
-    def stop(self) -> None:
-        if self.popen.poll() is None:
-            os.killpg(self.popen.pid, signal.SIGINT)
-            try:
-                self.popen.wait(10)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.popen.pid, signal.SIGKILL)
-                self.popen.wait()
+# One child-process harness for the robot benches (bench_robot_stream's).
+from bench_robot_stream import Child, free_port  # noqa: E402
 
 
 def run_json(argv: list[str], timeout: float = 300) -> dict[str, Any]:
@@ -282,12 +252,12 @@ def serve(robots: list[Robot], log_dir: Path, children: list[Child]) -> None:
             f"--package-path={robot.package}={robot.folder}", "--namespace", robot.namespace,
             "--frame-prefix", robot.tf_prefix], log_dir)
         children.append(publisher)
-        publisher.wait_for("ready")
+        publisher.wait_for("ready", 90.0)
         motion = Child(f"joint-motion-{tag}", [
             *py, "-m", "bridge.robots.demo.joint_motion", str(robot.urdf), "--rate", "50",
             "--namespace", robot.namespace, "--no-trajectory-action"], log_dir)
         children.append(motion)
-        motion.wait_for("joint motion ready")
+        motion.wait_for("joint motion ready", 90.0)
 
 
 def with_daemon(tag: str, robots: list[Robot], mesh_home: Path, plan: list[dict[str, Any]],
@@ -313,7 +283,7 @@ def with_daemon(tag: str, robots: list[Robot], mesh_home: Path, plan: list[dict[
         else:
             os.environ["XDG_CACHE_HOME"] = env_home
     try:
-        daemon.wait_for("listening on")
+        daemon.wait_for("listening on", 90.0)
         run_json([*py, __file__, "--graph", str(port),
                   json.dumps([robot.node for robot in robots])])
         return run_json([*py, __file__, "--client", str(port), json.dumps(plan)])  # type: ignore[return-value]

@@ -28,6 +28,13 @@ def _kernel_at_least(major: int, minor: int) -> bool:
     return found is not None and (int(found.group(1)), int(found.group(2))) >= (major, minor)
 
 
+# An ordinary thread's own scheduler slice (what the receive threads ask for).
+OWN_SLICES = pytest.mark.skipif(
+    not _kernel_at_least(6, 12),
+    reason=f"an ordinary thread's own slice needs Linux 6.12 or later, this is "
+           f"{platform.release()}")
+
+
 def _threads(pid: int) -> dict[str, tuple[int, int]]:
     """Each thread's name → (scheduling policy, real-time priority)."""
     found = {}
@@ -59,9 +66,7 @@ def test_the_receive_threads_run_under_sched_fifo_and_the_rest_as_before(
 
 
 @pytest.mark.ros
-@pytest.mark.skipif(not _kernel_at_least(6, 12),
-                    reason=f"an ordinary thread's own slice needs Linux 6.12 or later, this is "
-                           f"{platform.release()}")
+@OWN_SLICES
 def test_by_default_the_receive_threads_ask_for_a_short_slice_and_the_rest_keep_theirs(
         processes: Processes) -> None:
     running = start_daemon(processes)
@@ -81,9 +86,7 @@ def test_by_default_the_receive_threads_ask_for_a_short_slice_and_the_rest_keep_
 
 
 @pytest.mark.ros
-@pytest.mark.skipif(not _kernel_at_least(6, 12),
-                    reason=f"an ordinary thread's own slice needs Linux 6.12 or later, this is "
-                           f"{platform.release()}")
+@OWN_SLICES
 def test_without_the_workarounds_the_threads_keep_the_kernels_slice_and_the_log_says_so(
         processes: Processes) -> None:
     """`--without`, to weigh a host workaround (bridge/platform/README.md): left out, the
