@@ -23,6 +23,11 @@ time of each message's last byte; and the baselines:
   bare EventsExecutor subscriber of the same /tf writing the same bytes to 8 clients, with
   no tf work. The daemon's figure minus it is what its tf work costs.
 
+The user's path, in the pose phase: the same daemon with two clients as users make them,
+each its own process, both connected: a subscriber node made through the CamelCase facade
+(its ModifiedEvent observer reads ``GetLastMessage()``), and a Pythonic subscriber whose
+callback records publish() -> callback; the daemon's CPU, beside the floor's.
+
 Real traffic as well as steady streams: the burst rate published evenly and in bursts of
 10 back to back (a driver that batches), beside the floor and the naive relay; and the
 isolation phase: 32 raw clients with a facade client (slicer_client, decoding every
@@ -366,6 +371,10 @@ class Results:
     burst: dict[str, Figure] = field(default_factory=dict)
     bursty: dict[str, Figure] = field(default_factory=dict)  # bursts of BURST, same rate
     isolation: dict[str, Figure] = field(default_factory=dict)  # "facade", "stopped"
+    # The user's path (`user_path`): "steady" and "bursty" figures of the callback client;
+    # what the facade node saw.
+    user: dict[str, Figure] = field(default_factory=dict)
+    facade_seen: dict[str, int] = field(default_factory=dict)
     resumed: dict[str, float] = field(default_factory=dict)  # the stopped client's
     tf: Optional[Figure] = None
     tf_floor: float = float("nan")  # bench_fanout_floor.py's CPU share, 8 clients
@@ -414,6 +423,7 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
                 finally:
                     stop_all(readers)
                 if kind == "bridge":
+                    user_path(args, publisher, relay, results)
                     many_clients(args, publisher, relay, "bridge", results.clients)
                 results.rss[kind] = relay.child.rss_mib()
             finally:
@@ -426,6 +436,30 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
             relay.stop()
     finally:
         publisher.stop()
+
+
+def user_path(args: argparse.Namespace, publisher: Child, relay: Relay,
+              results: Results) -> None:
+    """The stream as users take it: a subscriber node made through the CamelCase facade
+    (an observer reading each message it is told of) and a Pythonic subscriber's callback,
+    each client its own process, both connected; the daemon's CPU, and publish -> callback
+    at the second."""
+    facade = peer("facade client", "facade", str(relay.port), POSE_TOPIC)
+    caller = peer("callback client", "callback", str(relay.port), POSE_TOPIC)
+    try:
+        reports, cpu, avg = run_phase(publisher, [caller], args.rate, args.seconds,
+                                      relay.child, 1)
+        results.user["steady"] = figure_from(reports, int(args.rate * args.seconds),
+                                             args.rate, cpu, avg)
+        print_progress("bridge, user's path", results.user["steady"])
+        results.user["bursty"] = bursty_run(args, publisher, [caller], relay.child)
+        print_progress(f"bridge, user's path, bursts of {BURST}", results.user["bursty"])
+        facade.say("REPORT")
+        seen = json.loads(facade.expect('"received"'))
+        results.facade_seen = {key: int(value) for key, value in seen.items()}
+    finally:
+        facade.stop()
+        caller.stop()
 
 
 MANY_CLIENTS = (8, 32)
@@ -679,6 +713,23 @@ def table(results: Results, args: argparse.Namespace) -> str:
                      lambda f: f"{ms(f.p50)} / {ms(f.p99)}"))
     rows.append(_row("… delivered", pose, Figure.delivered_text))
     rows.append(_row("… process CPU (share of one core)", pose, lambda f: pct(f.cpu)))
+    user = results.user
+    if user:
+        floor, floor_bursty = results.pose.get("floor", Figure()), results.bursty.get(
+            "floor", Figure())
+        steady, bursty = user.get("steady", Figure()), user.get("bursty", Figure())
+        rows.append(f"| PoseStamped at {rate}, the user's path (a facade subscriber node and "
+                    f"a Pythonic callback, both connected): publish() → callback p50 / p99 "
+                    f"(ms); CPU | {ms(floor.p50)} / {ms(floor.p99)}; {pct(floor.cpu)} | "
+                    f"{ms(steady.p50)} / {ms(steady.p99)}; {pct(steady.cpu)} | |")
+        rows.append(f"| … in bursts of {BURST} at {args.burst_rate:,.0f}/s: p50 / p99 (ms); "
+                    f"CPU | {ms(floor_bursty.p50)} / {ms(floor_bursty.p99)}; "
+                    f"{pct(floor_bursty.cpu)} | {ms(bursty.p50)} / {ms(bursty.p99)}; "
+                    f"{pct(bursty.cpu)} | |")
+        seen = results.facade_seen
+        rows.append(f"| … the facade node: ModifiedEvents (each reads GetLastMessage()); "
+                    f"GetNumberOfMessages() | | {seen.get('received', 0):,}; "
+                    f"{seen.get('messages', 0):,} | |")
     for clients, fig in sorted(results.clients.items()):
         rows.append(_row(f"PoseStamped at {rate} → {clients} clients: delivered; p50 / p99 "
                          "(ms); CPU (floor: bench/fanout_relay.py, a bare subscriber writing "
@@ -746,6 +797,7 @@ def per_khz(results: Results) -> str:
     for name, fig in (("floor", results.pose.get("floor")),
                       ("bridge, 1 client", results.pose.get("bridge")),
                       ("naive, 1 client", results.pose.get("naive")),
+                      ("bridge, the user's path", results.user.get("steady")),
                       *((f"bridge, {c} clients", f) for c, f in sorted(results.clients.items())),
                       ("bridge, burst", results.burst.get("bridge")),
                       ("naive, burst", results.burst.get("naive")),

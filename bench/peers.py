@@ -7,6 +7,7 @@ ROS floor), and a raw OpenIGTLink reader with any number of connections.
     peers.py read PORT CLIENTS [--setup JSON]
     peers.py watch PORT PARENT CHILD [--hello-hz HZ]
     peers.py facade PORT TOPIC [--cloud]
+    peers.py callback PORT TOPIC
 
 Every peer prints READY when it can start, then obeys lines on stdin:
 
@@ -20,12 +21,14 @@ Every peer prints READY when it can start, then obeys lines on stdin:
   of figures (see `Recorder.report`), ``QUIT`` exits. A reader also takes ``PAUSE
   SECONDS``: it reads nothing for that long (a stalled GUI), then reads on; its report
   then says what it read first (``resumed``);
-* facade: a `slicer_client` subscriber of TOPIC (PoseStamped) whose callback reads each
-  message, as a script or the ROS2Bridge module would: a client that decodes everything in
-  Python. ``REPORT`` prints ``{"received": N}``. With ``--cloud``, a PointCloud2 subscriber
-  made through the CamelCase facade (``GetDefaultROS2Node().CreateAndAddSubscriberNode``)
-  with a ModifiedEvent observer that counts (``received``), and the node's
-  ``GetNumberOfMessages()`` as ``messages``;
+* facade: a subscriber node of TOPIC made through the CamelCase facade
+  (``GetDefaultROS2Node().CreateAndAddSubscriberNode``, PoseStamped, or PointCloud2 with
+  ``--cloud``), as a script in Slicer makes it, with a ModifiedEvent observer that counts
+  (``received``) and reads ``GetLastMessage()`` (a pose's). ``REPORT`` prints ``received``
+  and the node's ``GetNumberOfMessages()`` as ``messages``;
+* callback: a Pythonic subscriber (``slicer_client.connect().subscribe``) of TOPIC
+  (PoseStamped), a reader whose stream ``callback`` is publish -> its callback (the
+  stamp of the newest message the client holds when the callback runs);
 * watcher (the other client of bench/attacks.py): one raw connection that streams the tf
   lookup PARENT <- CHILD (stream ``tf``) and sends ``hello`` at HZ, each one's round trip
   recorded as stream ``hello`` (stamp: when it was sent); a hello still unanswered at
@@ -572,33 +575,49 @@ def facade(port: int, topic: str, cloud: bool = False) -> None:
 
     received = [0]
     ros = slicer_client.connect("127.0.0.1", port)
-    node: Any = None
-    if cloud:  # as a script in Slicer would: the reference's CamelCase API
-        node = ros.GetDefaultROS2Node().CreateAndAddSubscriberNode(
-            "sensor_msgs/msg/PointCloud2", topic)
+    # As a script in Slicer would: the reference's CamelCase API, an observer that reads
+    # the node's last message each time it is told of one.
+    node = ros.GetDefaultROS2Node().CreateAndAddSubscriberNode(
+        "sensor_msgs/msg/PointCloud2" if cloud else "PoseStamped", topic)
 
-        def on_modified(caller: Any, event: str) -> None:
-            received[0] += 1
+    def on_modified(caller: Any, event: str) -> None:
+        received[0] += 1
+        if not cloud:
+            node.GetLastMessage()
 
-        node.AddObserver("ModifiedEvent", on_modified)
-    else:
-        pose = ros.subscribe(topic, "PoseStamped")
-
-        def on_pose(message: Any) -> None:  # reads the message, as a user's observer does
-            received[0] += 1
-            del message
-
-        pose.add_callback(on_pose)
+    node.AddObserver("ModifiedEvent", on_modified)
     print("READY", flush=True)
     for line in sys.stdin:
         word = line.strip()
         if word == "REPORT":
-            figures = {"received": received[0]}
-            if node is not None:
-                figures["messages"] = node.GetNumberOfMessages()
-            print(json.dumps(figures), flush=True)
+            print(json.dumps({"received": received[0],
+                              "messages": node.GetNumberOfMessages()}), flush=True)
         elif word == "QUIT":
             break
+    ros.close()
+
+
+def callback(port: int, topic: str) -> None:
+    """A Pythonic subscriber whose callback records publish -> callback latency: the stamp
+    of the newest message the client holds when the callback runs."""
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    import slicer_client
+
+    recorder = Recorder()
+    ros = slicer_client.connect("127.0.0.1", port)
+    pose = ros.subscribe(topic, "PoseStamped")
+
+    def on_pose(value: Any) -> None:
+        arrival = time.time_ns()
+        message = pose.last_message
+        if message is not None:
+            with recorder.lock:
+                recorder.add("callback", arrival, _stamp_ns(message.timestamp))
+
+    pose.add_callback(on_pose)
+    stop = threading.Event()
+    print("READY", flush=True)
+    _serve_commands(recorder, stop.set)
     ros.close()
 
 
@@ -624,7 +643,10 @@ def main() -> None:
     p.add_argument("port", type=int)
     p.add_argument("topic")
     p.add_argument("--cloud", action="store_true",
-                   help="a PointCloud2 subscriber node through the CamelCase facade")
+                   help="a PointCloud2 subscriber node (else PoseStamped)")
+    p = sub.add_parser("callback")
+    p.add_argument("port", type=int)
+    p.add_argument("topic")
     args = parser.parse_args()
     if args.role == "publish":
         publish(args.kind, args.topic)
@@ -634,6 +656,8 @@ def main() -> None:
         watch(args.port, args.parent, args.child, args.hello_hz)
     elif args.role == "facade":
         facade(args.port, args.topic, args.cloud)
+    elif args.role == "callback":
+        callback(args.port, args.topic)
     else:
         read(args.port, args.clients, json.loads(args.setup), not args.v1)
 

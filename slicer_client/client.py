@@ -282,8 +282,9 @@ class Client:
                   messages: bool = False) -> Subscriber:
         """Subscribe to a ROS topic. `type`: "String", "PoseStamped", "pkg/msg/Type"...
         `callback(value)` on every message (see the module docstring for the thread).
-        `messages`: also keep each message whole (`Subscriber.last_whole`), where the
-        transport can carry it (not 3D Slicer's connector: then the native stream only)."""
+        `messages`: also keep the newest message whole (`Subscriber.last_whole`, sent at
+        most once a display frame), where the transport can carry it (not 3D Slicer's
+        connector: then the native stream only)."""
         messages = messages and self._transport.carries_whole_messages
         sub: Subscriber = self._add(Subscriber(self, topic, type, qos=qos, rate_hz=rate_hz,
                                                messages=messages))

@@ -110,9 +110,10 @@ class Resource:
 class Subscriber(Resource):
     """A ROS subscription streamed to this client (the reference's subscriber node).
 
-    With ``messages``, this client also gets each message whole (the daemon's message
-    stream: lossless JSON in ROS units, with the subscription's own message count), kept as
-    `last_whole`; `add_whole_callback` hears of each. Images and point clouds have no such
+    With ``messages``, this client also gets the newest message whole, at most once a
+    display frame (the daemon's message stream: lossless JSON in ROS units, with the
+    subscription's own message count), kept as `last_whole`; `add_whole_callback` hears of
+    each. Images and point clouds have no such
     stream (their native one is whole): `message_device` stays empty."""
 
     def __init__(self, client: ResourceOwner, topic: str, type: str, *,
@@ -158,9 +159,20 @@ class Subscriber(Resource):
             self._client.emit(callback, reason)
 
     def add_whole_callback(self, callback: Callable[[Message], None]) -> None:
-        """`callback(message)` for each message of the message stream (where callbacks
-        run, never on the receive thread)."""
+        """`callback(message)` for each message of the message stream, at most one a
+        display frame (where callbacks run, never on the receive thread)."""
         self._whole_callbacks.append(callback)
+
+    def wait_for_whole(self, predicate: Optional[Callable[[Message], bool]] = None,
+                       timeout: float = 10.0) -> Message:
+        """Block until the message stream's newest (satisfying `predicate`) has arrived.
+        The daemon sends the newest message whole at most once a display frame."""
+        def ready() -> bool:
+            return self.last_whole is not None and (predicate is None
+                                                    or bool(predicate(self.last_whole)))
+        self._wait(ready, timeout, f"a whole message on {self.topic}")
+        assert self.last_whole is not None
+        return self.last_whole
 
     @property
     def ros_type(self) -> str:

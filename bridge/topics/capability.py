@@ -31,7 +31,7 @@ from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
 from bridge.core.dispatch import Created, Handler, Result
 from bridge.core.heavy import OffLoop
-from bridge.core.hub import (Hub, Replier, StreamChannel, Subscriber, frame_for,
+from bridge.core.hub import (Hub, Replier, Subscriber, frame_for,
                              is_large)
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.content_guards import ContentGuard
@@ -42,16 +42,16 @@ from bridge.ros.graph_types import refuse_other_type
 from bridge.ros.qos import default_depth, qos_profile
 from bridge.ros.raw_reader import BatchTopic
 from bridge.ros.ros_node import RosNode
+from bridge.topics.whole_messages import WholeMessages, WholeStream
 from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
                                CreateSubscriber, ErrorCode, ForbiddenError, GetLastMessage, Op,
                                Publish, QoS, RemovePublisher, RemoveSubscriber,
                                WrongTypeError)
-from protocol.conversions import igtl_stamp_or_now, igtl_timestamp_now
 from protocol.framing import StreamTemplate
 from protocol.freshness import daemon_clock_ms
-from protocol.messages import Message, PolyData, StatusCode, document_body
+from protocol.messages import Message, PolyData, StatusCode
 from protocol.messages import Point as PointBody
-from protocol.naming import KEY_COUNT, KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
+from protocol.naming import KEY_FRAME, DeviceNameRegistry, NameKey, metadata_for
 
 log = logging.getLogger(__name__)
 
@@ -103,9 +103,9 @@ class SubscriberBridge:
         self._filter = message_filter
         self._count = 0  # messages the Python path took (`count` adds the native lane's)
         self.arrivals: ArrivalsView = Arrivals()  # judged by StreamHealth: stale or not?
-        # The message stream (`enable_messages`): each message whole, as JSON, for the
-        # clients that joined its device; None until a client asks for it.
-        self._messages: Optional[_MessageStream] = None
+        # The message stream (`enable_messages`): the newest message whole, as JSON, at
+        # display rate, for the clients that joined its device; None until one asks.
+        self._messages: Optional[WholeStream] = None
         # (serialized bytes or None, message or None) of the last message, replaced whole;
         # (None, None) with `last_size` set when it was too large to keep.
         self._last: tuple[Optional[bytes], Any] = (None, None)
@@ -181,13 +181,19 @@ class SubscriberBridge:
         else:
             self._last = (data, None)
 
-    def enable_messages(self, device: str, metadata: dict[str, str]) -> str:
+    def enable_messages(self, device: str, metadata: dict[str, str],
+                        pacer: WholeMessages) -> str:
         """Open the message stream on `device` (once); clients then `join` it on the hub."""
         if self._messages is None:
-            self._hub.remove_lane(self.device)  # each message goes whole, as JSON, too
             self._hub.limit_to_audience(device)
-            self._messages = _MessageStream(self._hub.open_channel(device), metadata)
+            self._messages = WholeStream(self._hub.open_channel(device), metadata,
+                                         self._newest)
+            pacer.add(self._messages)
         return self._messages.channel.device
+
+    def _newest(self) -> tuple[int, Any]:
+        """(count, last message) for the message stream (its pacing thread)."""
+        return self.count, self.last_message
 
     def _on_raw(self, data: bytes) -> None:  # ROS executor thread
         self._on_batch([data])
@@ -225,14 +231,13 @@ class SubscriberBridge:
             self._count += 1
             frames.append((self.device, TemplateFrame(template, content, timestamp, values,
                                                       transform_body)))
-            if self._messages is not None:
-                self._post_whole(None, data)
             last = data
         if last is not None:
             self._keep(last)
             if self._lane is not None:
                 self._lane_takes(fast, frames[-1][1])
         self._hub.post_frames(frames, self._channel)
+        self._poke_whole()
 
     def _lane_takes(self, fast: RawPoseStream, frame: Frame) -> None:
         """The lane takes the frame ids of the last message from now on (it compares the
@@ -290,16 +295,12 @@ class SubscriberBridge:
             self._keep(data)
         self._count += 1
         self._convert(msg)
-        self._post_whole(msg, data)
+        self._poke_whole()
 
-    def _post_whole(self, msg: Any, data: bytes) -> None:
-        """The message stream's copy of this message, if anyone gets it (executor thread)."""
-        stream = self._messages
-        if stream is None or not self._hub.has_audience(stream.channel.device):
-            return
-        if msg is None:
-            msg = deserialize_message(data, self.codec.message_class)
-        stream.post(self._hub, msg, self.count)
+    def _poke_whole(self) -> None:
+        """The message stream (if any) has a newer message to make when due."""
+        if self._messages is not None:
+            self._messages.poke()
 
     def _encode_serialized(self, data: bytes) -> bool:
         """Sent (or refused) straight from the bytes, if the codec reads them (images)."""
@@ -311,7 +312,7 @@ class SubscriberBridge:
             template, lead, pixels, timestamp = same
             self._hub.post_frame(self._channel, TemplateBulkFrame(template, lead, pixels,
                                                                   timestamp, daemon_clock_ms()))
-            self._post_whole(None, data)
+            self._poke_whole()
             return True
         try:
             encoded: Encoded | CodecError | None = self.codec.encode_serialized(data)
@@ -327,7 +328,7 @@ class SubscriberBridge:
             message = self._post(encoded)
             if images is not None and is_large(message):  # a small one goes as the others
                 images.learn(data, message)
-        self._post_whole(None, data)
+        self._poke_whole()
         return True
 
     def _refused(self, error: CodecError) -> None:
@@ -355,31 +356,12 @@ class SubscriberBridge:
         self._hub.remove_lane(self.device)
         self._hub.close_channel(self._channel)
         if self._messages is not None:
+            self._messages.close()
             self._hub.close_channel(self._messages.channel)
         if self._reader is not None:
             self._reader.close()
         if self._subscription is not None:
             self._ros.destroy(self._subscription)
-
-
-@dataclass
-class _MessageStream:
-    """A subscriber's message stream: each message whole, as generic JSON, with the count of
-    messages the subscription had received (a client's GetNumberOfMessages stays exact when
-    its stream was coalesced)."""
-
-    channel: StreamChannel
-    metadata: dict[str, str]
-
-    def post(self, hub: Hub, msg: Any, count: int) -> None:
-        metadata = dict(self.metadata)
-        metadata[KEY_COUNT] = str(count)
-        stamp = getattr(getattr(msg, "header", None), "stamp", None)
-        timestamp = (igtl_stamp_or_now(stamp.sec, stamp.nanosec) if stamp is not None
-                     else igtl_timestamp_now())
-        message = Message(device_name=self.channel.device, body=document_body(message_to_json(msg)),
-                          timestamp=timestamp, metadata=metadata)
-        hub.post_frame(self.channel, frame_for(message))
 
 
 class PublisherBridge:
@@ -562,6 +544,7 @@ class TopicBridges:
         self._names = names
         self.subscribers: dict[str, SubscriberBridge] = {}
         self.publishers: dict[str, PublisherBridge] = {}
+        self._whole = WholeMessages(hub)  # every subscriber's message stream, paced
 
     def _codec(self, type_name: str) -> TypeCodec:
         try:
@@ -628,7 +611,8 @@ class TopicBridges:
             return reply
         key = NameKey.subscriber_messages(bridge.topic)
         device = bridge.enable_messages(self._names.register(key),
-                                        metadata_for(key, ros_type=bridge.codec.ros_type))
+                                        metadata_for(key, ros_type=bridge.codec.ros_type),
+                                        self._whole)
         self._hub.join(device, client)
         return {**reply, "message_device": device}
 
@@ -764,6 +748,7 @@ class TopicBridges:
             bridge.close()
         self.subscribers.clear()
         self.publishers.clear()
+        self._whole.close()
 
 
 def _describe(info: TopicInfo) -> dict[str, Any]:

@@ -40,8 +40,9 @@ class CreateSubscriber(Op, op="create_subscriber", ros_names=("topic",), writes=
 
     ``type`` is kept as given (the reference's ``IntTable`` vs ``IntArray`` choose the
     Slicer representation); `ros_type` is the resolved ``pkg/msg/Type``. ``messages``: this
-    client also gets every message whole, as generic JSON in ROS units, on the device the
-    reply names ``message_device`` (lossless, for message objects; images and point clouds
+    client also gets the newest message whole, at most once a display frame (60 Hz), as
+    generic JSON in ROS units, on the device the reply names ``message_device`` (lossless,
+    for message objects; each carries the subscription's count; images and point clouds
     have none: their IMAGE / POLYDATA stream is already whole)."""
 
     topic: str

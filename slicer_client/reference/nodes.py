@@ -5,8 +5,9 @@ What the reference returns as VTK objects comes back as VTK objects where vtk im
 Slicer), else as plain objects with the same methods (vtk_values.py); message types get
 message objects (messages.py); the table of which is in slicer_types.py.
 
-Reads are local: a subscriber keeps its last message whole (the daemon's message stream),
-so ``GetLastMessage``, ``GetLastMessageYAML`` and ``GetNumberOfMessages`` never ask the
+Reads are local: a subscriber keeps its last message whole (the daemon's message stream,
+whose newest comes at most once a display frame: ModifiedEvent fires as often), so
+``GetLastMessage``, ``GetLastMessageYAML`` and ``GetNumberOfMessages`` never ask the
 daemon, and an observer may call them, or anything else, from its callback. Observers are
 called as VTK calls them, ``callback(caller, event)``, where the client runs callbacks:
 in ``Spin()`` or on its dispatcher thread, never on the receive thread (events.py).

@@ -136,3 +136,41 @@ def test_a_parameter_client_keeps_every_change_when_asked(client: Connection,
     values = json.loads(streamed.body.text)["values"]
     assert values["label"] == changed
     assert values["count"] == {"type": "integer", "value": 3}  # the observed one, fetched
+
+
+def test_whole_messages_come_at_display_rate_and_the_newest_last(daemon: RunningDaemon) -> None:
+    """A facade subscriber asks for each message whole: the daemon makes one when it is
+    due (at most one a display frame), not one per message, and the last is the newest,
+    with the subscription's exact count. The native stream still brings every message."""
+    import threading
+    import time
+
+    import slicer_client
+    from bridge.topics.whole_messages import DISPLAY_HZ
+
+    published = 300
+    arrivals: list[float] = []
+    lock = threading.Lock()
+    with slicer_client.connect("127.0.0.1", daemon.port) as ros:
+        sub = ros.subscribe("/ms_paced", "PoseStamped", messages=True)
+        assert sub.message_device == "msg:ms_paced"
+
+        def whole(message: Message) -> None:
+            with lock:
+                arrivals.append(time.monotonic())
+        sub.add_whole_callback(whole)
+        pub = ros.publisher("/ms_paced", "PoseStamped")
+        start = time.monotonic()
+        for i in range(published):
+            pub.publish_message({"header": {"frame_id": "paced"},
+                                 "pose": {"position": {"x": (i + 1) / 1000.0}}})
+        newest = sub.wait_for_whole(lambda m: int(m.metadata[KEY_COUNT]) == published,
+                                    timeout=30)
+        assert json.loads(newest.body.text)["pose"]["position"]["x"] == published / 1000.0
+        sub.wait_for_message(timeout=30, predicate=lambda matrix: abs(
+            matrix[0][3] - published) < 1e-3)  # the native stream's newest, in mm
+        with lock:
+            span, whole_count = arrivals[-1] - start, len(arrivals)
+    # Every send of the stream lies between the first publish and the last arrival, each a
+    # frame or more after the one before.
+    assert 1 <= whole_count <= span * DISPLAY_HZ + 1, (whole_count, span)

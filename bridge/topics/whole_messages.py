@@ -1,0 +1,156 @@
+"""A subscriber's message stream (``create_subscriber`` with ``messages``): the clients
+that asked get the topic's newest message whole, as generic JSON, at most `DISPLAY_HZ`
+times a second.
+
+A whole message is made when it is due, not for every message: what it is read for (a
+message object in a script, YAML in a GUI) is read at display rate, and a 1 kHz stream
+then costs about 60 conversions a second. The topic's native stream (TRANSFORM, STRING...)
+still goes out per message by its own route, a pose's C lane included. Each whole message
+carries the subscription's own count (``KEY_COUNT``), so a client's GetNumberOfMessages
+stays exact.
+
+One thread serves every bridge (`WholeMessages`). A bridge that took a message in Python
+pokes it: the stream's newest goes at once if its last went out a frame ago or more (a lone
+message waits for nothing), else at the next frame. Messages a lane wrote in C poke
+nothing: while any client listens, every stream is looked at once a frame.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional
+
+from bridge.codecs import message_to_json
+from bridge.core.hub import Hub, StreamChannel, frame_for
+from bridge.core.logging_limits import RateLimitedLog
+from bridge.core.threads import OnFailure, start_thread
+from protocol.conversions import igtl_stamp_or_now, igtl_timestamp_now
+from protocol.messages import Message, document_body
+from protocol.naming import KEY_COUNT
+
+__all__ = ["DISPLAY_HZ", "WholeMessages", "WholeStream"]
+
+log = logging.getLogger(__name__)
+
+DISPLAY_HZ = 60.0  # what a display shows; SlicerROS2 itself spins ROS at 50 Hz
+_FRAME_S = 1.0 / DISPLAY_HZ
+
+
+@dataclass(eq=False)
+class WholeStream:
+    """One bridge's message stream. `newest` gives (the subscription's count, its newest
+    message as an rclpy message, or None when it was too large to keep)."""
+
+    channel: StreamChannel
+    metadata: dict[str, str]
+    newest: Callable[[], tuple[int, Any]]
+    sent_count: int = 0
+    sent_at: float = -_FRAME_S
+    poked: bool = False
+    _pacer: Optional[WholeMessages] = field(default=None, repr=False)
+
+    def poke(self) -> None:
+        """A ROS thread took a message for this stream (cheap after the first: one flag)."""
+        if not self.poked and self._pacer is not None:
+            self.poked = True
+            self._pacer.wake()
+
+    def close(self) -> None:
+        pacer = self._pacer
+        if pacer is not None:
+            pacer.remove(self)
+
+    def message(self, count: int, msg: Any) -> Message:
+        metadata = dict(self.metadata)
+        metadata[KEY_COUNT] = str(count)
+        stamp = getattr(getattr(msg, "header", None), "stamp", None)
+        timestamp = (igtl_stamp_or_now(stamp.sec, stamp.nanosec) if stamp is not None
+                     else igtl_timestamp_now())
+        return Message(device_name=self.channel.device,
+                       body=document_body(message_to_json(msg)),
+                       timestamp=timestamp, metadata=metadata)
+
+
+class WholeMessages:
+    """The pacing thread of every message stream; started with the first stream."""
+
+    def __init__(self, hub: Hub) -> None:
+        self._hub = hub
+        self._streams: list[WholeStream] = []
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._closed = False
+        self._thread: Optional[threading.Thread] = None
+        self._bad = RateLimitedLog(log)
+
+    def add(self, stream: WholeStream) -> None:
+        with self._lock:
+            stream._pacer = self
+            self._streams.append(stream)
+            if self._thread is None and not self._closed:
+                self._thread = start_thread("whole-messages", self._run, OnFailure.RESTART)
+        self._wake.set()
+
+    def remove(self, stream: WholeStream) -> None:
+        with self._lock:
+            stream._pacer = None
+            if stream in self._streams:
+                self._streams.remove(stream)
+
+    def wake(self) -> None:
+        self._wake.set()
+
+    def close(self) -> None:
+        with self._lock:
+            self._closed = True
+            self._streams.clear()
+        self._wake.set()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
+
+    def _run(self) -> None:
+        timeout: Optional[float] = None
+        while True:
+            self._wake.wait(timeout)
+            self._wake.clear()
+            with self._lock:
+                if self._closed:
+                    return
+                streams = tuple(self._streams)
+            timeout = None
+            for stream in streams:
+                wait = self._serve(stream)
+                if wait is not None:
+                    timeout = wait if timeout is None else min(timeout, wait)
+
+    def _serve(self, stream: WholeStream) -> Optional[float]:
+        """Send `stream`'s newest if it is new and due; how long until it should be looked
+        at again (None: only when poked)."""
+        if not self._hub.has_audience(stream.channel.device):
+            stream.poked = False
+            return None
+        now = time.monotonic()
+        wait = stream.sent_at + _FRAME_S - now
+        if wait > 0:
+            return wait
+        stream.poked = False  # a message taken from here on pokes again
+        count, msg = stream.newest()
+        if count != stream.sent_count:
+            stream.sent_count = count
+            stream.sent_at = now
+            if msg is not None:
+                self._post(stream, count, msg)
+        return _FRAME_S  # a lane's messages poke nothing: look again next frame
+
+    def _post(self, stream: WholeStream, count: int, msg: Any) -> None:
+        try:
+            message = stream.message(count, msg)
+        except (ValueError, TypeError) as error:  # a value JSON cannot hold: one line, go on
+            self._bad.warning(stream.channel.device, None, "the whole message on %s is "
+                              "not sent: %s", stream.channel.device, error)
+            return
+        self._hub.post_frame(stream.channel, frame_for(message))
