@@ -13,8 +13,9 @@ which says what is wrong with it (and drops it).
 from __future__ import annotations
 
 import struct
+from typing import Any
 from bridge.codecs.base import TypeCodec
-from bridge.codecs.cdr import RAW_POSE_READERS, CdrError
+from bridge.codecs.cdr import RAW_POSE_READERS, CdrError, RawPose
 from protocol.conversions import (
     igtl12_to_matrix,
     igtl_stamp_or_now,
@@ -24,7 +25,8 @@ from protocol.errors import ProtocolError
 from protocol.framing import StreamTemplate
 from protocol.messages import Transform
 
-__all__ = ["NotFast", "RawPoseStream", "has_fast_path", "transform_body"]
+__all__ = ["NotFast", "RawPoseStream", "has_fast_path", "pose_document", "read_raw_pose",
+           "transform_body"]
 
 _TWELVE = struct.Struct(">12f")
 _U32_MAX = 0xFFFFFFFF
@@ -39,6 +41,31 @@ class NotFast(Exception):
 
 def has_fast_path(ros_type: str) -> bool:
     return ros_type in RAW_POSE_READERS
+
+
+def read_raw_pose(ros_type: str, data: bytes) -> RawPose:
+    """A hot pose type's numbers, read straight from its CDR bytes; `NotFast` if they
+    cannot be (the caller deserializes them the ordinary way)."""
+    try:
+        return RAW_POSE_READERS[ros_type](data)
+    except CdrError as error:
+        raise NotFast(str(error)) from None
+
+
+def pose_document(ros_type: str, raw: RawPose) -> dict[str, Any]:
+    """A hot pose type as `message_to_dict` gives it (the message stream's generic JSON),
+    from its numbers, without building the rclpy message (tests/bridge/test_fast_path.py
+    holds the two equal)."""
+    sec, nanosec, frame, child, tx, ty, tz, x, y, z, w = raw
+    position = {"x": tx, "y": ty, "z": tz}
+    orientation = {"x": x, "y": y, "z": z, "w": w}
+    if ros_type == "geometry_msgs/msg/Pose":
+        return {"position": position, "orientation": orientation}
+    header = {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame}
+    if ros_type == "geometry_msgs/msg/PoseStamped":
+        return {"header": header, "pose": {"position": position, "orientation": orientation}}
+    return {"header": header, "child_frame_id": child,
+            "transform": {"translation": position, "rotation": orientation}}
 
 
 def pack_transform(values: tuple[float, ...]) -> bytes:
@@ -57,7 +84,6 @@ class RawPoseStream:
 
     def __init__(self, codec: TypeCodec, device: str, metadata: dict[str, str]) -> None:
         self._codec = codec
-        self._read = RAW_POSE_READERS[codec.ros_type]
         self._device = device
         self._metadata = metadata
         self._templates: dict[tuple[str, str], StreamTemplate] = {}
@@ -65,10 +91,8 @@ class RawPoseStream:
 
     def convert(self, data: bytes) -> tuple[StreamTemplate, bytes, int, tuple[float, ...]]:
         """CDR bytes -> (template, TRANSFORM content, IGTL time stamp, the 12 numbers)."""
-        try:
-            sec, nanosec, frame, child, tx, ty, tz, x, y, z, w = self._read(data)
-        except CdrError as error:
-            raise NotFast(str(error)) from None
+        sec, nanosec, frame, child, tx, ty, tz, x, y, z, w = read_raw_pose(
+            self._codec.ros_type, data)
         values = pose_to_igtl12(tx, ty, tz, x, y, z, w)
         if values is None:
             raise NotFast("a NaN, an infinity, a zero quaternion or a length beyond float32")

@@ -42,6 +42,7 @@ from protocol.commands import FieldDescription, MessageDescription, WrongTypeErr
 from protocol.yaml_text import to_yaml
 
 __all__ = [
+    "document_to_json",
     "check_float",
     "check_int",
     "describe_message",
@@ -192,7 +193,12 @@ def message_to_dict(msg: Any, *, bytes_as: str = "base64") -> dict[str, JsonValu
 
 def message_to_json(msg: Any) -> str:
     """A message as compact JSON text (see `message_to_dict`)."""
-    return json.dumps(message_to_dict(msg), separators=(",", ":"), ensure_ascii=False)
+    return document_to_json(message_to_dict(msg))
+
+
+def document_to_json(document: Mapping[str, JsonValue]) -> str:
+    """A message's dict (`message_to_dict`'s form) as compact JSON text."""
+    return json.dumps(document, separators=(",", ":"), ensure_ascii=False)
 
 
 def message_to_yaml(msg: Any) -> str:

@@ -24,7 +24,9 @@ from std_msgs.msg import String as StringMsg
 
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
 from bridge.codecs.base import Encoded, stream_message
-from bridge.codecs.fast import NotFast, RawPoseStream, has_fast_path, transform_body
+from bridge.codecs.fast import (NotFast, RawPoseStream, has_fast_path, pose_document,
+                                read_raw_pose, transform_body)
+from bridge.codecs.generic import document_to_json
 from bridge.codecs.fast_image import RawImageStream
 from bridge.codecs.image import ImageCodec
 from bridge.codecs.generic import dict_to_message
@@ -58,6 +60,7 @@ log = logging.getLogger(__name__)
 # `get_last_message` answers with the whole message (JSON and YAML): a larger one (a 20 MB
 # point cloud) would be a reply of many MB, and keeping it would hold that much per topic.
 LAST_MESSAGE_MAX_BYTES = 8 * 1024 * 1024
+POSE_TYPE = "geometry_msgs/msg/Pose"  # the one hot pose type without a header
 
 
 
@@ -155,22 +158,48 @@ class SubscriberBridge:
         with self._hub.fanout:
             return self._count + int(self._lane.count)
 
-    @property
-    def last_message(self) -> Any:
-        """The last message received (None before the first, or if it was larger than
-        `LAST_MESSAGE_MAX_BYTES`: see `last_size`), as an rclpy message."""
+    def _last_kept(self) -> tuple[Optional[bytes], Any]:
+        """(serialized bytes or None, message or None) of the last message: the lane's
+        bytes if it took the last one, else what this path kept."""
         if self._lane is not None:
             with self._hub.fanout:
                 data = self._lane.last()
             if data is not None:  # the lane took the last one
-                return deserialize_message(data, self.codec.message_class)
-        last = self._last
+                return data, None
+        return self._last
+
+    @property
+    def last_message(self) -> Any:
+        """The last message received (None before the first, or if it was larger than
+        `LAST_MESSAGE_MAX_BYTES`: see `last_size`), as an rclpy message."""
+        last = self._last_kept()
         data, msg = last
         if msg is None and data is not None:
             msg = deserialize_message(data, self.codec.message_class)
             if self._last is last:
                 self._last = (data, msg)
         return msg
+
+    def whole_document(self) -> Optional[tuple[str, Optional[tuple[int, int]]]]:
+        """The last message as the message stream's JSON, with its header stamp (None: the
+        type has none); None before the first or if it was too large to keep. A hot pose
+        is read from its bytes, without building the rclpy message."""
+        data, msg = self._last_kept()
+        ros_type = self.codec.ros_type
+        if msg is None and data is not None and self._fast is not None:
+            try:
+                raw = read_raw_pose(ros_type, data)
+            except NotFast:
+                pass  # the ordinary way, below
+            else:
+                stamp = None if ros_type == POSE_TYPE else (raw[0], raw[1])
+                return document_to_json(pose_document(ros_type, raw)), stamp
+        msg = self.last_message
+        if msg is None:
+            return None
+        header_stamp = getattr(getattr(msg, "header", None), "stamp", None)
+        return message_to_json(msg), (None if header_stamp is None
+                                      else (header_stamp.sec, header_stamp.nanosec))
 
     def _keep(self, data: bytes, msg: Any = None) -> None:
         self.last_size = len(data)
@@ -187,13 +216,9 @@ class SubscriberBridge:
         if self._messages is None:
             self._hub.limit_to_audience(device)
             self._messages = WholeStream(self._hub.open_channel(device), metadata,
-                                         self._newest)
+                                         lambda: self.count, self.whole_document)
             pacer.add(self._messages)
         return self._messages.channel.device
-
-    def _newest(self) -> tuple[int, Any]:
-        """(count, last message) for the message stream (its pacing thread)."""
-        return self.count, self.last_message
 
     def _on_raw(self, data: bytes) -> None:  # ROS executor thread
         self._on_batch([data])

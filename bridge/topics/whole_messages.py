@@ -21,9 +21,8 @@ import logging
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional
+from typing import Callable, Optional
 
-from bridge.codecs import message_to_json
 from bridge.core.hub import Hub, StreamChannel, frame_for
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.threads import OnFailure, start_thread
@@ -31,22 +30,27 @@ from protocol.conversions import igtl_stamp_or_now, igtl_timestamp_now
 from protocol.messages import Message, document_body
 from protocol.naming import KEY_COUNT
 
-__all__ = ["DISPLAY_HZ", "WholeMessages", "WholeStream"]
+__all__ = ["DISPLAY_HZ", "Document", "WholeMessages", "WholeStream"]
 
 log = logging.getLogger(__name__)
 
 DISPLAY_HZ = 60.0  # what a display shows; SlicerROS2 itself spins ROS at 50 Hz
 _FRAME_S = 1.0 / DISPLAY_HZ
 
+# A whole message: its generic JSON, and its header stamp (sec, nanosec), None without one.
+Document = tuple[str, Optional[tuple[int, int]]]
+
 
 @dataclass(eq=False)
 class WholeStream:
-    """One bridge's message stream. `newest` gives (the subscription's count, its newest
-    message as an rclpy message, or None when it was too large to keep)."""
+    """One bridge's message stream. `count` gives the subscription's count; `newest` its
+    newest message as generic JSON with its header stamp (None: the type has none), or None
+    when it was too large to keep."""
 
     channel: StreamChannel
     metadata: dict[str, str]
-    newest: Callable[[], tuple[int, Any]]
+    count: Callable[[], int]
+    newest: Callable[[], Optional[Document]]
     sent_count: int = 0
     sent_at: float = -_FRAME_S
     poked: bool = False
@@ -63,14 +67,13 @@ class WholeStream:
         if pacer is not None:
             pacer.remove(self)
 
-    def message(self, count: int, msg: Any) -> Message:
+    def message(self, count: int, document: Document) -> Message:
+        text, stamp = document
         metadata = dict(self.metadata)
         metadata[KEY_COUNT] = str(count)
-        stamp = getattr(getattr(msg, "header", None), "stamp", None)
-        timestamp = (igtl_stamp_or_now(stamp.sec, stamp.nanosec) if stamp is not None
+        timestamp = (igtl_stamp_or_now(*stamp) if stamp is not None
                      else igtl_timestamp_now())
-        return Message(device_name=self.channel.device,
-                       body=document_body(message_to_json(msg)),
+        return Message(device_name=self.channel.device, body=document_body(text),
                        timestamp=timestamp, metadata=metadata)
 
 
@@ -138,18 +141,20 @@ class WholeMessages:
         if wait > 0:
             return wait
         stream.poked = False  # a message taken from here on pokes again
-        count, msg = stream.newest()
+        count = stream.count()
         if count != stream.sent_count:
             stream.sent_count = count
             stream.sent_at = now
-            if msg is not None:
-                self._post(stream, count, msg)
+            self._post(stream, count)
         return _FRAME_S  # a lane's messages poke nothing: look again next frame
 
-    def _post(self, stream: WholeStream, count: int, msg: Any) -> None:
+    def _post(self, stream: WholeStream, count: int) -> None:
         try:
-            message = stream.message(count, msg)
-        except (ValueError, TypeError) as error:  # a value JSON cannot hold: one line, go on
+            document = stream.newest()
+            if document is None:
+                return
+            message = stream.message(count, document)
+        except Exception as error:  # noqa: BLE001 - bytes rclpy cannot read: one line, go on
             self._bad.warning(stream.channel.device, None, "the whole message on %s is "
                               "not sent: %s", stream.channel.device, error)
             return

@@ -23,7 +23,9 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from bridge.codecs import CodecError, codec_for
 from bridge.codecs.cdr import CdrError, read_pose, read_pose_stamped, read_transform_stamped
-from bridge.codecs.fast import NotFast, RawPoseStream, transform_body
+from bridge.codecs.fast import (NotFast, RawPoseStream, pose_document, read_raw_pose,
+                                transform_body)
+from bridge.codecs.generic import document_to_json, message_to_json
 from bridge.core.hub import Hub
 from bridge.core.outbox import Frame, TemplateFrame
 from bridge.core.session import ClientSession, SessionLimits
@@ -100,6 +102,28 @@ def test_pose_bytes_read_as_rclpy_deserializes_them(t, q) -> None:
     msg.position.x, msg.position.y, msg.position.z = t
     msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = q
     assert read_pose(serialize_message(msg))[4:] == (*t, *q)
+
+
+any_float = st.floats(allow_nan=True, allow_infinity=True)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.sampled_from(["geometry_msgs/msg/Pose", "geometry_msgs/msg/PoseStamped",
+                        "geometry_msgs/msg/TransformStamped"]), stamps, names, names,
+       st.tuples(any_float, any_float, any_float), st.tuples(unit, unit, unit, any_float))
+def test_a_hot_pose_s_whole_message_is_the_generic_json_of_the_message(
+        ros_type, stamp, frame, child, t, q) -> None:
+    """The message stream reads a hot pose from its bytes (`pose_document`): the same
+    JSON text as the generic way from the rclpy message, NaN and infinities included."""
+    if ros_type == "geometry_msgs/msg/Pose":
+        msg: Any = _pose_stamped(stamp, frame, t, q).pose
+    elif ros_type == "geometry_msgs/msg/PoseStamped":
+        msg = _pose_stamped(stamp, frame, t, q)
+    else:
+        msg = _transform_stamped(stamp, frame, child, t, q)
+    data = serialize_message(msg)
+    ours = document_to_json(pose_document(ros_type, read_raw_pose(ros_type, data)))
+    assert ours == message_to_json(deserialize_message(data, type(msg)))
 
 
 def test_bytes_it_does_not_read_are_refused_not_misread() -> None:
