@@ -24,8 +24,8 @@ import ssl
 import threading
 import time
 from pathlib import Path
-from typing import (Any, Callable, Dict, List, Mapping, Optional, Set, Tuple, TypeVar, cast,
-                    overload)
+from typing import (Any, Callable, Dict, Hashable, List, Mapping, Optional, Set, Tuple, TypeVar,
+                    cast, overload)
 
 import numpy as np
 
@@ -160,7 +160,8 @@ class Client:
         """Re-create everything (in order) on a new connection, then tell the user."""
         hello = c.Hello(client="slicer_client 0.1", heartbeat=HEARTBEAT_INTERVAL_S
                         if self._transport.watches_silence else None,
-                        stamps=self._transport.drops_late_values)
+                        stamps=self._transport.drops_late_values,
+                        display_hz=self._transport.display_hz)
         self.daemon_info = command(hello.op, hello.to_args())  # kept whole: the module shows it
         greeting = hello.parse_result(self.daemon_info)
         self._valued = set()
@@ -211,6 +212,11 @@ class Client:
     def emit(self, callback: Callable[..., None], *args: Any) -> None:
         """Queue `callback(*args)` where callbacks run (never here, on the receive thread)."""
         self._events.post(callback, *args)
+
+    def emit_newest(self, key: Hashable, callback: Callable[..., None], *args: Any) -> None:
+        """`emit`, replacing the arguments of the one queued under `key` that has not run
+        yet (a stream's newest value)."""
+        self._events.post_newest(key, callback, *args)
 
     def process_events(self, timeout: float = 0.0, max_events: Optional[int] = None) -> int:
         """Run the callbacks queued so far on the calling thread (waiting up to `timeout` s

@@ -10,7 +10,10 @@ queued callbacks run
   callback waits at most ``spin_grace`` for a spinner before that thread runs it.
 
 Either way callbacks run one at a time, in the order their events came, and never where a
-reply is awaited: a callback may call anything, blocking commands included. Mode
+reply is awaited: a callback may call anything, blocking commands included. A stream's
+callbacks are queued by `post_newest`: while one waits to run, a newer value replaces its
+own, so a callback that falls behind (a GUI spinning every 20 ms, a 1 kHz topic) runs
+once with the newest value, not once for every value it no longer needs. Mode
 ``"spin"`` leaves every callback to `spin` (a GUI that must run them on its own thread).
 
 A spin also runs the tick hooks (`add_tick`): the reference's tf lookups notify their
@@ -23,7 +26,7 @@ import logging
 import threading
 import time
 from collections import deque
-from typing import Any, Callable, Deque, List, Optional, Tuple
+from typing import Any, Callable, Deque, Dict, Hashable, List, Optional, Tuple
 
 __all__ = ["DISPATCH_MODES", "EventDispatcher"]
 
@@ -34,7 +37,17 @@ DISPATCH_MODES = ("auto", "spin")
 # never returns must not make the client hold every message forever.
 MAX_QUEUED = 10_000
 
-Event = Tuple[Callable[..., Any], Tuple[Any, ...], float]
+class _Event:
+    """A queued callback; `post_newest` may replace its callback and args while queued."""
+
+    __slots__ = ("callback", "args", "queued_at", "key")
+
+    def __init__(self, callback: Callable[..., Any], args: Tuple[Any, ...],
+                 key: Optional[Hashable] = None) -> None:
+        self.callback = callback
+        self.args = args
+        self.queued_at = time.monotonic()
+        self.key = key
 
 
 class EventDispatcher:
@@ -45,7 +58,8 @@ class EventDispatcher:
                              f"{mode!r}")
         self.mode = mode
         self._grace = spin_grace
-        self._queue: Deque[Event] = deque()
+        self._queue: Deque[_Event] = deque()
+        self._newest: Dict[Hashable, _Event] = {}  # `post_newest`'s events still queued
         self._max = max_queued
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
@@ -57,6 +71,7 @@ class EventDispatcher:
         self._ticks: List[Callable[[], None]] = []
         self._closed = False
         self.dropped = 0
+        self.replaced = 0  # values a newer one replaced before their callback ran
         self.ran = 0
         self._thread: Optional[threading.Thread] = None
         if mode == "auto":
@@ -68,17 +83,37 @@ class EventDispatcher:
     def post(self, callback: Callable[..., Any], *args: Any) -> None:
         """Queue `callback(*args)` (the receive thread calls this; it never runs it)."""
         with self._wake:
+            if not self._closed:
+                self._append(_Event(callback, args))
+
+    def post_newest(self, key: Hashable, callback: Callable[..., Any], *args: Any) -> None:
+        """`post`, but if the event queued under `key` has not run yet, it runs with
+        these arguments instead, in its place: a stream's newest value."""
+        with self._wake:
             if self._closed:
                 return
-            if len(self._queue) >= self._max:
-                self._queue.popleft()
-                self.dropped += 1
-                if self.dropped == 1 or self.dropped % 1000 == 0:
-                    log.warning("%d callbacks dropped: nothing ran them for a while (a "
-                                "callback that does not return, or nobody spinning in "
-                                "'spin' mode)", self.dropped)
-            self._queue.append((callback, args, time.monotonic()))
-            self._wake.notify()
+            queued = self._newest.get(key)
+            if queued is not None:
+                queued.callback, queued.args = callback, args
+                self.replaced += 1
+                return
+            event = _Event(callback, args, key)
+            self._newest[key] = event
+            self._append(event)
+
+    def _append(self, event: _Event) -> None:
+        # Under the lock.
+        if len(self._queue) >= self._max:
+            dropped = self._queue.popleft()
+            if dropped.key is not None:
+                del self._newest[dropped.key]
+            self.dropped += 1
+            if self.dropped == 1 or self.dropped % 1000 == 0:
+                log.warning("%d callbacks dropped: nothing ran them for a while (a "
+                            "callback that does not return, or nobody spinning in "
+                            "'spin' mode)", self.dropped)
+        self._queue.append(event)
+        self._wake.notify()
 
     def add_tick(self, hook: Callable[[], None]) -> None:
         """`hook()` runs on every `spin` (after the queued callbacks)."""
@@ -131,8 +166,10 @@ class EventDispatcher:
                     with self._lock:
                         if not self._queue:
                             break
-                        callback, args, _ = self._queue.popleft()
-                    self._call(callback, args)
+                        event = self._queue.popleft()
+                        if event.key is not None:
+                            del self._newest[event.key]
+                    self._call(event.callback, event.args)
                     ran += 1
             finally:
                 self._delivery_thread = None
@@ -160,18 +197,19 @@ class EventDispatcher:
         if not self._queue:
             return False
         now = time.monotonic()
-        oldest = self._queue[0][2]
+        oldest = self._queue[0].queued_at
         return now - self._last_spin > self._grace or now - oldest > self._grace
 
     def _wait_time(self) -> Optional[float]:
         if not self._queue:
             return None
-        return max(0.001, self._queue[0][2] + self._grace - time.monotonic())
+        return max(0.001, self._queue[0].queued_at + self._grace - time.monotonic())
 
     def close(self) -> None:
         with self._wake:
             self._closed = True
             self._queue.clear()
+            self._newest.clear()
             self._wake.notify_all()
         thread = self._thread
         if thread is not None and thread is not threading.current_thread():

@@ -4,7 +4,8 @@ direction only (client -> resources -> owner)."""
 
 from __future__ import annotations
 
-from typing import Any, Callable, Dict, List, Mapping, Optional, Protocol, Tuple, TypeVar, overload
+from typing import (Any, Callable, Dict, Hashable, List, Mapping, Optional, Protocol, Tuple,
+                    TypeVar, overload)
 
 import numpy as np
 
@@ -39,6 +40,10 @@ class ResourceOwner(Protocol):
 
     def emit(self, callback: Callable[..., None], *args: Any) -> None:
         """Deliver a callback where the client delivers events (thread or queue)."""
+        ...
+
+    def emit_newest(self, key: Hashable, callback: Callable[..., None], *args: Any) -> None:
+        """`emit`, or, while the one queued under `key` has not run, give it these args."""
         ...
 
     def remove_resource(self, resource: Any) -> None:

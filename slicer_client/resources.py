@@ -75,12 +75,13 @@ class Resource:
         for callback in list(self._callbacks):
             self._client.emit(callback, *args)
 
-    def _notify_lazy(self, make_args: Callable[[], Tuple[Any, ...]]) -> None:
-        """Call the callbacks with ``make_args()``, made where they run (a message is
-        decoded there, not on the receive thread), once for all of them."""
+    def _notify_newest(self, make_args: Callable[[], Tuple[Any, ...]]) -> None:
+        """Call the callbacks with ``make_args()`` of a stream's newest value, made where
+        they run (a message is decoded there, not on the receive thread), once for all of
+        them; a value that comes while they wait to run replaces this one."""
         callbacks = list(self._callbacks)
         if callbacks:
-            self._client.emit(_call_each, callbacks, make_args)
+            self._client.emit_newest((id(self), "value"), _call_each, callbacks, make_args)
 
     def _wait(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
         with self._changed:
@@ -185,8 +186,10 @@ class Subscriber(Resource):
                 self.last_whole = message
                 self.received_by_daemon = _count_of(message, self.received_by_daemon)
                 self._changed.notify_all()
-            for callback in list(self._whole_callbacks):
-                self._client.emit(callback, message)
+            whole = list(self._whole_callbacks)
+            if whole:
+                self._client.emit_newest((id(self), "whole"), _call_each, whole,
+                                         lambda: (message,))
             return
         if self.stale:
             self._set_stale("")  # a new message: live again, whatever the STATUS says later
@@ -194,7 +197,7 @@ class Subscriber(Resource):
             self.count += 1
             self.last_message = message
             self._changed.notify_all()
-        self._notify_lazy(lambda: (self._value_of(message),))
+        self._notify_newest(lambda: (self._value_of(message),))
 
     def _value_of(self, message: Message) -> Any:
         cached, value = self._last_value
@@ -486,10 +489,10 @@ class TfLookup(Resource):
         if not isinstance(message.body, Transform):
             return
         with self._changed:
-            self.matrix = np.array(message.body.matrix, dtype=np.float64)
+            self.matrix = matrix = np.array(message.body.matrix, dtype=np.float64)
             self.count += 1
             self._changed.notify_all()
-        self._notify(self.matrix)
+        self._notify_newest(lambda: (matrix,))
 
     def wait_for_matrix(self, timeout: float = 10.0,
                         predicate: Optional[Callable[[np.ndarray], bool]] = None

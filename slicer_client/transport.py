@@ -74,6 +74,9 @@ class Transport(Protocol):
     # Can it carry the daemon's whole-message streams (a JSON body)? 3D Slicer's connector
     # imports only OpenIGTLink's standard types: a subscriber then reads its native stream.
     carries_whole_messages: bool
+    # Does what it gets go to a display (3D Slicer's scene)? Then the hello asks the
+    # daemon for each stream's newest value this many times a second; None: every value.
+    display_hz: Optional[float]
 
     @property
     def connected(self) -> bool: ...
@@ -101,6 +104,7 @@ class ReconnectingTransport:
     watches_silence = True
     drops_late_values = True
     carries_whole_messages = True
+    display_hz: Optional[float] = None  # a script's callbacks see every value they keep up with
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  reconnect: bool = True, retry_interval: float = 0.5,

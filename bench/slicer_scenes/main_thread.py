@@ -30,10 +30,10 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
                                                                     args["topic"])
 
         def on_message(caller: Any, event: Any) -> None:
-            # Reads the pose (a 4x4 in mm). GetLastMessage() of a PoseStamped needs the
-            # daemon's whole-message stream, which Slicer's connector does not carry.
-            pose = caller.resource.last_value
-            del pose
+            # Reads the message as a user's observer does (a PoseStamped message object,
+            # from the whole message the connector imported as a text node).
+            message = caller.GetLastMessage()
+            del message
             seen[0] += 1
         sub.AddObserver("ModifiedEvent", on_message)
         count = sub.GetNumberOfMessages

@@ -521,6 +521,9 @@ class Dispatcher:
         if request.heartbeat is not None:
             client.start_heartbeat(request.heartbeat)
             reply["heartbeat"] = request.heartbeat
+        if request.display_hz is not None:
+            client.pace_display(request.display_hz)
+            reply["display_hz"] = request.display_hz
         reply["clock_ms"] = daemon_clock_ms()  # streams' message ids are on this clock
         return reply
 

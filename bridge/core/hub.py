@@ -118,6 +118,7 @@ class Replier(Protocol):
     def send_message(self, message: Message) -> None: ...
     def granted(self, grant: WriteGrant) -> None: ...
     def start_heartbeat(self, interval: float) -> None: ...
+    def pace_display(self, hz: float) -> None: ...
 
 
 InboundHandler = Callable[[Message, Replier], None]
@@ -166,6 +167,8 @@ class Hub:
         # (lane, what makes a `Frame` of its `latest()`).
         self.fanout = new_fanout(batch=send_batch)
         self._lanes: dict[str, tuple[Any, Callable[[Any], Frame]]] = {}
+        # Clients paced to a display (bridge/core/display.py): no lane writes to them.
+        self._paced: set[Subscriber] = set()
 
     def send_mode(self) -> str:
         """How streamed values reach the clients, for the start-up log."""
@@ -198,6 +201,7 @@ class Hub:
     def detach(self, client: Subscriber) -> None:
         with self._lock:
             self.clients.discard(client)
+            self._paced.discard(client)
             self._client_tuple = tuple(self.clients)
             self._set_slots()
             for device, members in tuple(self._audience.items()):
@@ -229,15 +233,23 @@ class Hub:
             if members is not None and client in members:
                 self._audience[device] = tuple(m for m in members if m is not client)
 
+    def set_paced(self, client: Subscriber) -> None:
+        """`client` takes its streams once a display frame (`lane_news` included): the
+        lanes write to the others only."""
+        with self._lock:
+            self._paced.add(client)
+            self._set_slots()
+
     # --- native lanes ------------------------------------------------------------------------
     def _set_slots(self) -> dict[str, Frame]:
-        """Under the hand-off lock: the lanes write to the clients attached now; returns
-        the newest value of every device, lanes' included, as of that moment."""
+        """Under the hand-off lock: the lanes write to the clients attached now (but the
+        paced ones); returns the newest value of every device, lanes' included, as of
+        that moment."""
         if self.fanout is None:
             return dict(self._latest)
         # A client without a native slot (a test's) stays closed: the lanes then leave
         # every message to the Python path.
-        slots = [getattr(c, "slot", None) for c in self._client_tuple]
+        slots = [getattr(c, "slot", None) for c in self._client_tuple if c not in self._paced]
         newest = dict(self._latest)
         with self.fanout:
             self.fanout.set_slots([s if s is not None and not isinstance(s, PySlot)
@@ -268,6 +280,23 @@ class Hub:
                 latest = lane.latest()
                 if latest is not None:
                     self._latest[device] = to_frame(latest)
+
+    def lane_news(self, seen: dict[str, int]) -> list[tuple[str, Frame]]:
+        """The newest value of each writing lane whose count moved since `seen` (which
+        this updates): what a paced client, which no lane writes to, takes at its frame."""
+        if self.fanout is None:
+            return []
+        news = []
+        with self.fanout:  # no template changes meanwhile
+            for device, (lane, to_frame) in tuple(self._lanes.items()):
+                count = int(lane.count)
+                if not lane.enabled or seen.get(device) == count:
+                    continue
+                seen[device] = count
+                latest = lane.latest()
+                if latest is not None:  # else the Python path took a later one: handed over
+                    news.append((device, to_frame(latest)))
+        return news
 
     def _update_lane(self, device: str) -> None:
         entry = self._lanes.get(device)

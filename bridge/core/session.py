@@ -44,6 +44,7 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Callable, Optional
 
+from bridge.core.display import DisplayPacing
 from bridge.core.heavy import HeavyWork
 from bridge.core.hub import Hub
 from bridge.core.logging_limits import RateLimitedLog
@@ -153,6 +154,9 @@ class ClientSession(asyncio.Protocol):
         # set while the loop has yet to take them (one wake-up for any number handed).
         self._handed_frames: list[tuple[str, Frame]] = []
         self._handed = False
+        # A display's pacing (`pace_display`): its streams' newest values once a frame.
+        self._display: Optional[DisplayPacing] = None
+        self._display_timer: Optional[asyncio.TimerHandle] = None
         self._unrouted_warned: set[str] = set()
         self._bad_log = RateLimitedLog(log)
         self.peer = "?"
@@ -234,10 +238,12 @@ class ClientSession(asyncio.Protocol):
 
     def _release(self) -> None:
         """Drop what the session holds (buffers, budget, timers) at once. Idempotent."""
-        for timer in (self._attach_timer, self._frame_timer, self._heartbeat):
+        for timer in (self._attach_timer, self._frame_timer, self._heartbeat,
+                      self._display_timer):
             if timer is not None:
                 timer.cancel()
         self._attach_timer = self._frame_timer = self._heartbeat = None
+        self._display_timer = None
         self.frame_started = None
         self._decoder.close()
         self._outbox.clear()
@@ -478,6 +484,13 @@ class ClientSession(asyncio.Protocol):
     def send_stream(self, device: str, frame: Frame) -> None:
         if self._closing:
             return
+        if self._display is not None:
+            with self.slot:
+                self._display.hold(device, frame)
+            return
+        self._send_now(device, frame)
+
+    def _send_now(self, device: str, frame: Frame) -> None:
         if self._paused or len(self._outbox):
             self._outbox.put_latest(device, frame)
             return
@@ -537,6 +550,37 @@ class ClientSession(asyncio.Protocol):
         self.grant = grant
         self.challenge = None  # one answer per challenge
         self._unrouted_warned.clear()  # refusals said before may not hold now
+
+    def pace_display(self, hz: float) -> None:
+        """From now on this client gets its streams' newest values `hz` times a second at
+        most (bridge/core/display.py); the native lanes no longer write to it."""
+        if self._closing:
+            return
+        with self.slot:
+            self.slot.open = False
+            self._display = DisplayPacing(hz)
+        self._hub.set_paced(self)
+        if self._display_timer is None:
+            self._display_timer = asyncio.get_running_loop().call_later(
+                self._display.interval_s, self._display_frame)
+
+    def _display_frame(self) -> None:
+        display = self._display
+        if display is None or self._closing:
+            self._display_timer = None
+            return
+        self._display_timer = asyncio.get_running_loop().call_later(display.interval_s,
+                                                                    self._display_frame)
+        lanes = self._hub.lane_news(display.lanes_seen)
+        with self.slot:
+            frames = display.take(lanes)
+        if frames:
+            self.begin_batch()
+            try:
+                for device, frame in frames:
+                    self._send_now(device, frame)
+            finally:
+                self.end_batch()
 
     def start_heartbeat(self, interval: float) -> None:
         """Send a STATUS on `HEARTBEAT_DEVICE` every `interval` seconds (the client asked
@@ -603,6 +647,9 @@ class ClientSession(asyncio.Protocol):
 
     def forget_device(self, device: str) -> None:
         self._outbox.discard(device)
+        if self._display is not None:
+            with self.slot:
+                self._display.forget(device)
 
     def close(self) -> None:
         """Close the connection. What the transport already holds is still flushed; the
@@ -681,6 +728,7 @@ class ClientSession(asyncio.Protocol):
             transport = self._transport
             direct = self._direct
             if (direct is None or transport is None or self._closing or self._paused
+                    or self._display is not None
                     or self._handed or slot.has_stash or self._batch is not None
                     or len(self._outbox) or transport.is_closing()
                     or transport.get_write_buffer_size()):
@@ -732,6 +780,9 @@ class ClientSession(asyncio.Protocol):
         handed one at once: no image waits behind a stale one."""
         with self.slot:
             self.slot.open = False
+            if self._display is not None:  # its next frame takes it
+                self._display.hold(device, frame)
+                return
             handed = self._handed_frames
             if isinstance(frame, BulkFrame):
                 handed[:] = [(d, f) for d, f in handed if d != device]
@@ -783,7 +834,8 @@ class ClientSession(asyncio.Protocol):
                 "received": self.received, "sent": self.sent,
                 "coalesced": self._outbox.coalesced, "waiting": self._outbox.frames_waiting,
                 "waiting_bytes": self._outbox.pending_bytes,
-                "receiving_bytes": self._decoder.buffered, "decoding": self._decoding}
+                "receiving_bytes": self._decoder.buffered, "decoding": self._decoding,
+                "display_hz": self._display.hz if self._display is not None else None}
 
 
 def _size(parts: tuple[Buffer, ...]) -> int:

@@ -26,6 +26,7 @@ from typing import Callable, Optional
 from bridge.core.hub import Hub, StreamChannel, frame_for
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.threads import OnFailure, start_thread
+from protocol.commands import DISPLAY_HZ
 from protocol.conversions import igtl_stamp_or_now, igtl_timestamp_now
 from protocol.messages import Message, document_body
 from protocol.naming import KEY_COUNT
@@ -34,7 +35,6 @@ __all__ = ["DISPLAY_HZ", "Document", "WholeMessages", "WholeStream"]
 
 log = logging.getLogger(__name__)
 
-DISPLAY_HZ = 60.0  # what a display shows; SlicerROS2 itself spins ROS at 50 Hz
 _FRAME_S = 1.0 / DISPLAY_HZ
 
 # A whole message: its generic JSON, and its header stamp (sec, nanosec), None without one.

@@ -12,8 +12,10 @@ from protocol.commands.results import (Answered, AuthenticateResult, HelloResult
                                        ListServicesResult, ListTopicsResult)
 
 _PROOF = re.compile(r"[0-9a-f]{64}\Z")
+DISPLAY_HZ = 60.0  # what a display shows: the message stream's pace, and 3D Slicer's
+DISPLAY_HZ_MIN, DISPLAY_HZ_MAX = 1.0, 1000.0  # a display's frame rate, as a client asks it
 
-__all__ = ["Authenticate", "Hello", "ListBridges", "ListServices", "ListTopics"]
+__all__ = ["DISPLAY_HZ", "Authenticate", "Hello", "ListBridges", "ListServices", "ListTopics"]
 
 
 @dataclass(frozen=True)
@@ -24,11 +26,14 @@ class Hello(Op, Answered[HelloResult], op="hello", writes=False):
     (protocol/liveness.py), so that it notices a dead link. ``stamps``: this client drops
     stream values that come late by their freshness stamps (protocol/freshness.py); a
     client that shows whatever arrives (3D Slicer's connector) leaves it false, and the
-    daemon cuts its dead link before a backlog could age past the bound."""
+    daemon cuts its dead link before a backlog could age past the bound. ``display_hz``:
+    this client shows streams on a display (3D Slicer): send it each stream's newest value
+    that many times a second at most, not every value (a value waits at most a frame)."""
 
     client: str | None = None
     heartbeat: float | None = None
     stamps: bool = False
+    display_hz: float | None = None
 
     def resources(self) -> tuple[Resource, ...]:
         return ()
@@ -37,7 +42,9 @@ class Hello(Op, Answered[HelloResult], op="hello", writes=False):
     def from_args(cls, a: Args) -> Hello:
         return cls(client=a.opt_str("client", max_len=MAX_NAME),
                    heartbeat=a.opt_float("heartbeat", None, low=0.1, high=60.0),
-                   stamps=a.opt_bool("stamps", False))
+                   stamps=a.opt_bool("stamps", False),
+                   display_hz=a.opt_float("display_hz", None, low=DISPLAY_HZ_MIN,
+                                          high=DISPLAY_HZ_MAX))
 
 
 @dataclass(frozen=True)

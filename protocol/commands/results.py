@@ -129,13 +129,15 @@ def _flag(a: Args, name: str) -> bool:
 @dataclass(frozen=True)
 class HelloResult(Result):
     """The handshake: the daemon's node, and what this connection may do (``writes``; the
-    ``challenge`` a key answers), its heartbeat and the clock of stream stamps."""
+    ``challenge`` a key answers), its heartbeat, the clock of stream stamps, and the
+    display rate its streams are paced to."""
 
     node: str = ""
     writes: bool = True
     challenge: Optional[str] = None
     heartbeat: Optional[float] = None
     clock_ms: Optional[int] = None
+    display_hz: Optional[float] = None
 
     @classmethod
     def read(cls, a: Args) -> HelloResult:
@@ -147,7 +149,8 @@ class HelloResult(Result):
         return cls(node=cast(str, a.opt_str("node", "", allow_empty=True)), writes=writes,
                    challenge=challenge or None,
                    heartbeat=a.opt_float("heartbeat", None, low=0.0, high=3600.0),
-                   clock_ms=a.opt_int("clock_ms", None, low=0, high=_U32))
+                   clock_ms=a.opt_int("clock_ms", None, low=0, high=_U32),
+                   display_hz=a.opt_float("display_hz", None, low=0.0, high=1e6))
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ import json
 import logging
 import threading
 import time
-from typing import (Any, Callable, Dict, List, Mapping, Optional, Protocol, Tuple, Type,
+from typing import (Any, Callable, Dict, Hashable, List, Mapping, Optional, Protocol, Tuple, Type,
                     TypeVar)
 
 import numpy as np
@@ -180,6 +180,8 @@ class FacadeClient(Protocol):
     def list_services(self) -> List[Dict[str, Any]]: ...
 
     def emit(self, callback: Callable[..., None], *args: Any) -> None: ...
+
+    def emit_newest(self, key: Hashable, callback: Callable[..., None], *args: Any) -> None: ...
 
 
 class Logic(Protocol):

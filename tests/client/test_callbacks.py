@@ -118,3 +118,40 @@ def test_a_callback_that_never_returns_costs_bounded_memory() -> None:
         events.post(print, n)
     assert events.pending == 100 and events.dropped == 150
     events.close()
+
+
+def test_a_callback_that_falls_behind_runs_once_with_the_newest_value(
+        daemon: RunningDaemon) -> None:
+    """A GUI spins every 20 ms; a 1 kHz topic brings 20 values meanwhile. Its callback
+    runs once, with the newest, not 20 times with values already old; the count is exact."""
+    with slicer_client.connect("127.0.0.1", daemon.port, callbacks="spin") as ros:
+        sub = ros.subscribe("/cb_newest", "Int64")
+        values: list[int] = []
+        sub.add_callback(values.append)
+        pub = ros.publisher("/cb_newest", "Int64")
+        wait_until(lambda: pub.publish(-1) >= 1 and sub.count > 0, timeout=20,
+                   what="the first message")
+        ros.process_events()
+        values.clear()
+        start = sub.count
+        for n in range(50):
+            pub.publish(n)
+        sub.wait_for_message(timeout=20, predicate=lambda value: value == 49)
+        assert sub.count - start == 50  # every message came (the daemon's reliable stream)
+        assert ros.process_events() == 1
+        assert values == [49]
+        assert ros.events.replaced >= 49
+
+
+def test_post_newest_replaces_what_waits_and_keeps_its_place() -> None:
+    events = EventDispatcher("spin")
+    ran: list[tuple[str, int]] = []
+    events.post_newest("a", lambda v: ran.append(("a", v)), 1)
+    events.post(lambda: ran.append(("plain", 0)))
+    events.post_newest("a", lambda v: ran.append(("a", v)), 2)
+    events.post_newest("b", lambda v: ran.append(("b", v)), 3)
+    assert events.spin() == 3
+    assert ran == [("a", 2), ("plain", 0), ("b", 3)]  # "a" in its first place, newest value
+    events.post_newest("a", lambda v: ran.append(("a", v)), 4)  # ran: queued anew
+    assert events.spin() == 1 and ran[-1] == ("a", 4)
+    events.close()

@@ -170,7 +170,7 @@ def test_the_client_request_goes_through_its_command_route() -> None:
 
     class Stub:
         address, watches_silence, drops_late_values, connected = "stub", False, False, True
-        carries_whole_messages = True
+        carries_whole_messages, display_hz = True, None
 
         def __init__(self) -> None:
             self.command = Recorder({"topics": [{"topic": "/a", "types": ["x/msg/Y"]}]})

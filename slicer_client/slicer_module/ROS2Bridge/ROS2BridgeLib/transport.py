@@ -12,6 +12,7 @@ from typing import Any, Callable, Mapping, Optional
 import slicer
 import vtk
 
+from protocol import commands as c
 from protocol.liveness import HEARTBEAT_DEVICE
 from protocol.messages import Message
 from protocol.naming import KEY_ROBOT
@@ -79,6 +80,9 @@ class ConnectorTransport:
     # their JSON fits 65535 bytes (protocol.messages.document_body); a larger one is a JSON
     # message, which the connector does not import (standard OpenIGTLink types only).
     carries_whole_messages = True
+    # The connector imports every message into the scene on the main thread, which a
+    # display shows at its frame rate: the daemon sends each stream's newest once a frame.
+    display_hz: Optional[float] = c.DISPLAY_HZ
 
     def __init__(self, connector: Any, clock: Callable[[], float] = time.monotonic) -> None:
         self.connector = connector
