@@ -24,11 +24,10 @@ from std_msgs.msg import String as StringMsg
 
 from bridge.codecs import CodecError, TypeCodec, codec_for, message_to_json
 from bridge.codecs.base import Encoded, stream_message
-from bridge.codecs.fast import (NotFast, RawPoseStream, has_fast_path, pose_document,
+from bridge.codecs.fast import (NotFast, RawPoseStream, pose_document,
                                 read_raw_pose, transform_body)
 from bridge.codecs.generic import document_to_json
 from bridge.codecs.fast_image import RawImageStream
-from bridge.codecs.image import ImageCodec
 from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
 from bridge.core.dispatch import Created, Handler, Result
@@ -44,6 +43,7 @@ from bridge.ros.graph_types import refuse_other_type
 from bridge.ros.qos import default_depth, qos_profile
 from bridge.ros.raw_reader import BatchTopic
 from bridge.ros.ros_node import RosNode
+from bridge.topics.routes import Route, route_for
 from bridge.topics.whole_messages import WholeMessages, WholeStream
 from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
                                CreateSubscriber, ErrorCode, ForbiddenError, GetLastMessage, Op,
@@ -80,14 +80,10 @@ class TopicInfo:
 
 
 class SubscriberBridge:
-    """One ROS topic streamed to every client as one device.
-
-    Hot types (Pose, PoseStamped, TransformStamped) are taken raw: the callback gets the
-    serialized bytes and `RawPoseStream` turns them into the TRANSFORM's bytes without
-    building an rclpy message; `last_message` deserializes the last bytes only when asked.
-    Other types are taken as rclpy messages and converted by their codec. Either way the
-    callback hands one `Frame` to the hub through the bridge's channel, which `close`
-    closes first: a callback still running then cannot bring the device back.
+    """One ROS topic streamed to every client as one device, by its kind's route
+    (bridge/topics/routes.py). Each message becomes one `Frame` handed to the hub through
+    the bridge's channel, which `close` closes first: a callback still running then cannot
+    bring the device back. `last_message` deserializes the last bytes only when asked.
     """
 
     def __init__(self, ros: RosNode, hub: Hub, *, topic: str, codec: TypeCodec, qos: QoS,
@@ -119,17 +115,12 @@ class SubscriberBridge:
         # A volatile image or cloud is not kept for clients that connect later (a late ROS
         # subscriber would not get it either): 20 MB clouds would stay in memory for good.
         hub.set_volatile(device, qos.durability != "transient_local")
-        # A filtered stream needs the message itself: only unfiltered poses go raw.
-        self._fast = (RawPoseStream(codec, device, metadata)
-                      if has_fast_path(codec.ros_type) and message_filter is None else None)
-        # Images: the pixels go where they lie, in frames made from what the codec made of
-        # the stream's last differing message (bridge/codecs/fast_image.py).
-        self._images = (RawImageStream()
-                        if isinstance(codec, ImageCodec) and message_filter is None else None)
-        # Taken serialized whatever the type: the size is known before anything is kept,
-        # and the last message stays as its bytes (deserialized only when asked for). Hot
-        # poses are taken by the stream reader, without the interpreter's lock, a burst at
-        # a time (bridge/ros/raw_reader.py); the rest through the executor.
+        self.route = route_for(codec, filtered=message_filter is not None)
+        self._fast = (RawPoseStream(codec, device, metadata) if self.route is Route.POSE
+                      else None)
+        self._images = RawImageStream() if self.route is Route.IMAGE else None
+        # Hot poses are taken by the stream reader, without the interpreter's lock, a burst
+        # at a time (bridge/ros/raw_reader.py); the rest through the executor.
         # Where it is built, the reader's thread also converts and writes them itself, without
         # the interpreter, while nothing needs the Python path (bridge/core/native_stream.py).
         # The reader may call back before read_stream returns: all is set before it.
@@ -303,7 +294,7 @@ class SubscriberBridge:
                 session.stash_left()
 
     def _on_message(self, data: bytes) -> None:
-        if self._filter is None and self._encode_serialized(data):
+        if self.route is not Route.MESSAGE and self._encode_serialized(data):
             return
         try:
             msg = deserialize_message(data, self.codec.message_class)
