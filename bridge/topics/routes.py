@@ -55,6 +55,7 @@ def route_for(codec: TypeCodec, filtered: bool) -> Route:
         return Route.POSE
     if isinstance(codec, ImageCodec):
         return Route.IMAGE
-    if type(codec).encode_serialized is not TypeCodec.encode_serialized:
+    reads_bytes = getattr(type(codec), "encode_serialized", TypeCodec.encode_serialized)
+    if reads_bytes is not TypeCodec.encode_serialized:  # its codec has a reader of the bytes
         return Route.SERIALIZED
     return Route.MESSAGE
