@@ -371,9 +371,10 @@ class Results:
     burst: dict[str, Figure] = field(default_factory=dict)
     bursty: dict[str, Figure] = field(default_factory=dict)  # bursts of BURST, same rate
     isolation: dict[str, Figure] = field(default_factory=dict)  # "facade", "stopped"
-    # The user's path (`user_path`): "steady" and "bursty" figures of the callback client;
-    # what the facade node saw.
+    # The user's path (`user_path`), relay -> its callback client's figures, steady and in
+    # bursts; what the facade node saw.
     user: dict[str, Figure] = field(default_factory=dict)
+    user_bursty: dict[str, Figure] = field(default_factory=dict)
     facade_seen: dict[str, int] = field(default_factory=dict)
     resumed: dict[str, float] = field(default_factory=dict)  # the stopped client's
     tf: Optional[Figure] = None
@@ -422,8 +423,8 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
                     print_progress(f"{kind}, bursts of {BURST}", results.bursty[kind])
                 finally:
                     stop_all(readers)
+                user_path(args, publisher, relay, kind, results)
                 if kind == "bridge":
-                    user_path(args, publisher, relay, results)
                     many_clients(args, publisher, relay, "bridge", results.clients)
                 results.rss[kind] = relay.child.rss_mib()
             finally:
@@ -438,27 +439,33 @@ def pose_phases(args: argparse.Namespace, results: Results) -> None:
         publisher.stop()
 
 
-def user_path(args: argparse.Namespace, publisher: Child, relay: Relay,
+def user_path(args: argparse.Namespace, publisher: Child, relay: Relay, kind: str,
               results: Results) -> None:
-    """The stream as users take it: a subscriber node made through the CamelCase facade
-    (an observer reading each message it is told of) and a Pythonic subscriber's callback,
-    each client its own process, both connected; the daemon's CPU, and publish -> callback
-    at the second."""
-    facade = peer("facade client", "facade", str(relay.port), POSE_TOPIC)
-    caller = peer("callback client", "callback", str(relay.port), POSE_TOPIC)
+    """The stream as users take it, each client its own process. The daemon's: a
+    subscriber node made through the CamelCase facade (an observer reading each message
+    it is told of) and a Pythonic subscriber's callback, both connected; the naive relay's:
+    pyigtl's client in a `wait_for_message` loop (it serves one client). The relay's CPU,
+    and publish -> callback."""
+    facade = (peer("facade client", "facade", str(relay.port), POSE_TOPIC)
+              if kind == "bridge" else None)
+    caller = (peer("callback client", "callback", str(relay.port), POSE_TOPIC)
+              if kind == "bridge" else
+              peer("pyigtl client", "naive-callback", str(relay.port), "pose"))
     try:
         reports, cpu, avg = run_phase(publisher, [caller], args.rate, args.seconds,
                                       relay.child, 1)
-        results.user["steady"] = figure_from(reports, int(args.rate * args.seconds),
-                                             args.rate, cpu, avg)
-        print_progress("bridge, user's path", results.user["steady"])
-        results.user["bursty"] = bursty_run(args, publisher, [caller], relay.child)
-        print_progress(f"bridge, user's path, bursts of {BURST}", results.user["bursty"])
-        facade.say("REPORT")
-        seen = json.loads(facade.expect('"received"'))
-        results.facade_seen = {key: int(value) for key, value in seen.items()}
+        results.user[kind] = figure_from(reports, int(args.rate * args.seconds),
+                                         args.rate, cpu, avg)
+        print_progress(f"{kind}, user's path", results.user[kind])
+        results.user_bursty[kind] = bursty_run(args, publisher, [caller], relay.child)
+        print_progress(f"{kind}, user's path, bursts of {BURST}", results.user_bursty[kind])
+        if facade is not None:
+            facade.say("REPORT")
+            seen = json.loads(facade.expect('"received"'))
+            results.facade_seen = {key: int(value) for key, value in seen.items()}
     finally:
-        facade.stop()
+        if facade is not None:
+            facade.stop()
         caller.stop()
 
 
@@ -713,19 +720,20 @@ def table(results: Results, args: argparse.Namespace) -> str:
                      lambda f: f"{ms(f.p50)} / {ms(f.p99)}"))
     rows.append(_row("… delivered", pose, Figure.delivered_text))
     rows.append(_row("… process CPU (share of one core)", pose, lambda f: pct(f.cpu)))
-    user = results.user
-    if user:
-        floor, floor_bursty = results.pose.get("floor", Figure()), results.bursty.get(
-            "floor", Figure())
-        steady, bursty = user.get("steady", Figure()), user.get("bursty", Figure())
-        rows.append(f"| PoseStamped at {rate}, the user's path (a facade subscriber node and "
-                    f"a Pythonic callback, both connected): publish() → callback p50 / p99 "
-                    f"(ms); CPU | {ms(floor.p50)} / {ms(floor.p99)}; {pct(floor.cpu)} | "
-                    f"{ms(steady.p50)} / {ms(steady.p99)}; {pct(steady.cpu)} | |")
-        rows.append(f"| … in bursts of {BURST} at {args.burst_rate:,.0f}/s: p50 / p99 (ms); "
-                    f"CPU | {ms(floor_bursty.p50)} / {ms(floor_bursty.p99)}; "
-                    f"{pct(floor_bursty.cpu)} | {ms(bursty.p50)} / {ms(bursty.p99)}; "
-                    f"{pct(bursty.cpu)} | |")
+    if results.user:
+        user = (results.pose.get("floor", Figure()), results.user.get("bridge", Figure()),
+                results.user.get("naive", Figure()))
+        rows.append(_row(f"PoseStamped at {rate}, the user's path (bridge: a facade "
+                         f"subscriber node and a Pythonic callback, both connected; naive: "
+                         f"pyigtl's client): publish() → callback p50 / p99 (ms); CPU", user,
+                         lambda f: f"{ms(f.p50)} / {ms(f.p99)}; {pct(f.cpu)}"))
+        user_bursty = (results.bursty.get("floor", Figure()),
+                       results.user_bursty.get("bridge", Figure()),
+                       results.user_bursty.get("naive", Figure()))
+        rows.append(_row(f"… in bursts of {BURST} at {args.burst_rate:,.0f}/s: delivered; "
+                         f"p50 / p99 (ms); CPU", user_bursty,
+                         lambda f: f"{f.delivered_text()}; {ms(f.p50)} / {ms(f.p99)}; "
+                                   f"{pct(f.cpu)}"))
         seen = results.facade_seen
         rows.append(f"| … the facade node: ModifiedEvents (each reads GetLastMessage()); "
                     f"GetNumberOfMessages() | | {seen.get('received', 0):,}; "
@@ -797,7 +805,8 @@ def per_khz(results: Results) -> str:
     for name, fig in (("floor", results.pose.get("floor")),
                       ("bridge, 1 client", results.pose.get("bridge")),
                       ("naive, 1 client", results.pose.get("naive")),
-                      ("bridge, the user's path", results.user.get("steady")),
+                      ("bridge, the user's path", results.user.get("bridge")),
+                      ("naive, the user's path", results.user.get("naive")),
                       *((f"bridge, {c} clients", f) for c, f in sorted(results.clients.items())),
                       ("bridge, burst", results.burst.get("bridge")),
                       ("naive, burst", results.burst.get("naive")),

@@ -8,6 +8,7 @@ ROS floor), and a raw OpenIGTLink reader with any number of connections.
     peers.py watch PORT PARENT CHILD [--hello-hz HZ]
     peers.py facade PORT TOPIC [--cloud]
     peers.py callback PORT TOPIC
+    peers.py naive-callback PORT DEVICE
 
 Every peer prints READY when it can start, then obeys lines on stdin:
 
@@ -29,6 +30,8 @@ Every peer prints READY when it can start, then obeys lines on stdin:
 * callback: a Pythonic subscriber (``slicer_client.connect().subscribe``) of TOPIC
   (PoseStamped), a reader whose stream ``callback`` is publish -> its callback (the
   stamp of the newest message the client holds when the callback runs);
+* naive-callback: the naive relay's user, pyigtl's client in a `wait_for_message` loop,
+  a reader whose stream ``callback`` is publish -> the message returned to the loop;
 * watcher (the other client of bench/attacks.py): one raw connection that streams the tf
   lookup PARENT <- CHILD (stream ``tf``) and sends ``hello`` at HZ, each one's round trip
   recorded as stream ``hello`` (stamp: when it was sent); a hello still unanswered at
@@ -621,6 +624,29 @@ def callback(port: int, topic: str) -> None:
     ros.close()
 
 
+def naive_callback(port: int, device: str) -> None:
+    """The naive relay's user: pyigtl's client, a loop on `wait_for_message` (which polls
+    every 10 ms while nothing waits), recording publish -> the message in the user's hands."""
+    import pyigtl
+
+    recorder = Recorder()
+    client = pyigtl.OpenIGTLinkClient(port=port)
+    stop = threading.Event()
+
+    def receive() -> None:
+        while not stop.is_set():
+            message = client.wait_for_message(device, timeout=0.5)
+            if message is not None:
+                arrival = time.time_ns()
+                with recorder.lock:
+                    recorder.add("callback", arrival, int(message.timestamp * _NS))
+
+    threading.Thread(target=receive, daemon=True).start()
+    print("READY", flush=True)
+    _serve_commands(recorder, stop.set)
+    client.stop()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -647,6 +673,9 @@ def main() -> None:
     p = sub.add_parser("callback")
     p.add_argument("port", type=int)
     p.add_argument("topic")
+    p = sub.add_parser("naive-callback")
+    p.add_argument("port", type=int)
+    p.add_argument("device")
     args = parser.parse_args()
     if args.role == "publish":
         publish(args.kind, args.topic)
@@ -658,6 +687,8 @@ def main() -> None:
         facade(args.port, args.topic, args.cloud)
     elif args.role == "callback":
         callback(args.port, args.topic)
+    elif args.role == "naive-callback":
+        naive_callback(args.port, args.device)
     else:
         read(args.port, args.clients, json.loads(args.setup), not args.v1)
 
