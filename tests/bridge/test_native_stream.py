@@ -345,6 +345,75 @@ def test_a_client_that_cannot_take_a_frame_whole_keeps_the_rest_or_is_handed_it(
     theirs.close()
 
 
+def test_a_frame_of_parts_a_socket_takes_in_part_keeps_its_rest_in_order() -> None:
+    """`Slot.send` of parts (a session's image: header, pixels where they lie, metadata),
+    larger than the socket takes at once: what it took and the rest kept are the frame."""
+    ours, theirs = pair()
+    ours.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+    slot = open_slot(ours)
+    rng = random.Random(9)
+    header = bytes(rng.randrange(256) for _ in range(58))
+    pixels = bytes(rng.randrange(256) for _ in range(1 << 20))
+    strided = memoryview(pixels)[::2]  # not contiguous: the lane copies it
+    meta = b"metadata"
+    with slot:
+        assert slot.send((header, strided, meta)) == ns.STASHED
+        assert not slot.open and slot.has_stash and slot.sent == 1
+        # A slot holding a rest writes nothing more: that would pass it.
+        assert slot.send(b"next") == ns.REFUSED
+        rest = slot.take_stash()
+        assert slot.take_stash() is None and not slot.has_stash
+    frame = header + pixels[::2] + meta
+    taken = available_now(theirs)
+    assert 0 < len(taken) < len(frame) and taken + rest == frame
+    with slot:
+        with pytest.raises(ValueError, match="expected 1 to 8 parts, got 9"):
+            slot.send((b"x",) * 9)
+        with pytest.raises(ValueError, match="expected 1 to 8 parts, got 0"):
+            slot.send(())
+    ours.close()
+    theirs.close()
+
+
+def test_a_full_socket_refuses_a_gone_peer_breaks_and_a_disconnected_slot_refuses() -> None:
+    ours, theirs = pair()
+    slot = open_slot(ours)
+    with slot:
+        while (result := slot.send(b"x" * 4096)) == ns.SENT:  # the peer reads nothing
+            pass
+        assert result in (ns.REFUSED, ns.STASHED)
+    ours.close()
+    theirs.close()
+    ours, theirs = pair()
+    theirs.close()  # EPIPE: the loop's transport meets the same error
+    slot = open_slot(ours)
+    with slot:
+        assert slot.send(b"frame") == ns.BROKEN
+        slot.disconnect()
+        assert slot.fd == -1 and not slot.open
+        assert slot.send(b"frame") == ns.REFUSED
+    ours.close()
+
+
+def test_the_lane_refuses_what_it_cannot_be_made_of() -> None:
+    fanout = ns.Fanout(CLOCK_MODULUS)
+    with pytest.raises(ValueError, match="clock_modulus: expected 2 or more, got 1"):
+        ns.Fanout(1)
+    with pytest.raises(ValueError, match="kind: expected POSE, POSE_STAMPED or "
+                                         "TRANSFORM_STAMPED, got 7"):
+        ns.PoseLane(fanout, 7, 1 << 16, 0.1)
+    lane = ns.PoseLane(fanout, ns.POSE, 1 << 16, 0.1)
+    assert lane.frame_ids() is None
+    with pytest.raises(ValueError, match="expected at most 12 and 20 bytes, got 13 and 3"):
+        lane.set_template(b"", b"", b"T" * 13, b"dev", 0, 0, b"")
+    with pytest.raises(ValueError, match=r"expected those of meta_tail \(2 bytes\), got 1 \+ 0"):
+        lane.set_template(b"", b"", b"TRANSFORM", b"dev", 1, 0, b"ab")
+    with pytest.raises(ValueError, match="header_version: expected 1 or 2, got 3"):
+        lane.encode(b"", 3, 0)
+    lane.set_template(b"w", b"", b"TRANSFORM", b"dev", 0, 0, b"")
+    assert lane.frame_ids() == (b"w", b"")
+
+
 @WRITES
 def test_a_handle_that_may_not_wait_leaves_a_held_lock_and_writes_to_all_or_none(
         batch: bool) -> None:
