@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 from geometry_msgs.msg import Pose, PoseStamped, TransformStamped
-from rclpy.serialization import serialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 
 from bridge.codecs import codec_for
 from bridge.codecs.fast import NotFast, RawPoseStream
@@ -117,6 +117,29 @@ def test_other_frame_ids_and_bad_bytes_go_to_python() -> None:
     assert lane.encode(bytes(serialize_message(msg)), 2, 1) is None
     assert lane.encode(data[:-1], 2, 1) is None  # cut short
     assert lane.encode(b"\x00\x00" + data[2:], 2, 1) is None  # big-endian CDR
+
+
+@pytest.mark.parametrize("ros_type, cls", KINDS)
+def test_a_message_cut_short_anywhere_or_with_other_ids_of_the_same_size_goes_to_python(
+        ros_type: str, cls: type) -> None:
+    lane, stream = lane_for(ros_type)
+    data = posed(cls, (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0))
+    teach(lane, stream, data)
+    assert lane.encode(data, 2, 1) is not None
+    for n in range(len(data)):  # every field's bound checked: none read past the end
+        assert lane.encode(data[:n], 2, 1) is None, n
+        with pytest.raises(NotFast):  # the Python path leaves it to rclpy too
+            stream.convert(data[:n])
+    if cls is Pose:
+        return
+    for ids in [("wOrld", "tool"), ("world", "tOol")]:
+        msg = deserialize_message(data, cls)
+        msg.header.frame_id = ids[0]
+        if cls is TransformStamped:
+            msg.child_frame_id = ids[1]
+        elif ids[1] != "tool":
+            continue
+        assert lane.encode(bytes(serialize_message(msg)), 2, 1) is None, ids
 
 
 def posed(cls: type, t: tuple[float, float, float], q: tuple[float, float, float, float],
