@@ -42,6 +42,7 @@ def compiled_modules() -> list:
     modules = [store, lane, *rcl_reader()]
     traced = os.environ.get(TRACED_BUILD)
     if traced:
+        # The copies' own paths in the C files (not "bridge/..."), which the plugin follows.
         return cythonize(traced_modules(modules, Path(traced)), quiet=True,
                          compiler_directives={"linetrace": True},
                          relative_path_in_code_position_comments=False)
