@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo run test test-fast coverage bench fuzz lint clean wheel client-wheel
+.PHONY: setup demo run test test-fast coverage coverage-native bench fuzz lint clean wheel client-wheel
 
 setup:
 	@$(PYTHON) tools/setup_env.py
@@ -36,6 +36,12 @@ coverage: setup
 	$(BIN)/python -m coverage run -m pytest $(PYTEST_ARGS); status=$$?; \
 		$(BIN)/python -m coverage combine --quiet && $(BIN)/python -m coverage report \
 		&& exit $$status
+
+# The compiled modules' .pyx lines, which `coverage` cannot see: their tests against a build
+# with Cython's line tracing (built once per source digest in .cache/native-coverage/), under
+# Cython's coverage plugin. PYTEST_ARGS: other tests to run against it.
+coverage-native: setup
+	$(BIN)/python tools/native_coverage.py $(PYTEST_ARGS)
 
 bench: setup
 	@for script in bench/bench_*.py; do echo "== $$script"; $(BIN)/python $$script || exit 1; done

@@ -16,6 +16,7 @@ not the one with rclpy (a venv's, for ROS from PyPI).
 """
 
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -38,7 +39,37 @@ def compiled_modules() -> list:
     lane = Extension("bridge.core._native_stream", ["bridge/core/_native_stream.pyx"],
                      depends=["bridge/core/send_batch.h"],
                      extra_compile_args=["-O2", "-ffp-contract=off"], optional=True)
-    return cythonize([store, lane, *rcl_reader()], quiet=True)
+    modules = [store, lane, *rcl_reader()]
+    traced = os.environ.get(TRACED_BUILD)
+    if traced:
+        # The copies' own paths in the C files (not "bridge/..."), which the plugin follows.
+        return cythonize(traced_modules(modules, Path(traced)), quiet=True,
+                         compiler_directives={"linetrace": True},
+                         relative_path_in_code_position_comments=False)
+    return cythonize(modules, quiet=True)
+
+
+# The coverage build of the same modules (tools/native_coverage.py sets it to a directory).
+TRACED_BUILD = "SLICER_ROS2_BRIDGE_TRACED_BUILD"
+
+
+def traced_modules(modules: list, out: Path) -> list:
+    """The modules with Cython's line tracing, for coverage (tools/native_coverage.py): built
+    from copies of their sources in ``out``, so their C files lie beside those copies (where
+    Cython's coverage plugin looks, by the absolute paths traced) and never beside the
+    production ones, which `build_ext --inplace` would then take as up to date."""
+    for module in modules:
+        for source in [*module.sources, *module.depends]:
+            (out / source).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(HERE / source, out / source)
+        module.sources = [str(out / source) for source in module.sources]
+        module.depends = [str(out / source) for source in module.depends]
+        # CYTHON_TRACE_NOGIL: the lanes' code runs without the interpreter's lock. -O1:
+        # half the compile time of -O2; -ffp-contract=off stays, the tests compare bits.
+        module.define_macros.append(("CYTHON_TRACE_NOGIL", "1"))
+        module.extra_compile_args = ["-O1" if arg == "-O2" else arg
+                                     for arg in module.extra_compile_args]
+    return modules
 
 
 def rcl_reader() -> list:

@@ -15,7 +15,10 @@ The Python path stays the reference, and this file follows it step by step:
 - bytes: protocol/framing.py (`StreamTemplate.encode`) and protocol/crc64.py;
 - time: protocol/freshness.py (`daemon_clock_ms`), bridge/core/stream_health.py
   (`Arrivals.note`).
-tests/bridge/test_native_stream.py runs both on the same messages and compares the bytes.
+tests/bridge/test_native_stream.py runs both on the same messages and compares the bytes;
+tests/bridge/test_native_coverage.py runs it on a build of this file with line tracing and
+requires the rules copied here to have run (`make coverage-native` lists the lines that did
+not).
 
 A message this lane does not take as it is (another frame id than its template's, a NaN,
 a number that is not finite as float32 once in mm, bytes it cannot read, a client that is not writable at once, a

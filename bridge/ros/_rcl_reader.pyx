@@ -23,6 +23,7 @@ them under ``sys.prefix/include``); imported only after rclpy, which has loaded 
 libraries this module needs. Elsewhere the daemon takes these topics through rclpy.
 """
 
+cimport cython
 from cpython.bytes cimport PyBytes_FromStringAndSize
 from cpython.memoryview cimport PyMemoryView_FromMemory
 from cpython.pycapsule cimport PyCapsule_GetPointer
@@ -138,6 +139,10 @@ cdef struct _Tell:
     _Handler *handler  # NULL: the reader's thread takes its messages
 
 
+# Never traced, in the coverage build either (tools/native_coverage.py): a middleware thread
+# has no tracer, and tracing would take the interpreter's lock there.
+@cython.linetrace(False)
+@cython.profile(False)
 cdef void _on_new_messages(const void *user_data, size_t count) noexcept nogil:
     # A middleware thread: no interpreter, no allocation but the take's, as short as can be.
     cdef _Tell *tell = <_Tell *>user_data
@@ -150,6 +155,8 @@ cdef void _on_new_messages(const void *user_data, size_t count) noexcept nogil:
     pthread_mutex_unlock(&shared.lock)
 
 
+@cython.linetrace(False)  # a middleware thread's, as above
+@cython.profile(False)
 cdef bint _take_here(_Tell *tell) noexcept nogil:
     """Take ``tell``'s messages and hand each to its native handler, in the middleware's
     thread; True when none is left. False leaves them to the reader's thread: it is taking
@@ -517,6 +524,8 @@ cdef class RawReader:
             self._shared = NULL
 
 
+@cython.linetrace(False)  # a middleware thread's, as above
+@cython.profile(False)
 cdef void _ignore_new_messages(const void *user_data, size_t count) noexcept nogil:
     pass
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 from geometry_msgs.msg import Pose, PoseStamped, TransformStamped
-from rclpy.serialization import serialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 
 from bridge.codecs import codec_for
 from bridge.codecs.fast import NotFast, RawPoseStream
@@ -117,6 +117,29 @@ def test_other_frame_ids_and_bad_bytes_go_to_python() -> None:
     assert lane.encode(bytes(serialize_message(msg)), 2, 1) is None
     assert lane.encode(data[:-1], 2, 1) is None  # cut short
     assert lane.encode(b"\x00\x00" + data[2:], 2, 1) is None  # big-endian CDR
+
+
+@pytest.mark.parametrize("ros_type, cls", KINDS)
+def test_a_message_cut_short_anywhere_or_with_other_ids_of_the_same_size_goes_to_python(
+        ros_type: str, cls: type) -> None:
+    lane, stream = lane_for(ros_type)
+    data = posed(cls, (1.0, 2.0, 3.0), (0.0, 0.0, 0.0, 1.0))
+    teach(lane, stream, data)
+    assert lane.encode(data, 2, 1) is not None
+    for n in range(len(data)):  # every field's bound checked: none read past the end
+        assert lane.encode(data[:n], 2, 1) is None, n
+        with pytest.raises(NotFast):  # the Python path leaves it to rclpy too
+            stream.convert(data[:n])
+    if cls is Pose:
+        return
+    for ids in [("wOrld", "tool"), ("world", "tOol")]:
+        msg = deserialize_message(data, cls)
+        msg.header.frame_id = ids[0]
+        if cls is TransformStamped:
+            msg.child_frame_id = ids[1]
+        elif ids[1] != "tool":
+            continue
+        assert lane.encode(bytes(serialize_message(msg)), 2, 1) is None, ids
 
 
 def posed(cls: type, t: tuple[float, float, float], q: tuple[float, float, float, float],
@@ -343,6 +366,75 @@ def test_a_client_that_cannot_take_a_frame_whole_keeps_the_rest_or_is_handed_it(
         assert rest is not None and total % frame_size == 0
     ours.close()
     theirs.close()
+
+
+def test_a_frame_of_parts_a_socket_takes_in_part_keeps_its_rest_in_order() -> None:
+    """`Slot.send` of parts (a session's image: header, pixels where they lie, metadata),
+    larger than the socket takes at once: what it took and the rest kept are the frame."""
+    ours, theirs = pair()
+    ours.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+    slot = open_slot(ours)
+    rng = random.Random(9)
+    header = bytes(rng.randrange(256) for _ in range(58))
+    pixels = bytes(rng.randrange(256) for _ in range(1 << 20))
+    strided = memoryview(pixels)[::2]  # not contiguous: the lane copies it
+    meta = b"metadata"
+    with slot:
+        assert slot.send((header, strided, meta)) == ns.STASHED
+        assert not slot.open and slot.has_stash and slot.sent == 1
+        # A slot holding a rest writes nothing more: that would pass it.
+        assert slot.send(b"next") == ns.REFUSED
+        rest = slot.take_stash()
+        assert slot.take_stash() is None and not slot.has_stash
+    frame = header + pixels[::2] + meta
+    taken = available_now(theirs)
+    assert 0 < len(taken) < len(frame) and taken + rest == frame
+    with slot:
+        with pytest.raises(ValueError, match="expected 1 to 8 parts, got 9"):
+            slot.send((b"x",) * 9)
+        with pytest.raises(ValueError, match="expected 1 to 8 parts, got 0"):
+            slot.send(())
+    ours.close()
+    theirs.close()
+
+
+def test_a_full_socket_refuses_a_gone_peer_breaks_and_a_disconnected_slot_refuses() -> None:
+    ours, theirs = pair()
+    slot = open_slot(ours)
+    with slot:
+        while (result := slot.send(b"x" * 4096)) == ns.SENT:  # the peer reads nothing
+            pass
+        assert result in (ns.REFUSED, ns.STASHED)
+    ours.close()
+    theirs.close()
+    ours, theirs = pair()
+    theirs.close()  # EPIPE: the loop's transport meets the same error
+    slot = open_slot(ours)
+    with slot:
+        assert slot.send(b"frame") == ns.BROKEN
+        slot.disconnect()
+        assert slot.fd == -1 and not slot.open
+        assert slot.send(b"frame") == ns.REFUSED
+    ours.close()
+
+
+def test_the_lane_refuses_what_it_cannot_be_made_of() -> None:
+    fanout = ns.Fanout(CLOCK_MODULUS)
+    with pytest.raises(ValueError, match="clock_modulus: expected 2 or more, got 1"):
+        ns.Fanout(1)
+    with pytest.raises(ValueError, match="kind: expected POSE, POSE_STAMPED or "
+                                         "TRANSFORM_STAMPED, got 7"):
+        ns.PoseLane(fanout, 7, 1 << 16, 0.1)
+    lane = ns.PoseLane(fanout, ns.POSE, 1 << 16, 0.1)
+    assert lane.frame_ids() is None
+    with pytest.raises(ValueError, match="expected at most 12 and 20 bytes, got 13 and 3"):
+        lane.set_template(b"", b"", b"T" * 13, b"dev", 0, 0, b"")
+    with pytest.raises(ValueError, match=r"expected those of meta_tail \(2 bytes\), got 1 \+ 0"):
+        lane.set_template(b"", b"", b"TRANSFORM", b"dev", 1, 0, b"ab")
+    with pytest.raises(ValueError, match="header_version: expected 1 or 2, got 3"):
+        lane.encode(b"", 3, 0)
+    lane.set_template(b"w", b"", b"TRANSFORM", b"dev", 0, 0, b"")
+    assert lane.frame_ids() == (b"w", b"")
 
 
 @WRITES
