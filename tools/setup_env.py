@@ -52,9 +52,10 @@ CMAKE_WHEEL = "cmake==3.31.6"
 # The ROS wheels are built for these CPython versions only.
 SUPPORTED_PYTHONS = ((3, 10), (3, 11), (3, 12), (3, 13))
 # Inputs whose change means the environment must be rebuilt (the install builds the compiled
-# tf store from its .pyx, so an edit of it is one).
+# modules from their sources, so an edit of one is one).
 STAMP_INPUTS = ("pyproject.toml", "setup.py", "tools/setup_env.py",
-                "bridge/tf/_compiled_store.pyx", "bridge/ros/_rcl_reader.pyx")
+                "bridge/tf/_compiled_store.pyx", "bridge/ros/_rcl_reader.pyx",
+                "bridge/core/_native_stream.pyx", "bridge/core/send_batch.h")
 
 
 class SetupError(Exception):
