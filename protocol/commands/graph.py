@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from protocol.auth import NONCE
 from protocol.commands.fields import MAX_NAME, Args
-from protocol.commands.op import Op, Resource
+from protocol.commands.op import Example, Op, Resource
 from protocol.commands.results import (Answered, AuthenticateResult, HelloResult,
                                        ListServicesResult, ListTopicsResult)
 
@@ -25,6 +25,8 @@ class Hello(Op, Answered[HelloResult], op="hello", writes=False):
     stream values that come late by their freshness stamps (protocol/freshness.py); a
     client that shows whatever arrives (3D Slicer's connector) leaves it false, and the
     daemon cuts its dead link before a backlog could age past the bound."""
+
+    examples = (Example({}),)
 
     client: str | None = None
     heartbeat: float | None = None
@@ -46,6 +48,10 @@ class Authenticate(Op, Answered[AuthenticateResult], op="authenticate", writes=F
     to 128 hex digits) and ``proof``, the HMAC of the challenge `hello` gave with it. Once
     accepted, this connection may write (ops that write, data sent to publishers)."""
 
+    examples = (Example(
+        {"nonce": "00000000000000000000000000000000",
+         "proof": "1111111111111111111111111111111111111111111111111111111111111111"}),)
+
     nonce: str
     proof: str
 
@@ -62,6 +68,8 @@ class Authenticate(Op, Answered[AuthenticateResult], op="authenticate", writes=F
 class ListBridges(Op, op="list_bridges", writes=False, content=("frames",)):
     """Everything this daemon currently bridges, with device names."""
 
+    examples = (Example({}),)
+
     def resources(self) -> tuple[Resource, ...]:
         return ()
 
@@ -74,6 +82,8 @@ class ListBridges(Op, op="list_bridges", writes=False, content=("frames",)):
 class ListTopics(Op, Answered[ListTopicsResult], op="list_topics", writes=False):
     """The ROS graph's topics and their types."""
 
+    examples = (Example({}),)
+
     def resources(self) -> tuple[Resource, ...]:
         return ()
 
@@ -85,6 +95,8 @@ class ListTopics(Op, Answered[ListTopicsResult], op="list_topics", writes=False)
 @dataclass(frozen=True)
 class ListServices(Op, Answered[ListServicesResult], op="list_services", writes=False):
     """The ROS graph's services and their types."""
+
+    examples = (Example({}),)
 
     def resources(self) -> tuple[Resource, ...]:
         return ()

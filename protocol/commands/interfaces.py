@@ -20,7 +20,7 @@ from typing import Any, Optional, cast
 
 from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import MISSING, Args
-from protocol.commands.op import Op, Resource
+from protocol.commands.op import Example, Op, Resource
 from protocol.commands.wire import json_type
 
 __all__ = ["BASIC_FIELD_TYPES", "INTERFACE_KINDS", "DescribeType", "FieldDescription",
@@ -43,6 +43,8 @@ class DescribeType(Op, op="describe_type", writes=False):
     """Describe an installed interface type: ``kind`` message (``pkg/msg/Type``, a short
     name), service (``pkg/srv/Type``, or a reference service client class name such as
     ``vtkMRMLROS2ServiceClientSpawnNode``) or action (``pkg/action/Type``)."""
+
+    examples = (Example({"type": "PoseArray"}),)
 
     type: str
     kind: str = "message"

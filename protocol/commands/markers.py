@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import Args
-from protocol.commands.op import Bridge, FrameUse, Op, Resource, TopicUse
+from protocol.commands.op import Bridge, Example, FrameUse, Op, Resource, TopicUse
 from protocol.commands.values import QoS
 from protocol.commands.wire import json_type
 
@@ -67,6 +67,10 @@ class CreateMarkerSubscriber(Op, op="create_marker_subscriber", ros_names=("topi
     frames are judged by the frame globs marker by marker, when they arrive); MESH_RESOURCE
     markers read mesh files only inside the mesh roots (as a client's robot)."""
 
+    examples = (Example(
+        {"topic": "/m", "type": "MarkerArray", "fixed_frame": "/world"},
+        {("frame", "fixed_frame", "world"), ("topic", "topic", "/m")}),)
+
     topic: str
     type: str
     fixed_frame: str
@@ -92,6 +96,8 @@ class CreateMarkerSubscriber(Op, op="create_marker_subscriber", ros_names=("topi
 @dataclass(frozen=True)
 class RemoveMarkerSubscriber(Op, op="remove_marker_subscriber", ros_names=("topic",), writes=False,
                              removes="marker_subscriber"):
+    examples = (Example({"topic": "/m"}),)
+
     topic: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -105,6 +111,8 @@ class RemoveMarkerSubscriber(Op, op="remove_marker_subscriber", ros_names=("topi
 @dataclass(frozen=True)
 class ListMarkers(Op, op="list_markers", ros_names=("topic",), writes=False):
     """The live markers of a marker subscriber: device, ns, id, type, frame, expiry."""
+
+    examples = (Example({"topic": "/m"}, {("topic", "topic", "/m")}),)
 
     topic: str
 

@@ -8,7 +8,7 @@ from typing import Any
 
 from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import MISSING, ROBOT_NAME, ROS_NAME, ROS_NAME_DESC, Args
-from protocol.commands.op import ActionUse, FrameUse, Op, Resource, TopicUse
+from protocol.commands.op import ActionUse, Example, FrameUse, Op, Resource, TopicUse
 from protocol.commands.results import Answered, SendGoalResult, SolveIkResult
 from protocol.commands.robots import joint_values
 from protocol.commands.values import Matrix4, matrix_from
@@ -40,6 +40,10 @@ class SolveIk(Op, Answered[SolveIkResult], op="solve_ik", writes=False):
     positions reach is answered ``"solved": false`` with ``failure`` (``reason``
     unreachable, joint_limit or collision, the joints or the link and obstacle) and the
     best residual (mm, degrees); the client raises `IkFailedError` from it."""
+
+    examples = (Example(
+        {"name": "r", "tip": "tool",
+         "target": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}),)
 
     name: str
     tip: str
@@ -85,6 +89,10 @@ class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False,
     name again replaces it; at most `MAX_OBSTACLES` per robot. Its frame is judged by the
     frame globs (a Marker's as it arrives: a denied one leaves the obstacle unplaced)."""
 
+    examples = (Example(
+        {"name": "r", "obstacle": "skull", "topic": "/skull"},
+        {("topic", "topic", "/skull")}),)
+
     name: str
     obstacle: str
     topic: str
@@ -117,6 +125,8 @@ class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False,
 class RemoveObstacle(Op, op="remove_obstacle", writes=False):
     """Forget obstacle ``obstacle`` of robot ``name`` (its subscription ends)."""
 
+    examples = (Example({"name": "r", "obstacle": "skull"}),)
+
     name: str
     obstacle: str
 
@@ -133,6 +143,8 @@ class ObstacleDistances(Op, op="obstacle_distances", writes=False):
     """At the robot's current joint state: the minimum distance (mm) from ``link`` to each
     obstacle with the nearest points (mm, root link frame), and every link-obstacle pair in
     contact. A read."""
+
+    examples = (Example({"name": "r", "link": "tool"}),)
 
     name: str
     link: str
@@ -151,6 +163,10 @@ class PublishDistance(Op, op="publish_distance", ros_names=("topic",), writes=Tr
     METRES on ``topic``, ``rate_hz`` times a second at the robot's current joint state (for
     virtual fixtures and haptics; a client reads it as any topic). One per topic: the same
     topic again replaces it, ``rate_hz`` 0 stops it. A write (a ROS publisher)."""
+
+    examples = (Example(
+        {"name": "r", "link": "tool", "obstacle": "skull", "topic": "/d"},
+        {("topic", "topic", "/d")}),)
 
     name: str
     link: str
@@ -180,6 +196,8 @@ class PlanMotion(Op, op="plan_motion", writes=False):
     (actuated joints; the others stay), a straight line within the URDF's limits, checked
     for contact with the robot's obstacles at every ``resolution`` (rad or m: the largest
     joint step between two checked configurations). A read: for a preview."""
+
+    examples = (Example({"name": "r", "positions": {"j": 0.5}}),)
 
     name: str
     positions: tuple[tuple[str, float], ...]
@@ -212,6 +230,10 @@ class ExecuteMotion(Op, Answered[SendGoalResult], op="execute_motion", ros_names
     server to accept); refused with ``REJECTED`` naming the link, the obstacle and where on
     the path when it is not. ``duration_s``: the motion's time (omitted: from the URDF's
     velocity limits, at half of them, at least 1 s). A write: it moves the robot."""
+
+    examples = (Example(
+        {"name": "r", "positions": {"j": 0.5}, "action": "/arm/fjt"},
+        {("action", "action", "/arm/fjt")}),)
 
     name: str
     positions: tuple[tuple[str, float], ...]

@@ -35,7 +35,7 @@ all derived from the registry below (`REQUEST_TYPES`, `bridge_kinds`).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, fields, replace
 from typing import Any, Callable, ClassVar, Optional, TypeVar, Union, cast
 
@@ -44,7 +44,8 @@ from protocol.commands.errors import WrongTypeError
 from protocol.commands.fields import Args
 from protocol.commands.wire import MAX_OP_NAME_BYTES, SCHEMA_VERSION, dumps, json_type, loads
 
-__all__ = ["CONTENT", "REQUEST_TYPES", "ActionUse", "Bridge", "BridgeKind", "FileUse", "FrameUse",
+__all__ = ["CONTENT", "REQUEST_TYPES", "ActionUse", "Bridge", "BridgeKind", "Example", "FileUse",
+           "FrameUse",
            "NameResolver", "Op", "ParameterUse", "Request", "Resource", "ServiceUse", "TopicUse",
            "bridge_kinds", "encode_request", "parse_request"]
 
@@ -154,6 +155,26 @@ class BridgeKind:
     follow_ups: tuple[type[Op], ...] = ()
 
 
+# ---------------------------------------------------------------------------- examples
+
+
+@dataclass(frozen=True)
+class Example:
+    """One valid request of an op, beside its declaration: its JSON ``args``, and the
+    resources it must declare, each ``(kind, field, judged name)`` (kind: topic, service,
+    action, parameter (name ``node.names``, ``OWN`` for the daemon's node), frame or
+    file). tests/protocol derives its tables from these: every op parses its examples,
+    declares exactly those resources, and round-trips requests drawn from its fields."""
+
+    args: Mapping[str, Any]
+    declares: frozenset[tuple[str, str, str]] = frozenset()
+
+    def __init__(self, args: Mapping[str, Any],
+                 declares: Iterable[tuple[str, str, str]] = ()) -> None:
+        object.__setattr__(self, "args", args)
+        object.__setattr__(self, "declares", frozenset(declares))
+
+
 # ---------------------------------------------------------------------------- requests
 
 REQUEST_TYPES: dict[str, type[Op]] = {}
@@ -186,6 +207,8 @@ class Op:
     ros_names: ClassVar[tuple[str, ...]] = ()
     client_frames: ClassVar[tuple[str, ...]] = ()
     content: ClassVar[tuple[str, ...]] = ()
+    # Its valid requests, for the tests (`Example`); every op gives at least one.
+    examples: ClassVar[tuple[Example, ...]] = ()
 
     def __init_subclass__(cls, *, op: str = "", writes: Optional[bool] = None,
                           creates: Optional[Bridge] = None, removes: Optional[str] = None,

@@ -8,7 +8,7 @@ from typing import cast
 
 from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import MAX_NAME, MAX_TEXT, PARAM_NAME, Args, check_str
-from protocol.commands.op import Bridge, Op, ParameterUse, Resource
+from protocol.commands.op import Bridge, Example, Op, ParameterUse, Resource
 from protocol.commands.results import (Answered, GetParametersResult, ListParametersResult,
                                        ObserveParametersResult, SetParametersResult)
 from protocol.commands.values import ParameterValue
@@ -24,6 +24,8 @@ class CreateParameterClient(Op, op="create_parameter_client", ros_names=("node",
                                            section="parameter_clients")):
     """Watch another node's parameters (``/robot_state_publisher`` or ``ns/node``)."""
 
+    examples = (Example({"node": "/n"}),)
+
     node: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -38,6 +40,8 @@ class CreateParameterClient(Op, op="create_parameter_client", ros_names=("node",
 class RemoveParameterClient(
         Op, op="remove_parameter_client", ros_names=("node",), writes=False,
         removes="parameter_client"):
+    examples = (Example({"node": "/n"}),)
+
     node: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -52,6 +56,8 @@ class RemoveParameterClient(
 class ListParameters(Op, Answered[ListParametersResult], op="list_parameters", ros_names=("node",),
                      content=("parameters",),
                      writes=False):
+    examples = (Example({"node": "/n"}),)
+
     node: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -66,6 +72,8 @@ class ListParameters(Op, Answered[ListParametersResult], op="list_parameters", r
 class GetParameters(Op, Answered[GetParametersResult], op="get_parameters", ros_names=("node",),
                     writes=False):
     """Values of a remote node's parameters (unknown ones come back ``not_set``)."""
+
+    examples = (Example({"node": "/n", "names": ["p"]}, {("parameter", "names", "/n.p")}),)
 
     node: str
     names: tuple[str, ...]
@@ -95,6 +103,10 @@ class SetParameters(Op, Answered[SetParametersResult], op="set_parameters", ros_
                     writes=True):
     """Set a remote node's parameters; the reply gives each one's outcome."""
 
+    examples = (Example(
+        {"node": "/n", "values": {"p": {"type": "integer", "value": 1}}},
+        {("parameter", "values", "/n.p")}),)
+
     node: str
     values: dict[str, ParameterValue]
 
@@ -117,6 +129,8 @@ class ObserveParameters(Op, Answered[ObserveParametersResult],
     declared or changed from now on (the reference's parameter node keeps those too), as
     far as the parameter globs let a client see it."""
 
+    examples = (Example({"node": "/n", "names": ["p"]}, {("parameter", "names", "/n.p")}),)
+
     node: str
     names: tuple[str, ...]
     all_changes: bool = False
@@ -133,6 +147,10 @@ class ObserveParameters(Op, Answered[ObserveParametersResult],
 @dataclass(frozen=True)
 class ServerDeclareParameter(Op, op="server_declare_parameter", writes=True):
     """Declare a parameter on the daemon's own ROS node (a parameter server for Slicer)."""
+
+    examples = (Example(
+        {"name": "p", "value": {"type": "integer", "value": 1}},
+        {("parameter", "name", "OWN.p")}),)
 
     name: str
     value: ParameterValue
@@ -153,6 +171,10 @@ class ServerDeclareParameter(Op, op="server_declare_parameter", writes=True):
 
 @dataclass(frozen=True)
 class ServerSetParameter(Op, op="server_set_parameter", writes=True):
+    examples = (Example(
+        {"name": "p", "value": {"type": "integer", "value": 1}},
+        {("parameter", "name", "OWN.p")}),)
+
     name: str
     value: ParameterValue
 
@@ -169,6 +191,8 @@ class ServerSetParameter(Op, op="server_set_parameter", writes=True):
 class ServerGetParameters(Op, op="server_get_parameters", writes=False):
     """Values of the daemon's own parameters; ``names`` omitted or empty = all."""
 
+    examples = (Example({"names": ["p"]}, {("parameter", "names", "OWN.p")}),)
+
     names: tuple[str, ...] = ()
 
     def resources(self) -> tuple[Resource, ...]:
@@ -181,6 +205,8 @@ class ServerGetParameters(Op, op="server_get_parameters", writes=False):
 
 @dataclass(frozen=True)
 class ServerUndeclareParameter(Op, op="server_undeclare_parameter", writes=True):
+    examples = (Example({"name": "p"}, {("parameter", "name", "OWN.p")}),)
+
     name: str
 
     def resources(self) -> tuple[Resource, ...]:

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from protocol.commands.fields import Args, check_float
-from protocol.commands.op import Op, Resource
+from protocol.commands.op import Example, Op, Resource
 from protocol.commands.results import Answered, Result
 from protocol.commands.values import Stamp
 
@@ -63,6 +63,8 @@ def _seconds(a: Args, name: str, high: float = float("inf")) -> float:
 class PlaybackStatus(Op, Answered[PlaybackResult], op="playback_status", writes=False):
     """The player's clock and state."""
 
+    examples = (Example({}),)
+
     def resources(self) -> tuple[Resource, ...]:
         return ()
 
@@ -75,6 +77,8 @@ class PlaybackStatus(Op, Answered[PlaybackResult], op="playback_status", writes=
 class PausePlayback(Op, Answered[PlaybackResult], op="pause_playback", writes=True):
     """Hold the clock where it is (streams stop; lookups and meshes stay)."""
 
+    examples = (Example({}),)
+
     def resources(self) -> tuple[Resource, ...]:
         return ()
 
@@ -86,6 +90,8 @@ class PausePlayback(Op, Answered[PlaybackResult], op="pause_playback", writes=Tr
 @dataclass(frozen=True)
 class ResumePlayback(Op, Answered[PlaybackResult], op="resume_playback", writes=True):
     """Run the clock on from where it was held (from the start again if it had ended)."""
+
+    examples = (Example({}),)
 
     def resources(self) -> tuple[Resource, ...]:
         return ()
@@ -101,6 +107,8 @@ class SeekPlayback(Op, Answered[PlaybackResult], op="seek_playback", writes=True
     poses, images and values shown next are those at that time: each stream's last
     message at or before it. A paused player stays paused."""
 
+    examples = (Example({"offset": 1.5}),)
+
     offset: float
 
     def resources(self) -> tuple[Resource, ...]:
@@ -115,6 +123,8 @@ class SeekPlayback(Op, Answered[PlaybackResult], op="seek_playback", writes=True
 class SetPlaybackRate(Op, Answered[PlaybackResult], op="set_playback_rate", writes=True):
     """Play at ``rate`` times the bag's own speed (0 < rate <= 1000); the bag time shown
     does not jump."""
+
+    examples = (Example({"rate": 2.0}),)
 
     rate: float
 

@@ -14,7 +14,7 @@ from typing import Optional
 
 from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import MAX_TEXT, ROS_NAME, ROS_NAME_DESC, Args
-from protocol.commands.op import FileUse, NameResolver, Op, Resource, TopicUse
+from protocol.commands.op import Example, FileUse, NameResolver, Op, Resource, TopicUse
 
 __all__ = ["BAG_SUFFIX", "COMPRESSIONS", "RecordingStatus", "StartRecording", "StopRecording",
            "bag_path_problem"]
@@ -51,6 +51,10 @@ class StartRecording(Op, op="start_recording", writes=True):
     those bridged later too. It lasts until `StopRecording` (any writer's) or the daemon
     stops."""
 
+    examples = (Example(
+        {"path": "/data/s.mcap", "topics": ["/a", "/b"]},
+        {("file", "path", "/data/s.mcap"), ("topic", "topics", "/a"), ("topic", "topics", "/b")}),)
+
     path: str
     topics: tuple[str, ...] = ()
     overwrite: bool = False
@@ -78,6 +82,8 @@ class StopRecording(Op, op="stop_recording", writes=True):
     """Stop the recording into ``path``: the bag is finished (index, summary) and closed;
     the reply is its last `RecordingStatus`."""
 
+    examples = (Example({"path": "/data/s.mcap"}),)
+
     path: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -93,6 +99,8 @@ class RecordingStatus(Op, op="recording_status", writes=False):
     """A recording's counts: messages and drops per topic, bytes on disk, elapsed time,
     topics wanted but not recorded yet (and why), and ``error`` if it stopped on its own
     (a full disk)."""
+
+    examples = (Example({"path": "/data/s.mcap"}),)
 
     path: str
 

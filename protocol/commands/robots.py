@@ -9,8 +9,8 @@ from typing import Any, cast
 from protocol.commands.errors import TooLargeError
 from protocol.commands.fields import (MAX_NAME, ROBOT_NAME, ROS_NAME, ROS_NAME_DESC, Args,
                                       check_float, check_str)
-from protocol.commands.op import (Bridge, FileUse, FrameUse, NameResolver, Op, ParameterUse,
-                                  Resource, TopicUse)
+from protocol.commands.op import (Bridge, Example, FileUse, FrameUse, NameResolver, Op,
+                                  ParameterUse, Resource, TopicUse)
 from protocol.commands.results import (Answered, DescribeRobotJointsResult,
                                        SetRobotJointsResult)
 from protocol.commands.values import RobotSource
@@ -51,6 +51,11 @@ class CreateRobot(Op, op="create_robot", ros_names=("source.node", "source.topic
     set, nothing on its topic) leaves the robot waiting for it; False refuses the request
     with ``NOT_FOUND`` naming what is missing. It is how one asks, not what is made: two
     requests that differ only in it create the same robot."""
+
+    examples = (Example(
+        {"name": "r", "namespace": "PSM1", "fixed_frame": "world"},
+        {("frame", "fixed_frame", "world"),
+         ("parameter", "source.parameter", "PSM1/robot_state_publisher.robot_description")}),)
 
     name: str
     source: RobotSource = RobotSource()
@@ -119,6 +124,8 @@ class CreateRobot(Op, op="create_robot", ros_names=("source.node", "source.topic
 
 @dataclass(frozen=True)
 class RemoveRobot(Op, op="remove_robot", writes=False, removes="robot"):
+    examples = (Example({"name": "r"}),)
+
     name: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -132,6 +139,8 @@ class RemoveRobot(Op, op="remove_robot", writes=False, removes="robot"):
 
 @dataclass(frozen=True)
 class ListRobots(Op, op="list_robots", writes=False):
+
+    examples = (Example({}),)
 
     def resources(self) -> tuple[Resource, ...]:
         return ()
@@ -147,6 +156,8 @@ class DescribeRobotJoints(Op, Answered[DescribeRobotJointsResult],
     """The joints of a loaded robot, from its URDF: type, limits, mimic (leader, multiplier,
     offset), whether a client sets it (``actuated``: moving and not a mimic), and the
     joint-states topic its state publisher listens to by default."""
+
+    examples = (Example({"name": "r"}),)
 
     name: str
 
@@ -170,6 +181,10 @@ class SetRobotJoints(Op, Answered[SetRobotJointsResult], op="set_robot_joints",
     (``multiplier * leader + offset``), and must fall in their own limits too. Only the
     joints given (and their mimics) are in the message: a state publisher keeps the
     others where they were, as robot_state_publisher does."""
+
+    examples = (Example(
+        {"name": "r", "positions": {"j": 0.5}, "topic": "/PSM1/joint_states"},
+        {("topic", "topic", "/PSM1/joint_states")}),)
 
     name: str
     positions: tuple[tuple[str, float], ...]

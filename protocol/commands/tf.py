@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import cast
 
 from protocol.commands.fields import Args
-from protocol.commands.op import Bridge, FrameUse, Op, Resource
+from protocol.commands.op import Bridge, Example, FrameUse, Op, Resource
 from protocol.commands.results import Answered, LookupTransformResult
 from protocol.commands.values import Matrix4, Stamp, matrix_from
 
@@ -24,6 +24,10 @@ class CreateTfLookup(Op, op="create_tf_lookup", client_frames=("parent", "child"
                      creates=Bridge("tf_lookup", ("parent", "child"), section="tf_lookups")):
     """Stream parent->child as a TRANSFORM (mm) whenever it changes, at most ``rate_hz``."""
 
+    examples = (Example(
+        {"parent": "a", "child": "b"},
+        {("frame", "child", "b"), ("frame", "parent", "a")}),)
+
     parent: str
     child: str
     rate_hz: float | None = None
@@ -39,6 +43,8 @@ class CreateTfLookup(Op, op="create_tf_lookup", client_frames=("parent", "child"
 @dataclass(frozen=True)
 class RemoveTfLookup(Op, op="remove_tf_lookup",
                      client_frames=("parent", "child"), writes=False, removes="tf_lookup"):
+    examples = (Example({"parent": "a", "child": "b"}),)
+
     parent: str
     child: str
 
@@ -54,6 +60,10 @@ class RemoveTfLookup(Op, op="remove_tf_lookup",
 class LookupTransform(Op, Answered[LookupTransformResult], op="lookup_transform",
                       client_frames=("parent", "child"), writes=False):
     """One tf lookup; ``time`` omitted = latest; waits up to ``timeout`` seconds."""
+
+    examples = (Example(
+        {"parent": "a", "child": "b"},
+        {("frame", "child", "b"), ("frame", "parent", "a")}),)
 
     parent: str
     child: str
@@ -76,6 +86,10 @@ class CreateTfBroadcaster(Op, op="create_tf_broadcaster",
                                          section="tf_broadcasters")):
     """Broadcast parent->child; ``static`` uses /tf_static (latched)."""
 
+    examples = (Example(
+        {"parent": "a", "child": "b"},
+        {("frame", "child", "b"), ("frame", "parent", "a")}),)
+
     parent: str
     child: str
     static: bool = False
@@ -93,6 +107,8 @@ class CreateTfBroadcaster(Op, op="create_tf_broadcaster",
 class RemoveTfBroadcaster(Op, op="remove_tf_broadcaster",
                           client_frames=("parent", "child"), writes=False,
                           removes="tf_broadcaster"):
+    examples = (Example({"parent": "a", "child": "b"}),)
+
     parent: str
     child: str
 
@@ -109,6 +125,11 @@ class BroadcastTransform(Op, op="broadcast_transform",
                          client_frames=("parent", "child"), writes=True):
     """Broadcast one parent->child transform given as a rigid 4x4 matrix in mm (rows);
     ``stamp`` omitted = the daemon's current time."""
+
+    examples = (Example(
+        {"parent": "a", "child": "b",
+         "matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]},
+        {("frame", "child", "b"), ("frame", "parent", "a")}),)
 
     parent: str
     child: str

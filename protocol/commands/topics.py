@@ -7,7 +7,7 @@ from typing import Any
 
 from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import MISSING, ROS_NAME, ROS_NAME_DESC, Args
-from protocol.commands.op import Bridge, FrameUse, Op, Resource, TopicUse
+from protocol.commands.op import Bridge, Example, FrameUse, Op, Resource, TopicUse
 from protocol.commands.results import Answered, GetLastMessageResult, PublishResult
 from protocol.commands.types import check_message_type, resolve_message_type
 from protocol.commands.values import QoS
@@ -44,6 +44,8 @@ class CreateSubscriber(Op, op="create_subscriber", ros_names=("topic",), writes=
     reply names ``message_device`` (lossless, for message objects; images and point clouds
     have none: their IMAGE / POLYDATA stream is already whole)."""
 
+    examples = (Example({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),)
+
     topic: str
     type: str
     qos: QoS = QoS()
@@ -66,6 +68,8 @@ class CreateSubscriber(Op, op="create_subscriber", ros_names=("topic",), writes=
 @dataclass(frozen=True)
 class RemoveSubscriber(Op, op="remove_subscriber", ros_names=("topic",),
                        writes=False, removes="subscriber"):
+    examples = (Example({"topic": "/a"}),)
+
     topic: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -88,6 +92,8 @@ class CreatePublisher(Op, op="create_publisher", ros_names=("topic", "labels_top
     alike when it is published. ``labels_topic``: where the labels of markups sent as POINT
     go (a ``std_msgs/String`` holding a JSON list, one label per point, published just
     before the points), since PoseArray and PointStamped carry none."""
+
+    examples = (Example({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),)
 
     topic: str
     type: str
@@ -121,6 +127,8 @@ class CreatePublisher(Op, op="create_publisher", ros_names=("topic", "labels_top
 @dataclass(frozen=True)
 class RemovePublisher(Op, op="remove_publisher", ros_names=("topic",),
                       writes=False, removes="publisher"):
+    examples = (Example({"topic": "/a"}),)
+
     topic: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -138,6 +146,8 @@ class Publish(Op, Answered[PublishResult], op="publish", ros_names=("topic",), w
     4x4 mm matrix for Pose/PoseStamped/Transform...); or ``message``: the whole message as
     generic JSON in ROS units (metres, quaternions), every field checked strictly, as a
     subscriber's message stream gives it. Reply: subscriber count."""
+
+    examples = (Example({"topic": "/a", "value": "x"}, {("topic", "topic", "/a")}),)
 
     topic: str
     value: Any = None
@@ -171,6 +181,8 @@ class GetLastMessage(Op, Answered[GetLastMessageResult], op="get_last_message",
                      ros_names=("topic",),
                      writes=False):
     """The last message a subscriber received, as YAML or JSON text, and the count."""
+
+    examples = (Example({"topic": "/a"}, {("topic", "topic", "/a")}),)
 
     topic: str
     format: str = "yaml"  # yaml | json

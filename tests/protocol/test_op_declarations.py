@@ -1,11 +1,12 @@
 """Every op of the schema declares what it writes, creates, removes and touches, and the
 rest of the project derives its tables from those declarations (issue 11: "the op is the
-unit"). The examples below enumerate every op: a new op without one fails here."""
+unit"). Each op carries its examples (`Op.examples`: a valid request and the resources it
+must declare); the tests iterate the registry, so a new op without one fails here, named."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import cast
 
 import pytest
 
@@ -13,101 +14,18 @@ from protocol import commands as c
 from protocol.commands import (ActionUse, Bridge, FileUse, FrameUse, Op, ParameterUse,
                                Resource, ServiceUse, TopicUse)
 
-IDENTITY = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
-VALUE = {"type": "integer", "value": 1}
 
-# One valid request per op, and the resources it must declare (kind, field, judged name).
-EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
-    "hello": ({}, set()),
-    "list_bridges": ({}, set()),
-    "list_topics": ({}, set()),
-    "list_services": ({}, set()),
-    "describe_type": ({"type": "PoseArray"}, set()),
-    "authenticate": ({"nonce": "0" * 32, "proof": "1" * 64}, set()),
-    "create_subscriber": ({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),
-    "remove_subscriber": ({"topic": "/a"}, set()),
-    "create_publisher": ({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),
-    "remove_publisher": ({"topic": "/a"}, set()),
-    "publish": ({"topic": "/a", "value": "x"}, {("topic", "topic", "/a")}),
-    "get_last_message": ({"topic": "/a"}, {("topic", "topic", "/a")}),
-    "create_parameter_client": ({"node": "/n"}, set()),
-    "remove_parameter_client": ({"node": "/n"}, set()),
-    "list_parameters": ({"node": "/n"}, set()),
-    "get_parameters": ({"node": "/n", "names": ["p"]}, {("parameter", "names", "/n.p")}),
-    "set_parameters": ({"node": "/n", "values": {"p": VALUE}},
-                       {("parameter", "values", "/n.p")}),
-    "observe_parameters": ({"node": "/n", "names": ["p"]}, {("parameter", "names", "/n.p")}),
-    "server_declare_parameter": ({"name": "p", "value": VALUE},
-                                 {("parameter", "name", "OWN.p")}),
-    "server_set_parameter": ({"name": "p", "value": VALUE}, {("parameter", "name", "OWN.p")}),
-    "server_get_parameters": ({"names": ["p"]}, {("parameter", "names", "OWN.p")}),
-    "server_undeclare_parameter": ({"name": "p"}, {("parameter", "name", "OWN.p")}),
-    "create_tf_lookup": ({"parent": "a", "child": "b"},
-                         {("frame", "parent", "a"), ("frame", "child", "b")}),
-    "remove_tf_lookup": ({"parent": "a", "child": "b"}, set()),
-    "lookup_transform": ({"parent": "a", "child": "b"},
-                         {("frame", "parent", "a"), ("frame", "child", "b")}),
-    "create_tf_broadcaster": ({"parent": "a", "child": "b"},
-                              {("frame", "parent", "a"), ("frame", "child", "b")}),
-    "remove_tf_broadcaster": ({"parent": "a", "child": "b"}, set()),
-    "broadcast_transform": ({"parent": "a", "child": "b", "matrix": IDENTITY},
-                            {("frame", "parent", "a"), ("frame", "child", "b")}),
-    "create_robot": ({"name": "r", "namespace": "PSM1", "fixed_frame": "world"},
-                     {("parameter", "source.parameter",
-                       "PSM1/robot_state_publisher.robot_description"),
-                      ("frame", "fixed_frame", "world")}),
-    "remove_robot": ({"name": "r"}, set()),
-    "list_robots": ({}, set()),
-    "describe_robot_joints": ({"name": "r"}, set()),
-    "playback_status": ({}, set()),
-    "pause_playback": ({}, set()),
-    "resume_playback": ({}, set()),
-    "seek_playback": ({"offset": 1.5}, set()),
-    "set_playback_rate": ({"rate": 2.0}, set()),
-    "set_robot_joints": ({"name": "r", "positions": {"j": 0.5}, "topic": "/PSM1/joint_states"},
-                         {("topic", "topic", "/PSM1/joint_states")}),
-    "solve_ik": ({"name": "r", "tip": "tool", "target": IDENTITY}, set()),  # a read
-    "set_obstacle": ({"name": "r", "obstacle": "skull", "topic": "/skull"},
-                     {("topic", "topic", "/skull")}),
-    "remove_obstacle": ({"name": "r", "obstacle": "skull"}, set()),
-    "obstacle_distances": ({"name": "r", "link": "tool"}, set()),
-    "publish_distance": ({"name": "r", "link": "tool", "obstacle": "skull", "topic": "/d"},
-                         {("topic", "topic", "/d")}),
-    "plan_motion": ({"name": "r", "positions": {"j": 0.5}}, set()),
-    "execute_motion": ({"name": "r", "positions": {"j": 0.5}, "action": "/arm/fjt"},
-                       {("action", "action", "/arm/fjt")}),
-    "call_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
-                     {("service", "service", "/s")}),
-    "advertise_service": ({"service": "/s", "type": "std_srvs/srv/Trigger"},
-                          {("service", "service", "/s")}),
-    "unadvertise_service": ({"service": "/s"}, set()),
-    "service_request": ({"service": "/s", "type": "std_srvs/srv/Trigger", "request": {}},
-                        set()),
-    "create_marker_subscriber": ({"topic": "/m", "type": "MarkerArray",
-                                  "fixed_frame": "/world"},
-                                 {("topic", "topic", "/m"), ("frame", "fixed_frame", "world")}),
-    "remove_marker_subscriber": ({"topic": "/m"}, set()),
-    "list_markers": ({"topic": "/m"}, {("topic", "topic", "/m")}),
-    "list_actions": ({}, set()),
-    "send_goal": ({"action": "/a", "type": "control_msgs/action/GripperCommand"},
-                  {("action", "action", "/a")}),
-    "cancel_goal": ({"action": "/a", "goal_id": "0" * 32}, {("action", "action", "/a")}),
-    "advertise_action": ({"action": "/a", "type": "control_msgs/GripperCommand"},
-                         {("action", "action", "/a")}),
-    "unadvertise_action": ({"action": "/a"}, set()),
-    "action_feedback": ({"action": "/a", "goal_id": "0" * 32, "feedback": {}},
-                        {("action", "action", "/a")}),
-    "action_goal": ({"action": "/a", "type": "control_msgs/GripperCommand",
-                     "goal_id": "0" * 32, "goal": {}}, set()),
-    "action_cancel": ({"action": "/a", "goal_id": "0" * 32}, set()),
-    "action_decide": ({"action": "/a", "type": "control_msgs/GripperCommand", "goal": {}},
-                      set()),
-    "start_recording": ({"path": "/data/s.mcap", "topics": ["/a", "/b"]},
-                        {("file", "path", "/data/s.mcap"), ("topic", "topics", "/a"),
-                         ("topic", "topics", "/b")}),
-    "stop_recording": ({"path": "/data/s.mcap"}, set()),
-    "recording_status": ({"path": "/data/s.mcap"}, set()),
-}
+def examples(cls: type[Op]) -> tuple[c.Example, ...]:
+    """The op's own examples (`Op.examples`), or a failure naming the op that has none."""
+    own = cls.__dict__.get("examples", ())
+    assert own, (f"{cls.__name__} ({cls.op}) gives no example: declare examples = "
+                 f"(Example(<a valid request's arguments>, <the resources it declares>),) "
+                 f"beside its fields")
+    return cast("tuple[c.Example, ...]", own)
+
+
+CASES = [(cls, i) for cls in c.REQUEST_TYPES.values()
+         for i in range(len(cls.__dict__.get("examples", ())) or 1)]
 
 
 def judged(use: Resource) -> tuple[str, str, str]:
@@ -125,22 +43,42 @@ def judged(use: Resource) -> tuple[str, str, str]:
     return "file", use.field, use.path
 
 
-def test_the_examples_enumerate_every_op() -> None:
-    assert set(EXAMPLES) == set(c.REQUEST_TYPES)
-
-
-@pytest.mark.parametrize("op", sorted(EXAMPLES))
-def test_each_op_declares_what_it_touches(op: str) -> None:
-    args, expected = EXAMPLES[op]
-    request = c.parse_request(op, c.dumps(args))
-    cls = type(request)
-    assert cls.op == op and isinstance(cls.writes, bool)
+@pytest.mark.parametrize(("cls", "index"), CASES, ids=lambda v: getattr(v, "op", str(v)))
+def test_each_op_declares_what_it_touches(cls: type[Op], index: int) -> None:
+    example = examples(cls)[index]
+    op = cls.op
+    request = c.parse_request(op, c.dumps(dict(example.args)))
+    assert type(request) is cls and isinstance(cls.writes, bool)
+    expected = example.declares
     assert "resources" in cls.__dict__  # its own declaration, not an inherited default
     uses = request.resources()
     assert {judged(use) for use in uses} == expected
     names = {f.name for f in fields(request)}
     for use in uses:  # every field a refusal would name is one of the request's
         assert use.field.split(".")[0] in names, (op, use.field)
+    # What --read-only refuses: an op that writes through any resource declares writes
+    # (some write through none: a player's clock, stopping a recording).
+    if any(writes(use) for use in uses):
+        assert cls.writes, f"{op} writes through {[u for u in uses if writes(u)]}"
+
+
+def writes(use: Resource) -> bool:
+    if isinstance(use, ServiceUse):
+        return True  # calling a service or offering one
+    return bool(getattr(use, "writes", False) or getattr(use, "serves", False))
+
+
+def test_an_op_without_examples_fails_naming_it() -> None:
+    @dataclass(frozen=True)
+    class Bare(Op, op="test_bare", writes=False):
+        def resources(self) -> tuple[Resource, ...]:
+            return ()
+
+    try:
+        with pytest.raises(AssertionError, match=r"Bare \(test_bare\) gives no example"):
+            examples(Bare)
+    finally:
+        del c.REQUEST_TYPES["test_bare"]
 
 
 def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
@@ -153,16 +91,6 @@ def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
         remove_fields = {f.name for f in fields(kind.remove)}
         assert set(kind.bridge.identity) <= remove_fields
     assert [f.op for f in kinds["parameter_client"].follow_ups] == ["observe_parameters"]
-    # Writes: what --read-only refuses (removals are refused there as removals).
-    assert {op for op, cls in c.REQUEST_TYPES.items() if cls.writes} == {
-        "create_publisher", "publish", "create_tf_broadcaster", "broadcast_transform",
-        "set_parameters", "server_declare_parameter", "server_set_parameter",
-        "server_undeclare_parameter", "call_service", "advertise_service",
-        "set_robot_joints", "send_goal", "cancel_goal", "advertise_action", "action_feedback",
-        "start_recording", "stop_recording",
-        # A player's clock: every client of the player sees what these change.
-        "pause_playback", "resume_playback", "seek_playback", "set_playback_rate",
-        "publish_distance", "execute_motion"}
 
 
 def test_a_publisher_declares_its_frame_and_labels_topic() -> None:
