@@ -21,8 +21,7 @@ class LiveRefusals:
             raise CommandFailedError("op", "a player (slicer-ros2-bridge play BAG.mcap)",
                                      f"{request.op} sent to the live daemon, which plays ROS, "
                                      "not a bag", code=ErrorCode.NOT_SUPPORTED)
-        return {cls: refuse for cls in (c.PlaybackStatus, c.PausePlayback, c.ResumePlayback,
-                                        c.SeekPlayback, c.SetPlaybackRate)}
+        return dict.fromkeys(c.player_ops(), refuse)
 
     def describe(self) -> list[dict[str, Any]]:
         return []

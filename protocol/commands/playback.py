@@ -11,12 +11,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from protocol.commands.fields import Args, check_float
-from protocol.commands.op import Example, Op, Resource
+from protocol.commands.op import REQUEST_TYPES, Example, Op, Resource
 from protocol.commands.results import Answered, Result
 from protocol.commands.values import Stamp
 
 __all__ = ["MAX_PLAYBACK_RATE", "MAX_SEEK_S", "PausePlayback", "PlaybackResult", "PlaybackStatus",
-           "ResumePlayback", "SeekPlayback", "SetPlaybackRate"]
+           "ResumePlayback", "SeekPlayback", "SetPlaybackRate", "player_ops"]
 
 MAX_PLAYBACK_RATE = 1000.0
 MAX_SEEK_S = 1e9  # beyond any bag: a seek past the end is clamped to it
@@ -136,3 +136,8 @@ class SetPlaybackRate(Op, Answered[PlaybackResult], op="set_playback_rate", writ
         return cls(rate=check_float(a.raw("rate", True), a.path("rate"), 0.0,
                                     MAX_PLAYBACK_RATE, True))
 
+
+
+def player_ops() -> tuple[type[Op], ...]:
+    """The ops only a player serves: this module's (the live daemon refuses them)."""
+    return tuple(cls for cls in REQUEST_TYPES.values() if cls.__module__ == __name__)
