@@ -3,17 +3,48 @@
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 from protocol.auth import NONCE
 from protocol.commands.fields import MAX_NAME, Args
 from protocol.commands.op import Example, Op, Resource
 from protocol.commands.results import (Answered, AuthenticateResult, HelloResult,
-                                       ListServicesResult, ListTopicsResult)
+                                       ListServicesResult, ListTopicsResult, Result,
+                                       read_field)
 
 _PROOF = re.compile(r"[0-9a-f]{64}\Z")
 
-__all__ = ["Authenticate", "Hello", "ListBridges", "ListServices", "ListTopics"]
+__all__ = ["Authenticate", "Hello", "ListBridges", "ListBridgesResult", "ListServices",
+           "ListTopics"]
+
+
+@dataclass(frozen=True)
+class ListBridgesResult(Result):
+    """Every bridge (each an object naming its ``kind``), the hub's devices and clients,
+    and each capability's other state under its own key (``state``: those keys, sent
+    beside the others)."""
+
+    large = True
+
+    bridges: tuple[dict[str, Any], ...]
+    devices: tuple[str, ...]
+    clients: tuple[dict[str, Any], ...]
+    hub_dropped: int
+    state: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        out = super().to_dict()
+        return {**out, **out.pop("state")}
+
+    @classmethod
+    def read(cls, a: Args) -> ListBridgesResult:
+        known = ("bridges", "devices", "clients", "hub_dropped")
+        return cls(bridges=read_field(a, "bridges", tuple[dict[str, Any], ...]),
+                   devices=read_field(a, "devices", tuple[str, ...]),
+                   clients=read_field(a, "clients", tuple[dict[str, Any], ...]),
+                   hub_dropped=read_field(a, "hub_dropped", int),
+                   state={k: a.raw(k, True) for k in a.keys() if k not in known})
 
 
 @dataclass(frozen=True)
@@ -65,7 +96,8 @@ class Authenticate(Op, Answered[AuthenticateResult], op="authenticate", writes=F
 
 
 @dataclass(frozen=True)
-class ListBridges(Op, op="list_bridges", writes=False, content=("frames",)):
+class ListBridges(Op, op="list_bridges", writes=False, content=("frames",),
+                  result=ListBridgesResult):
     """Everything this daemon currently bridges, with device names."""
 
     examples = (Example({}),)

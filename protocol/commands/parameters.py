@@ -4,22 +4,58 @@ daemon's own parameter server (``server_*``)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import cast
+from typing import Optional, cast
 
 from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import MAX_NAME, MAX_TEXT, PARAM_NAME, Args, check_str
 from protocol.commands.op import Bridge, Example, Op, ParameterUse, Resource
 from protocol.commands.results import (Answered, GetParametersResult, ListParametersResult,
-                                       ObserveParametersResult, SetParametersResult)
+                                       ObserveParametersResult, Result, SetParametersResult)
 from protocol.commands.values import ParameterValue
 
 __all__ = ["CreateParameterClient", "GetParameters", "ListParameters", "ObserveParameters",
-           "RemoveParameterClient", "ServerDeclareParameter", "ServerGetParameters",
-           "ServerSetParameter", "ServerUndeclareParameter", "SetParameters"]
+           "OwnParameter", "OwnParameterUndeclared", "ParameterClientBridge",
+           "ParameterClientRemoved", "RemoveParameterClient", "ServerDeclareParameter",
+           "ServerGetParameters", "ServerSetParameter", "ServerUndeclareParameter",
+           "SetParameters"]
+
+
+@dataclass(frozen=True)
+class ParameterClientBridge(Result):
+    """A parameter client, as `create_parameter_client` and `list_bridges` describe it: the
+    device its observed changes come on, whether the node answers, what it observes."""
+
+    kind: str  # "parameter_client"
+    node: str
+    device: str
+    ready: bool
+    observed: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ParameterClientRemoved(Result):
+    node: str
+    device: str
+
+
+@dataclass(frozen=True)
+class OwnParameter(Result):
+    """A parameter of the daemon's own node as it is now; ``existed``: a declaration that
+    found it declared already, with the same type (absent for a set)."""
+
+    name: str
+    value: ParameterValue
+    existed: Optional[bool] = None
+
+
+@dataclass(frozen=True)
+class OwnParameterUndeclared(Result):
+    name: str
 
 
 @dataclass(frozen=True)
 class CreateParameterClient(Op, op="create_parameter_client", ros_names=("node",), writes=False,
+                            result=ParameterClientBridge,
                             creates=Bridge("parameter_client", ("node",),
                                            section="parameter_clients")):
     """Watch another node's parameters (``/robot_state_publisher`` or ``ns/node``)."""
@@ -39,7 +75,7 @@ class CreateParameterClient(Op, op="create_parameter_client", ros_names=("node",
 @dataclass(frozen=True)
 class RemoveParameterClient(
         Op, op="remove_parameter_client", ros_names=("node",), writes=False,
-        removes="parameter_client"):
+        removes="parameter_client", result=ParameterClientRemoved):
     examples = (Example({"node": "/n"}),)
 
     node: str
@@ -145,7 +181,7 @@ class ObserveParameters(Op, Answered[ObserveParametersResult],
 
 
 @dataclass(frozen=True)
-class ServerDeclareParameter(Op, op="server_declare_parameter", writes=True):
+class ServerDeclareParameter(Op, op="server_declare_parameter", writes=True, result=OwnParameter):
     """Declare a parameter on the daemon's own ROS node (a parameter server for Slicer)."""
 
     examples = (Example(
@@ -170,7 +206,7 @@ class ServerDeclareParameter(Op, op="server_declare_parameter", writes=True):
 
 
 @dataclass(frozen=True)
-class ServerSetParameter(Op, op="server_set_parameter", writes=True):
+class ServerSetParameter(Op, op="server_set_parameter", writes=True, result=OwnParameter):
     examples = (Example(
         {"name": "p", "value": {"type": "integer", "value": 1}},
         {("parameter", "name", "OWN.p")}),)
@@ -188,7 +224,8 @@ class ServerSetParameter(Op, op="server_set_parameter", writes=True):
 
 
 @dataclass(frozen=True)
-class ServerGetParameters(Op, op="server_get_parameters", writes=False):
+class ServerGetParameters(Op, op="server_get_parameters", writes=False,
+                          result=GetParametersResult):
     """Values of the daemon's own parameters; ``names`` omitted or empty = all."""
 
     examples = (Example({"names": ["p"]}, {("parameter", "names", "OWN.p")}),)
@@ -204,7 +241,8 @@ class ServerGetParameters(Op, op="server_get_parameters", writes=False):
 
 
 @dataclass(frozen=True)
-class ServerUndeclareParameter(Op, op="server_undeclare_parameter", writes=True):
+class ServerUndeclareParameter(Op, op="server_undeclare_parameter", writes=True,
+                               result=OwnParameterUndeclared):
     examples = (Example({"name": "p"}, {("parameter", "name", "OWN.p")}),)
 
     name: str

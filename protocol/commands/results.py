@@ -9,29 +9,36 @@ and ``request.parse_result(reply.result)`` gives a ``PublishResult``, or raises 
 `ResultFormatError` naming the op, the field, what was expected and what came. So a field
 renamed on one side fails the type checker and the client's tests, not a user at run time.
 
-Results read only the fields a client uses and ignore the rest (a newer daemon may add
-fields). A field the daemon always sends is required, so that a rename is caught at once;
-one it may leave out has the default the client always assumed.
+Every op a client sends declares one, and its handler in the daemon returns it: the reply's
+JSON is `Result.to_dict` (its fields in order; an optional field whose default is None is
+left out while None), so the type is the one description of the reply on both sides.
+
+A result reads every field it declares (`Result.read`, derived from the field types unless
+a result says more) and ignores the rest (a newer daemon may add fields). A field the
+daemon always sends is required, so that a rename is caught at once; one it may leave out
+has the default the client always assumed.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Generic, Optional, TypeVar, cast, get_args, get_origin
+from typing import (Any, ClassVar, Generic, Optional, TypeVar, Union, cast, get_args,
+                    get_origin, get_type_hints)
 
 from protocol.commands.errors import CommandError, WrongTypeError
-from protocol.commands.fields import Args, check_float, check_str
-from protocol.commands.values import Matrix4, ParameterValue, matrix_from
-from protocol.commands.wire import json_type
+from protocol.commands.fields import MISSING, Args, check_float, check_str
+from protocol.commands.values import Matrix4, ParameterValue, Stamp, matrix_from
+from protocol.commands.wire import json_type, jsonable
 from protocol.errors import ProtocolError
 
 __all__ = ["AdvertiseActionResult", "Answered", "AuthenticateResult", "CallServiceResult",
            "CancelGoalResult", "DescribeRobotJointsResult", "GetLastMessageResult",
-           "GetParametersResult", "HelloResult",
+           "GetParametersResult", "HelloAuth", "HelloResult",
            "ListParametersResult", "ListServicesResult", "ListTopicsResult",
            "LookupTransformResult", "ObserveParametersResult", "ParameterOutcome",
-           "PublishResult", "Result", "ResultFormatError", "SendGoalResult",
+           "PublishResult", "Result", "ResultFormatError", "read_field", "SendGoalResult",
            "SetParametersResult", "SetRobotJointsResult", "SolveIkResult"]
 
 _U32 = (1 << 32) - 1
@@ -48,11 +55,36 @@ R = TypeVar("R", bound="Result")
 
 
 class Result:
-    """Base of the typed results: each reads its fields from an `Args` in `read`."""
+    """Base of the typed results (frozen dataclasses): `to_dict` is the reply's JSON
+    object, `read` its reader. ``large``: a reply that may be long (a listing), which the
+    daemon encodes off its event loop."""
+
+    large: ClassVar[bool] = False
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON object of this result: its fields in order, an optional one (default
+        None) left out while None."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(cast(Any, self)):
+            value = getattr(self, f.name)
+            if value is None and f.default is None:
+                continue
+            out[f.name] = jsonable(value)
+        return out
 
     @classmethod
     def read(cls: type[T], a: Args) -> T:  # noqa: PYI019  (3.9: no Self)
-        raise NotImplementedError  # pragma: no cover - every result defines its own
+        """Each declared field, read as its type says (`read_field`); a result whose
+        fields say less than the client needs reads them itself."""
+        hints = get_type_hints(cls)
+        values: dict[str, Any] = {}
+        for f in dataclasses.fields(cast(Any, cls)):
+            optional = (f.default is not dataclasses.MISSING
+                        or f.default_factory is not dataclasses.MISSING)
+            if optional and a.raw(f.name, False) is MISSING:
+                continue  # its default
+            values[f.name] = read_field(a, f.name, hints[f.name])
+        return cls(**values)
 
     @classmethod
     def parse(cls: type[T], op: str, data: Mapping[str, Any]) -> T:  # noqa: PYI019
@@ -103,9 +135,69 @@ def _objects(a: Args, name: str) -> tuple[dict[str, Any], ...]:
     return tuple(value)
 
 
+def _numbers(a: Args, name: str) -> tuple[float, ...]:
+    value = a.raw(name, True)
+    if not isinstance(value, list):
+        raise WrongTypeError(a.path(name), "an array of numbers", json_type(value))
+    return tuple(check_float(v, f"{a.path(name)}[{i}]", float("-inf"), float("inf"), False)
+                 for i, v in enumerate(value))
+
+
 def _parameter_values(a: Args, name: str) -> dict[str, ParameterValue]:
     return {key: ParameterValue.from_json_value(raw, f"{a.path(name)}.{key}")
             for key, raw in _object(a, name).items()}
+
+
+def _optional_of(hint: Any) -> Any:
+    """X for ``Optional[X]``, else None."""
+    args = get_args(hint)
+    if get_origin(hint) is Union and len(args) == 2 and type(None) in args:
+        return args[0] if args[1] is type(None) else args[1]
+    return None
+
+
+def read_field(a: Args, name: str, hint: Any) -> Any:
+    """Field ``name`` of a result, read as its type ``hint`` says; an error names its path.
+    Strings, numbers, flags, objects, lists of them, stamps, parameter values and nested
+    results; ``Any`` as it came."""
+    inner = _optional_of(hint)
+    if inner is not None:
+        return None if a.raw(name, False) is MISSING else read_field(a, name, inner)
+    path = a.path(name)
+    if hint is Any:
+        return a.raw(name, True)
+    if hint is str:
+        return check_str(a.raw(name, True), path, 1 << 30, True, None, "")
+    if hint is bool:
+        return _flag(a, name)
+    if hint is int:
+        return a.req_int(name, low=-(1 << 63), high=_COUNT_MAX)
+    if hint is float:
+        return check_float(a.raw(name, True), path, float("-inf"), float("inf"), False)
+    if hint == dict[str, Any]:
+        return _object(a, name)
+    if hint == tuple[dict[str, Any], ...]:
+        return _objects(a, name)
+    if hint == tuple[str, ...]:
+        return a.str_list(name)
+    if hint == tuple[float, ...]:
+        return _numbers(a, name)
+    if hint == dict[str, ParameterValue]:
+        return _parameter_values(a, name)
+    if hint == dict[str, float]:
+        return _positions(a, name)
+    if hint is Stamp:
+        return Stamp.from_args(Args(_object(a, name), path + "."))
+    if hint is ParameterValue:
+        return ParameterValue.from_json_value(a.raw(name, True), path)
+    if isinstance(hint, type) and issubclass(hint, Result):
+        return hint.read(Args(_object(a, name), path + "."))
+    raise TypeError(f"{path}: no reader for a field of type {hint!r}")  # a result's bug
+
+
+def _or(a: Args, name: str, hint: Any, default: Any) -> Any:
+    """Field ``name`` read as `read_field` reads it, or ``default`` when absent."""
+    return default if a.raw(name, False) is MISSING else read_field(a, name, hint)
 
 
 def _device(a: Args) -> str:
@@ -127,25 +219,52 @@ def _flag(a: Args, name: str) -> bool:
 
 
 @dataclass(frozen=True)
-class HelloResult(Result):
-    """The handshake: the daemon's node, and what this connection may do (``writes``; the
-    ``challenge`` a key answers), its heartbeat and the clock of stream stamps."""
+class HelloAuth(Result):
+    """What a connection may do: whether it writes, and when not, why, and the challenge
+    the daemon's key answers (`Authenticate`), if it has one."""
 
-    node: str = ""
     writes: bool = True
+    why: Optional[str] = None
     challenge: Optional[str] = None
+
+    @classmethod
+    def read(cls, a: Args) -> HelloAuth:
+        return cls(writes=a.opt_bool("writes", True),
+                   why=a.opt_str("why", None, max_len=1 << 16, allow_empty=True),
+                   challenge=a.opt_str("challenge", None, max_len=1024,
+                                       allow_empty=True) or None)
+
+
+@dataclass(frozen=True)
+class HelloResult(Result):
+    """The handshake: the daemon's schema, version, node and ops, what this connection may
+    do (``auth``; absent for the operator's start-up config), its heartbeat and the clock
+    of stream stamps."""
+
+    schema: int = 1
+    version: str = ""
+    node: str = ""
+    ops: tuple[str, ...] = ()
+    auth: Optional[HelloAuth] = None
     heartbeat: Optional[float] = None
     clock_ms: Optional[int] = None
+
+    @property
+    def writes(self) -> bool:
+        return self.auth.writes if self.auth is not None else True
+
+    @property
+    def challenge(self) -> Optional[str]:
+        return self.auth.challenge if self.auth is not None else None
 
     @classmethod
     def read(cls, a: Args) -> HelloResult:
         auth = a.opt_obj("auth")
-        writes, challenge = True, None
-        if auth is not None:
-            writes = auth.opt_bool("writes", True)
-            challenge = auth.opt_str("challenge", None, max_len=1024, allow_empty=True)
-        return cls(node=cast(str, a.opt_str("node", "", allow_empty=True)), writes=writes,
-                   challenge=challenge or None,
+        return cls(schema=cast(int, a.opt_int("schema", 1, low=0, high=_U32)),
+                   version=cast(str, a.opt_str("version", "", allow_empty=True)),
+                   node=cast(str, a.opt_str("node", "", allow_empty=True)),
+                   ops=a.str_list("ops", required=False),
+                   auth=HelloAuth.read(auth) if auth is not None else None,
                    heartbeat=a.opt_float("heartbeat", None, low=0.0, high=3600.0),
                    clock_ms=a.opt_int("clock_ms", None, low=0, high=_U32))
 
@@ -161,7 +280,10 @@ class AuthenticateResult(Result):
 
 @dataclass(frozen=True)
 class ListTopicsResult(Result):
-    """The graph's topics, each an object (``name``, ``types``), as the daemon lists them."""
+    """The graph's topics, each an object (``topic``, ``types``, ``publishers``), as the
+    daemon lists them."""
+
+    large = True
 
     topics: tuple[dict[str, Any], ...]
 
@@ -172,6 +294,8 @@ class ListTopicsResult(Result):
 
 @dataclass(frozen=True)
 class ListServicesResult(Result):
+    large = True
+
     services: tuple[dict[str, Any], ...]
 
     @classmethod
@@ -201,26 +325,41 @@ class GetLastMessageResult(Result):
                    count=_count(a, "count"))
 
 
+def _node(a: Args) -> str:
+    """The node a parameter result names (older daemons did not say: "")."""
+    return cast(str, a.opt_str("node", "", allow_empty=True))
+
+
 @dataclass(frozen=True)
 class ListParametersResult(Result):
+    """The node's parameters a client may see, and each one's type."""
+
+    node: str
     names: tuple[str, ...]
+    types: dict[str, str]
 
     @classmethod
     def read(cls, a: Args) -> ListParametersResult:
-        return cls(names=a.str_list("names"))
+        types = _object(a, "types") if a.raw("types", False) is not MISSING else {}
+        return cls(node=_node(a), names=a.str_list("names"),
+                   types={k: v for k, v in types.items() if isinstance(v, str)})
 
 
 @dataclass(frozen=True)
 class GetParametersResult(Result):
+    """Parameter values of a node (`get_parameters`), or of the daemon's own
+    (`server_get_parameters`)."""
+
+    node: str
     values: dict[str, ParameterValue]
 
     @classmethod
     def read(cls, a: Args) -> GetParametersResult:
-        return cls(values=_parameter_values(a, "values"))
+        return cls(node=_node(a), values=_parameter_values(a, "values"))
 
 
 @dataclass(frozen=True)
-class ParameterOutcome:
+class ParameterOutcome(Result):
     """One parameter of a `SetParameters`: set, or refused by the node (and why)."""
 
     ok: bool
@@ -229,6 +368,7 @@ class ParameterOutcome:
 
 @dataclass(frozen=True)
 class SetParametersResult(Result):
+    node: str
     results: dict[str, ParameterOutcome]
 
     @classmethod
@@ -243,28 +383,48 @@ class SetParametersResult(Result):
                 ok=outcome.opt_bool("ok", False),
                 reason=cast(str, outcome.opt_str("reason", "", max_len=1 << 16,
                                                  allow_empty=True)))
-        return cls(results=results)
+        return cls(node=_node(a), results=results)
 
 
 @dataclass(frozen=True)
 class ObserveParametersResult(Result):
-    """Whether the node answers now, and the observed parameters' values so far."""
+    """The parameter client's device, the names it observes, whether the node answers
+    now, and the observed parameters' values so far."""
 
+    node: str
+    device: str
+    observed: tuple[str, ...]
     ready: bool
     values: dict[str, ParameterValue]
 
     @classmethod
     def read(cls, a: Args) -> ObserveParametersResult:
-        return cls(ready=_flag(a, "ready"), values=_parameter_values(a, "values"))
+        observed = a.str_list("observed", required=False)
+        return cls(node=_node(a), device=cast(str, a.opt_str("device", "", allow_empty=True)),
+                   observed=observed, ready=_flag(a, "ready"),
+                   values=_parameter_values(a, "values"))
 
 
 @dataclass(frozen=True)
 class LookupTransformResult(Result):
+    """The transform parent <- child: as a matrix (mm, rows), as tf holds it (translation
+    in m, quaternion x y z w), and its stamp."""
+
+    parent: str
+    child: str
     matrix: Matrix4  # mm, rows
+    translation: tuple[float, ...]
+    rotation: tuple[float, ...]
+    stamp: Stamp
 
     @classmethod
     def read(cls, a: Args) -> LookupTransformResult:
-        return cls(matrix=matrix_from(a.any("matrix"), a.path("matrix"), rigid=False))
+        # The matrix is what a client reads; the rest as a daemon before 2026-11 left out.
+        matrix = matrix_from(a.any("matrix"), a.path("matrix"), rigid=False)
+        return cls(parent=_or(a, "parent", str, ""), child=_or(a, "child", str, ""),
+                   matrix=matrix, translation=_or(a, "translation", tuple[float, ...], ()),
+                   rotation=_or(a, "rotation", tuple[float, ...], ()),
+                   stamp=_or(a, "stamp", Stamp, Stamp(0)))
 
 
 @dataclass(frozen=True)
@@ -301,11 +461,11 @@ class SetRobotJointsResult(Result):
         return cls(positions=_positions(a))
 
 
-def _positions(a: Args) -> dict[str, float]:
+def _positions(a: Args, name: str = "positions") -> dict[str, float]:
     """A result's ``positions``: joint -> a finite number."""
-    path = a.path("positions")
+    path = a.path(name)
     positions = {}
-    for joint, value in _object(a, "positions").items():
+    for joint, value in _object(a, name).items():
         check_str(joint, path, 1 << 10, False, None, "")
         positions[joint] = check_float(value, f"{path}.{joint}", float("-inf"), float("inf"),
                                        False)

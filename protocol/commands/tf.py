@@ -3,15 +3,65 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import cast
+from typing import Optional, cast
 
 from protocol.commands.fields import Args
 from protocol.commands.op import Bridge, Example, FrameUse, Op, Resource
-from protocol.commands.results import Answered, LookupTransformResult
+from protocol.commands.results import Answered, LookupTransformResult, Result
 from protocol.commands.values import Matrix4, Stamp, matrix_from
 
-__all__ = ["BroadcastTransform", "CreateTfBroadcaster", "CreateTfLookup", "LookupTransform",
-           "RemoveTfBroadcaster", "RemoveTfLookup"]
+__all__ = ["BroadcastTransform", "BroadcastTransformResult", "CreateTfBroadcaster",
+           "CreateTfLookup", "LookupTransform", "RemoveTfBroadcaster", "RemoveTfLookup",
+           "TfBridgeRemoved", "TfBroadcasterBridge", "TfLookupBridge"]
+
+
+@dataclass(frozen=True)
+class TfLookupBridge(Result):
+    """A streamed lookup, as `create_tf_lookup` and `list_bridges` describe it: its device,
+    ``state`` (pending, streaming or error: then ``error`` says why), the TRANSFORMs sent,
+    and its rate cap."""
+
+    kind: str  # "tf_lookup"
+    parent: str
+    child: str
+    device: str
+    igtl_type: str
+    state: str
+    messages: int
+    error: Optional[str] = None
+    rate_hz: Optional[float] = None
+
+
+@dataclass(frozen=True)
+class TfBroadcasterBridge(Result):
+    """A broadcaster, as `create_tf_broadcaster` and `list_bridges` describe it."""
+
+    kind: str  # "tf_broadcaster"
+    parent: str
+    child: str
+    device: str
+    igtl_type: str
+    static: bool
+    topic: str
+    messages: int
+
+
+@dataclass(frozen=True)
+class TfBridgeRemoved(Result):
+    """A removed lookup or broadcaster: its frames and the device it had."""
+
+    parent: str
+    child: str
+    device: str
+
+
+@dataclass(frozen=True)
+class BroadcastTransformResult(Result):
+    """Where a one-off transform went, its stamp and how many subscribers got it."""
+
+    topic: str
+    stamp: Stamp
+    subscribers: int
 
 
 def _stamp(a: Args, name: str) -> Stamp | None:
@@ -21,6 +71,7 @@ def _stamp(a: Args, name: str) -> Stamp | None:
 
 @dataclass(frozen=True)
 class CreateTfLookup(Op, op="create_tf_lookup", client_frames=("parent", "child"), writes=False,
+                     result=TfLookupBridge,
                      creates=Bridge("tf_lookup", ("parent", "child"), section="tf_lookups")):
     """Stream parent->child as a TRANSFORM (mm) whenever it changes, at most ``rate_hz``."""
 
@@ -41,7 +92,7 @@ class CreateTfLookup(Op, op="create_tf_lookup", client_frames=("parent", "child"
 
 
 @dataclass(frozen=True)
-class RemoveTfLookup(Op, op="remove_tf_lookup",
+class RemoveTfLookup(Op, op="remove_tf_lookup", result=TfBridgeRemoved,
                      client_frames=("parent", "child"), writes=False, removes="tf_lookup"):
     examples = (Example({"parent": "a", "child": "b"}),)
 
@@ -80,7 +131,7 @@ class LookupTransform(Op, Answered[LookupTransformResult], op="lookup_transform"
 
 
 @dataclass(frozen=True)
-class CreateTfBroadcaster(Op, op="create_tf_broadcaster",
+class CreateTfBroadcaster(Op, op="create_tf_broadcaster", result=TfBroadcasterBridge,
                           client_frames=("parent", "child"), writes=True,
                           creates=Bridge("tf_broadcaster", ("parent", "child"),
                                          section="tf_broadcasters")):
@@ -104,7 +155,7 @@ class CreateTfBroadcaster(Op, op="create_tf_broadcaster",
 
 
 @dataclass(frozen=True)
-class RemoveTfBroadcaster(Op, op="remove_tf_broadcaster",
+class RemoveTfBroadcaster(Op, op="remove_tf_broadcaster", result=TfBridgeRemoved,
                           client_frames=("parent", "child"), writes=False,
                           removes="tf_broadcaster"):
     examples = (Example({"parent": "a", "child": "b"}),)
@@ -121,7 +172,7 @@ class RemoveTfBroadcaster(Op, op="remove_tf_broadcaster",
 
 
 @dataclass(frozen=True)
-class BroadcastTransform(Op, op="broadcast_transform",
+class BroadcastTransform(Op, op="broadcast_transform", result=BroadcastTransformResult,
                          client_frames=("parent", "child"), writes=True):
     """Broadcast one parent->child transform given as a rigid 4x4 matrix in mm (rows);
     ``stamp`` omitted = the daemon's current time."""

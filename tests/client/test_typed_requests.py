@@ -140,8 +140,9 @@ def test_replies_parse_into_the_declared_results() -> None:
     hello = c.Hello().parse_result({"node": "/b", "auth": {"writes": False,
                                                              "challenge": "ab"},
                                     "clock_ms": 7, "heartbeat": 1.0})
-    assert hello == c.HelloResult(node="/b", writes=False, challenge="ab", heartbeat=1.0,
-                                  clock_ms=7)
+    assert hello == c.HelloResult(node="/b", auth=c.HelloAuth(writes=False, challenge="ab"),
+                                  heartbeat=1.0, clock_ms=7)
+    assert (hello.writes, hello.challenge) == (False, "ab")
 
 
 @pytest.mark.parametrize("request_, result, field", [
