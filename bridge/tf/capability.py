@@ -70,7 +70,6 @@ from protocol.commands import (
     ErrorCode,
     LookupTransform,
     LookupTransformResult,
-    Matrix4,
     Op,
     OutOfRangeError,
     RemoveTfBroadcaster,
@@ -79,6 +78,7 @@ from protocol.commands import (
     TfBridgeRemoved,
     TfBroadcasterBridge,
     TfLookupBridge,
+    matrix_rows,
 )
 from protocol.conversions import (
     ConversionError,
@@ -159,14 +159,6 @@ def _transform_stamped(st: StampedTransform) -> Any:
     q.x, q.y, q.z, q.w = st.rotation
     return msg
 
-
-def _stamp(stamp_ns: int) -> Stamp:
-    sec, nanosec = divmod(stamp_ns, _NS_PER_S)
-    return Stamp(sec, nanosec)
-
-
-def _rows(matrix: npt.NDArray[np.float64]) -> Matrix4:
-    return tuple((row[0], row[1], row[2], row[3]) for row in matrix.tolist())
 
 
 def _stamp_ns(stamp: Optional[Stamp]) -> int:
@@ -548,9 +540,9 @@ class TfLookups:
             raise CommandFailedError(
                 "child", f"a transform {pair[0]} <- {pair[1]} whose numbers fit float32 in mm",
                 f"{error}", code=ErrorCode.NOT_SUPPORTED) from None
-        return LookupTransformResult(pair[0], pair[1], _rows(matrix),
+        return LookupTransformResult(pair[0], pair[1], matrix_rows(matrix),
                                      tuple(result.translation), tuple(result.rotation),
-                                     _stamp(result.stamp_ns))
+                                     Stamp.from_ns(result.stamp_ns))
 
     async def _lookup_waiting(self, pair: tuple[str, str], time_ns: int,
                               timeout: float) -> LookupTransformResult:
@@ -737,7 +729,7 @@ class TfBridges(TfLookups):
         stamp_ns = _stamp_ns(request.stamp) or self._now_ns()
         subscribers = self._send(broadcaster, np.asarray(request.matrix, dtype=np.float64),
                                  stamp_ns)
-        return BroadcastTransformResult(broadcaster.topic, _stamp(stamp_ns), subscribers)
+        return BroadcastTransformResult(broadcaster.topic, Stamp.from_ns(stamp_ns), subscribers)
 
     def _on_igtl(self, message: Message, client: Replier) -> None:
         """A client sent a message to a broadcaster's device (loop thread)."""

@@ -25,13 +25,14 @@ from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import MISSING, Args
 from protocol.commands.op import ActionUse, Bridge, Example, Op, Resource
 from protocol.commands.results import (AdvertiseActionResult, Answered, CancelGoalResult,
-                                       SendGoalResult)
+                                       Result, SendGoalResult)
 from protocol.commands.types import resolve_action_type
 from protocol.commands.wire import json_type
 
 __all__ = ["GOAL_STATUSES", "SERVED_OUTCOMES", "ActionCancel", "ActionDecide",
-           "ActionFeedback", "ActionGoal", "AdvertiseAction", "CancelGoal", "ListActions",
-           "SendGoal", "UnadvertiseAction", "goal_id_text"]
+           "ActionFeedback", "ActionFeedbackResult", "ActionGoal", "AdvertiseAction",
+           "CancelGoal", "ListActions", "ListActionsResult", "SendGoal", "UnadvertiseAction",
+           "UnadvertisedAction", "goal_id_text"]
 
 # action_msgs/msg/GoalStatus codes -> the names replies and goal events use.
 GOAL_STATUSES: dict[int, str] = {0: "unknown", 1: "accepted", 2: "executing", 3: "canceling",
@@ -70,7 +71,29 @@ def _object(a: Args, name: str) -> dict[str, Any]:
 
 
 @dataclass(frozen=True)
-class ListActions(Op, op="list_actions", writes=False):
+class ListActionsResult(Result):
+    """The actions some node serves, each ``action`` with its ``types``."""
+
+    actions: tuple[dict[str, Any], ...]
+
+
+@dataclass(frozen=True)
+class UnadvertisedAction(Result):
+    action: str
+    device: str
+
+
+@dataclass(frozen=True)
+class ActionFeedbackResult(Result):
+    """The feedbacks published for the goal so far."""
+
+    action: str
+    goal_id: str
+    feedbacks: int
+
+
+@dataclass(frozen=True)
+class ListActions(Op, op="list_actions", writes=False, result=ListActionsResult):
     """Every action of the ROS graph with its types."""
 
     examples = (Example({}),)
@@ -182,6 +205,7 @@ class AdvertiseAction(Op, Answered[AdvertiseActionResult], op="advertise_action"
 
 @dataclass(frozen=True)
 class UnadvertiseAction(Op, op="unadvertise_action", ros_names=("action",), writes=False,
+                        result=UnadvertisedAction,
                         removes="served_action"):
     examples = (Example({"action": "/a"}),)
 
@@ -196,7 +220,8 @@ class UnadvertiseAction(Op, op="unadvertise_action", ros_names=("action",), writ
 
 
 @dataclass(frozen=True)
-class ActionFeedback(Op, op="action_feedback", ros_names=("action",), writes=True):
+class ActionFeedback(Op, op="action_feedback", ros_names=("action",), writes=True,
+                     result=ActionFeedbackResult):
     """Feedback of a goal this client serves, published to the ROS client that sent it."""
 
     examples = (Example(

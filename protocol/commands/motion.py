@@ -4,18 +4,21 @@ obstacles it must avoid (Slicer models published to ROS) and its distances to th
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Optional
 
 from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import MISSING, ROBOT_NAME, ROS_NAME, ROS_NAME_DESC, Args
 from protocol.commands.op import ActionUse, Example, FrameUse, Op, Resource, TopicUse
-from protocol.commands.results import Answered, SendGoalResult, SolveIkResult
+from protocol.commands.results import (Answered, Result, SendGoalResult, SolveIkResult,
+                                       read_field)
 from protocol.commands.robots import joint_values
 from protocol.commands.values import Matrix4, matrix_from
 
 __all__ = ["DEFAULT_TRAJECTORY_ACTION", "FOLLOW_JOINT_TRAJECTORY", "MAX_OBSTACLES",
-           "MAX_PLAN_PREVIEW", "OBSTACLE_TYPES", "ExecuteMotion", "ObstacleDistances", "PlanMotion",
-           "PublishDistance", "RemoveObstacle", "SetObstacle", "SolveIk"]
+           "MAX_PLAN_PREVIEW", "OBSTACLE_TYPES", "ExecuteMotion", "ExecuteMotionResult",
+           "ObstacleDistances", "ObstacleDistancesResult", "ObstacleRemoved", "ObstacleSet",
+           "PlanMotion", "PlanMotionResult", "PublishDistance", "PublishDistanceResult",
+           "RemoveObstacle", "SetObstacle", "SolveIk"]
 
 FOLLOW_JOINT_TRAJECTORY = "control_msgs/action/FollowJointTrajectory"
 # ros2_control's joint trajectory controller's action (and the demo's).
@@ -28,6 +31,95 @@ MAX_OBSTACLES = 16  # per robot: each one a subscription and a bounding-volume h
 OBSTACLE_TYPES = {"Marker": "visualization_msgs/msg/Marker", "Mesh": "shape_msgs/msg/Mesh"}
 _ROBOT_DESC = "a robot name of letters, digits and _"
 _OBSTACLE_DESC = "an obstacle name of letters, digits and _"
+
+
+@dataclass(frozen=True)
+class ObstacleSet(Result):
+    """An obstacle of a robot: the topic it comes from, its type, and the robot's links
+    its contacts are checked against."""
+
+    name: str
+    obstacle: str
+    topic: str
+    type: str
+    links: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ObstacleRemoved(Result):
+    name: str
+    obstacle: str
+
+
+@dataclass(frozen=True)
+class ObstacleDistancesResult(Result):
+    """At the robot's current joint state: the distances from ``link`` to each obstacle
+    (with the nearest points), the link-obstacle pairs in contact, and the obstacles not
+    placed in the robot's frame (and why)."""
+
+    name: str
+    link: str
+    positions: dict[str, float]
+    distances: tuple[dict[str, Any], ...]
+    contacts: tuple[dict[str, Any], ...]
+    unplaced: tuple[dict[str, Any], ...]
+
+
+@dataclass(frozen=True)
+class PublishDistanceResult(Result):
+    """Whether the distance is now published on ``topic`` (at ``rate_hz``), or stopped."""
+
+    name: str
+    topic: str
+    publishing: bool
+    rate_hz: Optional[float] = None
+
+
+@dataclass(frozen=True)
+class PlanMotionResult(Result):
+    """A joint-space path: the joints that move, the start and goal positions, the path's
+    configurations (of those joints), how many were checked and whether all are clear
+    (else the first ``collision``: link, obstacle, step, fraction, positions), the
+    obstacles not placed, the motion's duration, and ``preview`` (each link's pose, mm,
+    at some configurations) when asked."""
+
+    name: str
+    joints: tuple[str, ...]
+    start: dict[str, float]
+    goal: dict[str, float]
+    path: tuple[tuple[float, ...], ...]
+    resolution: float
+    checked: int
+    clear: bool
+    collision: Optional[dict[str, Any]]
+    unplaced: tuple[dict[str, Any], ...]
+    duration_s: float
+    preview: Optional[tuple[dict[str, Any], ...]] = None
+
+
+@dataclass(frozen=True)
+class ExecuteMotionResult(SendGoalResult):
+    """The goal sent (a `SendGoalResult`), and the plan it follows: the joints, the
+    configurations checked, the resolution, the motion's duration, the obstacles not
+    placed."""
+
+    name: str
+    joints: tuple[str, ...]
+    checked: int
+    resolution: float
+    duration_s: float
+    unplaced: tuple[dict[str, Any], ...]
+
+    @classmethod
+    def read(cls, a: Args) -> ExecuteMotionResult:
+        goal = SendGoalResult.read(a)
+        return cls(**{f: getattr(goal, f) for f in goal.__dataclass_fields__},
+                   name=read_field(a, "name", str),
+                   joints=read_field(a, "joints", tuple[str, ...]),
+                   checked=read_field(a, "checked", int),
+                   resolution=read_field(a, "resolution", float),
+                   duration_s=read_field(a, "duration_s", float),
+                   unplaced=read_field(a, "unplaced", tuple[dict[str, Any], ...]))
 
 
 @dataclass(frozen=True)
@@ -79,7 +171,7 @@ def _obstacle(a: Args) -> str:
 
 
 @dataclass(frozen=True)
-class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False,
+class SetObstacle(Op, op="set_obstacle", result=ObstacleSet, ros_names=("topic",), writes=False,
                   content=("frames",)):
     """Make the model published on ``topic`` an obstacle of robot ``name``: a Slicer model
     sent to ROS (``publish_model``) as a visualization_msgs/Marker TRIANGLE_LIST (placed in
@@ -122,7 +214,7 @@ class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False,
 
 
 @dataclass(frozen=True)
-class RemoveObstacle(Op, op="remove_obstacle", writes=False):
+class RemoveObstacle(Op, op="remove_obstacle", result=ObstacleRemoved, writes=False):
     """Forget obstacle ``obstacle`` of robot ``name`` (its subscription ends)."""
 
     examples = (Example({"name": "r", "obstacle": "skull"}),)
@@ -139,7 +231,7 @@ class RemoveObstacle(Op, op="remove_obstacle", writes=False):
 
 
 @dataclass(frozen=True)
-class ObstacleDistances(Op, op="obstacle_distances", writes=False):
+class ObstacleDistances(Op, op="obstacle_distances", result=ObstacleDistancesResult, writes=False):
     """At the robot's current joint state: the minimum distance (mm) from ``link`` to each
     obstacle with the nearest points (mm, root link frame), and every link-obstacle pair in
     contact. A read."""
@@ -158,7 +250,8 @@ class ObstacleDistances(Op, op="obstacle_distances", writes=False):
 
 
 @dataclass(frozen=True)
-class PublishDistance(Op, op="publish_distance", ros_names=("topic",), writes=True):
+class PublishDistance(Op, op="publish_distance", result=PublishDistanceResult,
+                      ros_names=("topic",), writes=True):
     """Publish the minimum distance from ``link`` to ``obstacle`` as std_msgs/Float64 in
     METRES on ``topic``, ``rate_hz`` times a second at the robot's current joint state (for
     virtual fixtures and haptics; a client reads it as any topic). One per topic: the same
@@ -191,7 +284,7 @@ def _resolution(a: Args) -> float:
 
 
 @dataclass(frozen=True)
-class PlanMotion(Op, op="plan_motion", writes=False):
+class PlanMotion(Op, op="plan_motion", result=PlanMotionResult, writes=False):
     """A joint-space path of robot ``name`` from its current joint state to ``positions``
     (actuated joints; the others stay), a straight line within the URDF's limits, checked
     for contact with the robot's obstacles at every ``resolution`` (rad or m: the largest

@@ -1,6 +1,10 @@
-"""Typed results: what a successful `Reply` says, for the ops whose result a client reads.
+"""Typed results: what a successful `Reply` says, for every op a client sends.
 
-An op declares its result type next to its fields, by a second base::
+Every such op declares its result type next to its fields, and its handler in the daemon
+returns it: the reply's JSON is `Result.to_dict` (its fields in order; an optional field
+whose default is None is left out while None), so the type is the one description of the
+reply on both sides. An op whose result the client reads typed declares it by a second
+base::
 
     @dataclass(frozen=True)
     class Publish(Op, Answered[PublishResult], op="publish", writes=True): ...
@@ -8,22 +12,19 @@ An op declares its result type next to its fields, by a second base::
 and ``request.parse_result(reply.result)`` gives a ``PublishResult``, or raises a
 `ResultFormatError` naming the op, the field, what was expected and what came. So a field
 renamed on one side fails the type checker and the client's tests, not a user at run time.
-
-Every op a client sends declares one, and its handler in the daemon returns it: the reply's
-JSON is `Result.to_dict` (its fields in order; an optional field whose default is None is
-left out while None), so the type is the one description of the reply on both sides.
+Others declare ``result=ItsResult`` (their client still reads the JSON object).
 
 A result reads every field it declares (`Result.read`, derived from the field types unless
 a result says more) and ignores the rest (a newer daemon may add fields). A field the
-daemon always sends is required, so that a rename is caught at once; one it may leave out
-has the default the client always assumed.
+daemon always sends is required, so that a rename is caught at once; one it may leave out,
+or one an older daemon left out, has the default the client always assumed.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import (Any, ClassVar, Generic, Optional, TypeVar, Union, cast, get_args,
                     get_origin, get_type_hints)
 
@@ -305,24 +306,40 @@ class ListServicesResult(Result):
 
 @dataclass(frozen=True)
 class PublishResult(Result):
+    topic: str
     subscribers: int
 
     @classmethod
     def read(cls, a: Args) -> PublishResult:
-        return cls(subscribers=_count(a, "subscribers"))
+        return cls(topic=_or(a, "topic", str, ""), subscribers=_count(a, "subscribers"))
 
 
 @dataclass(frozen=True)
 class GetLastMessageResult(Result):
-    """The subscriber's last message as text ("" before any) and its message count."""
+    """The subscriber's message count and whether it holds a last message; if so, its
+    ``text`` (YAML or JSON) and ``value`` (as a client's value holds it); "" before any."""
 
-    text: str
+    topic: str
+    type: str
     count: int
+    received: bool
+    text: str = ""
+    value: Any = None
+
+    def to_dict(self) -> dict[str, Any]:
+        out = super().to_dict()
+        if self.received:  # a message's value may be null: it is sent all the same
+            out["value"] = self.value
+        else:
+            del out["text"]
+        return out
 
     @classmethod
     def read(cls, a: Args) -> GetLastMessageResult:
-        return cls(text=cast(str, a.opt_str("text", "", max_len=1 << 30, allow_empty=True)),
-                   count=_count(a, "count"))
+        text = cast(str, a.opt_str("text", "", max_len=1 << 30, allow_empty=True))
+        return cls(topic=_or(a, "topic", str, ""), type=_or(a, "type", str, ""),
+                   count=_count(a, "count"), received=_or(a, "received", bool, bool(text)),
+                   text=text, value=a.raw("value", False) if "value" in a.keys() else None)
 
 
 def _node(a: Args) -> str:
@@ -429,11 +446,14 @@ class LookupTransformResult(Result):
 
 @dataclass(frozen=True)
 class CallServiceResult(Result):
+    service: str
+    type: str
     response: dict[str, Any]
 
     @classmethod
     def read(cls, a: Args) -> CallServiceResult:
-        return cls(response=_object(a, "response"))
+        return cls(service=_or(a, "service", str, ""), type=_or(a, "type", str, ""),
+                   response=_object(a, "response"))
 
 
 @dataclass(frozen=True)
@@ -441,12 +461,15 @@ class DescribeRobotJointsResult(Result):
     """Where the robot's state publisher listens, and its joints as the daemon describes
     them (objects with ``name``, ``type``, limits, ``mimic``, ``actuated``)."""
 
+    name: str
+    robot: str  # the URDF's own name
     joint_states_topic: str
     joints: tuple[dict[str, Any], ...]
 
     @classmethod
     def read(cls, a: Args) -> DescribeRobotJointsResult:
-        return cls(joint_states_topic=a.req_str("joint_states_topic"),
+        return cls(name=_or(a, "name", str, ""), robot=_or(a, "robot", str, ""),
+                   joint_states_topic=a.req_str("joint_states_topic"),
                    joints=_objects(a, "joints"))
 
 
@@ -454,11 +477,15 @@ class DescribeRobotJointsResult(Result):
 class SetRobotJointsResult(Result):
     """The joint positions published, the added mimic joints included."""
 
+    name: str
+    topic: str
     positions: dict[str, float]
+    subscribers: int
 
     @classmethod
     def read(cls, a: Args) -> SetRobotJointsResult:
-        return cls(positions=_positions(a))
+        return cls(name=_or(a, "name", str, ""), topic=_or(a, "topic", str, ""),
+                   positions=_positions(a), subscribers=_or(a, "subscribers", int, 0))
 
 
 def _positions(a: Args, name: str = "positions") -> dict[str, float]:
@@ -476,31 +503,59 @@ def _positions(a: Args, name: str = "positions") -> dict[str, float]:
 class SendGoalResult(Result):
     """The accepted goal's device, where its feedback and result events come."""
 
+    action: str
+    type: str
+    goal_id: str
     device: str
+    status: str  # "accepted"
+    stamp: dict[str, Any]  # when the server accepted it (builtin_interfaces/Time)
 
     @classmethod
     def read(cls, a: Args) -> SendGoalResult:
-        return cls(device=_device(a))
+        device = _device(a)
+        return cls(action=_or(a, "action", str, ""), type=_or(a, "type", str, ""),
+                   goal_id=_or(a, "goal_id", str, ""), device=device,
+                   status=_or(a, "status", str, "accepted"),
+                   stamp=_or(a, "stamp", dict[str, Any], {}))
 
 
 @dataclass(frozen=True)
 class CancelGoalResult(Result):
+    """Whether the server is cancelling the goal, and its return code (name)."""
+
+    action: str
+    goal_id: str
     accepted: bool
+    return_code: int
+    return_name: str
 
     @classmethod
     def read(cls, a: Args) -> CancelGoalResult:
-        return cls(accepted=_flag(a, "accepted"))
+        accepted = _flag(a, "accepted")
+        return cls(action=_or(a, "action", str, ""), goal_id=_or(a, "goal_id", str, ""),
+                   accepted=accepted, return_code=_or(a, "return_code", int, 0),
+                   return_name=_or(a, "return_name", str, ""))
 
 
 @dataclass(frozen=True)
 class AdvertiseActionResult(Result):
-    """The device the served action's goals, decisions and cancels come on."""
+    """A served action, as `advertise_action` and `list_bridges` describe it: the device
+    its goals, decisions and cancels come on, the goals it received, whether it decides
+    (accepts or rejects) goals itself."""
 
+    kind: str  # "served_action"
+    action: str
+    type: str
     device: str
+    goals: int
+    decides: bool
 
     @classmethod
     def read(cls, a: Args) -> AdvertiseActionResult:
-        return cls(device=_device(a))
+        device = _device(a)
+        return cls(kind=_or(a, "kind", str, "served_action"), action=_or(a, "action", str, ""),
+                   type=_or(a, "type", str, ""), device=device,
+                   goals=_or(a, "goals", int, 0), decides=_or(a, "decides", bool, False))
 
 
 @dataclass(frozen=True)
@@ -510,6 +565,8 @@ class SolveIkResult(Result):
     solved the ``failure`` (``reason``: unreachable, joint_limit or collision; ``text``;
     ``joints`` past their limits; ``link`` and ``obstacle`` in contact)."""
 
+    name: str
+    tip: str
     solved: bool
     positions: dict[str, float]
     residual_mm: float
@@ -517,9 +574,11 @@ class SolveIkResult(Result):
     iterations: int
     attempts: int
     seed: str  # where the start came from: "given", "joint_states" or "zero"
-    failure: Optional[dict[str, Any]] = None
     # Each link's pose at those positions, in the root link's frame (mm): a preview's.
-    links: dict[str, Matrix4] = field(default_factory=dict)
+    links: dict[str, Matrix4]
+    failure: Optional[dict[str, Any]] = None
+    # Obstacles this solve could not take into account, and why (none: left out).
+    unplaced: Optional[tuple[dict[str, Any], ...]] = None
 
     @classmethod
     def read(cls, a: Args) -> SolveIkResult:
@@ -530,7 +589,8 @@ class SolveIkResult(Result):
             check_str(link, links_path, 1 << 10, False, None, "")
             links[link] = matrix_from(rows, f"{links_path}.{link}")
         failure = a.raw("failure", False)
-        return cls(solved=a.opt_bool("solved", False), positions=_positions(a),
+        return cls(name=_or(a, "name", str, ""), tip=_or(a, "tip", str, ""),
+                   solved=a.opt_bool("solved", False), positions=_positions(a),
                    residual_mm=cast(float, a.opt_float("residual_mm", 0.0, low=0.0,
                                                        high=float("inf"))),
                    residual_deg=cast(float, a.opt_float("residual_deg", 0.0, low=0.0,
@@ -539,4 +599,5 @@ class SolveIkResult(Result):
                    attempts=a.req_int("attempts", low=0, high=_COUNT_MAX),
                    seed=a.req_str("seed"),
                    failure=dict(failure) if isinstance(failure, dict) else None,
-                   links=links)
+                   links=links,
+                   unplaced=_or(a, "unplaced", tuple[dict[str, Any], ...], None))

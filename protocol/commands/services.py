@@ -9,11 +9,30 @@ from typing import Any, cast
 from protocol.commands.errors import WrongTypeError
 from protocol.commands.fields import MISSING, Args
 from protocol.commands.op import Bridge, Example, Op, Resource, ServiceUse
-from protocol.commands.results import Answered, CallServiceResult
+from protocol.commands.results import Answered, CallServiceResult, Result
 from protocol.commands.types import resolve_service_type
 from protocol.commands.wire import json_type
 
-__all__ = ["AdvertiseService", "CallService", "ServiceRequest", "UnadvertiseService"]
+__all__ = ["AdvertiseService", "CallService", "ServedServiceBridge", "ServiceRequest",
+           "UnadvertiseService", "UnadvertisedService"]
+
+
+@dataclass(frozen=True)
+class ServedServiceBridge(Result):
+    """A service a client serves, as `advertise_service` and `list_bridges` describe it:
+    the device its calls come on and how many it answered."""
+
+    kind: str  # "served_service"
+    service: str
+    type: str
+    device: str
+    calls: int
+
+
+@dataclass(frozen=True)
+class UnadvertisedService(Result):
+    service: str
+    device: str
 
 
 def _srv_type(a: Args) -> str:
@@ -60,6 +79,7 @@ class CallService(Op, Answered[CallServiceResult], op="call_service", ros_names=
 
 @dataclass(frozen=True)
 class AdvertiseService(Op, op="advertise_service", ros_names=("service",), writes=True,
+                       result=ServedServiceBridge,
                        creates=Bridge("served_service", ("service",), per_connection=True)):
     """Offer a ROS service served by this client: each call reaches the client as a
     `ServiceRequest` COMMAND, answered with an RTS_COMMAND reply ``{"response": {...}}``."""
@@ -85,6 +105,7 @@ class AdvertiseService(Op, op="advertise_service", ros_names=("service",), write
 
 @dataclass(frozen=True)
 class UnadvertiseService(Op, op="unadvertise_service", ros_names=("service",),
+                         result=UnadvertisedService,
                          writes=False, removes="served_service"):
     examples = (Example({"service": "/s"}),)
 

@@ -2,19 +2,52 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, Optional
 
 from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import MISSING, ROS_NAME, ROS_NAME_DESC, Args
 from protocol.commands.op import Bridge, Example, FrameUse, Op, Resource, TopicUse
-from protocol.commands.results import Answered, GetLastMessageResult, PublishResult
+from protocol.commands.results import Answered, GetLastMessageResult, PublishResult, Result
 from protocol.commands.types import check_message_type, resolve_message_type
 from protocol.commands.values import QoS
 from protocol.commands.wire import json_type
 
 __all__ = ["LABELS_TYPE", "CreatePublisher", "CreateSubscriber", "GetLastMessage", "Publish",
-           "RemovePublisher", "RemoveSubscriber"]
+           "RemovePublisher", "RemoveSubscriber", "TopicBridge", "TopicBridgeRemoved"]
+
+
+@dataclass(frozen=True)
+class TopicBridge(Result):
+    """A subscriber or publisher bridge, as its create op and `list_bridges` describe it:
+    its resolved type, device, OpenIGTLink type, QoS, messages so far and rate cap;
+    ``extra``: what its kind adds (a publisher's subscriber count, frame, labels topic),
+    sent beside the others; ``message_device``: where this client gets whole messages."""
+
+    kind: str  # "subscriber" | "publisher"
+    topic: str
+    type: str
+    device: str
+    igtl_type: str
+    qos: Optional[dict[str, Any]] = None
+    messages: int = 0
+    rate_hz: Optional[float] = None
+    extra: dict[str, Any] = field(default_factory=dict)
+    message_device: Optional[str] = None
+
+    def to_dict(self) -> dict[str, Any]:
+        out = super().to_dict()
+        device = out.pop("message_device", None)
+        out.update(out.pop("extra"))
+        if device is not None:
+            out["message_device"] = device
+        return out
+
+
+@dataclass(frozen=True)
+class TopicBridgeRemoved(Result):
+    topic: str
+    device: str
 
 
 # The type of a publisher's labels topic (markups labels as a JSON list).
@@ -33,7 +66,8 @@ def _msg_type(a: Args) -> str:
 
 
 @dataclass(frozen=True)
-class CreateSubscriber(Op, op="create_subscriber", ros_names=("topic",), writes=False,
+class CreateSubscriber(Op, op="create_subscriber", result=TopicBridge, ros_names=("topic",),
+                       writes=False,
                        content=("messages",),
                        creates=Bridge("subscriber", ("topic",), section="subscribers")):
     """Subscribe to a ROS topic; messages then flow to clients as OpenIGTLink messages.
@@ -66,7 +100,7 @@ class CreateSubscriber(Op, op="create_subscriber", ros_names=("topic",), writes=
 
 
 @dataclass(frozen=True)
-class RemoveSubscriber(Op, op="remove_subscriber", ros_names=("topic",),
+class RemoveSubscriber(Op, op="remove_subscriber", result=TopicBridgeRemoved, ros_names=("topic",),
                        writes=False, removes="subscriber"):
     examples = (Example({"topic": "/a"}),)
 
@@ -81,7 +115,8 @@ class RemoveSubscriber(Op, op="remove_subscriber", ros_names=("topic",),
 
 
 @dataclass(frozen=True)
-class CreatePublisher(Op, op="create_publisher", ros_names=("topic", "labels_topic"), writes=True,
+class CreatePublisher(Op, op="create_publisher", result=TopicBridge,
+                      ros_names=("topic", "labels_topic"), writes=True,
                       content=("messages",),
                       creates=Bridge("publisher", ("topic",), section="publishers")):
     """Create a ROS publisher; clients feed it with `Publish` or by sending OpenIGTLink
@@ -125,7 +160,7 @@ class CreatePublisher(Op, op="create_publisher", ros_names=("topic", "labels_top
 
 
 @dataclass(frozen=True)
-class RemovePublisher(Op, op="remove_publisher", ros_names=("topic",),
+class RemovePublisher(Op, op="remove_publisher", result=TopicBridgeRemoved, ros_names=("topic",),
                       writes=False, removes="publisher"):
     examples = (Example({"topic": "/a"}),)
 

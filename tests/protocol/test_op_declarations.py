@@ -5,14 +5,20 @@ must declare); the tests iterate the registry, so a new op without one fails her
 
 from __future__ import annotations
 
+import ast
+import re
 from dataclasses import dataclass, fields
-from typing import cast
+from pathlib import Path
+from typing import Optional, cast
 
 import pytest
 
 from protocol import commands as c
 from protocol.commands import (ActionUse, Bridge, FileUse, FrameUse, Op, ParameterUse,
                                Resource, ServiceUse, TopicUse)
+
+
+BRIDGE = Path(__file__).resolve().parents[2] / "bridge"
 
 
 def examples(cls: type[Op]) -> tuple[c.Example, ...]:
@@ -180,3 +186,75 @@ def test_action_ops_parse_types_goal_ids_and_limits() -> None:
         assert (error.value.field, error.value.error_code) == (field, code), args
     assert c.resolve_action_type("pkg/action/Name") == "pkg/action/Name"
     assert c.goal_id_text("A" * 32) == "a" * 32
+
+
+# ---------------------------------------------------------------- results
+
+def _bridge_modules() -> dict[str, ast.Module]:
+    return {str(path.relative_to(BRIDGE.parent)): ast.parse(path.read_text(), str(path))
+            for path in sorted(BRIDGE.rglob("*.py"))}
+
+
+def _handler_tables(modules: dict[str, ast.Module]) -> list[tuple[str, str, ast.expr]]:
+    """Every handler table entry in bridge/: (module path, op class name, handler)."""
+    entries = []
+    for path, tree in modules.items():
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.Dict):
+                continue
+            for key, value in zip(node.keys, node.values):
+                name = ast.unparse(key).removeprefix("c.") if key is not None else ""
+                if isinstance(c.__dict__.get(name), type) and issubclass(c.__dict__[name], Op):
+                    entries.append((path, name, value))
+    return entries
+
+
+def _annotations(modules: dict[str, ast.Module]) -> dict[str, dict[str, set[str]]]:
+    """Function name -> module path -> the return annotations of the functions so named."""
+    found: dict[str, dict[str, set[str]]] = {}
+    for path, tree in modules.items():
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) \
+                    and node.returns is not None:
+                found.setdefault(node.name, {}).setdefault(path, set()).add(
+                    ast.unparse(node.returns))
+    return found
+
+
+def _returns(path: str, handler: ast.expr,
+             annotations: dict[str, dict[str, set[str]]]) -> Optional[str]:
+    """The return annotation of the function a handler entry calls (a method, a lambda
+    calling one), found by its name in the entry's module first, then in bridge/."""
+    target = handler.body if isinstance(handler, ast.Lambda) else handler
+    if isinstance(target, ast.Call):
+        target = target.func
+    name = target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", "")
+    found = annotations.get(name, {})
+    mine = found.get(path) or set().union(*found.values())
+    return next(iter(mine)) if len(mine) == 1 else None
+
+
+def test_every_client_op_declares_its_result_and_its_handlers_return_it() -> None:
+    """An op's reply is its declared result type (`Op.result`): the dispatcher refuses a
+    handler that returns another (INTERNAL, naming both), and here every handler in
+    bridge/ says in its annotation that it returns that type (or a subtype)."""
+    for op, cls in c.REQUEST_TYPES.items():
+        if cls.to_client:
+            assert cls.result is None, op  # the client answers these
+        else:
+            assert isinstance(cls.result, type) and issubclass(cls.result, c.Result), (
+                f"{cls.__name__} ({op}) declares no result type: result=... or "
+                f"Answered[...] beside its fields")
+    served: set[str] = set()
+    modules = _bridge_modules()
+    annotations = _annotations(modules)
+    for path, name, handler in _handler_tables(modules):
+        cls = c.__dict__[name]
+        returns = _returns(path, handler, annotations)
+        assert returns is not None, f"{path}: the {cls.op} handler's return type not found"
+        served.add(cls.op)
+        named = {c.__dict__.get(word) for word in re.findall(r"\w+", returns)}
+        assert any(isinstance(t, type) and issubclass(t, cls.result) for t in named) \
+            or returns == "NoReturn", (f"{path}: the {cls.op} handler returns {returns}: "
+                                       f"expected {cls.result.__name__}, as its op declares")
+    assert served == {op for op, cls in c.REQUEST_TYPES.items() if not cls.to_client}
