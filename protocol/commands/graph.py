@@ -35,7 +35,8 @@ class ListBridgesResult(Result):
 
     def to_dict(self) -> dict[str, Any]:
         out = super().to_dict()
-        return {**out, **out.pop("state")}
+        state = out.pop("state")
+        return {**out, **state}
 
     @classmethod
     def read(cls, a: Args) -> ListBridgesResult:

@@ -339,7 +339,7 @@ class GetLastMessageResult(Result):
         text = cast(str, a.opt_str("text", "", max_len=1 << 30, allow_empty=True))
         return cls(topic=_or(a, "topic", str, ""), type=_or(a, "type", str, ""),
                    count=_count(a, "count"), received=_or(a, "received", bool, bool(text)),
-                   text=text, value=a.raw("value", False) if "value" in a.keys() else None)
+                   text=text, value=a.raw("value", True) if "value" in a.keys() else None)
 
 
 def _node(a: Args) -> str:

@@ -258,3 +258,23 @@ def test_every_client_op_declares_its_result_and_its_handlers_return_it() -> Non
             or returns == "NoReturn", (f"{path}: the {cls.op} handler returns {returns}: "
                                        f"expected {cls.result.__name__}, as its op declares")
     assert served == {op for op, cls in c.REQUEST_TYPES.items() if not cls.to_client}
+
+
+def test_results_with_keys_of_their_own_keep_the_wire_s_order() -> None:
+    """Results whose JSON is not only their fields in order: list_bridges' capability state
+    beside its four keys, a bridge kind's extra keys, a last message's null value."""
+    listing = c.ListBridgesResult((), ("tool",), (), 0, {"tf_buffer": {"frames": []}})
+    assert list(listing.to_dict()) == ["bridges", "devices", "clients", "hub_dropped",
+                                       "tf_buffer"]
+    assert c.ListBridgesResult.parse("list_bridges", listing.to_dict()) == listing
+    bridge = c.TopicBridge("publisher", "/b", "std_msgs/msg/String", "pub:b", "STRING",
+                           {"depth": 10}, 2, extra={"subscribers": 1, "frame": "w"},
+                           message_device="msg:b")
+    assert list(bridge.to_dict()) == ["kind", "topic", "type", "device", "igtl_type", "qos",
+                                      "messages", "subscribers", "frame", "message_device"]
+    empty = c.GetLastMessageResult("/a", "std_msgs/msg/Empty", 0, False)
+    assert empty.to_dict() == {"topic": "/a", "type": "std_msgs/msg/Empty", "count": 0,
+                               "received": False}
+    held = c.GetLastMessageResult("/a", "std_msgs/msg/Empty", 1, True, "{}\n", None)
+    assert list(held.to_dict().items())[-2:] == [("text", "{}\n"), ("value", None)]
+    assert c.GetLastMessageResult.parse("get_last_message", held.to_dict()) == held
