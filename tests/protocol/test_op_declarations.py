@@ -278,3 +278,22 @@ def test_results_with_keys_of_their_own_keep_the_wire_s_order() -> None:
     held = c.GetLastMessageResult("/a", "std_msgs/msg/Empty", 1, True, "{}\n", None)
     assert list(held.to_dict().items())[-2:] == [("text", "{}\n"), ("value", None)]
     assert c.GetLastMessageResult.parse("get_last_message", held.to_dict()) == held
+
+
+@pytest.mark.parametrize("result", [
+    c.TfLookupBridge("tf_lookup", "world", "tool", "tf:world>tool", "TRANSFORM", "error", 3,
+                     error="no frame tool"),
+    c.OwnParameter("speed", c.ParameterValue("double", 0.5), existed=False),
+    c.BroadcastTransformResult("/tf", c.Stamp(5, 7), 2),
+    c.ObstacleDistancesResult("arm", "tool", {"j1": 0.5}, ({"obstacle": "skull"},), (), ()),
+    c.RecordingResult("/data/a.mcap", 1, 0.5, 3, 0, 100, 0, False,
+                      ({"topic": "/a", "type": "std_msgs/msg/String"},), error="disk full"),
+    c.ListActionsResult(({"action": "/fjt", "types": ["control_msgs/action/X"]},)),
+], ids=lambda r: type(r).__name__)
+def test_a_result_reads_back_what_it_wrote(result: c.Result) -> None:
+    """`Result.read`, derived from the field types, reads `Result.to_dict` back (through
+    JSON text, as a client gets it)."""
+    data = c.loads(c.dumps(result.to_dict()))
+    assert type(result).parse("op", data) == result
+    with pytest.raises(c.ResultFormatError, match=r"op\.result\.\w+(\[0\])?: expected"):
+        type(result).parse("op", {**data, next(iter(data)): [1]})
