@@ -228,6 +228,24 @@ def test_the_op_tables_list_every_op_once_and_only_ops() -> None:
     assert not twice, f"protocol/README.md §3.5: two rows for {twice}"
 
 
+def test_the_security_page_s_read_and_write_columns_follow_the_declarations() -> None:
+    """docs/security.md, "What a client can do": an op in the changes column declares
+    ``writes`` (what --read-only refuses), one in the receives column does not, and every
+    op that writes is in the changes column."""
+    text = (REPO / "docs" / "security.md").read_text()
+    table = text[text.index("| area | receives (read) | changes (write) |"):]
+    table = table[:table.index("\n\n")]
+    reads, writes = set(), set()
+    for row in table.splitlines()[2:]:
+        cells = row.strip("|").split(" | ")
+        reads |= set(re.findall(r"`([a-z_]+)`", cells[1])) & set(REQUEST_TYPES)
+        writes |= set(re.findall(r"`([a-z_]+)`", cells[2])) & set(REQUEST_TYPES)
+    declared = {op for op, cls in REQUEST_TYPES.items() if cls.writes}
+    assert sorted(reads & declared) == [], "in the receives column, but they write"
+    assert sorted(writes - declared) == [], "in the changes column, but they only read"
+    assert sorted(declared - writes) == [], "they write, but are not in the changes column"
+
+
 # --- protocol/README.md's list_bridges row against a live reply ----------------------------
 def _documented_result(op: str) -> dict[str, Any]:
     """The ``← result`` example of ``op``'s row in protocol/README.md's op tables (the
