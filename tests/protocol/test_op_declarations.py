@@ -148,6 +148,12 @@ def test_an_op_that_declares_nothing_fails_at_import() -> None:
 
             def resources(self) -> tuple[Resource, ...]:
                 return ()
+    with pytest.raises(TypeError, match="its result is declared twice"):
+        @dataclass(frozen=True)
+        class TwoResults(Op, c.Answered[c.PublishResult], op="test_two_results",
+                         writes=False, result=c.PublishResult):
+            def resources(self) -> tuple[Resource, ...]:
+                return ()
     assert not [op for op in c.REQUEST_TYPES if op.startswith("test_")]
 
 
