@@ -37,7 +37,7 @@ from typing import Any, Iterator
 import pytest
 import yaml
 
-from protocol.commands import bridge_kinds
+from protocol.commands import REQUEST_TYPES, bridge_kinds
 from slicer_client.connection import CommandRefusedError
 from support import (REPO, Child, Processes, assert_clean_exit, pick_free_port, scaled,
                      start_daemon)
@@ -211,6 +211,39 @@ def test_the_block_runs_against_the_demo(block: Block, demo: Demo, processes: Pr
     output = result.stdout + result.stderr
     assert result.returncode == 0, f"{block.name} exited {result.returncode}:\n{output[-4000:]}"
     assert "Traceback" not in output, output[-4000:]
+
+
+# --- protocol/README.md's op tables against the registry ----------------------------------
+def test_the_op_tables_list_every_op_once_and_only_ops() -> None:
+    """protocol/README.md §3.5: each op of the schema (`REQUEST_TYPES`) has one row, and
+    each row names an op (a new op without its row fails here, named)."""
+    text = (REPO / "protocol" / "README.md").read_text()
+    tables = text[text.index("### 3.5"):text.index("### 3.6")]
+    rows = re.findall(r"^\| `([a-z_]+)`(?: \([^|]*\))? \|", tables, re.M)
+    missing = [op for op in REQUEST_TYPES if op not in rows]
+    assert not missing, f"protocol/README.md §3.5: no row for the ops {missing}"
+    unknown = [op for op in rows if op not in REQUEST_TYPES]
+    assert not unknown, f"protocol/README.md §3.5: rows for {unknown}, which are no ops"
+    twice = sorted({op for op in rows if rows.count(op) > 1})
+    assert not twice, f"protocol/README.md §3.5: two rows for {twice}"
+
+
+def test_the_security_page_s_read_and_write_columns_follow_the_declarations() -> None:
+    """docs/security.md, "What a client can do": an op in the changes column declares
+    ``writes`` (what --read-only refuses), one in the receives column does not, and every
+    op that writes is in the changes column."""
+    text = (REPO / "docs" / "security.md").read_text()
+    table = text[text.index("| area | receives (read) | changes (write) |"):]
+    table = table[:table.index("\n\n")]
+    reads, writes = set(), set()
+    for row in table.splitlines()[2:]:
+        cells = row.strip("|").split(" | ")
+        reads |= set(re.findall(r"`([a-z_]+)`", cells[1])) & set(REQUEST_TYPES)
+        writes |= set(re.findall(r"`([a-z_]+)`", cells[2])) & set(REQUEST_TYPES)
+    declared = {op for op, cls in REQUEST_TYPES.items() if cls.writes}
+    assert sorted(reads & declared) == [], "in the receives column, but they write"
+    assert sorted(writes - declared) == [], "in the changes column, but they only read"
+    assert sorted(declared - writes) == [], "they write, but are not in the changes column"
 
 
 # --- protocol/README.md's list_bridges row against a live reply ----------------------------

@@ -35,8 +35,8 @@ from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Handler
 from bridge.core.hub import Hub, Replier
 from bridge.ros.ros_node import RosNode
-from protocol.commands import (ActionFeedback, AdvertiseAction, CancelGoal, ListActions, Op,
-                               SendGoal, UnadvertiseAction)
+from protocol.commands import (ActionFeedback, AdvertiseAction, CancelGoal, ListActions,
+                               ListActionsResult, Op, SendGoal, UnadvertiseAction)
 from protocol.naming import DeviceNameRegistry
 
 __all__ = ["ActionBridges"]
@@ -55,7 +55,8 @@ class ActionBridges:
                                  idle_client_s=idle_client_s, lost_server_s=lost_server_s)
         self.servers = ServedActions(ros, hub, names, linger_s=linger_s, replies=replies)
 
-    def list_actions(self, request: ListActions, client: Optional[Replier]) -> dict[str, Any]:
+    def list_actions(self, request: ListActions,
+                     client: Optional[Replier]) -> ListActionsResult:
         """The actions some node serves: a goal can be sent to them. (The graph's action
         names also hold those that only have clients, the daemon's own after a goal that
         found no server among them.)"""
@@ -68,8 +69,8 @@ class ActionBridges:
                 continue
             for action, types in found:
                 served.setdefault(action, set()).update(types)
-        return {"actions": [{"action": action, "types": sorted(types)}
-                            for action, types in sorted(served.items())]}
+        return ListActionsResult(tuple({"action": action, "types": sorted(types)}
+                                       for action, types in sorted(served.items())))
 
     def handlers(self) -> dict[type[Op], Handler]:
         return {

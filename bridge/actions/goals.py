@@ -45,8 +45,9 @@ from bridge.ros.ros_node import RosNode
 from bridge.codecs import message_from_json
 from bridge.core.served import connected_client
 from protocol import commands as c
-from protocol.commands import (CancelGoal, CommandError, CommandFailedError, ErrorCode,
-                               ForbiddenError, LimitReachedError, SendGoal)
+from protocol.commands import (CancelGoal, CancelGoalResult, CommandError, CommandFailedError,
+                               ErrorCode, ForbiddenError, LimitReachedError, SendGoal,
+                               SendGoalResult)
 from protocol.messages import Message, String
 from protocol.naming import (KEY_FORMAT, KEY_GOAL_STATUS, DeviceNameRegistry, NameKey,
                              metadata_for)
@@ -204,7 +205,7 @@ class GoalSender:
         self._ros.executor.create_task(destroy_quietly, entry.client, entry.action)
 
     # --- send_goal -------------------------------------------------------------------------
-    async def send_goal(self, request: SendGoal, client: Optional[Replier]) -> dict[str, Any]:
+    async def send_goal(self, request: SendGoal, client: Optional[Replier]) -> SendGoalResult:
         client = connected_client(client, "action", "gets the feedback and the result")
         action = request.action
         ros_type = request.ros_type
@@ -249,8 +250,8 @@ class GoalSender:
         self._schedule_watch()
         log.info("goal %s sent to %s (%s) for client %s", goal_id, action, ros_type,
                  getattr(client, "peer", "?"))
-        return {"action": action, "type": ros_type, "goal_id": goal_id, "device": sent.device,
-                "status": "accepted", "stamp": message_to_dict(handle.stamp)}
+        return SendGoalResult(action, ros_type, goal_id, sent.device, "accepted",
+                              message_to_dict(handle.stamp))
 
     async def _send(self, sent: SentGoal, goal: Any, timeout: float) -> Any:
         loop = asyncio.get_running_loop()
@@ -465,7 +466,7 @@ class GoalSender:
         self._owned(action, goal.hex(), client, "request.goal_info.goal_id")
 
     async def cancel_goal(self, request: CancelGoal, client: Optional[Replier]
-                          ) -> dict[str, Any]:
+                          ) -> CancelGoalResult:
         action = request.action
         sent = self._owned(action, request.goal_id, client, "goal_id")
         if sent.handle is None:
@@ -480,9 +481,8 @@ class GoalSender:
                                      code=ErrorCode.TIMEOUT) from None
         code = int(response.return_code)
         canceling = [bytes(g.goal_id.uuid).hex() for g in response.goals_canceling]
-        return {"action": action, "goal_id": sent.goal_id,
-                "accepted": code == 0 and sent.goal_id in canceling,
-                "return_code": code, "return_name": _CANCEL_CODES.get(code, str(code))}
+        return CancelGoalResult(action, sent.goal_id, code == 0 and sent.goal_id in canceling,
+                                code, _CANCEL_CODES.get(code, str(code)))
 
     def _on_client_closed(self, client: Replier) -> None:
         # Nobody watches its goals any more: ask their servers to stop them.

@@ -35,9 +35,9 @@ from bridge.ros.ros_node import RosNode
 from bridge.codecs import message_from_json
 from bridge.core.served import advertised_by, already_served, client_answer, connected_client
 from protocol import commands as c
-from protocol.commands import (ActionCancel, ActionDecide, ActionFeedback, ActionGoal,
-                               AdvertiseAction,
-                               CommandError, CommandFailedError, ErrorCode, UnadvertiseAction,
+from protocol.commands import (ActionCancel, ActionDecide, ActionFeedback, ActionFeedbackResult,
+                               ActionGoal, AdvertiseAction, AdvertiseActionResult, CommandError,
+                               CommandFailedError, ErrorCode, UnadvertiseAction, UnadvertisedAction,
                                WrongTypeError)
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
 
@@ -104,7 +104,7 @@ class ServedActions:
 
     # --- advertise_action ------------------------------------------------------------------
     def advertise_action(self, request: AdvertiseAction, client: Optional[Replier]
-                         ) -> Created:
+                         ) -> Created[AdvertiseActionResult]:
         client = connected_client(client, "action", "executes the goals")
         action = request.action
         ros_type = request.ros_type
@@ -162,11 +162,11 @@ class ServedActions:
                 else lambda _goal: GoalResponse.ACCEPT)
 
     def unadvertise_action(self, request: UnadvertiseAction, client: Optional[Replier]
-                           ) -> dict[str, Any]:
+                           ) -> UnadvertisedAction:
         action = request.action
         served = advertised_by(self.served, "action", action, client)
         self._unadvertise(served)
-        return {"action": action, "device": served.device}
+        return UnadvertisedAction(action, served.device)
 
     def _execute_for(self, served: ServedAction) -> Any:
         async def execute(goal_handle: Any) -> Any:
@@ -317,7 +317,7 @@ class ServedActions:
                            metadata_for(served.key, ros_type=served.ros_type))
 
     def action_feedback(self, request: ActionFeedback, client: Optional[Replier]
-                        ) -> dict[str, Any]:
+                        ) -> ActionFeedbackResult:
         action = request.action
         served = self.served.get(action)
         goal = served.goals.get(request.goal_id) if served is not None else None
@@ -329,7 +329,7 @@ class ServedActions:
         # Published now, in order with the client's answer that ends the goal (rcl's publish
         # is thread-safe; the goal handle's own lock guards against its destruction).
         goal.handle.publish_feedback(feedback)
-        return {"action": action, "goal_id": goal.goal_id, "feedbacks": goal.feedbacks}
+        return ActionFeedbackResult(action, goal.goal_id, goal.feedbacks)
 
     def _outcome_from(self, served: ServedAction, text: str) -> Optional[tuple[str, Any]]:
         """The client's answer -> (status, Result), judged by its JSON; None (abort) with a
@@ -398,7 +398,7 @@ class ServedActions:
             self._unadvertise(served)
 
     def describe(self) -> list[dict[str, Any]]:
-        return [_describe_served(served) for served in self.served.values()]
+        return [_describe_served(served).to_dict() for served in self.served.values()]
 
     def close(self) -> None:
         # The node (with its action servers) is destroyed right after; only make sure no
@@ -414,8 +414,6 @@ class ServedActions:
         self._lingering.clear()
 
 
-def _describe_served(served: ServedAction) -> dict[str, Any]:
-    out: dict[str, Any] = {"kind": "served_action", "action": served.action,
-                           "type": served.ros_type, "device": served.device,
-                           "goals": served.received, "decides": served.decides}
-    return out
+def _describe_served(served: ServedAction) -> AdvertiseActionResult:
+    return AdvertiseActionResult("served_action", served.action, served.ros_type,
+                                 served.device, served.received, served.decides)

@@ -27,9 +27,9 @@ import inspect
 import logging
 import time
 from collections import deque
-from dataclasses import dataclass
-from typing import (Any, Awaitable, Callable, Mapping, Optional, Protocol, Sequence, Union,
-                    cast)
+from dataclasses import dataclass, replace
+from typing import (Any, Awaitable, Callable, Generic, Mapping, Optional, Protocol, Sequence,
+                    TypeVar, Union, cast)
 
 from bridge.core.content_guards import ContentGuard
 from bridge.core.heavy import HeavyWork, LargeResult, OffLoop
@@ -49,16 +49,23 @@ log = logging.getLogger(__name__)
 Result = Mapping[str, Any]
 
 
+# A handler's reply: its op's typed result (`protocol.commands.Result`), made the JSON
+# object here, in `_created`.
+Answer = Union[Result, c.Result]
+R = TypeVar("R", bound=Answer)
+
+
 @dataclass(frozen=True)
-class Created:
+class Created(Generic[R]):
     """What a create op's handler returns: its reply, and whether the bridge was there
     already (then the client's quota slot goes back). The reply gets ``existed`` here."""
 
-    reply: Result
+    reply: R
     existed: bool
 
 
-Outcome = Union[Result, Created, Awaitable[Result], Awaitable[Created], "OffLoop[Result]"]
+Outcome = Union[Answer, Created[Any], Awaitable[Answer], Awaitable[Created[Any]],
+                "OffLoop[Answer]"]
 # A handler gets the parsed request, the client that sent it (None for start-up config) and,
 # when its op declares content (`Op.content`), the `ContentGuard` for it: (request, client,
 # guard). The arity is checked when the dispatcher is built.
@@ -118,9 +125,22 @@ def _created(request: c.Request, outcome: Any) -> tuple[Result, bool]:
         raise TypeError(f"the {request.op} handler returned {type(outcome).__name__}: "
                         f"{'a create op' if creates else 'an op that creates nothing'} "
                         f"returns {'Created' if creates else 'its reply'}")
+    reply = outcome.reply if isinstance(outcome, Created) else outcome
+    declared = type(request).result
+    if declared is not None and not isinstance(reply, declared):
+        raise TypeError(f"the {request.op} handler returned {type(reply).__name__}: "
+                        f"expected {declared.__name__}, the result its op declares")
     if isinstance(outcome, Created):
-        return {**outcome.reply, "existed": outcome.existed}, outcome.existed
-    return cast(Result, outcome), False
+        return {**_json_object(outcome.reply), "existed": outcome.existed}, outcome.existed
+    return _json_object(cast(Answer, outcome)), False
+
+
+def _json_object(result: Answer) -> Result:
+    """A handler's typed result as its reply's JSON object (a listing's encoded off the
+    loop: `LargeResult`)."""
+    if isinstance(result, c.Result):
+        return LargeResult(result.to_dict()) if result.large else result.to_dict()
+    return result
 
 
 def _check_arity(cls: type[Op], handler: Handler) -> None:
@@ -411,15 +431,15 @@ class Dispatcher:
         self._settle(request, client, key, reserved, result, existed)
         return result
 
-    def _off_loop(self, outcome: OffLoop[Result],
-                  client: Replier | None) -> Result | Awaitable[Result]:
+    def _off_loop(self, outcome: OffLoop[Answer],
+                  client: Replier | None) -> Answer | Awaitable[Answer]:
         """A handler's `OffLoop` work, in its client's lane (the operator's start-up
         commands run it here and now: nothing else is served yet)."""
         if client is None or self._heavy is None:
             return outcome.work()
         return self._heavy.run(client, outcome.work)  # LaneFullError: LIMIT_REACHED
 
-    async def _counted(self, outcome: Awaitable[Result | Created], request: c.Request,
+    async def _counted(self, outcome: Awaitable[Answer | Created[Any]], request: c.Request,
                        client: Replier | None, key: Optional[BridgeKey],
                        reserved: bool) -> Result:
         result: Result | None = None
@@ -502,32 +522,28 @@ class Dispatcher:
                           body.command_id)
 
     # --- small handlers -----------------------------------------------------------------
-    def _hello(self, request: c.Hello, client: Replier | None) -> Result:
+    def _hello(self, request: c.Hello, client: Replier | None) -> c.HelloResult:
         """The handshake; for a client, also what it may do (``auth``: whether it writes,
         why not, and the challenge its key must answer) and its heartbeat, if asked."""
-        reply: dict[str, Any] = {"schema": c.SCHEMA_VERSION, "version": DAEMON_VERSION,
-                                 "node": self._ros.fully_qualified_name,
-                                 "ops": sorted(self._handlers)}
+        greeting = c.HelloResult(c.SCHEMA_VERSION, DAEMON_VERSION,
+                                 self._ros.fully_qualified_name, tuple(sorted(self._handlers)))
         if client is None:
-            return reply
-        auth: dict[str, Any] = {"writes": client.grant.writes}
-        if not client.grant.writes:
-            auth["why"] = client.grant.why
-        if self._policy.key is not None and not client.grant.writes \
-                and not self._policy.read_only:
-            client.challenge = auth["challenge"] = new_challenge()
-        reply["auth"] = auth
+            return greeting
+        writes, challenge = client.grant.writes, None
+        if self._policy.key is not None and not writes and not self._policy.read_only:
+            client.challenge = challenge = new_challenge()
         client.reads_stamps = request.stamps
         if request.heartbeat is not None:
             client.start_heartbeat(request.heartbeat)
-            reply["heartbeat"] = request.heartbeat
         if request.display_hz is not None:
             client.pace_display(request.display_hz)
-            reply["display_hz"] = request.display_hz
-        reply["clock_ms"] = daemon_clock_ms()  # streams' message ids are on this clock
-        return reply
+        return replace(greeting, auth=c.HelloAuth(writes, None if writes else client.grant.why,
+                                                  challenge),
+                       heartbeat=request.heartbeat, display_hz=request.display_hz,
+                       clock_ms=daemon_clock_ms())  # streams' message ids are on this clock
 
-    def _authenticate(self, request: c.Authenticate, client: Replier | None) -> Result:
+    def _authenticate(self, request: c.Authenticate,
+                      client: Replier | None) -> c.AuthenticateResult:
         """A key presented against this connection's challenge (one try per challenge: a
         wrong proof needs a new hello)."""
         if client is None:
@@ -549,36 +565,40 @@ class Dispatcher:
                                  "daemon's?)")
         client.granted(self._policy.grant_after_proof())
         log.info("a client presented the key: it may write")
-        return {"writes": client.grant.writes}
+        return c.AuthenticateResult(client.grant.writes)
 
     def _list_bridges(self, request: c.ListBridges, client: Replier | None,
-                      guard: ContentGuard) -> Result:
+                      guard: ContentGuard) -> c.ListBridgesResult:
         """The bridges (declared kinds only), each capability's other state under its own
         key, and the hub's devices and clients."""
-        reply: dict[str, Any] = {"bridges": [], "devices": self._hub.devices(),
-                                 "clients": [client.describe() for client in self._hub.clients],
-                                 "hub_dropped": self._hub.dropped}
+        bridges: list[dict[str, Any]] = []
+        state: dict[str, Any] = {}
         for capability in self._capabilities:
             for bridge in capability.describe():
                 if bridge.get("kind") not in _KINDS:
                     raise TypeError(f"{type(capability).__name__}.describe(): expected bridges "
                                     f"of a declared kind ({', '.join(sorted(_KINDS))}), got "
                                     f"kind {bridge.get('kind')!r}")
-                reply["bridges"].append(bridge)
+                bridges.append(bridge)
             for key, value in capability.state(guard).items():
-                if key in reply:
+                if key in state or key in c.ListBridgesResult.__dataclass_fields__:
                     raise TypeError(f"{type(capability).__name__}.state(): expected a key of "
                                     f"its own in the list_bridges reply, got {key!r} (taken)")
-                reply[key] = value
-        return LargeResult(reply)
+                state[key] = value
+        return c.ListBridgesResult(tuple(bridges), tuple(self._hub.devices()),
+                                   tuple(client.describe() for client in self._hub.clients),
+                                   self._hub.dropped, state)
 
-    def _list_topics(self, request: c.ListTopics, client: Replier | None) -> Result:
+    def _list_topics(self, request: c.ListTopics,
+                     client: Replier | None) -> c.ListTopicsResult:
         # The publisher count: a client's wait for a topic that has none says so.
         node = self._ros.node
-        return LargeResult(topics=[{"topic": name, "types": list(types),
-                                    "publishers": node.count_publishers(name)}
-                                   for name, types in node.get_topic_names_and_types()])
+        return c.ListTopicsResult(tuple({"topic": name, "types": list(types),
+                                         "publishers": node.count_publishers(name)}
+                                        for name, types in node.get_topic_names_and_types()))
 
-    def _list_services(self, request: c.ListServices, client: Replier | None) -> Result:
-        return LargeResult(services=[{"service": name, "types": list(types)} for name, types
-                                     in self._ros.node.get_service_names_and_types()])
+    def _list_services(self, request: c.ListServices,
+                       client: Replier | None) -> c.ListServicesResult:
+        return c.ListServicesResult(tuple({"service": name, "types": list(types)}
+                                          for name, types
+                                          in self._ros.node.get_service_names_and_types()))

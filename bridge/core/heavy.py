@@ -31,6 +31,7 @@ __all__ = ["HEAVY_THREADS", "MAX_WAITING_PER_LANE", "HeavyWork", "LaneFullError"
            "LargeResult", "OffLoop"]
 
 T = TypeVar("T")
+T_co = TypeVar("T_co", covariant=True)
 
 HEAVY_THREADS = 2  # the machine this is built for has two cores
 MAX_WAITING_PER_LANE = 16  # a client's jobs queued behind its running one
@@ -49,11 +50,11 @@ class LaneFullError(LimitReachedError):
 
 
 @dataclass(frozen=True)
-class OffLoop(Generic[T]):
+class OffLoop(Generic[T_co]):
     """What a handler returns for work to run in its client's lane: ``work()`` in a pool
     thread, its result (or exception) the handler's."""
 
-    work: Callable[[], T]
+    work: Callable[[], T_co]
 
 
 class LargeResult(dict[str, Any]):

@@ -78,7 +78,6 @@ from bridge.codecs import CodecError, codec_for
 from bridge.codecs.cdr import CdrError
 from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Created, Handler
-from bridge.core.heavy import LargeResult
 from bridge.core.hub import Hub, Replier, Subscriber
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.outbox import SharedFrame
@@ -92,8 +91,9 @@ from bridge.tf.buffer import TfBuffer
 from bridge.tf.errors import ExtrapolationError, TfError
 from bridge.tf.lookups import LookupKey, LookupStreams
 from bridge.tf.math import Quat, Tf7, Vec3, compose, quat_normalize
-from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode,
-                               ListMarkers, Op, RemoveMarkerSubscriber)
+from protocol.commands import (CommandFailedError, CreateMarkerSubscriber, ErrorCode, ListMarkers,
+                               ListMarkersResult, MarkerSubscriberBridge, Op,
+                               RemoveMarkerSubscriber, RemovedMarkerSubscriber)
 from protocol.conversions import igtl_stamp_or_now
 from protocol.messages import Message, StatusCode, String
 from protocol.naming import (KEY_COLOR, KEY_DELETED, KEY_FORMAT, KEY_MARKER_TYPE, KEY_MARKERS,
@@ -567,7 +567,7 @@ class MarkerServing:
     # ------------------------------------------------------------------ ops
 
     def create(self, request: CreateMarkerSubscriber, client: Optional[Replier],
-               guard: ContentGuard) -> Created:
+               guard: ContentGuard) -> Created[MarkerSubscriberBridge]:
         topic = request.topic
         ros_type = request.ros_type
         existing = self.subscriptions.get(topic)
@@ -638,29 +638,29 @@ class MarkerServing:
                                      code=ErrorCode.NOT_FOUND)
         return sub
 
-    def remove(self, request: RemoveMarkerSubscriber) -> dict[str, Any]:
+    def remove(self, request: RemoveMarkerSubscriber) -> RemovedMarkerSubscriber:
         sub = self._find(request.topic)
         topic = sub.topic
         devices = [live.device for live in sub.markers.values()] + [sub.device]
         self._close(sub)
-        return {"topic": topic, "devices": devices}
+        return RemovedMarkerSubscriber(topic, tuple(devices))
 
-    def list_markers(self, request: ListMarkers) -> LargeResult:
+    def list_markers(self, request: ListMarkers) -> ListMarkersResult:
         sub = self._find(request.topic)
         now = time.monotonic_ns()
-        return LargeResult({
-            "topic": sub.topic, "device": sub.device,
-            "markers": [{"ns": live.key[0], "id": live.key[1], "device": live.device,
-                         "type": live.kind, "frame": live.frame, "points": live.points,
-                         "placed": live.parent != live.frame,
-                         "frame_device": self._frames[(sub.fixed_frame, live.parent)].device,
-                         "expires_in": (round((live.expires_ns - now) / 1e9, 3)
-                                        if live.expires_ns else None)}
-                        for live in sub.markers.values()],
-            "withheld": [{"ns": k[0], "id": k[1], "reason": why}
-                         for k, why in sub.withheld.items()],
-            "errors": [{"ns": k[0], "id": k[1], "error": why} for k, why in sub.errors.items()],
-        })
+        return ListMarkersResult(
+            sub.topic, sub.device,
+            markers=tuple({"ns": live.key[0], "id": live.key[1], "device": live.device,
+                           "type": live.kind, "frame": live.frame, "points": live.points,
+                           "placed": live.parent != live.frame,
+                           "frame_device": self._frames[(sub.fixed_frame, live.parent)].device,
+                           "expires_in": (round((live.expires_ns - now) / 1e9, 3)
+                                          if live.expires_ns else None)}
+                          for live in sub.markers.values()),
+            withheld=tuple({"ns": k[0], "id": k[1], "reason": why}
+                           for k, why in sub.withheld.items()),
+            errors=tuple({"ns": k[0], "id": k[1], "error": why}
+                         for k, why in sub.errors.items()))
 
     # ------------------------------------------------------------------ loop thread
 
@@ -931,25 +931,20 @@ class MarkerServing:
             ListMarkers: lambda request, _: self.list_markers(request),
         }
 
-    def _describe(self, sub: _Subscription) -> dict[str, Any]:
+    def _describe(self, sub: _Subscription) -> MarkerSubscriberBridge:
         worker = sub.worker
-        out: dict[str, Any] = {
-            "kind": "marker_subscriber", "topic": sub.topic, "type": sub.ros_type,
-            "fixed_frame": sub.fixed_frame, "device": sub.device,
-            "qos": sub.request.qos.to_dict(), "messages": sub.received,
-            "markers": len(sub.markers), "withheld": len(sub.withheld),
-            "errors": len(sub.errors), "raw": sub.raw,
-            "dropped": worker.dropped if worker is not None else 0,
-            "meshed": worker.meshed if worker is not None else 0,
-            "model_bytes": self.budget.of_topic(sub.topic)}
-        return out
+        return MarkerSubscriberBridge(
+            "marker_subscriber", sub.topic, sub.ros_type, sub.fixed_frame, sub.device,
+            sub.request.qos.to_dict(), sub.received, len(sub.markers), len(sub.withheld),
+            len(sub.errors), sub.raw, worker.dropped if worker is not None else 0,
+            worker.meshed if worker is not None else 0, self.budget.of_topic(sub.topic))
 
     def recorded_topics(self) -> dict[str, Optional[str]]:
         """What a recording takes from here (any thread): every marker topic."""
         return {topic: sub.request.ros_type for topic, sub in tuple(self.subscriptions.items())}
 
     def describe(self) -> list[dict[str, Any]]:
-        return [self._describe(sub) for sub in self.subscriptions.values()]
+        return [self._describe(sub).to_dict() for sub in self.subscriptions.values()]
 
     def state(self, guard: ContentGuard) -> dict[str, Any]:
         return {}

@@ -47,7 +47,7 @@ from std_msgs.msg import Float64
 from visualization_msgs.msg import Marker
 
 from bridge.core.content_guards import ContentGuard
-from bridge.core.dispatch import Handler, Result
+from bridge.core.dispatch import Handler
 from bridge.core.heavy import OffLoop
 from bridge.core.threads import OnFailure, start_thread
 from bridge.ros.ros_node import RosNode
@@ -55,9 +55,11 @@ from bridge.motion.errors import MotionError
 from bridge.ros.graph_types import refuse_other_type
 from bridge.core.hub import Replier
 from protocol.commands import (FOLLOW_JOINT_TRAJECTORY, MAX_OBSTACLES, CommandFailedError,
-                               ErrorCode, ExecuteMotion, LimitReachedError, ObstacleDistances,
-                               Op, OutOfRangeError, PlanMotion, PublishDistance,
-                               RemoveObstacle, SendGoal, SetObstacle, SolveIk)
+                               ErrorCode, ExecuteMotion, ExecuteMotionResult, LimitReachedError,
+                               Matrix4, ObstacleDistances, ObstacleDistancesResult, ObstacleRemoved,
+                               ObstacleSet, Op, OutOfRangeError, PlanMotion, PlanMotionResult,
+                               PublishDistance, PublishDistanceResult, RemoveObstacle, SendGoal,
+                               SendGoalResult, SetObstacle, SolveIk, SolveIkResult, matrix_rows)
 from protocol.commands.fields import Args
 from protocol.conversions import metres_to_mm, mm_to_metres, pose_to_matrix
 
@@ -79,7 +81,7 @@ RobotLookup = Callable[[str], "tuple[RobotModel, str, str]"]
 # tf: target <- source, latest (the daemon's buffer); raises a TfError when it cannot.
 FrameLookup = Callable[[str, str], Any]
 # The actions capability's send_goal: (request, client) -> its reply.
-GoalSender = Callable[[SendGoal, Optional[Replier]], Awaitable[dict[str, Any]]]
+GoalSender = Callable[[SendGoal, Optional[Replier]], Awaitable[SendGoalResult]]
 
 _MAX_TRAJECTORY_POINTS = 50
 _MAX_WATCHES = 64  # publish_distance topics, all robots together
@@ -253,12 +255,12 @@ class MotionBridges:
 
     # ------------------------------------------------------------------ ops
 
-    def solve_ik(self, request: SolveIk) -> OffLoop[Result]:
+    def solve_ik(self, request: SolveIk) -> OffLoop[SolveIkResult]:
         robot = self._robot(request.name)
         target_m = np.array(request.target, dtype=np.float64)
         target_m[:3, 3] = mm_to_metres(target_m[:3, 3])
 
-        def work() -> Result:
+        def work() -> SolveIkResult:
             from bridge.motion.ik import solve_ik
 
             current = robot.current() if request.seed is None else {}
@@ -281,17 +283,12 @@ class MotionBridges:
                 except MotionError as error:  # the request's fault: a refusal, not a bug
                     raise OutOfRangeError(error.field, error.expected, error.got) from None
                 links = robot.model.link_poses(result.theta)
-            out: dict[str, Any] = {
-                "name": robot.name, "tip": request.tip, "solved": result.ok,
-                "positions": result.positions, "residual_mm": result.residual_mm,
-                "residual_deg": result.residual_deg, "iterations": result.iterations,
-                "attempts": result.attempts, "seed": seed_from,
-                "links": {link: _mm_rows(pose) for link, pose in links.items()}}
-            if result.failure is not None:
-                out["failure"] = result.failure.to_dict()
-            if unplaced:  # obstacles this solve could not take into account, and why
-                out["unplaced"] = unplaced
-            return out
+            return SolveIkResult(
+                robot.name, request.tip, result.ok, result.positions, result.residual_mm,
+                result.residual_deg, result.iterations, result.attempts, seed_from,
+                {link: _mm_rows(pose) for link, pose in links.items()},
+                failure=result.failure.to_dict() if result.failure is not None else None,
+                unplaced=tuple(unplaced) or None)
 
         return OffLoop(work)
 
@@ -336,7 +333,7 @@ class MotionBridges:
 
     # ------------------------------------------------------------------ obstacles
 
-    def set_obstacle(self, request: SetObstacle, guard: ContentGuard) -> dict[str, Any]:
+    def set_obstacle(self, request: SetObstacle, guard: ContentGuard) -> ObstacleSet:
         robot = self._robot(request.name)
         with robot.lock:
             if robot.world is None:
@@ -366,8 +363,8 @@ class MotionBridges:
         robot.obstacles[request.obstacle] = obstacle
         log.info("motion: robot %s: obstacle %s from %s (%s)", robot.name, request.obstacle,
                  request.topic, request.type)
-        return {"name": robot.name, "obstacle": request.obstacle, "topic": request.topic,
-                "type": request.type, "links": list(robot.world.links)}
+        return ObstacleSet(robot.name, request.obstacle, request.topic, request.type,
+                           tuple(robot.world.links))
 
     def _on_obstacle(self, robot: _Robot, obstacle: _Obstacle, msg: Any) -> None:
         """A model on an obstacle's topic (executor thread): handed to the builder thread
@@ -418,7 +415,7 @@ class MotionBridges:
             obstacle.frame, obstacle.pose = frame or robot.root_frame, pose
             obstacle.triangles, obstacle.error = len(triangles), ""
 
-    def remove_obstacle(self, request: RemoveObstacle) -> dict[str, Any]:
+    def remove_obstacle(self, request: RemoveObstacle) -> ObstacleRemoved:
         robot = self._robot(request.name)
         obstacle = robot.obstacles.pop(request.obstacle, None)
         if obstacle is None:
@@ -429,14 +426,15 @@ class MotionBridges:
         with robot.lock:
             if robot.world is not None:
                 robot.world.obstacles.pop(request.obstacle, None)
-        return {"name": robot.name, "obstacle": request.obstacle}
+        return ObstacleRemoved(robot.name, request.obstacle)
 
     # ------------------------------------------------------------------ distances
 
-    def obstacle_distances(self, request: ObstacleDistances) -> OffLoop[Result]:
+    def obstacle_distances(self, request: ObstacleDistances,
+                           ) -> OffLoop[ObstacleDistancesResult]:
         robot = self._robot(request.name)
 
-        def work() -> Result:
+        def work() -> ObstacleDistancesResult:
             positions = robot.current()
             with robot.lock:
                 if robot.world is None:
@@ -449,19 +447,19 @@ class MotionBridges:
                         contacts = world.contacts(theta)
                     except MotionError as error:
                         raise OutOfRangeError(error.field, error.expected, error.got) from None
-            return {"name": robot.name, "link": request.link,
-                    "positions": robot.model.positions_of(theta),
-                    "distances": [d.to_dict() for d in distances],
-                    "contacts": [{"link": c.link, "obstacle": c.obstacle} for c in contacts],
-                    "unplaced": unplaced}
+            return ObstacleDistancesResult(
+                robot.name, request.link, robot.model.positions_of(theta),
+                tuple(d.to_dict() for d in distances),
+                tuple({"link": c.link, "obstacle": c.obstacle} for c in contacts),
+                tuple(unplaced))
 
         return OffLoop(work)
 
-    def publish_distance(self, request: PublishDistance) -> dict[str, Any]:
+    def publish_distance(self, request: PublishDistance) -> PublishDistanceResult:
         robot = self._robot(request.name)
         self._stop_watch(request.topic)
         if request.rate_hz == 0:
-            return {"name": robot.name, "topic": request.topic, "publishing": False}
+            return PublishDistanceResult(robot.name, request.topic, False)
         if request.obstacle not in robot.obstacles:
             raise CommandFailedError("obstacle", f"an obstacle of robot {robot.name!r} "
                                      f"({', '.join(robot.obstacles) or 'none'})",
@@ -477,8 +475,7 @@ class MotionBridges:
         watch.timer = self._ros.node.create_timer(1.0 / request.rate_hz,
                                                   lambda: self._tick(watch))
         self._watches[request.topic] = watch
-        return {"name": robot.name, "topic": request.topic, "publishing": True,
-                "rate_hz": request.rate_hz}
+        return PublishDistanceResult(robot.name, request.topic, True, request.rate_hz)
 
     def _tick(self, watch: _Watch) -> None:
         """One distance on a watch's topic (executor thread), for the robot of that name as
@@ -522,7 +519,7 @@ class MotionBridges:
     # ------------------------------------------------------------------ plan, execute
 
     def _plan(self, robot: _Robot, goal: tuple[tuple[str, float], ...],
-              resolution: float, preview: int = 0) -> dict[str, Any]:
+              resolution: float, preview: int = 0) -> PlanMotionResult:
         """The straight joint-space path from the current state to ``goal`` (worker
         thread), checked for limits (the goal; the box of limits holds the whole line) and
         for contact at every ``resolution``."""
@@ -564,18 +561,15 @@ class MotionBridges:
             speed = (joint.limits.velocity if joint.limits is not None and
                      joint.limits.velocity else 2 * _DEFAULT_SPEED) * 0.5
             duration = max(duration, abs(float(delta[i])) / speed)
-        out = {"name": robot.name, "joints": [model.joint_names[i] for i in moving],
-               "start": model.positions_of(start), "goal": model.positions_of(end),
-               "path": [[float(row[i]) for i in moving] for row in path],
-               "resolution": resolution, "checked": len(path), "clear": collision is None,
-               "collision": collision, "unplaced": unplaced, "duration_s": duration}
-        if preview:
-            out["preview"] = [{"step": k, "time_s": duration * k / max(1, len(path) - 1),
-                               "links": {link: _mm_rows(pose) for link, pose in links.items()}}
-                              for k, links in poses]
-        return out
+        return PlanMotionResult(
+            robot.name, tuple(model.joint_names[i] for i in moving), model.positions_of(start),
+            model.positions_of(end), tuple(tuple(float(row[i]) for i in moving) for row in path),
+            resolution, len(path), collision is None, collision, tuple(unplaced), duration,
+            preview=tuple({"step": k, "time_s": duration * k / max(1, len(path) - 1),
+                           "links": {link: _mm_rows(pose) for link, pose in links.items()}}
+                          for k, links in poses) if preview else None)
 
-    async def plan_motion(self, request: PlanMotion) -> dict[str, Any]:
+    async def plan_motion(self, request: PlanMotion) -> PlanMotionResult:
         robot = self._robot(request.name)
         loop = asyncio.get_running_loop()
         return await loop.run_in_executor(
@@ -583,30 +577,30 @@ class MotionBridges:
                                      request.preview))
 
     async def execute_motion(self, request: ExecuteMotion,
-                             client: Optional[Replier]) -> dict[str, Any]:
+                             client: Optional[Replier]) -> ExecuteMotionResult:
         robot = self._robot(request.name)
         loop = asyncio.get_running_loop()
         plan = await loop.run_in_executor(
             None, lambda: self._plan(robot, request.positions, request.resolution))
-        collision = plan["collision"]
+        collision = plan.collision
         if collision is not None:
             raise CommandFailedError(
                 "positions", f"a path clear of the robot's obstacles (checked every "
                 f"{request.resolution:g} rad or m)", f"link {collision['link']!r} touches "
                 f"obstacle {collision['obstacle']!r} {collision['fraction']:.0%} of the way "
-                f"(configuration {collision['step']} of {plan['checked'] - 1}); nothing sent",
+                f"(configuration {collision['step']} of {plan.checked - 1}); nothing sent",
                 code=ErrorCode.REJECTED)
-        duration = request.duration_s or plan["duration_s"]
-        path = plan["path"]
+        duration = request.duration_s or plan.duration_s
+        path = plan.path
         picks = np.unique(np.linspace(0, len(path) - 1,
                                       min(len(path), _MAX_TRAJECTORY_POINTS)).round().astype(int))
         points = []
         for k in picks[1:] if len(picks) > 1 else picks:
             at = duration * k / max(1, len(path) - 1)
             sec = int(at)
-            points.append({"positions": path[k], "time_from_start": {
+            points.append({"positions": list(path[k]), "time_from_start": {
                 "sec": sec, "nanosec": int(round((at - sec) * 1e9)) % 1_000_000_000}})
-        goal = {"trajectory": {"joint_names": plan["joints"], "points": points}}
+        goal = {"trajectory": {"joint_names": list(plan.joints), "points": points}}
         fields: dict[str, Any] = {"action": request.action, "type": FOLLOW_JOINT_TRAJECTORY,
                                   "goal": goal, "timeout": request.timeout}
         if request.result_timeout is not None:
@@ -616,11 +610,13 @@ class MotionBridges:
         send = SendGoal.from_args(Args(fields, ""))  # its own checks (the goal id's form)
         reply = await self._send_goal(send, client)
         log.info("motion: robot %s: %d joint(s) to %s in %.2f s, %d configurations clear "
-                 "(every %g)", robot.name, len(plan["joints"]), request.action, duration,
-                 plan["checked"], request.resolution)
-        return {**reply, "name": robot.name, "joints": plan["joints"],
-                "checked": plan["checked"], "resolution": request.resolution,
-                "duration_s": duration, "unplaced": plan["unplaced"]}
+                 "(every %g)", robot.name, len(plan.joints), request.action, duration,
+                 plan.checked, request.resolution)
+        return ExecuteMotionResult(reply.action, reply.type, reply.goal_id, reply.device,
+                                   reply.status, reply.stamp, name=robot.name,
+                                   joints=plan.joints, checked=plan.checked,
+                                   resolution=request.resolution, duration_s=duration,
+                                   unplaced=plan.unplaced)
 
     # ------------------------------------------------------------------ capability
 
@@ -650,11 +646,11 @@ class MotionBridges:
             self._forget(robot)
 
 
-def _mm_rows(pose_m: npt.NDArray[np.float64]) -> list[list[float]]:
+def _mm_rows(pose_m: npt.NDArray[np.float64]) -> Matrix4:
     """A pose in metres as the wire's 4 rows in millimetres."""
     rows = np.array(pose_m, dtype=np.float64)
     rows[:3, 3] = metres_to_mm(rows[:3, 3])
-    return [[float(v) for v in row] for row in rows]
+    return matrix_rows(rows)
 
 
 def _import_motion_libraries() -> None:

@@ -45,13 +45,14 @@ from bridge.core.security import parameter_service
 from bridge.ros.ros_node import RosNode
 from bridge.parameters.watch import ParameterWatch
 from bridge.ros.service_calls import call_ros_service, wait_until_ready
-from protocol.commands import (Op, CommandError, CommandFailedError, CreateParameterClient,
-                               ErrorCode, ForbiddenError, GetParameters, ListParameters,
-                               ObserveParameters,
-                               OutOfRangeError, ParameterValue, RemoveParameterClient,
-                               ServerDeclareParameter, ServerGetParameters,
-                               ServerSetParameter, ServerUndeclareParameter, SetParameters,
-                               dumps, not_json_number)
+from protocol.commands import (CommandError, CommandFailedError, CreateParameterClient, ErrorCode,
+                               ForbiddenError, GetParameters, GetParametersResult, ListParameters,
+                               ListParametersResult, ObserveParameters, ObserveParametersResult, Op,
+                               OutOfRangeError, OwnParameter, OwnParameterUndeclared,
+                               ParameterClientBridge, ParameterClientRemoved, ParameterOutcome,
+                               ParameterValue, RemoveParameterClient, ServerDeclareParameter,
+                               ServerGetParameters, ServerSetParameter, ServerUndeclareParameter,
+                               SetParameters, SetParametersResult, dumps, not_json_number)
 from protocol.messages import Message, Status, StatusCode, String
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
 
@@ -193,7 +194,8 @@ class ParameterBridges:
         ros.node.add_post_set_parameters_callback(self._on_server_set_ros)
 
     # --- parameter clients -----------------------------------------------------------------
-    async def create_parameter_client(self, request: CreateParameterClient) -> Created:
+    async def create_parameter_client(self, request: CreateParameterClient,
+                                      ) -> Created[ParameterClientBridge]:
         node = request.node
         existing = self.clients.get(node)
         if existing is not None:
@@ -218,7 +220,7 @@ class ParameterBridges:
                  "ready" if client.ready else "not ready")
         return Created(self._describe_client(client), existed=False)
 
-    def remove_parameter_client(self, request: RemoveParameterClient) -> dict[str, Any]:
+    def remove_parameter_client(self, request: RemoveParameterClient) -> ParameterClientRemoved:
         client = self._client(request.node)
         del self.clients[client.node]
         self._update_watched()
@@ -226,10 +228,10 @@ class ParameterBridges:
             self._ros.destroy(ros_client)
         self._hub.forget(client.device)
         self._names.release(client.key)
-        return {"node": client.node, "device": client.device}
+        return ParameterClientRemoved(client.node, client.device)
 
     async def list_parameters(self, request: ListParameters,
-                              guard: ContentGuard) -> dict[str, Any]:
+                              guard: ContentGuard) -> ListParametersResult:
         """The node's parameters a client may see (``guard``: a listing names none
         beforehand, so the dispatcher could not judge them)."""
         client = self._client(request.node)
@@ -242,16 +244,14 @@ class ParameterBridges:
                                      GetParameterTypesSrv.Request(names=names))
             types = {name: _KIND.get(int(number), "not_set")
                      for name, number in zip(names, typed.types)}
-        return {"node": client.node, "names": names, "types": types}
+        return ListParametersResult(client.node, tuple(names), types)
 
-    async def get_parameters(self, request: GetParameters) -> dict[str, Any]:
+    async def get_parameters(self, request: GetParameters) -> GetParametersResult:
         client = self._client(request.node)
-        values = await self._get(client, request.names)
-        return {"node": client.node,
-                "values": {name: value.to_dict() for name, value in values.items()}}
+        return GetParametersResult(client.node, await self._get(client, request.names))
 
     async def set_parameters(self, request: SetParameters,
-                             caller: Optional[Replier] = None) -> dict[str, Any]:
+                             caller: Optional[Replier] = None) -> SetParametersResult:
         client = self._client(request.node)
         names = list(request.values)
         if caller is not None:
@@ -262,13 +262,13 @@ class ParameterBridges:
         if len(reply.results) != len(names):
             raise CommandFailedError("values", f"{len(names)} results from {client.node}",
                                      str(len(reply.results)), code=ErrorCode.ROS_ERROR)
-        return {"node": client.node,
-                "results": {name: {"ok": bool(result.successful),
-                                   "reason": _explain_refusal(client.node, name, result.reason)}
-                            for name, result in zip(names, reply.results)}}
+        return SetParametersResult(client.node, {
+            name: ParameterOutcome(bool(result.successful),
+                                   _explain_refusal(client.node, name, result.reason))
+            for name, result in zip(names, reply.results)})
 
     async def observe_parameters(self, request: ObserveParameters,
-                                 guard: ContentGuard) -> dict[str, Any]:
+                                 guard: ContentGuard) -> ObserveParametersResult:
         client = self._client(request.node)
         client.observed = tuple(dict.fromkeys(request.names))
         client.all_changes = guard if request.all_changes else None
@@ -279,9 +279,8 @@ class ParameterBridges:
             await self._refresh(client)  # a failure is the reply; a later (re)appearance retries
         else:
             self._stream_values(client)
-        return {"node": client.node, "device": client.device, "observed": list(client.observed),
-                "ready": bool(client.ready),
-                "values": {n: v.to_dict() for n, v in client.values.items()}}
+        return ObserveParametersResult(client.node, client.device, tuple(client.observed),
+                                       bool(client.ready), dict(client.values))
 
     def _client(self, node: str) -> ParameterClient:
         client = self.clients.get(node)
@@ -573,7 +572,7 @@ class ParameterBridges:
             self._stream_values(client)
 
     # --- parameter server (the daemon's own node) -----------------------------------------
-    def server_declare_parameter(self, request: ServerDeclareParameter) -> dict[str, Any]:
+    def server_declare_parameter(self, request: ServerDeclareParameter) -> OwnParameter:
         name, value, node = request.name, request.value, self._ros.node
         if value.type == "not_set":
             raise OutOfRangeError("value.type", "a parameter type other than not_set",
@@ -581,7 +580,7 @@ class ParameterBridges:
         if node.has_parameter(name):
             current = self._server_value(name)
             if name in self.declared and current.type == value.type:
-                return {"name": name, "value": current.to_dict(), "existed": True}
+                return OwnParameter(name, current, existed=True)
             raise CommandFailedError("name", "a parameter not declared yet (or declared again "
                                      "with the same type)", f"{name} ({current.type})",
                                      code=ErrorCode.ALREADY_EXISTS)
@@ -604,10 +603,10 @@ class ParameterBridges:
                                      code=ErrorCode.ROS_ERROR) from None
         self.declared[name] = None
         self._request_server_stream()
-        return {"name": name, "value": self._server_value(name).to_dict(), "existed": False}
+        return OwnParameter(name, self._server_value(name), existed=False)
 
     def server_set_parameter(self, request: ServerSetParameter,
-                             caller: Optional[Replier] = None) -> dict[str, Any]:
+                             caller: Optional[Replier] = None) -> OwnParameter:
         name, node = request.name, self._ros.node
         if not node.has_parameter(name):
             raise CommandFailedError("name", "a declared parameter (server_declare_parameter "
@@ -622,15 +621,16 @@ class ParameterBridges:
         if not result.successful:
             raise CommandFailedError("value", f"a value ROS accepts for {name}", result.reason,
                                      code=ErrorCode.ROS_ERROR)
-        return {"name": name, "value": self._server_value(name).to_dict()}
+        return OwnParameter(name, self._server_value(name))
 
-    def server_get_parameters(self, request: ServerGetParameters) -> dict[str, Any]:
+    def server_get_parameters(self, request: ServerGetParameters) -> GetParametersResult:
         node = self._ros.node
         names = request.names or tuple(sorted(node.list_parameters([], 0).names))
-        return {"node": self._server_node,
-                "values": {name: self._own_value(name).to_dict() for name in names}}
+        return GetParametersResult(self._server_node,
+                                   {name: self._own_value(name) for name in names})
 
-    def server_undeclare_parameter(self, request: ServerUndeclareParameter) -> dict[str, Any]:
+    def server_undeclare_parameter(self, request: ServerUndeclareParameter,
+                                   ) -> OwnParameterUndeclared:
         name = request.name
         if name not in self.declared:
             raise CommandFailedError("name", "a parameter a client declared", name,
@@ -644,7 +644,7 @@ class ParameterBridges:
         del self.declared[name]
         self._own_watches_changed([name])
         self._request_server_stream()
-        return {"name": name}
+        return OwnParameterUndeclared(name)
 
     def _judge_own_write(self, node: str, names: Iterable[str], field: str) -> None:
         """Of the daemon's own node, a client sets only the parameters clients declared
@@ -741,14 +741,12 @@ class ParameterBridges:
             ServerUndeclareParameter: lambda r, _: self.server_undeclare_parameter(r),
         }
 
-    def _describe_client(self, client: ParameterClient) -> dict[str, Any]:
-        out: dict[str, Any] = {"kind": "parameter_client", "node": client.node,
-                               "device": client.device, "ready": bool(client.ready),
-                               "observed": list(client.observed)}
-        return out
+    def _describe_client(self, client: ParameterClient) -> ParameterClientBridge:
+        return ParameterClientBridge("parameter_client", client.node, client.device,
+                                     bool(client.ready), tuple(client.observed))
 
     def describe(self) -> list[dict[str, Any]]:
-        return [self._describe_client(client) for client in self.clients.values()]
+        return [self._describe_client(client).to_dict() for client in self.clients.values()]
 
     def state(self, guard: ContentGuard) -> dict[str, Any]:
         """The daemon node's own parameters clients declared (null while there are none)."""

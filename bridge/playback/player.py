@@ -161,7 +161,7 @@ class PlayedTopics:
         self._bad = RateLimitedLog(log)
 
     def create_subscriber(self, request: c.CreateSubscriber, client: Optional[Subscriber],
-                          guard: ContentGuard) -> Created:
+                          guard: ContentGuard) -> Created[c.TopicBridge]:
         topic = request.topic
         types = self._bag.topics()
         bag_type = types.get(topic)
@@ -192,14 +192,14 @@ class PlayedTopics:
         self._on_new(topic)
         return Created(self._describe(played), existed=False)
 
-    def remove_subscriber(self, request: c.RemoveSubscriber) -> dict[str, Any]:
+    def remove_subscriber(self, request: c.RemoveSubscriber) -> c.TopicBridgeRemoved:
         played = self.subscribers.pop(request.topic, None)
         if played is None:
             raise CommandFailedError("topic", "a topic with a subscriber bridge", request.topic,
                                      code=ErrorCode.NOT_FOUND)
         self._hub.close_channel(played.channel)
         self._names.release(NameKey.subscriber(played.topic))
-        return {"topic": played.topic, "device": played.device}
+        return c.TopicBridgeRemoved(played.topic, played.device)
 
     def play(self, topic: str, msg: Any) -> None:
         """One decoded message of ``topic`` to its subscribers (player thread)."""
@@ -220,10 +220,9 @@ class PlayedTopics:
         self._hub.post_frame(played.channel,
                              frame_for(stream_message(played.device, played.metadata, encoded)))
 
-    def _describe(self, played: _PlayedTopic) -> dict[str, Any]:
-        return {"kind": "subscriber", "topic": played.topic, "type": played.codec.ros_type,
-                "device": played.device, "igtl_type": played.codec.igtl_type,
-                "messages": played.messages}
+    def _describe(self, played: _PlayedTopic) -> c.TopicBridge:
+        return c.TopicBridge("subscriber", played.topic, played.codec.ros_type, played.device,
+                             played.codec.igtl_type, messages=played.messages)
 
     def handlers(self) -> dict[type[Op], Handler]:
         return {
@@ -232,7 +231,7 @@ class PlayedTopics:
         }
 
     def describe(self) -> list[dict[str, Any]]:
-        return [self._describe(played) for played in self.subscribers.values()]
+        return [self._describe(played).to_dict() for played in self.subscribers.values()]
 
     def state(self, guard: ContentGuard) -> dict[str, Any]:
         return {}
@@ -450,25 +449,26 @@ class Player:
         # It says its own failure (the clock's ops report it): a thread that cannot die.
         self._thread = start_thread("player", self._run, OnFailure.RESTART)
 
-    def status(self) -> dict[str, Any]:
+    def status(self) -> c.PlaybackResult:
         with self._cond:
             now = time.monotonic_ns()
             at = self.clock.bag_time(now)
-            return {"bag": str(self.bag.path), "start": _stamp(self.bag.start_ns),
-                    "end": _stamp(self.bag.end_ns), "time": _stamp(at),
-                    "offset": (at - self.bag.start_ns) / _NS_PER_S,
-                    "duration": (self.bag.end_ns - self.bag.start_ns) / _NS_PER_S,
-                    "rate": self.clock.rate, "paused": self.clock.paused,
-                    "loop": self.options.loop, "ended": self.ended}
+            return c.PlaybackResult(
+                bag=str(self.bag.path), start=c.Stamp.from_ns(self.bag.start_ns),
+                end=c.Stamp.from_ns(self.bag.end_ns), time=c.Stamp.from_ns(at),
+                offset=(at - self.bag.start_ns) / _NS_PER_S,
+                duration=(self.bag.end_ns - self.bag.start_ns) / _NS_PER_S,
+                rate=self.clock.rate, paused=self.clock.paused, loop=self.options.loop,
+                ended=self.ended)
 
-    def pause(self) -> dict[str, Any]:
+    def pause(self) -> c.PlaybackResult:
         with self._cond:
             if not self.clock.paused:
                 self.clock.pause(time.monotonic_ns())
                 self._cond.notify_all()
         return self.status()
 
-    def resume(self) -> dict[str, Any]:
+    def resume(self) -> c.PlaybackResult:
         with self._cond:
             if self.ended:  # played to the end: from the start again
                 self._seek(self.bag.start_ns)
@@ -477,7 +477,7 @@ class Player:
             self._cond.notify_all()
         return self.status()
 
-    async def seek(self, offset_s: float) -> dict[str, Any]:
+    async def seek(self, offset_s: float) -> c.PlaybackResult:
         """Move the clock; answered once the state at the new time is sent, so a client
         has the poses at that time by the reply."""
         shown: asyncio.Future[None] = asyncio.get_running_loop().create_future()
@@ -501,7 +501,7 @@ class Player:
         self.ended = False
         self._cond.notify_all()
 
-    def set_rate(self, rate: float) -> dict[str, Any]:
+    def set_rate(self, rate: float) -> c.PlaybackResult:
         with self._cond:
             self.clock.set_rate(rate, time.monotonic_ns())
             self._cond.notify_all()
@@ -736,11 +736,6 @@ _NO_TRANSFORMS = _NoTransforms()
 def _settle(waiter: asyncio.Future[None]) -> None:
     if not waiter.done():
         waiter.set_result(None)
-
-
-def _stamp(ns: int) -> dict[str, int]:
-    sec, nanosec = divmod(ns, _NS_PER_S)
-    return {"sec": sec, "nanosec": nanosec}
 
 
 class _Controls:

@@ -3,7 +3,7 @@ is imported: the daemon runs without the play extra)."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NoReturn
 
 from bridge.core.content_guards import ContentGuard
 from bridge.core.dispatch import Handler
@@ -17,12 +17,11 @@ class LiveRefusals:
     """The playback ops on the live daemon: refused, saying where they belong."""
 
     def handlers(self) -> dict[type[Op], Handler]:
-        def refuse(request: Op, client: Any) -> dict[str, Any]:
+        def refuse(request: Op, client: Any) -> NoReturn:
             raise CommandFailedError("op", "a player (slicer-ros2-bridge play BAG.mcap)",
                                      f"{request.op} sent to the live daemon, which plays ROS, "
                                      "not a bag", code=ErrorCode.NOT_SUPPORTED)
-        return {cls: refuse for cls in (c.PlaybackStatus, c.PausePlayback, c.ResumePlayback,
-                                        c.SeekPlayback, c.SetPlaybackRate)}
+        return dict.fromkeys(c.player_ops(), refuse)
 
     def describe(self) -> list[dict[str, Any]]:
         return []

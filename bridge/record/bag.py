@@ -28,10 +28,10 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Optional, Union
+from typing import Any, Callable, Optional, Union
 
 from bridge.core.threads import OnFailure, start_thread
-from protocol.commands import BAG_SUFFIX, COMPRESSIONS, bag_path_problem
+from protocol.commands import BAG_SUFFIX, COMPRESSIONS, RecordingResult, bag_path_problem
 
 try:  # a daemon installed without it serves on; recording says what to install
     from mcap.data_stream import RecordBuilder
@@ -147,7 +147,7 @@ class TopicStats:
     messages: int = 0  # handed to the bag (written, or waiting to be)
     dropped: int = 0  # refused: the queue was full, or the bag had stopped
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> dict[str, Any]:
         return {"topic": self.topic, "type": self.ros_type, "messages": self.messages,
                 "dropped": self.dropped}
 
@@ -165,16 +165,13 @@ class BagStats:
     error: str = ""  # why the recording stopped on its own (a full disk)
     running: bool = True
 
-    def to_dict(self) -> dict[str, object]:
-        out: dict[str, object] = {"path": self.path, "started_ns": self.started_ns,
-                                  "elapsed_s": round(self.elapsed_s, 3),
-                                  "messages": self.messages, "dropped": self.dropped,
-                                  "bytes": self.bytes, "attachments": self.attachments,
-                                  "running": self.running,
-                                  "topics": [t.to_dict() for t in self.topics]}
-        if self.error:
-            out["error"] = self.error
-        return out
+    def result(self, pending: dict[str, str]) -> RecordingResult:
+        """These counts as a recording op answers them, with the topics still awaited."""
+        return RecordingResult(
+            self.path, self.started_ns, round(self.elapsed_s, 3), self.messages, self.dropped,
+            self.bytes, self.attachments, self.running,
+            tuple(t.to_dict() for t in self.topics), self.error or None,
+            tuple({"topic": t, "why": why} for t, why in sorted(pending.items())))
 
 
 # Queue items: a batch of one channel's messages, or work for the writer (a channel, an

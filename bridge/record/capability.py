@@ -18,12 +18,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Optional, Protocol, Sequence
 
 from bridge.core.content_guards import ContentGuard
-from bridge.core.dispatch import Handler, Result
+from bridge.core.dispatch import Handler
 from bridge.core.heavy import OffLoop
 from bridge.record.bag import BagPathError, BagWriter
 from bridge.record.recorder import Recorder
-from protocol.commands import (JOINT_STATE_TYPE, CommandFailedError, ErrorCode, ForbiddenError,
-                               Op, RecordingStatus, StartRecording, StopRecording)
+from protocol.commands import (JOINT_STATE_TYPE, CommandFailedError, ErrorCode, ForbiddenError, Op,
+                               RecordingResult, RecordingStatus, StartRecording, StopRecording)
 
 if TYPE_CHECKING:
     from bridge.ros.ros_node import RosNode
@@ -61,7 +61,7 @@ class RecordBridges:
         self._meshes = meshes
         self.running: dict[str, Recorder] = {}
         self._opening: set[str] = set()  # started, the file not open yet
-        self._finished: dict[str, dict[str, Any]] = {}
+        self._finished: dict[str, RecordingResult] = {}
 
     def bridged(self) -> dict[str, Optional[str]]:
         """What the daemon bridges now, topic -> type (any thread: copies of the dicts)."""
@@ -74,7 +74,7 @@ class RecordBridges:
 
     # ------------------------------------------------------------------ ops
 
-    def start(self, request: StartRecording) -> OffLoop[Result]:
+    def start(self, request: StartRecording) -> OffLoop[RecordingResult]:
         path = str(Path(request.path))  # absolute and .mcap: checked by the schema
         if path in self.running or path in self._opening:
             raise CommandFailedError("path", "a path no recording writes to", f"{path} "
@@ -82,14 +82,14 @@ class RecordBridges:
                                      code=ErrorCode.ALREADY_EXISTS)
         self._opening.add(path)  # a second start of the same path is refused meanwhile
 
-        def work() -> dict[str, Any]:
+        def work() -> RecordingResult:
             try:
                 return self._open(path, request)
             finally:
                 self._opening.discard(path)
         return OffLoop(work)
 
-    def _open(self, path: str, request: StartRecording) -> dict[str, Any]:
+    def _open(self, path: str, request: StartRecording) -> RecordingResult:
         """Open the bag and start recording (the client's lane)."""
         topics = request.topics
         try:
@@ -125,28 +125,27 @@ class RecordBridges:
         running = list(self.running)
         return "running: " + ", ".join(running) if running else "none is running"
 
-    def stop(self, request: StopRecording) -> OffLoop[Result]:
+    def stop(self, request: StopRecording) -> OffLoop[RecordingResult]:
         recorder = self._find(request.path)
         path = str(recorder.bag.path)
 
-        def work() -> dict[str, Any]:
-            pending = recorder.status()["pending"]
-            stats = recorder.stop().to_dict()
-            stats["pending"] = pending
+        def work() -> RecordingResult:
+            pending = {p["topic"]: p["why"] for p in recorder.status().pending}
+            stats = recorder.stop().result(pending)
             self._remember(path, stats)
             log.info("recording into %s stopped: %d messages, %d dropped", path,
-                     stats["messages"], stats["dropped"])
+                     stats.messages, stats.dropped)
             return stats
         self.running.pop(path, None)
         return OffLoop(work)
 
-    def status(self, request: RecordingStatus) -> dict[str, Any]:
+    def status(self, request: RecordingStatus) -> RecordingResult:
         path = str(Path(request.path))
         if path in self._finished:
             return self._finished[path]
         return self._find(path).status()
 
-    def _remember(self, path: str, stats: dict[str, Any]) -> None:
+    def _remember(self, path: str, stats: RecordingResult) -> None:
         self._finished[path] = stats
         while len(self._finished) > FINISHED_KEPT:
             del self._finished[next(iter(self._finished))]
@@ -162,7 +161,7 @@ class RecordBridges:
         return []
 
     def state(self, guard: ContentGuard) -> dict[str, Any]:
-        return {"recordings": [{k: v for k, v in r.status().items() if k != "topics"}
+        return {"recordings": [{k: v for k, v in r.status().to_dict().items() if k != "topics"}
                                for r in tuple(self.running.values())]}
 
     def close(self) -> None:

@@ -106,7 +106,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         recorder.start()
         print(f"recording into {path} (Ctrl-C stops)", file=out, flush=True)
         stop.wait(args.duration)
-        pending = {p["topic"]: p["why"] for p in recorder.status()["pending"]}
+        pending = {p["topic"]: p["why"] for p in recorder.status().pending}
         stats = recorder.stop()
     finally:
         ros.stop()

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Optional, cast
 from bridge.core.threads import OnFailure, start_thread
 from bridge.record.bag import BagStats, BagWriter
 from bridge.record.definitions import DefinitionError, full_definition
+from protocol.commands import RecordingResult
 
 if TYPE_CHECKING:
     from bridge.ros.ros_node import RosNode
@@ -195,13 +196,11 @@ class Recorder:
                 continue
             self.bag.attach(name, data)
 
-    def status(self) -> dict[str, Any]:
+    def status(self) -> RecordingResult:
         stats = self.bag.stats()
         with self._lock:
             pending = dict(self._state.pending)
-        out = stats.to_dict()
-        out["pending"] = [{"topic": t, "why": why} for t, why in sorted(pending.items())]
-        return out
+        return stats.result(pending)
 
     @property
     def topics(self) -> list[str]:

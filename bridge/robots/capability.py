@@ -56,10 +56,11 @@ from bridge.robots.errors import RobotError
 from bridge.robots.joints import describe_joints, joint_positions
 from bridge.robots.resources import PackageResolver
 from bridge.tf.lookups import LookupKey, LookupStreams
-from protocol.commands import (JOINT_STATE_TYPE, CommandFailedError, CreateRobot,
-                               DescribeRobotJoints, ErrorCode, ForbiddenError, ListRobots, Op,
-                               OutOfRangeError, ParameterValue, RemoveRobot, RobotSource,
-                               SetRobotJoints)
+from protocol.commands import (JOINT_STATE_TYPE, CommandFailedError, CreateRobot, CreatedRobot,
+                               DescribeRobotJoints, DescribeRobotJointsResult, ErrorCode,
+                               ForbiddenError, ListRobots, ListRobotsResult, Op, OutOfRangeError,
+                               ParameterValue, RemoveRobot, RemovedRobot, RobotSource, RobotSummary,
+                               SetRobotJoints, SetRobotJointsResult)
 from protocol.messages import Message, PolyData, Status, StatusCode
 from protocol.naming import (KEY_CHILD, KEY_COLOR, KEY_LINK_COUNT, KEY_PARENT, KEY_PARENT_DEVICE,
                              KEY_VISUAL_COUNT, KEY_WARNINGS, UNITS_MM,
@@ -195,7 +196,7 @@ class RobotServing:
     # ------------------------------------------------------------------ ops
 
     async def create_robot(self, request: CreateRobot, client: Optional[Replier],
-                           guard: ContentGuard) -> Created:
+                           guard: ContentGuard) -> Created[CreatedRobot]:
         """`client` None: the operator's start-up robot. ``guard`` says which of its frames
         a client may see and where its meshes may be read from (anywhere only for a URDF
         file the operator's config names: `SecurityPolicy.content_guard`)."""
@@ -231,7 +232,7 @@ class RobotServing:
             raise
         return Created(self._describe(robot), existed=False)
 
-    def remove_robot(self, request: RemoveRobot) -> dict[str, Any]:
+    def remove_robot(self, request: RemoveRobot) -> RemovedRobot:
         robot = self.robots.get(request.name)
         if robot is None:
             raise CommandFailedError("name", "a robot created by create_robot", request.name,
@@ -239,7 +240,7 @@ class RobotServing:
         devices = self._devices_of(robot)
         self._drop(robot)
         log.info("robot %s removed (%d devices)", robot.name, len(devices))
-        return {"name": robot.name, "devices": devices}
+        return RemovedRobot(robot.name, tuple(devices))
 
     async def wait_loaded(self, name: str, timeout: float) -> dict[str, Any]:
         """The `create_robot` result of robot ``name`` once it has loaded, or as it is after
@@ -249,10 +250,10 @@ class RobotServing:
             await asyncio.wait_for(robot.loaded.wait(), timeout)
         except asyncio.TimeoutError:
             pass
-        return self._describe(robot)
+        return self._describe(robot).to_dict()
 
-    def list_robots(self, request: ListRobots) -> dict[str, Any]:
-        return {"robots": [self._summary(robot) for robot in self.robots.values()]}
+    def list_robots(self, request: ListRobots) -> ListRobotsResult:
+        return ListRobotsResult(tuple(self._summary(robot) for robot in self.robots.values()))
 
     # ------------------------------------------------------------------ sources
 
@@ -585,54 +586,40 @@ class RobotServing:
         robot, model = self._loaded(name)
         return model, self._joint_states_topic(robot), robot.tf_prefix + model.root_link
 
-    def describe_robot_joints(self, request: DescribeRobotJoints) -> dict[str, Any]:
+    def describe_robot_joints(self, request: DescribeRobotJoints) -> DescribeRobotJointsResult:
         robot, model = self._loaded(request.name)
-        return {"name": robot.name, "robot": model.name,
-                "joint_states_topic": self._joint_states_topic(robot),
-                "joints": describe_joints(model.joints)}
+        return DescribeRobotJointsResult(robot.name, model.name,
+                                         self._joint_states_topic(robot),
+                                         tuple(describe_joints(model.joints)))
 
     def _unposed(self, robot: _Robot) -> Optional[dict[str, Any]]:
         """The links of a loaded robot tf cannot place in its fixed frame now, and why
         (None: all placed)."""
         return None
 
-    def _summary(self, robot: _Robot) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "kind": "robot", "name": robot.name, "state": robot.state,
-            "source": robot.source.to_dict(), "fixed_frame": robot.fixed_frame or None,
-            "tf_prefix": robot.tf_prefix, "links": len(robot.links),
-            "withheld": len(robot.withheld),
-            "visuals": len(robot.visuals), "description_device": robot.description_device,
-            "loads": robot.loads, "warnings": len(robot.warnings)}
-        if robot.request.namespace:
-            out["namespace"] = robot.request.namespace
-        if robot.reason:
-            out["reason"] = robot.reason
-        unposed = self._unposed(robot)
-        if unposed is not None:
-            out["unposed"] = unposed
-        return out
+    def _summary(self, robot: _Robot) -> RobotSummary:
+        return RobotSummary(
+            "robot", robot.name, robot.state, robot.source, robot.fixed_frame or None,
+            robot.tf_prefix, len(robot.links), len(robot.withheld), len(robot.visuals),
+            robot.description_device, robot.loads, len(robot.warnings),
+            namespace=robot.request.namespace or None, reason=robot.reason or None,
+            unposed=self._unposed(robot))
 
-    def _describe(self, robot: _Robot) -> dict[str, Any]:
+    def _describe(self, robot: _Robot) -> CreatedRobot:
         model = robot.model
-        out: dict[str, Any] = {
-            "name": robot.name, "state": robot.state, "source": robot.source.to_dict(),
-            "fixed_frame": robot.fixed_frame or None, "tf_prefix": robot.tf_prefix,
-            "robot": model.name if model is not None else None,
-            "root_link": model.root_link if model is not None else None,
-            "description_device": robot.description_device,
-            "links": [{"link": link.link, "device": link.device, "frame": link.frame,
-                       "visuals": list(link.visuals)} for link in robot.links.values()],
-            "visuals": [info.to_dict() for info in robot.visuals.values()],
-            "withheld": [{"link": name, "frame": robot.tf_prefix + name, "reason": why}
-                         for name, why in robot.withheld.items()],
-            "warnings": list(robot.warnings)}
-        if robot.reason:
-            out["reason"] = robot.reason
-        return out
+        return CreatedRobot(
+            robot.name, robot.state, robot.source, robot.fixed_frame or None, robot.tf_prefix,
+            model.name if model is not None else None,
+            model.root_link if model is not None else None, robot.description_device,
+            links=tuple({"link": link.link, "device": link.device, "frame": link.frame,
+                         "visuals": list(link.visuals)} for link in robot.links.values()),
+            visuals=tuple(info.to_dict() for info in robot.visuals.values()),
+            withheld=tuple({"link": name, "frame": robot.tf_prefix + name, "reason": why}
+                           for name, why in robot.withheld.items()),
+            warnings=tuple(robot.warnings), reason=robot.reason or None)
 
     def describe(self) -> list[dict[str, Any]]:
-        return [self._summary(robot) for robot in self.robots.values()]
+        return [self._summary(robot).to_dict() for robot in self.robots.values()]
 
     def state(self, guard: ContentGuard) -> dict[str, Any]:
         return {}
@@ -778,7 +765,7 @@ class RobotBridges(RobotServing):
                                           else "joint_states", "topic")
         return f"{base}/joint_states"
 
-    def set_robot_joints(self, request: SetRobotJoints) -> dict[str, Any]:
+    def set_robot_joints(self, request: SetRobotJoints) -> SetRobotJointsResult:
         from sensor_msgs.msg import JointState
 
         from bridge.ros.graph_types import refuse_other_type
@@ -799,8 +786,8 @@ class RobotBridges(RobotServing):
         msg.name = list(positions)
         msg.position = list(positions.values())
         robot.joint_publisher.publish(msg)
-        return {"name": robot.name, "topic": topic, "positions": positions,
-                "subscribers": int(robot.joint_publisher.get_subscription_count())}
+        return SetRobotJointsResult(robot.name, topic, positions,
+                                    int(robot.joint_publisher.get_subscription_count()))
 
     def _unposed(self, robot: _Robot) -> Optional[dict[str, Any]]:
         """The links of a loaded robot tf cannot place in its fixed frame now, and why: a

@@ -37,8 +37,9 @@ from bridge.codecs.registry import installed_class
 from bridge.ros.ros_clients import RosClientCache
 from bridge.ros.ros_node import RosNode
 from bridge.ros.service_calls import call_ros_service
-from protocol.commands import (Op, AdvertiseService, CallService, CommandError, LimitReachedError,
-                               ServiceRequest, UnadvertiseService, WrongTypeError)
+from protocol.commands import (AdvertiseService, CallService, CallServiceResult, CommandError,
+                               LimitReachedError, Op, ServedServiceBridge, ServiceRequest,
+                               UnadvertiseService, UnadvertisedService, WrongTypeError)
 from protocol.naming import DeviceNameRegistry, NameKey, metadata_for
 
 log = logging.getLogger(__name__)
@@ -137,7 +138,7 @@ class ServiceBridges:
         self._call_guards.append(guard)
 
     async def call_service(self, request: CallService, client: Optional[Replier],
-                           guard: ContentGuard) -> dict[str, Any]:
+                           guard: ContentGuard) -> CallServiceResult:
         """``guard``: a parameter listing's reply shows what the parameter globs allow."""
         service = request.service
         ros_type = request.ros_type
@@ -168,8 +169,8 @@ class ServiceBridges:
             if client is not None and task is not None:
                 self._forget_call(client, task)
         entry.calls += 1
-        return {"service": service, "type": ros_type, "response":
-                guard.service_reply(message_to_dict(response))}
+        return CallServiceResult(service, ros_type,
+                                 guard.service_reply(message_to_dict(response)))
 
     def _new_client(self, service: str, ros_type: str, srv: Any) -> CalledService:
         client = self._ros.node.create_client(srv, service, callback_group=self._group)
@@ -192,7 +193,7 @@ class ServiceBridges:
 
     # --- advertise_service -----------------------------------------------------------------
     def advertise_service(self, request: AdvertiseService,
-                          client: Optional[Replier]) -> Created:
+                          client: Optional[Replier]) -> Created[ServedServiceBridge]:
         client = connected_client(client, "service", "answers the calls")
         service = request.service
         ros_type = request.ros_type
@@ -218,11 +219,11 @@ class ServiceBridges:
         return Created(_describe_served(served), existed=False)
 
     def unadvertise_service(self, request: UnadvertiseService,
-                            client: Optional[Replier]) -> dict[str, Any]:
+                            client: Optional[Replier]) -> UnadvertisedService:
         service = request.service
         served = advertised_by(self.served, "service", service, client)
         self._unadvertise(served)
-        return {"service": service, "device": served.device}
+        return UnadvertisedService(service, served.device)
 
     def _callback_for(self, served: ServedService) -> Any:
         async def serve(request: Any, response: Any) -> Any:
@@ -343,7 +344,7 @@ class ServiceBridges:
         }
 
     def describe(self) -> list[dict[str, Any]]:
-        return [_describe_served(served) for served in self.served.values()]
+        return [_describe_served(served).to_dict() for served in self.served.values()]
 
     def state(self, guard: ContentGuard) -> dict[str, Any]:
         """call_service's cached clients (not bridges: the daemon makes and drops them)."""
@@ -362,8 +363,6 @@ class ServiceBridges:
         self.called.close()
 
 
-def _describe_served(served: ServedService) -> dict[str, Any]:
-    out: dict[str, Any] = {"kind": "served_service", "service": served.service,
-                           "type": served.ros_type, "device": served.device,
-                           "calls": served.calls}
-    return out
+def _describe_served(served: ServedService) -> ServedServiceBridge:
+    return ServedServiceBridge("served_service", served.service, served.ros_type,
+                               served.device, served.calls)

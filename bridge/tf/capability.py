@@ -62,17 +62,23 @@ from bridge.tf.errors import (
 )
 from bridge.tf.lookups import LookupKey, LookupRegistry, LookupResult
 from protocol.commands import (
-    Op,
     BroadcastTransform,
+    BroadcastTransformResult,
     CommandFailedError,
     CreateTfBroadcaster,
     CreateTfLookup,
     ErrorCode,
     LookupTransform,
+    LookupTransformResult,
+    Op,
     OutOfRangeError,
     RemoveTfBroadcaster,
     RemoveTfLookup,
     Stamp,
+    TfBridgeRemoved,
+    TfBroadcasterBridge,
+    TfLookupBridge,
+    matrix_rows,
 )
 from protocol.conversions import (
     ConversionError,
@@ -153,10 +159,6 @@ def _transform_stamped(st: StampedTransform) -> Any:
     q.x, q.y, q.z, q.w = st.rotation
     return msg
 
-
-def _stamp_dict(stamp_ns: int) -> dict[str, int]:
-    sec, nanosec = divmod(stamp_ns, _NS_PER_S)
-    return {"sec": sec, "nanosec": nanosec}
 
 
 def _stamp_ns(stamp: Optional[Stamp]) -> int:
@@ -483,7 +485,7 @@ class TfLookups:
             if self._by_key.pop(handle, None) is not None:
                 self.registry.remove(handle)
 
-    def create_lookup(self, request: CreateTfLookup) -> Created:
+    def create_lookup(self, request: CreateTfLookup) -> Created[TfLookupBridge]:
         pair = (request.parent, request.child)  # mapped by the dispatcher
         existing = self.lookups.get(pair)
         if existing is not None:
@@ -505,7 +507,7 @@ class TfLookups:
         log.info("tf lookup %s -> %s streams as device %r", pair[0], pair[1], device)
         return Created(self._describe_lookup(lookup), existed=False)
 
-    def remove_lookup(self, request: RemoveTfLookup) -> dict[str, Any]:
+    def remove_lookup(self, request: RemoveTfLookup) -> TfBridgeRemoved:
         pair = (request.parent, request.child)  # mapped by the dispatcher
         lookup = self.lookups.pop(pair, None)
         if lookup is None:
@@ -516,10 +518,10 @@ class TfLookups:
             self.registry.remove(lookup.key)
         self._hub.forget(lookup.device)
         self._names.release(NameKey.tf_lookup(*pair))
-        return {"parent": pair[0], "child": pair[1], "device": lookup.device}
+        return TfBridgeRemoved(pair[0], pair[1], lookup.device)
 
     def lookup_transform(self, request: LookupTransform,
-                         ) -> Union[dict[str, Any], Awaitable[dict[str, Any]]]:
+                         ) -> Union[LookupTransformResult, Awaitable[LookupTransformResult]]:
         """One lookup; with ``timeout`` it waits (without blocking the loop) for tf data."""
         pair = (request.parent, request.child)  # mapped by the dispatcher
         time_ns = _stamp_ns(request.time)
@@ -530,7 +532,7 @@ class TfLookups:
                 raise _unavailable(pair, time_ns, error) from None
         return self._lookup_waiting(pair, time_ns, request.timeout)
 
-    def _lookup_once(self, pair: tuple[str, str], time_ns: int) -> dict[str, Any]:
+    def _lookup_once(self, pair: tuple[str, str], time_ns: int) -> LookupTransformResult:
         result = self.buffer.lookup(pair[0], pair[1], time_ns)
         try:
             matrix: npt.NDArray[np.float64] = result.matrix_mm()
@@ -538,12 +540,12 @@ class TfLookups:
             raise CommandFailedError(
                 "child", f"a transform {pair[0]} <- {pair[1]} whose numbers fit float32 in mm",
                 f"{error}", code=ErrorCode.NOT_SUPPORTED) from None
-        return {"parent": pair[0], "child": pair[1], "matrix": matrix.tolist(),
-                "translation": list(result.translation), "rotation": list(result.rotation),
-                "stamp": _stamp_dict(result.stamp_ns)}
+        return LookupTransformResult(pair[0], pair[1], matrix_rows(matrix),
+                                     tuple(result.translation), tuple(result.rotation),
+                                     Stamp.from_ns(result.stamp_ns))
 
     async def _lookup_waiting(self, pair: tuple[str, str], time_ns: int,
-                              timeout: float) -> dict[str, Any]:
+                              timeout: float) -> LookupTransformResult:
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
         while True:
@@ -572,7 +574,7 @@ class TfLookups:
         }
 
     def describe(self) -> list[dict[str, Any]]:
-        return [self._describe_lookup(lookup) for lookup in self.lookups.values()]
+        return [self._describe_lookup(lookup).to_dict() for lookup in self.lookups.values()]
 
     def state(self, guard: ContentGuard) -> dict[str, Any]:
         """The shared tf buffer (not a bridge: every lookup reads it), naming only the
@@ -582,7 +584,7 @@ class TfLookups:
             "frames": guard.visible_frames(self.buffer.frames()),
             "received": dict(self.received), "cache_time_s": self.buffer.cache_time_s}}
 
-    def _describe_lookup(self, lookup: _Lookup) -> dict[str, Any]:
+    def _describe_lookup(self, lookup: _Lookup) -> TfLookupBridge:
         last = self.registry.last_sent(lookup.key)
         if isinstance(last, StampedTransform):
             state = "streaming"
@@ -590,15 +592,10 @@ class TfLookups:
             state = "error"
         else:
             state = "pending"  # no result yet: a frame is unknown, or not evaluated yet
-        out: dict[str, Any] = {"kind": "tf_lookup", "parent": lookup.key.parent,
-                               "child": lookup.key.child, "device": lookup.device,
-                               "igtl_type": Transform.TYPE, "state": state,
-                               "messages": lookup.messages}
-        if isinstance(last, TfError):
-            out["error"] = last.message
-        if lookup.rate_hz:
-            out["rate_hz"] = lookup.rate_hz
-        return out
+        return TfLookupBridge("tf_lookup", lookup.key.parent, lookup.key.child, lookup.device,
+                              Transform.TYPE, state, lookup.messages,
+                              error=last.message if isinstance(last, TfError) else None,
+                              rate_hz=lookup.rate_hz or None)
 
     def close(self) -> None:
         with self._deliver_lock:  # a delivery under way ends before the devices are forgotten
@@ -679,7 +676,8 @@ class TfBridges(TfLookups):
 
     # ------------------------------------------------------------------ broadcasters
 
-    def create_broadcaster(self, request: CreateTfBroadcaster) -> Created:
+    def create_broadcaster(self, request: CreateTfBroadcaster,
+                           ) -> Created[TfBroadcasterBridge]:
         pair = (request.parent, request.child)  # mapped by the dispatcher
         if pair[0] == pair[1]:
             raise OutOfRangeError("child", "a frame other than the parent", repr(request.child))
@@ -703,7 +701,7 @@ class TfBridges(TfLookups):
                  pair[0], pair[1], broadcaster.topic, device)
         return Created(self._describe_broadcaster(broadcaster), existed=False)
 
-    def remove_broadcaster(self, request: RemoveTfBroadcaster) -> dict[str, Any]:
+    def remove_broadcaster(self, request: RemoveTfBroadcaster) -> TfBridgeRemoved:
         from tf2_msgs.msg import TFMessage
 
         pair = (request.parent, request.child)  # mapped by the dispatcher
@@ -719,9 +717,9 @@ class TfBridges(TfLookups):
             # ones keep it (there is no "delete" in tf2).
             self._static_publisher.publish(
                 TFMessage(transforms=list(self._static_transforms.values())))
-        return {"parent": pair[0], "child": pair[1], "device": broadcaster.device}
+        return TfBridgeRemoved(pair[0], pair[1], broadcaster.device)
 
-    def broadcast(self, request: BroadcastTransform) -> dict[str, Any]:
+    def broadcast(self, request: BroadcastTransform) -> BroadcastTransformResult:
         pair = (request.parent, request.child)  # mapped by the dispatcher
         broadcaster = self.broadcasters.get(pair)
         if broadcaster is None:
@@ -731,8 +729,7 @@ class TfBridges(TfLookups):
         stamp_ns = _stamp_ns(request.stamp) or self._now_ns()
         subscribers = self._send(broadcaster, np.asarray(request.matrix, dtype=np.float64),
                                  stamp_ns)
-        return {"topic": broadcaster.topic, "stamp": _stamp_dict(stamp_ns),
-                "subscribers": subscribers}
+        return BroadcastTransformResult(broadcaster.topic, Stamp.from_ns(stamp_ns), subscribers)
 
     def _on_igtl(self, message: Message, client: Replier) -> None:
         """A client sent a message to a broadcaster's device (loop thread)."""
@@ -809,15 +806,13 @@ class TfBridges(TfLookups):
 
     def describe(self) -> list[dict[str, Any]]:
         out = super().describe()
-        out.extend(self._describe_broadcaster(b) for b in self.broadcasters.values())
+        out.extend(self._describe_broadcaster(b).to_dict() for b in self.broadcasters.values())
         return out
 
-    def _describe_broadcaster(self, broadcaster: _Broadcaster) -> dict[str, Any]:
-        out: dict[str, Any] = {"kind": "tf_broadcaster", "parent": broadcaster.parent,
-                               "child": broadcaster.child, "device": broadcaster.device,
-                               "igtl_type": Transform.TYPE, "static": broadcaster.static,
-                               "topic": broadcaster.topic, "messages": broadcaster.messages}
-        return out
+    def _describe_broadcaster(self, broadcaster: _Broadcaster) -> TfBroadcasterBridge:
+        return TfBroadcasterBridge("tf_broadcaster", broadcaster.parent, broadcaster.child,
+                                   broadcaster.device, Transform.TYPE, broadcaster.static,
+                                   broadcaster.topic, broadcaster.messages)
 
     def close(self) -> None:
         super().close()

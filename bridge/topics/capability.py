@@ -16,7 +16,7 @@ import json
 import logging
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Optional, cast
 
 from rclpy.serialization import deserialize_message
@@ -30,7 +30,7 @@ from bridge.codecs.generic import document_to_json
 from bridge.codecs.fast_image import RawImageStream
 from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
-from bridge.core.dispatch import Created, Handler, Result
+from bridge.core.dispatch import Created, Handler
 from bridge.core.heavy import OffLoop
 from bridge.core.hub import (Hub, Replier, Subscriber, frame_for,
                              is_large)
@@ -45,10 +45,10 @@ from bridge.ros.raw_reader import BatchTopic
 from bridge.ros.ros_node import RosNode
 from bridge.topics.routes import Route, route_for
 from bridge.topics.whole_messages import WholeMessages, WholeStream
-from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher,
-                               CreateSubscriber, ErrorCode, ForbiddenError, GetLastMessage, Op,
-                               Publish, QoS, RemovePublisher, RemoveSubscriber,
-                               WrongTypeError)
+from protocol.commands import (LABELS_TYPE, CommandFailedError, CreatePublisher, CreateSubscriber,
+                               ErrorCode, ForbiddenError, GetLastMessage, GetLastMessageResult, Op,
+                               Publish, PublishResult, QoS, RemovePublisher, RemoveSubscriber,
+                               TopicBridge, TopicBridgeRemoved, WrongTypeError)
 from protocol.framing import StreamTemplate
 from protocol.freshness import daemon_clock_ms
 from protocol.messages import Message, PolyData, StatusCode
@@ -592,7 +592,7 @@ class TopicBridges:
         return True
 
     def create_subscriber(self, request: CreateSubscriber, client: Optional[Subscriber],
-                          guard: ContentGuard) -> Created:
+                          guard: ContentGuard) -> Created[TopicBridge]:
         """``guard`` judges what its messages name (a tf topic's frames) on their way to
         clients; an existing bridge keeps its own (the policy is the daemon's: the same)."""
         topic = request.topic
@@ -620,7 +620,7 @@ class TopicBridges:
                        existed=False)
 
     def _with_messages(self, request: CreateSubscriber, client: Optional[Subscriber],
-                       bridge: SubscriberBridge, reply: dict[str, Any]) -> dict[str, Any]:
+                       bridge: SubscriberBridge, reply: TopicBridge) -> TopicBridge:
         """Join `client` to the bridge's message stream if it asked (not for images and
         point clouds: their IMAGE / POLYDATA stream is the whole message already)."""
         if not request.messages or client is None or bridge.codec.bulk:
@@ -630,9 +630,9 @@ class TopicBridges:
                                         metadata_for(key, ros_type=bridge.codec.ros_type),
                                         self._whole)
         self._hub.join(device, client)
-        return {**reply, "message_device": device}
+        return replace(reply, message_device=device)
 
-    def remove_subscriber(self, request: RemoveSubscriber) -> dict[str, Any]:
+    def remove_subscriber(self, request: RemoveSubscriber) -> TopicBridgeRemoved:
         topic = request.topic
         bridge = self.subscribers.pop(topic, None)
         if bridge is None:
@@ -643,9 +643,10 @@ class TopicBridges:
             self._health.unwatch(bridge.device)
         self._names.release(NameKey.subscriber(topic))
         self._names.release(NameKey.subscriber_messages(topic))
-        return {"topic": topic, "device": bridge.device}
+        return TopicBridgeRemoved(topic, bridge.device)
 
-    def create_publisher(self, request: CreatePublisher, guard: ContentGuard) -> Created:
+    def create_publisher(self, request: CreatePublisher,
+                         guard: ContentGuard) -> Created[TopicBridge]:
         topic = request.topic
         codec = self._codec(request.type)  # a bare name is looked up among installed packages
         ros_type = codec.ros_type
@@ -671,7 +672,7 @@ class TopicBridges:
         log.info("publishing %s (%s); clients send to device %r", topic, ros_type, device)
         return Created(_describe(bridge.info()), existed=False)
 
-    def remove_publisher(self, request: RemovePublisher) -> dict[str, Any]:
+    def remove_publisher(self, request: RemovePublisher) -> TopicBridgeRemoved:
         topic = request.topic
         bridge = self.publishers.pop(topic, None)
         if bridge is None:
@@ -679,9 +680,9 @@ class TopicBridges:
                                      code=ErrorCode.NOT_FOUND)
         bridge.close()
         self._names.release(NameKey.publisher(topic))
-        return {"topic": topic, "device": bridge.device}
+        return TopicBridgeRemoved(topic, bridge.device)
 
-    def publish(self, request: Publish) -> OffLoop[Result]:
+    def publish(self, request: Publish) -> OffLoop[PublishResult]:
         topic = request.topic
         bridge = self.publishers.get(topic)
         if bridge is None:
@@ -689,7 +690,7 @@ class TopicBridges:
                                      "first)", topic, code=ErrorCode.NOT_FOUND)
         field = "value" if request.message is None else "message"
 
-        def work() -> dict[str, Any]:  # a message of a megabyte of JSON takes a second
+        def work() -> PublishResult:  # a message of a megabyte of JSON takes a second
             try:
                 if request.message is None:
                     subscribers = bridge.publish_value(request.value)
@@ -698,10 +699,10 @@ class TopicBridges:
             except CodecError as error:
                 raise WrongTypeError(f"{field}.{error.field}" if error.field else field,
                                      error.expected, error.got) from None
-            return {"topic": topic, "subscribers": subscribers}
+            return PublishResult(topic, subscribers)
         return OffLoop(work)
 
-    def get_last_message(self, request: GetLastMessage) -> dict[str, Any]:
+    def get_last_message(self, request: GetLastMessage) -> GetLastMessageResult:
         topic = request.topic
         bridge = self.subscribers.get(topic)
         if bridge is None:
@@ -713,12 +714,11 @@ class TopicBridges:
                 "topic", f"a last message of at most {LAST_MESSAGE_MAX_BYTES} bytes (larger "
                 "ones stream to the subscriber's device but are not kept)",
                 f"{bridge.last_size} bytes on {topic}", code=ErrorCode.NOT_SUPPORTED)
-        result: dict[str, Any] = {"topic": topic, "type": bridge.codec.ros_type,
-                                  "count": bridge.count, "received": message is not None}
+        result = GetLastMessageResult(topic, bridge.codec.ros_type, bridge.count, False)
         if message is not None:
-            result["text"] = (bridge.codec.to_yaml(message) if request.format == "yaml"
-                              else message_to_json(message))
-            result["value"] = bridge.codec.to_value(message)
+            result = replace(result, received=True, value=bridge.codec.to_value(message),
+                             text=(bridge.codec.to_yaml(message) if request.format == "yaml"
+                                   else message_to_json(message)))
         return result
 
     def handlers(self) -> dict[type[Op], Handler]:
@@ -747,7 +747,7 @@ class TopicBridges:
                                                             *self.publishers.values()]
         described = []
         for bridge in bridges:
-            entry = _describe(bridge.info())
+            entry = _describe(bridge.info()).to_dict()
             stale = self._health.stale(bridge.device) if self._health is not None else None
             if stale is not None and isinstance(bridge, SubscriberBridge):
                 entry["stale"] = stale
@@ -767,11 +767,6 @@ class TopicBridges:
         self._whole.close()
 
 
-def _describe(info: TopicInfo) -> dict[str, Any]:
-    out: dict[str, Any] = {"kind": info.kind, "topic": info.topic, "type": info.ros_type,
-                           "device": info.device, "igtl_type": info.igtl_type, "qos": info.qos,
-                           "messages": info.messages}
-    if info.max_rate_hz:
-        out["rate_hz"] = info.max_rate_hz
-    out.update(info.extra)
-    return out
+def _describe(info: TopicInfo) -> TopicBridge:
+    return TopicBridge(info.kind, info.topic, info.ros_type, info.device, info.igtl_type,
+                       info.qos, info.messages, info.max_rate_hz or None, dict(info.extra))

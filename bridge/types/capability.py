@@ -40,7 +40,7 @@ class InterfaceTypes:
 
 
 @lru_cache(maxsize=512)
-def describe_type(name: str, kind: str) -> dict[str, Any]:
+def describe_type(name: str, kind: str) -> TypeDescription:
     try:
         full, parts = _parts(name, kind)
     except (CodecError, OutOfRangeError) as error:
@@ -49,7 +49,7 @@ def describe_type(name: str, kind: str) -> dict[str, Any]:
                                  code=ErrorCode.UNKNOWN_ROS_TYPE) from None
     messages: dict[str, MessageDescription] = {}
     names = {part: describe_message(cls, messages) for part, cls in parts.items()}
-    return TypeDescription(full, kind, names, messages).to_dict()
+    return TypeDescription(full, kind, names, messages)
 
 
 def _parts(name: str, kind: str) -> tuple[str, dict[str, Any]]:

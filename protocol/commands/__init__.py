@@ -17,11 +17,13 @@ The package, by job:
     fields      the field reader (`Args`)
     values      QoS, Stamp, ParameterValue, RobotSource, matrices
     types       the one grammar of ROS type names
-    results     the typed results of the ops a client reads (`Answered`), parsed in one place
+    results     the typed results' base (`Result`: a reply's JSON object and its reader) and
+                those shared by several areas; `Answered` for ops a client reads typed
     op          the op base class, its declarations and the registry; parsing
     graph, topics, parameters, tf, robots, services, markers, motion, actions,
     interfaces, recording, playback
-                the ops, by area (adding an op: a class in one of these, and a handler)
+                the ops, by area, each with its result type and examples (adding an op: a
+                class in one of these, and a handler returning its result)
     replies     the Reply and error replies
 
 Everything is importable from ``protocol.commands`` itself.

@@ -23,15 +23,16 @@ from typing import Any, Optional, cast
 
 from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import MISSING, Args
-from protocol.commands.op import ActionUse, Bridge, Op, Resource
+from protocol.commands.op import ActionUse, Bridge, Example, Op, Resource
 from protocol.commands.results import (AdvertiseActionResult, Answered, CancelGoalResult,
-                                       SendGoalResult)
+                                       Result, SendGoalResult)
 from protocol.commands.types import resolve_action_type
 from protocol.commands.wire import json_type
 
 __all__ = ["GOAL_STATUSES", "SERVED_OUTCOMES", "ActionCancel", "ActionDecide",
-           "ActionFeedback", "ActionGoal", "AdvertiseAction", "CancelGoal", "ListActions",
-           "SendGoal", "UnadvertiseAction", "goal_id_text"]
+           "ActionFeedback", "ActionFeedbackResult", "ActionGoal", "AdvertiseAction",
+           "CancelGoal", "ListActions", "ListActionsResult", "SendGoal", "UnadvertiseAction",
+           "UnadvertisedAction", "goal_id_text"]
 
 # action_msgs/msg/GoalStatus codes -> the names replies and goal events use.
 GOAL_STATUSES: dict[int, str] = {0: "unknown", 1: "accepted", 2: "executing", 3: "canceling",
@@ -70,8 +71,32 @@ def _object(a: Args, name: str) -> dict[str, Any]:
 
 
 @dataclass(frozen=True)
-class ListActions(Op, op="list_actions", writes=False):
+class ListActionsResult(Result):
+    """The actions some node serves, each ``action`` with its ``types``."""
+
+    actions: tuple[dict[str, Any], ...]
+
+
+@dataclass(frozen=True)
+class UnadvertisedAction(Result):
+    action: str
+    device: str
+
+
+@dataclass(frozen=True)
+class ActionFeedbackResult(Result):
+    """The feedbacks published for the goal so far."""
+
+    action: str
+    goal_id: str
+    feedbacks: int
+
+
+@dataclass(frozen=True)
+class ListActions(Op, op="list_actions", writes=False, result=ListActionsResult):
     """Every action of the ROS graph with its types."""
+
+    examples = (Example({}),)
 
     def resources(self) -> tuple[Resource, ...]:
         return ()
@@ -88,6 +113,10 @@ class SendGoal(Op, Answered[SendGoalResult], op="send_goal", ros_names=("action"
     the daemon cancels the goal when no result came by then (the goal ends ``timeout``).
     ``goal_id``: the client may choose the goal's UUID (so it knows the goal before the
     reply); the daemon draws one otherwise."""
+
+    examples = (Example(
+        {"action": "/a", "type": "control_msgs/action/GripperCommand"},
+        {("action", "action", "/a")}),)
 
     action: str
     type: str
@@ -122,6 +151,10 @@ class CancelGoal(Op, Answered[CancelGoalResult], op="cancel_goal",
     """Ask the server to cancel a goal this client sent (its end still arrives as the
     goal's result event, status ``canceled`` if the server honours it)."""
 
+    examples = (Example(
+        {"action": "/a", "goal_id": "00000000000000000000000000000000"},
+        {("action", "action", "/a")}),)
+
     action: str
     goal_id: str
     timeout: float = 4.0
@@ -146,6 +179,10 @@ class AdvertiseAction(Op, Answered[AdvertiseActionResult], op="advertise_action"
     ``decides``: each goal is first put to the client (`ActionDecide`), which accepts or
     rejects it; otherwise every goal is accepted."""
 
+    examples = (Example(
+        {"action": "/a", "type": "control_msgs/GripperCommand"},
+        {("action", "action", "/a")}),)
+
     action: str
     type: str
     goal_timeout: float = 300.0
@@ -168,7 +205,10 @@ class AdvertiseAction(Op, Answered[AdvertiseActionResult], op="advertise_action"
 
 @dataclass(frozen=True)
 class UnadvertiseAction(Op, op="unadvertise_action", ros_names=("action",), writes=False,
+                        result=UnadvertisedAction,
                         removes="served_action"):
+    examples = (Example({"action": "/a"}),)
+
     action: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -180,8 +220,13 @@ class UnadvertiseAction(Op, op="unadvertise_action", ros_names=("action",), writ
 
 
 @dataclass(frozen=True)
-class ActionFeedback(Op, op="action_feedback", ros_names=("action",), writes=True):
+class ActionFeedback(Op, op="action_feedback", ros_names=("action",), writes=True,
+                     result=ActionFeedbackResult):
     """Feedback of a goal this client serves, published to the ROS client that sent it."""
+
+    examples = (Example(
+        {"action": "/a", "goal_id": "00000000000000000000000000000000", "feedback": {}},
+        {("action", "action", "/a")}),)
 
     action: str
     goal_id: str
@@ -201,6 +246,10 @@ class ActionFeedback(Op, op="action_feedback", ros_names=("action",), writes=Tru
 class ActionGoal(Op, op="action_goal", ros_names=("action",), writes=False, to_client=True):
     """Sent by the daemon to the client that advertised ``action``: one goal to execute
     within ``timeout`` seconds. Answer: ``{"status": ..., "result": {...}}``."""
+
+    examples = (Example(
+        {"action": "/a", "type": "control_msgs/GripperCommand",
+         "goal_id": "00000000000000000000000000000000", "goal": {}}),)
 
     action: str
     type: str
@@ -227,6 +276,8 @@ class ActionDecide(Op, op="action_decide", ros_names=("action",), writes=False, 
     seconds (no answer in time: the goal is rejected). An accepted goal then comes as an
     `ActionGoal`."""
 
+    examples = (Example({"action": "/a", "type": "control_msgs/GripperCommand", "goal": {}}),)
+
     action: str
     type: str
     goal: dict[str, Any] = field(default_factory=dict)
@@ -247,6 +298,8 @@ class ActionDecide(Op, op="action_decide", ros_names=("action",), writes=False, 
 class ActionCancel(Op, op="action_cancel", ros_names=("action",), writes=False, to_client=True):
     """Sent by the daemon to the serving client: a ROS client asks to cancel a goal. The
     client ends the goal (its `ActionGoal` answer, status ``canceled``) when it can."""
+
+    examples = (Example({"action": "/a", "goal_id": "00000000000000000000000000000000"}),)
 
     action: str
     goal_id: str

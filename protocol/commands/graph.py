@@ -3,19 +3,51 @@
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 from protocol.auth import NONCE
 from protocol.commands.fields import MAX_NAME, Args
-from protocol.commands.op import Op, Resource
+from protocol.commands.op import Example, Op, Resource
 from protocol.commands.results import (Answered, AuthenticateResult, HelloResult,
-                                       ListServicesResult, ListTopicsResult)
+                                       ListServicesResult, ListTopicsResult, Result,
+                                       read_field)
 
 _PROOF = re.compile(r"[0-9a-f]{64}\Z")
 DISPLAY_HZ = 60.0  # what a display shows: the message stream's pace, and 3D Slicer's
 DISPLAY_HZ_MIN, DISPLAY_HZ_MAX = 1.0, 1000.0  # a display's frame rate, as a client asks it
 
-__all__ = ["DISPLAY_HZ", "Authenticate", "Hello", "ListBridges", "ListServices", "ListTopics"]
+__all__ = ["DISPLAY_HZ", "DISPLAY_HZ_MAX", "DISPLAY_HZ_MIN", "Authenticate", "Hello",
+           "ListBridges", "ListBridgesResult", "ListServices", "ListTopics"]
+
+
+@dataclass(frozen=True)
+class ListBridgesResult(Result):
+    """Every bridge (each an object naming its ``kind``), the hub's devices and clients,
+    and each capability's other state under its own key (``state``: those keys, sent
+    beside the others)."""
+
+    large = True
+
+    bridges: tuple[dict[str, Any], ...]
+    devices: tuple[str, ...]
+    clients: tuple[dict[str, Any], ...]
+    hub_dropped: int
+    state: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        out = super().to_dict()
+        state = out.pop("state")
+        return {**out, **state}
+
+    @classmethod
+    def read(cls, a: Args) -> ListBridgesResult:
+        known = ("bridges", "devices", "clients", "hub_dropped")
+        return cls(bridges=read_field(a, "bridges", tuple[dict[str, Any], ...]),
+                   devices=read_field(a, "devices", tuple[str, ...]),
+                   clients=read_field(a, "clients", tuple[dict[str, Any], ...]),
+                   hub_dropped=read_field(a, "hub_dropped", int),
+                   state={k: a.raw(k, True) for k in a.keys() if k not in known})
 
 
 @dataclass(frozen=True)
@@ -29,6 +61,8 @@ class Hello(Op, Answered[HelloResult], op="hello", writes=False):
     daemon cuts its dead link before a backlog could age past the bound. ``display_hz``:
     this client shows streams on a display (3D Slicer): send it each stream's newest value
     that many times a second at most, not every value (a value waits at most a frame)."""
+
+    examples = (Example({}),)
 
     client: str | None = None
     heartbeat: float | None = None
@@ -53,6 +87,10 @@ class Authenticate(Op, Answered[AuthenticateResult], op="authenticate", writes=F
     to 128 hex digits) and ``proof``, the HMAC of the challenge `hello` gave with it. Once
     accepted, this connection may write (ops that write, data sent to publishers)."""
 
+    examples = (Example(
+        {"nonce": "00000000000000000000000000000000",
+         "proof": "1111111111111111111111111111111111111111111111111111111111111111"}),)
+
     nonce: str
     proof: str
 
@@ -66,8 +104,11 @@ class Authenticate(Op, Answered[AuthenticateResult], op="authenticate", writes=F
 
 
 @dataclass(frozen=True)
-class ListBridges(Op, op="list_bridges", writes=False, content=("frames",)):
+class ListBridges(Op, op="list_bridges", writes=False, content=("frames",),
+                  result=ListBridgesResult):
     """Everything this daemon currently bridges, with device names."""
+
+    examples = (Example({}),)
 
     def resources(self) -> tuple[Resource, ...]:
         return ()
@@ -81,6 +122,8 @@ class ListBridges(Op, op="list_bridges", writes=False, content=("frames",)):
 class ListTopics(Op, Answered[ListTopicsResult], op="list_topics", writes=False):
     """The ROS graph's topics and their types."""
 
+    examples = (Example({}),)
+
     def resources(self) -> tuple[Resource, ...]:
         return ()
 
@@ -92,6 +135,8 @@ class ListTopics(Op, Answered[ListTopicsResult], op="list_topics", writes=False)
 @dataclass(frozen=True)
 class ListServices(Op, Answered[ListServicesResult], op="list_services", writes=False):
     """The ROS graph's services and their types."""
+
+    examples = (Example({}),)
 
     def resources(self) -> tuple[Resource, ...]:
         return ()

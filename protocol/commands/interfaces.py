@@ -20,7 +20,8 @@ from typing import Any, Optional, cast
 
 from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import MISSING, Args
-from protocol.commands.op import Op, Resource
+from protocol.commands.op import Example, Op, Resource
+from protocol.commands.results import Result
 from protocol.commands.wire import json_type
 
 __all__ = ["BASIC_FIELD_TYPES", "INTERFACE_KINDS", "DescribeType", "FieldDescription",
@@ -36,23 +37,6 @@ _ARRAYS = (None, "fixed", "sequence")
 # Bounds on a description a client accepts (a real one is far below them).
 _MAX_MESSAGES = 10_000
 _MAX_FIELDS = 10_000
-
-
-@dataclass(frozen=True)
-class DescribeType(Op, op="describe_type", writes=False):
-    """Describe an installed interface type: ``kind`` message (``pkg/msg/Type``, a short
-    name), service (``pkg/srv/Type``, or a reference service client class name such as
-    ``vtkMRMLROS2ServiceClientSpawnNode``) or action (``pkg/action/Type``)."""
-
-    type: str
-    kind: str = "message"
-
-    def resources(self) -> tuple[Resource, ...]:
-        return ()  # installed type definitions: no ROS graph resource
-
-    @classmethod
-    def from_args(cls, a: Args) -> DescribeType:
-        return cls(type=a.req_str("type"), kind=a.choice("kind", INTERFACE_KINDS, "message"))
 
 
 @dataclass(frozen=True)
@@ -132,7 +116,7 @@ class MessageDescription:
 
 
 @dataclass(frozen=True)
-class TypeDescription:
+class TypeDescription(Result):
     """The reply to `DescribeType`: the resolved type, its parts (``message``; ``request``
     and ``response``; ``goal``, ``result`` and ``feedback``), each a message type, and
     every message type they are made of."""
@@ -179,3 +163,22 @@ def _args(data: Any, path: str) -> Args:
     if not isinstance(data, dict):
         raise WrongTypeError(path, "an object", json_type(data))
     return Args(data, path + ".")
+
+
+@dataclass(frozen=True)
+class DescribeType(Op, op="describe_type", writes=False, result=TypeDescription):
+    """Describe an installed interface type: ``kind`` message (``pkg/msg/Type``, a short
+    name), service (``pkg/srv/Type``, or a reference service client class name such as
+    ``vtkMRMLROS2ServiceClientSpawnNode``) or action (``pkg/action/Type``)."""
+
+    examples = (Example({"type": "PoseArray"}),)
+
+    type: str
+    kind: str = "message"
+
+    def resources(self) -> tuple[Resource, ...]:
+        return ()  # installed type definitions: no ROS graph resource
+
+    @classmethod
+    def from_args(cls, a: Args) -> DescribeType:
+        return cls(type=a.req_str("type"), kind=a.choice("kind", INTERFACE_KINDS, "message"))

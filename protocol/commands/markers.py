@@ -14,15 +14,64 @@ topic still works and gives the message as JSON text.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import Args
-from protocol.commands.op import Bridge, FrameUse, Op, Resource, TopicUse
+from protocol.commands.op import Bridge, Example, FrameUse, Op, Resource, TopicUse
+from protocol.commands.results import Result
 from protocol.commands.values import QoS
 from protocol.commands.wire import json_type
 
-__all__ = ["MARKER_SOURCE_TYPES", "CreateMarkerSubscriber", "ListMarkers",
-           "RemoveMarkerSubscriber", "marker_source_type"]
+__all__ = ["MARKER_SOURCE_TYPES", "CreateMarkerSubscriber", "ListMarkers", "ListMarkersResult",
+           "MarkerSubscriberBridge", "RemoveMarkerSubscriber", "RemovedMarkerSubscriber",
+           "marker_source_type"]
+
+
+@dataclass(frozen=True)
+class MarkerSubscriberBridge(Result):
+    """A marker subscriber, as `create_marker_subscriber` and `list_bridges` describe it:
+    its device (the live markers' list), counts of messages, markers shown, withheld and
+    refused, whether it reads CDR bytes, what its worker dropped or meshed, and the bytes
+    of its models."""
+
+    kind: str  # "marker_subscriber"
+    topic: str
+    type: str
+    fixed_frame: str
+    device: str
+    qos: dict[str, Any]
+    messages: int
+    markers: int
+    withheld: int
+    errors: int
+    raw: bool
+    dropped: int
+    meshed: int
+    model_bytes: int
+
+
+@dataclass(frozen=True)
+class RemovedMarkerSubscriber(Result):
+    """A removed marker subscriber and the devices it had (its markers', then its own)."""
+
+    topic: str
+    devices: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ListMarkersResult(Result):
+    """A marker subscriber's live markers (each: ns, id, device, type, frame, points,
+    whether placed in the fixed frame, its frame's device, seconds to expiry or null), and
+    those withheld or refused, with why."""
+
+    large = True
+
+    topic: str
+    device: str
+    markers: tuple[dict[str, Any], ...]
+    withheld: tuple[dict[str, Any], ...]
+    errors: tuple[dict[str, Any], ...]
 
 # The types a marker subscriber takes: short name -> ROS type.
 MARKER_SOURCE_TYPES: dict[str, str] = {
@@ -55,7 +104,8 @@ def _fixed_frame(a: Args) -> str:
 
 
 @dataclass(frozen=True)
-class CreateMarkerSubscriber(Op, op="create_marker_subscriber", ros_names=("topic",), writes=False,
+class CreateMarkerSubscriber(Op, op="create_marker_subscriber", result=MarkerSubscriberBridge,
+                             ros_names=("topic",), writes=False,
                              content=("frames", "files"),
                              creates=Bridge("marker_subscriber", ("topic",),
                                             section="marker_subscribers")):
@@ -66,6 +116,10 @@ class CreateMarkerSubscriber(Op, op="create_marker_subscriber", ros_names=("topi
     It reads the topic and reveals the fixed frame's relation to each marker's frame (the
     frames are judged by the frame globs marker by marker, when they arrive); MESH_RESOURCE
     markers read mesh files only inside the mesh roots (as a client's robot)."""
+
+    examples = (Example(
+        {"topic": "/m", "type": "MarkerArray", "fixed_frame": "/world"},
+        {("frame", "fixed_frame", "world"), ("topic", "topic", "/m")}),)
 
     topic: str
     type: str
@@ -90,8 +144,11 @@ class CreateMarkerSubscriber(Op, op="create_marker_subscriber", ros_names=("topi
 
 
 @dataclass(frozen=True)
-class RemoveMarkerSubscriber(Op, op="remove_marker_subscriber", ros_names=("topic",), writes=False,
+class RemoveMarkerSubscriber(Op, op="remove_marker_subscriber", result=RemovedMarkerSubscriber,
+                             ros_names=("topic",), writes=False,
                              removes="marker_subscriber"):
+    examples = (Example({"topic": "/m"}),)
+
     topic: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -103,8 +160,11 @@ class RemoveMarkerSubscriber(Op, op="remove_marker_subscriber", ros_names=("topi
 
 
 @dataclass(frozen=True)
-class ListMarkers(Op, op="list_markers", ros_names=("topic",), writes=False):
+class ListMarkers(Op, op="list_markers", result=ListMarkersResult,
+                  ros_names=("topic",), writes=False):
     """The live markers of a marker subscriber: device, ns, id, type, frame, expiry."""
+
+    examples = (Example({"topic": "/m"}, {("topic", "topic", "/m")}),)
 
     topic: str
 

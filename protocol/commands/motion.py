@@ -4,18 +4,21 @@ obstacles it must avoid (Slicer models published to ROS) and its distances to th
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Optional
 
 from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import MISSING, ROBOT_NAME, ROS_NAME, ROS_NAME_DESC, Args
-from protocol.commands.op import ActionUse, FrameUse, Op, Resource, TopicUse
-from protocol.commands.results import Answered, SendGoalResult, SolveIkResult
+from protocol.commands.op import ActionUse, Example, FrameUse, Op, Resource, TopicUse
+from protocol.commands.results import (Answered, Result, SendGoalResult, SolveIkResult,
+                                       read_field)
 from protocol.commands.robots import joint_values
 from protocol.commands.values import Matrix4, matrix_from
 
 __all__ = ["DEFAULT_TRAJECTORY_ACTION", "FOLLOW_JOINT_TRAJECTORY", "MAX_OBSTACLES",
-           "MAX_PLAN_PREVIEW", "OBSTACLE_TYPES", "ExecuteMotion", "ObstacleDistances", "PlanMotion",
-           "PublishDistance", "RemoveObstacle", "SetObstacle", "SolveIk"]
+           "MAX_PLAN_PREVIEW", "OBSTACLE_TYPES", "ExecuteMotion", "ExecuteMotionResult",
+           "ObstacleDistances", "ObstacleDistancesResult", "ObstacleRemoved", "ObstacleSet",
+           "PlanMotion", "PlanMotionResult", "PublishDistance", "PublishDistanceResult",
+           "RemoveObstacle", "SetObstacle", "SolveIk"]
 
 FOLLOW_JOINT_TRAJECTORY = "control_msgs/action/FollowJointTrajectory"
 # ros2_control's joint trajectory controller's action (and the demo's).
@@ -31,6 +34,95 @@ _OBSTACLE_DESC = "an obstacle name of letters, digits and _"
 
 
 @dataclass(frozen=True)
+class ObstacleSet(Result):
+    """An obstacle of a robot: the topic it comes from, its type, and the robot's links
+    its contacts are checked against."""
+
+    name: str
+    obstacle: str
+    topic: str
+    type: str
+    links: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ObstacleRemoved(Result):
+    name: str
+    obstacle: str
+
+
+@dataclass(frozen=True)
+class ObstacleDistancesResult(Result):
+    """At the robot's current joint state: the distances from ``link`` to each obstacle
+    (with the nearest points), the link-obstacle pairs in contact, and the obstacles not
+    placed in the robot's frame (and why)."""
+
+    name: str
+    link: str
+    positions: dict[str, float]
+    distances: tuple[dict[str, Any], ...]
+    contacts: tuple[dict[str, Any], ...]
+    unplaced: tuple[dict[str, Any], ...]
+
+
+@dataclass(frozen=True)
+class PublishDistanceResult(Result):
+    """Whether the distance is now published on ``topic`` (at ``rate_hz``), or stopped."""
+
+    name: str
+    topic: str
+    publishing: bool
+    rate_hz: Optional[float] = None
+
+
+@dataclass(frozen=True)
+class PlanMotionResult(Result):
+    """A joint-space path: the joints that move, the start and goal positions, the path's
+    configurations (of those joints), how many were checked and whether all are clear
+    (else the first ``collision``: link, obstacle, step, fraction, positions), the
+    obstacles not placed, the motion's duration, and ``preview`` (each link's pose, mm,
+    at some configurations) when asked."""
+
+    name: str
+    joints: tuple[str, ...]
+    start: dict[str, float]
+    goal: dict[str, float]
+    path: tuple[tuple[float, ...], ...]
+    resolution: float
+    checked: int
+    clear: bool
+    collision: Optional[dict[str, Any]]
+    unplaced: tuple[dict[str, Any], ...]
+    duration_s: float
+    preview: Optional[tuple[dict[str, Any], ...]] = None
+
+
+@dataclass(frozen=True)
+class ExecuteMotionResult(SendGoalResult):
+    """The goal sent (a `SendGoalResult`), and the plan it follows: the joints, the
+    configurations checked, the resolution, the motion's duration, the obstacles not
+    placed."""
+
+    name: str
+    joints: tuple[str, ...]
+    checked: int
+    resolution: float
+    duration_s: float
+    unplaced: tuple[dict[str, Any], ...]
+
+    @classmethod
+    def read(cls, a: Args) -> ExecuteMotionResult:
+        goal = SendGoalResult.read(a)
+        return cls(**{f: getattr(goal, f) for f in goal.__dataclass_fields__},
+                   name=read_field(a, "name", str),
+                   joints=read_field(a, "joints", tuple[str, ...]),
+                   checked=read_field(a, "checked", int),
+                   resolution=read_field(a, "resolution", float),
+                   duration_s=read_field(a, "duration_s", float),
+                   unplaced=read_field(a, "unplaced", tuple[dict[str, Any], ...]))
+
+
+@dataclass(frozen=True)
 class SolveIk(Op, Answered[SolveIkResult], op="solve_ik", writes=False):
     """Joint positions putting link ``tip`` of loaded robot ``name`` at ``target`` (a rigid
     4x4 in mm, rows, in the robot's root link frame), within the URDF's limits, starting
@@ -40,6 +132,10 @@ class SolveIk(Op, Answered[SolveIkResult], op="solve_ik", writes=False):
     positions reach is answered ``"solved": false`` with ``failure`` (``reason``
     unreachable, joint_limit or collision, the joints or the link and obstacle) and the
     best residual (mm, degrees); the client raises `IkFailedError` from it."""
+
+    examples = (Example(
+        {"name": "r", "tip": "tool",
+         "target": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}),)
 
     name: str
     tip: str
@@ -75,7 +171,7 @@ def _obstacle(a: Args) -> str:
 
 
 @dataclass(frozen=True)
-class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False,
+class SetObstacle(Op, op="set_obstacle", result=ObstacleSet, ros_names=("topic",), writes=False,
                   content=("frames",)):
     """Make the model published on ``topic`` an obstacle of robot ``name``: a Slicer model
     sent to ROS (``publish_model``) as a visualization_msgs/Marker TRIANGLE_LIST (placed in
@@ -84,6 +180,10 @@ class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False,
     Robot links touching it fail solve_ik; distances to it are measured. Setting the same
     name again replaces it; at most `MAX_OBSTACLES` per robot. Its frame is judged by the
     frame globs (a Marker's as it arrives: a denied one leaves the obstacle unplaced)."""
+
+    examples = (Example(
+        {"name": "r", "obstacle": "skull", "topic": "/skull"},
+        {("topic", "topic", "/skull")}),)
 
     name: str
     obstacle: str
@@ -114,8 +214,10 @@ class SetObstacle(Op, op="set_obstacle", ros_names=("topic",), writes=False,
 
 
 @dataclass(frozen=True)
-class RemoveObstacle(Op, op="remove_obstacle", writes=False):
+class RemoveObstacle(Op, op="remove_obstacle", result=ObstacleRemoved, writes=False):
     """Forget obstacle ``obstacle`` of robot ``name`` (its subscription ends)."""
+
+    examples = (Example({"name": "r", "obstacle": "skull"}),)
 
     name: str
     obstacle: str
@@ -129,10 +231,12 @@ class RemoveObstacle(Op, op="remove_obstacle", writes=False):
 
 
 @dataclass(frozen=True)
-class ObstacleDistances(Op, op="obstacle_distances", writes=False):
+class ObstacleDistances(Op, op="obstacle_distances", result=ObstacleDistancesResult, writes=False):
     """At the robot's current joint state: the minimum distance (mm) from ``link`` to each
     obstacle with the nearest points (mm, root link frame), and every link-obstacle pair in
     contact. A read."""
+
+    examples = (Example({"name": "r", "link": "tool"}),)
 
     name: str
     link: str
@@ -146,11 +250,16 @@ class ObstacleDistances(Op, op="obstacle_distances", writes=False):
 
 
 @dataclass(frozen=True)
-class PublishDistance(Op, op="publish_distance", ros_names=("topic",), writes=True):
+class PublishDistance(Op, op="publish_distance", result=PublishDistanceResult,
+                      ros_names=("topic",), writes=True):
     """Publish the minimum distance from ``link`` to ``obstacle`` as std_msgs/Float64 in
     METRES on ``topic``, ``rate_hz`` times a second at the robot's current joint state (for
     virtual fixtures and haptics; a client reads it as any topic). One per topic: the same
     topic again replaces it, ``rate_hz`` 0 stops it. A write (a ROS publisher)."""
+
+    examples = (Example(
+        {"name": "r", "link": "tool", "obstacle": "skull", "topic": "/d"},
+        {("topic", "topic", "/d")}),)
 
     name: str
     link: str
@@ -175,11 +284,13 @@ def _resolution(a: Args) -> float:
 
 
 @dataclass(frozen=True)
-class PlanMotion(Op, op="plan_motion", writes=False):
+class PlanMotion(Op, op="plan_motion", result=PlanMotionResult, writes=False):
     """A joint-space path of robot ``name`` from its current joint state to ``positions``
     (actuated joints; the others stay), a straight line within the URDF's limits, checked
     for contact with the robot's obstacles at every ``resolution`` (rad or m: the largest
     joint step between two checked configurations). A read: for a preview."""
+
+    examples = (Example({"name": "r", "positions": {"j": 0.5}}),)
 
     name: str
     positions: tuple[tuple[str, float], ...]
@@ -212,6 +323,10 @@ class ExecuteMotion(Op, Answered[SendGoalResult], op="execute_motion", ros_names
     server to accept); refused with ``REJECTED`` naming the link, the obstacle and where on
     the path when it is not. ``duration_s``: the motion's time (omitted: from the URDF's
     velocity limits, at half of them, at least 1 s). A write: it moves the robot."""
+
+    examples = (Example(
+        {"name": "r", "positions": {"j": 0.5}, "action": "/arm/fjt"},
+        {("action", "action", "/arm/fjt")}),)
 
     name: str
     positions: tuple[tuple[str, float], ...]

@@ -25,7 +25,17 @@ fields, everything the rest of the daemon derives from it.
   URDF's meshes). The dispatcher hands its handler a guard built
   for exactly these, so no capability needs to know the policy;
 * ``resources()``: what it touches (topics, services, actions, parameters, tf frames, files); the
-  security policy judges these, never op names.
+  security policy judges these, never op names;
+* ``result``: the type of its reply's result (`protocol.commands.results.Result`), which its
+  handler returns; an op whose result the client reads typed declares it as a second base,
+  ``Answered[ItsResult]``, instead;
+* ``examples``: one or more valid requests (`Example`) with the resources each must
+  declare, from which the tests derive their tables.
+
+Adding an op takes two files: its class here (in the module of its area), with its result
+type and examples beside it, and its handler, registered by class in a capability's
+``handlers()`` and returning that result type. Nothing else lists ops: the README's op table
+is checked against the registry, and the tests draw requests from the class's fields.
 
 A class that leaves out ``op`` or ``writes``, or does not define ``resources`` itself,
 fails when its module is imported; so does a second class with the same op. The op lists,
@@ -35,16 +45,19 @@ all derived from the registry below (`REQUEST_TYPES`, `bridge_kinds`).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, fields, replace
 from typing import Any, Callable, ClassVar, Optional, TypeVar, Union, cast
 
 from protocol.commands.errors import TooLargeError, UnknownOpError, UnsupportedSchemaError
 from protocol.commands.errors import WrongTypeError
 from protocol.commands.fields import Args
-from protocol.commands.wire import MAX_OP_NAME_BYTES, SCHEMA_VERSION, dumps, json_type, loads
+from protocol.commands.results import Result
+from protocol.commands.wire import (MAX_OP_NAME_BYTES, SCHEMA_VERSION, dumps, json_type,
+                                    jsonable, loads)
 
-__all__ = ["CONTENT", "REQUEST_TYPES", "ActionUse", "Bridge", "BridgeKind", "FileUse", "FrameUse",
+__all__ = ["CONTENT", "REQUEST_TYPES", "ActionUse", "Bridge", "BridgeKind", "Example", "FileUse",
+           "FrameUse",
            "NameResolver", "Op", "ParameterUse", "Request", "Resource", "ServiceUse", "TopicUse",
            "bridge_kinds", "encode_request", "parse_request"]
 
@@ -154,21 +167,31 @@ class BridgeKind:
     follow_ups: tuple[type[Op], ...] = ()
 
 
+# ---------------------------------------------------------------------------- examples
+
+
+@dataclass(frozen=True)
+class Example:
+    """One valid request of an op, beside its declaration: its JSON ``args``, and the
+    resources it must declare, each ``(kind, field, judged name)`` (kind: topic, service,
+    action, parameter (name ``node.names``, ``OWN`` for the daemon's node), frame or
+    file). tests/protocol derives its tables from these: every op parses its examples,
+    declares exactly those resources, and round-trips requests drawn from its fields."""
+
+    args: Mapping[str, Any]
+    declares: frozenset[tuple[str, str, str]] = frozenset()
+
+    def __init__(self, args: Mapping[str, Any],
+                 declares: Iterable[tuple[str, str, str]] = ()) -> None:
+        object.__setattr__(self, "args", args)
+        object.__setattr__(self, "declares", frozenset(declares))
+
+
 # ---------------------------------------------------------------------------- requests
 
 REQUEST_TYPES: dict[str, type[Op]] = {}
 
 R = TypeVar("R", bound="Op")
-
-
-def _jsonable(value: Any) -> Any:
-    if hasattr(value, "to_dict"):
-        return value.to_dict()
-    if isinstance(value, tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    return value
 
 
 @dataclass(frozen=True)
@@ -186,14 +209,19 @@ class Op:
     ros_names: ClassVar[tuple[str, ...]] = ()
     client_frames: ClassVar[tuple[str, ...]] = ()
     content: ClassVar[tuple[str, ...]] = ()
+    # The type of its result; None for an op the daemon sends to a client.
+    result: ClassVar[Optional[type[Result]]] = None
+    # Its valid requests, for the tests (`Example`); every op gives at least one.
+    examples: ClassVar[tuple[Example, ...]] = ()
 
     def __init_subclass__(cls, *, op: str = "", writes: Optional[bool] = None,
                           creates: Optional[Bridge] = None, removes: Optional[str] = None,
                           follows: Optional[str] = None, to_client: bool = False,
                           ros_names: tuple[str, ...] = (),
                           client_frames: tuple[str, ...] = (),
-                          content: tuple[str, ...] = (), **kwargs: Any) -> None:
-        super().__init_subclass__(**kwargs)
+                          content: tuple[str, ...] = (), result: Optional[type[Result]] = None,
+                          **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)  # `Answered` sets ``result_type`` here
         name = cls.__name__
         if not op:
             raise TypeError(f"{name}: an op declares its name (op=...)")
@@ -222,6 +250,11 @@ class Op:
         cls.op, cls.writes, cls.to_client, cls.ros_names = op, writes, to_client, ros_names
         cls.client_frames, cls.content = client_frames, content
         cls.creates, cls.removes, cls.follows = creates, removes, follows
+        answered = cls.__dict__.get("result_type")
+        if result is not None and answered is not None:
+            raise TypeError(f"{name} ({op}): its result is declared twice (result= and "
+                            f"Answered[...])")
+        cls.result = result or answered
         REQUEST_TYPES[op] = cls
 
     def resources(self) -> tuple[Resource, ...]:
@@ -255,7 +288,7 @@ class Op:
         for f in fields(self):
             value = getattr(self, f.name)
             if value is not None or f.default is not None:  # omit unset optionals only
-                out[f.name] = _jsonable(value)
+                out[f.name] = jsonable(value)
         return out
 
     def to_json(self) -> str:

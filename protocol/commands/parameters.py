@@ -4,25 +4,63 @@ daemon's own parameter server (``server_*``)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import cast
+from typing import Optional, cast
 
 from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import MAX_NAME, MAX_TEXT, PARAM_NAME, Args, check_str
-from protocol.commands.op import Bridge, Op, ParameterUse, Resource
+from protocol.commands.op import Bridge, Example, Op, ParameterUse, Resource
 from protocol.commands.results import (Answered, GetParametersResult, ListParametersResult,
-                                       ObserveParametersResult, SetParametersResult)
+                                       ObserveParametersResult, Result, SetParametersResult)
 from protocol.commands.values import ParameterValue
 
 __all__ = ["CreateParameterClient", "GetParameters", "ListParameters", "ObserveParameters",
-           "RemoveParameterClient", "ServerDeclareParameter", "ServerGetParameters",
-           "ServerSetParameter", "ServerUndeclareParameter", "SetParameters"]
+           "OwnParameter", "OwnParameterUndeclared", "ParameterClientBridge",
+           "ParameterClientRemoved", "RemoveParameterClient", "ServerDeclareParameter",
+           "ServerGetParameters", "ServerSetParameter", "ServerUndeclareParameter",
+           "SetParameters"]
+
+
+@dataclass(frozen=True)
+class ParameterClientBridge(Result):
+    """A parameter client, as `create_parameter_client` and `list_bridges` describe it: the
+    device its observed changes come on, whether the node answers, what it observes."""
+
+    kind: str  # "parameter_client"
+    node: str
+    device: str
+    ready: bool
+    observed: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ParameterClientRemoved(Result):
+    node: str
+    device: str
+
+
+@dataclass(frozen=True)
+class OwnParameter(Result):
+    """A parameter of the daemon's own node as it is now; ``existed``: a declaration that
+    found it declared already, with the same type (absent for a set)."""
+
+    name: str
+    value: ParameterValue
+    existed: Optional[bool] = None
+
+
+@dataclass(frozen=True)
+class OwnParameterUndeclared(Result):
+    name: str
 
 
 @dataclass(frozen=True)
 class CreateParameterClient(Op, op="create_parameter_client", ros_names=("node",), writes=False,
+                            result=ParameterClientBridge,
                             creates=Bridge("parameter_client", ("node",),
                                            section="parameter_clients")):
     """Watch another node's parameters (``/robot_state_publisher`` or ``ns/node``)."""
+
+    examples = (Example({"node": "/n"}),)
 
     node: str
 
@@ -37,7 +75,9 @@ class CreateParameterClient(Op, op="create_parameter_client", ros_names=("node",
 @dataclass(frozen=True)
 class RemoveParameterClient(
         Op, op="remove_parameter_client", ros_names=("node",), writes=False,
-        removes="parameter_client"):
+        removes="parameter_client", result=ParameterClientRemoved):
+    examples = (Example({"node": "/n"}),)
+
     node: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -52,6 +92,8 @@ class RemoveParameterClient(
 class ListParameters(Op, Answered[ListParametersResult], op="list_parameters", ros_names=("node",),
                      content=("parameters",),
                      writes=False):
+    examples = (Example({"node": "/n"}),)
+
     node: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -66,6 +108,8 @@ class ListParameters(Op, Answered[ListParametersResult], op="list_parameters", r
 class GetParameters(Op, Answered[GetParametersResult], op="get_parameters", ros_names=("node",),
                     writes=False):
     """Values of a remote node's parameters (unknown ones come back ``not_set``)."""
+
+    examples = (Example({"node": "/n", "names": ["p"]}, {("parameter", "names", "/n.p")}),)
 
     node: str
     names: tuple[str, ...]
@@ -95,6 +139,10 @@ class SetParameters(Op, Answered[SetParametersResult], op="set_parameters", ros_
                     writes=True):
     """Set a remote node's parameters; the reply gives each one's outcome."""
 
+    examples = (Example(
+        {"node": "/n", "values": {"p": {"type": "integer", "value": 1}}},
+        {("parameter", "values", "/n.p")}),)
+
     node: str
     values: dict[str, ParameterValue]
 
@@ -117,6 +165,8 @@ class ObserveParameters(Op, Answered[ObserveParametersResult],
     declared or changed from now on (the reference's parameter node keeps those too), as
     far as the parameter globs let a client see it."""
 
+    examples = (Example({"node": "/n", "names": ["p"]}, {("parameter", "names", "/n.p")}),)
+
     node: str
     names: tuple[str, ...]
     all_changes: bool = False
@@ -131,8 +181,12 @@ class ObserveParameters(Op, Answered[ObserveParametersResult],
 
 
 @dataclass(frozen=True)
-class ServerDeclareParameter(Op, op="server_declare_parameter", writes=True):
+class ServerDeclareParameter(Op, op="server_declare_parameter", writes=True, result=OwnParameter):
     """Declare a parameter on the daemon's own ROS node (a parameter server for Slicer)."""
+
+    examples = (Example(
+        {"name": "p", "value": {"type": "integer", "value": 1}},
+        {("parameter", "name", "OWN.p")}),)
 
     name: str
     value: ParameterValue
@@ -152,7 +206,11 @@ class ServerDeclareParameter(Op, op="server_declare_parameter", writes=True):
 
 
 @dataclass(frozen=True)
-class ServerSetParameter(Op, op="server_set_parameter", writes=True):
+class ServerSetParameter(Op, op="server_set_parameter", writes=True, result=OwnParameter):
+    examples = (Example(
+        {"name": "p", "value": {"type": "integer", "value": 1}},
+        {("parameter", "name", "OWN.p")}),)
+
     name: str
     value: ParameterValue
 
@@ -166,8 +224,11 @@ class ServerSetParameter(Op, op="server_set_parameter", writes=True):
 
 
 @dataclass(frozen=True)
-class ServerGetParameters(Op, op="server_get_parameters", writes=False):
+class ServerGetParameters(Op, op="server_get_parameters", writes=False,
+                          result=GetParametersResult):
     """Values of the daemon's own parameters; ``names`` omitted or empty = all."""
+
+    examples = (Example({"names": ["p"]}, {("parameter", "names", "OWN.p")}),)
 
     names: tuple[str, ...] = ()
 
@@ -180,7 +241,10 @@ class ServerGetParameters(Op, op="server_get_parameters", writes=False):
 
 
 @dataclass(frozen=True)
-class ServerUndeclareParameter(Op, op="server_undeclare_parameter", writes=True):
+class ServerUndeclareParameter(Op, op="server_undeclare_parameter", writes=True,
+                               result=OwnParameterUndeclared):
+    examples = (Example({"name": "p"}, {("parameter", "name", "OWN.p")}),)
+
     name: str
 
     def resources(self) -> tuple[Resource, ...]:

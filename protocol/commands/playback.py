@@ -11,12 +11,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from protocol.commands.fields import Args, check_float
-from protocol.commands.op import Op, Resource
+from protocol.commands.op import REQUEST_TYPES, Example, Op, Resource
 from protocol.commands.results import Answered, Result
 from protocol.commands.values import Stamp
 
 __all__ = ["MAX_PLAYBACK_RATE", "MAX_SEEK_S", "PausePlayback", "PlaybackResult", "PlaybackStatus",
-           "ResumePlayback", "SeekPlayback", "SetPlaybackRate"]
+           "ResumePlayback", "SeekPlayback", "SetPlaybackRate", "player_ops"]
 
 MAX_PLAYBACK_RATE = 1000.0
 MAX_SEEK_S = 1e9  # beyond any bag: a seek past the end is clamped to it
@@ -63,6 +63,8 @@ def _seconds(a: Args, name: str, high: float = float("inf")) -> float:
 class PlaybackStatus(Op, Answered[PlaybackResult], op="playback_status", writes=False):
     """The player's clock and state."""
 
+    examples = (Example({}),)
+
     def resources(self) -> tuple[Resource, ...]:
         return ()
 
@@ -75,6 +77,8 @@ class PlaybackStatus(Op, Answered[PlaybackResult], op="playback_status", writes=
 class PausePlayback(Op, Answered[PlaybackResult], op="pause_playback", writes=True):
     """Hold the clock where it is (streams stop; lookups and meshes stay)."""
 
+    examples = (Example({}),)
+
     def resources(self) -> tuple[Resource, ...]:
         return ()
 
@@ -86,6 +90,8 @@ class PausePlayback(Op, Answered[PlaybackResult], op="pause_playback", writes=Tr
 @dataclass(frozen=True)
 class ResumePlayback(Op, Answered[PlaybackResult], op="resume_playback", writes=True):
     """Run the clock on from where it was held (from the start again if it had ended)."""
+
+    examples = (Example({}),)
 
     def resources(self) -> tuple[Resource, ...]:
         return ()
@@ -100,6 +106,8 @@ class SeekPlayback(Op, Answered[PlaybackResult], op="seek_playback", writes=True
     """Move the clock to ``offset`` seconds from the bag's start (clamped to its end). The
     poses, images and values shown next are those at that time: each stream's last
     message at or before it. A paused player stays paused."""
+
+    examples = (Example({"offset": 1.5}),)
 
     offset: float
 
@@ -116,6 +124,8 @@ class SetPlaybackRate(Op, Answered[PlaybackResult], op="set_playback_rate", writ
     """Play at ``rate`` times the bag's own speed (0 < rate <= 1000); the bag time shown
     does not jump."""
 
+    examples = (Example({"rate": 2.0}),)
+
     rate: float
 
     def resources(self) -> tuple[Resource, ...]:
@@ -126,3 +136,8 @@ class SetPlaybackRate(Op, Answered[PlaybackResult], op="set_playback_rate", writ
         return cls(rate=check_float(a.raw("rate", True), a.path("rate"), 0.0,
                                     MAX_PLAYBACK_RATE, True))
 
+
+
+def player_ops() -> tuple[type[Op], ...]:
+    """The ops only a player serves: this module's (the live daemon refuses them)."""
+    return tuple(cls for cls in REQUEST_TYPES.values() if cls.__module__ == __name__)

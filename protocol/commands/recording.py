@@ -10,14 +10,15 @@ from __future__ import annotations
 
 import posixpath
 from dataclasses import dataclass, replace
-from typing import Optional
+from typing import Any, Optional
 
 from protocol.commands.errors import OutOfRangeError
 from protocol.commands.fields import MAX_TEXT, ROS_NAME, ROS_NAME_DESC, Args
-from protocol.commands.op import FileUse, NameResolver, Op, Resource, TopicUse
+from protocol.commands.op import Example, FileUse, NameResolver, Op, Resource, TopicUse
+from protocol.commands.results import Result
 
-__all__ = ["BAG_SUFFIX", "COMPRESSIONS", "RecordingStatus", "StartRecording", "StopRecording",
-           "bag_path_problem"]
+__all__ = ["BAG_SUFFIX", "COMPRESSIONS", "RecordingResult", "RecordingStatus", "StartRecording",
+           "StopRecording", "bag_path_problem"]
 
 COMPRESSIONS = ("none", "zstd", "lz4")
 BAG_SUFFIX = ".mcap"
@@ -42,7 +43,27 @@ def _path(a: Args) -> str:
 
 
 @dataclass(frozen=True)
-class StartRecording(Op, op="start_recording", writes=True):
+class RecordingResult(Result):
+    """A recording's counts (every recording op answers them): messages and drops, in all
+    and per topic (``topics``: topic, type, messages, dropped), bytes on disk, elapsed
+    seconds, mesh files attached, whether it runs; ``error`` when it stopped on its own;
+    ``pending``: the topics it waits for (topic, why)."""
+
+    path: str
+    started_ns: int
+    elapsed_s: float
+    messages: int
+    dropped: int
+    bytes: int
+    attachments: int
+    running: bool
+    topics: tuple[dict[str, Any], ...]
+    error: Optional[str] = None
+    pending: tuple[dict[str, Any], ...] = ()
+
+
+@dataclass(frozen=True)
+class StartRecording(Op, op="start_recording", result=RecordingResult, writes=True):
     """Record into ``path`` (absolute, ``.mcap``, on the daemon's machine, inside one of
     its ``--record-dir`` folders; an existing file is refused with ``ALREADY_EXISTS``
     unless ``overwrite``) the ``topics`` given, or without any, what the daemon bridges:
@@ -50,6 +71,10 @@ class StartRecording(Op, op="start_recording", writes=True):
     meshes as attachments), every subscribed topic and every topic clients publish on,
     those bridged later too. It lasts until `StopRecording` (any writer's) or the daemon
     stops."""
+
+    examples = (Example(
+        {"path": "/data/s.mcap", "topics": ["/a", "/b"]},
+        {("file", "path", "/data/s.mcap"), ("topic", "topics", "/a"), ("topic", "topics", "/b")}),)
 
     path: str
     topics: tuple[str, ...] = ()
@@ -74,9 +99,11 @@ class StartRecording(Op, op="start_recording", writes=True):
 
 
 @dataclass(frozen=True)
-class StopRecording(Op, op="stop_recording", writes=True):
+class StopRecording(Op, op="stop_recording", result=RecordingResult, writes=True):
     """Stop the recording into ``path``: the bag is finished (index, summary) and closed;
     the reply is its last `RecordingStatus`."""
+
+    examples = (Example({"path": "/data/s.mcap"}),)
 
     path: str
 
@@ -89,10 +116,12 @@ class StopRecording(Op, op="stop_recording", writes=True):
 
 
 @dataclass(frozen=True)
-class RecordingStatus(Op, op="recording_status", writes=False):
+class RecordingStatus(Op, op="recording_status", result=RecordingResult, writes=False):
     """A recording's counts: messages and drops per topic, bytes on disk, elapsed time,
     topics wanted but not recorded yet (and why), and ``error`` if it stopped on its own
     (a full disk)."""
+
+    examples = (Example({"path": "/data/s.mcap"}),)
 
     path: str
 

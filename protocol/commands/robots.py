@@ -4,19 +4,77 @@ transforms."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any, cast
+from typing import Any, Optional, cast
 
 from protocol.commands.errors import TooLargeError
 from protocol.commands.fields import (MAX_NAME, ROBOT_NAME, ROS_NAME, ROS_NAME_DESC, Args,
                                       check_float, check_str)
-from protocol.commands.op import (Bridge, FileUse, FrameUse, NameResolver, Op, ParameterUse,
-                                  Resource, TopicUse)
-from protocol.commands.results import (Answered, DescribeRobotJointsResult,
+from protocol.commands.op import (Bridge, Example, FileUse, FrameUse, NameResolver, Op,
+                                  ParameterUse, Resource, TopicUse)
+from protocol.commands.results import (Answered, DescribeRobotJointsResult, Result,
                                        SetRobotJointsResult)
 from protocol.commands.values import RobotSource
 
 __all__ = ["JOINT_STATE_TYPE", "MAX_JOINTS", "CreateRobot", "DescribeRobotJoints",
-           "ListRobots", "RemoveRobot", "SetRobotJoints", "joint_values"]
+           "ListRobots", "ListRobotsResult", "RemoveRobot", "RemovedRobot", "CreatedRobot",
+           "RobotSummary", "SetRobotJoints", "joint_values"]
+
+
+@dataclass(frozen=True)
+class CreatedRobot(Result):
+    """A robot as `create_robot` answers: its state (``reason`` while it waits or failed),
+    where its description comes from, its URDF's name and root link (null until loaded),
+    and its devices: a TRANSFORM per link, a POLYDATA per visual, the links withheld (and
+    why), and the load's warnings."""
+
+    name: str
+    state: str
+    source: RobotSource
+    fixed_frame: Optional[str]
+    tf_prefix: str
+    robot: Optional[str]
+    root_link: Optional[str]
+    description_device: str
+    links: tuple[dict[str, Any], ...]
+    visuals: tuple[dict[str, Any], ...]
+    withheld: tuple[dict[str, Any], ...]
+    warnings: tuple[str, ...]
+    reason: Optional[str] = None
+
+
+@dataclass(frozen=True)
+class RobotSummary(Result):
+    """A robot as `list_robots` and `list_bridges` count it: its devices by number;
+    ``unposed``: the links tf cannot place in its fixed frame now, and why."""
+
+    kind: str  # "robot"
+    name: str
+    state: str
+    source: RobotSource
+    fixed_frame: Optional[str]
+    tf_prefix: str
+    links: int
+    withheld: int
+    visuals: int
+    description_device: str
+    loads: int
+    warnings: int
+    namespace: Optional[str] = None
+    reason: Optional[str] = None
+    unposed: Optional[dict[str, Any]] = None
+
+
+@dataclass(frozen=True)
+class ListRobotsResult(Result):
+    robots: tuple[RobotSummary, ...]
+
+
+@dataclass(frozen=True)
+class RemovedRobot(Result):
+    """A removed robot and the devices it had."""
+
+    name: str
+    devices: tuple[str, ...]
 
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 MAX_JOINTS = 1000  # per set_robot_joints: far above any URDF's joint count
@@ -38,7 +96,8 @@ def joint_values(a: Args, name: str) -> tuple[tuple[str, float], ...]:
 
 
 @dataclass(frozen=True)
-class CreateRobot(Op, op="create_robot", ros_names=("source.node", "source.topic"), writes=False,
+class CreateRobot(Op, op="create_robot", result=CreatedRobot,
+                  ros_names=("source.node", "source.topic"), writes=False,
                   content=("frames", "files"),
                   creates=Bridge("robot", ("name",), section="robots")):
     """Load a robot from its URDF: one model per link visual, placed by tf lookups from
@@ -51,6 +110,11 @@ class CreateRobot(Op, op="create_robot", ros_names=("source.node", "source.topic
     set, nothing on its topic) leaves the robot waiting for it; False refuses the request
     with ``NOT_FOUND`` naming what is missing. It is how one asks, not what is made: two
     requests that differ only in it create the same robot."""
+
+    examples = (Example(
+        {"name": "r", "namespace": "PSM1", "fixed_frame": "world"},
+        {("frame", "fixed_frame", "world"),
+         ("parameter", "source.parameter", "PSM1/robot_state_publisher.robot_description")}),)
 
     name: str
     source: RobotSource = RobotSource()
@@ -118,7 +182,9 @@ class CreateRobot(Op, op="create_robot", ros_names=("source.node", "source.topic
 
 
 @dataclass(frozen=True)
-class RemoveRobot(Op, op="remove_robot", writes=False, removes="robot"):
+class RemoveRobot(Op, op="remove_robot", result=RemovedRobot, writes=False, removes="robot"):
+    examples = (Example({"name": "r"}),)
+
     name: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -131,7 +197,9 @@ class RemoveRobot(Op, op="remove_robot", writes=False, removes="robot"):
 
 
 @dataclass(frozen=True)
-class ListRobots(Op, op="list_robots", writes=False):
+class ListRobots(Op, op="list_robots", result=ListRobotsResult, writes=False):
+
+    examples = (Example({}),)
 
     def resources(self) -> tuple[Resource, ...]:
         return ()
@@ -147,6 +215,8 @@ class DescribeRobotJoints(Op, Answered[DescribeRobotJointsResult],
     """The joints of a loaded robot, from its URDF: type, limits, mimic (leader, multiplier,
     offset), whether a client sets it (``actuated``: moving and not a mimic), and the
     joint-states topic its state publisher listens to by default."""
+
+    examples = (Example({"name": "r"}),)
 
     name: str
 
@@ -170,6 +240,10 @@ class SetRobotJoints(Op, Answered[SetRobotJointsResult], op="set_robot_joints",
     (``multiplier * leader + offset``), and must fall in their own limits too. Only the
     joints given (and their mimics) are in the message: a state publisher keeps the
     others where they were, as robot_state_publisher does."""
+
+    examples = (Example(
+        {"name": "r", "positions": {"j": 0.5}, "topic": "/PSM1/joint_states"},
+        {("topic", "topic", "/PSM1/joint_states")}),)
 
     name: str
     positions: tuple[tuple[str, float], ...]

@@ -8,12 +8,31 @@ from typing import Any, cast
 
 from protocol.commands.errors import WrongTypeError
 from protocol.commands.fields import MISSING, Args
-from protocol.commands.op import Bridge, Op, Resource, ServiceUse
-from protocol.commands.results import Answered, CallServiceResult
+from protocol.commands.op import Bridge, Example, Op, Resource, ServiceUse
+from protocol.commands.results import Answered, CallServiceResult, Result
 from protocol.commands.types import resolve_service_type
 from protocol.commands.wire import json_type
 
-__all__ = ["AdvertiseService", "CallService", "ServiceRequest", "UnadvertiseService"]
+__all__ = ["AdvertiseService", "CallService", "ServedServiceBridge", "ServiceRequest",
+           "UnadvertiseService", "UnadvertisedService"]
+
+
+@dataclass(frozen=True)
+class ServedServiceBridge(Result):
+    """A service a client serves, as `advertise_service` and `list_bridges` describe it:
+    the device its calls come on and how many it answered."""
+
+    kind: str  # "served_service"
+    service: str
+    type: str
+    device: str
+    calls: int
+
+
+@dataclass(frozen=True)
+class UnadvertisedService(Result):
+    service: str
+    device: str
 
 
 def _srv_type(a: Args) -> str:
@@ -28,6 +47,10 @@ class CallService(Op, Answered[CallServiceResult], op="call_service", ros_names=
                   writes=True):
     """Call a ROS service. Keep ``timeout`` below the client's own command timeout
     (3D Slicer's default is 5 s) so the daemon's TIMEOUT reply arrives first."""
+
+    examples = (Example(
+        {"service": "/s", "type": "std_srvs/srv/Trigger"},
+        {("service", "service", "/s")}),)
 
     service: str
     type: str
@@ -56,9 +79,14 @@ class CallService(Op, Answered[CallServiceResult], op="call_service", ros_names=
 
 @dataclass(frozen=True)
 class AdvertiseService(Op, op="advertise_service", ros_names=("service",), writes=True,
+                       result=ServedServiceBridge,
                        creates=Bridge("served_service", ("service",), per_connection=True)):
     """Offer a ROS service served by this client: each call reaches the client as a
     `ServiceRequest` COMMAND, answered with an RTS_COMMAND reply ``{"response": {...}}``."""
+
+    examples = (Example(
+        {"service": "/s", "type": "std_srvs/srv/Trigger"},
+        {("service", "service", "/s")}),)
 
     service: str
     type: str
@@ -77,7 +105,10 @@ class AdvertiseService(Op, op="advertise_service", ros_names=("service",), write
 
 @dataclass(frozen=True)
 class UnadvertiseService(Op, op="unadvertise_service", ros_names=("service",),
+                         result=UnadvertisedService,
                          writes=False, removes="served_service"):
+    examples = (Example({"service": "/s"}),)
+
     service: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -93,6 +124,8 @@ class ServiceRequest(Op, op="service_request",
                      ros_names=("service",), writes=False, to_client=True):
     """Sent by the daemon to the client that advertised ``service``: one ROS call to serve
     within ``timeout`` seconds."""
+
+    examples = (Example({"service": "/s", "type": "std_srvs/srv/Trigger", "request": {}}),)
 
     service: str
     type: str

@@ -3,15 +3,65 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import cast
+from typing import Optional, cast
 
 from protocol.commands.fields import Args
-from protocol.commands.op import Bridge, FrameUse, Op, Resource
-from protocol.commands.results import Answered, LookupTransformResult
+from protocol.commands.op import Bridge, Example, FrameUse, Op, Resource
+from protocol.commands.results import Answered, LookupTransformResult, Result
 from protocol.commands.values import Matrix4, Stamp, matrix_from
 
-__all__ = ["BroadcastTransform", "CreateTfBroadcaster", "CreateTfLookup", "LookupTransform",
-           "RemoveTfBroadcaster", "RemoveTfLookup"]
+__all__ = ["BroadcastTransform", "BroadcastTransformResult", "CreateTfBroadcaster",
+           "CreateTfLookup", "LookupTransform", "RemoveTfBroadcaster", "RemoveTfLookup",
+           "TfBridgeRemoved", "TfBroadcasterBridge", "TfLookupBridge"]
+
+
+@dataclass(frozen=True)
+class TfLookupBridge(Result):
+    """A streamed lookup, as `create_tf_lookup` and `list_bridges` describe it: its device,
+    ``state`` (pending, streaming or error: then ``error`` says why), the TRANSFORMs sent,
+    and its rate cap."""
+
+    kind: str  # "tf_lookup"
+    parent: str
+    child: str
+    device: str
+    igtl_type: str
+    state: str
+    messages: int
+    error: Optional[str] = None
+    rate_hz: Optional[float] = None
+
+
+@dataclass(frozen=True)
+class TfBroadcasterBridge(Result):
+    """A broadcaster, as `create_tf_broadcaster` and `list_bridges` describe it."""
+
+    kind: str  # "tf_broadcaster"
+    parent: str
+    child: str
+    device: str
+    igtl_type: str
+    static: bool
+    topic: str
+    messages: int
+
+
+@dataclass(frozen=True)
+class TfBridgeRemoved(Result):
+    """A removed lookup or broadcaster: its frames and the device it had."""
+
+    parent: str
+    child: str
+    device: str
+
+
+@dataclass(frozen=True)
+class BroadcastTransformResult(Result):
+    """Where a one-off transform went, its stamp and how many subscribers got it."""
+
+    topic: str
+    stamp: Stamp
+    subscribers: int
 
 
 def _stamp(a: Args, name: str) -> Stamp | None:
@@ -21,8 +71,13 @@ def _stamp(a: Args, name: str) -> Stamp | None:
 
 @dataclass(frozen=True)
 class CreateTfLookup(Op, op="create_tf_lookup", client_frames=("parent", "child"), writes=False,
+                     result=TfLookupBridge,
                      creates=Bridge("tf_lookup", ("parent", "child"), section="tf_lookups")):
     """Stream parent->child as a TRANSFORM (mm) whenever it changes, at most ``rate_hz``."""
+
+    examples = (Example(
+        {"parent": "a", "child": "b"},
+        {("frame", "child", "b"), ("frame", "parent", "a")}),)
 
     parent: str
     child: str
@@ -37,8 +92,10 @@ class CreateTfLookup(Op, op="create_tf_lookup", client_frames=("parent", "child"
 
 
 @dataclass(frozen=True)
-class RemoveTfLookup(Op, op="remove_tf_lookup",
+class RemoveTfLookup(Op, op="remove_tf_lookup", result=TfBridgeRemoved,
                      client_frames=("parent", "child"), writes=False, removes="tf_lookup"):
+    examples = (Example({"parent": "a", "child": "b"}),)
+
     parent: str
     child: str
 
@@ -55,6 +112,10 @@ class LookupTransform(Op, Answered[LookupTransformResult], op="lookup_transform"
                       client_frames=("parent", "child"), writes=False):
     """One tf lookup; ``time`` omitted = latest; waits up to ``timeout`` seconds."""
 
+    examples = (Example(
+        {"parent": "a", "child": "b"},
+        {("frame", "child", "b"), ("frame", "parent", "a")}),)
+
     parent: str
     child: str
     time: Stamp | None = None
@@ -70,11 +131,15 @@ class LookupTransform(Op, Answered[LookupTransformResult], op="lookup_transform"
 
 
 @dataclass(frozen=True)
-class CreateTfBroadcaster(Op, op="create_tf_broadcaster",
+class CreateTfBroadcaster(Op, op="create_tf_broadcaster", result=TfBroadcasterBridge,
                           client_frames=("parent", "child"), writes=True,
                           creates=Bridge("tf_broadcaster", ("parent", "child"),
                                          section="tf_broadcasters")):
     """Broadcast parent->child; ``static`` uses /tf_static (latched)."""
+
+    examples = (Example(
+        {"parent": "a", "child": "b"},
+        {("frame", "child", "b"), ("frame", "parent", "a")}),)
 
     parent: str
     child: str
@@ -90,9 +155,11 @@ class CreateTfBroadcaster(Op, op="create_tf_broadcaster",
 
 
 @dataclass(frozen=True)
-class RemoveTfBroadcaster(Op, op="remove_tf_broadcaster",
+class RemoveTfBroadcaster(Op, op="remove_tf_broadcaster", result=TfBridgeRemoved,
                           client_frames=("parent", "child"), writes=False,
                           removes="tf_broadcaster"):
+    examples = (Example({"parent": "a", "child": "b"}),)
+
     parent: str
     child: str
 
@@ -105,10 +172,15 @@ class RemoveTfBroadcaster(Op, op="remove_tf_broadcaster",
 
 
 @dataclass(frozen=True)
-class BroadcastTransform(Op, op="broadcast_transform",
+class BroadcastTransform(Op, op="broadcast_transform", result=BroadcastTransformResult,
                          client_frames=("parent", "child"), writes=True):
     """Broadcast one parent->child transform given as a rigid 4x4 matrix in mm (rows);
     ``stamp`` omitted = the daemon's current time."""
+
+    examples = (Example(
+        {"parent": "a", "child": "b",
+         "matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]},
+        {("frame", "child", "b"), ("frame", "parent", "a")}),)
 
     parent: str
     child: str

@@ -2,19 +2,52 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, Optional
 
 from protocol.commands.errors import OutOfRangeError, WrongTypeError
 from protocol.commands.fields import MISSING, ROS_NAME, ROS_NAME_DESC, Args
-from protocol.commands.op import Bridge, FrameUse, Op, Resource, TopicUse
-from protocol.commands.results import Answered, GetLastMessageResult, PublishResult
+from protocol.commands.op import Bridge, Example, FrameUse, Op, Resource, TopicUse
+from protocol.commands.results import Answered, GetLastMessageResult, PublishResult, Result
 from protocol.commands.types import check_message_type, resolve_message_type
 from protocol.commands.values import QoS
 from protocol.commands.wire import json_type
 
 __all__ = ["LABELS_TYPE", "CreatePublisher", "CreateSubscriber", "GetLastMessage", "Publish",
-           "RemovePublisher", "RemoveSubscriber"]
+           "RemovePublisher", "RemoveSubscriber", "TopicBridge", "TopicBridgeRemoved"]
+
+
+@dataclass(frozen=True)
+class TopicBridge(Result):
+    """A subscriber or publisher bridge, as its create op and `list_bridges` describe it:
+    its resolved type, device, OpenIGTLink type, QoS, messages so far and rate cap;
+    ``extra``: what its kind adds (a publisher's subscriber count, frame, labels topic),
+    sent beside the others; ``message_device``: where this client gets whole messages."""
+
+    kind: str  # "subscriber" | "publisher"
+    topic: str
+    type: str
+    device: str
+    igtl_type: str
+    qos: Optional[dict[str, Any]] = None
+    messages: int = 0
+    rate_hz: Optional[float] = None
+    extra: dict[str, Any] = field(default_factory=dict)
+    message_device: Optional[str] = None
+
+    def to_dict(self) -> dict[str, Any]:
+        out = super().to_dict()
+        device = out.pop("message_device", None)
+        out.update(out.pop("extra"))
+        if device is not None:
+            out["message_device"] = device
+        return out
+
+
+@dataclass(frozen=True)
+class TopicBridgeRemoved(Result):
+    topic: str
+    device: str
 
 
 # The type of a publisher's labels topic (markups labels as a JSON list).
@@ -33,7 +66,8 @@ def _msg_type(a: Args) -> str:
 
 
 @dataclass(frozen=True)
-class CreateSubscriber(Op, op="create_subscriber", ros_names=("topic",), writes=False,
+class CreateSubscriber(Op, op="create_subscriber", result=TopicBridge, ros_names=("topic",),
+                       writes=False,
                        content=("messages",),
                        creates=Bridge("subscriber", ("topic",), section="subscribers")):
     """Subscribe to a ROS topic; messages then flow to clients as OpenIGTLink messages.
@@ -44,6 +78,8 @@ class CreateSubscriber(Op, op="create_subscriber", ros_names=("topic",), writes=
     generic JSON in ROS units, on the device the reply names ``message_device`` (lossless,
     for message objects; each carries the subscription's count; images and point clouds
     have none: their IMAGE / POLYDATA stream is already whole)."""
+
+    examples = (Example({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),)
 
     topic: str
     type: str
@@ -65,8 +101,10 @@ class CreateSubscriber(Op, op="create_subscriber", ros_names=("topic",), writes=
 
 
 @dataclass(frozen=True)
-class RemoveSubscriber(Op, op="remove_subscriber", ros_names=("topic",),
+class RemoveSubscriber(Op, op="remove_subscriber", result=TopicBridgeRemoved, ros_names=("topic",),
                        writes=False, removes="subscriber"):
+    examples = (Example({"topic": "/a"}),)
+
     topic: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -78,7 +116,8 @@ class RemoveSubscriber(Op, op="remove_subscriber", ros_names=("topic",),
 
 
 @dataclass(frozen=True)
-class CreatePublisher(Op, op="create_publisher", ros_names=("topic", "labels_topic"), writes=True,
+class CreatePublisher(Op, op="create_publisher", result=TopicBridge,
+                      ros_names=("topic", "labels_topic"), writes=True,
                       content=("messages",),
                       creates=Bridge("publisher", ("topic",), section="publishers")):
     """Create a ROS publisher; clients feed it with `Publish` or by sending OpenIGTLink
@@ -89,6 +128,8 @@ class CreatePublisher(Op, op="create_publisher", ros_names=("topic", "labels_top
     alike when it is published. ``labels_topic``: where the labels of markups sent as POINT
     go (a ``std_msgs/String`` holding a JSON list, one label per point, published just
     before the points), since PoseArray and PointStamped carry none."""
+
+    examples = (Example({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),)
 
     topic: str
     type: str
@@ -120,8 +161,10 @@ class CreatePublisher(Op, op="create_publisher", ros_names=("topic", "labels_top
 
 
 @dataclass(frozen=True)
-class RemovePublisher(Op, op="remove_publisher", ros_names=("topic",),
+class RemovePublisher(Op, op="remove_publisher", result=TopicBridgeRemoved, ros_names=("topic",),
                       writes=False, removes="publisher"):
+    examples = (Example({"topic": "/a"}),)
+
     topic: str
 
     def resources(self) -> tuple[Resource, ...]:
@@ -139,6 +182,8 @@ class Publish(Op, Answered[PublishResult], op="publish", ros_names=("topic",), w
     4x4 mm matrix for Pose/PoseStamped/Transform...); or ``message``: the whole message as
     generic JSON in ROS units (metres, quaternions), every field checked strictly, as a
     subscriber's message stream gives it. Reply: subscriber count."""
+
+    examples = (Example({"topic": "/a", "value": "x"}, {("topic", "topic", "/a")}),)
 
     topic: str
     value: Any = None
@@ -172,6 +217,8 @@ class GetLastMessage(Op, Answered[GetLastMessageResult], op="get_last_message",
                      ros_names=("topic",),
                      writes=False):
     """The last message a subscriber received, as YAML or JSON text, and the count."""
+
+    examples = (Example({"topic": "/a"}, {("topic", "topic", "/a")}),)
 
     topic: str
     format: str = "yaml"  # yaml | json

@@ -15,7 +15,7 @@ from protocol.commands.wire import json_type
 from protocol.conversions import ConversionError, validate_matrix
 
 __all__ = ["PARAMETER_TYPES", "Matrix4", "ParameterValue", "QoS", "RobotSource", "Stamp",
-           "matrix_from"]
+           "matrix_from", "matrix_rows"]
 
 _U32 = (1 << 32) - 1
 _I64_MIN, _I64_MAX = -(1 << 63), (1 << 63) - 1
@@ -64,6 +64,12 @@ class Stamp:
 
     def to_dict(self) -> dict[str, Any]:
         return {"sec": self.sec, "nanosec": self.nanosec}
+
+    @classmethod
+    def from_ns(cls, ns: int) -> Stamp:
+        """Nanoseconds since 1970 as a stamp."""
+        sec, nanosec = divmod(ns, 1_000_000_000)
+        return cls(sec, nanosec)
 
     @classmethod
     def from_args(cls, a: Args) -> Stamp:
@@ -226,6 +232,11 @@ class RobotSource:
 
 
 Matrix4 = tuple[tuple[float, float, float, float], ...]
+
+
+def matrix_rows(rows: Any) -> Matrix4:
+    """A 4x4 array (numpy's, or lists) as a result's matrix: rows of 4 floats."""
+    return tuple((float(row[0]), float(row[1]), float(row[2]), float(row[3])) for row in rows)
 
 
 def matrix_from(value: Any, path: str, *, rigid: bool = True) -> Matrix4:

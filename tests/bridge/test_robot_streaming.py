@@ -102,8 +102,8 @@ def test_links_stream_before_any_mesh_and_each_mesh_goes_out_once(tmp_path: Path
         served, recorder = serving(tmp_path)
         result: Any = (await served.create_robot(create(), None, Guard())).reply  # type: ignore[arg-type]
         kinds = [kind for kind, _ in recorder.events]
-        links = [item["device"] for item in result["links"]]
-        visuals = [item["device"] for item in result["visuals"]]
+        links = [item["device"] for item in result.links]
+        visuals = [item["device"] for item in result.visuals]
         assert len(links) == 11 and len(visuals) == 14
         assert kinds.index("mesh") > max(i for i, k in enumerate(kinds) if k == "lookup")
         assert sorted(d for k, d in recorder.events if k == "lookup") == sorted(links)

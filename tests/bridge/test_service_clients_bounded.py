@@ -83,7 +83,7 @@ def test_service_clients_are_cached_bounded_and_dropped_when_idle(processes: Pro
             assert list(services.called) == [("/sb/slow", "std_srvs/srv/Trigger"),
                                              ("/sb/trigger", "std_srvs/srv/Trigger")]
             response = await slow
-            assert response["response"]["success"] is True
+            assert response.response["success"] is True
             # Unused for longer than idle_client_s: every client is destroyed.
             await _until(lambda: not services.called and not list(ros.node.clients),
                          "idle clients dropped", timeout=30)
@@ -106,7 +106,7 @@ def test_with_every_client_busy_a_new_service_is_refused(processes: Processes) -
             await _until(lambda: len(services.called) == 1, "the slow call's client")
             with pytest.raises(c.LimitReachedError, match="at most 1 services called at once"):
                 await _called(services, _call("/sb2/trigger", "std_srvs/srv/Trigger", {}))
-            assert (await slow)["response"]["success"] is True
+            assert (await slow).response["success"] is True
             assert len(list(ros.node.clients)) == 1
 
     asyncio.run(scenario())

@@ -13,7 +13,7 @@ import json
 import math
 import threading
 import time
-from typing import Any, Iterator, Mapping
+from typing import Any, Iterator
 
 import numpy as np
 import pytest
@@ -456,7 +456,7 @@ def test_frame_prefix_maps_relative_frames_and_leaves_absolute_ones() -> None:
     from bridge.core.hub import Hub
     from bridge.ros.ros_node import RosNode, RosOptions
     from bridge.tf.capability import TfBridges
-    from protocol.commands import CreateTfLookup
+    from protocol.commands import CreateTfLookup, TfLookupBridge
     from protocol.naming import DeviceNameRegistry
 
     loop = asyncio.new_event_loop()
@@ -466,12 +466,12 @@ def test_frame_prefix_maps_relative_frames_and_leaves_absolute_ones() -> None:
         assert tf.resolve_frame("base") == "robot1/base"
         assert tf.resolve_frame("/world") == "world"
 
-        async def create() -> Mapping[str, Any]:  # mapped as the dispatcher maps it
+        async def create() -> TfLookupBridge:  # mapped as the dispatcher maps it
             request = CreateTfLookup(parent="/world", child="tool")
             return tf.create_lookup(request.with_frames(tf.resolve_client_frame)).reply
 
         created = loop.run_until_complete(create())
-        assert (created["parent"], created["child"]) == ("world", "robot1/tool")
+        assert (created.parent, created.child) == ("world", "robot1/tool")
         tf.close()
     finally:
         ros.stop()

@@ -21,7 +21,7 @@ interface_types = pytest.importorskip("bridge.types.capability",
 
 
 def _describe(name: str, kind: str) -> TypeDescription:
-    return TypeDescription.from_dict(interface_types.describe_type(name, kind))
+    return TypeDescription.from_dict(interface_types.describe_type(name, kind).to_dict())
 
 
 @pytest.fixture(params=["vtk", "plain"])

@@ -129,7 +129,7 @@ def test_a_bridge_spec_keeps_only_the_fields_chosen() -> None:
 def test_replies_parse_into_the_declared_results() -> None:
     publish = request_with(Recorder({"topic": "/a", "subscribers": 2}),
                            c.Publish(topic="/a", value="x"))
-    assert publish == c.PublishResult(subscribers=2)
+    assert publish == c.PublishResult(topic="/a", subscribers=2)
     observed = request_with(Recorder({"ready": True, "values": {
         "a": {"type": "double", "value": 1.5}}, "device": "d"}),
         c.ObserveParameters(node="/rsp", names=("a",)))
@@ -137,11 +137,13 @@ def test_replies_parse_into_the_declared_results() -> None:
     outcome = request_with(Recorder({"results": {"a": {"ok": False, "reason": "no"}}}),
                            c.SetParameters(node="/n", values={"a": c.ParameterValue.infer(1)}))
     assert outcome.results == {"a": c.ParameterOutcome(ok=False, reason="no")}
+    assert observed.device == "d" and outcome.node == ""  # a field left out: its default
     hello = c.Hello().parse_result({"node": "/b", "auth": {"writes": False,
                                                              "challenge": "ab"},
                                     "clock_ms": 7, "heartbeat": 1.0})
-    assert hello == c.HelloResult(node="/b", writes=False, challenge="ab", heartbeat=1.0,
-                                  clock_ms=7)
+    assert hello == c.HelloResult(node="/b", auth=c.HelloAuth(writes=False, challenge="ab"),
+                                  heartbeat=1.0, clock_ms=7)
+    assert (hello.writes, hello.challenge) == (False, "ab")
 
 
 @pytest.mark.parametrize("request_, result, field", [

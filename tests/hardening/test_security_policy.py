@@ -59,47 +59,16 @@ def test_deny_wins_and_any_allow_glob_makes_an_allow_list() -> None:
 
 def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
     policy = SecurityPolicy(read_only=True)
-    writes = {
-        "create_publisher": {"topic": "/t", "type": "String"},
-        "publish": {"topic": "/t", "value": "x"},
-        "create_tf_broadcaster": {"parent": "a", "child": "b"},
-        "broadcast_transform": {"parent": "a", "child": "b",
-                                "matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0],
-                                           [0, 0, 0, 1]]},
-        "set_parameters": {"node": "/n", "values": {"p": {"type": "integer", "value": 1}}},
-        "server_declare_parameter": {"name": "p", "value": {"type": "integer", "value": 1}},
-        "server_set_parameter": {"name": "p", "value": {"type": "integer", "value": 1}},
-        "server_undeclare_parameter": {"name": "p"},
-        "call_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
-        "advertise_service": {"service": "/s", "type": "std_srvs/srv/Trigger"},
-        "set_robot_joints": {"name": "r", "positions": {"j": 0.1}},
-        "publish_distance": {"name": "r", "link": "tool", "obstacle": "o", "topic": "/d"},
-        "execute_motion": {"name": "r", "positions": {"j": 0.1}},
-        "send_goal": {"action": "/a", "type": "control_msgs/action/GripperCommand"},
-        "cancel_goal": {"action": "/a", "goal_id": "0" * 32},
-        "advertise_action": {"action": "/a", "type": "control_msgs/action/GripperCommand"},
-        "action_feedback": {"action": "/a", "goal_id": "0" * 32, "feedback": {}},
-        "start_recording": {"path": "/data/s.mcap"},  # a file on the daemon's host
-        "stop_recording": {"path": "/data/s.mcap"},
-        # A player's clock (slicer-ros2-bridge play): every client of it sees the change.
-        "pause_playback": {}, "resume_playback": {}, "seek_playback": {"offset": 1.0},
-        "set_playback_rate": {"rate": 2.0},
-    }
-    # The declarations say what writes: this list is the expectation they are held to.
-    assert set(writes) == {op for op, cls in c.REQUEST_TYPES.items() if cls.writes}
-    for op, args in writes.items():
-        with pytest.raises(ForbiddenError) as refused:
+    # Every op's own example (`Op.examples`): what it declares is what read-only judges.
+    for op, cls in c.REQUEST_TYPES.items():
+        args = dict(cls.examples[0].args)
+        if cls.writes:
+            with pytest.raises(ForbiddenError) as refused:
+                check(policy, op, args)
+            assert refused.value.error_code == ErrorCode.FORBIDDEN, op
+            assert refused.value.field == "op" and "read-only" in str(refused.value), op
+        elif cls.removes is None and not cls.to_client:  # removals: by who made the bridge
             check(policy, op, args)
-        assert refused.value.error_code == ErrorCode.FORBIDDEN
-        assert refused.value.field == "op" and "read-only" in str(refused.value)
-    for op, args in {"create_subscriber": {"topic": "/t", "type": "String"},
-                     "create_tf_lookup": {"parent": "a", "child": "b"},
-                     "get_parameters": {"node": "/n", "names": ["p"]},
-                     "list_actions": {},
-                     "recording_status": {"path": "/data/s.mcap"},
-                     "playback_status": {},
-                     "hello": {}}.items():
-        check(policy, op, args)
     # Watching an action: its goal status topic.
     check(policy, "create_subscriber", {"topic": "/a/_action/status",
                                         "type": "action_msgs/msg/GoalStatusArray"})
@@ -317,17 +286,15 @@ def test_config_errors_name_the_key(tmp_path: Path, section: str, message: str) 
 
 # ---------------------------------------------------------------------------- tf frames
 
-IDENTITY = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
-FRAME_OPS = {
-    "create_tf_lookup": {}, "lookup_transform": {},
-    "create_tf_broadcaster": {}, "broadcast_transform": {"matrix": IDENTITY},
-}
+# Every op naming a client's frames (`Op.client_frames`) but removals, with its example's
+# other arguments.
+FRAME_OPS = {op: {k: v for k, v in cls.examples[0].args.items() if k not in ("parent", "child")}
+             for op, cls in c.REQUEST_TYPES.items()
+             if cls.client_frames == ("parent", "child") and cls.removes is None}
 
 
 def test_every_tf_op_judges_both_frames_deny_wins_and_allow_lists() -> None:
-    assert set(FRAME_OPS) == {op for op, cls in c.REQUEST_TYPES.items()
-                              if "parent" in getattr(cls, "__dataclass_fields__", {})
-                              and cls.removes is None}
+    assert {"lookup_transform", "broadcast_transform"} <= set(FRAME_OPS)
     policy = SecurityPolicy(frames=NameRules(allow=("PSM1/*", "world"),
                                              deny=("PSM1/secret*",)))
     for op, extra in FRAME_OPS.items():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Any, Iterator
 from unittest.mock import patch
 
@@ -32,209 +33,49 @@ from protocol.commands import (
 )
 from protocol.commands.fields import ROS_NAME, Args
 from protocol.errors import ProtocolError
+from tests.protocol.op_strategies import NoStrategyError, json_values, strategy_for
 
 # ---------------------------------------------------------------- strategies
 
-_ident = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,12}", fullmatch=True)
-ros_names = st.builds(
-    lambda lead, parts: lead + "/".join(parts), st.sampled_from(["", "/"]),
-    st.lists(_ident, min_size=1, max_size=4))
-frames = st.text(min_size=1, max_size=30).filter(
-    lambda s: "\x00" not in s and s.strip() == s and s != "")
-param_names = st.from_regex(r"[A-Za-z_][A-Za-z0-9_.]{0,20}", fullmatch=True)
-msg_types = st.sampled_from(
-    ["String", "PoseStamped", "Int", "IntTable", "geometry_msgs/msg/Pose", "std_msgs/Bool",
-     "vtkMRMLROS2SubscriberStringNode", "vtkMRMLROS2PublisherPoseStampedNode",
-     "sensor_msgs/msg/PointCloud2"])
-srv_types = st.sampled_from(["std_srvs/srv/SetBool", "turtlesim/Spawn", "std_srvs/srv/Trigger"])
-finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
-json_scalars = st.none() | st.booleans() | st.integers(-(2**53), 2**53) | finite | st.text(
-    max_size=20)
-json_values = st.recursive(
-    json_scalars,
-    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner,
-                                                                max_size=4),
-    max_leaves=12)
-json_objects = st.dictionaries(st.text(max_size=8), json_values, max_size=4)
-qos = st.builds(c.QoS, depth=st.integers(1, 10_000),
-                reliability=st.sampled_from(["reliable", "best_effort"]),
-                durability=st.sampled_from(["volatile", "transient_local"]))
-rates = st.none() | st.floats(0.001, 10_000.0)
-stamps = st.builds(c.Stamp, sec=st.integers(0, 2**32 - 1), nanosec=st.integers(0, 999_999_999))
-
-_i64 = st.integers(-(2**63), 2**63 - 1)
-param_values = st.one_of(
-    st.just(ParameterValue("not_set")),
-    st.builds(ParameterValue, st.just("bool"), st.booleans()),
-    st.builds(ParameterValue, st.just("integer"), _i64),
-    st.builds(ParameterValue, st.just("double"), finite),
-    st.builds(ParameterValue, st.just("string"), st.text(max_size=20)),
-    st.builds(ParameterValue, st.just("byte_array"), st.lists(st.integers(0, 255), max_size=5)),
-    st.builds(ParameterValue, st.just("bool_array"), st.lists(st.booleans(), max_size=5)),
-    st.builds(ParameterValue, st.just("integer_array"), st.lists(_i64, max_size=5)),
-    st.builds(ParameterValue, st.just("double_array"), st.lists(finite, max_size=5)),
-    st.builds(ParameterValue, st.just("string_array"), st.lists(st.text(max_size=5), max_size=5)),
-)
+def _strategies() -> tuple[dict[type, st.SearchStrategy[Any]], dict[str, str]]:
+    """Every op's strategy, derived from its class (tests/protocol/op_strategies.py), and
+    the ops whose strategy cannot be built, with why."""
+    built: dict[type, st.SearchStrategy[Any]] = {}
+    failed: dict[str, str] = {}
+    for cls in REQUEST_TYPES.values():
+        try:
+            built[cls] = strategy_for(cls)
+        except NoStrategyError as error:
+            failed[cls.op] = str(error)
+    return built, failed
 
 
-def _rigid(angle: float, tx: float) -> tuple[tuple[float, ...], ...]:
-    import math
-
-    cs, sn = math.cos(angle), math.sin(angle)
-    return ((cs, -sn, 0.0, tx), (sn, cs, 0.0, -tx), (0.0, 0.0, 1.0, 2.0 * tx),
-            (0.0, 0.0, 0.0, 1.0))
-
-
-matrices = st.builds(_rigid, st.floats(-3.14, 3.14), st.floats(-1e4, 1e4))
-robot_sources = st.one_of(
-    st.builds(c.RobotSource, st.just("parameter"), node=ros_names, parameter=param_names),
-    st.builds(c.RobotSource, st.just("topic"), topic=ros_names),
-    st.builds(c.RobotSource, st.just("file"), path=st.text(min_size=1, max_size=40)),
-)
-robot_names = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,15}", fullmatch=True)
-names_tuples = st.lists(param_names, max_size=5).map(tuple)
-
-action_types = st.sampled_from(["control_msgs/action/FollowJointTrajectory",
-                                "control_msgs/GripperCommand"])
-goal_ids = st.uuids().map(lambda u: u.hex)
-bag_paths = st.from_regex(r"[A-Za-z0-9_ .-]{1,30}", fullmatch=True).map(
-    lambda name: f"/data/{name}.mcap")
-
-STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
-    c.Hello: st.builds(c.Hello, client=st.none() | st.text(min_size=1, max_size=30),
-                       heartbeat=st.none() | st.floats(0.1, 60.0), stamps=st.booleans()),
-    c.Authenticate: st.builds(c.Authenticate, nonce=st.from_regex(r"[0-9a-f]{32,64}",
-                                                                  fullmatch=True),
-                              proof=st.from_regex(r"[0-9a-f]{64}", fullmatch=True)),
-    c.ListBridges: st.just(c.ListBridges()),
-    c.ListTopics: st.just(c.ListTopics()),
-    c.ListServices: st.just(c.ListServices()),
-    c.CreateSubscriber: st.builds(c.CreateSubscriber, topic=ros_names, type=msg_types, qos=qos,
-                                  rate_hz=rates, messages=st.booleans()),
-    c.RemoveSubscriber: st.builds(c.RemoveSubscriber, topic=ros_names),
-    c.CreatePublisher: st.builds(c.CreatePublisher, topic=ros_names, type=msg_types, qos=qos,
-                                 frame=st.none() | frames,
-                                 labels_topic=st.none() | ros_names),
-    c.RemovePublisher: st.builds(c.RemovePublisher, topic=ros_names),
-    c.Publish: st.builds(c.Publish, topic=ros_names, value=json_values) | st.builds(
-        c.Publish, topic=ros_names, message=json_objects),
-    c.GetLastMessage: st.builds(c.GetLastMessage, topic=ros_names,
-                                format=st.sampled_from(["yaml", "json"])),
-    c.CreateParameterClient: st.builds(c.CreateParameterClient, node=ros_names),
-    c.RemoveParameterClient: st.builds(c.RemoveParameterClient, node=ros_names),
-    c.ListParameters: st.builds(c.ListParameters, node=ros_names),
-    c.GetParameters: st.builds(c.GetParameters, node=ros_names, names=names_tuples),
-    c.SetParameters: st.builds(c.SetParameters, node=ros_names,
-                               values=st.dictionaries(param_names, param_values, min_size=1,
-                                                      max_size=4)),
-    c.ObserveParameters: st.builds(c.ObserveParameters, node=ros_names, names=names_tuples,
-                                   all_changes=st.booleans()),
-    c.ServerDeclareParameter: st.builds(c.ServerDeclareParameter, name=param_names,
-                                        value=param_values, read_only=st.booleans(),
-                                        description=st.text(max_size=30)),
-    c.ServerSetParameter: st.builds(c.ServerSetParameter, name=param_names, value=param_values),
-    c.ServerGetParameters: st.builds(c.ServerGetParameters, names=names_tuples),
-    c.ServerUndeclareParameter: st.builds(c.ServerUndeclareParameter, name=param_names),
-    c.CreateTfLookup: st.builds(c.CreateTfLookup, parent=frames, child=frames, rate_hz=rates),
-    c.RemoveTfLookup: st.builds(c.RemoveTfLookup, parent=frames, child=frames),
-    c.LookupTransform: st.builds(c.LookupTransform, parent=frames, child=frames,
-                                 time=st.none() | stamps, timeout=st.floats(0.0, 60.0)),
-    c.CreateTfBroadcaster: st.builds(c.CreateTfBroadcaster, parent=frames, child=frames,
-                                     static=st.booleans()),
-    c.RemoveTfBroadcaster: st.builds(c.RemoveTfBroadcaster, parent=frames, child=frames),
-    c.BroadcastTransform: st.builds(c.BroadcastTransform, parent=frames, child=frames,
-                                    matrix=matrices, stamp=st.none() | stamps),
-    c.CreateRobot: st.builds(c.CreateRobot, name=robot_names, source=robot_sources,
-                             fixed_frame=st.none() | frames,
-                             tf_prefix=st.sampled_from(["", "PSM1/"]),
-                             namespace=st.sampled_from(["", "/PSM1", "arm"])),
-    c.RemoveRobot: st.builds(c.RemoveRobot, name=robot_names),
-    c.ListRobots: st.just(c.ListRobots()),
-    c.DescribeRobotJoints: st.builds(c.DescribeRobotJoints, name=robot_names),
-    c.PlaybackStatus: st.just(c.PlaybackStatus()),
-    c.PausePlayback: st.just(c.PausePlayback()),
-    c.ResumePlayback: st.just(c.ResumePlayback()),
-    c.SeekPlayback: st.builds(c.SeekPlayback, offset=st.floats(0.0, c.MAX_SEEK_S)),
-    c.SetPlaybackRate: st.builds(c.SetPlaybackRate,
-                                 rate=st.floats(0.0, c.MAX_PLAYBACK_RATE, exclude_min=True)),
-    c.SolveIk: st.builds(
-        c.SolveIk, name=robot_names, tip=st.text(min_size=1, max_size=20), target=matrices,
-        seed=st.none() | st.dictionaries(st.text(min_size=1, max_size=20), finite,
-                                         max_size=5).map(lambda d: tuple(d.items())),
-        collisions=st.booleans()),
-    c.SetObstacle: st.one_of(
-        st.builds(c.SetObstacle, name=robot_names, obstacle=robot_names, topic=ros_names),
-        st.builds(c.SetObstacle, name=robot_names, obstacle=robot_names, topic=ros_names,
-                  type=st.just("Mesh"), frame=st.none() | frames)),
-    c.RemoveObstacle: st.builds(c.RemoveObstacle, name=robot_names, obstacle=robot_names),
-    c.ObstacleDistances: st.builds(c.ObstacleDistances, name=robot_names,
-                                   link=st.text(min_size=1, max_size=20)),
-    c.PublishDistance: st.builds(c.PublishDistance, name=robot_names,
-                                 link=st.text(min_size=1, max_size=20), obstacle=robot_names,
-                                 topic=ros_names, rate_hz=st.floats(0.0, 1000.0)),
-    c.PlanMotion: st.builds(
-        c.PlanMotion, name=robot_names, resolution=st.floats(0.001, 1.0),
-        positions=st.dictionaries(st.text(min_size=1, max_size=20), finite, min_size=1,
-                                  max_size=5).map(lambda d: tuple(d.items()))),
-    c.ExecuteMotion: st.builds(
-        c.ExecuteMotion, name=robot_names, action=ros_names, resolution=st.floats(0.001, 1.0),
-        positions=st.dictionaries(st.text(min_size=1, max_size=20), finite, min_size=1,
-                                  max_size=5).map(lambda d: tuple(d.items())),
-        duration_s=st.none() | st.floats(0.1, 100.0), timeout=st.floats(0.1, 300.0),
-        result_timeout=st.none() | st.floats(0.1, 1000.0)),
-    c.SetRobotJoints: st.builds(
-        c.SetRobotJoints, name=robot_names, topic=ros_names,
-        positions=st.dictionaries(st.text(min_size=1, max_size=20), finite,
-                                  max_size=5).map(lambda d: tuple(d.items()))),
-    c.CallService: st.builds(c.CallService, service=ros_names, type=srv_types,
-                             request=json_objects, timeout=st.floats(0.01, 300.0)),
-    c.AdvertiseService: st.builds(c.AdvertiseService, service=ros_names, type=srv_types),
-    c.UnadvertiseService: st.builds(c.UnadvertiseService, service=ros_names),
-    c.ServiceRequest: st.builds(c.ServiceRequest, service=ros_names, type=srv_types,
-                                request=json_objects, timeout=st.floats(0.01, 300.0)),
-    # The fixed frame is kept as tf holds it (no leading '/').
-    c.CreateMarkerSubscriber: st.builds(
-        c.CreateMarkerSubscriber, topic=ros_names,
-        type=st.sampled_from(["Marker", "MarkerArray", "nav_msgs/msg/Path",
-                              "geometry_msgs/PolygonStamped", "PointStamped"]),
-        fixed_frame=frames.filter(lambda s: not s.startswith("/")), qos=qos),
-    c.RemoveMarkerSubscriber: st.builds(c.RemoveMarkerSubscriber, topic=ros_names),
-    c.ListMarkers: st.builds(c.ListMarkers, topic=ros_names),
-    c.ListActions: st.just(c.ListActions()),
-    c.SendGoal: st.builds(c.SendGoal, action=ros_names, type=action_types, goal=json_objects,
-                          timeout=st.floats(0.01, 300.0),
-                          result_timeout=st.none() | st.floats(0.01, 86_400.0),
-                          goal_id=st.none() | goal_ids),
-    c.CancelGoal: st.builds(c.CancelGoal, action=ros_names, goal_id=goal_ids,
-                            timeout=st.floats(0.01, 300.0)),
-    c.AdvertiseAction: st.builds(c.AdvertiseAction, action=ros_names, type=action_types,
-                                 goal_timeout=st.floats(0.01, 86_400.0), decides=st.booleans()),
-    c.UnadvertiseAction: st.builds(c.UnadvertiseAction, action=ros_names),
-    c.ActionFeedback: st.builds(c.ActionFeedback, action=ros_names, goal_id=goal_ids,
-                                feedback=json_objects),
-    c.ActionGoal: st.builds(c.ActionGoal, action=ros_names, type=action_types, goal_id=goal_ids,
-                            goal=json_objects, timeout=st.floats(0.01, 86_400.0)),
-    c.ActionCancel: st.builds(c.ActionCancel, action=ros_names, goal_id=goal_ids),
-    c.ActionDecide: st.builds(c.ActionDecide, action=ros_names, type=action_types,
-                              goal=json_objects, timeout=st.floats(0.01, 3_600.0)),
-    c.DescribeType: st.builds(c.DescribeType, type=st.sampled_from(
-        ["PoseArray", "geometry_msgs/msg/PoseStamped", "vtkMRMLROS2ServiceClientSpawnNode",
-         "control_msgs/action/GripperCommand"]), kind=st.sampled_from(c.INTERFACE_KINDS)),
-    c.StartRecording: st.builds(c.StartRecording, path=bag_paths,
-                                topics=st.lists(ros_names, max_size=4).map(tuple),
-                                overwrite=st.booleans(),
-                                compression=st.sampled_from(c.COMPRESSIONS)),
-    c.StopRecording: st.builds(c.StopRecording, path=bag_paths),
-    c.RecordingStatus: st.builds(c.RecordingStatus, path=bag_paths),
-}
+STRATEGIES, NO_STRATEGY = _strategies()
 
 
 def test_every_op_has_a_strategy_and_a_unique_literal_op() -> None:
+    assert not NO_STRATEGY, "\n".join(NO_STRATEGY.values())
     assert set(STRATEGIES) == set(REQUEST_TYPES.values())
     assert len(REQUEST_TYPES) == len(STRATEGIES)
     for op, cls in REQUEST_TYPES.items():
         assert cls.op == op
         assert len(op.encode()) <= c.MAX_OP_NAME_BYTES
+
+
+def test_an_op_whose_field_has_no_strategy_is_named() -> None:
+    @dataclass(frozen=True)
+    class Odd(c.Op, op="test_odd_field", writes=False):
+        widget: complex
+
+        def resources(self) -> tuple[c.Resource, ...]:
+            return ()
+
+    try:
+        with pytest.raises(NoStrategyError, match=r"Odd \(test_odd_field\): no strategy for "
+                                                  r"field 'widget'"):
+            strategy_for(Odd)
+    finally:
+        del REQUEST_TYPES["test_odd_field"]
 
 
 @pytest.mark.parametrize("cls", list(STRATEGIES), ids=lambda k: k.op)
