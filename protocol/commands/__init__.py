@@ -19,7 +19,7 @@ The package, by job:
     types       the one grammar of ROS type names
     results     the typed results of the ops a client reads (`Answered`), parsed in one place
     op          the op base class, its declarations and the registry; parsing
-    graph, topics, parameters, tf, robots, services, markers, motion, actions,
+    graph, bridges, topics, parameters, tf, robots, services, markers, motion, actions,
     interfaces, recording, playback
                 the ops, by area (adding an op: a class in one of these, and a handler)
     replies     the Reply and error replies
@@ -43,6 +43,8 @@ from protocol.commands.op import *  # noqa: F403
 from protocol.commands.op import __all__ as _op
 from protocol.commands.graph import *  # noqa: F403
 from protocol.commands.graph import __all__ as _graph
+from protocol.commands.bridges import *  # noqa: F403
+from protocol.commands.bridges import __all__ as _bridges
 from protocol.commands.topics import *  # noqa: F403
 from protocol.commands.topics import __all__ as _topics
 from protocol.commands.parameters import *  # noqa: F403
@@ -68,8 +70,8 @@ from protocol.commands.playback import __all__ as _playback
 from protocol.commands.replies import *  # noqa: F403
 from protocol.commands.replies import __all__ as _replies
 
-__all__ = [*_errors, *_wire, *_values, *_types, *_results, *_op, *_graph, *_topics, *_parameters,
-           *_tf, *_robots, *_services, *_markers, *_motion, *_actions, *_interfaces,
+__all__ = [*_errors, *_wire, *_values, *_types, *_results, *_op, *_graph, *_bridges, *_topics,
+           *_parameters, *_tf, *_robots, *_services, *_markers, *_motion, *_actions, *_interfaces,
            *_recording, *_playback, *_replies]
 
 bridge_kinds()  # noqa: F405 - a create op without its remove op fails here, at import
