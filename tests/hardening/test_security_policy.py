@@ -84,6 +84,8 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
         # A player's clock (slicer-ros2-bridge play): every client of it sees the change.
         "pause_playback": {}, "resume_playback": {}, "seek_playback": {"offset": 1.0},
         "set_playback_rate": {"rate": 2.0},
+        # Leaves a bridge behind the connection: a connection that may not write cannot.
+        "keep_bridge": {"kind": "subscriber", "topic": "/t"},
     }
     # The declarations say what writes: this list is the expectation they are held to.
     assert set(writes) == {op for op, cls in c.REQUEST_TYPES.items() if cls.writes}
@@ -171,8 +173,26 @@ def test_no_client_removes_the_operators_bridges() -> None:
     assert refused.value.field == "topic" and "operator" in str(refused.value)
     owners.check_removal(("subscriber", ("/b",)), "topic", other)  # a client's: any client
     owners.check_removal(("subscriber", ("/a",)), "topic", None)  # the operator itself
-    owners.forget(client, {"served_service"})
-    assert owners.owner(("subscriber", ("/b",))) is client  # bridges outlive their client
+    assert owners.forget(client, {"served_service"}) == 0  # it served none
+
+
+def test_a_clients_bridge_ends_with_its_last_holder_unless_kept_or_the_operators() -> None:
+    """docs/security.md, "Who owns a bridge": what `left` names the dispatcher removes."""
+    owners, a, b = BridgeOwners(), object(), object()
+    shared, own, kept, config = (("subscriber", (t,)) for t in ("/s", "/o", "/k", "/c"))
+    owners.created(shared, a)
+    owners.created(shared, b)  # asked again by another client: shared
+    owners.created(own, a)
+    owners.created(kept, a)
+    assert owners.keep(kept) and not owners.keep(("subscriber", ("/never",)))
+    owners.created(config, OPERATOR)
+    owners.created(config, a)  # a client asking for the operator's holds nothing
+    assert owners.holders(shared) == {a, b} and owners.holders(config) == set()
+    assert owners.left(a) == [own]  # the shared one lives on with b; kept and config stay
+    assert owners.owner(shared) is a  # its maker still: whose quota slot its removal frees
+    assert owners.left(b) == [shared]
+    assert owners.stays(kept) and owners.stays(config) and not owners.orphaned(kept)
+    assert owners.removed(own) is a and owners.owner(own) is None
 
 
 def test_a_request_class_the_schema_does_not_declare_is_refused() -> None:

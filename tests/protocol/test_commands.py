@@ -107,6 +107,13 @@ STRATEGIES: dict[type, st.SearchStrategy[Any]] = {
                                                                   fullmatch=True),
                               proof=st.from_regex(r"[0-9a-f]{64}", fullmatch=True)),
     c.ListBridges: st.just(c.ListBridges()),
+    # A kept bridge is named as its remove op names it.
+    c.KeepBridge: st.one_of(
+        st.builds(c.RemoveSubscriber, topic=ros_names).map(
+            lambda r: c.KeepBridge("subscriber", r)),
+        st.builds(c.RemoveTfLookup, parent=frames, child=frames).map(
+            lambda r: c.KeepBridge("tf_lookup", r)),
+        st.builds(c.RemoveRobot, name=robot_names).map(lambda r: c.KeepBridge("robot", r))),
     c.ListTopics: st.just(c.ListTopics()),
     c.ListServices: st.just(c.ListServices()),
     c.CreateSubscriber: st.builds(c.CreateSubscriber, topic=ros_names, type=msg_types, qos=qos,
@@ -287,10 +294,14 @@ def test_the_ros_names_a_request_parses_are_declared_and_resolved(
     request = data.draw(STRATEGIES[cls])
     with _ros_name_reads() as read:
         parse_request(*c.encode_request(request))
-    assert read <= set(cls.ros_names) | _PREFIXES.get(cls, set())
+    # keep_bridge names its bridge as that bridge's remove op does: with that op's names.
+    named = request.bridge if isinstance(request, c.KeepBridge) else request
+    assert read <= set(type(named).ros_names) | _PREFIXES.get(cls, set())
     resolved = request.with_names(lambda name, field: f"/resolved/{field}")
-    for path in cls.ros_names:
-        if path in read and _value_at(request, path):
+    if isinstance(resolved, c.KeepBridge):
+        resolved = resolved.bridge
+    for path in type(named).ros_names:
+        if path in read and _value_at(named, path):
             assert _value_at(resolved, path) == f"/resolved/{path}"
 
 

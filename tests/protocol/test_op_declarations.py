@@ -20,6 +20,7 @@ VALUE = {"type": "integer", "value": 1}
 EXAMPLES: dict[str, tuple[dict[str, Any], set[tuple[str, str, str]]]] = {
     "hello": ({}, set()),
     "list_bridges": ({}, set()),
+    "keep_bridge": ({"kind": "subscriber", "topic": "/a"}, set()),  # judged when it was made
     "list_topics": ({}, set()),
     "list_services": ({}, set()),
     "describe_type": ({"type": "PoseArray"}, set()),
@@ -162,7 +163,9 @@ def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
         "start_recording", "stop_recording",
         # A player's clock: every client of the player sees what these change.
         "pause_playback", "resume_playback", "seek_playback", "set_playback_rate",
-        "publish_distance", "execute_motion"}
+        "publish_distance", "execute_motion",
+        # Leaves a bridge behind its connection.
+        "keep_bridge"}
 
 
 def test_a_publisher_declares_its_frame_and_labels_topic() -> None:
