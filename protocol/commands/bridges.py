@@ -25,11 +25,13 @@ def _keepable() -> tuple[str, ...]:
 
 
 @dataclass(frozen=True)
-class KeepBridge(Op, op="keep_bridge", writes=True):
+class KeepBridge(Op, op="keep_bridge", writes=False):
     """Keep the bridge of ``kind`` named by the fields its remove op takes (``topic`` for
     a subscriber, ``parent`` and ``child`` for a tf lookup...) when its clients have left:
     ``{"kind": "subscriber", "topic": "/joint_states"}``. Any client may still remove it.
-    It writes: a connection that may not write leaves nothing behind."""
+    It does not write: a connection that may make a subscriber may keep it (a plain
+    connector without the daemon's key), and what is kept counts against ``--max-bridges``
+    until it is removed."""
 
     kind: str
     bridge: Op  # the removal that names it: its identity, parsed and resolved as there

@@ -84,8 +84,6 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
         # A player's clock (slicer-ros2-bridge play): every client of it sees the change.
         "pause_playback": {}, "resume_playback": {}, "seek_playback": {"offset": 1.0},
         "set_playback_rate": {"rate": 2.0},
-        # Leaves a bridge behind the connection: a connection that may not write cannot.
-        "keep_bridge": {"kind": "subscriber", "topic": "/t"},
     }
     # The declarations say what writes: this list is the expectation they are held to.
     assert set(writes) == {op for op, cls in c.REQUEST_TYPES.items() if cls.writes}
@@ -95,6 +93,8 @@ def test_read_only_refuses_every_write_op_and_allows_receiving() -> None:
         assert refused.value.error_code == ErrorCode.FORBIDDEN
         assert refused.value.field == "op" and "read-only" in str(refused.value)
     for op, args in {"create_subscriber": {"topic": "/t", "type": "String"},
+                     # What a receiving client may make it may keep (--max-bridges bounds it).
+                     "keep_bridge": {"kind": "subscriber", "topic": "/t"},
                      "create_tf_lookup": {"parent": "a", "child": "b"},
                      "get_parameters": {"node": "/n", "names": ["p"]},
                      "list_actions": {},

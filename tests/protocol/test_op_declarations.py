@@ -163,9 +163,7 @@ def test_bridge_kinds_pair_create_and_remove_with_their_identity() -> None:
         "start_recording", "stop_recording",
         # A player's clock: every client of the player sees what these change.
         "pause_playback", "resume_playback", "seek_playback", "set_playback_rate",
-        "publish_distance", "execute_motion",
-        # Leaves a bridge behind its connection.
-        "keep_bridge"}
+        "publish_distance", "execute_motion"}
 
 
 def test_a_publisher_declares_its_frame_and_labels_topic() -> None:
