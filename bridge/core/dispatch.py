@@ -342,7 +342,7 @@ class Dispatcher:
                                             if k.bridge.per_connection})
         self._quota.release(client, gone)
         self._quota.forget(client)
-        if not self._closing:  # at the daemon's stop, the capabilities close them all
+        if not self._closing:  # closed: the capabilities have closed every bridge
             for key in self._owners.left(client):
                 self._spawn(self._end(key))
         self._parsing.pop(client, None)
