@@ -208,6 +208,8 @@ class Relay:
                     self.devices[name] = setup.command("create_subscriber", {
                         "topic": topic, "type": ros_type,
                         "qos": {"depth": POSE_DEPTH if name == "pose" else 10}})["device"]
+                    # The readers connect later: kept, as an operator's bridge would be.
+                    setup.command("keep_bridge", {"kind": "subscriber", "topic": topic})
         elif kind == "fanout":
             self.child = Child("fan-out floor", [sys.executable, str(REPO / "bench" /
                                                                     "fanout_relay.py"),

@@ -26,6 +26,7 @@ STATE_VERSION = 1
 _KINDS = [kind for kind in c.bridge_kinds().values() if not kind.bridge.per_connection]
 REMOVE_OPS: Dict[str, Tuple[str, Tuple[str, ...]]] = {
     kind.create.op: (kind.remove.op, kind.bridge.identity) for kind in _KINDS}
+_KIND_OF = {kind.create.op: kind.bridge.kind for kind in _KINDS}
 CREATE_OPS = tuple(REMOVE_OPS)
 FOLLOW_UP_OPS = tuple(follow.op for kind in _KINDS for follow in kind.follow_ups)
 
@@ -52,9 +53,13 @@ def _chosen(request: c.Op, f: dataclasses.Field[Any]) -> bool:
 
 @dataclass(frozen=True)
 class BridgeSpec:
+    """``kept``: the client asked the daemon to keep the bridge past the connection
+    (`keep_bridge`); asked again after each re-creation."""
+
     op: str
     args: Dict[str, Any]
     then: Tuple[Tuple[str, Dict[str, Any]], ...] = ()
+    kept: bool = False
 
     @classmethod
     def of(cls, request: c.Op) -> BridgeSpec:
@@ -74,10 +79,16 @@ class BridgeSpec:
         op, fields = REMOVE_OPS[self.op]
         return op, {f: self.args[f] for f in fields}
 
+    def keep_command(self) -> Tuple[str, Dict[str, Any]]:
+        _, identity = self.remove_command()
+        return c.KeepBridge.op, {"kind": _KIND_OF[self.op], **identity}
+
     def to_dict(self) -> Dict[str, Any]:
         out: Dict[str, Any] = {"op": self.op, "args": self.args}
         if self.then:
             out["then"] = [{"op": op, "args": args} for op, args in self.then]
+        if self.kept:
+            out["kept"] = True
         return out
 
     @classmethod
@@ -98,7 +109,10 @@ class BridgeSpec:
                 raise StateFormatError(f"{sub}: expected {{'op': one of {FOLLOW_UP_OPS}, "
                                        f"'args': ...}}, got {item!r}")
             then.append((item["op"], _validated(item["op"], item.get("args", {}), sub)))
-        return cls(op, _validated(op, args, where), tuple(then))
+        kept = data.get("kept", False)
+        if not isinstance(kept, bool):
+            raise StateFormatError(f"{where}.kept: expected true or false, got {kept!r}")
+        return cls(op, _validated(op, args, where), tuple(then), kept)
 
 
 @dataclass(frozen=True)

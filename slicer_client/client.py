@@ -18,6 +18,7 @@ names if they changed) and restores observers before user commands go through ag
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import secrets
 import ssl
@@ -247,6 +248,8 @@ class Client:
         restore = getattr(resource, "_restore", None)
         if restore is not None:
             restore(command)
+        if resource.spec.kept:
+            command(*resource.spec.keep_command())
         with self._lock:
             for device in resource.devices():
                 self._by_device[device] = resource
@@ -278,6 +281,11 @@ class Client:
                 self._resources.pop(resource.spec.key, None)
                 for device in resource.devices():
                     self._by_device.pop(device, None)
+
+    def keep_resource(self, resource: Resource) -> None:
+        self.command(*resource.spec.keep_command())
+        resource.spec = dataclasses.replace(resource.spec, kept=True)
+        self.spec_changed(resource)
 
     def spec_changed(self, resource: Resource) -> None:
         """A resource's follow-up commands changed (kept for re-sync and saving)."""
@@ -530,6 +538,8 @@ class Client:
             resource = self.markers(a["topic"], a["type"], a["fixed_frame"], qos=a.get("qos"))
         else:  # a bridge kind without a Pythonic class yet: its spec alone re-creates it
             resource = self._add(Resource(self, spec))
+        if spec.kept and not resource.spec.kept:
+            resource.keep()
         return resource
 
     # --- direct commands -----------------------------------------------------------------

@@ -50,6 +50,10 @@ class ResourceOwner(Protocol):
         """Remove `resource` daemon-side and forget it."""
         ...
 
+    def keep_resource(self, resource: Any) -> None:
+        """Have the daemon keep `resource` past this client (`keep_bridge`)."""
+        ...
+
     def spec_changed(self, resource: Any) -> None:
         """A resource's follow-up commands changed (kept for re-sync and saving)."""
         ...

@@ -10,6 +10,7 @@ callbacks, never on the receive thread (`Client.Spin()` or its dispatcher: event
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import threading
@@ -103,6 +104,12 @@ class Resource:
         if not self.removed:
             self._client.remove_resource(self)
             self.removed = True
+
+    def keep(self) -> None:
+        """Have the daemon keep it when this client is gone (a bridge ends with the last
+        client holding it otherwise). Any client may still remove it; saved state and a
+        re-sync after a reconnect keep it again."""
+        self._client.keep_resource(self)
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.spec.key[1:]} device={self.device!r}>"
@@ -466,7 +473,7 @@ class ParameterClient(Resource):
             self.values.update(result.values)
         self.observed = tuple(names)
         self.all_changes = all_changes
-        self.spec = BridgeSpec(self.spec.op, self.spec.args, (
+        self.spec = dataclasses.replace(self.spec, then=(
             (request.op, {k: v for k, v in request.to_args().items() if k != "schema"}),)
             if names or all_changes else ())
         self._client.spec_changed(self)

@@ -10,9 +10,11 @@ client's frame ids are resolved once (`Op.with_names`, `Op.with_frames`), the se
 policy judges its resources, the content it declares gets its guard (the handler's third
 argument, `ContentGuard`: capabilities apply the policy inside messages and results without
 knowing it), a creation (its handler returns `Created`) is counted against
-its client's quota and recorded with who made it (the operator's start-up config or a
-client), and a removal is allowed by the ownership rules
-(`bridge.core.security.BridgeOwners`).
+its client's quota and recorded with who holds it (the operator's start-up config or the
+clients that asked for it), and a removal is allowed by the ownership rules
+(`bridge.core.security.BridgeOwners`). A client's bridge ends when the last client holding
+it leaves, unless one kept it (`keep_bridge`): the dispatcher runs its kind's remove op, as
+the operator.
 
 Creations and removals of one bridge (its kind and identity) run one at a time, in the
 order they came (`BridgeLocks`): a removal that arrives while an asynchronous creation of
@@ -226,6 +228,7 @@ class Dispatcher:
                                   self._policy.max_bridges)
         self._owners = BridgeOwners()
         self._locks = BridgeLocks()
+        self._closing = False
         self._auth_failures = RateLimitedLog(log)
         hub.add_closed_listener(self._client_left)
         self._tasks: set[asyncio.Task[None]] = set()
@@ -235,6 +238,7 @@ class Dispatcher:
             c.Hello: self._hello,
             c.Authenticate: self._authenticate,
             c.ListBridges: self._list_bridges,
+            c.KeepBridge: self._keep,
             c.ListTopics: self._list_topics,
             c.ListServices: self._list_services,
         }
@@ -345,21 +349,63 @@ class Dispatcher:
         return outcome
 
     def close(self) -> None:
+        self._closing = True
         for task in tuple(self._tasks):
             task.cancel()
         for capability in reversed(self._capabilities):
             capability.close()
 
     def _client_left(self, client: Replier) -> None:
-        # Its bridges live on (any client may remove them), except those that live only
-        # as long as their client (a served service); its count goes.
+        # Those that live only as long as their client (a served service) their capability
+        # ends; of the others, those it was the last to hold and nothing keeps end here.
         gone = self._owners.forget(client, {kind for kind, k in _KINDS.items()
                                             if k.bridge.per_connection})
         self._quota.release(client, gone)
         self._quota.forget(client)
+        if not self._closing:  # closed: the capabilities have closed every bridge
+            for key in self._owners.left(client):
+                self._spawn(self._end(key))
         self._parsing.pop(client, None)
         if self._heavy is not None:
             self._heavy.forget(client)
+
+    async def _end(self, key: BridgeKey) -> None:
+        """Remove a bridge whose last holder left, by its kind's remove op as the operator
+        would, unless a client asked for it (a reconnecting one) or kept it meanwhile."""
+        await self._locks.take(key)
+        try:
+            if not self._owners.orphaned(key):
+                return
+            kind = _KINDS[key[0]]
+            request = c.parse_request(kind.remove.op,
+                                      c.dumps(dict(zip(kind.bridge.identity, key[1]))))
+            try:
+                outcome = self._call(self._handlers[kind.remove.op], request, None, key)
+                if inspect.isawaitable(outcome):
+                    await outcome
+            except CommandError as error:  # gone already (its node went): forget it
+                log.info("the %s %s its last client left was gone already: %s", key[0],
+                         "/".join(key[1]), error)
+                self._forget_bridge(key)
+            else:
+                log.info("removed the %s %s: its last client left", key[0], "/".join(key[1]))
+        finally:
+            self._locks.release(key)
+
+    def _keep(self, request: c.KeepBridge, client: Replier | None) -> c.KeptBridge:
+        key = self._bridge_key(request.bridge)
+        assert key is not None  # a removal names its bridge
+        if not self._owners.keep(key):
+            identity = _identity_fields(request.bridge)
+            raise CommandFailedError(identity[0], f"a live {key[0]}", "/".join(key[1]),
+                                     code=ErrorCode.NOT_FOUND)
+        return c.KeptBridge(key[0], dict(zip(_identity_fields(request.bridge), key[1])))
+
+    def _forget_bridge(self, key: BridgeKey) -> None:
+        """`key` is gone: its maker's quota slot goes back."""
+        maker = self._owners.removed(key)
+        if maker is not None and maker != OPERATOR:
+            self._quota.release(maker)
 
     # --- plumbing -----------------------------------------------------------------------
     def _run(self, request: c.Request, client: Replier | None) -> Result | Awaitable[Result]:
@@ -461,9 +507,7 @@ class Dispatcher:
         if type(request).creates is not None:
             self._owners.created(key, OPERATOR if client is None else client)
         elif type(request).removes is not None:
-            owner = self._owners.removed(key)
-            if owner is not None and owner != OPERATOR:
-                self._quota.release(owner)
+            self._forget_bridge(key)
 
     def _bridge_key(self, request: c.Request) -> Optional[BridgeKey]:
         """(kind, identity) of the bridge a create or remove request names, as the
@@ -579,7 +623,7 @@ class Dispatcher:
                     raise TypeError(f"{type(capability).__name__}.describe(): expected bridges "
                                     f"of a declared kind ({', '.join(sorted(_KINDS))}), got "
                                     f"kind {bridge.get('kind')!r}")
-                bridges.append(bridge)
+                bridges.append({**bridge, **self._lifetime(bridge)})
             for key, value in capability.state(guard).items():
                 if key in state or key in c.ListBridgesResult.__dataclass_fields__:
                     raise TypeError(f"{type(capability).__name__}.state(): expected a key of "
@@ -588,6 +632,15 @@ class Dispatcher:
         return c.ListBridgesResult(tuple(bridges), tuple(self._hub.devices()),
                                    tuple(client.describe() for client in self._hub.clients),
                                    self._hub.dropped, state)
+
+    def _lifetime(self, bridge: Mapping[str, Any]) -> dict[str, Any]:
+        """How long a listed bridge lives: ``stays`` (the operator's or kept) and how many
+        live ``clients`` hold it (it ends with the last unless it stays)."""
+        identity = _KINDS[bridge["kind"]].bridge.identity
+        if not all(name in bridge for name in identity):
+            return {}
+        key = (bridge["kind"], tuple(str(bridge[name]) for name in identity))
+        return {"stays": self._owners.stays(key), "clients": len(self._owners.holders(key))}
 
     def _list_topics(self, request: c.ListTopics,
                      client: Replier | None) -> c.ListTopicsResult:

@@ -607,41 +607,89 @@ BridgeKey = tuple[str, tuple[str, ...]]  # (bridge kind, its identity values)
 
 
 class BridgeOwners:
-    """Who made each live bridge: `OPERATOR` (the start-up config) or the client object.
+    """Who holds each live bridge, and so when it ends (docs/security.md, "Who owns a
+    bridge").
 
-    The rules (docs/security.md): no client removes the operator's bridges; a client may
-    remove any bridge a client made, its own or one a former connection made (bridges live
-    on when their client leaves, except the services a client serves); a ``--read-only``
-    daemon's clients remove nothing (`SecurityPolicy.check_request`).
+    A bridge's holders are the live clients that asked for it (its maker, then any client
+    that asked again: they share it). The operator's start-up config holds its bridges for
+    good, and a client may mark one kept (`keep`): both stay when every client has left.
+    Otherwise a bridge ends when its last holder leaves (`left` names it; the dispatcher
+    removes it). Its maker is kept apart: the maker's quota slot is what its removal frees.
+
+    Removal: no client removes the operator's bridges; a client may remove any bridge a
+    client made, its own or another's, held or kept (removal is for everyone holding it);
+    a ``--read-only`` daemon's clients remove nothing (`SecurityPolicy.check_request`).
     """
 
     def __init__(self) -> None:
-        self._owners: dict[BridgeKey, object] = {}
+        self._makers: dict[BridgeKey, object] = {}
+        self._holders: dict[BridgeKey, set[object]] = {}
+        self._kept: set[BridgeKey] = set()
 
     def created(self, key: BridgeKey, owner: object) -> None:
-        # Asking again for a bridge keeps its maker, except that the operator's config
-        # always claims its own bridges: no client owns one of them.
-        if owner == OPERATOR or key not in self._owners:
-            self._owners[key] = owner
+        """`owner` made `key` or asked for it again (then it shares it). The operator's
+        config always claims its own bridges: no client holds one of them."""
+        if owner == OPERATOR:
+            self._makers[key] = OPERATOR
+            self._holders[key] = set()
+            return
+        if key not in self._makers:
+            self._makers[key] = owner
+            self._holders[key] = set()
+        if self._makers[key] != OPERATOR:
+            self._holders[key].add(owner)
 
     def owner(self, key: BridgeKey) -> Optional[object]:
-        return self._owners.get(key)
+        """Who made `key` (`OPERATOR` or a client, perhaps gone), None if it is not live."""
+        return self._makers.get(key)
+
+    def holders(self, key: BridgeKey) -> frozenset[object]:
+        return frozenset(self._holders.get(key, ()))
+
+    def keep(self, key: BridgeKey) -> bool:
+        """Mark `key` to stay when its holders have left; False if no such bridge lives."""
+        if key not in self._makers:
+            return False
+        self._kept.add(key)
+        return True
+
+    def stays(self, key: BridgeKey) -> bool:
+        """Whether `key` outlives its clients (the operator's, or kept)."""
+        return key in self._kept or self._makers.get(key) == OPERATOR
+
+    def orphaned(self, key: BridgeKey) -> bool:
+        """Whether `key` lives with no holder left and nothing keeping it: it ends."""
+        return key in self._makers and not self._holders[key] and not self.stays(key)
 
     def removed(self, key: BridgeKey) -> Optional[object]:
-        return self._owners.pop(key, None)
+        """`key` is gone; returns who made it (whose quota slot it frees)."""
+        self._holders.pop(key, None)
+        self._kept.discard(key)
+        return self._makers.pop(key, None)
 
     def forget(self, client: object, kinds: Iterable[str]) -> int:
-        """`client` left: its bridges of `kinds` (those that die with it) are gone; returns
-        how many."""
+        """`client` left: its bridges of `kinds` (those that die with their connection, which
+        their capability ends) are gone; returns how many it made."""
         kinds = set(kinds)
-        gone = [k for k, owner in self._owners.items() if owner is client and k[0] in kinds]
+        gone = [k for k, maker in self._makers.items() if maker is client and k[0] in kinds]
         for key in gone:
-            del self._owners[key]
+            self.removed(key)
         return len(gone)
+
+    def left(self, client: object) -> list[BridgeKey]:
+        """`client` left: it holds nothing any more. Returns the bridges that end with it
+        (it was their last holder and nothing keeps them), in the order they were made."""
+        ending = []
+        for key, holders in self._holders.items():
+            if client in holders:
+                holders.discard(client)
+                if self.orphaned(key):
+                    ending.append(key)
+        return ending
 
     def check_removal(self, key: BridgeKey, field: str, client: object) -> None:
         """Raise `ForbiddenError` if `client` (None: the operator) may not remove `key`."""
-        if client is not None and self._owners.get(key) == OPERATOR:
+        if client is not None and self._makers.get(key) == OPERATOR:
             raise ForbiddenError(field, f"a {key[0]} a client created (the operator's "
                                  f"start-up bridges stay)", "/".join(key[1]))
 
@@ -653,7 +701,8 @@ class BridgeQuota:
     A creation reserves a slot before it runs (so a burst of slow async creations cannot
     overshoot) and gives it back if it fails or found an existing bridge; the removal of a
     bridge (by whichever client) frees the slot of the client that made it. A client that
-    leaves takes its own count with it, not the total: its bridges live on.
+    leaves takes its own count with it, not the total: what it made and others still hold
+    or kept lives on, and frees its slot of the total when removed.
     """
 
     def __init__(self, limit: int, total: int = DEFAULT_MAX_BRIDGES) -> None:
@@ -687,7 +736,7 @@ class BridgeQuota:
             self.release(client)
 
     def forget(self, client: object) -> None:
-        """The client left: its bridges live on (they are daemon-wide), its count goes."""
+        """The client left: its count goes (its bridges that others hold or kept live on)."""
         self._counts.pop(client, None)
 
     def count(self, client: object) -> int:

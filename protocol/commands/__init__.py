@@ -20,7 +20,7 @@ The package, by job:
     results     the typed results' base (`Result`: a reply's JSON object and its reader) and
                 those shared by several areas; `Answered` for ops a client reads typed
     op          the op base class, its declarations and the registry; parsing
-    graph, topics, parameters, tf, robots, services, markers, motion, actions,
+    graph, bridges, topics, parameters, tf, robots, services, markers, motion, actions,
     interfaces, recording, playback
                 the ops, by area, each with its result type and examples (adding an op: a
                 class in one of these, and a handler returning its result)
@@ -45,6 +45,8 @@ from protocol.commands.op import *  # noqa: F403
 from protocol.commands.op import __all__ as _op
 from protocol.commands.graph import *  # noqa: F403
 from protocol.commands.graph import __all__ as _graph
+from protocol.commands.bridges import *  # noqa: F403
+from protocol.commands.bridges import __all__ as _bridges
 from protocol.commands.topics import *  # noqa: F403
 from protocol.commands.topics import __all__ as _topics
 from protocol.commands.parameters import *  # noqa: F403
@@ -70,8 +72,8 @@ from protocol.commands.playback import __all__ as _playback
 from protocol.commands.replies import *  # noqa: F403
 from protocol.commands.replies import __all__ as _replies
 
-__all__ = [*_errors, *_wire, *_values, *_types, *_results, *_op, *_graph, *_topics, *_parameters,
-           *_tf, *_robots, *_services, *_markers, *_motion, *_actions, *_interfaces,
+__all__ = [*_errors, *_wire, *_values, *_types, *_results, *_op, *_graph, *_bridges, *_topics,
+           *_parameters, *_tf, *_robots, *_services, *_markers, *_motion, *_actions, *_interfaces,
            *_recording, *_playback, *_replies]
 
 bridge_kinds()  # noqa: F405 - a create op without its remove op fails here, at import

@@ -287,7 +287,8 @@ def test_an_action_served_by_the_client(ros: Client, processes: Processes) -> No
     assert seen == [{"command": {"position": 0.3, "max_effort": 1.0}}]
     bridges = ros.list_bridges()["bridges"]
     assert {"kind": "served_action", "action": "/served_gripper", "type": GRIPPER,
-            "device": "act:served_gripper", "goals": 1, "decides": False} in bridges
+            "device": "act:served_gripper", "goals": 1, "decides": False,
+            "clients": 1, "stays": False} in bridges  # it goes with its client
 
 
 def test_a_served_action_decides_which_goals_it_accepts(ros: Client, processes: Processes

@@ -212,7 +212,7 @@ def test_node_that_appears_later_is_picked_up(processes: Processes,
     wait_until(ready, timeout=20, what=f"{name} ready")
     bridges = client.command("list_bridges")["bridges"]
     assert {"kind": "parameter_client", "node": f"/{name}", "device": device, "ready": True,
-            "observed": ["count", "label"]} in bridges
+            "observed": ["count", "label"], "clients": 1, "stays": False} in bridges
 
 
 def test_namespaced_nodes_side_by_side(processes: Processes, client: Connection) -> None:

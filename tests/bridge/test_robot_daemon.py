@@ -204,9 +204,12 @@ def omni(module_processes: Processes, daemon: RunningDaemon) -> dict[str, Any]:
     joints.wait_for_output("READY", timeout=30)
     with daemon.connect() as connection:
         # The parameter name given is the one used (no source: the defaults).
-        return create_and_wait_loaded(connection, {
+        result = create_and_wait_loaded(connection, {
             "name": "omni", "source": {"kind": "parameter", "node": "/robot_state_publisher",
                                        "parameter": "robot_description"}})
+        # The module's tests read it from connections of their own: kept past this one.
+        connection.command("keep_bridge", {"kind": "robot", "name": "omni"})
+        return result
 
 
 # ------------------------------------------------------------------ the Omni, from a parameter

@@ -174,7 +174,7 @@ def test_advertised_service_answered_by_the_client(processes: Processes, client:
     bridges = client.command("list_bridges")["bridges"]
     assert {"kind": "served_service", "service": "/slicer/toggle",
             "type": "std_srvs/srv/SetBool", "device": "srv:slicer/toggle",
-            "calls": 1} in bridges
+            "calls": 1, "clients": 1, "stays": False} in bridges
     # Another client cannot take it over; the owner advertising again is idempotent.
     error = refused(lambda: client.command("advertise_service", {
         "service": "/slicer/toggle", "type": "std_srvs/srv/SetBool"}))

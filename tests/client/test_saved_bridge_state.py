@@ -75,6 +75,8 @@ def test_a_saved_state_recreates_every_kind_in_another_client(
      ' "then": [{"op": "remove_subscriber"}]}]}', "bridges[0].then[0]: expected {'op':"),
     ('{"version": 1, "bridges": [{"op": "create_subscriber", "args": {"topic": "/t"}}]}',
      "bridges[0]: create_subscriber arguments:"),
+    ('{"version": 1, "bridges": [{"op": "create_subscriber", "args": {"topic": "/t", '
+     '"type": "String"}, "kept": 1}]}', "bridges[0].kept: expected true or false, got 1"),
 ])
 def test_saved_text_that_cannot_be_read_names_the_entry(text: str, message: str) -> None:
     from slicer_client.bridge_state import STATE_VERSION

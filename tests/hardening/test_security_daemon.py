@@ -12,7 +12,8 @@ from hardening_tools import RawClient, read_until_closed, transform_bytes
 from protocol.commands import ErrorCode
 from protocol.messages import StatusCode
 from slicer_client.connection import CommandRefusedError, Connection
-from support import Processes, RunningDaemon, assert_clean_exit, pick_free_port, start_daemon
+from support import (Processes, RunningDaemon, assert_clean_exit, pick_free_port, scaled,
+                     start_daemon, wait_until)
 
 pytestmark = pytest.mark.ros
 
@@ -165,15 +166,17 @@ def test_a_bad_option_is_a_clear_error(processes: Processes) -> None:
 def test_reconnecting_does_not_multiply_the_bridges(processes: Processes) -> None:
     daemon = start_daemon(processes, "--max-bridges-per-client", "3", "--max-bridges", "5")
     made = 0
-    for _ in range(2):  # a client that makes its fill, leaves, and comes back
+    for _ in range(2):  # a client that makes its fill, keeps it, leaves, and comes back
         with daemon.connect() as client:
             for _ in range(3):
                 if made == 5:
                     break
                 client.command("create_tf_lookup", {"parent": "w", "child": f"r{made}"})
+                client.command("keep_bridge", {"kind": "tf_lookup", "parent": "w",
+                                               "child": f"r{made}"})
                 made += 1
     with daemon.connect() as client:
-        # Bridges outlive their client: the daemon-wide count holds after reconnects.
+        # Kept bridges outlive their client: the daemon-wide count holds after reconnects.
         error = refusal(client, "create_tf_lookup", {"parent": "w", "child": "r5"})
         assert error.code == ErrorCode.LIMIT_REACHED
         assert "at most 5 bridges made by clients, all together (--max-bridges" in str(error)
@@ -183,4 +186,13 @@ def test_reconnecting_does_not_multiply_the_bridges(processes: Processes) -> Non
         listed = [b for b in client.command("list_bridges")["bridges"]
                   if b.get("kind") == "tf_lookup"]
         assert len(listed) == 5
+    # One not kept ends with its client, and its slot with it.
+    with daemon.connect() as client:
+        client.command("remove_tf_lookup", {"parent": "w", "child": "r1"})
+        client.command("create_tf_lookup", {"parent": "w", "child": "r6"})
+    with daemon.connect() as client:
+        wait_until(lambda: not any(b.get("child") == "r6" for b in
+                                   client.command("list_bridges")["bridges"]),
+                   timeout=scaled(10), what="the bridge not kept to end")
+        client.command("create_tf_lookup", {"parent": "w", "child": "r7"})
     assert_clean_exit(daemon)

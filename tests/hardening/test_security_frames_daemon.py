@@ -110,24 +110,26 @@ def test_broadcasters_of_denied_frames_never_reach_ros(guarded: RunningDaemon,
         created = client.command("create_tf_broadcaster", {"parent": "/world",
                                                            "child": "needle"})
         assert (created["parent"], created["child"]) == ("world", "PSM1/needle")
-    # TRANSFORMs: to the allowed broadcaster's device they reach /tf; to the device the
-    # denied one would have had, they find nothing (the broadcaster was never created).
-    denied_device = DeviceNameRegistry().register(
-        NameKey.tf_broadcaster("world", "PSM1/secret_needle"))
-    assert denied_device != created["device"]
-    raw = RawClient(guarded.port)
-    try:
-        raw.send(transform_bytes([1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0], denied_device))
-        status = raw.read_until(lambda m: m.type_name == "STATUS"
-                                and m.device_name == denied_device)
-        assert status.body.code == StatusCode.NOT_FOUND
-        deadline = time.monotonic() + scaled(20)
-        while time.monotonic() < deadline and not any(
-                t["child_frame_id"] == "PSM1/needle" for t in ros_transforms(echo)):
-            raw.send(transform_bytes([1, 0, 0, 0, 1, 0, 0, 0, 1, 10, 20, 30], created["device"]))
-            time.sleep(0.1)
-    finally:
-        raw.close()
+        # (The broadcaster is the client's: it lives while the client is connected.)
+        # TRANSFORMs: to the allowed broadcaster's device they reach /tf; to the device the
+        # denied one would have had, they find nothing (the broadcaster was never created).
+        denied_device = DeviceNameRegistry().register(
+            NameKey.tf_broadcaster("world", "PSM1/secret_needle"))
+        assert denied_device != created["device"]
+        raw = RawClient(guarded.port)
+        try:
+            raw.send(transform_bytes([1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0], denied_device))
+            status = raw.read_until(lambda m: m.type_name == "STATUS"
+                                    and m.device_name == denied_device)
+            assert status.body.code == StatusCode.NOT_FOUND
+            deadline = time.monotonic() + scaled(20)
+            while time.monotonic() < deadline and not any(
+                    t["child_frame_id"] == "PSM1/needle" for t in ros_transforms(echo)):
+                raw.send(transform_bytes([1, 0, 0, 0, 1, 0, 0, 0, 1, 10, 20, 30],
+                                         created["device"]))
+                time.sleep(0.1)
+        finally:
+            raw.close()
     sent = [t for t in ros_transforms(echo) if t["child_frame_id"] == "PSM1/needle"]
     assert sent and sent[0]["header"]["frame_id"] == "world", echo.output()[-2000:]
     assert not any("secret" in t["child_frame_id"] or "map" in t["header"]["frame_id"]

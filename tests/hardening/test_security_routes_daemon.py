@@ -385,6 +385,9 @@ def test_the_facade_removes_from_a_new_connection_what_the_rules_allow(
     first = slicer_client.connect("127.0.0.1", daemon.port)
     first.GetDefaultROS2Node().CreateAndAddSubscriberNode("String", "/client_feed")
     first.GetDefaultROS2Node().CreateAndAddTf2LookupNode("a", "b")
+    # Kept, so that they outlive this connection (else they would end with it).
+    first.find("create_subscriber", "/client_feed").keep()
+    first.find("create_tf_lookup", "a", "b").keep()
     first.close()
     second = slicer_client.connect("127.0.0.1", daemon.port)
     try:

@@ -3,10 +3,11 @@ keepalive, it never sends; on a lost connection it reconnects every 0.1 s (as
 OpenIGTLinkIO's client connector does). It shows every pose that arrives.
 
 usage: plain_pose_reader.py HOST PORT TOPIC
-First makes the daemon-wide subscriber of TOPIC (PoseStamped) on a connection of its own,
-then reads. Prints READY <device>; CONNECTED / LOST <reason>; POSE <age in ms by the
-publisher's own stamp, in the message's header> 1 for each pose. Each line starts with the
-wall-clock time. Runs until SIGINT.
+First makes the daemon-wide subscriber of TOPIC (PoseStamped) on a connection of its own
+and keeps it (keep_bridge: it would end with that connection), then reads. Prints READY
+<device>; CONNECTED / LOST <reason>; POSE <age in ms by the publisher's own stamp, in the
+message's header> 1 for each pose. Each line starts with the wall-clock time. Runs until
+SIGINT.
 """
 
 import socket
@@ -50,6 +51,8 @@ def main() -> None:
     setup = Connection(host, port)
     try:
         reply = setup.command("create_subscriber", {"topic": topic, "type": "PoseStamped"})
+        # Kept past this connection: the reader's connections come and go.
+        setup.command("keep_bridge", {"kind": "subscriber", "topic": topic})
     finally:
         setup.close()
     device = reply["device"]

@@ -206,8 +206,22 @@ def _field_strategy(cls: type[Op], name: str, hint: Any,
                           f"BY_OP (tests/protocol/op_strategies.py)")
 
 
+def _keep_bridge() -> st.SearchStrategy[Op]:
+    """A kind a client may keep, and its remove op's request naming one bridge of it."""
+    kinds = {kind: k for kind, k in c.bridge_kinds().items() if not k.bridge.per_connection}
+    return st.sampled_from(sorted(kinds)).flatmap(
+        lambda kind: strategy_for(kinds[kind].remove).map(
+            lambda removal: c.KeepBridge(kind=kind, bridge=removal)))
+
+
+# Ops whose fields depend on each other: drawn whole.
+WHOLE: dict[type[Op], Callable[[], st.SearchStrategy[Op]]] = {c.KeepBridge: _keep_bridge}
+
+
 def strategy_for(cls: type[Op]) -> st.SearchStrategy[Op]:
     """Requests of op ``cls``: its examples, and requests built from its fields."""
+    if cls in WHOLE:
+        return WHOLE[cls]()
     hints = typing.get_type_hints(cls)
     built: st.SearchStrategy[Op] = st.builds(cls, **{
         f.name: _field_strategy(cls, f.name, hints[f.name], f.default) for f in fields(cls)})

@@ -128,8 +128,10 @@ def test_the_ros_names_a_request_parses_are_declared_and_resolved(
     request = data.draw(STRATEGIES[cls])
     with _ros_name_reads() as read:
         parse_request(*c.encode_request(request))
-    assert read <= set(cls.ros_names) | _PREFIXES.get(cls, set())
     resolved = request.with_names(lambda name, field: f"/resolved/{field}")
+    if isinstance(request, c.KeepBridge):  # it names its bridge as that bridge's removal does
+        request, resolved, cls = request.bridge, resolved.bridge, type(request.bridge)
+    assert read <= set(cls.ros_names) | _PREFIXES.get(cls, set())
     for path in cls.ros_names:
         if path in read and _value_at(request, path):
             assert _value_at(resolved, path) == f"/resolved/{path}"
