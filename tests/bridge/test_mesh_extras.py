@@ -23,6 +23,28 @@ PRIMITIVES = ('<link name="box"><visual><geometry><box size="0.1 0.2 0.3"/></geo
               '</visual></link><link name="tube"><visual><geometry><cylinder radius="0.01" '
               'length="0.3"/></geometry></visual></link><link name="ball"><visual><geometry>'
               '<sphere radius="0.025"/></geometry></visual></link>')
+# Two faces of their own colours sharing an edge: trimesh averages them on the shared
+# vertices (with scipy.sparse, which the daemon leaves out).
+FACE_COLOURED_PLY = """ply
+format ascii 1.0
+element vertex 4
+property float x
+property float y
+property float z
+element face 2
+property list uchar int vertex_indices
+property uchar red
+property uchar green
+property uchar blue
+property uchar alpha
+end_header
+0 0 0
+1 0 0
+0 1 0
+0 0 1
+3 0 1 2 255 0 0 255
+3 0 1 3 0 10 255 255
+"""
 
 # Each visual of a robot, as bytes digests of what the loader made (mm, link frame).
 READ = """
@@ -43,16 +65,31 @@ print(json.dumps({"visuals": {f"{v.link}/{v.index}": [
 """
 
 
-def _robot_with_primitives(tmp_path: Path) -> tuple[Path, dict[str, Path]]:
+def _robot_of_every_kind(tmp_path: Path) -> tuple[Path, dict[str, Path]]:
     """The demo arm (STL, OBJ and DAE meshes, colours from the URDF and from a DAE) with a
-    box, a cylinder and a sphere added."""
+    box, a cylinder and a sphere, a PLY of two face colours, a 3MF and a GLB added."""
+    import trimesh
+
     urdf, packages = demo_urdf_path(tmp_path / "demo")
+    meshes = tmp_path / "meshes"
+    meshes.mkdir()
+    (meshes / "faces.ply").write_text(FACE_COLOURED_PLY)
+    box = trimesh.creation.box(extents=(0.1, 0.2, 0.3))
+    (meshes / "box.3mf").write_bytes(trimesh.exchange.threemf.export_3MF(box))
+    ball = trimesh.creation.icosphere(subdivisions=1, radius=0.02)
+    ball.visual.vertex_colors = np.linspace(0, 255, len(ball.vertices) * 4).astype(
+        np.uint8).reshape(-1, 4)
+    (meshes / "ball.glb").write_bytes(ball.export(file_type="glb"))
+    files = "".join(f'<link name="{path.stem}_{path.suffix[1:]}"><visual><geometry><mesh '
+                    f'filename="file://{path}"/></geometry></visual></link>'
+                    for path in sorted(meshes.iterdir()))
+    names = ["box", "tube", "ball"] + [f"{p.stem}_{p.suffix[1:]}" for p in meshes.iterdir()]
     text = urdf.read_text()
     root = text.index(">", text.index("<robot")) + 1
     joints = "".join(f'<joint name="to_{name}" type="fixed"><parent link="base_link"/>'
-                     f'<child link="{name}"/></joint>' for name in ("box", "tube", "ball"))
+                     f'<child link="{name}"/></joint>' for name in names)
     mixed = urdf.with_name("mixed.urdf")
-    mixed.write_text(text[:root] + PRIMITIVES + joints + text[root:])
+    mixed.write_text(text[:root] + PRIMITIVES + files + joints + text[root:])
     return mixed, packages
 
 
@@ -67,15 +104,18 @@ def _read(mode: str, urdf: Path, packages: dict[str, Path]) -> dict[str, object]
 
 
 def test_meshes_read_without_the_extras_are_those_read_with_them(tmp_path: Path) -> None:
-    urdf, packages = _robot_with_primitives(tmp_path)
+    urdf, packages = _robot_of_every_kind(tmp_path)
     model = load_robot_file(urdf, package_paths=packages, cache=MeshCache())
     formats = {Path(v.source.split(" -> ")[0]).suffix for v in model.visuals}
-    assert formats >= {".stl", ".obj", ".dae"} and model.warnings == ()
+    assert formats >= {".stl", ".obj", ".dae", ".ply", ".3mf", ".glb"}
+    assert model.warnings == ()
     assert {v.link for v in model.visuals} >= {"box", "tube", "ball"}
+    faces = next(v for v in model.visuals if v.link == "faces_ply")
+    assert faces.vertex_rgba is not None  # per vertex: the shared edge's ends averaged
     lean = _read("lean", urdf, packages)
     full = _read("full", urdf, packages)
     # This machine has the extras (yourdfpy asks for trimesh[easy]): trimesh imports them.
-    assert {name.split(".")[0] for name in full["extras"]} >= {"scipy", "networkx"}  # type: ignore[union-attr]
+    assert {name.split(".")[0] for name in full["extras"]} >= {"scipy", "shapely"}  # type: ignore[union-attr]
     assert lean["extras"] == [] and lean["warnings"] == []
     assert lean["visuals"] == full["visuals"]
     # ... and both are what this process read.

@@ -364,9 +364,9 @@ def test_a_package_uri_file_and_a_malformed_urdf(client: Connection, tmp_path: P
 def test_a_robot_loads_without_the_mesh_extras_trimesh_would_import(
         daemon: RunningDaemon, client: Connection) -> None:
     """Issue 44: a daemon's first robot waited most of a second while trimesh imported
-    scipy, networkx, shapely, rtree, embreex and manifold3d, none of which reading meshes
-    uses. With the demo arm's STL, OBJ and DAE meshes sent, the daemon has mapped the
-    compiled modules of those that did the work (lxml, Pillow), none of the others'."""
+    scipy, shapely, rtree, embreex and manifold3d, none of which reading meshes uses.
+    With the demo arm's STL, OBJ and DAE meshes sent, the daemon has mapped the compiled
+    modules of those that did the work (lxml, Pillow), none of the others'."""
     result = client.command("create_robot", {"name": "demo_lean", "source": {
         "kind": "file", "path": f"package://{DEMO_PACKAGE}/urdf/demo_arm.urdf"}})
     try:
