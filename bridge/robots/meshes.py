@@ -14,6 +14,7 @@ loading the same file get identical arrays.
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import logging
 import os
@@ -31,6 +32,7 @@ import trimesh.units
 
 from bridge.robots.cache_folder import user_cache_dir
 from bridge.robots.errors import MeshError
+from bridge.robots.mesh_extras import take_back
 
 __all__ = [
     "MeshData",
@@ -233,6 +235,8 @@ def _read_geometries(path: Path) -> tuple[list[tuple[trimesh.Trimesh, F64]], flo
     if suffix not in MESH_SUFFIXES:
         raise MeshError(str(path), "a mesh file (" + ", ".join(MESH_SUFFIXES) + ")",
                         f"suffix {suffix or '(none)'}")
+    if suffix == ".3mf":
+        _take_back_3mf_reader()
     try:
         # process=False: keep the file's vertices; merging is ours (exact, see module doc).
         loaded = _load_collada(path) if suffix == ".dae" else \
@@ -292,6 +296,23 @@ def _load_collada(path: Path) -> Any:
         if isinstance(geometry, dict):
             geometry["process"] = False
     return trimesh.load(kwargs, force="scene")
+
+
+_READER_LOCK = threading.Lock()
+
+
+def _take_back_3mf_reader() -> None:
+    """trimesh's 3MF reader needs networkx (its build graph), which trimesh looks for only
+    as it starts and a daemon leaves out then (`bridge.robots.mesh_extras`: 0.06-0.1 s of
+    its first robot): the first 3MF file takes it back and registers the reader again."""
+    from trimesh.exchange import load as exchange, threemf
+
+    with _READER_LOCK:
+        if hasattr(threemf, "nx"):
+            return
+        take_back("networkx")
+        importlib.reload(threemf)  # its optional imports, tried again
+        exchange.mesh_loaders.update(threemf._three_loaders)
 
 
 def _explain_empty_collada(path: Path) -> None:
