@@ -34,6 +34,7 @@ from bridge.parameters.capability import ParameterBridges
 from bridge.playback.refusals import LiveRefusals
 from bridge.record.capability import RecordBridges
 from bridge.robots.capability import RobotBridges
+from bridge.robots.mesh_extras import leave_out_mesh_extras
 from bridge.types import InterfaceTypes
 from bridge.platform.receive_priority import (RECEIVE_SLICE_NS, ReceivePriorityError,
                                          raise_receive_threads, shorten_receive_slices)
@@ -224,6 +225,7 @@ async def run_daemon(config: DaemonConfig,
     within ``config.stop_timeout_s``."""
     if "gil-switch" not in config.without:
         shorten_gil_switches()
+    leave_out_mesh_extras()  # before any thread imports trimesh (a first robot, a mesh marker)
     loop = asyncio.get_running_loop()
     signals = StopSignals(loop, timeout_s=config.stop_timeout_s)
     signals.install()

@@ -841,8 +841,9 @@ def _fixed_frame(robot: _Robot, model: RobotModel | RobotDescription) -> str:
 
 
 def _import_mesh_libraries() -> None:
-    """trimesh and yourdfpy (most of a second), imported off the loop while the first
-    robot's description is fetched; `_read_robot` waits for them if they are not in yet."""
+    """trimesh and yourdfpy (0.1-0.2 s in a daemon, which leaves out trimesh's unused
+    extras: `bridge.robots.mesh_extras`), imported off the loop while the first robot's
+    description is fetched; `_read_robot` waits for them if they are not in yet."""
     try:
         import bridge.robots.model  # noqa: F401
     except Exception:  # noqa: BLE001 - the load itself imports again and says why
@@ -850,8 +851,8 @@ def _import_mesh_libraries() -> None:
 
 
 def _read_robot(text: str, **options: Any) -> RobotModel:
-    """`load_robot` in a worker thread: the mesh libraries (trimesh, yourdfpy: most of a
-    second) are imported there, never on the loop, the first time."""
+    """`load_robot` in a worker thread: the mesh libraries (trimesh, yourdfpy) are imported
+    there, never on the loop, the first time."""
     from bridge.robots.model import load_robot
 
     return load_robot(text, **options)

@@ -14,6 +14,7 @@ loading the same file get identical arrays.
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import logging
 import os
@@ -31,6 +32,7 @@ import trimesh.units
 
 from bridge.robots.cache_folder import user_cache_dir
 from bridge.robots.errors import MeshError
+from bridge.robots.mesh_extras import take_back
 
 __all__ = [
     "MeshData",
@@ -165,7 +167,8 @@ def _visual_colours(geom: trimesh.Trimesh) -> Optional[U8]:
             if len(faces) and np.all(faces == faces[0]):
                 colours = np.broadcast_to(faces[0], (len(geom.vertices), 4))
             else:
-                colours = visual.vertex_colors  # trimesh averages face colours per vertex
+                colours = _face_to_vertex_colours(np.asarray(geom.faces, dtype=np.int64),
+                                                  faces, len(geom.vertices))
         else:
             colours = visual.vertex_colors
     except Exception as exc:  # a broken material must not lose the geometry
@@ -175,6 +178,22 @@ def _visual_colours(geom: trimesh.Trimesh) -> Optional[U8]:
     if colours.shape != (len(geom.vertices), 4):
         return None
     return np.ascontiguousarray(colours)
+
+
+def _face_to_vertex_colours(faces: npt.NDArray[np.int64], face_colours: U8,
+                            vertex_count: int) -> U8:
+    """Each vertex the mean of the colours of the faces that use it, truncated to uint8
+    (trimesh's `face_to_vertex_color`, whose scipy.sparse a daemon leaves out:
+    `bridge.robots.mesh_extras`). Sums of uint8 values are exact in float64, so the result
+    is trimesh's to the bit."""
+    corners = faces.ravel()
+    per_corner = np.repeat(face_colours.astype(np.float64), faces.shape[1], axis=0)
+    sums: F64 = np.stack([np.bincount(corners, per_corner[:, k], minlength=vertex_count)
+                          for k in range(4)], axis=1).astype(np.float64)
+    degree = np.bincount(corners, minlength=vertex_count).astype(np.float64)
+    used = degree > 0
+    sums[used] /= degree[used, None]
+    return sums.astype(np.uint8)
 
 
 def _split_colours(colours: Optional[U8]
@@ -209,11 +228,15 @@ def _unit_scale(units: Optional[str]) -> float:
 # ---------------------------------------------------------------------------- files
 
 
-def _read_geometries(path: Path) -> tuple[list[trimesh.Trimesh], float]:
+def _read_geometries(path: Path) -> tuple[list[tuple[trimesh.Trimesh, F64]], float]:
+    """The file's triangle meshes, each with the transform its scene node places it by,
+    and the file's unit in metres."""
     suffix = path.suffix.lower()
     if suffix not in MESH_SUFFIXES:
         raise MeshError(str(path), "a mesh file (" + ", ".join(MESH_SUFFIXES) + ")",
                         f"suffix {suffix or '(none)'}")
+    if suffix == ".3mf":
+        _take_back_3mf_reader()
     try:
         # process=False: keep the file's vertices; merging is ours (exact, see module doc).
         loaded = _load_collada(path) if suffix == ".dae" else \
@@ -224,15 +247,39 @@ def _read_geometries(path: Path) -> tuple[list[trimesh.Trimesh], float]:
         raise MeshError(str(path), f"a readable {suffix[1:].upper()} mesh",
                         f"{type(exc).__name__}: {exc}") from None
     scale = _unit_scale(getattr(loaded, "units", None))
+    placed: list[tuple[Any, F64]] = [(loaded, np.eye(4))]
     if isinstance(loaded, trimesh.Scene):
+        # Not `Scene.dump`: it copies every geometry, and the copy of a face-coloured one
+        # averages its colours per vertex with scipy (left out in a daemon:
+        # `bridge.robots.mesh_extras`), to throw them away.
         try:
-            geoms = loaded.dump(concatenate=False)
+            placed = []
+            for node in loaded.graph.nodes_geometry:
+                transform, name = loaded.graph[node]
+                placed.append((loaded.geometry.get(name),
+                               np.asarray(transform, dtype=np.float64)))
         except Exception as exc:
             raise MeshError(str(path), "a mesh scene", f"{type(exc).__name__}: {exc}") from None
-    else:
-        geoms = [loaded]
-    meshes = [g for g in geoms if isinstance(g, trimesh.Trimesh) and len(g.faces) > 0]
+    meshes = [(g, t) for g, t in placed if isinstance(g, trimesh.Trimesh) and len(g.faces) > 0]
     return meshes, scale
+
+
+_IDENTITY = np.eye(4)
+
+
+def _placed(geom: trimesh.Trimesh, transform: F64) -> tuple[F64, npt.NDArray[np.int64]]:
+    """A scene geometry's vertices where its node puts them, and its faces (their winding
+    flipped by a mirroring transform), as trimesh's `apply_transform` makes them."""
+    vertices = np.asarray(geom.vertices, dtype=np.float64)
+    faces = np.asarray(geom.faces, dtype=np.int64)
+    if trimesh.util.allclose(transform, _IDENTITY, 1e-8):
+        return vertices, faces
+    vertices = trimesh.transformations.transform_points(vertices, transform)
+    if not trimesh.util.allclose(transform[:3, :3], _IDENTITY[:3, :3], 1e-6) and \
+            trimesh.transformations.flips_winding(transform):  # type: ignore[no-untyped-call]
+        faces = np.ascontiguousarray(np.fliplr(faces))
+    return vertices, faces
+
 
 
 def _load_collada(path: Path) -> Any:
@@ -249,6 +296,23 @@ def _load_collada(path: Path) -> Any:
         if isinstance(geometry, dict):
             geometry["process"] = False
     return trimesh.load(kwargs, force="scene")
+
+
+_READER_LOCK = threading.Lock()
+
+
+def _take_back_3mf_reader() -> None:
+    """trimesh's 3MF reader needs networkx (its build graph), which trimesh looks for only
+    as it starts and a daemon leaves out then (`bridge.robots.mesh_extras`: 0.06-0.1 s of
+    its first robot): the first 3MF file takes it back and registers the reader again."""
+    from trimesh.exchange import load as exchange, threemf
+
+    with _READER_LOCK:
+        if hasattr(threemf, "nx"):
+            return
+        take_back("networkx")
+        importlib.reload(threemf)  # its optional imports, tried again
+        exchange.mesh_loaders.update(threemf._three_loaders)
 
 
 def _explain_empty_collada(path: Path) -> None:
@@ -288,9 +352,8 @@ def load_mesh_file(path: Path, scale: Sequence[float] = (1.0, 1.0, 1.0), *,
     tris: list[U32] = []
     colour_parts: list[Optional[U8]] = []
     offset = 0
-    for g in geoms:
-        v = np.asarray(g.vertices, dtype=np.float64)
-        f = np.asarray(g.faces, dtype=np.int64)
+    for g, transform in geoms:
+        v, f = _placed(g, transform)
         if f.ndim != 2 or f.shape[1] != 3 or (len(f) and (f.min() < 0 or f.max() >= len(v))):
             raise MeshError(str(path), "triangles indexing the vertices",
                             f"faces of shape {f.shape}")

@@ -364,6 +364,30 @@ def test_a_package_uri_file_and_a_malformed_urdf(client: Connection, tmp_path: P
     assert not any(d.startswith(("broken", "urdf:broken")) for d in daemon_devices(client))
 
 
+def test_a_robot_loads_without_the_mesh_extras_trimesh_would_import(
+        daemon: RunningDaemon, client: Connection) -> None:
+    """Issue 44: a daemon's first robot waited most of a second while trimesh imported
+    scipy, shapely, rtree, embreex and manifold3d, none of which reading meshes uses.
+    With the demo arm's STL, OBJ and DAE meshes sent, the daemon has mapped the compiled
+    modules of those that did the work (lxml, Pillow), none of the others'."""
+    result = client.command("create_robot", {"name": "demo_lean", "source": {
+        "kind": "file", "path": f"package://{DEMO_PACKAGE}/urdf/demo_arm.urdf"}})
+    try:
+        assert result["state"] == "loaded" and result["warnings"] == []
+        sources = [entry["source"] for entry in devices_of(result)[1].values()]
+        assert {Path(s.split(" -> ")[0]).suffix for s in sources} >= {".stl", ".obj", ".dae"}
+        for device in devices_of(result)[1]:
+            client.wait_for(device, is_mesh)
+        maps = Path(f"/proc/{daemon.child.pid}/maps").read_text()
+        mapped = {line.split("/site-packages/", 1)[1].split("/", 1)[0]
+                  for line in maps.splitlines() if "/site-packages/" in line}
+        assert {"lxml", "PIL"} <= mapped, sorted(mapped)
+        assert [name for name in mapped if name.startswith(
+            ("scipy", "shapely", "rtree", "embreex", "manifold3d"))] == [], sorted(mapped)
+    finally:
+        client.command("remove_robot", {"name": "demo_lean"})
+
+
 # ------------------------------------------------------------------ namespaces, reload, remove
 
 def test_two_robots_under_namespaces_with_tf_prefixes(processes: Processes, client: Connection,
