@@ -207,7 +207,8 @@ class SubscriberBridge:
         if self._messages is None:
             self._hub.limit_to_audience(device)
             self._messages = WholeStream(self._hub.open_channel(device), metadata,
-                                         lambda: self.count, self.whole_document)
+                                         lambda: self.count, self.whole_document,
+                                         polled=self._lane is not None)
             pacer.add(self._messages)
         return self._messages.channel.device
 

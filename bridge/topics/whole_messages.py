@@ -12,7 +12,7 @@ stays exact.
 One thread serves every bridge (`WholeMessages`). A bridge that took a message in Python
 pokes it: the stream's newest goes at once if its last went out a frame ago or more (a lone
 message waits for nothing), else at the next frame. Messages a lane wrote in C poke
-nothing: while any client listens, every stream is looked at once a frame.
+nothing: while any client listens, a stream a lane feeds is looked at once a frame.
 """
 
 from __future__ import annotations
@@ -51,6 +51,7 @@ class WholeStream:
     metadata: dict[str, str]
     count: Callable[[], int]
     newest: Callable[[], Optional[Document]]
+    polled: bool = False  # messages may come without a poke (a lane writes them in C)
     sent_count: int = 0
     sent_at: float = -_FRAME_S
     poked: bool = False
@@ -146,7 +147,7 @@ class WholeMessages:
             stream.sent_count = count
             stream.sent_at = now
             self._post(stream, count)
-        return _FRAME_S  # a lane's messages poke nothing: look again next frame
+        return _FRAME_S if stream.polled else None  # a lane's messages poke nothing
 
     def _post(self, stream: WholeStream, count: int) -> None:
         try:
