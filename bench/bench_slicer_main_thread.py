@@ -34,6 +34,7 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "bench"))
 
 from bench_daemon import Child, free_port, load  # noqa: E402
+from slicer_client.connection import Connection  # noqa: E402
 from tools.slicer_core.demo import peer_or_exit, ros_env, start_demo  # noqa: E402
 
 SCENE = REPO / "bench" / "slicer_scenes" / "main_thread.py"
@@ -73,6 +74,11 @@ def main() -> int:
     demo, port = start_demo(env)
     publisher = Child("publisher", [sys.executable, "-u", str(PEERS), "publish", "pose",
                                     TOPIC], env=env)
+    # The pose subscriber every pass reads, kept for the run (a client's bridges end with
+    # it: the module's would go with the module's pass).
+    with Connection("127.0.0.1", port) as setup:
+        setup.command("create_subscriber", {"topic": TOPIC, "type": "PoseStamped"})
+        setup.command("keep_bridge", {"kind": "subscriber", "topic": TOPIC})
     rows = []
     try:
         print(f"load {load()}; {args.rate:g} Hz PoseStamped for {args.seconds:g} s, "
