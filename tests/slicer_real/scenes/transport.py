@@ -50,6 +50,8 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     started = time.monotonic()
     out["expired"] = error_of(lambda: transport.command("list_bridges", timeout=1.0))
     out["expired_after_s"] = time.monotonic() - started
+    # The peer's thread may read it after the timeout on a busy machine: wait for it.
+    until(lambda: bool(peer.of_type("COMMAND")), "the command at the peer", session.pump)
     out["command_names"] = [m.body.name for m in peer.of_type("COMMAND")]
 
     # Each send is one message, whether the text changed or not.
