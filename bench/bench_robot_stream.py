@@ -19,8 +19,9 @@ Measured in the same run:
    - tf lookups: the same 11 link transforms through plain create_tf_lookup (baseline:
      what a client would do without the robot capability);
    - robot: create_robot (link transforms streamed by the robot capability).
-   The /tf rate the daemon actually received and the TRANSFORMs/s the client got are
-   printed beside, since a Python publisher may not reach 1 kHz on a loaded machine.
+   The /tf rate the daemon actually received and the link poses/s the client got (a
+   TRANSFORM each, or an element of the robot's TDATA) are printed beside, since a Python
+   publisher may not reach 1 kHz on a loaded machine.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from bridge.robots.demo import DEMO_PACKAGE, demo_urdf_path  # noqa: E402
-from protocol.messages import Message, PolyData, Transform  # noqa: E402
+from protocol.messages import Message, PolyData, TrackingData, Transform  # noqa: E402
 from slicer_client.connection import Connection  # noqa: E402
 
 OMNI = REPO.parent / "shared" / "robots" / "sensable_omni_model"
@@ -104,6 +105,8 @@ class Recorder:
                 self.changed.notify_all()
             elif isinstance(message.body, Transform):
                 self.transforms += 1
+            elif isinstance(message.body, TrackingData):  # a robot's: one element per link
+                self.transforms += len(message.body.elements)
 
     def wait_meshes(self, devices: set[str], since: float, timeout: float = 60.0) -> float:
         deadline = time.monotonic() + timeout
@@ -277,7 +280,7 @@ def main() -> int:
     print(f"\nstreaming the demo's {len(link_names)} link transforms "
           f"({window:g} s windows, one client connected)")
     print(f"{'daemon doing':<28} {'joints':>8} {'CPU s/s':>8} {'/tf in/s':>9} "
-          f"{'TRANSFORM out/s':>16} {'CPU ms per /tf':>15}")
+          f"{'poses out/s':>16} {'CPU ms per /tf':>15}")
     for label, rate_text, cpu, tf_rate, out_rate in stream_rows:
         per = f"{cpu / tf_rate * 1000:.3f}" if tf_rate else "-"
         print(f"{label:<28} {rate_text:>8} {cpu:>8.3f} {tf_rate:>9.0f} {out_rate:>16.0f} "

@@ -37,6 +37,7 @@ __all__ = [
     "encode_name",
     "encode_text",
     "foreign_protocol",
+    "TDATA_NAME_MAX_BYTES",
     "pack_metadata",
     "unpack_metadata",
     "unpack_raw",
@@ -46,6 +47,10 @@ HEADER_SIZE = 58
 EXT_HEADER_SIZE = 12
 TYPE_NAME_SIZE = 12
 DEVICE_NAME_SIZE = 20
+# A TDATA element's name is char[20] too, but the C++ library 3D Slicer links reads one of
+# 20 bytes as empty (igtlTrackingDataMessage.cxx, UnpackContent, puts '\n' where its NUL
+# should be), and its connector then mixes up the elements: 19 bytes at most are sent.
+TDATA_NAME_MAX_BYTES = DEVICE_NAME_SIZE - 1
 SUPPORTED_HEADER_VERSIONS = (1, 2)
 
 # IANA MIBenum values OpenIGTLink uses for text.

@@ -30,6 +30,7 @@ from protocol.errors import BodyError, EncodeError
 from protocol.header import (
     DEVICE_NAME_SIZE,
     ENCODING_UTF8,
+    TDATA_NAME_MAX_BYTES,
     decode_name,
     decode_text,
     encode_name,
@@ -55,6 +56,9 @@ __all__ = [
     "Status",
     "StatusCode",
     "String",
+    "TrackerKind",
+    "TrackingData",
+    "TrackingElement",
     "Transform",
     "cell_count",
     "cells_from_array",
@@ -105,6 +109,14 @@ def _as_array(value: object, field_name: str, dtype: Any, expected: str) -> AnyA
         return np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as exc:
         raise EncodeError(field_name, expected, f"{type(value).__name__} ({exc})") from None
+
+
+def _element_table(type_name: str, content: bytes, dtype: np.dtype[Any]) -> AnyArray:
+    """A body of fixed-size elements (POINT, TDATA) as a structured array, whole ones only."""
+    if len(content) % dtype.itemsize:
+        raise _bad(type_name, "body", f"a multiple of {dtype.itemsize} bytes",
+                   f"{len(content)} bytes")
+    return np.frombuffer(content, dtype=dtype)
 
 
 def _check_shape(arr: AnyArray, shape: tuple[int, ...], field_name: str) -> None:
@@ -714,10 +726,7 @@ class Point:
 
     @classmethod
     def unpack(cls, content: bytes) -> Point:
-        if len(content) % _POINT_DTYPE.itemsize:
-            raise _bad(cls.TYPE, "body", f"a multiple of {_POINT_DTYPE.itemsize} bytes",
-                       f"{len(content)} bytes")
-        table = np.frombuffer(content, dtype=_POINT_DTYPE)
+        table = _element_table(cls.TYPE, content, _POINT_DTYPE)
         positions = table["position"].astype(np.float64)
         diameters = table["diameter"].astype(np.float64).tolist()
         rgbas = table["rgba"].tolist()
@@ -734,6 +743,74 @@ class Point:
             for i, row in enumerate(table)
         ]
         return cls(elements)
+
+
+# ----------------------------------------------------------------------------- TDATA
+
+_TDATA_DTYPE = np.dtype([("name", "S20"), ("kind", "u1"), ("reserved", "u1"),
+                         ("matrix", ">f4", (12,))])
+assert _TDATA_DTYPE.itemsize == 70  # IGTL_TDATA_ELEMENT_SIZE
+
+
+class TrackerKind(IntEnum):
+    """Spec: trackingdata.md, TYPE_X."""
+
+    TRACKER = 1
+    INSTRUMENT_6D = 2
+    INSTRUMENT_3D = 3
+    INSTRUMENT_5D = 4
+
+
+def _eye4() -> FloatArray:
+    return np.eye(4, dtype=np.float64)
+
+
+@dataclass(eq=False)
+class TrackingElement:
+    """Spec: trackingdata.md, one element: a named pose, as a TRANSFORM carries it."""
+
+    name: str
+    matrix: FloatArray = field(default_factory=_eye4)  # (4, 4), translation in mm
+    kind: int = TrackerKind.INSTRUMENT_6D
+
+    __eq__ = _dataclass_eq
+
+
+@dataclass
+class TrackingData:
+    """Spec: trackingdata.md. N x 70 bytes: NAME char[20], TYPE u8, reserved u8, MATRIX
+    f32[12] (TRANSFORM's layout). Several poses in one message: 3D Slicer's connector makes
+    one linear transform node per element name and updates them all at once. A name has at
+    most 19 bytes (`TDATA_NAME_MAX_BYTES`: what Slicer's library reads back)."""
+
+    TYPE: ClassVar[str] = "TDATA"
+    elements: list[TrackingElement] = field(default_factory=list)
+
+    def pack(self) -> bytes:
+        parts = []
+        for i, element in enumerate(self.elements):
+            what = f"TDATA elements[{i}]"
+            name = encode_name(element.name, f"{what}.name", TDATA_NAME_MAX_BYTES)
+            if not isinstance(element.kind, int) or not 0 <= element.kind <= 255:
+                raise EncodeError(f"{what}.kind", "an integer 0..255", repr(element.kind))
+            try:  # the matrix as a TRANSFORM packs it: checked the same way
+                matrix = Transform(element.matrix).pack()
+            except EncodeError as exc:
+                raise EncodeError(f"{what}.matrix", exc.expected, exc.got) from None
+            parts.append(name.ljust(DEVICE_NAME_SIZE, b"\0") + bytes((element.kind, 0))
+                         + matrix)
+        return b"".join(parts)
+
+    @classmethod
+    def unpack(cls, content: bytes) -> TrackingData:
+        table = _element_table(cls.TYPE, content, _TDATA_DTYPE)
+        matrices = np.zeros((len(table), 4, 4), dtype=np.float64)
+        matrices[:, :3, :] = table["matrix"].astype(np.float64)[:, _IGTL12_INDEX]
+        matrices[:, 3, 3] = 1.0
+        kinds = table["kind"].tolist()
+        return cls([TrackingElement(decode_name(row["name"], f"elements[{i}].name", cls.TYPE),
+                                    matrices[i], kinds[i])
+                    for i, row in enumerate(table)])
 
 
 # ----------------------------------------------------------------------------- IMAGE
@@ -1010,13 +1087,15 @@ class RawBody:
         return bytes(self.data)
 
 
-KnownBody = Union[Transform, String, Status, PolyData, Point, Image, Command, RtsCommand, Json]
-Body = Union[Transform, String, Status, PolyData, Point, Image, Command, RtsCommand, Json,
-             RawBody]
+KnownBody = Union[Transform, String, Status, PolyData, Point, TrackingData, Image, Command,
+                  RtsCommand, Json]
+Body = Union[Transform, String, Status, PolyData, Point, TrackingData, Image, Command,
+             RtsCommand, Json, RawBody]
 
 BODY_TYPES: dict[str, type[KnownBody]] = {
     cls.TYPE: cls
-    for cls in (Transform, String, Status, PolyData, Point, Image, Command, RtsCommand, Json)
+    for cls in (Transform, String, Status, PolyData, Point, TrackingData, Image, Command,
+                RtsCommand, Json)
 }
 
 _UNPACKERS: dict[str, Callable[[bytes], Body]] = {

@@ -16,6 +16,7 @@ tf_broadcaster        parent, child              ``tfb:world>tool``
 robot_link            robot, link                ``PSM1:base_link``
 robot_visual          robot, link, index         ``PSM1:base_link:0``
 robot_description     robot                      ``urdf:PSM1``
+robot_poses           robot                      ``poses:PSM1``
 parameter_client      node ``/rsp``              ``param:rsp``
 parameter_server      node (the daemon's)        ``params:bridge``
 service_client        service ``/spawn``         ``srvc:spawn``
@@ -65,6 +66,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from protocol.errors import ProtocolError
+from protocol.header import TDATA_NAME_MAX_BYTES
 
 __all__ = [
     "DEFAULT_HASH_LENGTH",
@@ -77,6 +79,7 @@ __all__ = [
     "KEY_FORMAT",
     "KEY_LABELS",
     "KEY_LINK_COUNT",
+    "KEY_LINK_DEVICES",
     "KEY_LINE_WIDTH",
     "KEY_MARKER_ID",
     "KEY_MARKER_NS",
@@ -149,6 +152,7 @@ class Role(str, enum.Enum):
     ROBOT_LINK = "robot_link"
     ROBOT_VISUAL = "robot_visual"
     ROBOT_DESCRIPTION = "robot_description"
+    ROBOT_POSES = "robot_poses"  # every link's pose in one TDATA (elements: link devices)
     PARAMETER_CLIENT = "parameter_client"
     PARAMETER_SERVER = "parameter_server"
     SERVICE_CLIENT = "service_client"
@@ -170,6 +174,7 @@ _PREFIX: dict[Role, str] = {
     Role.ROBOT_LINK: "",
     Role.ROBOT_VISUAL: "",
     Role.ROBOT_DESCRIPTION: "urdf:",
+    Role.ROBOT_POSES: "poses:",
     Role.PARAMETER_CLIENT: "param:",
     Role.PARAMETER_SERVER: "params:",
     Role.SERVICE_CLIENT: "srvc:",
@@ -197,12 +202,14 @@ KEY_ACTION = "ros2.action"
 KEY_GOAL_ID = "ros2.goal_id"  # a goal's UUID, 32 lower-case hex digits
 KEY_GOAL_STATUS = "ros2.status"  # a goal event's status (accepted, executing, succeeded...)
 KEY_UNITS = "ros2.units"
-# A robot visual's model: the device of the link TRANSFORM it goes under, and its colour
+# A robot visual's model: the device of the link it goes under (its TDATA element), and its colour
 # ("r g b a", floats 0..1), so a Slicer script can parent and colour it from attributes.
 KEY_PARENT_DEVICE = "ros2.parent_device"
 KEY_COLOR = "ros2.color"
 # On a robot's description device (STATUS OK once loaded): how many links and visuals it has.
 KEY_LINK_COUNT = "ros2.links"
+# A loaded robot's links: JSON {link: device}, its elements' names in the robot's TDATA.
+KEY_LINK_DEVICES = "ros2.link_devices"
 KEY_VISUAL_COUNT = "ros2.visuals"
 KEY_WARNINGS = "ros2.warnings"  # JSON list of the load's warnings (missing meshes...)
 # What the codecs add about a message's content.
@@ -236,7 +243,7 @@ KEY_DELETED = "ros2.deleted"
 METADATA_KEYS: tuple[str, ...] = (
     KEY_TOPIC, KEY_TYPE, KEY_FRAME, KEY_PARENT, KEY_CHILD, KEY_ROBOT, KEY_LINK,
     KEY_VISUAL, KEY_NODE, KEY_SERVICE, KEY_ROLE, KEY_UNITS, KEY_PARENT_DEVICE, KEY_COLOR,
-    KEY_LINK_COUNT, KEY_VISUAL_COUNT, KEY_WARNINGS, KEY_MARKER_NS, KEY_MARKER_ID,
+    KEY_LINK_COUNT, KEY_LINK_DEVICES, KEY_VISUAL_COUNT, KEY_WARNINGS, KEY_MARKER_NS, KEY_MARKER_ID,
     KEY_MARKER_TYPE, KEY_ACTION, KEY_GOAL_ID, KEY_GOAL_STATUS,
 )
 UNITS_MM = "mm"
@@ -250,6 +257,7 @@ _PART_KEYS: dict[Role, tuple[str, ...]] = {
     Role.ROBOT_LINK: (KEY_ROBOT, KEY_LINK),
     Role.ROBOT_VISUAL: (KEY_ROBOT, KEY_LINK, KEY_VISUAL),
     Role.ROBOT_DESCRIPTION: (KEY_ROBOT,),
+    Role.ROBOT_POSES: (KEY_ROBOT,),
     Role.PARAMETER_CLIENT: (KEY_NODE,),
     Role.PARAMETER_SERVER: (KEY_NODE,),
     Role.SERVICE_CLIENT: (KEY_SERVICE,),
@@ -331,6 +339,10 @@ class NameKey:
         return cls(Role.ROBOT_DESCRIPTION, (_clean(robot, KEY_ROBOT),))
 
     @classmethod
+    def robot_poses(cls, robot: str) -> NameKey:
+        return cls(Role.ROBOT_POSES, (_clean(robot, KEY_ROBOT),))
+
+    @classmethod
     def marker(cls, topic: str, ns: str, marker_id: int) -> NameKey:
         if isinstance(marker_id, bool) or not isinstance(marker_id, int):
             raise NamingError(field=KEY_MARKER_ID, expected="an integer", got=repr(marker_id))
@@ -410,15 +422,22 @@ def _digest(key: NameKey) -> str:
     return base64.b32encode(raw).decode("ascii").lower().rstrip("=")
 
 
+# A robot link's device also names its element in the robot's TDATA, where 19 bytes is
+# what 3D Slicer's library reads back (protocol.header.TDATA_NAME_MAX_BYTES).
+_MAX_BYTES = {Role.ROBOT_LINK: TDATA_NAME_MAX_BYTES}
+
+
 def device_name_for(key: NameKey, hash_length: int = DEFAULT_HASH_LENGTH) -> str:
-    """The deterministic device name of ``key`` (ASCII, at most 20 bytes).
+    """The deterministic device name of ``key`` (ASCII, at most 20 bytes; a robot link's
+    at most 19).
 
     ``hash_length`` only matters for names that must be abbreviated; the registry raises it
     on a collision.
     """
     prefix = _PREFIX[key.role]
     readable = prefix + _readable_body(key)
-    if _is_lossless(key) and len(readable) <= MAX_DEVICE_NAME_BYTES:
+    limit = _MAX_BYTES.get(key.role, MAX_DEVICE_NAME_BYTES)
+    if _is_lossless(key) and len(readable) <= limit:
         return readable
     if not 4 <= hash_length <= _MAX_HASH_LENGTH:
         raise NamingError(field="hash_length", expected=f"4..{_MAX_HASH_LENGTH}",
@@ -432,7 +451,7 @@ def device_name_for(key: NameKey, hash_length: int = DEFAULT_HASH_LENGTH) -> str
         if not parts[1]:
             parts.pop()  # an empty ns: nothing to abbreviate
     mark = _HASH_SEPARATOR + _digest(key)[:hash_length]
-    room = MAX_DEVICE_NAME_BYTES - len(prefix) - len(mark) - len(suffix)
+    room = limit - len(prefix) - len(mark) - len(suffix)
     return f"{prefix}{_abbreviate(key.role, parts, room)}{mark}{suffix}"
 
 

@@ -20,12 +20,13 @@ see slicer_client/README.md "Verified against"):
 
 from __future__ import annotations
 
-from typing import Any, Dict, Mapping, Optional, Tuple
+from typing import Any, Dict, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
 from protocol import commands as c
-from protocol.messages import Message, PolyData, Status, String, Transform
+from protocol.messages import (Message, PolyData, Status, String, TrackingData,
+                               TrackingElement, Transform)
 from slicer_client.connection import (CommandRefusedError, CommandTimeoutError,
                                       ConnectionClosedError)
 from slicer_client.scene_plan import metadata_from_attributes
@@ -96,12 +97,18 @@ def message_from_node(device: str, attributes: Mapping[str, str], *,
                       text: Optional[str] = None,
                       matrix: Optional[Any] = None,
                       status: Optional[Tuple[int, str, str]] = None,
-                      model: Optional[Tuple[Any, Any]] = None) -> Optional[Message]:
+                      model: Optional[Tuple[Any, Any]] = None,
+                      poses: Optional[Sequence[Tuple[str, Any]]] = None) -> Optional[Message]:
     """A connector node's content -> the Message it came from (text node: STRING,
     transform node: TRANSFORM, status node: STATUS from its code, error name and
     text, model node: POLYDATA from its points (N, 3) in mm and its polygons as
-    ``[n, i0..i(n-1), ...]``); None for anything else."""
+    ``[n, i0..i(n-1), ...]``, tracking-data bundle: TDATA from its transform nodes'
+    (name, 4x4 rows in mm)); None for anything else."""
     metadata = metadata_from_attributes(attributes)
+    if poses is not None:
+        return Message(device, TrackingData([
+            TrackingElement(name, np.array(rows, dtype=np.float64)) for name, rows in poses]),
+            metadata=metadata)
     if model is not None:
         points, polygons = model
         return Message(device, PolyData(points=np.asarray(points, dtype=np.float32),

@@ -23,8 +23,9 @@ from protocol import commands as c
 from protocol.commands.fields import Args
 from protocol.conversions import quaternion_to_rotation
 from protocol.messages import (Message, Point, PointElement, PolyData, Status, StatusCode,
-                               String, Transform, cells_from_array)
+                               String, TrackingData, Transform, cells_from_array)
 from protocol.naming import (KEY_COLOR, KEY_COUNT, KEY_FRAME, KEY_LINK, KEY_LINK_COUNT,
+                             KEY_LINK_DEVICES,
                              KEY_MARKER_ID, KEY_MARKER_NS, KEY_MARKER_TYPE, KEY_MARKERS,
                              KEY_PARENT_DEVICE, KEY_POSITION, KEY_ROLE, KEY_TOPIC, KEY_VISUAL,
                              KEY_VISUAL_COUNT, KEY_WARNINGS)
@@ -592,7 +593,8 @@ class RobotLink:
 
 class Robot(Resource):
     """A robot: one mesh (PolyData, mm, in its link's frame) per link visual and one
-    transform per link, as they arrive; read from the messages' ros2.* metadata.
+    transform per link, as they arrive (every link's in one TDATA, each element named by
+    its link's device); read from the messages' ros2.* metadata.
     Callbacks get (kind, link_name, value) with kind "transform" or "mesh", and
     ("warning", "", text) for each warning of a load (also logged, and in `warnings`)."""
 
@@ -608,6 +610,7 @@ class Robot(Resource):
         self.name = name
         self.links: Dict[str, RobotLink] = {}
         self._devices: Dict[str, Tuple[str, Optional[int]]] = {}
+        self._poses_device = ""  # the TDATA of every link's pose (create_robot's reply)
         # (links, visuals) from the daemon's "loaded" STATUS: a robot created while its
         # description was not there yet learns its size only then.
         self._expected: Optional[Tuple[int, int]] = None
@@ -629,9 +632,10 @@ class Robot(Resource):
 
     def progress(self) -> Tuple[int, Optional[int]]:
         """(meshes received, meshes expected); expected is None until the daemon said."""
-        expected = sum(1 for _, index in self._devices.values() if index is not None) \
-            if self._devices else (self._expected[1] if self._expected else None)
-        return self.mesh_count(), expected
+        if self._expected is not None:  # the daemon's count at the newest load
+            return self.mesh_count(), self._expected[1]
+        visuals = sum(1 for _, index in self._devices.values() if index is not None)
+        return self.mesh_count(), visuals if self._devices else None
 
     def _created(self, result: Mapping[str, Any]) -> None:
         super()._created(result)
@@ -639,6 +643,7 @@ class Robot(Resource):
         with self._changed:
             self.state = str(result.get("state", ""))
             self.reason = str(result.get("reason", ""))
+            self._poses_device = str(result.get("poses_device", ""))
             for item in result.get("links", []):
                 link = self.links.setdefault(item["link"], RobotLink(item["link"]))
                 link.device = item.get("device", "")
@@ -648,10 +653,13 @@ class Robot(Resource):
                     self._devices[device] = (link.name, index)
 
     def devices(self) -> Tuple[str, ...]:
-        return tuple(self._devices)
+        return tuple(self._devices) + ((self._poses_device,) if self._poses_device else ())
 
     def _handle(self, message: Message) -> None:
         meta = message.metadata
+        if isinstance(message.body, TrackingData):
+            self._poses(message.body)
+            return
         if isinstance(message.body, Status) and KEY_LINK_COUNT not in meta:
             self._description_status(message.body)
             return
@@ -659,6 +667,7 @@ class Robot(Resource):
             with self._changed:
                 self._expected = (int(meta[KEY_LINK_COUNT]), int(meta.get(KEY_VISUAL_COUNT, 0)))
                 self.state, self.reason = "loaded", ""
+                self._learn_links(meta.get(KEY_LINK_DEVICES, "{}"))
                 self._changed.notify_all()
             try:
                 warnings = json.loads(meta.get(KEY_WARNINGS, "[]"))
@@ -673,12 +682,7 @@ class Robot(Resource):
         value: Union[np.ndarray, PolyData]  # a link matrix or mesh, as `kind` says
         with self._changed:
             link = self.links.setdefault(link_name, RobotLink(link_name))
-            if isinstance(message.body, Transform) and meta.get(KEY_ROLE, "robot_link") \
-                    == "robot_link":
-                link.device = link.device or message.device_name
-                link.matrix = np.array(message.body.matrix, dtype=np.float64)
-                kind, value = "transform", link.matrix
-            elif isinstance(message.body, PolyData):
+            if isinstance(message.body, PolyData):
                 index = int(meta.get(KEY_VISUAL, known[1] if known and known[1] is not None
                                      else 0))
                 link.meshes[index] = message.body
@@ -688,6 +692,37 @@ class Robot(Resource):
                 return
             self._changed.notify_all()
         self._notify(kind, link_name, value)
+
+    def _learn_links(self, text: str) -> None:
+        """The link devices of a load ("loaded" STATUS): a robot created while it waited
+        learns there which TDATA element is which link."""
+        try:
+            devices = json.loads(text)
+        except ValueError:
+            devices = None
+        if not isinstance(devices, dict):
+            log.warning("robot %s: unreadable link devices from the daemon: %r", self.name,
+                        text[:200])
+            return
+        for name, device in devices.items():
+            link = self.links.setdefault(str(name), RobotLink(str(name)))
+            link.device = str(device)
+            self._devices[link.device] = (link.name, None)
+
+    def _poses(self, poses: TrackingData) -> None:
+        """Every placed link's pose, one element each, named by the link's device."""
+        moved = []
+        with self._changed:
+            for element in poses.elements:
+                known = self._devices.get(element.name)
+                if known is None or known[1] is not None:
+                    continue  # not a link of this robot (as the create reply named them)
+                link = self.links.setdefault(known[0], RobotLink(known[0], element.name))
+                link.matrix = np.array(element.matrix, dtype=np.float64)
+                moved.append((link.name, link.matrix))
+            self._changed.notify_all()
+        for link_name, matrix in moved:
+            self._notify("transform", link_name, matrix)
 
     def _description_status(self, status: Status) -> None:
         """The daemon's word on the description: waiting for it, or not loaded (why)."""

@@ -17,14 +17,15 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 import numpy.typing as npt
 
-from protocol.naming import (KEY_CHILD, KEY_LINK, KEY_MARKER_ID, KEY_MARKER_NS,
+from protocol.naming import (KEY_CHILD, KEY_FRAME, KEY_LINK, KEY_MARKER_ID, KEY_MARKER_NS,
                              KEY_MARKER_TYPE, KEY_NODE, KEY_PARENT, KEY_PARENT_DEVICE,
                              KEY_POINT_COLORS, KEY_POSITION, KEY_ROBOT, KEY_ROLE, KEY_TOPIC,
-                             KEY_TYPE, KEY_VISUAL, NameKey, NamingError, Role,
+                             KEY_TYPE, KEY_UNITS, KEY_VISUAL, NameKey, NamingError, Role,
                              device_name_for)
 
 __all__ = ["ATTRIBUTE_PREFIX", "DEFAULT_COLOUR", "MARKERS_FOLDER", "NodePlan", "ROBOTS_FOLDER",
-           "describe_bridges", "is_point_like", "marker_folder", "metadata_from_attributes",
+           "describe_bridges", "is_point_like", "link_metadata", "marker_folder",
+           "metadata_from_attributes",
            "model_colour", "plan_node", "point_colours_differ", "robot_folder",
            "stale_marker_nodes", "vertex_per_point"]
 
@@ -67,6 +68,15 @@ def metadata_from_attributes(attributes: Mapping[str, str]) -> Dict[str, str]:
     """Node attributes -> the message metadata they came from (``OpenIGTLink.`` stripped)."""
     return {k[len(ATTRIBUTE_PREFIX):]: v for k, v in attributes.items()
             if k.startswith(ATTRIBUTE_PREFIX)}
+
+
+def link_metadata(poses: Mapping[str, str], robot: str, link: str) -> Dict[str, str]:
+    """The metadata of a robot link's transform node: its robot's TDATA (whose metadata
+    `poses` is) makes one node per link but carries one metadata for all, so the module
+    gives each link node what its own TRANSFORM would have carried."""
+    metadata = {k: v for k, v in poses.items() if k in (KEY_FRAME, KEY_PARENT, KEY_UNITS)}
+    metadata.update({KEY_ROLE: Role.ROBOT_LINK.value, KEY_ROBOT: robot, KEY_LINK: link})
+    return metadata
 
 
 def is_point_like(metadata: Mapping[str, str]) -> bool:
@@ -188,6 +198,9 @@ def plan_node(device: str, metadata: Mapping[str, str], *,
                         parent_device=_link_device(robot, link, link_devices),
                         folder=robot_folder(robot), colour=colour, opacity=opacity,
                         point_colours=point_colours_differ(metadata, rgba))
+    if role == Role.ROBOT_POSES.value and robot:
+        return NodePlan(device, "robot_poses", f"{robot} link poses",
+                        folder=robot_folder(robot))
     if role == Role.ROBOT_DESCRIPTION.value and robot:
         return NodePlan(device, "robot_description", f"{robot} URDF",
                         folder=robot_folder(robot))

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Optional
 import numpy as np
 
 from protocol.framing import Decoder, encode
-from protocol.messages import Command, Message, Status
+from protocol.messages import Command, Message, Status, TrackingData
 from support import Child, Processes, scaled
 
 if TYPE_CHECKING:  # rosbags: the test extra
@@ -86,12 +86,14 @@ def _urdf_file(bag: RobotBag) -> str:
 
 class RawReader:
     """OpenIGTLink over one socket with protocol/ alone: every message decoded, the newest
-    per device kept, COMMANDs answered by their command id."""
+    per device kept (and per element of a TDATA, a robot's link poses, in `poses`),
+    COMMANDs answered by their command id."""
 
     def __init__(self, port: int) -> None:
         self.sock = socket.create_connection(("127.0.0.1", port), timeout=30)
         self.sock.sendall(encode(Message("", Status(text="raw reader")), header_version=2))
         self.latest: dict[str, Message] = {}
+        self.poses: dict[str, np.ndarray] = {}  # TDATA element name -> its newest matrix
         self.replies: dict[int, dict[str, Any]] = {}
         self.cond = threading.Condition()
         self._ids = iter(range(1, 1 << 30))
@@ -113,6 +115,8 @@ class RawReader:
                                 message.body.text)
                         else:
                             self.latest[message.device_name] = message
+                        if isinstance(message.body, TrackingData):
+                            self.poses.update((e.name, e.matrix) for e in message.body.elements)
                         self.cond.notify_all()
         except OSError:
             return

@@ -14,11 +14,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
+import numpy as np
 import pytest
 
 from bridge.platform.shm_locks import (ports_of_domains, release_stuck, remove_dead_segments,
                                   remove_unfinished)
 from slicer_client.connection import CommandRefusedError, Connection
+from protocol.messages import Message
 
 REPO = Path(__file__).resolve().parent.parent
 PEERS = Path(__file__).resolve().parent / "peers"
@@ -298,3 +300,25 @@ def wait_robot_described(robot: object, timeout: float = 30) -> None:
         return True
     wait_until(described, timeout=timeout,
                what=f"robot {getattr(robot, 'name', '?')} loaded")
+
+
+def wait_link_pose(connection: Connection, poses_device: str, link_device: str,
+                   predicate: Optional[Callable[[np.ndarray], bool]] = None,
+                   timeout: float = 30.0) -> np.ndarray:
+    """The pose (4x4, mm) of one link, from its robot's TDATA on `poses_device` (each
+    element named by the link's device): the first whose matrix `predicate` accepts."""
+    from protocol.messages import TrackingData
+
+    def pose(message: Message) -> Optional[np.ndarray]:
+        if isinstance(message.body, TrackingData):
+            for element in message.body.elements:
+                if element.name == link_device:
+                    return element.matrix
+        return None
+
+    def matches(message: Message) -> bool:
+        matrix = pose(message)
+        return matrix is not None and (predicate is None or predicate(matrix))
+    found = pose(connection.wait_for(poses_device, matches, timeout=timeout))
+    assert found is not None
+    return found

@@ -38,7 +38,7 @@ import asyncio
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Awaitable, Callable, Optional, Union
 
 import numpy as np
@@ -66,6 +66,8 @@ from protocol.commands import (
     BroadcastTransformResult,
     CommandFailedError,
     CreateTfBroadcaster,
+    DISPLAY_HZ,
+    DISPLAY_HZ_MIN,
     CreateTfLookup,
     ErrorCode,
     LookupTransform,
@@ -83,12 +85,14 @@ from protocol.commands import (
 from protocol.conversions import (
     ConversionError,
     igtl_stamp_or_now,
+    igtl12_to_matrix,
     igtl_timestamp_now,
     pose_to_igtl12,
     validate_matrix,
 )
 from protocol.framing import StreamTemplate
-from protocol.messages import Message, Status, StatusCode, Transform
+from protocol.messages import (Message, Status, StatusCode, TrackingData, TrackingElement,
+                               Transform)
 from protocol.naming import UNITS_MM, DeviceNameRegistry, NameKey, metadata_for
 
 if TYPE_CHECKING:  # ROS is imported where the daemon subscribes and publishes: `TfLookups`
@@ -101,6 +105,8 @@ __all__ = ["TfBridges", "TfLookups", "status_for_error", "tf_cdr_to_transforms",
 log = logging.getLogger(__name__)
 
 _NS_PER_S = 1_000_000_000
+# When a pose group's message that named new elements goes again (`TfLookups._send_again`).
+_SEND_AGAIN_AFTER_S = (2.0 / DISPLAY_HZ, 1.5 / DISPLAY_HZ_MIN)
 
 
 
@@ -220,6 +226,7 @@ class _Lookup:
     metadata: dict[str, str]
     requested: tuple[str, str]  # the frames as the client named them
     rate_hz: Optional[float]
+    group: Optional[str] = None  # the pose group it is an element of (device), if any
     messages: int = 0
     # The constant part of its TRANSFORMs: a result costs two struct packs and a CRC, not
     # a Message and a full encode (a 7-link robot at 1 kHz is 7,000 of them a second).
@@ -236,6 +243,33 @@ class _Lookup:
             return None
         return TemplateFrame(self.template, pack_transform(values),
                              _igtl_timestamp(result.stamp_ns), values, transform_body)
+
+
+@dataclass
+class _PoseGroup:
+    """Lookups sent together as one TDATA on `device`: each lookup an element named by its
+    own device, every element placed now in each message (one that tf cannot place is left
+    out, as the spec says of a tool out of view), so the newest message is the whole state.
+    A robot's links: 3D Slicer's connector updates all its link nodes from one message."""
+
+    device: str
+    metadata: dict[str, str]
+    # element -> (matrix in mm, stamp ns)
+    poses: dict[str, tuple[npt.NDArray[np.float64], int]] = field(default_factory=dict)
+    sent: frozenset[str] = frozenset()  # the element names of the last message
+
+    def names_new_elements(self) -> bool:
+        """Does the message now name an element the last one did not (then noted as sent)?"""
+        names = frozenset(self.poses)
+        new, self.sent = not names <= self.sent, names
+        return new
+
+    def message(self) -> Message:
+        stamps = [stamp for _, stamp in self.poses.values()]
+        return Message(device_name=self.device, body=TrackingData(
+            [TrackingElement(name, matrix) for name, (matrix, _) in self.poses.items()]),
+            timestamp=_igtl_timestamp(max(stamps)) if stamps else igtl_timestamp_now(),
+            metadata=self.metadata)
 
 
 @dataclass
@@ -271,6 +305,7 @@ class TfLookups:
         self.registry = LookupRegistry(self.buffer)
         self.lookups: dict[tuple[str, str], _Lookup] = {}
         self._by_key: dict[LookupKey, _Lookup] = {}
+        self._groups: dict[str, _PoseGroup] = {}
         self._tf_topic = tf_topic
         self._tf_static_topic = tf_static_topic
         # Evaluation + writing of lookups, from either thread (see the module docstring).
@@ -412,11 +447,17 @@ class TfLookups:
     def _frames_of(self, results: list[tuple[LookupKey, LookupResult]],
                    ) -> list[tuple[str, Frame]]:
         frames: list[tuple[str, Frame]] = []
+        moved: dict[str, _PoseGroup] = {}
         for key, result in results:
             lookup = self._by_key.get(key)
             if lookup is None:
                 continue
             lookup.messages += 1
+            group = self._groups.get(lookup.group) if lookup.group is not None else None
+            if group is not None:
+                self._place(group, lookup, result)
+                moved[group.device] = group
+                continue
             if isinstance(result, StampedTransform):
                 frame = lookup.frame_of(result)
                 if frame is not None:
@@ -436,7 +477,42 @@ class TfLookups:
             frames.append((lookup.device, Frame(Message(
                 device_name=lookup.device, body=body, timestamp=timestamp,
                 metadata=lookup.metadata))))
+        for device, group in moved.items():
+            frames.append((device, Frame(group.message())))
+            if group.names_new_elements():
+                self._hub.call_soon(self._send_again, device)
         return frames
+
+    def _send_again(self, device: str) -> None:
+        """3D Slicer's connector makes the node of an element new to a bundle it has at the
+        identity, not at the element's pose (vtkMRMLIGTLConnectorNode.cxx, SlicerOpenIGTLink
+        d090ca4: its new-element branch passes a fresh matrix); the next message places it.
+        A robot at rest sends none, so a group's message that named new elements goes again:
+        two display frames later, and once more after the slowest display's frame (a paced
+        client takes only the newest message of a frame)."""
+        loop = asyncio.get_running_loop()
+        for delay in _SEND_AGAIN_AFTER_S:
+            loop.call_later(delay, self._post_group, device)
+
+    def _post_group(self, device: str) -> None:
+        with self._deliver_lock:
+            group = self._groups.get(device)
+            if group is not None and not self._closed:
+                self._hub.post_frames([(device, Frame(group.message()))])
+
+    def _place(self, group: _PoseGroup, lookup: _Lookup, result: LookupResult) -> None:
+        """A group element's new result: its pose, or out of the group while tf cannot
+        place it (or its pose is beyond float32 in mm: said, as for a lookup's TRANSFORM)."""
+        values = None
+        if isinstance(result, StampedTransform):
+            values = pose_to_igtl12(*result.translation, *result.rotation)
+            if values is not None:
+                group.poses[lookup.device] = (igtl12_to_matrix(values), result.stamp_ns)
+                return
+            self._refusals.warning(lookup.device, None, "lookup %s <- %s (element %r of %r) "
+                                   "not sent: not finite as float32 in mm",
+                                   *lookup.requested, lookup.device, group.device)
+        group.poses.pop(lookup.device, None)
 
     # ------------------------------------------------------------------ frames
 
@@ -467,23 +543,42 @@ class TfLookups:
 
     def stream_lookup(self, parent: str, child: str, *, device: str,
                       metadata: dict[str, str], rate_hz: Optional[float] = None,
-                      ) -> LookupKey:
+                      group: Optional[str] = None) -> LookupKey:
         """Stream parent <- child on ``device`` with ``metadata`` for another capability
         (robots): the same change-driven evaluation and delivery as `create_lookup`, but
         the caller owns the device name (and forgets it). Frames are taken as given (no
-        ``frame_prefix``). Returns the handle for `stop_lookup`."""
+        ``frame_prefix``). With ``group`` (an `open_pose_group` device) it is an element
+        of that group's TDATA, named ``device``, instead of a TRANSFORM of its own.
+        Returns the handle for `stop_lookup`."""
         tag = f"device:{device}"  # one registration per device, beside clients' lookups
         with self._deliver_lock:  # the streams thread must not evaluate it unregistered
             key = self.registry.add(parent, child, rate_hz=rate_hz, tag=tag)
-            self._by_key[key] = _Lookup(key, device, dict(metadata), (parent, child), rate_hz)
+            self._by_key[key] = _Lookup(key, device, dict(metadata), (parent, child), rate_hz,
+                                        group)
         self._arm()
         return key
 
     def stop_lookup(self, handle: LookupKey) -> None:
         """Stop a `stream_lookup` (its device is the caller's to forget)."""
         with self._deliver_lock:  # after this, nothing more is written to its device
-            if self._by_key.pop(handle, None) is not None:
+            lookup = self._by_key.pop(handle, None)
+            if lookup is not None:
                 self.registry.remove(handle)
+                group = self._groups.get(lookup.group) if lookup.group is not None else None
+                if group is not None:
+                    group.poses.pop(lookup.device, None)
+
+    def open_pose_group(self, device: str, metadata: dict[str, str]) -> None:
+        """Lookups streamed with ``group=device`` go as one TDATA on ``device`` (the
+        caller's device name, to forget with `close_pose_group`). Opening it again
+        changes its metadata."""
+        with self._deliver_lock:
+            group = self._groups.setdefault(device, _PoseGroup(device, dict(metadata)))
+            group.metadata = dict(metadata)
+
+    def close_pose_group(self, device: str) -> None:
+        with self._deliver_lock:
+            self._groups.pop(device, None)
 
     def create_lookup(self, request: CreateTfLookup) -> Created[TfLookupBridge]:
         pair = (request.parent, request.child)  # mapped by the dispatcher

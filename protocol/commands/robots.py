@@ -24,7 +24,8 @@ __all__ = ["JOINT_STATE_TYPE", "MAX_JOINTS", "CreateRobot", "DescribeRobotJoints
 class CreatedRobot(Result):
     """A robot as `create_robot` answers: its state (``reason`` while it waits or failed),
     where its description comes from, its URDF's name and root link (null until loaded),
-    and its devices: a TRANSFORM per link, a POLYDATA per visual, the links withheld (and
+    and its devices: a POLYDATA per visual, every link's pose in one TDATA on
+    ``poses_device`` (each element named by its link's ``device``), the links withheld (and
     why), and the load's warnings."""
 
     name: str
@@ -40,6 +41,7 @@ class CreatedRobot(Result):
     withheld: tuple[dict[str, Any], ...]
     warnings: tuple[str, ...]
     reason: Optional[str] = None
+    poses_device: str = ""
 
 
 @dataclass(frozen=True)

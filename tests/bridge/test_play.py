@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import slicer_client
-from protocol.messages import Image, Message, PolyData, Transform
+from protocol.messages import Image, Message, PolyData
 from protocol.naming import NameKey, device_name_for
 from support import Processes, scaled, wait_until
 
@@ -48,24 +48,23 @@ def link_devices(reply: dict[str, Any]) -> dict[str, str]:
 
 def assert_poses(reader: RawReader, devices: dict[str, str],
                  expected: dict[str, np.ndarray]) -> None:
-    def all_match(latest: dict[str, Message]) -> bool:
+    def all_match(_latest: dict[str, Message]) -> bool:
         for link, device in devices.items():
-            message = latest.get(device)
-            if not isinstance(message, Message) or not isinstance(message.body, Transform):
-                return False
-            if not np.allclose(message.body.matrix[:3, 3], expected[link][:3, 3], atol=0.01):
+            matrix = reader.poses.get(device)
+            if matrix is None or not np.allclose(matrix[:3, 3], expected[link][:3, 3],
+                                                 atol=0.01):
                 return False
         return True
     try:
         reader.wait(all_match, "every link at its forward-kinematics pose")
     except AssertionError:
         for link, device in devices.items():  # say which link and by how much
-            got = reader.latest.get(device)
-            got_t = None if got is None else np.asarray(got.body.matrix)[:3, 3]
+            got = reader.poses.get(device)
+            got_t = None if got is None else got[:3, 3]
             print(link, got_t, expected[link][:3, 3])
         raise
     for link, device in devices.items():
-        matrix = np.asarray(reader.latest[device].body.matrix)
+        matrix = reader.poses[device]
         np.testing.assert_allclose(matrix[:3, :3], expected[link][:3, :3], atol=1e-5)
 
 

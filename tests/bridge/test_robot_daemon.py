@@ -21,12 +21,13 @@ import numpy as np
 import pytest
 
 from bridge.robots.demo import DEMO_PACKAGE, demo_urdf_path
-from protocol.messages import AttributeKind, Message, PolyData, Status, Transform
+from protocol.messages import AttributeKind, Message, PolyData, Status, TrackingData
 from protocol.polydata import RGBA_ATTRIBUTE
 from protocol.naming import NameKey, device_name_for
 from slicer_client.connection import CommandRefusedError, Connection
 from support import (SHARED, Processes, RunningDaemon, assert_clean_exit, children_of,
-                     pick_free_port, require_shared, spare_domain, start_daemon, wait_until)
+                     pick_free_port, require_shared, spare_domain, start_daemon, wait_link_pose,
+                     wait_until)
 
 OMNI = SHARED / "robots" / "sensable_omni_model"
 LOAD_TIMEOUT = 30.0  # discovery of a node that just started can take a few seconds
@@ -109,12 +110,12 @@ def is_mesh(message: Message) -> bool:
 
 
 def matrix_close(expected: np.ndarray, atol: float = 1e-2) -> Any:
-    return lambda m: isinstance(m.body, Transform) and np.allclose(
-        np.asarray(m.body.matrix), expected, atol=atol)
+    return lambda matrix: np.allclose(np.asarray(matrix), expected, atol=atol)
 
 
 def devices_of(result: dict[str, Any]) -> tuple[dict[str, str], dict[str, dict[str, Any]]]:
-    """(link -> TRANSFORM device, visual device -> its entry) of a create_robot result."""
+    """(link -> its device, the name of its element in the robot's TDATA; visual device
+    -> its entry) of a create_robot result."""
     links = {item["link"]: item["device"] for item in result["links"]}
     visuals = {item["device"]: item for item in result["visuals"]}
     return links, visuals
@@ -236,21 +237,25 @@ def check_omni(client: Connection, result: dict[str, Any]) -> None:
         assert meta["ros2.units"] == "mm"
         assert tuple(float(v) for v in meta["ros2.color"].split()) == pytest.approx(colour)
     expected = omni_link_poses_mm(OMNI_Q)
+    poses = result["poses_device"]
+    assert poses == "poses:omni"
     for link, device in links.items():
-        message = client.wait_for(device, matrix_close(expected[link]), timeout=LOAD_TIMEOUT)
-        meta = message.metadata
-        assert meta["ros2.role"] == "robot_link" and meta["ros2.link"] == link
-        assert meta["ros2.frame"] == "base" and meta["ros2.units"] == "mm"
+        wait_link_pose(client, poses, device, matrix_close(expected[link]), LOAD_TIMEOUT)
+    # One TDATA holds every link: its elements are the links' devices.
+    message = client.latest(poses)
+    assert isinstance(message.body, TrackingData)
+    assert sorted(e.name for e in message.body.elements) == sorted(links.values())
+    meta = message.metadata
+    assert meta["ros2.role"] == "robot_poses" and meta["ros2.robot"] == "omni"
+    assert meta["ros2.frame"] == "base" and meta["ros2.units"] == "mm"
 
 
 def test_omni_from_the_parameter_meshes_colours_and_forward_kinematics(
         omni: dict[str, Any], client: Connection) -> None:
     check_omni(client, omni)
     # The waist at 90 degrees turns the shoulder offset (-7.5 mm along x) onto -y.
-    torso = client.latest(omni["links"][1]["device"])
-    upper = client.latest(devices_of(omni)[0]["upper_arm"])
-    assert torso is not None and upper is not None
-    np.testing.assert_allclose(np.asarray(upper.body.matrix)[:3, 3], (0, -7.5, 125), atol=1e-2)
+    upper = wait_link_pose(client, omni["poses_device"], devices_of(omni)[0]["upper_arm"])
+    np.testing.assert_allclose(upper[:3, 3], (0, -7.5, 125), atol=1e-2)
 
 
 def test_a_client_that_connects_later_gets_meshes_and_transforms(
@@ -333,7 +338,8 @@ def test_from_a_file_primitives_a_dae_mesh_and_a_missing_mesh(
         # (the mesh reader keeps 8 bits per channel)
         np.testing.assert_allclose(rgba_of(meshes["dae"])[0], diffuse, atol=1 / 255)
         # The root link is the fixed frame: its TRANSFORM is the identity.
-        client.wait_for(links["root"], matrix_close(np.eye(4), atol=1e-9))
+        wait_link_pose(client, result["poses_device"], links["root"],
+                       matrix_close(np.eye(4), atol=1e-9))
     finally:
         client.command("remove_robot", {"name": "mixed"})
 
@@ -412,10 +418,11 @@ def test_two_robots_under_namespaces_with_tf_prefixes(processes: Processes, clie
             for device in visuals:
                 assert client.wait_for(device, is_mesh).metadata["ros2.robot"] == ns
             arm = pose(rot("z", angles[ns]), (0, 0, 100))
-            client.wait_for(links["arm"], matrix_close(arm), timeout=LOAD_TIMEOUT)
-            client.wait_for(links["tool"], matrix_close(arm @ pose(np.eye(3), (0, 0, 200))),
-                            timeout=LOAD_TIMEOUT)
-            assert client.latest(links["arm"]).metadata["ros2.child"] == f"{ns}/arm"
+            poses = result["poses_device"]
+            wait_link_pose(client, poses, links["arm"], matrix_close(arm), LOAD_TIMEOUT)
+            wait_link_pose(client, poses, links["tool"],
+                           matrix_close(arm @ pose(np.eye(3), (0, 0, 200))), LOAD_TIMEOUT)
+            assert client.latest(poses).metadata["ros2.frame"] == f"{ns}/base"
     finally:
         for ns in angles:
             client.command("remove_robot", {"name": ns})
@@ -441,8 +448,9 @@ def test_reload_on_a_changed_description_and_remove(processes: Processes, client
     old_links, old_visuals = devices_of(by_parameter)
     box = next(d for d, v in old_visuals.items() if v["link"] == "arm")
     client.wait_for(box, lambda m: is_mesh(m) and len(m.body.points) == 8)
-    client.wait_for(old_links["tool"], matrix_close(pose(np.eye(3), (0, 0, 300))),
-                    timeout=LOAD_TIMEOUT)
+    poses = by_parameter["poses_device"]
+    wait_link_pose(client, poses, old_links["tool"], matrix_close(pose(np.eye(3), (0, 0, 300))),
+                   LOAD_TIMEOUT)
     # A new description: the arm becomes a sphere, the tool link is gone, the joint higher.
     client.command("create_parameter_client", {"node": "/reload/robot_state_publisher"},
                    timeout=LOAD_TIMEOUT)
@@ -460,11 +468,15 @@ def test_reload_on_a_changed_description_and_remove(processes: Processes, client
             assert robot_summary(client, name)["links"] == 2
         # Same device name, new mesh (replaced); the tool's devices are forgotten.
         client.wait_for(box, lambda m: is_mesh(m) and len(m.body.points) > 8)
-        client.wait_for(old_links["arm"], matrix_close(pose(np.eye(3), (0, 0, 300))),
-                        timeout=LOAD_TIMEOUT)  # the joint moved up with the new URDF
+        wait_link_pose(client, poses, old_links["arm"],  # the joint moved up with the new URDF
+                       matrix_close(pose(np.eye(3), (0, 0, 300))), LOAD_TIMEOUT)
+        # The tool's mesh is forgotten, and its element left the robot's TDATA.
+        wait_until(lambda: old_links["tool"] not in {
+            e.name for e in client.latest(poses).body.elements}, LOAD_TIMEOUT,
+            "the tool's element to leave the TDATA")
         devices = daemon_devices(client)
-        assert old_links["tool"] not in devices and "rl:tool:0" not in devices
-        assert old_links["arm"] in devices and box in devices
+        assert "rl:tool:0" not in devices
+        assert poses in devices and box in devices
         with daemon.connect() as late:  # a new client gets the new robot only
             late.wait_for(box, lambda m: is_mesh(m) and len(m.body.points) > 8)
         # A malformed description is refused by the state publisher itself, so the
@@ -627,12 +639,12 @@ def test_the_demo_command(processes: Processes) -> None:
         for device in meshes:
             connection.wait_for(device, is_mesh)
         for device in links.values():
-            connection.wait_for(device, lambda m: isinstance(m.body, Transform))
+            wait_link_pose(connection, robot["poses_device"], device)
         # The arm moves: the tool flange's transform changes over time.
         flange = links["tool_flange"]
-        first = np.asarray(connection.wait_for(flange).body.matrix).copy()
-        connection.wait_for(flange, lambda m: not np.allclose(
-            np.asarray(m.body.matrix), first, atol=1.0), timeout=10)
+        first = wait_link_pose(connection, robot["poses_device"], flange).copy()
+        wait_link_pose(connection, robot["poses_device"], flange,
+                       lambda matrix: not np.allclose(matrix, first, atol=1.0), 10)
     code = demo.stop()
     output = demo.output()
     assert code == 0, output[-3000:]
@@ -662,7 +674,7 @@ def test_a_robot_from_the_yaml_start_up_config(processes: Processes, tmp_path: P
     with running.connect() as connection:
         for device in ("cfg:base:0", "cfg:arm:0", "cfg:tool:0"):
             assert connection.wait_for(device, is_mesh).metadata["ros2.robot"] == "cfg"
-        connection.wait_for("cfg:base", matrix_close(np.eye(4), atol=1e-9))
+        wait_link_pose(connection, "poses:cfg", "cfg:base", matrix_close(np.eye(4), atol=1e-9))
         states = {r["name"]: r["state"] for r in connection.command("list_robots")["robots"]}
         assert states == {"cfg": "loaded", "cfg_waiting": "waiting"}
     assert_clean_exit(running)

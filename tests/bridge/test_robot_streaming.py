@@ -27,6 +27,7 @@ class Recorder:
         self.events: list[tuple[str, str]] = []
         self.persistent: dict[str, Any] = {}
         self.lookups: dict[int, str] = {}
+        self.groups: set[str] = set()
         self.on_mesh: Optional[Any] = None
 
     # hub
@@ -48,7 +49,9 @@ class Recorder:
         self.persistent.pop(device, None)
 
     # tf
-    def stream_lookup(self, parent: str, child: str, *, device: str, metadata: Any) -> int:
+    def stream_lookup(self, parent: str, child: str, *, device: str, metadata: Any,
+                      group: Optional[str] = None) -> int:
+        assert group is not None and group in self.groups  # a robot's poses go as one TDATA
         self.events.append(("lookup", device))
         handle = len(self.events)
         self.lookups[handle] = device
@@ -56,6 +59,12 @@ class Recorder:
 
     def stop_lookup(self, handle: int) -> None:
         self.lookups.pop(handle)
+
+    def open_pose_group(self, device: str, metadata: Any) -> None:
+        self.groups.add(device)
+
+    def close_pose_group(self, device: str) -> None:
+        self.groups.discard(device)
 
 
 class Guard:
@@ -147,7 +156,7 @@ def test_a_robot_removed_while_its_meshes_are_read_leaves_nothing(tmp_path: Path
         await served.create_robot(create(), None, Guard())  # type: ignore[arg-type]
         await settle(served)
         assert removed and "arm" not in served.robots
-        assert recorder.persistent == {} and recorder.lookups == {}
+        assert recorder.persistent == {} and recorder.lookups == {} and recorder.groups == set()
         served.close()
 
     asyncio.run(run())

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from protocol import commands as c
-from protocol.messages import Message, Status, String, Transform
+from protocol.messages import Message, Status, String, TrackingData, Transform
 from protocol.naming import NameKey, device_name_for, metadata_for
 from slicer_client import (BridgeSpec, BridgeState, CommandRefusedError, CommandTimeoutError,
                            MatrixError, StateFormatError, as_numpy, to_vtk)
@@ -19,7 +19,8 @@ from slicer_client.connector_codec import (COMMAND_STATUS, SLICER_TEXT_ENCODING,
                                            build_command, message_from_node,
                                            outgoing_content, parse_reply)
 from slicer_client.scene_plan import (DEFAULT_COLOUR, describe_bridges, is_point_like,
-                                      metadata_from_attributes, model_colour, plan_node,
+                                      link_metadata, metadata_from_attributes, model_colour,
+                                      plan_node,
                                       point_colours_differ, vertex_per_point)
 from slicer_client.values import value_from_message
 
@@ -105,6 +106,7 @@ def test_colours_from_metadata_then_rgba_attribute_then_default() -> None:
 @pytest.mark.parametrize("key, kind, folder", [
     (NameKey.robot_link("R", "base"), "robot_link", "robot R"),
     (NameKey.robot_description("R"), "robot_description", "robot R"),
+    (NameKey.robot_poses("R"), "robot_poses", "robot R"),
     (NameKey.tf_lookup("world", "tool"), "tf_lookup", "ROS2 tf"),
     (NameKey.subscriber("/tool"), "subscriber", "ROS2 topics"),
     (NameKey.parameter_client("/rsp"), "parameters", "ROS2 parameters"),
@@ -112,6 +114,17 @@ def test_colours_from_metadata_then_rgba_attribute_then_default() -> None:
 def test_every_role_has_a_plan(key: NameKey, kind: str, folder: str) -> None:
     plan = plan_node(device_name_for(key), metadata_for(key, ros_type="std_msgs/msg/String"))
     assert (plan.kind, plan.folder, plan.parent_device) == (kind, folder, None)
+
+
+def test_a_link_node_of_a_robot_s_tdata_is_planned_as_its_transform_was() -> None:
+    poses = metadata_for(NameKey.robot_poses("PSM1"), frame="world", units="mm")
+    poses["ros2.parent"] = "world"
+    meta = link_metadata(poses, "PSM1", "tool_link")
+    assert meta == {"ros2.role": "robot_link", "ros2.robot": "PSM1", "ros2.link": "tool_link",
+                    "ros2.frame": "world", "ros2.parent": "world", "ros2.units": "mm"}
+    plan = plan_node("PSM1:tool_link", meta)
+    assert (plan.kind, plan.display_name, plan.folder) == ("robot_link", "PSM1 tool_link",
+                                                           "robot PSM1")
 
 
 def test_unknown_nodes_are_left_alone() -> None:
@@ -228,6 +241,11 @@ def test_connector_nodes_become_messages() -> None:
     assert isinstance(transform.body, Transform)
     np.testing.assert_allclose(value_from_message(transform), moved)
     assert message_from_node("x", {}) is None
+    poses = message_from_node("poses:R", attrs(metadata_for(NameKey.robot_poses("R"))),
+                              poses=[("R:a", moved.tolist()), ("R:b", np.eye(4).tolist())])
+    assert isinstance(poses.body, TrackingData) and poses.metadata["ros2.robot"] == "R"
+    assert [e.name for e in poses.body.elements] == ["R:a", "R:b"]
+    np.testing.assert_allclose(poses.body.elements[0].matrix, moved)
 
 
 # --- values and matrices ------------------------------------------------------------------

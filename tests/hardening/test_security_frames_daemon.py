@@ -18,7 +18,7 @@ from protocol.messages import Message, StatusCode, Transform
 from protocol.naming import DeviceNameRegistry, NameKey
 from slicer_client.connection import CommandRefusedError, Connection
 from support import (Child, Processes, RunningDaemon, assert_clean_exit, pick_free_port,
-                     scaled, start_daemon)
+                     scaled, start_daemon, wait_link_pose)
 
 pytestmark = pytest.mark.ros
 
@@ -226,14 +226,18 @@ def test_robot_links_are_judged_by_the_frame_globs(guarded: RunningDaemon,
             status = client.wait_for("urdf:sec", lambda m: m.body.code == StatusCode.OK)
             assert "1 link(s) withheld by the frame policy: secret_tool" in status.body.text
             assert status.metadata["ros2.links"] == "2", status.metadata
-            # The root link's TRANSFORM (identity: it is the fixed frame) has come, and the
-            # meshes went out together at load: a withheld link's would be here by now.
-            root = client.wait_for(names.register(NameKey.robot_link("sec", "base")),
-                                   timeout=10)
-            np.testing.assert_allclose(root.body.matrix, np.eye(4), atol=1e-9)
+            # The root link's pose (identity: it is the fixed frame) has come in the robot's
+            # TDATA (nothing publishes the others' tf), and the meshes went out together at
+            # load: a withheld link's would be here by now.
+            root = wait_link_pose(client, loaded["poses_device"],
+                                  names.register(NameKey.robot_link("sec", "base")),
+                                  lambda m: np.allclose(m, np.eye(4), atol=1e-9), timeout=10)
+            np.testing.assert_allclose(root, np.eye(4), atol=1e-9)
             secret_mesh = names.register(NameKey.robot_visual("sec", "secret_tool", 0))
             secret_link = names.register(NameKey.robot_link("sec", "secret_tool"))
             assert client.latest(secret_mesh) is None and client.latest(secret_link) is None
+            poses = client.latest(loaded["poses_device"]).body
+            assert secret_link not in {element.name for element in poses.elements}
             listed = client.command("list_robots")["robots"]
             assert [(r["name"], r["links"], r["withheld"]) for r in listed] == [("sec", 2, 1)]
         finally:

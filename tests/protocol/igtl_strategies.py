@@ -20,6 +20,8 @@ from protocol.messages import (
     RtsCommand,
     Status,
     String,
+    TrackingData,
+    TrackingElement,
     Transform,
     cells_from_array,
 )
@@ -116,6 +118,9 @@ point_elements = st.builds(
     owner=utf8_max(20),
 )
 points = st.builds(Point, st.lists(point_elements, max_size=8))
+tracking_data = st.builds(TrackingData, st.lists(st.builds(
+    TrackingElement, utf8_max(19), transforms().map(lambda t: t.matrix), st.integers(0, 255)),
+    max_size=8))
 
 _DTYPES = ["u1", "i1", "u2", "i2", "u4", "i4", "f4", "f8"]
 
@@ -147,11 +152,11 @@ def commands(draw: st.DrawFn, cls: type = Command) -> Any:
     return cls(draw(st.integers(0, 2**32 - 1)), draw(utf8_max(128)), text, encoding)
 
 
-raw_bodies = st.builds(RawBody, st.sampled_from(["GET_POLYDATA", "NDARRAY", "TDATA", "X"]),
+raw_bodies = st.builds(RawBody, st.sampled_from(["GET_POLYDATA", "NDARRAY", "STT_TDATA", "X"]),
                        st.binary(max_size=64))
 
-bodies = st.one_of(transforms(), strings(), statuses, polydatas(), points, images(),
-                   commands(), commands(RtsCommand), raw_bodies)
+bodies = st.one_of(transforms(), strings(), statuses, polydatas(), points, tracking_data,
+                   images(), commands(), commands(RtsCommand), raw_bodies)
 
 
 @st.composite

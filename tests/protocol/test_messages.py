@@ -30,6 +30,9 @@ from protocol.messages import (
     Status,
     StatusCode,
     String,
+    TrackerKind,
+    TrackingData,
+    TrackingElement,
     Transform,
     cell_count,
     cells_from_array,
@@ -108,6 +111,12 @@ def test_point_roundtrip(body: Point) -> None:
     assert roundtrip(body) == body
 
 
+@settings(max_examples=40, deadline=None)
+@given(strat.tracking_data)
+def test_tracking_data_roundtrip(body: TrackingData) -> None:
+    assert roundtrip(body) == body
+
+
 @settings(max_examples=60, deadline=None)
 @given(strat.images())
 def test_image_pack_parts_are_pack_s_bytes_and_pixels_laid_out_as_sent_are_not_copied(
@@ -149,8 +158,8 @@ def test_command_roundtrip(command: Command, reply: RtsCommand) -> None:
 
 
 def test_registry_lists_every_type() -> None:
-    assert set(BODY_TYPES) == {"TRANSFORM", "STRING", "STATUS", "POLYDATA", "POINT", "IMAGE",
-                               "COMMAND", "RTS_COMMAND", "JSON"}
+    assert set(BODY_TYPES) == {"TRANSFORM", "STRING", "STATUS", "POLYDATA", "POINT", "TDATA",
+                               "IMAGE", "COMMAND", "RTS_COMMAND", "JSON"}
     for name, cls in BODY_TYPES.items():
         assert cls.TYPE == name
 
@@ -323,6 +332,32 @@ def test_point_golden() -> None:
                 + f32be(1, 2, 3, 4) + b"owner".ljust(20, b"\0"))
     assert body.pack() == expected
     assert Point.unpack(expected) == body
+
+
+def test_tracking_data_golden() -> None:
+    matrix = np.eye(4)
+    matrix[:3, 3] = (1, 2, 3)
+    matrix[0, 1] = 0.5  # as in TRANSFORM: R12 is the 4th float
+    body = TrackingData([TrackingElement("demo:base_link", matrix),
+                         TrackingElement("tip", np.eye(4), TrackerKind.TRACKER)])
+    expected = (b"demo:base_link".ljust(20, b"\0") + bytes([2, 0])
+                + f32be(1, 0, 0, 0.5, 1, 0, 0, 0, 1, 1, 2, 3)
+                + b"tip".ljust(20, b"\0") + bytes([1, 0])
+                + f32be(1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0))
+    assert body.pack() == expected
+    assert TrackingData.unpack(expected) == body
+
+
+def test_tracking_data_refuses_what_a_transform_refuses() -> None:
+    beyond = np.eye(4)
+    beyond[0, 3] = 1e39  # finite in float64, infinite in float32
+    with pytest.raises(EncodeError) as info:
+        TrackingData([TrackingElement("a", np.eye(4)), TrackingElement("b", beyond)]).pack()
+    assert info.value.field == "TDATA elements[1].matrix"
+    with pytest.raises(EncodeError) as info:  # 20 bytes: Slicer's library reads it as ""
+        TrackingData([TrackingElement("x" * 20)]).pack()
+    assert info.value.field == "TDATA elements[0].name"
+    assert info.value.expected == "at most 19 bytes in UTF-8"
 
 
 def test_image_golden_centre_of_volume() -> None:
@@ -507,6 +542,8 @@ MALFORMED = [
      "attribute 'a' data"),
     ("POINT", b"\0" * 135, "body"),
     ("POINT", b"\xff" * 136, "points[0].name"),
+    ("TDATA", b"\0" * 69, "body"),
+    ("TDATA", b"\0" * 70 + b"\xff" * 70, "elements[1].name"),
     ("IMAGE", GOOD_IMAGE[:-1], "pixel data"),  # size disagrees with the buffer
     ("IMAGE", GOOD_IMAGE + b"\0", "pixel data"),
     ("IMAGE", _patch(GOOD_IMAGE, 3, ">B", 9), "SCALAR_TYPE"),

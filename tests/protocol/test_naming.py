@@ -6,6 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from protocol.header import TDATA_NAME_MAX_BYTES
 from protocol.naming import (
     DEFAULT_HASH_LENGTH,
     KEY_CHILD,
@@ -44,6 +45,7 @@ from protocol.naming import (
         (NameKey.robot_link("PSM1", "base_link"), "PSM1:base_link"),
         (NameKey.robot_visual("PSM1", "base_link", 2), "PSM1:base_link:2"),
         (NameKey.robot_description("PSM1"), "urdf:PSM1"),
+        (NameKey.robot_poses("PSM1"), "poses:PSM1"),
         (NameKey.parameter_client("/turtlesim"), "param:turtlesim"),
         (NameKey.parameter_server("/slicer"), "params:slicer"),
         (NameKey.service_client("/spawn"), "srvc:spawn"),
@@ -85,9 +87,20 @@ def test_long_topics_shorten_their_namespaces_then_hash() -> None:
 
 
 def test_hash_is_stable_across_versions() -> None:
-    # Pinned: changing it would orphan users' saved Slicer scenes.
+    # Pinned: changing it would orphan users' saved Slicer scenes. (Changed once: a robot
+    # link's device names its element in the robot's TDATA, which Slicer's library reads
+    # only up to 19 bytes; it was "PSM1:tool_tip_l~gafc".)
     assert device_name_for(NameKey.robot_link("PSM1", "tool_tip_link_very_long")) == (
-        "PSM1:tool_tip_l~gafc")
+        "PSM1:tool_tip_~gafc")
+    assert device_name_for(NameKey.robot_visual("PSM1", "tool_tip_link_very_long", 0)) == (
+        "PSM1:tool_tip~yyll:0")  # unchanged: a visual is no TDATA element
+
+
+def test_a_robot_link_s_device_fits_a_tdata_element_name_slicer_reads() -> None:
+    for link in ("tool_tip_link_very_long", "a" * 40, "wrist_3_link", "base"):
+        for robot in ("PSM1", "saved_arm", "r" * 30):
+            name = device_name_for(NameKey.robot_link(robot, link))
+            assert len(name.encode()) <= TDATA_NAME_MAX_BYTES == 19, name
 
 
 @pytest.mark.parametrize(
@@ -261,7 +274,7 @@ ALL_KEYS = [
     NameKey.tf_lookup("w", "t"),
     NameKey.tf_broadcaster("wörld", "t"), NameKey.robot_link("R", "l"),
     NameKey.robot_visual("R", "l", 3), NameKey.robot_description("R"),
-    NameKey.parameter_client("/n"), NameKey.parameter_server("/s"),
+    NameKey.robot_poses("R"), NameKey.parameter_client("/n"), NameKey.parameter_server("/s"),
     NameKey.service_client("/c"), NameKey.service_server("/c"),
     NameKey.marker("/m", "", 0), NameKey.marker("/m", "ns x", -3),
     NameKey.marker_frame("world", "base"), NameKey.marker_topic("/m"),

@@ -18,9 +18,10 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
     connector.Start()
 
     def arrived() -> bool:
+        # The link transforms: the nodes the connector makes of the robot's TDATA elements.
+        bundle = session.scene.GetFirstNode("poses:demo", "vtkMRMLIGTLTrackingDataBundleNode")
         return (len(nodes(session, "vtkMRMLModelNode", role="robot_visual")) == args["models"]
-                and len(nodes(session, "vtkMRMLLinearTransformNode", role="robot_link"))
-                == args["links"])
+                and bundle is not None and bundle.GetNumberOfTransformNodes() == args["links"])
     session.pump(60, until=arrived, what="the demo robot's nodes")
     exec(compile(args["code"], "README block", "exec"), {"slicer": slicer})
     models = {}

@@ -25,8 +25,9 @@ from slicer_client.joint_sliders import JointSlider, joint_sliders, slider_posit
 from slicer_client.reference.logic import ROS2Logic
 from slicer_client.reference.nodes import ROS2Node, RobotNode
 from slicer_client.resources import MarkerSubscriber, Publisher, Robot
-from slicer_client.scene_plan import (MARKERS_FOLDER, ROBOTS_FOLDER, NodePlan,
-                                      describe_bridges, metadata_from_attributes, plan_node,
+from slicer_client.scene_plan import (ATTRIBUTE_PREFIX, MARKERS_FOLDER, ROBOTS_FOLDER, NodePlan,
+                                      describe_bridges, link_metadata,
+                                      metadata_from_attributes, plan_node,
                                       robot_status_lines, stale_lines, stale_marker_nodes,
                                       vertex_per_point)
 from slicer_client.send_plan import KIND_ORDER, plan_send
@@ -714,6 +715,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
                         link_devices[(robot.name, link.name)] = link.device
         for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
             node = self.connector.GetIncomingMRMLNode(i)
+            if node is not None and node.IsA("vtkMRMLIGTLTrackingDataBundleNode"):
+                self._placeLinks(node, {d: key for key, d in link_devices.items()})
             if node is None or node.GetID() in self._planned:
                 continue
             attributes = {n: node.GetAttribute(n) for n in node.GetAttributeNames()}
@@ -734,6 +737,23 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             self._planned.add(node.GetID())
         self._removeStaleMarkers()
         self._updateMarkerLabels()
+
+    def _placeLinks(self, bundle: Any, links: Mapping[str, tuple[str, str]]) -> None:
+        """A robot's link nodes, which its connector makes from the elements of the robot's
+        TDATA (more may come with later messages): each gets its link's attributes, name
+        and folder, as the connector would give the node of a TRANSFORM."""
+        poses = metadata_from_attributes(
+            {n: bundle.GetAttribute(n) for n in bundle.GetAttributeNames()})
+        for j in range(bundle.GetNumberOfTransformNodes()):
+            node = bundle.GetTransformNode(j)
+            named = links.get(node.GetName())
+            if node.GetID() in self._planned or named is None:
+                continue  # done, or its robot's create reply is not here yet: next tick
+            metadata = link_metadata(poses, *named)
+            for key, value in metadata.items():
+                node.SetAttribute(ATTRIBUTE_PREFIX + key, value)
+            self._apply(node, plan_node(node.GetName(), metadata))
+            self._planned.add(node.GetID())
 
     @staticmethod
     def _rgba(node: Any) -> Optional[np.ndarray]:

@@ -35,11 +35,14 @@ def time_sequence(scene: Any, name: str, attribute: str, value: str) -> Any:
 
 
 def recorded_nodes(connector: Any) -> list[Any]:
-    """The connector's nodes whose content follows the bag's clock."""
+    """The connector's nodes whose content follows the bag's clock (a robot's link nodes:
+    those its tracking-data bundle made)."""
     nodes = []
     for i in range(connector.GetNumberOfIncomingMRMLNodes()):
         node = connector.GetIncomingMRMLNode(i)
-        if (node is not None and any(node.IsA(cls) for cls in RECORDED_CLASSES)
+        if node is not None and node.IsA("vtkMRMLIGTLTrackingDataBundleNode"):
+            nodes += [node.GetTransformNode(j) for j in range(node.GetNumberOfTransformNodes())]
+        elif (node is not None and any(node.IsA(cls) for cls in RECORDED_CLASSES)
                 and node.GetAttribute(ROLE_ATTRIBUTE) not in STILL_ROLES):
             nodes.append(node)
     return nodes

@@ -90,6 +90,9 @@ class ConnectorTransport:
         self._clock = clock
         self._listener: Optional[TransportListener] = None
         self._node_observers: dict[str, Observer] = {}  # node id -> (node, tag)
+        # Tracking-data bundles (a robot's link poses): node id -> [node, newest element
+        # MTime handed on]; handed on from `poll`, once per tick in which elements moved.
+        self._bundles: dict[str, list[Any]] = {}
         self._connector_tags: list[int] = []
         self._first = True
         self._up_now = False  # the listener was told "connected" and not "lost" since
@@ -196,6 +199,8 @@ class ConnectorTransport:
         known = self.connector.GetNumberOfIncomingMRMLNodes()
         self.connector.PeriodicProcess()  # what has come is counted before judging silence
         self._watchIncomingNodes(known)
+        for entry in tuple(self._bundles.values()):
+            self._forwardBundle(entry)
         if not self._dead_after:
             return
         now = self._clock()
@@ -357,7 +362,12 @@ class ConnectorTransport:
         ends its node modification once per received message, so ModifiedEvent (text) and
         TransformModifiedEvent (transforms) fire once per message, or once per batch for
         messages read during a blocking command."""
-        if node.GetID() in self._node_observers:
+        if node.GetID() in self._node_observers or node.GetID() in self._bundles:
+            return
+        if node.IsA("vtkMRMLIGTLTrackingDataBundleNode"):
+            # Its connector updates the element nodes, never the bundle: no event to observe.
+            self._bundles[node.GetID()] = entry = [node, -1]
+            self._forwardBundle(entry)
             return
         event = (slicer.vtkMRMLTransformNode.TransformModifiedEvent
                  if node.IsA("vtkMRMLTransformNode") else
@@ -368,6 +378,7 @@ class ConnectorTransport:
         self._forward(node)
 
     def unwatch(self, node: Any) -> None:
+        self._bundles.pop(node.GetID(), None)
         entry = self._node_observers.pop(node.GetID(), None)
         if entry is not None:
             entry[0].RemoveObserver(entry[1])
@@ -375,10 +386,7 @@ class ConnectorTransport:
     def _forward(self, node: Any) -> None:
         attributes = {name: node.GetAttribute(name) for name in node.GetAttributeNames()}
         if node.IsA("vtkMRMLLinearTransformNode"):
-            matrix = vtk.vtkMatrix4x4()
-            node.GetMatrixTransformToParent(matrix)
-            values = [[matrix.GetElement(i, j) for j in range(4)] for i in range(4)]
-            message = message_from_node(node.GetName(), attributes, matrix=values)
+            message = message_from_node(node.GetName(), attributes, matrix=_rows(node))
         elif node.IsA("vtkMRMLTextNode"):
             message = message_from_node(node.GetName(), attributes, text=node.GetText())
         elif node.IsA("vtkMRMLIGTLStatusNode"):
@@ -397,7 +405,24 @@ class ConnectorTransport:
             except Exception:  # noqa: BLE001 - inside a VTK callback
                 log.exception("handling %s failed", node.GetName())
 
+    def _forwardBundle(self, entry: list[Any]) -> None:
+        """A bundle's element nodes as one TDATA for the client, when any moved since."""
+        node = entry[0]
+        elements = [node.GetTransformNode(i) for i in range(node.GetNumberOfTransformNodes())]
+        newest = max((int(e.GetMTime()) for e in elements), default=0)
+        if newest == entry[1] or self._listener is None:
+            return
+        entry[1] = newest
+        attributes = {name: node.GetAttribute(name) for name in node.GetAttributeNames()}
+        message = message_from_node(node.GetName(), attributes, poses=[
+            (element.GetName(), _rows(element)) for element in elements])
+        try:
+            self._listener.on_message(message)  # type: ignore[arg-type]
+        except Exception:  # noqa: BLE001 - inside the module's timer
+            log.exception("handling %s failed", node.GetName())
+
     def close(self) -> None:
+        self._bundles.clear()
         for tag in self._connector_tags:
             self.connector.RemoveObserver(tag)
         self._connector_tags = []
@@ -408,6 +433,14 @@ class ConnectorTransport:
             node.RemoveObserver(tag)
         self._node_observers.clear()
         self._listener = None
+
+
+def _rows(transformNode: Any) -> list[list[float]]:
+    """A linear transform node's matrix to its parent, as 4 rows."""
+    matrix = vtk.vtkMatrix4x4()
+    transformNode.GetMatrixTransformToParent(matrix)
+    values = matrix.GetData()  # 16 numbers, row by row (one call, not 16)
+    return [list(values[i:i + 4]) for i in range(0, 16, 4)]
 
 
 def _modelArrays(polydata: Any) -> Optional[tuple[Any, Any]]:
