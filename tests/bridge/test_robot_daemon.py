@@ -645,6 +645,10 @@ def test_the_demo_command(processes: Processes) -> None:
         first = wait_link_pose(connection, robot["poses_device"], flange).copy()
         wait_link_pose(connection, robot["poses_device"], flange,
                        lambda matrix: not np.allclose(matrix, first, atol=1.0), 10)
+        # One message moves the whole arm: every link in it, none on a device of its own.
+        moving = connection.latest(robot["poses_device"])
+        assert sorted(e.name for e in moving.body.elements) == sorted(links.values())
+        assert all(connection.latest(device) is None for device in links.values())
     code = demo.stop()
     output = demo.output()
     assert code == 0, output[-3000:]
