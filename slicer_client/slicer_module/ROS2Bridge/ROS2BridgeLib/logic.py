@@ -17,6 +17,7 @@ from slicer.util import VTKObservationMixin
 
 from protocol import commands as c
 from protocol.conversions import metres_to_mm
+from protocol.naming import KEY_ROBOT
 from protocol.polydata import RGBA_ATTRIBUTE
 from slicer_client.bridge_state import BridgeState
 from slicer_client.client import Client, read_key_file
@@ -82,6 +83,11 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.problems: list[str] = []  # errors met outside a button's handler, shown in the GUI
         self.recording: Optional[Recording] = None  # the last one started from here
         self._planned: set[str] = set()  # node ids already placed
+        # (incoming nodes, links the client knows, link nodes of bundles) when the last
+        # scan placed every node; None: scan at the next tick. While it holds and no node
+        # came (the connector's NewDeviceEvent) or went, a tick does not scan.
+        self._settledAt: Optional[tuple[int, int, int]] = None
+        self._bundles: dict[str, Any] = {}  # id -> a robot's tracking-data bundle node
         self._timer = qt.QTimer()
         self._timer.setInterval(200)  # new connector nodes are placed within 0.2 s
         self._timer.connect("timeout()", self._onTimer)
@@ -135,6 +141,9 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.removeObservers(self._onConnected)
         self.addObserver(self.connector, slicer.vtkMRMLIGTLConnectorNode.ConnectedEvent,
                          self._onConnected)
+        self.removeObservers(self._onNewDevice)
+        self.addObserver(self.connector, slicer.vtkMRMLIGTLConnectorNode.NewDeviceEvent,
+                         self._onNewDevice)
         self._timer.start()
         self._spinTimer.start()
         if self.isConnected():
@@ -145,6 +154,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._spinTimer.stop()
         if self.connector is not None:
             self.removeObservers(self._onConnected)
+            self.removeObservers(self._onNewDevice)
             self.connector.Stop()
         if self.transport is not None:
             self.transport.close()
@@ -201,6 +211,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             self.problems += self.client.logic.nodes.adopt(self.client.logic)
 
     def _onSceneEndImport(self, caller: Any = None, event: Any = None) -> None:
+        self._settledAt = None
         self._adoptSavedNodes()  # connected already: else _onConnected does it
 
     def requireClient(self) -> Client:
@@ -318,6 +329,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             self.removeObserver(node, slicer.vtkMRMLModelNode.MeshModifiedEvent,
                                 self._onPointsModified)
         self._planned.discard(node.GetID())
+        self._bundles.pop(node.GetID(), None)
+        self._settledAt = None
         displays: list[Any] = []
         if node.IsA("vtkMRMLDisplayableNode"):
             displays = [node.GetNthDisplayNode(i) for i in range(node.GetNumberOfDisplayNodes())]
@@ -701,27 +714,43 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             self.transport.poll()
         self.updateScene()
 
+    def _onNewDevice(self, caller: Any = None, event: Any = None) -> None:
+        self._settledAt = None  # its content and attributes come after: scanned next tick
+
     def updateScene(self) -> None:
-        """Place the connector's new nodes as the scene planner says."""
+        """Place the connector's new nodes as the scene planner says. A tick scans the
+        incoming nodes only while something may be unplaced (see `_settledAt`): at 50 Hz a
+        scan of every node cost the main thread more than the nodes' messages."""
         if self.connector is None or self.connector.GetScene() is None:
             return
-        link_devices: dict[tuple[str, str], str] = {}
-        if self.client is not None:
-            for robot in self.client.resources():
-                if not isinstance(robot, Robot):
-                    continue
-                for link in robot.links.values():
-                    if link.device:
-                        link_devices[(robot.name, link.name)] = link.device
+        robots = [r for r in self.client.resources() if isinstance(r, Robot)] \
+            if self.client is not None else []
+        now = (self.connector.GetNumberOfIncomingMRMLNodes(),
+               sum(len(robot.links) for robot in robots),
+               sum(b.GetNumberOfTransformNodes() for b in self._bundles.values()))
+        if now != self._settledAt:
+            self._settledAt = None
+            if self._placeNew(robots):
+                self._settledAt = now
+        self._removeStaleMarkers()
+        self._updateMarkerLabels()
+
+    def _placeNew(self, robots: Sequence[Robot]) -> bool:
+        """Place the nodes not placed yet; whether every one could be."""
+        link_devices = {(robot.name, link.name): link.device for robot in robots
+                        for link in robot.links.values() if link.device}
+        placed = True
         for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
             node = self.connector.GetIncomingMRMLNode(i)
             if node is not None and node.IsA("vtkMRMLIGTLTrackingDataBundleNode"):
-                self._placeLinks(node, {d: key for key, d in link_devices.items()})
+                self._bundles[node.GetID()] = node
+                placed &= self._placeLinks(node, {d: key for key, d in link_devices.items()})
             if node is None or node.GetID() in self._planned:
                 continue
             attributes = {n: node.GetAttribute(n) for n in node.GetAttributeNames()}
             metadata = metadata_from_attributes(attributes)
             if "ros2.role" not in metadata:
+                placed = False
                 continue  # attributes not there yet: next tick
             plan = plan_node(node.GetName(), metadata, rgba=self._rgba(node),
                              link_devices=link_devices)
@@ -729,31 +758,39 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
                 parent = slicer.mrmlScene.GetFirstNode(plan.parent_device,
                                                        "vtkMRMLLinearTransformNode")
                 if parent is None:
+                    placed = False
                     continue  # its link transform has not arrived yet: next tick
                 node.SetAndObserveTransformNodeID(parent.GetID())
             self._apply(node, plan)
             if self.transport is not None:
                 self.transport.watch(node)
             self._planned.add(node.GetID())
-        self._removeStaleMarkers()
-        self._updateMarkerLabels()
+        return placed
 
-    def _placeLinks(self, bundle: Any, links: Mapping[str, tuple[str, str]]) -> None:
+    def _placeLinks(self, bundle: Any, links: Mapping[str, tuple[str, str]]) -> bool:
         """A robot's link nodes, which its connector makes from the elements of the robot's
         TDATA (more may come with later messages): each gets its link's attributes, name
-        and folder, as the connector would give the node of a TRANSFORM."""
+        and folder, as the connector would give the node of a TRANSFORM. Whether every one
+        of a robot this client loaded could be (another client's robot is not ours)."""
         poses = metadata_from_attributes(
             {n: bundle.GetAttribute(n) for n in bundle.GetAttributeNames()})
+        robot = poses.get(KEY_ROBOT, "")
+        ours = any(name == robot for name, _ in links.values())
+        placed = True
         for j in range(bundle.GetNumberOfTransformNodes()):
             node = bundle.GetTransformNode(j)
+            if node.GetID() in self._planned:
+                continue
             named = links.get(node.GetName())
-            if node.GetID() in self._planned or named is None:
-                continue  # done, or its robot's create reply is not here yet: next tick
+            if named is None:
+                placed = not ours  # its link devices not known yet: next tick
+                continue
             metadata = link_metadata(poses, *named)
             for key, value in metadata.items():
                 node.SetAttribute(ATTRIBUTE_PREFIX + key, value)
             self._apply(node, plan_node(node.GetName(), metadata))
             self._planned.add(node.GetID())
+        return placed
 
     @staticmethod
     def _rgba(node: Any) -> Optional[np.ndarray]:
@@ -832,5 +869,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.disconnect()
         self.connector = None
         self._planned.clear()
+        self._bundles.clear()
+        self._settledAt = None
 
 
