@@ -30,7 +30,7 @@ from bridge.codecs.generic import document_to_json
 from bridge.codecs.fast_image import RawImageStream
 from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
-from bridge.core.dispatch import Created, Handler
+from bridge.core.dispatch import Created, Handler, made_bridge
 from bridge.core.heavy import OffLoop
 from bridge.core.hub import (Hub, Replier, Subscriber, frame_for,
                              is_large)
@@ -606,6 +606,7 @@ class TopicBridges:
         self._check_graph(topic, ros_type)
         key = NameKey.subscriber(topic)
         device = self._names.register(key)
+        self._hub.bridge_device(made_bridge(request), device)  # before its first value
         bridge = SubscriberBridge(
             self._ros, self._hub, topic=topic, codec=codec,
             qos=request.qos.with_default_depth(default_depth(codec.bulk)),
