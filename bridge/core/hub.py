@@ -358,7 +358,7 @@ class Hub:
         with self.fanout:
             self.fanout.set_slots(self._lane_slots(self._client_tuple))
             for device, (lane, to_frame) in self._lanes.items():
-                self._update_lane(device)
+                self._set_lane(device, lane)
                 latest = lane.latest()
                 if latest is not None:
                     newest[device] = to_frame(latest)
@@ -419,12 +419,15 @@ class Hub:
         entry = self._lanes.get(device)
         if entry is None or self.fanout is None:
             return
-        members = self._audience.get(device)
         with self.fanout:
-            lane = entry[0]
-            lane.enabled = device not in self._min_interval
-            lane.set_slots(None if members is None else
-                           self._lane_slots(tuple(c for c in members if c in self.clients)))
+            self._set_lane(device, entry[0])
+
+    def _set_lane(self, device: str, lane: Any) -> None:
+        # Holding the fanout (and the hand-off lock, but for a rate cap's change).
+        members = self._audience.get(device)
+        lane.enabled = device not in self._min_interval
+        lane.set_slots(None if members is None else
+                       self._lane_slots(tuple(c for c in members if c in self.clients)))
 
     def _newest(self, device: str) -> Optional[Frame]:
         entry = self._lanes.get(device)

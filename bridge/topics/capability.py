@@ -366,8 +366,13 @@ class SubscriberBridge:
         return message
 
     def info(self) -> TopicInfo:
+        extra: dict[str, Any] = {}
+        if self._lane is not None:  # its route: how many the native lane wrote
+            with self._hub.fanout:
+                extra["lane_written"] = int(self._lane.count)
         return TopicInfo("subscriber", self.topic, self.codec.ros_type, self.device,
-                         self.codec.igtl_type, self.qos.to_dict(), self.max_rate_hz, self.count)
+                         self.codec.igtl_type, self.qos.to_dict(), self.max_rate_hz, self.count,
+                         extra)
 
     def close(self) -> None:
         self._hub.remove_lane(self.device)
