@@ -21,27 +21,23 @@ import pytest
 from protocol.framing import Decoder
 from protocol.messages import Message, Status
 from slicer_client.connection import Connection
-from support import (Child, Processes, RunningDaemon, assert_clean_exit, scaled, start_daemon,
+from support import (Child, Processes, RunningDaemon, assert_clean_exit, operator_daemon, scaled,
                      wait_until)
 
 pytestmark = pytest.mark.ros
 
-OPERATOR_TOPIC = "/aud_op"
-POSE_TOPIC = "/aud_pose"
-FORCE_TOPIC = "/aud_force"
-ONCE_TOPIC = "/aud_once"
+# The operator's pose topic, a client's pose and Float64 streams, a value published once.
+OPERATOR_TOPIC, POSE_TOPIC, FORCE_TOPIC, ONCE_TOPIC = ("/aud_op", "/aud_pose", "/aud_force",
+                                                      "/aud_once")
 FLOAT64 = "std_msgs/msg/Float64"
 
 
 @pytest.fixture(scope="module")
-def daemon(module_processes: Processes, tmp_path_factory: pytest.TempPathFactory) \
-        -> Iterator[RunningDaemon]:
-    config = tmp_path_factory.mktemp("audience") / "bridge.yaml"
-    config.write_text(f"subscribers:\n  - {{topic: {OPERATOR_TOPIC}, type: PoseStamped}}\n")
-    running = start_daemon(module_processes, "--config", str(config))
-    for topic in (OPERATOR_TOPIC, POSE_TOPIC):
-        module_processes.python(f"publisher{topic.replace('/', '_')}", "stream_publisher.py",
-                                topic, "200", "--count", "100000000")
+def daemon(module_processes: Processes,
+           tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningDaemon]:
+    """Poses at 200 Hz on the operator's topic and a client's, forces at 20 Hz."""
+    running = operator_daemon(module_processes, tmp_path_factory.mktemp("audience"),
+                              OPERATOR_TOPIC, POSE_TOPIC, rate_hz="200")
     module_processes.python("publisher_force", "publish_json.py", FORCE_TOPIC, FLOAT64,
                             '{"data": 2.5}')
     yield running
