@@ -668,45 +668,35 @@ class Hub:
                 if channel is not None and channel.closed:
                     return
                 if not (self._wake_pending or self._draining):
-                    audience = self._audience
-                    if any(device in audience for device, _ in frames):
-                        self._write_direct_limited(frames)
-                    else:
-                        self._write_direct_many(frames)
+                    self._write_direct_many(frames)
                     return
         for device, frame in frames:
             self._post(device, frame, channel)
 
     def _write_direct_many(self, frames: list[tuple[str, Frame]]) -> None:
-        # Under self._lock, with nothing queued for the loop (see _write_direct).
+        # Under self._lock, with nothing queued for the loop (see _write_direct). Each
+        # client gets, in one write, those of the frames whose devices it gets.
         for device, frame in frames:
             self._latest[device] = frame
         self.streamed += len(frames)
         self.direct += len(frames)
+        audience = self._audience
+        limited = bool(audience) and any(device in audience for device, _ in frames)
         joined: dict[int, bytes] = {}  # header version -> the whole update, encoded once
         for client in self._client_tuple:
+            mine = frames
+            if limited:
+                mine = [(d, f) for d, f in frames if self._gets(client, d)]
+                if not mine:
+                    continue
             version = client.header_version
-            data = joined.get(version)
+            data = joined.get(version) if mine is frames else None
             if data is None:
-                data = joined[version] = (frames[0][1].encoded(version) if len(frames) == 1
-                                          else b"".join(f.encoded(version) for _, f in frames))
+                data = (mine[0][1].encoded(version) if len(mine) == 1
+                        else b"".join(f.encoded(version) for _, f in mine))
+                if mine is frames:
+                    joined[version] = data
             if not client.write_direct(data):
-                for device, frame in frames:
-                    client.hand_over(device, frame)
-
-    def _write_direct_limited(self, frames: list[tuple[str, Frame]]) -> None:
-        # `_write_direct_many` where some devices have an audience: each client gets its
-        # own, in one write.
-        for device, frame in frames:
-            self._latest[device] = frame
-        self.streamed += len(frames)
-        self.direct += len(frames)
-        for client in self._client_tuple:
-            mine = [(d, f) for d, f in frames if self._gets(client, d)]
-            if not mine:
-                continue
-            version = client.header_version
-            if not client.write_direct(b"".join(f.encoded(version) for _, f in mine)):
                 for device, frame in mine:
                     client.hand_over(device, frame)
 
