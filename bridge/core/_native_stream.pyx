@@ -25,9 +25,9 @@ a device that goes only to its audience, docs/security.md "Who owns a bridge"), 
 limited to some clients stays here.
 
 A message this lane does not take as it is (another frame id than its template's, a NaN,
-a number that is not finite as float32 once in mm, bytes it cannot read, a client that is not writable at once, a
-bound or an audience on the device, values waiting for the loop) goes to the Python path,
-which decides; so does the rest of its batch, so order is kept.
+a number that is not finite as float32 once in mm, bytes it cannot read, a client of its
+that is not writable at once, a bound on the device, values waiting for the loop) goes to
+the Python path, which decides; so does the rest of its batch, so order is kept.
 
 Locks: `Fanout` (one per hub) guards the client list and `hold`; each `Slot` (one per
 client) guards its socket. The order is always fanout, then slot; the interpreter's lock is
