@@ -277,6 +277,20 @@ def start_daemon(processes: Processes, *args: str, env: Optional[dict[str, str]]
     return RunningDaemon(child, int(listening.group(1)))
 
 
+def operator_daemon(processes: Processes, folder: Path, topic: str, *others: str,
+                    rate_hz: str) -> RunningDaemon:
+    """A daemon whose operator's `--config` streams `topic` (PoseStamped) to every client,
+    and a publisher of PoseStamped at `rate_hz` on it and on each of `others`, each in a
+    process of its own."""
+    config = folder / "bridge.yaml"
+    config.write_text(f"subscribers:\n  - {{topic: {topic}, type: PoseStamped}}\n")
+    running = start_daemon(processes, "--config", str(config))
+    for published in (topic, *others):
+        processes.python(f"publisher{published.replace('/', '_')}", "stream_publisher.py",
+                         published, rate_hz, "--count", "100000000")
+    return running
+
+
 def assert_clean_exit(daemon: RunningDaemon) -> None:
     """SIGINT stops the daemon with exit code 0, no traceback and nothing at ERROR level."""
     code = daemon.child.stop()

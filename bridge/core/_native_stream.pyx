@@ -20,10 +20,14 @@ tests/bridge/test_native_coverage.py runs it on a build of this file with line t
 requires the rules copied here to have run (`make coverage-native` lists the lines that did
 not).
 
+Each lane writes to the fanout's clients, or to its own subset of them (`PoseLane.set_slots`:
+a device that goes only to its audience, docs/security.md "Who owns a bridge"), so a stream
+limited to some clients stays here.
+
 A message this lane does not take as it is (another frame id than its template's, a NaN,
-a number that is not finite as float32 once in mm, bytes it cannot read, a client that is not writable at once, a
-bound or an audience on the device, values waiting for the loop) goes to the Python path,
-which decides; so does the rest of its batch, so order is kept.
+a number that is not finite as float32 once in mm, bytes it cannot read, a client of its
+that is not writable at once, a bound on the device, values waiting for the loop) goes to
+the Python path, which decides; so does the rest of its batch, so order is kept.
 
 Locks: `Fanout` (one per hub) guards the client list and `hold`; each `Slot` (one per
 client) guards its socket. The order is always fanout, then slot; the interpreter's lock is
@@ -45,7 +49,7 @@ from protocol.conversions import FLOAT32_BOUND
 
 # Bump with the wrappers' expectation (bridge/core/native_stream.py): an older build is
 # not used.
-INTERFACE = 5
+INTERFACE = 6
 
 # The one rule for a number sent as float32 is protocol/conversions.py's `fits_float32`:
 # its bound, taken from there, not copied.
@@ -429,6 +433,7 @@ cdef struct FanoutState:
     bint hold
     SlotState **slots
     Py_ssize_t count
+    Py_ssize_t room  # writes a batch has room for (`_room`)
     int64_t clock_modulus
     send_batch_t batch  # ring_fd -1: one write at a time
     # Per client, for a batch: what is written where, and what each write did.
@@ -466,6 +471,7 @@ cdef class Fanout(_Held):
         self.state.hold = False
         self.state.slots = NULL
         self.state.count = 0
+        self.state.room = 0
         self.state.clock_modulus = clock_modulus
         self.state.fds = NULL
         self.state.staged = NULL
@@ -512,19 +518,27 @@ cdef class Fanout(_Held):
         kept = [<Slot?>s for s in slots]
         cdef Py_ssize_t n = len(kept)
         cdef Py_ssize_t i
-        cdef size_t room = <size_t>max(n, 1)
-        _grow(<void **>&self.state.slots, room * sizeof(SlotState *))
-        # A batch's room, a write per client.
-        _grow(<void **>&self.state.fds, room * sizeof(int))
-        _grow(<void **>&self.state.staged, room * sizeof(Py_ssize_t))
-        _grow(<void **>&self.state.parts, room * sizeof(iovec))
-        _grow(<void **>&self.state.messages, room * sizeof(msghdr))
-        _grow(<void **>&self.state.sent, room * sizeof(int))
+        _grow(<void **>&self.state.slots, <size_t>max(n, 1) * sizeof(SlotState *))
+        _room(self.state, n)
         cdef SlotState **array = self.state.slots
         for i in range(n):
             array[i] = (<Slot>kept[i]).state
         self._slots = kept
         self.state.count = n
+
+
+cdef int _room(FanoutState *fanout, Py_ssize_t n) except -1:
+    """A batch's room for ``n`` writes (a write per client of a lane)."""
+    if n <= fanout.room:
+        return 0
+    cdef size_t room = <size_t>n
+    _grow(<void **>&fanout.fds, room * sizeof(int))
+    _grow(<void **>&fanout.staged, room * sizeof(Py_ssize_t))
+    _grow(<void **>&fanout.parts, room * sizeof(iovec))
+    _grow(<void **>&fanout.messages, room * sizeof(msghdr))
+    _grow(<void **>&fanout.sent, room * sizeof(int))
+    fanout.room = n
+    return 0
 
 
 cdef int _grow(void **pointer, size_t size) except -1:
@@ -541,6 +555,10 @@ cdef struct LaneState:
     FanoutState *fanout
     int kind
     bint enabled
+    # Its own clients (`PoseLane.set_slots`), or (own_slots false) the fanout's.
+    bint own_slots
+    SlotState **slots
+    Py_ssize_t slot_count
     bint settle  # a slot was missed or stashed: Python settles before the next native one
     # The template: the frame ids it is for (as CDR holds them) and StreamTemplate's parts.
     bint has_template
@@ -581,6 +599,15 @@ cdef struct Handler:
     # holds the middleware's locks, while a lock here may be held by a thread that needs
     # the interpreter, which a thread needing those may hold.
     int (*try_handle)(void *lane, const uint8_t *data, size_t size) noexcept nogil
+
+
+cdef inline SlotState **_slots_of(LaneState *lane, Py_ssize_t *count) noexcept nogil:
+    """The clients ``lane`` writes to: its own subset, or every client of its fanout."""
+    if lane.own_slots:
+        count[0] = lane.slot_count
+        return lane.slots
+    count[0] = lane.fanout.count
+    return lane.fanout.slots
 
 
 cdef inline size_t _v1_offset(LaneState *lane) noexcept nogil:
@@ -742,18 +769,18 @@ cdef inline bint _lock(pthread_mutex_t *mutex, bint wait) noexcept nogil:
     return pthread_mutex_trylock(mutex) == 0
 
 
-cdef bint _write_all(FanoutState *fanout, LaneState *lane, size_t size1,
-                     size_t size2) noexcept nogil:
-    """The lane's frame to every client (each slot held), in one system call where the
-    fanout batches; True when some client did not take it whole (Python settles)."""
+cdef bint _write_all(FanoutState *fanout, LaneState *lane, SlotState **slots,
+                     Py_ssize_t slot_count, size_t size1, size_t size2) noexcept nogil:
+    """The lane's frame to each of its clients (each slot held), in one system call where
+    the fanout batches; True when some client did not take it whole (Python settles)."""
     cdef Py_ssize_t i, j, count = 0
     cdef SlotState *slot
     cdef iovec part
     cdef int result
     cdef bint settle = False
-    cdef bint batched = fanout.batch.ring_fd >= 0 and fanout.count > 1
-    for i in range(fanout.count):
-        slot = fanout.slots[i]
+    cdef bint batched = fanout.batch.ring_fd >= 0 and slot_count > 1
+    for i in range(slot_count):
+        slot = slots[i]
         if slot.header_version == 2:
             part.iov_base = <void *>lane.buffer
             part.iov_len = size2
@@ -781,7 +808,7 @@ cdef bint _write_all(FanoutState *fanout, LaneState *lane, size_t size1,
                           fanout.sent) != 0:
             send_batch_close(&fanout.batch)  # the ring failed: one at a time from now on
         for j in range(count):
-            slot = fanout.slots[fanout.staged[j]]
+            slot = slots[fanout.staged[j]]
             result = _settle(slot, &fanout.parts[j], 1, fanout.parts[j].iov_len,
                              fanout.sent[j], -fanout.sent[j] if fanout.sent[j] < 0 else 0)
             settle = _missed(slot, result) or settle
@@ -806,13 +833,15 @@ cdef int _try_handle(void *lane_pointer, const uint8_t *data, size_t n) noexcept
 
 
 cdef int _handle_as(void *lane_pointer, const uint8_t *data, size_t n, bint wait) noexcept nogil:
-    """One message: written to every client (HANDLED, or HANDLED_SETTLE when a client
-    could not take it whole), or TO_PYTHON with nothing done; BUSY with nothing done when
-    not ``wait``ing and a lock is held. Every client's slot is held before the first
-    write, so a message goes to all or to none."""
+    """One message: written to each of the lane's clients (HANDLED, or HANDLED_SETTLE when
+    a client could not take it whole), or TO_PYTHON with nothing done; BUSY with nothing
+    done when not ``wait``ing and a lock is held. Every client's slot is held before the
+    first write, so a message goes to all or to none."""
     cdef LaneState *lane = <LaneState *>lane_pointer
     cdef FanoutState *fanout = lane.fanout
     cdef SlotState *slot
+    cdef SlotState **slots
+    cdef Py_ssize_t slot_count
     cdef uint8_t content[CONTENT_SIZE]
     cdef double values[12]
     cdef uint64_t timestamp
@@ -827,8 +856,9 @@ cdef int _handle_as(void *lane_pointer, const uint8_t *data, size_t n, bint wait
     if fanout.hold or not lane.enabled or lane.settle:
         pthread_mutex_unlock(&fanout.lock)
         return C_TO_PYTHON
-    for i in range(fanout.count):
-        slot = fanout.slots[i]
+    slots = _slots_of(lane, &slot_count)
+    for i in range(slot_count):
+        slot = slots[i]
         if not slot.open:
             pthread_mutex_unlock(&fanout.lock)
             return C_TO_PYTHON
@@ -836,10 +866,10 @@ cdef int _handle_as(void *lane_pointer, const uint8_t *data, size_t n, bint wait
             v2 = True
         else:
             v1 = True
-    for i in range(fanout.count):
-        if not _lock(&fanout.slots[i].lock, wait):
+    for i in range(slot_count):
+        if not _lock(&slots[i].lock, wait):
             for j in range(i):
-                pthread_mutex_unlock(&fanout.slots[j].lock)
+                pthread_mutex_unlock(&slots[j].lock)
             pthread_mutex_unlock(&fanout.lock)
             return C_BUSY
     clock = _clock_ms(fanout)
@@ -847,9 +877,9 @@ cdef int _handle_as(void *lane_pointer, const uint8_t *data, size_t n, bint wait
         size2 = _frame(lane, 2, content, timestamp, clock)
     if v1:
         size1 = _frame(lane, 1, content, timestamp, clock)
-    settle = _write_all(fanout, lane, size1, size2)
-    for i in range(fanout.count):
-        pthread_mutex_unlock(&fanout.slots[i].lock)
+    settle = _write_all(fanout, lane, slots, slot_count, size1, size2)
+    for i in range(slot_count):
+        pthread_mutex_unlock(&slots[i].lock)
     _keep(lane, data, n, content, values, timestamp, clock)
     _note(lane, <double>_now_ns(CLOCK_MONOTONIC) / 1e9)
     lane.settle = settle
@@ -865,6 +895,7 @@ cdef class PoseLane:
     cdef Handler _handler
     cdef Fanout _fanout
     cdef object _capsule
+    cdef list _slots  # its own clients (`set_slots`), or None: the fanout's
 
     def __cinit__(self, Fanout fanout, int kind, size_t last_max_bytes, double smoothing):
         if kind not in (C_POSE, C_POSE_STAMPED, C_TRANSFORM_STAMPED):
@@ -889,6 +920,7 @@ cdef class PoseLane:
             free(self.state.last)
             free(self.state.frame_raw)
             free(self.state.child_raw)
+            free(self.state.slots)
             free(self.state)
             self.state = NULL
 
@@ -910,6 +942,30 @@ cdef class PoseLane:
     def count(self):
         """Messages written here."""
         return self.state.count
+
+    @property
+    def slots(self):
+        """The clients it writes to: its own (`set_slots`), else None (the fanout's)."""
+        return None if self._slots is None else list(self._slots)
+
+    def set_slots(self, slots):
+        """Write to ``slots`` only from now on (a device limited to an audience: a subset
+        of the fanout's clients, perhaps none), or, with None, to every client of the
+        fanout."""
+        if slots is None:
+            self.state.own_slots = False
+            self._slots = None
+            return
+        kept = [<Slot?>s for s in slots]
+        cdef Py_ssize_t n = len(kept)
+        cdef Py_ssize_t i
+        _grow(<void **>&self.state.slots, <size_t>max(n, 1) * sizeof(SlotState *))
+        _room(self._fanout.state, n)
+        for i in range(n):
+            self.state.slots[i] = (<Slot>kept[i]).state
+        self.state.slot_count = n
+        self.state.own_slots = True
+        self._slots = kept
 
     def set_template(self, bytes frame_raw, bytes child_raw, bytes type_raw, bytes name_raw,
                      int meta_header_size, long long meta_size, bytes meta_tail):
@@ -998,7 +1054,7 @@ cdef class PoseLane:
         the rest of a frame (their loop writes it); the lane writes again after this."""
         missed = []
         stashed = []
-        for slot in self._fanout._slots:
+        for slot in (self._fanout._slots if self._slots is None else self._slots):
             if (<Slot>slot).state.missed:
                 (<Slot>slot).state.missed = False
                 missed.append((<Slot>slot).owner)

@@ -14,7 +14,10 @@ its client's quota and recorded with who holds it (the operator's start-up confi
 clients that asked for it), and a removal is allowed by the ownership rules
 (`bridge.core.security.BridgeOwners`). A client's bridge ends when the last client holding
 it leaves, unless one kept it (`keep_bridge`): the dispatcher runs its kind's remove op, as
-the operator.
+the operator. Who receives a bridge's streams follows from who holds it
+(`BridgeOwners.audience`): the dispatcher tells the hub whenever that changes, and each
+capability reports its bridges' devices to the hub (`Hub.bridge_device`, keyed by
+`bridge_key`).
 
 Creations and removals of one bridge (its kind and identity) run one at a time, in the
 order they came (`BridgeLocks`): a removal that arrives while an asynchronous creation of
@@ -35,7 +38,7 @@ from typing import (Any, Awaitable, Callable, Generic, Mapping, Optional, Protoc
 
 from bridge.core.content_guards import ContentGuard
 from bridge.core.heavy import HeavyWork, LargeResult, OffLoop
-from bridge.core.hub import Hub, Replier
+from bridge.core.hub import Hub, Replier, Subscriber
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.security import (OPERATOR, WRITES, BridgeKey, BridgeOwners, BridgeQuota,
                                   FileResolver, SecurityPolicy, strip_frame)
@@ -156,6 +159,25 @@ def _check_arity(cls: type[Op], handler: Handler) -> None:
         raise TypeError(f"the {cls.op} handler takes {taken} arguments: expected (request, "
                         f"client{', guard' if cls.content else ''}), as the op declares "
                         f"content={cls.content!r}")
+
+
+def bridge_key(request: c.Request) -> Optional[BridgeKey]:
+    """(kind, identity) of the bridge a create or remove request names, as the
+    capabilities keep them (names resolved, so ``cmd`` and ``/cmd`` are one bridge); a
+    capability names its bridge's devices to the hub by it (`Hub.bridge_device`)."""
+    cls = type(request)
+    kind = cls.creates.kind if cls.creates is not None else cls.removes
+    if kind is None:
+        return None
+    return kind, tuple(str(getattr(request, name)) for name in _identity_fields(request))
+
+
+def made_bridge(request: c.Request) -> BridgeKey:
+    """`bridge_key` of a create request: the bridge whose devices its handler reports."""
+    key = bridge_key(request)
+    if key is None or type(request).creates is None:
+        raise TypeError(f"{request.op} creates no bridge")
+    return key
 
 
 def _identity_fields(request: c.Request) -> tuple[str, ...]:
@@ -360,7 +382,9 @@ class Dispatcher:
         # ends; of the others, those it was the last to hold and nothing keeps end here.
         gone = self._owners.forget(client, {kind for kind, k in _KINDS.items()
                                             if k.bridge.per_connection})
-        self._quota.release(client, gone)
+        for key in gone:
+            self._hub.drop_bridge(key)
+        self._quota.release(client, len(gone))
         self._quota.forget(client)
         if not self._closing:  # closed: the capabilities have closed every bridge
             for key in self._owners.left(client):
@@ -393,19 +417,27 @@ class Dispatcher:
             self._locks.release(key)
 
     def _keep(self, request: c.KeepBridge, client: Replier | None) -> c.KeptBridge:
-        key = self._bridge_key(request.bridge)
+        key = bridge_key(request.bridge)
         assert key is not None  # a removal names its bridge
         if not self._owners.keep(key):
             identity = _identity_fields(request.bridge)
             raise CommandFailedError(identity[0], f"a live {key[0]}", "/".join(key[1]),
                                      code=ErrorCode.NOT_FOUND)
+        self._tell_audience(key)  # every client gets it now
         return c.KeptBridge(key[0], dict(zip(_identity_fields(request.bridge), key[1])))
 
     def _forget_bridge(self, key: BridgeKey) -> None:
         """`key` is gone: its maker's quota slot goes back."""
         maker = self._owners.removed(key)
+        self._hub.drop_bridge(key)
         if maker is not None and maker != OPERATOR:
             self._quota.release(maker)
+
+    def _tell_audience(self, key: BridgeKey) -> None:
+        """The hub streams `key`'s devices to whom its holders make its audience."""
+        audience = self._owners.audience(key)
+        self._hub.set_bridge_audience(key, None if audience is None
+                                      else tuple(cast(Subscriber, a) for a in audience))
 
     # --- plumbing -----------------------------------------------------------------------
     def _run(self, request: c.Request, client: Replier | None) -> Result | Awaitable[Result]:
@@ -421,7 +453,7 @@ class Dispatcher:
                                    from_client=client is not None,
                                    resolve_file=self._resolve_file,
                                    grant=client.grant if client is not None else WRITES)
-        key = self._bridge_key(request)
+        key = bridge_key(request)
         if key is None:
             return self._call(handler, request, client, None)
         if not self._locks.try_take(key):
@@ -458,6 +490,11 @@ class Dispatcher:
         """The handler with the ownership check before it and the bookkeeping after."""
         if key is not None and type(request).removes is not None:
             self._owners.check_removal(key, _identity_fields(request)[0], client)
+        if key is not None and type(request).creates is not None \
+                and self._owners.owner(key) is None:
+            # A new bridge's devices, reported while it is made, go to its maker only.
+            self._hub.set_bridge_audience(key, None if client is None
+                                          else (cast(Subscriber, client),))
         reserved = client is not None and self._quota.reserve(client, request.op)
         try:
             if type(request).content:
@@ -502,21 +539,17 @@ class Dispatcher:
         if client is not None:
             self._quota.settle(client, reserved, succeeded=result is not None,
                                existed=existed)
-        if key is None or result is None:
+        if key is None:
+            return
+        if result is None:
+            if type(request).creates is not None and self._owners.owner(key) is None:
+                self._hub.drop_bridge(key)  # not made after all
             return
         if type(request).creates is not None:
             self._owners.created(key, OPERATOR if client is None else client)
+            self._tell_audience(key)
         elif type(request).removes is not None:
             self._forget_bridge(key)
-
-    def _bridge_key(self, request: c.Request) -> Optional[BridgeKey]:
-        """(kind, identity) of the bridge a create or remove request names, as the
-        capabilities keep them (names resolved, so ``cmd`` and ``/cmd`` are one bridge)."""
-        cls = type(request)
-        kind = cls.creates.kind if cls.creates is not None else cls.removes
-        if kind is None:
-            return None
-        return kind, tuple(str(getattr(request, name)) for name in _identity_fields(request))
 
     async def _finish(self, outcome: Awaitable[Result], client: Replier,
                       message: Message) -> None:

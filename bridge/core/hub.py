@@ -1,13 +1,17 @@
 """The daemon-wide switch between ROS-side bridges and connected OpenIGTLink clients.
 
 Bridges are daemon-wide, as with an OpenIGTLink server in 3D Slicer: every client receives
-every streamed device (except a device with an audience: a client's own message stream
-goes to the clients that joined it, `join`), and a client that connects gets the current
-state at once (the newest value of each streamed device, and every persistent one-shot such
-as a robot mesh), except what a late ROS subscriber would not get either: a large value
-(an image, a point cloud) of a volatile topic is not kept once sent (`set_volatile`), as it
-may be tens of MB and the next one is on its way. Whether a message is large is decided in
-one place, `is_large`.
+every streamed device, except a device with an audience. A bridge's devices (a capability
+reports each, `bridge_device`) go to that bridge's audience, which the dispatcher derives
+from who holds it (`set_bridge_audience`; docs/security.md, "Who owns a bridge"): a
+client's bridge to its live holders, the operator's and kept ones to every client. A
+client's own message stream goes to the clients that joined it (`join`). A client that
+is added to an audience gets the device's current state at once, and a client that
+connects gets the current state at once (the newest value of each streamed device, and
+every persistent one-shot such as a robot mesh), except what a late ROS subscriber would
+not get either: a large value (an image, a point cloud) of a volatile topic is not kept
+once sent (`set_volatile`), as it may be tens of MB and the next one is on its way.
+Whether a message is large is decided in one place, `is_large`.
 
 Threads: the asyncio loop owns the clients and their buffers. ROS callbacks run in an
 executor thread and hand values over through a `StreamChannel` (`post_frame`):
@@ -20,9 +24,9 @@ executor thread and hand values over through a `StreamChannel` (`post_frame`):
   (`hand_over`: in order, one wake-up for all handed meanwhile, an image replacing its
   device's older one), into its own outbox;
 * hotter still: a streamed pose taken by a native lane (native_stream.py) is converted and
-  written to every client without the interpreter (to all of them in one system call,
-  where io_uring is allowed), while every client keeps up and nothing waits for the loop
-  (`fanout.hold`); otherwise it takes the path above;
+  written to each client of its audience (the lane's own slots) without the interpreter
+  (to all of them in one system call, where io_uring is allowed), while they keep up and
+  nothing waits for the loop (`fanout.hold`); otherwise it takes the path above;
 * otherwise small values queue in order (bounded), large ones (images, point clouds)
   replace their device's waiting one, and the loop is woken at most once per batch, so a
   burst costs one wake-up and each client gets the whole batch in one socket write.
@@ -48,7 +52,7 @@ from typing import Any, Callable, Iterator, Optional, Protocol
 
 from bridge.core.native_stream import PySlot, new_fanout, new_slot
 from bridge.core.outbox import BulkFrame, Frame
-from bridge.core.security import WriteGrant
+from bridge.core.security import BridgeKey, WriteGrant
 from protocol.crc64 import Buffer
 from protocol.freshness import daemon_clock_ms
 from protocol.messages import Message
@@ -142,9 +146,15 @@ class Hub:
         # A device's condition while it is not normal (a stale stream's STATUS): sent to
         # its clients when it changes, and to a client that connects or joins later.
         self._condition: dict[str, Frame] = {}
-        # Devices that go only to the clients that joined them (may be none); a device not
-        # listed goes to every client. Tuples, replaced whole: other threads iterate them.
+        # Who gets each device (`_refresh`), from the two sources below: devices that go
+        # only to the clients listed (may be none); a device not listed goes to every
+        # client. Tuples, replaced whole: other threads iterate them.
         self._audience: dict[str, tuple[Subscriber, ...]] = {}
+        # Devices that go to the clients that `join` them (a client's message stream).
+        self._joined: dict[str, tuple[Subscriber, ...]] = {}
+        # A bridge's audience (None: every client) and the bridges each device is of.
+        self._bridges: dict[BridgeKey, Optional[tuple[Subscriber, ...]]] = {}
+        self._device_bridges: dict[str, tuple[BridgeKey, ...]] = {}
         self._inbound: dict[str, InboundHandler] = {}
         self._reply_listeners: list[ReplyListener] = []
         self._closed_listeners: list[ClosedListener] = []
@@ -186,16 +196,14 @@ class Hub:
             self.clients.add(client)
             self._client_tuple = tuple(self.clients)
             newest = self._set_slots()  # from now on the lanes see it (closed until it keeps up)
-            for frame in self._persistent.values():
-                client.send_once(frame)
-            audience = self._audience
+            for device, frame in self._persistent.items():
+                if self._gets(client, device):
+                    client.send_once(frame)
             for device, frame in newest.items():
-                members = audience.get(device)
-                if members is None or client in members:
+                if self._gets(client, device):
                     client.send_stream(device, frame)
             for device, frame in self._condition.items():
-                members = audience.get(device)
-                if members is None or client in members:
+                if self._gets(client, device):
                     client.send_once(frame)
 
     def detach(self, client: Subscriber) -> None:
@@ -203,39 +211,138 @@ class Hub:
             self.clients.discard(client)
             self._paced.discard(client)
             self._client_tuple = tuple(self.clients)
-            self._set_slots()
             for device, members in tuple(self._audience.items()):
                 if client in members:
-                    self._audience[device] = tuple(m for m in members if m is not client)
+                    self._audience[device] = _without(members, client)
+            for device, members in tuple(self._joined.items()):
+                if client in members:
+                    self._joined[device] = _without(members, client)
+            for key, audience in tuple(self._bridges.items()):
+                if audience is not None and client in audience:
+                    self._bridges[key] = _without(audience, client)
+            self._set_slots()
 
     # --- audiences (loop thread) -------------------------------------------------------------
     def limit_to_audience(self, device: str) -> None:
         """From now on `device` goes only to the clients that `join` it (none yet)."""
         with self._lock:
-            self._audience.setdefault(device, ())
-        self._update_lane(device)
+            self._joined.setdefault(device, ())
+            self._refresh((device,))
 
     def join(self, device: str, client: Subscriber) -> None:
         """Stream `device` (limited to an audience) to `client` too; it gets the newest
         value at once, as a client that connects gets the others'."""
         with self._lock:
-            members = self._audience.get(device, ())
-            if client in members:
-                return
-            self._audience[device] = (*members, client)
-            frame = self._newest(device)
-            if frame is not None and client in self.clients:
-                client.send_stream(device, frame)
+            members = self._joined.get(device, ())
+            if client not in members:
+                self._joined[device] = (*members, client)
+                self._refresh((device,))
 
     def leave(self, device: str, client: Subscriber) -> None:
         with self._lock:
-            members = self._audience.get(device)
+            members = self._joined.get(device)
             if members is not None and client in members:
-                self._audience[device] = tuple(m for m in members if m is not client)
+                self._joined[device] = _without(members, client)
+                self._refresh((device,))
+
+    def bridge_device(self, key: BridgeKey, device: str) -> None:
+        """`device` streams for the bridge `key`: the one hook through which a capability
+        reports each device of its bridges (when it registers the device's name). It goes
+        to the bridge's audience (`set_bridge_audience`); a device of several bridges (a
+        frame several marker topics use) to each of theirs."""
+        with self._lock:
+            keys = self._device_bridges.get(device, ())
+            if key not in keys:
+                self._device_bridges[device] = (*keys, key)
+                self._refresh((device,))
+
+    def set_bridge_audience(self, key: BridgeKey,
+                            members: Optional[tuple[Subscriber, ...]]) -> None:
+        """Who gets the devices of the bridge `key` from now on (None: every client); the
+        dispatcher's, from who holds the bridge. A client added gets each device's
+        current state at once. A bridge the dispatcher never named (no dispatcher: a
+        test's, a player's) goes to every client."""
+        with self._lock:
+            self._bridges[key] = members
+            self._refresh(tuple(d for d, keys in self._device_bridges.items() if key in keys))
+
+    def drop_bridge(self, key: BridgeKey) -> None:
+        """The bridge `key` is gone: its devices (those another bridge shares) are no
+        longer its."""
+        with self._lock:
+            self._bridges.pop(key, None)
+            devices = []
+            for device, keys in tuple(self._device_bridges.items()):
+                if key in keys:
+                    rest = tuple(k for k in keys if k != key)
+                    if rest:
+                        self._device_bridges[device] = rest
+                    else:
+                        del self._device_bridges[device]
+                    devices.append(device)
+            self._refresh(devices)
+
+    def audience(self, device: str) -> tuple[Subscriber, ...]:
+        """The clients that get `device` now."""
+        return self._recipients(device)
+
+    def _derived(self, device: str) -> Optional[tuple[Subscriber, ...]]:
+        """Who may get `device` (None: every client): the clients that joined it, or the
+        union of its bridges' audiences (every client once one of them goes to all)."""
+        joined = self._joined.get(device)
+        if joined is not None:
+            return joined
+        keys = self._device_bridges.get(device)
+        if not keys:
+            return None
+        members: dict[Subscriber, None] = {}
+        for key in keys:
+            audience = self._bridges.get(key)
+            if audience is None:
+                return None
+            members.update(dict.fromkeys(audience))
+        return tuple(members)
+
+    def _refresh(self, devices: tuple[str, ...] | list[str]) -> None:
+        """Under the hand-off lock: `devices`' audiences as derived now; a client they
+        gained gets each one's current state at once (its lanes' subsets hold the fanout,
+        so no lane writes meanwhile)."""
+        for device in devices:
+            before = self._recipients(device)
+            members = self._derived(device)
+            if members is None:
+                self._audience.pop(device, None)
+            else:
+                self._audience[device] = members
+            gained = [c for c in self._recipients(device)
+                      if c not in before and c in self.clients]
+            if device in self._lanes:
+                for client in gained:  # no lane value may pass its catching up
+                    _close_slot(client)
+            self._update_lane(device)
+            for client in gained:
+                self._catch_up(client, device)
+
+    def _catch_up(self, client: Subscriber, device: str) -> None:
+        """`client` gets `device` from now on: its current state at once, as a client that
+        connects gets it."""
+        persistent = self._persistent.get(device)
+        if persistent is not None:
+            client.send_once(persistent)
+        frame = self._newest(device)
+        if frame is not None:
+            client.send_stream(device, frame)
+        condition = self._condition.get(device)
+        if condition is not None:
+            client.send_once(condition)
+
+    def _gets(self, client: Subscriber, device: str) -> bool:
+        members = self._audience.get(device)
+        return members is None or client in members
 
     def set_paced(self, client: Subscriber) -> None:
-        """`client` takes its streams once a display frame (`lane_news` included): the
-        lanes write to the others only."""
+        """`client` takes its streams once a display frame (`lane_news` included, what its
+        audiences give it): the lanes write to the others only."""
         with self._lock:
             self._paced.add(client)
             self._set_slots()
@@ -247,26 +354,31 @@ class Hub:
         that moment."""
         if self.fanout is None:
             return dict(self._latest)
-        # A client without a native slot (a test's) stays closed: the lanes then leave
-        # every message to the Python path.
-        slots = [getattr(c, "slot", None) for c in self._client_tuple if c not in self._paced]
         newest = dict(self._latest)
         with self.fanout:
-            self.fanout.set_slots([s if s is not None and not isinstance(s, PySlot)
-                                   else _closed_slot() for s in slots])
+            self.fanout.set_slots(self._lane_slots(self._client_tuple))
             for device, (lane, to_frame) in self._lanes.items():
+                self._set_lane(device, lane)
                 latest = lane.latest()
                 if latest is not None:
                     newest[device] = to_frame(latest)
         return newest
 
+    def _lane_slots(self, clients: tuple[Subscriber, ...]) -> list[Any]:
+        """The native slots a lane writes to for `clients`: the paced ones' not (they take
+        `lane_news`). A client without a native slot (a test's) stays closed: the lanes
+        then leave every message to the Python path."""
+        slots = [getattr(c, "slot", None) for c in clients if c not in self._paced]
+        return [s if s is not None and not isinstance(s, PySlot) else _closed_slot()
+                for s in slots]
+
     def add_lane(self, device: str, lane: Any, to_frame: Callable[[Any], Frame]) -> None:
         """`device`'s values may be written by a native lane (`PoseLane`) from now on, when
-        nothing about the device needs the Python path (a bound, an audience).
+        nothing about the device needs the Python path (a bound), to its audience.
         `to_frame` runs holding the fanout, so the lane's template cannot change under it."""
         with self._lock:
             self._lanes[device] = (lane, to_frame)
-        self._update_lane(device)
+            self._update_lane(device)
 
     def remove_lane(self, device: str) -> None:
         """The lane writes no more (once this returns); its newest value becomes the hub's."""
@@ -281,16 +393,19 @@ class Hub:
                 if latest is not None:
                     self._latest[device] = to_frame(latest)
 
-    def lane_news(self, seen: dict[str, int]) -> list[tuple[str, Frame]]:
-        """The newest value of each writing lane whose count moved since `seen` (which
-        this updates): what a paced client, which no lane writes to, takes at its frame."""
+    def lane_news(self, seen: dict[str, int],
+                  client: Subscriber) -> list[tuple[str, Frame]]:
+        """The newest value of each writing lane `client` gets whose count moved since
+        `seen` (which this updates): what a paced client, which no lane writes to, takes
+        at its frame."""
         if self.fanout is None:
             return []
         news = []
         with self.fanout:  # no template changes meanwhile
             for device, (lane, to_frame) in tuple(self._lanes.items()):
                 count = int(lane.count)
-                if not lane.enabled or seen.get(device) == count:
+                if (not lane.enabled or seen.get(device) == count
+                        or not self._gets(client, device)):
                     continue
                 seen[device] = count
                 latest = lane.latest()
@@ -299,11 +414,20 @@ class Hub:
         return news
 
     def _update_lane(self, device: str) -> None:
+        """`device`'s lane writes unless it is bound, to its audience (its own slots) or
+        to every client (the fanout's)."""
         entry = self._lanes.get(device)
         if entry is None or self.fanout is None:
             return
         with self.fanout:
-            entry[0].enabled = device not in self._min_interval and device not in self._audience
+            self._set_lane(device, entry[0])
+
+    def _set_lane(self, device: str, lane: Any) -> None:
+        # Holding the fanout (and the hand-off lock, but for a rate cap's change).
+        members = self._audience.get(device)
+        lane.enabled = device not in self._min_interval
+        lane.set_slots(None if members is None else
+                       self._lane_slots(tuple(c for c in members if c in self.clients)))
 
     def _newest(self, device: str) -> Optional[Frame]:
         entry = self._lanes.get(device)
@@ -382,7 +506,7 @@ class Hub:
         """A one-shot every client gets once per connection (a mesh); replaces an older one."""
         frame = Frame(message)
         self._persistent[message.device_name] = frame
-        for client in tuple(self.clients):
+        for client in self._recipients(message.device_name):
             client.send_once(frame)
 
     def set_condition(self, device: str, kept: Frame | None, sent: Frame) -> None:
@@ -428,7 +552,10 @@ class Hub:
                     lane[0].enabled = False
         self._persistent.pop(device, None)
         self._condition.pop(device, None)
-        self._audience.pop(device, None)
+        with self._lock:
+            self._audience.pop(device, None)
+            self._joined.pop(device, None)
+            self._device_bridges.pop(device, None)
         self._volatile.discard(device)
         self._held.pop(device, None)
         self._min_interval.pop(device, None)
@@ -438,8 +565,7 @@ class Hub:
 
     def latest(self, device: str, client: Subscriber | None = None) -> Message | None:
         """The newest value of `device`; with `client`, only if that client gets it."""
-        members = self._audience.get(device)
-        if client is not None and members is not None and client not in members:
+        if client is not None and not self._gets(client, device):
             return None
         frame = self._newest(device) or self._persistent.get(device)
         return frame.message if frame else None
@@ -535,8 +661,7 @@ class Hub:
         direct = self._direct_writes
         for device, frame in frames:  # a plain loop: this runs per message on hot paths
             frame.clock = frame.clock or clock
-            if direct and (device in self._min_interval or device in self._audience
-                           or isinstance(frame, BulkFrame)):
+            if direct and (device in self._min_interval or isinstance(frame, BulkFrame)):
                 direct = False
         if direct:
             with self._lock:
@@ -549,20 +674,30 @@ class Hub:
             self._post(device, frame, channel)
 
     def _write_direct_many(self, frames: list[tuple[str, Frame]]) -> None:
-        # Under self._lock, with nothing queued for the loop (see _write_direct).
+        # Under self._lock, with nothing queued for the loop (see _write_direct). Each
+        # client gets, in one write, those of the frames whose devices it gets.
         for device, frame in frames:
             self._latest[device] = frame
         self.streamed += len(frames)
         self.direct += len(frames)
+        audience = self._audience
+        limited = bool(audience) and any(device in audience for device, _ in frames)
         joined: dict[int, bytes] = {}  # header version -> the whole update, encoded once
         for client in self._client_tuple:
+            mine = frames
+            if limited:
+                mine = [(d, f) for d, f in frames if self._gets(client, d)]
+                if not mine:
+                    continue
             version = client.header_version
-            data = joined.get(version)
+            data = joined.get(version) if mine is frames else None
             if data is None:
-                data = joined[version] = (frames[0][1].encoded(version) if len(frames) == 1
-                                          else b"".join(f.encoded(version) for _, f in frames))
+                data = (mine[0][1].encoded(version) if len(mine) == 1
+                        else b"".join(f.encoded(version) for _, f in mine))
+                if mine is frames:
+                    joined[version] = data
             if not client.write_direct(data):
-                for device, frame in frames:
+                for device, frame in mine:
                     client.hand_over(device, frame)
 
     def _write_direct(self, device: str, frame: Frame) -> None:
@@ -650,6 +785,19 @@ class StreamChannel:
     def __init__(self, device: str) -> None:
         self.device = device
         self.closed = False
+
+
+def _without(members: tuple[Subscriber, ...], client: Subscriber) -> tuple[Subscriber, ...]:
+    return tuple(m for m in members if m is not client)
+
+
+def _close_slot(client: Subscriber) -> None:
+    """No lane writes to `client` until its session opens its slot again (once nothing it
+    was sent waits)."""
+    slot = getattr(client, "slot", None)
+    if slot is not None and not isinstance(slot, PySlot):
+        with slot:
+            slot.open = False
 
 
 def _closed_slot() -> Any:

@@ -22,7 +22,7 @@ __all__ = ["BROKEN", "REFUSED", "SENT", "STASHED", "LaneArrivals", "PySlot", "av
            "new_fanout", "new_lane", "new_slot"]
 
 # The compiled module's interface this wrapper expects (`_native_stream.INTERFACE`).
-NATIVE_INTERFACE = 5
+NATIVE_INTERFACE = 6
 
 try:
     from bridge.core import _native_stream

@@ -646,6 +646,11 @@ class BridgeOwners:
     def holders(self, key: BridgeKey) -> frozenset[object]:
         return frozenset(self._holders.get(key, ()))
 
+    def audience(self, key: BridgeKey) -> Optional[frozenset[object]]:
+        """Who receives the streams of `key`: None (every client) if it stays (the
+        operator's, or kept), else its live holders."""
+        return None if self.stays(key) else self.holders(key)
+
     def keep(self, key: BridgeKey) -> bool:
         """Mark `key` to stay when its holders have left; False if no such bridge lives."""
         if key not in self._makers:
@@ -667,14 +672,14 @@ class BridgeOwners:
         self._kept.discard(key)
         return self._makers.pop(key, None)
 
-    def forget(self, client: object, kinds: Iterable[str]) -> int:
+    def forget(self, client: object, kinds: Iterable[str]) -> list[BridgeKey]:
         """`client` left: its bridges of `kinds` (those that die with their connection, which
-        their capability ends) are gone; returns how many it made."""
+        their capability ends) are gone; returns them."""
         kinds = set(kinds)
         gone = [k for k, maker in self._makers.items() if maker is client and k[0] in kinds]
         for key in gone:
             self.removed(key)
-        return len(gone)
+        return gone
 
     def left(self, client: object) -> list[BridgeKey]:
         """`client` left: it holds nothing any more. Returns the bridges that end with it

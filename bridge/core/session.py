@@ -571,7 +571,7 @@ class ClientSession(asyncio.Protocol):
             return
         self._display_timer = asyncio.get_running_loop().call_later(display.interval_s,
                                                                     self._display_frame)
-        lanes = self._hub.lane_news(display.lanes_seen)
+        lanes = self._hub.lane_news(display.lanes_seen, self)
         with self.slot:
             frames = display.take(lanes)
         if frames:

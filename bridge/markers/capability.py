@@ -77,11 +77,11 @@ import numpy as np
 from bridge.codecs import CodecError, codec_for
 from bridge.codecs.cdr import CdrError
 from bridge.core.content_guards import ContentGuard
-from bridge.core.dispatch import Created, Handler
-from bridge.core.hub import Hub, Replier, Subscriber
+from bridge.core.dispatch import Created, Handler, made_bridge
+from bridge.core.hub import Hub, Replier
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.outbox import SharedFrame
-from bridge.core.security import DEFAULT_MAX_MARKER_BYTES, strip_frame
+from bridge.core.security import DEFAULT_MAX_MARKER_BYTES, BridgeKey, strip_frame
 from bridge.core.threads import OnFailure, start_thread
 from bridge.markers.cdr import layout_supported, read_marker, read_marker_array
 from bridge.markers.convert import ADD, DELETE, DELETEALL, MarkerEvent, events_of
@@ -271,7 +271,6 @@ class _FrameRef:
     name_key: NameKey
     handle: LookupKey
     users: int = 0
-    limited: bool = False  # goes only to the audiences of the topics that use it
 
 
 @dataclass
@@ -500,9 +499,8 @@ class _Subscription:
     received: int = 0
     closed: bool = False
     last_error: str = ""
-    # The clients its devices go to: those that created or subscribed to it (None: every
-    # client: the operator's, which plain OpenIGTLinkIF clients cannot ask for).
-    audience: Optional[set[Replier]] = None
+    # Its bridge: its devices go to whom that goes (`Hub.bridge_device`).
+    bridge: Optional[BridgeKey] = None
     last_budget_status: float = 0.0  # monotonic: one STATUS a second at most
 
     def on_message(self, msg: Any) -> None:  # ROS executor thread: hand off only
@@ -535,7 +533,6 @@ class MarkerServing:
         self._timer_due = 0
         self._refusals = RateLimitedLog(log)
         self.budget = ModelBudget(max_model_bytes)
-        hub.add_closed_listener(self._client_left)
         self._meshing = threading.Lock()  # one topic's worker meshes at a time
 
     # ------------------------------------------------------------------ sources
@@ -573,8 +570,6 @@ class MarkerServing:
         existing = self.subscriptions.get(topic)
         if existing is not None:
             if existing.request == request:  # a reconnecting client re-creates what it had
-                if client is not None:  # or another subscribes: it gets the topic's too
-                    self._join(existing, client)
                 return Created(self._describe(existing), existed=True)
             raise CommandFailedError("topic", "a topic without a marker subscriber "
                                      "(remove_marker_subscriber first, or repeat the same "
@@ -584,7 +579,7 @@ class MarkerServing:
         device = self._names.register(topic_key)
         sub = _Subscription(topic, ros_type, request, request.fixed_frame.lstrip("/"),
                             topic_key, device, self, guard, message_class=message_class,
-                            audience=None if client is None else {client})
+                            bridge=made_bridge(request))
         self._limit(sub, device)
         sub.raw = raw
         sub.worker = _Worker(sub, guard.readable_roots(), self._package_paths, budget=self.budget,
@@ -605,31 +600,9 @@ class MarkerServing:
     # ------------------------------------------------------------------ audiences
 
     def _limit(self, sub: _Subscription, device: str) -> None:
-        """``device`` (of ``sub``) goes only to ``sub``'s audience (if it has one)."""
-        if sub.audience is None:
-            return
-        self._hub.limit_to_audience(device)
-        for client in sub.audience:
-            self._hub.join(device, cast(Subscriber, client))
-
-    def _join(self, sub: _Subscription, client: Replier) -> None:
-        """``client`` subscribes to ``sub``'s markers: every device of it, now and later."""
-        if sub.audience is None or client in sub.audience:
-            return
-        sub.audience.add(client)
-        member = cast(Subscriber, client)
-        for device in [sub.device, *(live.device for live in sub.markers.values())]:
-            self._hub.join(device, member)
-        for parent in {live.parent for live in sub.markers.values()}:
-            ref = self._frames.get((sub.fixed_frame, parent))
-            if ref is not None and ref.limited:
-                self._hub.join(ref.device, member)
-
-    def _client_left(self, client: Replier) -> None:
-        # The hub forgets it in every audience; the topics' own lists too.
-        for sub in self.subscriptions.values():
-            if sub.audience is not None:
-                sub.audience.discard(client)
+        """``device`` is one of ``sub``'s: it goes to whom ``sub``'s bridge goes."""
+        if sub.bridge is not None:
+            self._hub.bridge_device(sub.bridge, device)
 
     def _find(self, topic: str) -> _Subscription:
         sub = self.subscriptions.get(topic)
@@ -789,9 +762,7 @@ class MarkerServing:
         if now - sub.last_budget_status < 1.0:
             return
         sub.last_budget_status = now
-        clients = (tuple(sub.audience) if sub.audience is not None
-                   else tuple(cast(Replier, c) for c in self._hub.clients))
-        for client in clients:
+        for client in tuple(cast(Replier, c) for c in self._hub.audience(sub.device)):
             client.send_status(sub.device, StatusCode.RESOURCE_ERROR, text[:4000])
 
     def _drop(self, sub: _Subscription, key: MarkerKey, gone: list[str]) -> None:
@@ -826,8 +797,8 @@ class MarkerServing:
 
     def _use_frame(self, sub: _Subscription, frame: str) -> None:
         """A marker of ``sub`` is in ``frame``: its TRANSFORM (shared by every marker of
-        every topic in it) goes to the audiences of those topics, or to everyone once a
-        topic without an audience (the operator's) uses it."""
+        every topic in it) goes to the audiences of those topics' bridges (to everyone
+        once one of them goes to everyone)."""
         fixed = sub.fixed_frame
         ref = self._frames.get((fixed, frame))
         if ref is None:
@@ -836,17 +807,8 @@ class MarkerServing:
             self._limit(sub, device)
             metadata = metadata_for(name_key, frame=fixed, units=UNITS_MM)
             handle = self._tf.stream_lookup(fixed, frame, device=device, metadata=metadata)
-            ref = self._frames[(fixed, frame)] = _FrameRef(device, name_key, handle,
-                                                           limited=sub.audience is not None)
-        elif ref.limited and sub.audience is None:
-            # To everyone from now on: streamed again, without an audience.
-            self._tf.stop_lookup(ref.handle)
-            self._hub.forget(ref.device)
-            ref.handle = self._tf.stream_lookup(
-                fixed, frame, device=ref.device,
-                metadata=metadata_for(ref.name_key, frame=fixed, units=UNITS_MM))
-            ref.limited = False
-        elif ref.limited:
+            ref = self._frames[(fixed, frame)] = _FrameRef(device, name_key, handle)
+        else:
             self._limit(sub, ref.device)
         ref.users += 1
 

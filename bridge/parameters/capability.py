@@ -38,7 +38,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_parameter_events
 
-from bridge.core.dispatch import Created, Handler
+from bridge.core.dispatch import Created, Handler, made_bridge
 from bridge.core.hub import Hub, Replier
 from bridge.core.content_guards import ContentGuard
 from bridge.core.security import parameter_service
@@ -202,8 +202,10 @@ class ParameterBridges:
             return Created(self._describe_client(existing), existed=True)
         key = NameKey.parameter_client(node)
         ros_node = self._ros.node
+        device = self._names.register(key)
+        self._hub.bridge_device(made_bridge(request), device)
         client = ParameterClient(
-            node, key, self._names.register(key),
+            node, key, device,
             list_client=ros_node.create_client(ListParametersSrv, f"{node}/list_parameters"),
             get_client=ros_node.create_client(GetParametersSrv, f"{node}/get_parameters"),
             set_client=ros_node.create_client(SetParametersSrv, f"{node}/set_parameters"),

@@ -42,7 +42,7 @@ from bridge.codecs.base import TypeCodec, stream_message
 from bridge.codecs.catalog import SPECIFIC_CODECS
 from bridge.codecs.errors import CodecError
 from bridge.core.content_guards import ContentGuard
-from bridge.core.dispatch import Created, Dispatcher, Handler
+from bridge.core.dispatch import Created, Dispatcher, Handler, made_bridge
 from bridge.core.heavy import HeavyWork
 from bridge.core.hub import Hub, StreamChannel, Subscriber, frame_for
 from bridge.core.logging_limits import RateLimitedLog
@@ -182,6 +182,7 @@ class PlayedTopics:
             return Created(self._describe(existing), existed=True)
         key = NameKey.subscriber(topic)
         device = self._names.register(key)
+        self._hub.bridge_device(made_bridge(request), device)  # before its first value
         channel = self._hub.open_channel(device)
         self._hub.set_rate_cap(device, request.rate_hz)
         self._hub.set_volatile(device, request.qos.durability != "transient_local")

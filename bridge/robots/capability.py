@@ -57,7 +57,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Optional
 
 from bridge.core.content_guards import ContentGuard
-from bridge.core.dispatch import Created, Handler
+from bridge.core.dispatch import Created, Handler, made_bridge
 from bridge.core.hub import Hub, Replier
 from bridge.robots.errors import RobotError
 from bridge.robots.joints import describe_joints, joint_positions
@@ -220,8 +220,8 @@ class RobotServing:
         try:
             description_key = NameKey.robot_description(request.name)
             poses_key = NameKey.robot_poses(request.name)
-            description_device = self._names.register(description_key)
-            poses_device = self._names.register(poses_key)
+            description_device = self._device(request, description_key)
+            poses_device = self._device(request, poses_key)
         except NamingError as error:
             raise OutOfRangeError("name", "a robot name usable as a device name",
                                   f"{request.name!r} ({error})") from None
@@ -459,7 +459,7 @@ class RobotServing:
                 continue
             frame = prefix + name
             key = NameKey.robot_link(robot.name, name)
-            device = self._names.register(key)
+            device = self._names.register(key)  # an element of the poses' TDATA: no stream
             metadata = metadata_for(key, frame=fixed, units=UNITS_MM)
             metadata[KEY_PARENT] = fixed
             metadata[KEY_CHILD] = frame
@@ -469,7 +469,7 @@ class RobotServing:
 
     def _publish_visual(self, robot: _Robot, visual: VisualMesh) -> _VisualInfo:
         key = NameKey.robot_visual(robot.name, visual.link, visual.index)
-        device = self._names.register(key)
+        device = self._device(robot.request, key)
         metadata = metadata_for(key, units=UNITS_MM)
         metadata[KEY_PARENT_DEVICE] = robot.links[visual.link].device
         metadata[KEY_COLOR] = " ".join(f"{c:.6g}" for c in visual.rgba)
@@ -490,6 +490,13 @@ class RobotServing:
             self._names.release(link.key)
 
     # ------------------------------------------------------------------ plumbing
+
+    def _device(self, request: CreateRobot, key: NameKey) -> str:
+        """The device named `key`, one of the robot's: it goes to whom the robot's bridge
+        goes (`Hub.bridge_device`). Every device of a robot is registered here."""
+        device = self._names.register(key)
+        self._hub.bridge_device(made_bridge(request), device)
+        return device
 
     def _status(self, robot: _Robot, code: int, text: str,
                 extra: Optional[dict[str, str]] = None) -> None:

@@ -48,7 +48,7 @@ from bridge.codecs.cdr import CdrError, read_tf_message
 from bridge.codecs.fast import pack_transform, transform_body
 
 from bridge.core.content_guards import TF_MESSAGE_TYPE, ContentGuard
-from bridge.core.dispatch import Created, Handler
+from bridge.core.dispatch import Created, Handler, made_bridge
 from bridge.core.hub import Hub, Replier
 from bridge.core.logging_limits import RateLimitedLog
 from bridge.core.outbox import Frame, TemplateFrame
@@ -591,6 +591,7 @@ class TfLookups:
             return Created(self._describe_lookup(existing), existed=True)
         name_key = NameKey.tf_lookup(*pair)
         device = self._names.register(name_key)
+        self._hub.bridge_device(made_bridge(request), device)
         with self._deliver_lock:  # the streams thread must not evaluate it unregistered
             key = self.registry.add(pair[0], pair[1], rate_hz=request.rate_hz)
             lookup = _Lookup(key, device, metadata_for(name_key, frame=pair[0],

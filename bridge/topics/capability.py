@@ -30,7 +30,7 @@ from bridge.codecs.generic import document_to_json
 from bridge.codecs.fast_image import RawImageStream
 from bridge.codecs.generic import dict_to_message
 from bridge.codecs.slicer_data import markup_labels
-from bridge.core.dispatch import Created, Handler
+from bridge.core.dispatch import Created, Handler, made_bridge
 from bridge.core.heavy import OffLoop
 from bridge.core.hub import (Hub, Replier, Subscriber, frame_for,
                              is_large)
@@ -366,8 +366,13 @@ class SubscriberBridge:
         return message
 
     def info(self) -> TopicInfo:
+        extra: dict[str, Any] = {}
+        if self._lane is not None:  # its route: how many the native lane wrote
+            with self._hub.fanout:
+                extra["lane_written"] = int(self._lane.count)
         return TopicInfo("subscriber", self.topic, self.codec.ros_type, self.device,
-                         self.codec.igtl_type, self.qos.to_dict(), self.max_rate_hz, self.count)
+                         self.codec.igtl_type, self.qos.to_dict(), self.max_rate_hz, self.count,
+                         extra)
 
     def close(self) -> None:
         self._hub.remove_lane(self.device)
@@ -606,6 +611,7 @@ class TopicBridges:
         self._check_graph(topic, ros_type)
         key = NameKey.subscriber(topic)
         device = self._names.register(key)
+        self._hub.bridge_device(made_bridge(request), device)  # before its first value
         bridge = SubscriberBridge(
             self._ros, self._hub, topic=topic, codec=codec,
             qos=request.qos.with_default_depth(default_depth(codec.bulk)),

@@ -21,8 +21,9 @@ __all__ = ["LABELS_TYPE", "CreatePublisher", "CreateSubscriber", "GetLastMessage
 class TopicBridge(Result):
     """A subscriber or publisher bridge, as its create op and `list_bridges` describe it:
     its resolved type, device, OpenIGTLink type, QoS, messages so far and rate cap;
-    ``extra``: what its kind adds (a publisher's subscriber count, frame, labels topic),
-    sent beside the others; ``message_device``: where this client gets whole messages."""
+    ``extra``: what its kind adds (a publisher's subscriber count, frame, labels topic; a
+    pose subscriber's ``lane_written``, the values its native lane wrote), sent beside the
+    others; ``message_device``: where this client gets whole messages."""
 
     kind: str  # "subscriber" | "publisher"
     topic: str

@@ -20,8 +20,8 @@ from protocol.commands import ErrorCode
 from protocol.framing import Decoder
 from slicer_client.client import Client
 from slicer_client.transport import open_transport
-from support import (Processes, RunningDaemon, assert_clean_exit, refused, scaled,
-                     start_daemon, wait_until)
+from support import (Processes, RunningDaemon, assert_clean_exit, operator_daemon, refused,
+                     scaled, start_daemon, wait_until)
 
 pytestmark = pytest.mark.ros
 
@@ -33,12 +33,8 @@ RATE_HZ = "50"
 @pytest.fixture(scope="module")
 def daemon(module_processes: Processes, tmp_path_factory: pytest.TempPathFactory) \
         -> Iterator[RunningDaemon]:
-    config = tmp_path_factory.mktemp("owners") / "bridge.yaml"
-    config.write_text(f"subscribers:\n  - {{topic: {OPERATOR_TOPIC}, type: PoseStamped}}\n")
-    running = start_daemon(module_processes, "--config", str(config))
-    for topic in (OPERATOR_TOPIC, SCRIPT_TOPIC):
-        module_processes.python(f"publisher{topic.replace('/', '_')}", "stream_publisher.py",
-                                topic, RATE_HZ, "--count", "100000000")
+    running = operator_daemon(module_processes, tmp_path_factory.mktemp("owners"),
+                              OPERATOR_TOPIC, SCRIPT_TOPIC, rate_hz=RATE_HZ)
     yield running
     assert_clean_exit(running)
 

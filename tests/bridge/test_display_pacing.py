@@ -1,6 +1,8 @@
 """Display pacing (hello's ``display_hz``), over real TCP against a real daemon: a client
 that shows streams on a display (3D Slicer) gets each stream's newest value once a frame;
-a client beside it that did not ask still gets every value, by the native lane."""
+a client beside it that did not ask still gets every value, by the native lane. Each gets
+only what it may: the streams of the bridges it holds (docs/security.md, "Who owns a
+bridge"), so a paced display that asked for nothing gets nothing of them."""
 
 from __future__ import annotations
 
@@ -45,11 +47,16 @@ def test_a_display_gets_the_newest_value_once_a_frame_and_the_others_every_one(
         device = setup.command("create_subscriber", {"topic": "/paced_pose",
                                                      "type": "PoseStamped"})["device"]
         setup.command("create_publisher", {"topic": "/paced_pose", "type": "PoseStamped"})
-        shown, every = _Arrivals(device), _Arrivals(device)
+        shown, every, stranger = _Arrivals(device), _Arrivals(device), _Arrivals(device)
         display = Connection("127.0.0.1", daemon.port, on_message=shown)
         plain = Connection("127.0.0.1", daemon.port, on_message=every)
+        other = Connection("127.0.0.1", daemon.port, on_message=stranger)
         try:
             assert display.command("hello", {"display_hz": HZ})["display_hz"] == HZ
+            assert other.command("hello", {"display_hz": HZ})["display_hz"] == HZ
+            for holder in (display, plain):  # they share the setup's bridge
+                assert holder.command("create_subscriber", {
+                    "topic": "/paced_pose", "type": "PoseStamped"})["existed"] is True
             matrix = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
             def both_see_it() -> bool:
                 setup.command("publish", {"topic": "/paced_pose", "value": matrix})
@@ -68,9 +75,15 @@ def test_a_display_gets_the_newest_value_once_a_frame_and_the_others_every_one(
             # One value a frame at most, each frame after the one before.
             assert len(paced) <= span * HZ + 2, (len(paced), span)
             assert len([x for t, x in every.snapshot() if t >= start]) > len(paced)
+            # The lane wrote the plain holder's values; the paced one that holds nothing got
+            # none of them, by the lane's news or otherwise.
+            listed = setup.command("list_bridges")["bridges"]
+            assert [b["lane_written"] for b in listed if b.get("device") == device][0] > 0
+            assert stranger.snapshot() == []
         finally:
             display.close()
             plain.close()
+            other.close()
     finally:
         setup.close()
 

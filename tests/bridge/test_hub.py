@@ -178,3 +178,45 @@ def test_a_large_value_from_another_thread_is_written_at_once_as_its_parts() -> 
         assert hub.direct == 1 and hub.dropped == 0
     finally:
         loop.close()
+
+
+def test_a_bridges_devices_go_to_its_audience_and_a_client_added_catches_up() -> None:
+    """What the dispatcher derives from ownership (docs/security.md, "Who owns a bridge"):
+    a client's bridge to its holders, every client once kept; a device several bridges
+    share to each of their audiences; a client added gets the current state at once, on
+    the loop's path and the direct one."""
+    loop = asyncio.new_event_loop()
+    try:
+        hub = Hub(loop)
+        maker, joiner, plain = _DirectClient(True), _DirectClient(True), _DirectClient(True)
+        for client in (maker, joiner, plain):
+            hub.attach(client)
+        mine, theirs = ("subscriber", ("/mine",)), ("subscriber", ("/theirs",))
+        hub.set_bridge_audience(mine, (maker,))
+        hub.bridge_device(mine, "mine")
+        hub.bridge_device(mine, "frame")
+        hub.bridge_device(theirs, "frame")  # shared: by both bridges' audiences
+        hub.set_bridge_audience(theirs, (joiner,))
+        hub.stream(_text("mine", "1"))
+        hub.publish_persistent(_text("mesh", "everyone's"))  # no bridge named it: all
+        assert hub.audience("mine") == (maker,) and set(hub.audience("frame")) == {
+            maker, joiner}
+        assert maker.got == [("mine", "1"), ("mesh", "everyone's")]
+        assert joiner.got == plain.got == [("mesh", "everyone's")]
+        # The direct path: each client in one write of what it gets.
+        update = [("mine", frame_for(_text("mine", "2"))),
+                  ("frame", frame_for(_text("frame", "f")))]
+        hub.post_frames(update)
+        assert [len(c.written) for c in (maker, joiner, plain)] == [1, 1, 0]
+        assert maker.written[0] == update[0][1].encoded(2) + update[1][1].encoded(2)
+        assert joiner.written[0] == update[1][1].encoded(2)
+        hub.set_bridge_audience(mine, (maker, joiner))  # it asked for the bridge too
+        assert joiner.got[-1] == ("mine", "2")
+        hub.set_bridge_audience(mine, None)  # kept: everyone, the newest at once
+        assert plain.got[1:] == [("mine", "2"), ("frame", "f")]
+        hub.drop_bridge(mine)  # removed: the shared frame is the other bridge's again
+        assert hub.audience("frame") == (joiner,)
+        hub.detach(joiner)
+        assert hub.audience("frame") == ()
+    finally:
+        loop.close()

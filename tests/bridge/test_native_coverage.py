@@ -53,7 +53,8 @@ BRANCHES = [
     "if not isfinite(norm2) or norm2 < 1e-24:",  # a rotation it cannot normalise
     "if not (-_FLOAT32_BOUND < values[i] < _FLOAT32_BOUND):",  # not a finite float32 in mm
     "if fanout.hold or not lane.enabled or lane.settle:",  # values waiting for the loop
-    "if not _lock(&fanout.slots[i].lock, wait):",  # a client's lock held: BUSY
+    "if not _lock(&slots[i].lock, wait):",  # a client's lock held: BUSY
+    "if lane.own_slots:",  # a device limited to its audience: the lane's own clients
 ]
 
 

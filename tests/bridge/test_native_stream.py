@@ -532,6 +532,64 @@ def test_more_clients_than_one_call_takes_each_get_the_frame_once(batch: bool) -
         theirs.close()
 
 
+@WRITES
+def test_a_lane_with_its_own_clients_writes_to_them_only_and_settles_only_them(
+        batch: bool) -> None:
+    """A device limited to an audience (docs/security.md, "Who owns a bridge") keeps its
+    lane: the lane writes to its own subset of the fanout's clients, judges only their
+    slots, and hands back only theirs; without a subset it writes to every client."""
+    fanout, lane, _, data = taught(9, batch)
+    ends = [pair() for _ in range(3)]
+    owners = [Owner() for _ in ends]
+    slots = [open_slot(ours, owner=owner) for (ours, _), owner in zip(ends, owners)]
+    frame = lane.encode(data, 2, 0)
+    with fanout:
+        fanout.set_slots(slots)
+        lane.set_slots([slots[0], slots[2]])
+        lane.enabled = True
+        assert lane.slots == [slots[0], slots[2]]
+    with slots[1]:
+        slots[1].open = False  # not the lane's: it does not send the lane to Python
+    assert lane.handle(data) == ns.HANDLED
+    assert [len(available_now(theirs)) for _, theirs in ends] == [len(frame), 0, len(frame)]
+    assert [s.sent for s in slots] == [1, 0, 1]
+    with slots[2]:
+        slots[2].open = False  # one of its own is closed: the Python path's
+    assert lane.handle(data) == ns.TO_PYTHON
+    with slots[2]:
+        slots[2].open = True
+    ends[2][1].close()  # its peer has gone: only its owner is handed back
+    assert lane.handle(data) == ns.HANDLED_SETTLE
+    with fanout:
+        missed, stashed = lane.settle()
+    assert [r() for r in missed] == [owners[2]] and stashed == []
+    with fanout:
+        lane.set_slots([])  # nobody's: written to no one, kept for a later client
+    assert lane.handle(data) == ns.HANDLED
+    with fanout:
+        assert lane.count == 3 and lane.latest() is not None
+        lane.set_slots(None)  # every client of the fanout again
+        assert lane.slots is None
+    with slots[1]:
+        slots[1].open = True
+    with slots[2]:
+        slots[2].disconnect()
+    with fanout:
+        fanout.set_slots(slots[:2])
+    assert lane.handle(data) == ns.HANDLED
+    assert [len(available_now(theirs)) for _, theirs in ends[:2]] == [2 * len(frame),
+                                                                      len(frame)]
+    for ours, theirs in ends:
+        ours.close()
+        theirs.close()
+
+
+def test_a_lanes_clients_are_slots() -> None:
+    fanout, lane, _, _ = taught(10)
+    with fanout, pytest.raises(TypeError):
+        lane.set_slots([object()])
+
+
 def _io_uring_allowed() -> tuple[bool, str]:
     """Whether this process may set up an io_uring, as the system says (not as the lane
     says: that is what is tested)."""

@@ -170,9 +170,12 @@ def test_observed_changes_are_pushed(processes: Processes, daemon: Any,
     client.wait_for(device, has_values(expected))
     assert changed_line(peer, "count")["value"] == 42
 
-    # A client joining later gets the current values at once.
+    # A client that asks for it later gets the current values at once (a client's bridge
+    # streams only to those that hold it: docs/security.md, "Who owns a bridge").
     late = daemon.connect()
     try:
+        assert late.command("create_parameter_client",
+                            {"node": name})["existed"] is True
         late.wait_for(device, has_values(expected), timeout=scaled(5))
     finally:
         late.close()

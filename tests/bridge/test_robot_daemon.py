@@ -477,7 +477,10 @@ def test_reload_on_a_changed_description_and_remove(processes: Processes, client
         devices = daemon_devices(client)
         assert "rl:tool:0" not in devices
         assert poses in devices and box in devices
-        with daemon.connect() as late:  # a new client gets the new robot only
+        # Kept, it goes to every client (docs/security.md, "Who owns a bridge"): a new one
+        # gets the new robot only.
+        client.command("keep_bridge", {"kind": "robot", "name": "rl"})
+        with daemon.connect() as late:
             late.wait_for(box, lambda m: is_mesh(m) and len(m.body.points) > 8)
         # A malformed description is refused by the state publisher itself, so the
         # daemon's view stays; a reload of the same text does nothing.

@@ -44,6 +44,9 @@ class Recorder:
     def stream(self, message: Any) -> None:
         self.events.append(("status", message.device_name))
 
+    def bridge_device(self, key: Any, device: str) -> None:
+        pass  # who gets it is the hub's (tests/bridge/test_stream_audience.py)
+
     def forget(self, device: str) -> None:
         self.events.append(("forget", device))
         self.persistent.pop(device, None)

@@ -77,9 +77,11 @@ def test_a_crashed_publisher_is_stale_at_the_client_and_live_again_when_back(
         # What the ROS2Bridge module shows: its client's stale streams; and the listing.
         assert stale_lines(ros.resources()) == [f"/health_pose is stale: {pose.stale}"]
         assert any("(STALE: " in line for line in describe_bridges(ros.list_bridges()))
-        # A client that connects now is told at once, beside the last value.
+        # A client that asks for it now is told at once, beside the last value.
         raw = daemon.connect()
         try:
+            assert raw.command("create_subscriber", {"topic": "/health_pose",
+                                                     "type": "PoseStamped"})["existed"] is True
             status = raw.wait_for(pose.device, lambda m: stream_condition(m) is not None,
                                   timeout=30)
             assert isinstance(status.body, Status)

@@ -137,8 +137,11 @@ def test_chain_lookup_streams_the_composed_matrix_in_mm(
     assert mine[0]["state"] == "streaming"
     buffer_info = listed["tf_buffer"]
     assert {p + f for f in ("world", "base", "link1", "tool")} <= set(buffer_info["frames"])
-    # A client that joins later gets the latest value at once.
+    # A client that asks for it later gets the latest value at once (the client's bridge
+    # streams only to those that hold it: docs/security.md, "Who owns a bridge").
     with daemon.connect() as late:
+        assert late.command("create_tf_lookup", {"parent": p + "world",
+                                                 "child": p + "tool"})["existed"] is True
         late.wait_for(device, is_matrix(WORLD_TOOL), timeout=scaled(5))
     client.command("remove_tf_lookup", {"parent": p + "world", "child": p + "tool"})
     with pytest.raises(CommandRefusedError) as gone:

@@ -392,7 +392,12 @@ def test_bulk_types_keep_one_message_and_a_large_last_message_is_not_kept(
                      json.dumps({"data": "kept"}))
     client.wait_for(small_device, timeout=scaled(30))
     with Connection("127.0.0.1", daemon.port) as late:
-        late.command("list_bridges")  # sent after what the daemon gives a client at attach
+        # It asks for both (a client's bridge streams only to those that hold it): what the
+        # daemon gives it then comes before the reply.
+        for asked, ros_type in ((string_topic, "String"), (topic, "Image")):
+            assert late.command("create_subscriber", {"topic": asked, "type": ros_type}
+                                )["existed"] is True
+        late.command("list_bridges")
         assert late.latest(created["device"]) is None
         kept = late.latest(small_device)
         assert kept is not None and kept.body.text == "kept"

@@ -83,6 +83,13 @@ def test_no_transform_holds_infinity_and_lookups_say_why(
         lookups = {child: client.command("create_tf_lookup", {"parent": "world",
                                                               "child": child})["device"]
                    for child in ("huge", "big", "b", "ok")}
+        # Kept, they stream to the raw reader too (a client's bridge streams only to the
+        # clients that hold it: docs/security.md, "Who owns a bridge").
+        kept = [{"kind": "subscriber", "topic": topic},
+                *({"kind": "tf_lookup", "parent": "world", "child": child}
+                  for child in lookups)]
+        for bridge in kept:
+            client.command("keep_bridge", bridge)
         peer = processes.python("huge", "huge_values_publisher.py", topic)
         peer.wait_for_output("READY")
         # A lookup sends when its value changes: world <- ok once.
@@ -110,6 +117,8 @@ def test_no_transform_holds_infinity_and_lookups_say_why(
         assert ok["matrix"][0][3] == pytest.approx(100.0)
         assert client.command("hello")["node"]
         read_transforms(raw, {pose_device: 5}, scaled(30))  # still streamed
+        for bridge in kept:
+            client.command(f"remove_{bridge.pop('kind')}", bridge)
     finally:
         raw.close()
         client.close()

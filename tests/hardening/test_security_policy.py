@@ -144,6 +144,21 @@ def test_no_client_removes_the_operators_bridges() -> None:
     assert owners.owner(("subscriber", ("/b",))) is client  # bridges outlive their client
 
 
+def test_a_bridges_audience_is_its_holders_until_it_stays() -> None:
+    """Who receives a bridge's streams (docs/security.md, "Who owns a bridge")."""
+    owners, maker, joiner = BridgeOwners(), object(), object()
+    mine, operators = ("subscriber", ("/mine",)), ("subscriber", ("/op",))
+    owners.created(operators, OPERATOR)
+    owners.created(operators, maker)  # asked for the operator's: it goes to everyone
+    owners.created(mine, maker)
+    assert owners.audience(operators) is None and owners.audience(mine) == {maker}
+    owners.created(mine, joiner)
+    assert owners.audience(mine) == {maker, joiner}
+    owners.left(maker)
+    assert owners.audience(mine) == {joiner}
+    assert owners.keep(mine) and owners.audience(mine) is None
+
+
 def test_a_request_class_the_schema_does_not_declare_is_refused() -> None:
     class Fake:  # looks like an op, is not one of the schema's
         op = "create_subscriber"
