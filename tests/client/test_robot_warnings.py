@@ -53,7 +53,8 @@ def test_a_missing_mesh_reaches_the_user(processes: Processes, tmp_path: Path,
         assert robot_status_lines([robot]) == ["warned: 1 of 1 meshes received",
                                                f"  warning: {warning}"]
         # A client that only listens (the module, a robot loaded later) reads them from the
-        # robot's description device.
+        # robot's description device: a kept robot goes to every client.
+        robot.keep()
         with daemon.connect() as listener:
             status = listener.wait_for("urdf:warned", timeout=30)
             assert json.loads(status.metadata["ros2.warnings"]) == [warning]
