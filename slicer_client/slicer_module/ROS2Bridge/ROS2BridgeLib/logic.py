@@ -88,6 +88,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         # came (the connector's NewDeviceEvent) or went, a tick does not scan.
         self._settledAt: Optional[tuple[int, int, int]] = None
         self._bundles: dict[str, Any] = {}  # id -> a robot's tracking-data bundle node
+        self._roleless: set[str] = set()  # ids of nodes a scan found with no ros2.role
         self._timer = qt.QTimer()
         self._timer.setInterval(200)  # new connector nodes are placed within 0.2 s
         self._timer.connect("timeout()", self._onTimer)
@@ -750,8 +751,11 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             attributes = {n: node.GetAttribute(n) for n in node.GetAttributeNames()}
             metadata = metadata_from_attributes(attributes)
             if "ros2.role" not in metadata:
-                placed = False
-                continue  # attributes not there yet: next tick
+                # Attributes not there yet (look again next tick), or, still none a tick
+                # later, a node that is not a bridge's (the heartbeat's): nothing to place.
+                placed &= node.GetID() in self._roleless
+                self._roleless.add(node.GetID())
+                continue
             plan = plan_node(node.GetName(), metadata, rgba=self._rgba(node),
                              link_devices=link_devices)
             if plan.parent_device is not None and node.IsA("vtkMRMLTransformableNode"):
@@ -870,6 +874,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.connector = None
         self._planned.clear()
         self._bundles.clear()
+        self._roleless.clear()
         self._settledAt = None
 
 
