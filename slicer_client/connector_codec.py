@@ -98,17 +98,19 @@ def message_from_node(device: str, attributes: Mapping[str, str], *,
                       matrix: Optional[Any] = None,
                       status: Optional[Tuple[int, str, str]] = None,
                       model: Optional[Tuple[Any, Any]] = None,
-                      poses: Optional[Sequence[Tuple[str, Any]]] = None) -> Optional[Message]:
+                      poses: Optional[Tuple[Sequence[str], Any]] = None) -> Optional[Message]:
     """A connector node's content -> the Message it came from (text node: STRING,
     transform node: TRANSFORM, status node: STATUS from its code, error name and
     text, model node: POLYDATA from its points (N, 3) in mm and its polygons as
     ``[n, i0..i(n-1), ...]``, tracking-data bundle: TDATA from its transform nodes'
-    (name, 4x4 rows in mm)); None for anything else."""
+    names and matrices (N x 16 numbers or N 4x4, mm)); None for anything else."""
     metadata = metadata_from_attributes(attributes)
     if poses is not None:
-        return Message(device, TrackingData([
-            TrackingElement(name, np.array(rows, dtype=np.float64)) for name, rows in poses]),
-            metadata=metadata)
+        names, matrices = poses
+        stacked = np.asarray(matrices, dtype=np.float64).reshape(len(names), 4, 4)
+        return Message(device, TrackingData([TrackingElement(name, matrix)
+                                             for name, matrix in zip(names, stacked)]),
+                       metadata=metadata)
     if model is not None:
         points, polygons = model
         return Message(device, PolyData(points=np.asarray(points, dtype=np.float32),

@@ -242,7 +242,7 @@ def test_connector_nodes_become_messages() -> None:
     np.testing.assert_allclose(value_from_message(transform), moved)
     assert message_from_node("x", {}) is None
     poses = message_from_node("poses:R", attrs(metadata_for(NameKey.robot_poses("R"))),
-                              poses=[("R:a", moved.tolist()), ("R:b", np.eye(4).tolist())])
+                              poses=(["R:a", "R:b"], [moved.ravel(), np.eye(4).ravel()]))
     assert isinstance(poses.body, TrackingData) and poses.metadata["ros2.robot"] == "R"
     assert [e.name for e in poses.body.elements] == ["R:a", "R:b"]
     np.testing.assert_allclose(poses.body.elements[0].matrix, moved)

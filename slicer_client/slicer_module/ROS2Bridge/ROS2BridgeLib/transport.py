@@ -9,6 +9,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Optional
 
+import numpy as np
 import slicer
 import vtk
 
@@ -93,6 +94,9 @@ class ConnectorTransport:
         # Tracking-data bundles (a robot's link poses): node id -> [node, newest element
         # MTime handed on]; handed on from `poll`, once per tick in which elements moved.
         self._bundles: dict[str, list[Any]] = {}
+        # The incoming nodes as many as when `_watchIncomingNodes` last looked, and none new
+        # since (NewDeviceEvent): a tick then does not look at each node again.
+        self._looked_at = -1
         self._connector_tags: list[int] = []
         self._first = True
         self._up_now = False  # the listener was told "connected" and not "lost" since
@@ -127,7 +131,9 @@ class ConnectorTransport:
         for event, handler in ((slicer.vtkMRMLIGTLConnectorNode.ConnectedEvent,
                                 self._onConnectedEvent),
                                (slicer.vtkMRMLIGTLConnectorNode.DisconnectedEvent,
-                                self._onDisconnectedEvent)):
+                                self._onDisconnectedEvent),
+                               (slicer.vtkMRMLIGTLConnectorNode.NewDeviceEvent,
+                                self._onNewDevice)):
             self._connector_tags.append(self.connector.AddObserver(event, handler))
         if self.connected:
             self._up()  # errors reach whoever made the Client
@@ -163,7 +169,11 @@ class ConnectorTransport:
         its load done), placed or not yet. Nodes from index `firstNew` on were made by the
         connector's last PeriodicProcess: a heartbeat node among them is a heartbeat heard
         (its observer comes after the modification that made it)."""
-        for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
+        count = self.connector.GetNumberOfIncomingMRMLNodes()
+        if count == self._looked_at:
+            return
+        self._looked_at = count
+        for i in range(count):
             node = self.connector.GetIncomingMRMLNode(i)
             if node is not None and node.IsA("vtkMRMLModelNode") \
                     and node.GetAttribute(ROBOT_ATTRIBUTE):
@@ -180,6 +190,9 @@ class ConnectorTransport:
                 if i >= firstNew:
                     self._onHeartbeat()
                 node.SetHideFromEditors(True)  # plumbing, not data for the user
+
+    def _onNewDevice(self, caller: Any = None, event: Any = None) -> None:
+        self._looked_at = -1  # its content and attributes come after: looked at next tick
 
     def _onHeartbeat(self, caller: Any = None, event: Any = None) -> None:
         self._heard = self._clock()
@@ -414,8 +427,9 @@ class ConnectorTransport:
             return
         entry[1] = newest
         attributes = {name: node.GetAttribute(name) for name in node.GetAttributeNames()}
-        message = message_from_node(node.GetName(), attributes, poses=[
-            (element.GetName(), _rows(element)) for element in elements])
+        message = message_from_node(node.GetName(), attributes, poses=(
+            [element.GetName() for element in elements],
+            np.array([_values(element) for element in elements], dtype=np.float64)))
         try:
             self._listener.on_message(message)  # type: ignore[arg-type]
         except Exception:  # noqa: BLE001 - inside the module's timer
@@ -435,11 +449,18 @@ class ConnectorTransport:
         self._listener = None
 
 
+_MATRIX = vtk.vtkMatrix4x4()  # read into, on the main thread only
+
+
+def _values(transformNode: Any) -> tuple[float, ...]:
+    """A linear transform node's matrix to its parent, its 16 numbers row by row."""
+    transformNode.GetMatrixTransformToParent(_MATRIX)
+    return tuple(_MATRIX.GetData())  # one call, not 16 GetElement
+
+
 def _rows(transformNode: Any) -> list[list[float]]:
     """A linear transform node's matrix to its parent, as 4 rows."""
-    matrix = vtk.vtkMatrix4x4()
-    transformNode.GetMatrixTransformToParent(matrix)
-    values = matrix.GetData()  # 16 numbers, row by row (one call, not 16)
+    values = _values(transformNode)
     return [list(values[i:i + 4]) for i in range(0, 16, 4)]
 
 
