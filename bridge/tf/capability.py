@@ -28,6 +28,10 @@ robot): then a relative frame ``base`` means ``<prefix>base`` and ``/base`` mean
 The topics stay ``/tf`` and ``/tf_static`` whatever the node's namespace, as with tf2_ros;
 pass relative ``tf_topic`` / ``tf_static_topic`` names to use namespaced ones instead.
 
+Pose groups: lookups another capability streams together (a robot's links) go as one TDATA
+per update, every placed element in each message (`open_pose_group`, `stream_lookup(group=)`),
+not a TRANSFORM each: one message for the receiver's main thread instead of one per link.
+
 Units: the buffer holds metres; clients get 4x4 matrices in mm, and the TRANSFORM messages a
 client sends to a broadcaster are in mm. Every conversion goes through `protocol.conversions`.
 """
