@@ -710,7 +710,9 @@ class Robot(Resource):
             self._devices[link.device] = (link.name, None)
 
     def _poses(self, poses: TrackingData) -> None:
-        """Every placed link's pose, one element each, named by the link's device."""
+        """Every placed link's pose, one element each, named by the link's device; the
+        "transform" callbacks run for the links whose pose changed (each message holds
+        them all)."""
         moved = []
         with self._changed:
             for element in poses.elements:
@@ -718,6 +720,8 @@ class Robot(Resource):
                 if known is None or known[1] is not None:
                     continue  # not a link of this robot (as the create reply named them)
                 link = self.links.setdefault(known[0], RobotLink(known[0], element.name))
+                if link.matrix is not None and np.array_equal(link.matrix, element.matrix):
+                    continue
                 link.matrix = np.array(element.matrix, dtype=np.float64)
                 moved.append((link.name, link.matrix))
             self._changed.notify_all()

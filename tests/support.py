@@ -129,6 +129,14 @@ class Child:
         return self.popen.returncode
 
 
+def _terminal_signals() -> None:
+    """A child takes Ctrl-C and hang-ups as from a terminal, even when the suite runs as a
+    background job (`nohup make test &` ignores SIGINT and SIGHUP, and children inherit
+    that: a Ctrl-C test's process would then never stop)."""
+    for sig in (signal.SIGINT, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)
+
+
 class Processes:
     """Starts children for one test and stops every one of them at teardown."""
 
@@ -144,7 +152,8 @@ class Processes:
         with log.open("wb") as out:
             popen = subprocess.Popen(list(argv), stdout=out, stderr=subprocess.STDOUT,
                                      stdin=subprocess.DEVNULL, env=full_env,
-                                     cwd=str(cwd or REPO), start_new_session=True)
+                                     cwd=str(cwd or REPO), start_new_session=True,
+                                     preexec_fn=_terminal_signals)
         child = Child(name, popen, log)
         self.children.append(child)
         return child

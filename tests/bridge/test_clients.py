@@ -32,6 +32,9 @@ def test_eight_clients_all_receive_every_streamed_device(daemon: RunningDaemon,
         # Another client's command changed the shared state: all see the same device.
         assert clients[5].command("create_subscriber", {"topic": "/clients_eight",
                                                         "type": "PoseStamped"})["existed"]
+        # Kept, it goes to every client (a client's own goes to its holders only:
+        # test_stream_audience.py).
+        clients[0].command("keep_bridge", {"kind": "subscriber", "topic": "/clients_eight"})
         processes.python("stream", "stream_publisher.py", "/clients_eight", "200",
                          "--count", "400")
         for client in clients:
@@ -40,6 +43,7 @@ def test_eight_clients_all_receive_every_streamed_device(daemon: RunningDaemon,
         assert len(listed["clients"]) >= 8
         assert all(c["header_version"] == 2 for c in listed["clients"])
     finally:
+        clients[0].command("remove_subscriber", {"topic": "/clients_eight"})
         for client in clients:
             client.close()
 
@@ -54,6 +58,8 @@ def test_a_client_that_never_reads_does_not_slow_others_and_memory_stays_bounded
     try:
         device = fast.command("create_subscriber", {"topic": "/clients_camera",
                                                     "type": "Image"})["device"]
+        # Kept, it goes to the client that asked for nothing too.
+        fast.command("keep_bridge", {"kind": "subscriber", "topic": "/clients_camera"})
         received: list[int] = []
         fast_latest = [0]
 
@@ -79,6 +85,7 @@ def test_a_client_that_never_reads_does_not_slow_others_and_memory_stays_bounded
         assert stats and stats[0]["coalesced"] > 200, stats  # the stalled one skipped them
         assert stats[0]["waiting"] <= 1  # one camera device: at most one frame waits
     finally:
+        fast.command("remove_subscriber", {"topic": "/clients_camera"})
         stalled.close()
         fast.close()
 
@@ -92,9 +99,11 @@ def test_a_late_client_gets_the_current_state_at_once(daemon: RunningDaemon,
                                      "--count", "7")
         first.wait_for(device, lambda m: sequence_of(m) == 7, timeout=20)
         publisher.wait_for_output("DONE")
-        # Nothing is published any more; a new client still gets the latest value on
-        # connect (while the bridge lives: its first client is still here).
+        # Nothing is published any more; a new client that asks for the same bridge gets
+        # the latest value at once (while the bridge lives: its first client is still here).
         with daemon.connect() as late:
+            assert late.command("create_subscriber", {"topic": "/clients_late",
+                                                      "type": "PoseStamped"})["existed"]
             message = late.wait_for(device, timeout=scaled(5))
             assert sequence_of(message) == 7
             assert message.metadata["ros2.topic"] == "/clients_late"
