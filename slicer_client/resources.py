@@ -710,9 +710,9 @@ class Robot(Resource):
             self._devices[link.device] = (link.name, None)
 
     def _poses(self, poses: TrackingData) -> None:
-        """Every placed link's pose, one element each, named by the link's device; the
-        "transform" callbacks run for the links whose pose changed (each message holds
-        them all)."""
+        """Link poses, one element each, named by the link's device; the "transform"
+        callbacks run for the links whose pose changed (the daemon's message holds every
+        placed link)."""
         moved = []
         with self._changed:
             for element in poses.elements:
@@ -720,11 +720,15 @@ class Robot(Resource):
                 if known is None or known[1] is not None:
                     continue  # not a link of this robot (as the create reply named them)
                 link = self.links.setdefault(known[0], RobotLink(known[0], element.name))
-                if link.matrix is not None and np.array_equal(link.matrix, element.matrix):
+                matrix = np.asarray(element.matrix, dtype=np.float64)
+                # Bytes, not np.array_equal: a robot's links at 50 Hz on 3D Slicer's main
+                # thread, where the comparison cost more than the rest of the message.
+                if link.matrix is not None and link.matrix.tobytes() == matrix.tobytes():
                     continue
-                link.matrix = np.array(element.matrix, dtype=np.float64)
+                link.matrix = matrix.copy()
                 moved.append((link.name, link.matrix))
-            self._changed.notify_all()
+            if moved:
+                self._changed.notify_all()
         for link_name, matrix in moved:
             self._notify("transform", link_name, matrix)
 

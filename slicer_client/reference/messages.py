@@ -79,6 +79,13 @@ class MessageObject:
         self._fields: Dict[str, Any] = self._types._blank_fields(self._description)
 
     @classmethod
+    def _of(cls, fields: Dict[str, Any]) -> "MessageObject":
+        """An instance holding `fields` (every field of its type, converted)."""
+        obj = cls.__new__(cls)
+        obj._fields = fields
+        return obj
+
+    @classmethod
     def GetROSType(cls) -> str:  # noqa: N802
         return cls._description.type
 
@@ -167,16 +174,18 @@ class MessageTypes:
 
     # --- JSON in ROS units -> objects --------------------------------------------------------
     def from_ros(self, ros_type: str, data: Mapping[str, Any]) -> MessageObject:
-        """A message object from the generic JSON of a whole message."""
-        obj = self.new(ros_type)
-        description = self.message(ros_type)
+        """A message object from the generic JSON of a whole message (a field it lacks
+        takes its default)."""
+        cls = self.message_class(ros_type)
         if not isinstance(data, Mapping):
             raise MessageValueError(f"{ros_type}: expected an object of its fields, got "
                                     f"{type(data).__name__}")
-        for f in description.fields:
-            if f.name in data:
-                obj._fields[f.name] = self._field_from_ros(f, data[f.name], f.name)
-        return obj
+        description = cls._description
+        # Each field converted once: not first blank, then overwritten (a subscriber's
+        # GetLastMessage runs this at a display's rate on 3D Slicer's main thread).
+        return cls._of({f.name: self._field_from_ros(
+            f, data[f.name] if f.name in data else description.default.get(f.name), f.name)
+            for f in description.fields})
 
     def _field_from_ros(self, f: FieldDescription, raw: Any, path: str) -> Any:
         if f.array is None:

@@ -89,6 +89,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self._settledAt: Optional[tuple[int, int, int]] = None
         self._bundles: dict[str, Any] = {}  # id -> a robot's tracking-data bundle node
         self._roleless: set[str] = set()  # ids of nodes a scan found with no ros2.role
+        # Text markers' nodes, by id: [node, its MTime when last labelled].
+        self._markerTexts: dict[str, list[Any]] = {}
         self._timer = qt.QTimer()
         self._timer.setInterval(200)  # new connector nodes are placed within 0.2 s
         self._timer.connect("timeout()", self._onTimer)
@@ -331,6 +333,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
                                 self._onPointsModified)
         self._planned.discard(node.GetID())
         self._bundles.pop(node.GetID(), None)
+        self._markerTexts.pop(node.GetID(), None)
         self._settledAt = None
         displays: list[Any] = []
         if node.IsA("vtkMRMLDisplayableNode"):
@@ -409,11 +412,12 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             display.SetSelectedColor(*plan.colour)
 
     def _updateMarkerLabels(self) -> None:
-        for i in range(self.connector.GetNumberOfIncomingMRMLNodes()):
-            node = self.connector.GetIncomingMRMLNode(i)
-            if node is None or not node.IsA("vtkMRMLTextNode") \
-                    or node.GetAttribute("OpenIGTLink.ros2.role") != "marker":
+        """Move and relabel the labelled point of each text marker that changed."""
+        for entry in tuple(self._markerTexts.values()):
+            node, labelled = entry
+            if node.GetMTime() == labelled:
                 continue
+            entry[1] = node.GetMTime()
             attributes = {n: node.GetAttribute(n) for n in node.GetAttributeNames()}
             plan = plan_node(node.GetName(), metadata_from_attributes(attributes))
             if plan.label_position is not None:
@@ -768,6 +772,8 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
             self._apply(node, plan)
             if self.transport is not None:
                 self.transport.watch(node)
+            if node.IsA("vtkMRMLTextNode") and metadata.get("ros2.role") == "marker":
+                self._markerTexts[node.GetID()] = [node, -1]
             self._planned.add(node.GetID())
         return placed
 
@@ -874,6 +880,7 @@ class ROS2BridgeLogic(ScriptedLoadableModuleLogic, VTKObservationMixin):
         self.connector = None
         self._planned.clear()
         self._bundles.clear()
+        self._markerTexts.clear()
         self._roleless.clear()
         self._settledAt = None
 

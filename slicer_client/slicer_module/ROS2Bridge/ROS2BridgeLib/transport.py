@@ -48,6 +48,16 @@ class _HandedOff:
     error: Optional[BaseException] = None
 
 
+@dataclass
+class _Bundle:
+    """A tracking-data bundle the connector made (a robot's link poses): its element nodes
+    and each one's MTime as last handed on (-1: not yet)."""
+
+    node: Any
+    elements: list[Any] = field(default_factory=list)
+    handed: list[int] = field(default_factory=list)
+
+
 class ConnectorTransport:
     """slicer_client's Transport over an OpenIGTLinkIF connector node (see transport.py).
 
@@ -91,9 +101,13 @@ class ConnectorTransport:
         self._clock = clock
         self._listener: Optional[TransportListener] = None
         self._node_observers: dict[str, Observer] = {}  # node id -> (node, tag)
-        # Tracking-data bundles (a robot's link poses): node id -> [node, newest element
-        # MTime handed on]; handed on from `poll`, once per tick in which elements moved.
-        self._bundles: dict[str, list[Any]] = {}
+        # Watched nodes the connector changed since the last `poll`, in the order of their
+        # latest change: handed on there, the newest value once per tick (the callbacks
+        # run in the same tick's Spin, so a value waits for nothing it did not wait for).
+        self._changed: dict[str, Any] = {}
+        # Tracking-data bundles (a robot's link poses), by node id: their moved elements
+        # are handed on from `poll`, once per tick.
+        self._bundles: dict[str, _Bundle] = {}
         # The incoming nodes as many as when `_watchIncomingNodes` last looked, and none new
         # since (NewDeviceEvent): a tick then does not look at each node again.
         self._looked_at = -1
@@ -204,6 +218,7 @@ class ConnectorTransport:
         back on the same socket."""
         self.serve_other_threads()
         if not self._socket_up():
+            self._handOn()  # what came before the loss
             self._silent_since = None
             self._down("the connector lost the daemon (it retries itself)")
             return
@@ -212,8 +227,7 @@ class ConnectorTransport:
         known = self.connector.GetNumberOfIncomingMRMLNodes()
         self.connector.PeriodicProcess()  # what has come is counted before judging silence
         self._watchIncomingNodes(known)
-        for entry in tuple(self._bundles.values()):
-            self._forwardBundle(entry)
+        self._handOn()
         if not self._dead_after:
             return
         now = self._clock()
@@ -233,6 +247,15 @@ class ConnectorTransport:
             self._down(f"no heartbeat from the daemon for {silence:.1f} s: the link to "
                        f"{self.address} is down (a pulled cable?); the connector reconnects "
                        "when it is back")
+
+    def _handOn(self) -> None:
+        """Hand the client what the connector changed since the last tick: each watched
+        node's newest content, in the order of change, then the bundles' moved elements."""
+        changed, self._changed = self._changed, {}
+        for node in changed.values():
+            self._forward(node)
+        for bundle in tuple(self._bundles.values()):
+            self._forwardBundle(bundle)
 
     def _incomingNow(self) -> tuple[int, int]:
         """How many incoming nodes the connector has, and their newest modification time
@@ -374,24 +397,31 @@ class ConnectorTransport:
         """Forward a connector node's updates to the client as Messages. The connector
         ends its node modification once per received message, so ModifiedEvent (text) and
         TransformModifiedEvent (transforms) fire once per message, or once per batch for
-        messages read during a blocking command."""
-        if node.GetID() in self._node_observers or node.GetID() in self._bundles:
+        messages read during a blocking command; the node is handed on at the next `poll`
+        (the display's newest value, once per tick)."""
+        key = node.GetID()
+        if key in self._node_observers or key in self._bundles:
             return
         if node.IsA("vtkMRMLIGTLTrackingDataBundleNode"):
             # Its connector updates the element nodes, never the bundle: no event to observe.
-            self._bundles[node.GetID()] = entry = [node, -1]
-            self._forwardBundle(entry)
+            self._bundles[key] = bundle = _Bundle(node)
+            self._forwardBundle(bundle)
             return
         event = (slicer.vtkMRMLTransformNode.TransformModifiedEvent
                  if node.IsA("vtkMRMLTransformNode") else
                  slicer.vtkMRMLModelNode.MeshModifiedEvent if node.IsA("vtkMRMLModelNode")
                  else vtk.vtkCommand.ModifiedEvent)
-        tag = node.AddObserver(event, lambda caller, _event: self._forward(caller))
-        self._node_observers[node.GetID()] = (node, tag)
+
+        def changed(caller: Any, _event: Any) -> None:
+            self._changed.pop(key, None)  # to the end: handed on in the order of change
+            self._changed[key] = caller
+        tag = node.AddObserver(event, changed)
+        self._node_observers[key] = (node, tag)
         self._forward(node)
 
     def unwatch(self, node: Any) -> None:
         self._bundles.pop(node.GetID(), None)
+        self._changed.pop(node.GetID(), None)
         entry = self._node_observers.pop(node.GetID(), None)
         if entry is not None:
             entry[0].RemoveObserver(entry[1])
@@ -418,18 +448,28 @@ class ConnectorTransport:
             except Exception:  # noqa: BLE001 - inside a VTK callback
                 log.exception("handling %s failed", node.GetName())
 
-    def _forwardBundle(self, entry: list[Any]) -> None:
-        """A bundle's element nodes as one TDATA for the client, when any moved since."""
-        node = entry[0]
-        elements = [node.GetTransformNode(i) for i in range(node.GetNumberOfTransformNodes())]
-        newest = max((int(e.GetMTime()) for e in elements), default=0)
-        if newest == entry[1] or self._listener is None:
+    def _forwardBundle(self, bundle: _Bundle) -> None:
+        """The bundle's elements that moved since last handed on, as one TDATA for the
+        client (its robot takes each element on its own)."""
+        node = bundle.node
+        count = node.GetNumberOfTransformNodes()
+        if count != len(bundle.elements):  # new links: every element is handed on again
+            bundle.elements = [node.GetTransformNode(i) for i in range(count)]
+            bundle.handed = [-1] * count
+        if self._listener is None:
             return
-        entry[1] = newest
+        moved = []
+        for i, element in enumerate(bundle.elements):
+            mtime = element.GetMTime()
+            if mtime != bundle.handed[i]:
+                bundle.handed[i] = mtime
+                moved.append(element)
+        if not moved:
+            return
         attributes = {name: node.GetAttribute(name) for name in node.GetAttributeNames()}
         message = message_from_node(node.GetName(), attributes, poses=(
-            [element.GetName() for element in elements],
-            np.array([_values(element) for element in elements], dtype=np.float64)))
+            [element.GetName() for element in moved],
+            np.array([_values(element) for element in moved], dtype=np.float64)))
         try:
             self._listener.on_message(message)  # type: ignore[arg-type]
         except Exception:  # noqa: BLE001 - inside the module's timer
@@ -437,6 +477,7 @@ class ConnectorTransport:
 
     def close(self) -> None:
         self._bundles.clear()
+        self._changed.clear()
         for tag in self._connector_tags:
             self.connector.RemoveObserver(tag)
         self._connector_tags = []
