@@ -293,15 +293,16 @@ class Client:
     def subscribe(self, topic: str, type: str, *, qos: Optional[Mapping[str, Any]] = None,
                   rate_hz: Optional[float] = None,
                   callback: Optional[Callable[[Any], None]] = None,
-                  messages: bool = False) -> Subscriber:
+                  messages: bool = False, native: bool = True) -> Subscriber:
         """Subscribe to a ROS topic. `type`: "String", "PoseStamped", "pkg/msg/Type"...
         `callback(value)` on every message (see the module docstring for the thread).
         `messages`: also keep the newest message whole (`Subscriber.last_whole`, sent at
         most once a display frame), where the transport can carry it (not 3D Slicer's
-        connector: then the native stream only)."""
+        connector: then the native stream only). `native=False` (with `messages`): the
+        whole messages only, none of the native values (`Subscriber`)."""
         messages = messages and self._transport.carries_whole_messages
         sub: Subscriber = self._add(Subscriber(self, topic, type, qos=qos, rate_hz=rate_hz,
-                                               messages=messages))
+                                               messages=messages, native=native))
         if callback is not None:
             sub.add_callback(callback)
         return sub

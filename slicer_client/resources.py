@@ -123,15 +123,24 @@ class Subscriber(Resource):
     display frame (the daemon's message stream: lossless JSON in ROS units, with the
     subscription's own message count), kept as `last_whole`; `add_whole_callback` hears of
     each. Images and point clouds have no such
-    stream (their native one is whole): `message_device` stays empty."""
+    stream (their native one is whole): `message_device` stays empty.
+
+    With ``messages`` and ``native=False``, this client takes the whole messages only: the
+    daemon sends it none of the native values (a message it reads once, not twice), so
+    `last_value`, `count`, value callbacks and `wait_for_message` are not fed (their use
+    raises); images and point clouds keep their native stream (`native` is then True)."""
 
     def __init__(self, client: ResourceOwner, topic: str, type: str, *,
                  qos: Optional[Mapping[str, Any]] = None,
-                 rate_hz: Optional[float] = None, messages: bool = False) -> None:
+                 rate_hz: Optional[float] = None, messages: bool = False,
+                 native: bool = True) -> None:
+        native = native or not messages  # values come one way at least
         super().__init__(client, BridgeSpec.of(c.CreateSubscriber(
-            topic=topic, type=type, qos=_qos(qos), rate_hz=rate_hz, messages=messages)))
+            topic=topic, type=type, qos=_qos(qos), rate_hz=rate_hz, messages=messages,
+            native=native)))
         self.topic = topic
         self.type = type
+        self.native = native
         self.count = 0  # messages this client received (the daemon may coalesce a burst)
         self.last_message: Optional[Message] = None
         self._last_value: Tuple[Optional[Message], Any] = (None, None)  # decoded once
@@ -149,6 +158,18 @@ class Subscriber(Resource):
         super()._created(result)
         self.message_device = str(result.get("message_device", ""))
         self.received_by_daemon = int(result.get("messages", 0) or 0)
+        if not self.message_device:
+            self.native = True  # no message stream (an image): its values are its messages
+
+    def _require_native(self, what: str) -> None:
+        if not self.native:
+            raise ValueError(f"{what}: this subscriber of {self.topic} reads its messages "
+                             "whole only (native=False); use last_whole, wait_for_whole or "
+                             "add_whole_callback, or subscribe with native=True")
+
+    def add_callback(self, callback: Callback) -> Callback:
+        self._require_native("add_callback")
+        return super().add_callback(callback)
 
     def devices(self) -> Tuple[str, ...]:
         return tuple(d for d in (self.device, self.message_device) if d)
@@ -218,12 +239,15 @@ class Subscriber(Resource):
     def last_value(self) -> Any:
         """The last message as a Python value: str/bool/int/float, a 4x4 numpy matrix in
         mm, a list/dict for JSON types, numpy pixels, PolyData; None before the first."""
+        self._require_native("last_value")
         message = self.last_message
         return None if message is None else self._value_of(message)
 
     def wait_for_message(self, timeout: float = 10.0,
                          predicate: Optional[Callable[[Any], bool]] = None) -> Any:
         """Block until a message (satisfying `predicate` on its value) has arrived."""
+        self._require_native("wait_for_message")
+
         def ready() -> bool:
             return self.last_message is not None and (
                 predicate is None or bool(predicate(value_from_message(self.last_message))))

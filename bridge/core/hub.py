@@ -6,6 +6,9 @@ reports each, `bridge_device`) go to that bridge's audience, which the dispatche
 from who holds it (`set_bridge_audience`; docs/security.md, "Who owns a bridge"): a
 client's bridge to its live holders, the operator's and kept ones to every client. A
 client's own message stream goes to the clients that joined it (`join`). A client that
+reads a subscriber's messages whole (message objects) may decline the topic's values
+(`set_declined`): it then gets the device's condition (stale, live) but none of its values,
+so it takes each message once, not twice. A client that
 is added to an audience gets the device's current state at once, and a client that
 connects gets the current state at once (the newest value of each streamed device, and
 every persistent one-shot such as a robot mesh), except what a late ROS subscriber would
@@ -152,6 +155,8 @@ class Hub:
         self._audience: dict[str, tuple[Subscriber, ...]] = {}
         # Devices that go to the clients that `join` them (a client's message stream).
         self._joined: dict[str, tuple[Subscriber, ...]] = {}
+        # Clients of a device's audience that take none of its values (`set_declined`).
+        self._declined: dict[str, tuple[Subscriber, ...]] = {}
         # A bridge's audience (None: every client) and the bridges each device is of.
         self._bridges: dict[BridgeKey, Optional[tuple[Subscriber, ...]]] = {}
         self._device_bridges: dict[str, tuple[BridgeKey, ...]] = {}
@@ -200,7 +205,7 @@ class Hub:
                 if self._gets(client, device):
                     client.send_once(frame)
             for device, frame in newest.items():
-                if self._gets(client, device):
+                if self._gets_values(client, device):
                     client.send_stream(device, frame)
             for device, frame in self._condition.items():
                 if self._gets(client, device):
@@ -217,6 +222,11 @@ class Hub:
             for device, members in tuple(self._joined.items()):
                 if client in members:
                     self._joined[device] = _without(members, client)
+            for device, members in tuple(self._declined.items()):
+                if client in members:
+                    self._declined[device] = _without(members, client)
+                    if not self._declined[device]:
+                        del self._declined[device]
             for key, audience in tuple(self._bridges.items()):
                 if audience is not None and client in audience:
                     self._bridges[key] = _without(audience, client)
@@ -244,6 +254,31 @@ class Hub:
             if members is not None and client in members:
                 self._joined[device] = _without(members, client)
                 self._refresh((device,))
+
+    def set_declined(self, device: str, client: Subscriber, declined: bool) -> None:
+        """`client` takes none of `device`'s values from now on (True: it reads the
+        subscriber's messages whole instead), or takes them again (False: it gets the
+        newest at once). Its audience, and so the device's condition, stay as they are."""
+        with self._lock:
+            members = self._declined.get(device, ())
+            if declined == (client in members):
+                return
+            if declined:
+                self._declined[device] = (*members, client)
+            else:
+                rest = _without(members, client)
+                if rest:
+                    self._declined[device] = rest
+                else:
+                    del self._declined[device]
+            if device in self._lanes:
+                if not declined:
+                    _close_slot(client)  # no lane value may pass its catching up
+                self._update_lane(device)
+            if not declined and client in self.clients and self._gets(client, device):
+                frame = self._newest(device)
+                if frame is not None:
+                    client.send_stream(device, frame)
 
     def bridge_device(self, key: BridgeKey, device: str) -> None:
         """`device` streams for the bridge `key`: the one hook through which a capability
@@ -329,7 +364,7 @@ class Hub:
         persistent = self._persistent.get(device)
         if persistent is not None:
             client.send_once(persistent)
-        frame = self._newest(device)
+        frame = self._newest(device) if self._gets_values(client, device) else None
         if frame is not None:
             client.send_stream(device, frame)
         condition = self._condition.get(device)
@@ -337,8 +372,13 @@ class Hub:
             client.send_once(condition)
 
     def _gets(self, client: Subscriber, device: str) -> bool:
+        """Is `client` of `device`'s audience (its condition, its one-shots)?"""
         members = self._audience.get(device)
         return members is None or client in members
+
+    def _gets_values(self, client: Subscriber, device: str) -> bool:
+        """Does `client` get `device`'s values (of its audience, and not declined)?"""
+        return self._gets(client, device) and client not in self._declined.get(device, ())
 
     def set_paced(self, client: Subscriber) -> None:
         """`client` takes its streams once a display frame (`lane_news` included, what its
@@ -405,7 +445,7 @@ class Hub:
             for device, (lane, to_frame) in tuple(self._lanes.items()):
                 count = int(lane.count)
                 if (not lane.enabled or seen.get(device) == count
-                        or not self._gets(client, device)):
+                        or not self._gets_values(client, device)):
                     continue
                 seen[device] = count
                 latest = lane.latest()
@@ -426,8 +466,11 @@ class Hub:
         # Holding the fanout (and the hand-off lock, but for a rate cap's change).
         members = self._audience.get(device)
         lane.enabled = device not in self._min_interval
-        lane.set_slots(None if members is None else
-                       self._lane_slots(tuple(c for c in members if c in self.clients)))
+        if members is None and device not in self._declined:
+            lane.set_slots(None)  # the fanout's: every client
+            return
+        lane.set_slots(self._lane_slots(tuple(c for c in self._value_recipients(device)
+                                              if c in self.clients)))
 
     def _newest(self, device: str) -> Optional[Frame]:
         entry = self._lanes.get(device)
@@ -444,8 +487,17 @@ class Hub:
         return members is None or bool(members)
 
     def _recipients(self, device: str) -> tuple[Subscriber, ...]:
+        """The clients of `device`'s audience (its condition, its one-shots)."""
         members = self._audience.get(device)
         return self._client_tuple if members is None else members
+
+    def _value_recipients(self, device: str) -> tuple[Subscriber, ...]:
+        """The clients that get `device`'s values: its audience but those that declined."""
+        members = self._recipients(device)
+        declined = self._declined.get(device)
+        if declined is None:
+            return members
+        return tuple(c for c in members if c not in declined and c in self.clients)
 
     # --- outbound (loop thread) ------------------------------------------------------------
     def stream(self, message: Message) -> None:
@@ -469,7 +521,7 @@ class Hub:
                 self._last_sent[device] = now
         self._keep_newest(device, frame)
         self.streamed += 1
-        for client in self._recipients(device):
+        for client in self._value_recipients(device):
             client.send_stream(device, frame)
 
     def _keep_newest(self, device: str, frame: Frame) -> None:
@@ -555,6 +607,7 @@ class Hub:
         with self._lock:
             self._audience.pop(device, None)
             self._joined.pop(device, None)
+            self._declined.pop(device, None)
             self._device_bridges.pop(device, None)
         self._volatile.discard(device)
         self._held.pop(device, None)
@@ -565,7 +618,7 @@ class Hub:
 
     def latest(self, device: str, client: Subscriber | None = None) -> Message | None:
         """The newest value of `device`; with `client`, only if that client gets it."""
-        if client is not None and not self._gets(client, device):
+        if client is not None and not self._gets_values(client, device):
             return None
         frame = self._newest(device) or self._persistent.get(device)
         return frame.message if frame else None
@@ -680,13 +733,14 @@ class Hub:
             self._latest[device] = frame
         self.streamed += len(frames)
         self.direct += len(frames)
-        audience = self._audience
-        limited = bool(audience) and any(device in audience for device, _ in frames)
+        audience, declined = self._audience, self._declined
+        limited = (bool(audience) or bool(declined)) and any(
+            device in audience or device in declined for device, _ in frames)
         joined: dict[int, bytes] = {}  # header version -> the whole update, encoded once
         for client in self._client_tuple:
             mine = frames
             if limited:
-                mine = [(d, f) for d, f in frames if self._gets(client, d)]
+                mine = [(d, f) for d, f in frames if self._gets_values(client, d)]
                 if not mine:
                     continue
             version = client.header_version
@@ -706,7 +760,7 @@ class Hub:
         self.streamed += 1
         self.direct += 1
         large = isinstance(frame, BulkFrame)  # its parts, never joined: pixels where they lie
-        for client in self._recipients(device):
+        for client in self._value_recipients(device):
             version = client.header_version
             if not client.write_direct(frame.encoded_parts(version) if large
                                        else frame.encoded(version)):

@@ -612,6 +612,7 @@ class TopicBridges:
         key = NameKey.subscriber(topic)
         device = self._names.register(key)
         self._hub.bridge_device(made_bridge(request), device)  # before its first value
+        self._decline_values(request, client, device, codec.bulk)  # so is this
         bridge = SubscriberBridge(
             self._ros, self._hub, topic=topic, codec=codec,
             qos=request.qos.with_default_depth(default_depth(codec.bulk)),
@@ -629,7 +630,9 @@ class TopicBridges:
     def _with_messages(self, request: CreateSubscriber, client: Optional[Subscriber],
                        bridge: SubscriberBridge, reply: TopicBridge) -> TopicBridge:
         """Join `client` to the bridge's message stream if it asked (not for images and
-        point clouds: their IMAGE / POLYDATA stream is the whole message already)."""
+        point clouds: their IMAGE / POLYDATA stream is the whole message already), and
+        let it decline the native values (``native`` false) or take them again."""
+        self._decline_values(request, client, bridge.device, bridge.codec.bulk)
         if not request.messages or client is None or bridge.codec.bulk:
             return reply
         key = NameKey.subscriber_messages(bridge.topic)
@@ -638,6 +641,13 @@ class TopicBridges:
                                         self._whole)
         self._hub.join(device, client)
         return replace(reply, message_device=device)
+
+    def _decline_values(self, request: CreateSubscriber, client: Optional[Subscriber],
+                        device: str, bulk: bool) -> None:
+        """`client` takes the native values of `device` unless it reads the messages whole
+        only (``native`` false); an image's or a cloud's native stream is its whole one."""
+        if client is not None and not bulk:
+            self._hub.set_declined(device, client, request.messages and not request.native)
 
     def remove_subscriber(self, request: RemoveSubscriber) -> TopicBridgeRemoved:
         topic = request.topic

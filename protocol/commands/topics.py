@@ -78,15 +78,22 @@ class CreateSubscriber(Op, op="create_subscriber", result=TopicBridge, ros_names
     client also gets the newest message whole, at most once a display frame (60 Hz), as
     generic JSON in ROS units, on the device the reply names ``message_device`` (lossless,
     for message objects; each carries the subscription's count; images and point clouds
-    have none: their IMAGE / POLYDATA stream is already whole)."""
+    have none: their IMAGE / POLYDATA stream is already whole). ``native``: false, with
+    ``messages``, for a client that reads the messages whole only (message objects): it
+    then gets none of the topic's native values (TRANSFORM, STRING...), so each message
+    costs it and the daemon once, not twice; it still gets the stream's stale/live STATUS.
+    Asked again with ``native`` true, it gets the values again."""
 
-    examples = (Example({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),)
+    examples = (Example({"topic": "/a", "type": "String"}, {("topic", "topic", "/a")}),
+                Example({"topic": "/a", "type": "PoseStamped", "messages": True,
+                         "native": False}, {("topic", "topic", "/a")}))
 
     topic: str
     type: str
     qos: QoS = QoS()
     rate_hz: float | None = None
     messages: bool = False
+    native: bool = True
 
     def resources(self) -> tuple[Resource, ...]:
         return (TopicUse("topic", self.topic, self.type),)
@@ -97,8 +104,13 @@ class CreateSubscriber(Op, op="create_subscriber", result=TopicBridge, ros_names
 
     @classmethod
     def from_args(cls, a: Args) -> CreateSubscriber:
+        messages, native = a.opt_bool("messages", False), a.opt_bool("native", True)
+        if not native and not messages:
+            raise OutOfRangeError(a.path("native"), "true, or false with messages true (a "
+                                  "client that declines the values reads them whole)",
+                                  "false without messages")
         return cls(topic=a.ros_name("topic"), type=_msg_type(a), qos=_qos(a), rate_hz=a.rate_hz(),
-                   messages=a.opt_bool("messages", False))
+                   messages=messages, native=native)
 
 
 @dataclass(frozen=True)

@@ -151,7 +151,7 @@ class FacadeClient(Protocol):
     def subscribe(self, topic: str, type: str, *, qos: Optional[Mapping[str, Any]] = None,
                   rate_hz: Optional[float] = None,
                   callback: Optional[Callable[[Any], None]] = None,
-                  messages: bool = False) -> Subscriber: ...
+                  messages: bool = False, native: bool = True) -> Subscriber: ...
 
     def publisher(self, topic: str, type: str, *,
                   qos: Optional[Mapping[str, Any]] = None, frame: Optional[str] = None,
@@ -348,6 +348,8 @@ class SubscriberNode(_Node):
         data = self._whole()
         if data is not None:
             return to_yaml(self._ros_node.logic.types.for_yaml(self.GetROSType(), data))
+        if self.resource.message_device:
+            return ""  # none yet
         value = self.resource.last_value
         return "" if value is None else to_yaml(_native_for_yaml(self.resource.last_message))
 
@@ -1135,7 +1137,8 @@ class ROS2Node:
     # --- topics -----------------------------------------------------------------------------
     def CreateAndAddSubscriberNode(self, className: str, topic: str) -> SubscriberNode:  # noqa: N802,N803
         c.check_message_type(className, "className")  # an early, named error
-        sub = self.client.subscribe(topic, className, messages=True)
+        # Its reads are of the whole message: the native values would come for nothing.
+        sub = self.client.subscribe(topic, className, messages=True, native=False)
 
         def make() -> SubscriberNode:
             slicer_type = self._slicer_type(className, sub.ros_type,

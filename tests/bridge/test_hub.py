@@ -220,3 +220,42 @@ def test_a_bridges_devices_go_to_its_audience_and_a_client_added_catches_up() ->
         assert hub.audience("frame") == ()
     finally:
         loop.close()
+
+
+def test_a_client_that_declines_a_devices_values_gets_its_condition_only() -> None:
+    """`set_declined` (a client reading a subscriber's messages whole): none of the
+    device's values reach it on any route (the loop's, the direct one, a later client's
+    catch-up, `latest`), its condition still does, kept bridges included; taken back, it
+    gets the newest at once."""
+    loop = asyncio.new_event_loop()
+    try:
+        hub = Hub(loop)
+        reader, raw = _DirectClient(True), _DirectClient(True)
+        hub.attach(reader)
+        hub.attach(raw)
+        pose = ("subscriber", ("/pose",))
+        hub.set_bridge_audience(pose, (reader, raw))
+        hub.bridge_device(pose, "pose")
+        hub.set_declined("pose", reader, True)
+        hub.stream(_text("pose", "1"))
+        hub.post_frames([("pose", frame_for(_text("pose", "2")))])
+        assert reader.got == [] and reader.written == []
+        assert raw.got == [("pose", "1")] and len(raw.written) == 1
+        assert hub.latest("pose", reader) is None and hub.latest("pose", raw) is not None
+        hub.set_condition("pose", frame_for(_text("pose", "stale")),
+                          frame_for(_text("pose", "stale")))
+        assert reader.got == [("pose", "stale")]  # its condition: not a value
+        hub.set_bridge_audience(pose, None)  # kept: every client, still not the decliner
+        later = _DirectClient(True)
+        hub.attach(later)
+        assert ("pose", "2") in later.got and ("pose", "2") not in reader.got
+        hub.post_frames([("pose", frame_for(_text("pose", "3")))])
+        assert reader.written == [] and len(later.written) == 1
+        hub.set_declined("pose", reader, False)  # asked again for the values
+        assert reader.got[-1] == ("pose", "3")
+        hub.detach(reader)
+        hub.set_declined("pose", later, True)
+        hub.detach(later)  # its decline goes with it
+        assert hub._declined == {}
+    finally:
+        loop.close()

@@ -20,7 +20,7 @@ import pytest
 
 from protocol.framing import Decoder
 from protocol.messages import Message, Status
-from slicer_client.connection import Connection
+from slicer_client.connection import CommandRefusedError, Connection
 from support import (Child, Processes, RunningDaemon, assert_clean_exit, operator_daemon, scaled,
                      wait_until)
 
@@ -194,3 +194,44 @@ def test_a_paced_display_that_asks_gets_the_stream_a_frame_at_a_time(
     finally:
         maker.close()
         paced.close()
+
+
+def test_a_client_that_reads_messages_whole_gets_no_native_values(
+        daemon: RunningDaemon) -> None:
+    """`native: false` with `messages` (what the reference facade asks): the client gets
+    the whole messages and none of the pose's TRANSFORMs, while another holder still gets
+    them by the lane; kept (every client), it still gets none; asked again with `native`,
+    it gets the newest value at once and then the stream. Declining alone is refused."""
+    whole_seen, raw_seen = Tally(), Tally()
+    reader = connect(daemon, whole_seen)
+    raw = connect(daemon, raw_seen)
+    try:
+        with pytest.raises(CommandRefusedError) as refused:
+            reader.command("create_subscriber", {"topic": POSE_TOPIC, "type": "PoseStamped",
+                                                 "native": False})
+        assert (refused.value.error.field, refused.value.error.code.name) == \
+            ("native", "OUT_OF_RANGE")
+        reply = reader.command("create_subscriber", {"topic": POSE_TOPIC,
+                                                     "type": "PoseStamped",
+                                                     "messages": True, "native": False})
+        pose, whole = reply["device"], reply["message_device"]
+        subscribe(raw, POSE_TOPIC, "PoseStamped")
+        more(raw_seen, pose, 200, "the pose stream at the raw holder")
+        more(whole_seen, whole, 20, "the whole messages at the reader")
+        assert whole_seen[pose] == 0, whole_seen.devices()
+        written = listed(raw, POSE_TOPIC)["lane_written"]
+        more(raw_seen, pose, 100, "more of it, by the lane")
+        assert listed(raw, POSE_TOPIC)["lane_written"] > written + 10
+
+        raw.command("keep_bridge", {"kind": "subscriber", "topic": POSE_TOPIC})
+        more(raw_seen, pose, 200, "the kept stream at the raw holder")
+        more(whole_seen, whole, 10, "the whole messages, kept")
+        assert whole_seen[pose] == 0, whole_seen.devices()
+
+        assert subscribe(reader, POSE_TOPIC, "PoseStamped")["existed"] is True
+        more(whole_seen, pose, 100, "the native values, asked for again")
+    finally:
+        reader.close()
+        raw.close()
+    with daemon.connect() as cleaner:
+        cleaner.command("remove_subscriber", {"topic": POSE_TOPIC})

@@ -46,6 +46,13 @@ def test_wrench_publisher_and_subscriber(rosLogic: Any, processes: Processes) ->
     got = until_got(pub, blank, sub, "the wrench back")
     assert isinstance(got, vtk.vtkDoubleArray)
     assert [got.GetValue(i) for i in range(6)] == [1.0, 2.0, 3.0, 0.1, 0.2, 0.3]
+    # The node reads whole messages, so its client asked for no native values (issue 44:
+    # each message once): none came, and the Pythonic reads of them say why.
+    assert sub.GetNumberOfMessages() >= 1 and sub.resource.native is False
+    assert sub.resource.count == 0 and sub.resource.last_message is None
+    with pytest.raises(ValueError, match=r"last_value: this subscriber of /tt_wrench reads "
+                                         r"its messages whole only \(native=False\)"):
+        _ = sub.resource.last_value
     assert sub.GetSlicerType() == pub.GetSlicerType() == "vtkDoubleArray"
     # Not six values, or not numbers: refused before anything is sent, naming what came.
     sent = pub.GetNumberOfMessagesSent()
@@ -168,6 +175,9 @@ def test_image_by_its_ros_name_is_numpy_pixels(rosLogic: Any, processes: Process
     got = until_got(pub, pixels, sub, "the pixels back")
     assert isinstance(got, np.ndarray)
     np.testing.assert_array_equal(got.reshape(2, 4, 3), pixels)
+    # An image has no message stream: its native one is whole, and the node reads it.
+    assert sub.resource.native is True and sub.resource.message_device == ""
+    assert sub.resource.count >= 1
     yaml = sub.GetLastMessageYAML()
     assert "frame_id: camera" in yaml and "encoding: rgb8" in yaml
     with pytest.raises(ValueError, match=r"expected uint8 pixels .* got shape \(2, 4, 2\)"):
