@@ -168,6 +168,7 @@ BY_OP: dict[type[Op], dict[str, st.SearchStrategy[Any]]] = {
 VALID: dict[type[Op], Callable[[Any], bool]] = {
     c.Publish: lambda r: r.message is None or r.value is None,
     c.SetObstacle: lambda r: r.frame is None or r.type == "Mesh",
+    c.CreateSubscriber: lambda r: r.native or r.messages,
 }
 
 
