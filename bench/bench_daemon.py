@@ -559,8 +559,12 @@ def resumed_text(results: Results) -> str:
 def tf_phase(args: argparse.Namespace, results: Results) -> None:
     publisher = peer("tf publisher", "publish", "tf", "/tf")
     relay = Relay("bridge", {}, args.daemon_profile, args.daemon_arg)
-    setup = [{"op": "create_tf_lookup", "arguments": {"parent": "base", "child": f"link{i}"}}
-             for i in range(1, LINKS + 1)]
+    # Each lookup kept: the readers, other clients than the one that makes them, get its
+    # stream (a client's bridge goes to its holders only; docs/security.md).
+    setup = [command for i in range(1, LINKS + 1) for command in (
+        {"op": "create_tf_lookup", "arguments": {"parent": "base", "child": f"link{i}"}},
+        {"op": "keep_bridge", "arguments": {"kind": "tf_lookup", "parent": "base",
+                                             "child": f"link{i}"}})]
     readers = readers_for(relay.port, 8, setup=setup)
     try:
         reports, cpu, avg = run_phase(publisher, readers, args.rate, args.seconds, relay.child,

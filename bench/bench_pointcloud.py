@@ -82,7 +82,12 @@ def bridge_phase(publisher: Child, seconds: float) -> tuple[Figure, dict[str, in
     readers: list[Child] = []
     try:
         facade = peer("facade client", "facade", str(relay.port), TOPIC, "--cloud")
-        readers = readers_for(relay.port, 1)
+        # Kept, as a Slicer user's connector would see it: the raw reader is another client
+        # than the facade's (a client's bridge goes to its holders only).
+        readers = readers_for(relay.port, 1, setup=[
+            {"op": "create_subscriber", "arguments": {"topic": TOPIC,
+                                                      "type": "sensor_msgs/msg/PointCloud2"}},
+            {"op": "keep_bridge", "arguments": {"kind": "subscriber", "topic": TOPIC}}])
         fig = measure(publisher, readers, seconds, relay.child)
         got = facade.report()
     finally:

@@ -211,8 +211,8 @@ def read(port: int, clients: int, setup: list[dict[str, Any]], v2: bool) -> None
     if setup:
         from slicer_client.connection import Connection
 
-        # Commands (tf lookups) on one extra connection that stays open: bridges it
-        # creates live as long as the daemon.
+        # Commands (tf lookups, then keep_bridge for each, so that the readers, other
+        # clients, get their streams) on one extra connection that stays open.
         keeper = Connection("127.0.0.1", port)
         for command in setup:
             keeper.command(command["op"], command.get("arguments", {}))

@@ -66,6 +66,10 @@ def vtk_available() -> bool:
 def fill_vtk(matrix: Any, target: Any) -> Any:
     """Copy a matrix into an existing vtkMatrix4x4 (what Slicer's getters do)."""
     values = as_numpy(matrix, rigid=False)
+    if hasattr(target, "GetClassName") and not isinstance(target, Matrix4x4):
+        # VTK's: one call, not 16 (a display's rate)
+        target.DeepCopy(values.ravel().tolist())
+        return target
     for i in range(4):
         for j in range(4):
             target.SetElement(i, j, float(values[i, j]))

@@ -743,7 +743,9 @@ class Robot(Resource):
                 known = self._devices.get(element.name)
                 if known is None or known[1] is not None:
                     continue  # not a link of this robot (as the create reply named them)
-                link = self.links.setdefault(known[0], RobotLink(known[0], element.name))
+                link = self.links.get(known[0])
+                if link is None:
+                    link = self.links.setdefault(known[0], RobotLink(known[0], element.name))
                 matrix = np.asarray(element.matrix, dtype=np.float64)
                 # Bytes, not np.array_equal: a robot's links at 50 Hz on 3D Slicer's main
                 # thread, where the comparison cost more than the rest of the message.

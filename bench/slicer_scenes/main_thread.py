@@ -30,10 +30,9 @@ def main(session: Any, args: dict[str, Any]) -> dict[str, Any]:
                                                                     args["topic"])
 
         def on_message(caller: Any, event: Any) -> None:
-            # Reads the message as a user's observer does (a PoseStamped message object,
-            # from the whole message the connector imported as a text node).
-            message = caller.GetLastMessage()
-            del message
+            # Reads the pose as a user's observer does (a PoseStamped message object, from
+            # the whole message the connector imported as a text node; its vtkMatrix4x4).
+            caller.GetLastMessage().GetPose()
             seen[0] += 1
         sub.AddObserver("ModifiedEvent", on_message)
         count = sub.GetNumberOfMessages

@@ -80,7 +80,7 @@ class MessageObject:
 
     @classmethod
     def _of(cls, fields: Dict[str, Any]) -> "MessageObject":
-        """An instance holding `fields` (every field of its type, converted)."""
+        """An instance holding `fields` (every field of its type, or `_FieldsFromRos`)."""
         obj = cls.__new__(cls)
         obj._fields = fields
         return obj
@@ -103,6 +103,25 @@ class MessageObject:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.to_ros()})"
+
+
+class _FieldsFromRos(dict):  # type: ignore[type-arg]
+    """A message object's fields, each converted from the message's generic JSON the first
+    time it is read (or replaced when set): an observer that reads the pose of a
+    PoseStamped at a display's rate converts the pose, not the header too."""
+
+    __slots__ = ("_types", "_description", "_data")
+
+    def __init__(self, types: MessageTypes, description: MessageDescription,
+                 data: Mapping[str, Any]) -> None:
+        super().__init__()
+        self._types, self._description, self._data = types, description, data
+
+    def __missing__(self, name: str) -> Any:
+        f = self._description.field(name)  # KeyError for a name the type does not have
+        raw = self._data[name] if name in self._data else self._description.default.get(name)
+        value = self[name] = self._types._field_from_ros(f, raw, name)
+        return value
 
 
 class MessageTypes:
@@ -180,12 +199,9 @@ class MessageTypes:
         if not isinstance(data, Mapping):
             raise MessageValueError(f"{ros_type}: expected an object of its fields, got "
                                     f"{type(data).__name__}")
-        description = cls._description
-        # Each field converted once: not first blank, then overwritten (a subscriber's
-        # GetLastMessage runs this at a display's rate on 3D Slicer's main thread).
-        return cls._of({f.name: self._field_from_ros(
-            f, data[f.name] if f.name in data else description.default.get(f.name), f.name)
-            for f in description.fields})
+        # Each field converted when first read (a subscriber's GetLastMessage runs this at a
+        # display's rate on 3D Slicer's main thread, and its observer reads one field).
+        return cls._of(_FieldsFromRos(self, cls._description, data))
 
     def _field_from_ros(self, f: FieldDescription, raw: Any, path: str) -> Any:
         if f.array is None:
@@ -203,7 +219,13 @@ class MessageTypes:
         if "/" not in type_name:
             return float(raw) if type_name in _FLOAT_TYPES and raw is not None else raw
         if type_name in _MATRIX_FIELDS:
-            return matrix_of_pose(self.values, raw, *_MATRIX_FIELDS[type_name])
+            where, how = _MATRIX_FIELDS[type_name]
+            try:
+                return matrix_of_pose(self.values, raw, where, how)
+            except (KeyError, TypeError, ValueError):
+                raise MessageValueError(
+                    f"{path}: expected a {type_name} ({where} x y z, {how} x y z w), got "
+                    f"{str(raw)[:80]}") from None
         if type_name in _VECTOR6_FIELDS:
             return array_of_vector6(self.values, raw, *_VECTOR6_FIELDS[type_name])
         return self.from_ros(type_name, raw)

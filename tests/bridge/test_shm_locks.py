@@ -9,7 +9,6 @@ import ctypes
 import ctypes.util
 import fcntl
 import os
-import re
 import signal
 import struct
 import subprocess
@@ -139,8 +138,9 @@ def test_the_command_releases_them(lock: str) -> None:
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert f"released {lock}" in done.stdout
-    assert re.search(r"removed \d+ shared-memory segment\(s\) of killed ROS processes",
-                     done.stdout), done.stdout
+    # A killed process's segment is anyone's to remove: another daemon of this host (another
+    # test session's) may have removed it first, and then this command says nothing of it
+    # (the unit tests above check who removes what, in a folder of their own).
     assert not dead.exists() and not dead_lock.exists()
     assert value(lock) == 1
     assert lock not in stuck_port_locks(wait_s=0.2, ports=only_port)
@@ -189,8 +189,8 @@ def test_a_running_daemon_releases_one_and_says_so(lock: str, processes: Process
         existed = unfinished.exists()
         unfinished.unlink(missing_ok=True)
     before_ros = running.child.output().split("(OpenIGTLink); ROS node")[0]
-    assert re.search(r"INFO bridge.platform.shm_ports: removed \d+ Fast DDS shared-memory "
-                     r"segment\(s\) of killed processes", before_ros), before_ros
+    # Gone before ROS starts: removed by this daemon (its log says so), or first by another
+    # daemon of this host (a killed process's segment is anyone's to remove).
     assert not dead.exists()
     assert f"WARNING bridge.platform.shm_ports: released Fast DDS port lock {lock}" in before_ros
     assert value(lock) == 1

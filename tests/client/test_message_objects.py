@@ -67,6 +67,31 @@ def test_a_pose_array_round_trips_through_ros_units(types: MessageTypes) -> None
     assert back.GetPoses()[1].GetElement(2, 2) == 1.0
 
 
+def test_a_message_from_ros_converts_each_field_when_first_read(types: MessageTypes) -> None:
+    """A subscriber's GetLastMessage at a display's rate: a field is converted when read
+    (the pose, not the header too), once; a field the JSON lacks reads as its default, a
+    malformed one fails when read, naming it, and the rest still reads."""
+    ros = {"header": {"stamp": {"sec": 7, "nanosec": 9}, "frame_id": "tool"},
+           "pose": {"position": {"x": 0.5, "y": 0.0, "z": 0.0},
+                    "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}}
+    message = types.from_ros("geometry_msgs/msg/PoseStamped", ros)
+    assert set(dict(message._fields)) == set()  # nothing converted yet
+    pose = message.GetPose()
+    assert pose.GetElement(0, 3) == 500.0 and message.GetPose() is pose  # mm, once
+    assert set(dict(message._fields)) == {"pose"}
+    assert message.GetHeader().GetStamp().GetSec() == 7
+    assert message.to_ros() == ros
+    partial = types.from_ros("geometry_msgs/msg/PoseStamped", {"pose": ros["pose"]})
+    assert partial.GetHeader().GetFrameId() == "" and partial.GetPose().GetElement(0, 3) == 500.0
+    bad = types.from_ros("geometry_msgs/msg/PoseStamped",
+                         {"header": ros["header"], "pose": {"position": {"x": 1.0}}})
+    assert bad.GetHeader().GetFrameId() == "tool"
+    with pytest.raises(MessageValueError, match=r"pose: expected a geometry_msgs/msg/Pose "
+                                                 r"\(position x y z, orientation x y z w\), "
+                                                 r"got \{'position': \{'x': 1.0\}\}"):
+        bad.GetPose()  # its position lacks y, and it has no orientation: said when read
+
+
 def test_wrench_and_twist_are_arrays_of_six_and_anything_else_of_six_is_zeros(
         types: MessageTypes) -> None:
     message = types.new("geometry_msgs/msg/WrenchStamped")

@@ -56,6 +56,9 @@ class _Bundle:
     node: Any
     elements: list[Any] = field(default_factory=list)
     handed: list[int] = field(default_factory=list)
+    # The bundle's attributes (its robot's names), as the connector set them from the first
+    # message: the same in every message of the robot.
+    attributes: dict[str, str] = field(default_factory=dict)
 
 
 class ConnectorTransport:
@@ -456,6 +459,8 @@ class ConnectorTransport:
         if count != len(bundle.elements):  # new links: every element is handed on again
             bundle.elements = [node.GetTransformNode(i) for i in range(count)]
             bundle.handed = [-1] * count
+            bundle.attributes = {name: node.GetAttribute(name)
+                                 for name in node.GetAttributeNames()}
         if self._listener is None:
             return
         moved = []
@@ -466,8 +471,7 @@ class ConnectorTransport:
                 moved.append(element)
         if not moved:
             return
-        attributes = {name: node.GetAttribute(name) for name in node.GetAttributeNames()}
-        message = message_from_node(node.GetName(), attributes, poses=(
+        message = message_from_node(node.GetName(), bundle.attributes, poses=(
             [element.GetName() for element in moved],
             np.array([_values(element) for element in moved], dtype=np.float64)))
         try:
