@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import asyncio
 import threading
-from typing import Any
+from contextlib import contextmanager
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -222,17 +223,26 @@ def test_a_bridges_devices_go_to_its_audience_and_a_client_added_catches_up() ->
         loop.close()
 
 
+@contextmanager
+def _hub_of(*clients: _Client) -> Iterator[Hub]:
+    """A hub on a loop of its own (closed after), `clients` attached."""
+    loop = asyncio.new_event_loop()
+    try:
+        hub = Hub(loop)
+        for client in clients:
+            hub.attach(client)
+        yield hub
+    finally:
+        loop.close()
+
+
 def test_a_client_that_declines_a_devices_values_gets_its_condition_only() -> None:
     """`set_declined` (a client reading a subscriber's messages whole): none of the
     device's values reach it on any route (the loop's, the direct one, a later client's
     catch-up, `latest`), its condition still does, kept bridges included; taken back, it
     gets the newest at once."""
-    loop = asyncio.new_event_loop()
-    try:
-        hub = Hub(loop)
-        reader, raw = _DirectClient(True), _DirectClient(True)
-        hub.attach(reader)
-        hub.attach(raw)
+    reader, raw = _DirectClient(True), _DirectClient(True)
+    with _hub_of(reader, raw) as hub:
         pose = ("subscriber", ("/pose",))
         hub.set_bridge_audience(pose, (reader, raw))
         hub.bridge_device(pose, "pose")
@@ -257,5 +267,3 @@ def test_a_client_that_declines_a_devices_values_gets_its_condition_only() -> No
         hub.set_declined("pose", later, True)
         hub.detach(later)  # its decline goes with it
         assert hub._declined == {}
-    finally:
-        loop.close()
