@@ -254,7 +254,7 @@ class SubscriberBridge:
             if self._lane is not None:
                 self._lane_takes(fast, frames[-1][1])
         self._hub.post_frames(frames, self._channel)
-        self._poke_whole()
+        self.poke_messages()
 
     def _lane_takes(self, fast: RawPoseStream, frame: Frame) -> None:
         """The lane takes the frame ids of the last message from now on (it compares the
@@ -312,9 +312,9 @@ class SubscriberBridge:
             self._keep(data)
         self._count += 1
         self._convert(msg)
-        self._poke_whole()
+        self.poke_messages()
 
-    def _poke_whole(self) -> None:
+    def poke_messages(self) -> None:
         """The message stream (if any) has a newer message to make when due."""
         if self._messages is not None:
             self._messages.poke()
@@ -329,7 +329,7 @@ class SubscriberBridge:
             template, lead, pixels, timestamp = same
             self._hub.post_frame(self._channel, TemplateBulkFrame(template, lead, pixels,
                                                                   timestamp, daemon_clock_ms()))
-            self._poke_whole()
+            self.poke_messages()
             return True
         try:
             encoded: Encoded | CodecError | None = self.codec.encode_serialized(data)
@@ -345,7 +345,7 @@ class SubscriberBridge:
             message = self._post(encoded)
             if images is not None and is_large(message):  # a small one goes as the others
                 images.learn(data, message)
-        self._poke_whole()
+        self.poke_messages()
         return True
 
     def _refused(self, error: CodecError) -> None:
@@ -640,6 +640,10 @@ class TopicBridges:
                                         metadata_for(key, ros_type=bridge.codec.ros_type),
                                         self._whole)
         self._hub.join(device, client)
+        # Its pacer stops looking while nobody listens, and what a lane writes in C pokes
+        # nothing: the newest of a pose topic reached no client that joined after the last
+        # one left (a reconnected module, a second script).
+        bridge.poke_messages()
         return replace(reply, message_device=device)
 
     def _decline_values(self, request: CreateSubscriber, client: Optional[Subscriber],

@@ -235,3 +235,38 @@ def test_a_client_that_reads_messages_whole_gets_no_native_values(
         raw.close()
     with daemon.connect() as cleaner:
         cleaner.command("remove_subscriber", {"topic": POSE_TOPIC})
+
+
+def test_a_client_that_joins_a_message_stream_after_the_last_left_gets_it(
+        daemon: RunningDaemon) -> None:
+    """Seen in bench_slicer_main_thread's second module pass: the message stream of a pose
+    the native lane takes stopped once its last reader left (its pacer stops looking while
+    nobody listens, and the lane pokes nothing), so a reader that came after (a module that
+    reconnected, a second script) got the newest once and nothing more."""
+    holder_seen, first_seen, second_seen = Tally(), Tally(), Tally()
+    holder = connect(daemon, holder_seen)  # keeps the bridge alive between the readers
+    try:
+        subscribe(holder, POSE_TOPIC, "PoseStamped")
+        whole = {"topic": POSE_TOPIC, "type": "PoseStamped", "messages": True,
+                 "native": False}
+        first = connect(daemon, first_seen)
+        device = first.command("create_subscriber", whole)["message_device"]
+        more(first_seen, device, 20, "the whole messages at the first reader")
+        first.close()
+        wait_until(lambda: listed(holder, POSE_TOPIC)["clients"] == 1, timeout=20,
+                   what="the first reader gone")
+        written = listed(holder, POSE_TOPIC)["lane_written"]
+        more(holder_seen, listed(holder, POSE_TOPIC)["device"], 200, "the lane writing on")
+        assert listed(holder, POSE_TOPIC)["lane_written"] > written + 100
+        second = connect(daemon, second_seen)
+        try:
+            assert second.command("create_subscriber", whole)["message_device"] == device
+            more(second_seen, device, 20, "the whole messages at the second reader")
+        finally:
+            second.close()
+    finally:
+        holder.close()
+    with daemon.connect() as looker:  # no holder left, nothing kept: the bridge ended
+        wait_until(lambda: not any(b["kind"] == "subscriber" and b["topic"] == POSE_TOPIC
+                                   for b in looker.command("list_bridges")["bridges"]),
+                   timeout=20, what="the bridge ended with its last holder")
