@@ -2,7 +2,8 @@
 
     .venv/bin/python bench/bench_robot_e2e.py [--links 130] [--repeat 5]
 
-Every party is a process of its own, as in real use: the daemon (`bridge.cli run`), a
+Every party is a process of its own, as in real use: the daemon (`bridge.console run`,
+the installed command: its mesh reader processes import its main module, which is small), a
 robot state publisher (`bridge.robots.state_publisher`: the URDF as a parameter and a
 latched topic, /tf_static, /tf from joint states), the demo's joint motion node publishing
 joint states at 50 Hz, and a client process (`slicer_client.connect(...)`,
@@ -267,7 +268,7 @@ def with_daemon(tag: str, robots: list[Robot], mesh_home: Path, plan: list[dict[
     client's `plan`, stop it."""
     py = [sys.executable, "-u"]
     port = free_port()
-    argv = [*py, "-m", "bridge.cli", "run", "--port", str(port), "--log-level", "INFO"]
+    argv = [*py, "-m", "bridge.console", "run", "--port", str(port), "--log-level", "INFO"]
     for robot in robots:
         argv += ["--package-path", f"{robot.package}={robot.folder}"]
     if profile is not None:

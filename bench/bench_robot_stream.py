@@ -2,7 +2,7 @@
 
 Run: .venv/bin/python bench/bench_robot_stream.py [--quick]
 
-Everything runs as separate processes, as in real use: the daemon (`bridge.cli run`), our
+Everything runs as separate processes, as in real use: the daemon (`bridge.console run`: the installed command), our
 state publisher(s) (`bridge.robots.state_publisher`), the demo's joint motion node
 (`bridge.robots.demo.joint_motion --rate HZ`) and a TCP client (slicer_client) here.
 
@@ -183,7 +183,7 @@ def main() -> int:
     urdf, packages = demo_urdf_path()
     py = [sys.executable, "-u"]
     port = free_port()
-    daemon_args = [*py, "-m", "bridge.cli", "run", "--port", str(port), "--log-level",
+    daemon_args = [*py, "-m", "bridge.console", "run", "--port", str(port), "--log-level",
                    "WARNING", "--package-path", f"{DEMO_PACKAGE}={packages[DEMO_PACKAGE]}"]
     have_omni = OMNI.exists()
     if have_omni:

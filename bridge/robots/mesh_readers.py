@@ -8,8 +8,8 @@ parses them in ``workers`` processes (one per core, at most two by default), so 
 one robot are read side by side, and the loop keeps its interpreter.
 
 The readers are forked by a forkserver that has imported trimesh (`bridge.robots.mesh_worker`)
-and the process's main module (which a reader would otherwise import again as its own)
-once: a reader starts in milliseconds and shares those pages. They start with the first
+once: a reader starts in milliseconds and shares those pages (each imports the process's
+main module, as multiprocessing's children do: `bridge.console`, the command's, is small). They start with the first
 robot (`start`, off the loop), not with the daemon, and `close` ends them (the daemon's
 stop); the forkserver ends with the process that started it.
 
@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import sys
 import threading
 from concurrent.futures import CancelledError, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -56,14 +55,10 @@ def _started() -> int:
 
 
 def _forkserver_context() -> multiprocessing.context.ForkServerContext:
-    """Forks from a process that imported trimesh and the main module once (not the
-    daemon's own fork: its ROS threads may hold locks a child would never see released)."""
+    """Forks from a process that imported trimesh once (not the daemon's own fork: its ROS
+    threads may hold locks a child would never see released)."""
     context = multiprocessing.get_context("forkserver")
-    main = getattr(getattr(sys.modules.get("__main__"), "__spec__", None), "name", None)
-    # A reader imports the main module by name unless it is a package's __main__ (pytest's,
-    # which must not run in the forkserver): importing it there first makes that free.
-    preload = [main] if main and not main.endswith("__main__") else []
-    context.set_forkserver_preload([*preload, "bridge.robots.mesh_worker"])
+    context.set_forkserver_preload(["bridge.robots.mesh_worker"])
     return context  # type: ignore[return-value]
 
 

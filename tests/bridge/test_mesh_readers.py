@@ -19,7 +19,7 @@ from bridge.robots.mesh_readers import MeshReaders
 from bridge.robots.model import RobotModel, to_polydata
 from mesh_reader_faults import die_on_crash_files
 from protocol.messages import PolyData
-from support import Processes, assert_clean_exit, start_daemon, wait_until
+from support import Processes, alive, assert_clean_exit, children_of, start_daemon, wait_until
 
 
 def capsule(seed: int) -> trimesh.Trimesh:
@@ -148,39 +148,12 @@ def test_a_reader_that_dies_leaves_out_only_its_file(tmp_path: Path, forkserver:
     assert "the mesh readers are stopped" in str(closed.value)
 
 
-def alive(pid: int) -> bool:
-    """A process that runs (a zombie waiting for its parent to reap it has ended)."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat.rsplit(")", 1)[1].split()[0] != "Z"
-
-
-def descendants(pid: int) -> set[int]:
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            children.setdefault(ppid, []).append(int(entry.name))
-    found: set[int] = set()
-    todo = [pid]
-    while todo:
-        for child in children.get(todo.pop(), []):
-            found.add(child)
-            todo.append(child)
-    return found
-
-
 def test_the_daemons_readers_read_its_robots_and_end_with_it(processes: Processes,
                                                              tmp_path: Path) -> None:
     files = write_meshes(tmp_path)
     (tmp_path / "robot.urdf").write_text(urdf(files))
     daemon = start_daemon(processes, "--robot-dir", str(tmp_path))
-    assert descendants(daemon.child.pid) == set()  # no readers before a robot
+    assert children_of(daemon.child.pid) == []  # no readers before a robot
     with daemon.connect() as client:
         created = client.command("create_robot", {"name": "r", "source": {
             "kind": "file", "path": str(tmp_path / "robot.urdf")}}, timeout=60)
@@ -188,7 +161,7 @@ def test_the_daemons_readers_read_its_robots_and_end_with_it(processes: Processe
         (robot,) = client.command("list_robots")["robots"]
         assert (robot["state"], robot["visuals"], robot["warnings"]) == ("loaded", 4, 0)
     # The forkserver and its two readers (and multiprocessing's resource tracker).
-    readers = descendants(daemon.child.pid)
-    assert len(readers) >= 3, readers
+    readers = {pid for pid, _, _ in children_of(daemon.child.pid)}
+    assert len(readers) >= 3, children_of(daemon.child.pid)
     assert_clean_exit(daemon)
     wait_until(lambda: not any(alive(pid) for pid in readers), what="the readers ended")
