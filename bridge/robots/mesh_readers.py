@@ -7,11 +7,12 @@ read so far (and every other stream) on the same interpreter meanwhile. `MeshRea
 parses them in ``workers`` processes (one per core, at most two by default), so the files of
 one robot are read side by side, and the loop keeps its interpreter.
 
-The readers are forked by a forkserver that has imported trimesh (`bridge.robots.mesh_worker`)
-once: a reader starts in milliseconds and shares those pages (each imports the process's
-main module, as multiprocessing's children do: `bridge.console`, the command's, is small). They start with the first
-robot (`start`, off the loop), not with the daemon, and `close` ends them (the daemon's
-stop); the forkserver ends with the process that started it.
+The readers are forked by a forkserver that has imported trimesh
+(`bridge.robots.mesh_worker`) once: a reader starts in milliseconds and shares those pages
+(each imports the process's main module, as multiprocessing's children do; the command's,
+`bridge.console`, is small). They start with the first robot (`start`, off the loop), not
+with the daemon, and `close` ends them (the daemon's stop); the forkserver ends with the
+process that started it.
 
 A reader that dies while reading (a parser crashing on a hostile file) breaks its pool:
 the pool is replaced, and each read that was in flight is made again alone, in a process
@@ -59,7 +60,7 @@ def _forkserver_context() -> multiprocessing.context.ForkServerContext:
     threads may hold locks a child would never see released)."""
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(["bridge.robots.mesh_worker"])
-    return context  # type: ignore[return-value]
+    return context
 
 
 class MeshReaders:

@@ -644,7 +644,8 @@ class MeshCache:
             reading = self._reading.get(key)
             if reading is None:
                 self.misses += 1
-                self._reading[key] = mine = Future()
+                mine: Future[MeshData] = Future()
+                self._reading[key] = mine
             else:
                 self.hits += 1
         if reading is not None:
