@@ -226,8 +226,6 @@ class RobotServing:
         self.robots[robot.name] = robot
         if "bridge.robots.model" not in sys.modules:  # the first robot: while its URDF comes
             asyncio.get_running_loop().run_in_executor(None, _import_mesh_libraries)
-        if self._readers is not None and not self._readers.started:  # likewise
-            asyncio.get_running_loop().run_in_executor(None, self._readers.start)
         try:
             text = await self._first_description(robot)
             if text is not None:

@@ -10,9 +10,10 @@ one robot are read side by side, and the loop keeps its interpreter.
 The readers are forked by a forkserver that has imported trimesh
 (`bridge.robots.mesh_worker`) once: a reader starts in milliseconds and shares those pages
 (each imports the process's main module, as multiprocessing's children do; the command's,
-`bridge.console`, is small). They start with the first robot (`start`, off the loop), not
-with the daemon, and `close` ends them (the daemon's stop); the forkserver ends with the
-process that started it.
+`bridge.console`, is small). They start with the first file a robot reads, not with the
+daemon (a daemon whose robots come from the mesh cache folder never needs them); until
+they are up (0.2-0.5 s) files are read in the asking thread, as without readers. `close`
+ends them (the daemon's stop); the forkserver ends with the process that started it.
 
 A reader that dies while reading (a parser crashing on a hostile file) breaks its pool:
 the pool is replaced, and each read that was in flight is made again alone, in a process
@@ -78,14 +79,17 @@ class MeshReaders:
         self._lock = threading.Lock()
         self._pool: Optional[ProcessPoolExecutor] = None
         self._closed = False
+        self._starting = False
+        self._ready = threading.Event()
 
     @property
-    def started(self) -> bool:
-        return self._pool is not None
+    def ready(self) -> bool:
+        """Are the readers up (reads go to them, not to the asking thread)?"""
+        return self._ready.is_set()
 
     def start(self) -> None:
-        """Fork the readers now (blocks while the forkserver imports trimesh: call it off
-        the loop, while the first robot's description is fetched)."""
+        """Fork the readers now; blocks while the forkserver imports trimesh (`read` calls
+        it in a thread of its own)."""
         pool = self._running()
         if pool is None:
             return
@@ -93,12 +97,18 @@ class MeshReaders:
             for future in [pool.submit(_started) for _ in range(self.workers)]:
                 future.result()
         except (BrokenProcessPool, CancelledError, RuntimeError):
-            pass  # closed meanwhile, or broken: the first read says so
+            return  # closed meanwhile, or broken: the next read replaces the pool
+        self._ready.set()
 
     def read(self, path: Path, scale: Sequence[float] = (1.0, 1.0, 1.0), *,
              max_triangles: Optional[int] = None) -> MeshData:
-        """`load_mesh_file` in a reader process: the same mesh, the same `MeshError`."""
+        """`load_mesh_file` in a reader process (here while they start): the same mesh, the
+        same `MeshError`."""
         args = (str(path), tuple(float(s) for s in scale), max_triangles)
+        if not self._ready.is_set():
+            self._start_soon()
+            if not self._closed:
+                return self._read_file(*args)
         pool = self._running()
         if pool is None:
             raise MeshError(str(path), "a running daemon", "the mesh readers are stopped")
@@ -121,6 +131,7 @@ class MeshReaders:
         """End the readers (reads waiting get a `MeshError`); later reads are refused."""
         with self._lock:
             self._closed = True
+            self._ready.clear()
             pool, self._pool = self._pool, None
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
@@ -130,6 +141,13 @@ class MeshReaders:
         pool = self._pool
         processes = getattr(pool, "_processes", None) or {}
         return sorted(int(pid) for pid in processes)
+
+    def _start_soon(self) -> None:
+        with self._lock:
+            if self._starting or self._closed:
+                return
+            self._starting = True
+        threading.Thread(target=self.start, name="mesh-readers-start", daemon=True).start()
 
     def _running(self) -> Optional[ProcessPoolExecutor]:
         with self._lock:

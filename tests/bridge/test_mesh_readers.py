@@ -81,7 +81,10 @@ def forkserver() -> Iterator[None]:
 
 @pytest.fixture
 def readers(forkserver: None) -> Iterator[MeshReaders]:
+    """Readers up: every file is read in them (before, in the asking thread)."""
     pool = MeshReaders(2)
+    pool.start()
+    assert pool.ready
     yield pool
     pool.close()
 
@@ -122,10 +125,29 @@ def test_bad_meshes_give_the_warnings_they_give_here(tmp_path: Path,
     assert [v.link for v in there.visuals] == [v.link for v in here.visuals] == ["l5"]
 
 
+def test_files_are_read_here_until_the_readers_are_up(tmp_path: Path, forkserver: None) -> None:
+    """The first file starts the readers and is read in the asking thread, as is every
+    file until they are up; then they read."""
+    files = write_meshes(tmp_path)
+    readers = MeshReaders(2)
+    try:
+        assert (readers.ready, readers.pids()) == (False, [])
+        here = readers.read(tmp_path / files[1])
+        wait_until(lambda: readers.ready, what="the readers up")
+        assert len(readers.pids()) == 2
+        there = readers.read(tmp_path / files[1])
+        assert np.array_equal(here.vertices, there.vertices)
+        assert np.array_equal(here.triangles, there.triangles)
+        assert (here.rgba, here.description) == (there.rgba, there.description)
+    finally:
+        readers.close()
+
+
 def test_a_reader_that_dies_leaves_out_only_its_file(tmp_path: Path, forkserver: None) -> None:
     files = write_meshes(tmp_path)
     (tmp_path / "crash.stl").write_bytes((tmp_path / files[0]).read_bytes())
     readers = MeshReaders(2, read_file=die_on_crash_files)
+    readers.start()  # (a file read before would be read here, in this process)
     try:
         model = load_robot(urdf(["crash.stl", *files[:3]]), base_dir=tmp_path,
                            cache=MeshCache(), readers=readers)
@@ -160,8 +182,9 @@ def test_the_daemons_readers_read_its_robots_and_end_with_it(processes: Processe
         assert created["robot"] == "r"
         (robot,) = client.command("list_robots")["robots"]
         assert (robot["state"], robot["visuals"], robot["warnings"]) == ("loaded", 4, 0)
-    # The forkserver and its two readers (and multiprocessing's resource tracker).
+    # The forkserver and its two readers (and multiprocessing's resource tracker), started
+    # by the first file read.
+    wait_until(lambda: len(children_of(daemon.child.pid)) >= 3, what="the daemon's readers")
     readers = {pid for pid, _, _ in children_of(daemon.child.pid)}
-    assert len(readers) >= 3, children_of(daemon.child.pid)
     assert_clean_exit(daemon)
     wait_until(lambda: not any(alive(pid) for pid in readers), what="the readers ended")
