@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import threading
 from concurrent.futures import CancelledError, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -56,12 +57,23 @@ def _started() -> int:
     return os.getpid()
 
 
+def _reader_begins() -> None:
+    """A reader ignores Ctrl-C: it reaches the daemon's whole process group, and the daemon
+    ends its readers itself (`close`); a reader would print a KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _forkserver_context() -> multiprocessing.context.ForkServerContext:
     """Forks from a process that imported trimesh once (not the daemon's own fork: its ROS
     threads may hold locks a child would never see released)."""
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(["bridge.robots.mesh_worker"])
     return context
+
+
+def _pool(workers: int) -> ProcessPoolExecutor:
+    return ProcessPoolExecutor(workers, mp_context=_forkserver_context(),
+                               initializer=_reader_begins)
 
 
 class MeshReaders:
@@ -120,7 +132,7 @@ class MeshReaders:
             raise MeshError(str(path), "a running daemon",
                             "the mesh readers stopped") from None
         # A reader died, and every read in flight died with it: this one again, alone.
-        with ProcessPoolExecutor(1, mp_context=_forkserver_context()) as alone:
+        with _pool(1) as alone:
             try:
                 return alone.submit(self._read_file, *args).result()
             except BrokenProcessPool:
@@ -154,8 +166,7 @@ class MeshReaders:
             if self._closed:
                 return None
             if self._pool is None:
-                self._pool = ProcessPoolExecutor(self.workers,
-                                                 mp_context=_forkserver_context())
+                self._pool = _pool(self.workers)
             return self._pool
 
     def _replace(self, broken: ProcessPoolExecutor) -> None:

@@ -6,6 +6,8 @@ the daemon."""
 
 from __future__ import annotations
 
+import os
+import signal
 import struct
 from pathlib import Path
 from typing import Iterator
@@ -19,7 +21,8 @@ from bridge.robots.mesh_readers import MeshReaders
 from bridge.robots.model import RobotModel, to_polydata
 from mesh_reader_faults import die_on_crash_files
 from protocol.messages import PolyData
-from support import Processes, alive, assert_clean_exit, children_of, start_daemon, wait_until
+from support import (Processes, alive, assert_clean_exit, children_of, scaled, start_daemon,
+                     wait_until)
 
 
 def capsule(seed: int) -> trimesh.Trimesh:
@@ -186,5 +189,8 @@ def test_the_daemons_readers_read_its_robots_and_end_with_it(processes: Processe
     # by the first file read.
     wait_until(lambda: len(children_of(daemon.child.pid)) >= 3, what="the daemon's readers")
     readers = {pid for pid, _, _ in children_of(daemon.child.pid)}
-    assert_clean_exit(daemon)
+    # Ctrl-C in a terminal reaches the whole process group: the readers too.
+    os.killpg(daemon.child.pid, signal.SIGINT)
+    daemon.child.popen.wait(scaled(30))
     wait_until(lambda: not any(alive(pid) for pid in readers), what="the readers ended")
+    assert_clean_exit(daemon)  # exit code 0, and no reader's KeyboardInterrupt traceback
