@@ -87,6 +87,14 @@ class MeshData:
     def triangle_count(self) -> int:
         return int(self.triangles.shape[0])
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # A mesh read in a reader process comes by pickle, its arrays writeable again:
+        # read-only as every MeshData's (one cached copy is shared by every robot).
+        for value in state.values():
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+        self.__dict__.update(state)
+
 
 def _frozen(array: np.ndarray) -> Any:
     array.setflags(write=False)

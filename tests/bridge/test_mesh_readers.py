@@ -142,6 +142,9 @@ def test_files_are_read_here_until_the_readers_are_up(tmp_path: Path, forkserver
         assert np.array_equal(here.vertices, there.vertices)
         assert np.array_equal(here.triangles, there.triangles)
         assert (here.rgba, here.description) == (there.rgba, there.description)
+        # Read-only as a mesh read here is: one cached copy serves every robot.
+        assert not any(array.flags.writeable for array in (
+            here.vertices, here.triangles, there.vertices, there.triangles))
     finally:
         readers.close()
 
