@@ -12,7 +12,8 @@ The readers are forked by a forkserver that has imported trimesh
 (each imports the process's main module, as multiprocessing's children do; the command's,
 `bridge.console`, is small). They start with the first file a robot reads, not with the
 daemon (a daemon whose robots come from the mesh cache folder never needs them); until
-they are up (0.2-0.5 s) files are read in the asking thread, as without readers. `close`
+they are up (0.2-0.5 s) files are read in the asking threads, one at a time, as without
+readers. `close`
 ends them (the daemon's stop); the forkserver ends with the process that started it.
 
 A reader that dies while reading (a parser crashing on a hostile file) breaks its pool:
@@ -93,6 +94,7 @@ class MeshReaders:
         self._closed = False
         self._starting = False
         self._ready = threading.Event()
+        self._here = threading.Lock()
 
     @property
     def ready(self) -> bool:
@@ -119,8 +121,11 @@ class MeshReaders:
         args = (str(path), tuple(float(s) for s in scale), max_triangles)
         if not self._ready.is_set():
             self._start_soon()
-            if not self._closed:
-                return self._read_file(*args)
+            # One file at a time here: threads parsing side by side in one process only take
+            # turns at its interpreter lock (and the loop's turns with them).
+            with self._here:
+                if not self._ready.is_set() and not self._closed:
+                    return self._read_file(*args)
         pool = self._running()
         if pool is None:
             raise MeshError(str(path), "a running daemon", "the mesh readers are stopped")
