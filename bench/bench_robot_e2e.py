@@ -2,7 +2,8 @@
 
     .venv/bin/python bench/bench_robot_e2e.py [--links 130] [--repeat 5]
 
-Every party is a process of its own, as in real use: the daemon (`bridge.cli run`), a
+Every party is a process of its own, as in real use: the daemon (`bridge.console run`,
+the installed command: its mesh reader processes import its main module, which is small), a
 robot state publisher (`bridge.robots.state_publisher`: the URDF as a parameter and a
 latched topic, /tf_static, /tf from joint states), the demo's joint motion node publishing
 joint states at 50 Hz, and a client process (`slicer_client.connect(...)`,
@@ -10,7 +11,11 @@ joint states at 50 Hz, and a client process (`slicer_client.connect(...)`,
 
 - reply: ``ros.robot`` returns (the daemon's create_robot reply);
 - meshes: every link visual's POLYDATA has reached the client's callback;
-- poses: every link's TRANSFORM has.
+- poses: every link's TRANSFORM has;
+- CPU: what the daemon process, and its mesh reader processes (`bridge.robots.mesh_readers`,
+  with their forkserver), spent from the request to the last callback (user + system, from
+  /proc). Unlike the times above these hardly depend on what else runs on the machine: on
+  two idle cores the daemon and the readers run side by side.
 
 Robots: the demo arm (``bridge.robots.demo``: 11 links, 14 meshes) and a generated robot
 of ``--links`` links (a trunk with arms, 3/4 of its joints revolute), one mesh file per
@@ -115,7 +120,7 @@ def make_robot(folder: Path, links: int, seed: int = 7) -> Path:
 
 
 # One child-process harness for the robot benches (bench_robot_stream's).
-from bench_robot_stream import Child, free_port  # noqa: E402
+from bench_robot_stream import CLK_TCK, Child, free_port  # noqa: E402
 
 
 def run_json(argv: list[str], timeout: float = 300) -> dict[str, Any]:
@@ -130,8 +135,36 @@ def run_json(argv: list[str], timeout: float = 300) -> dict[str, Any]:
 # ------------------------------------------------------------------------------ client side
 
 
-def time_one_load(ros: Any, name: str, node: str, tf_prefix: str) -> dict[str, Any]:
-    """Ask for robot `name` once: seconds to the reply, the last mesh and the last pose."""
+def cpu_s(pid: int) -> float:
+    """User + system CPU seconds of process `pid` so far (0 once it is gone)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / CLK_TCK
+
+
+def descendants(pid: int) -> list[int]:
+    parents: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+            parents.setdefault(ppid, []).append(int(entry.name))
+    found, todo = [], [pid]
+    while todo:
+        for child in parents.get(todo.pop(), []):
+            found.append(child)
+            todo.append(child)
+    return found
+
+
+def time_one_load(ros: Any, name: str, node: str, tf_prefix: str,
+                  daemon: int) -> dict[str, Any]:
+    """Ask for robot `name` once: seconds to the reply, the last mesh and the last pose,
+    and the CPU seconds the daemon (process `daemon`) and its children spent meanwhile."""
     import threading
 
     changed = threading.Condition()
@@ -147,6 +180,7 @@ def time_one_load(ros: Any, name: str, node: str, tf_prefix: str) -> dict[str, A
                 poses.setdefault(link, now)
             changed.notify_all()
 
+    cpu_before = {pid: cpu_s(pid) for pid in [daemon, *descendants(daemon)]}
     start = time.perf_counter()
     robot = ros.robot(name, node=node, tf_prefix=tf_prefix, callback=on_change, timeout=60)
     reply = time.perf_counter()
@@ -161,18 +195,21 @@ def time_one_load(ros: Any, name: str, node: str, tf_prefix: str) -> dict[str, A
                              f"{len(meshes)}/{visuals} meshes")
         result = {"reply": reply - start, "meshes": sorted(meshes)[visuals - 1] - start,
                   "poses": max(poses.values()) - start, "links": links, "visuals": visuals}
+    used = {pid: cpu_s(pid) - cpu_before.get(pid, 0.0) for pid in [daemon, *descendants(daemon)]}
+    result["cpu_daemon"] = used.pop(daemon)
+    result["cpu_readers"] = sum(used.values())
     robot.remove()
     time.sleep(0.3)  # the removal reaches the daemon before the next request
     return result
 
 
-def client_main(port: int, plan: list[dict[str, Any]]) -> int:
+def client_main(port: int, daemon: int, plan: list[dict[str, Any]]) -> int:
     """The user: connect, then for each robot of `plan` (name, node, tf_prefix, loads) ask
     for it `loads` times in turn, timing its meshes and poses."""
     import slicer_client
 
     ros = slicer_client.connect("127.0.0.1", port)
-    out = [[time_one_load(ros, step["name"], step["node"], step["tf_prefix"])
+    out = [[time_one_load(ros, step["name"], step["node"], step["tf_prefix"], daemon)
             for _ in range(step["loads"])] for step in plan]
     ros.close()
     print(json.dumps(out))
@@ -267,7 +304,7 @@ def with_daemon(tag: str, robots: list[Robot], mesh_home: Path, plan: list[dict[
     client's `plan`, stop it."""
     py = [sys.executable, "-u"]
     port = free_port()
-    argv = [*py, "-m", "bridge.cli", "run", "--port", str(port), "--log-level", "INFO"]
+    argv = [*py, "-m", "bridge.console", "run", "--port", str(port), "--log-level", "INFO"]
     for robot in robots:
         argv += ["--package-path", f"{robot.package}={robot.folder}"]
     if profile is not None:
@@ -286,7 +323,8 @@ def with_daemon(tag: str, robots: list[Robot], mesh_home: Path, plan: list[dict[
         daemon.wait_for("listening on", 90.0)
         run_json([*py, __file__, "--graph", str(port),
                   json.dumps([robot.node for robot in robots])])
-        return run_json([*py, __file__, "--client", str(port), json.dumps(plan)])  # type: ignore[return-value]
+        return run_json([*py, __file__, "--client", str(port), str(daemon.popen.pid),  # type: ignore[return-value]
+                         json.dumps(plan)])
     finally:
         daemon.stop()
 
@@ -315,14 +353,15 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=5, help="warm loads per robot")
     parser.add_argument("--profile", type=Path, default=None,
                         help="run the first daemon under py-spy, its profile here")
-    parser.add_argument("--client", nargs=2, metavar=("PORT", "PLAN"), help=argparse.SUPPRESS)
+    parser.add_argument("--client", nargs=3, metavar=("PORT", "DAEMON_PID", "PLAN"),
+                        help=argparse.SUPPRESS)
     parser.add_argument("--graph", nargs=2, metavar=("PORT", "NODES"), help=argparse.SUPPRESS)
     parser.add_argument("--fetch", metavar="NODE", help=argparse.SUPPRESS)
     parser.add_argument("--naive", nargs=3, metavar=("URDF", "PACKAGE", "DIR"),
                         help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.client:
-        return client_main(int(args.client[0]), json.loads(args.client[1]))
+        return client_main(int(args.client[0]), int(args.client[1]), json.loads(args.client[2]))
     if args.graph:
         return graph_main(int(args.graph[0]), json.loads(args.graph[1]))
     if args.fetch:
@@ -375,7 +414,7 @@ def main() -> int:
 
     def median(loads: list[dict[str, Any]]) -> dict[str, float]:
         return {k: statistics.median(load[k] for load in loads)
-                for k in ("reply", "meshes", "poses")}
+                for k in ("reply", "meshes", "poses", "cpu_daemon", "cpu_readers")}
 
     rows = [
         (demo.label, "first robot of a new daemon", first[0][0]),
@@ -389,12 +428,13 @@ def main() -> int:
     print(f"\nrobot load, request -> last item at a client's callbacks (ms); load average "
           f"now {os.getloadavg()[0]:.2f}")
     print(f"{'robot':<10} {'links':>5} {'meshes':>6} {'triangles':>9}  {'case':<30} "
-          f"{'reply':>6} {'meshes':>7} {'poses':>6}")
+          f"{'reply':>6} {'meshes':>7} {'poses':>6}  {'CPU: daemon':>11} {'readers':>7}")
     for label, case, row in rows:
         loads = first[0][0] if label == demo.label else first[1][0]
         print(f"{label:<10} {loads['links']:>5} {loads['visuals']:>6} "
               f"{triangles[label]:>9}  {case:<30} {row['reply'] * ms:>6.0f} "
-              f"{row['meshes'] * ms:>7.0f} {row['poses'] * ms:>6.0f}")
+              f"{row['meshes'] * ms:>7.0f} {row['poses'] * ms:>6.0f}  "
+              f"{row['cpu_daemon'] * ms:>11.0f} {row['cpu_readers'] * ms:>7.0f}")
     print("\nbaselines, same run (ms):")
     print(f"  plain rclpy GetParameters of {big.node}'s robot_description "
           f"({fetch['bytes']:,} bytes): {fetch['first'] * ms:.0f} from a new process "

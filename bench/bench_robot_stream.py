@@ -2,9 +2,10 @@
 
 Run: .venv/bin/python bench/bench_robot_stream.py [--quick]
 
-Everything runs as separate processes, as in real use: the daemon (`bridge.cli run`), our
-state publisher(s) (`bridge.robots.state_publisher`), the demo's joint motion node
-(`bridge.robots.demo.joint_motion --rate HZ`) and a TCP client (slicer_client) here.
+Everything runs as separate processes, as in real use: the daemon (`bridge.console run`,
+the installed command), our state publisher(s) (`bridge.robots.state_publisher`), the
+demo's joint motion node (`bridge.robots.demo.joint_motion --rate HZ`) and a TCP client
+(slicer_client) here.
 
 Measured in the same run:
 1. load time: from sending create_robot to the client holding the last link mesh, for the
@@ -186,7 +187,7 @@ def main() -> int:
     urdf, packages = demo_urdf_path()
     py = [sys.executable, "-u"]
     port = free_port()
-    daemon_args = [*py, "-m", "bridge.cli", "run", "--port", str(port), "--log-level",
+    daemon_args = [*py, "-m", "bridge.console", "run", "--port", str(port), "--log-level",
                    "WARNING", "--package-path", f"{DEMO_PACKAGE}={packages[DEMO_PACKAGE]}"]
     have_omni = OMNI.exists()
     if have_omni:

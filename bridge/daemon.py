@@ -35,6 +35,7 @@ from bridge.playback.refusals import LiveRefusals
 from bridge.record.capability import RecordBridges
 from bridge.robots.capability import RobotBridges
 from bridge.robots.mesh_extras import leave_out_mesh_extras
+from bridge.robots.mesh_readers import MeshReaders
 from bridge.types import InterfaceTypes
 from bridge.platform.receive_priority import (RECEIVE_SLICE_NS, ReceivePriorityError,
                                          raise_receive_threads, shorten_receive_slices)
@@ -105,9 +106,12 @@ class Daemon:
         # The daemon node's own parameters obey server_set_parameter's rule there too.
         self.services.add_call_guard(self.parameters.judge_service_call)
         package_paths = {name: Path(folder) for name, folder in config.package_paths}
+        # Robots' mesh files parsed in processes of their own, from the first robot on.
+        self.mesh_readers = MeshReaders()
         self.robots = RobotBridges(self.ros, self.hub, names, tf=self.tf,
                                    parameters=self.parameters,
-                                   package_paths=package_paths)
+                                   package_paths=package_paths,
+                                   mesh_readers=self.mesh_readers)
         self.markers = MarkerBridges(self.ros, self.hub, names, tf=self.tf,
                                      package_paths=package_paths,
                                      max_model_bytes=policy.max_marker_bytes)
@@ -214,6 +218,7 @@ class Daemon:
         self.shm_ports.close()
         self.dispatcher.close()
         self.heavy.close()
+        self.mesh_readers.close()
         self.ros.stop()
 
 

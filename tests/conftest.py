@@ -186,15 +186,17 @@ def turtlesim(processes: Processes) -> Iterator[Child]:
 
 @pytest.fixture(autouse=True)
 def no_leftover_children() -> Iterator[None]:
-    """Fail a test that leaves behind a child it started (module-scoped ones excepted)."""
-    before = {pid for pid, _, _ in children_of(os.getpid())}
+    """Fail a test that leaves behind a child it started (module-scoped ones excepted, and
+    what they start meanwhile: a module's daemon starts its mesh readers with its first
+    robot, and ends them as it ends)."""
+    before = frozenset(pid for pid, _, _ in children_of(os.getpid()))
     yield
     # A child that is exiting may take a moment to go.
     deadline = time.monotonic() + scaled(3.0)
-    left = [c for c in children_of(os.getpid()) if c[0] not in before]
+    left = [c for c in children_of(os.getpid(), not_under=before) if c[0] not in before]
     while left and time.monotonic() < deadline:
         time.sleep(0.05)
-        left = [c for c in children_of(os.getpid()) if c[0] not in before]
+        left = [c for c in children_of(os.getpid(), not_under=before) if c[0] not in before]
     for pid, _, _ in left:
         try:
             os.kill(pid, signal.SIGKILL)

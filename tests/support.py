@@ -218,8 +218,10 @@ def alive(pid: int) -> bool:
         return False
 
 
-def children_of(pid: int) -> list[tuple[int, str, str]]:
-    """(pid, state, command) of every live descendant of `pid`, read from /proc."""
+def children_of(pid: int, *, not_under: frozenset[int] = frozenset()
+                ) -> list[tuple[int, str, str]]:
+    """(pid, state, command) of every live descendant of `pid`, read from /proc; the
+    descendants of those in `not_under` are left out (theirs to end)."""
     parents: dict[int, list[int]] = {}
     info: dict[int, tuple[str, str]] = {}
     for entry in os.listdir("/proc"):
@@ -242,7 +244,8 @@ def children_of(pid: int) -> list[tuple[int, str, str]]:
         state, cmd = info.get(child, ("?", ""))
         if state != "Z":
             found.append((child, state, cmd))
-        stack.extend(parents.get(child, []))
+        if child not in not_under:
+            stack.extend(parents.get(child, []))
     return found
 
 

@@ -4,7 +4,9 @@ link moves; each element is named by its link's device, ``<robot>:<link>``).
 
     create_robot ─► URDF from a parameter (ParameterBridges.watch_parameter), a latched
                     topic (our subscription) or a file
-                 ─► load_robot in a worker thread (meshes: ms to seconds, never on the loop)
+                 ─► load_robot in a worker thread (meshes: ms to seconds, never on the loop;
+                    the files parsed several at once in reader processes, as the daemon
+                    gives them: `bridge.robots.mesh_readers`)
                  ─► loop: hub.publish_persistent(POLYDATA per visual)
                           tf.stream_lookup(fixed_frame <- tf_prefix + link) per link,
                           grouped: one TDATA per tf update for all the links
@@ -78,6 +80,7 @@ if TYPE_CHECKING:  # bridge.robots.model (trimesh, yourdfpy) loads with the firs
     # ROS only where the daemon reads a description from it (`RobotServing` is ROS-free)
     from bridge.parameters.watch import ParameterWatch, ParameterWatcher
     from bridge.robots.description import RobotDescription
+    from bridge.robots.mesh_readers import MeshReaders
     from bridge.robots.model import RobotModel, VisualMesh
     from bridge.ros.ros_node import RosNode
 
@@ -190,8 +193,11 @@ class RobotServing:
     the player (bridge/playback) from a bag; this part needs no ROS."""
 
     def __init__(self, hub: Hub, names: DeviceNameRegistry, *, tf: LookupStreams,
-                 package_paths: Mapping[str, Path] | None = None) -> None:
+                 package_paths: Mapping[str, Path] | None = None,
+                 mesh_readers: Optional[MeshReaders] = None) -> None:
         self._hub = hub
+        # Mesh files parsed in these processes (None: in a worker thread of this one).
+        self._readers = mesh_readers
         self._names = names
         self._tf = tf
         self._package_paths = {name: Path(folder) for name, folder in
@@ -305,7 +311,8 @@ class RobotServing:
         listeners = {
             "on_description": lambda description: post(self._described, robot, generation,
                                                        description),
-            "on_visual": lambda visual: post(self._visual_read, robot, generation, visual)}
+            "on_visual": lambda visual: post(self._visual_read, robot, generation, visual),
+            "readers": self._readers}
         if source.kind == "file":
             path = self._file_path(source.path)
             call = functools.partial(_read_robot_file, path, package_paths=self._package_paths,
@@ -666,8 +673,10 @@ class RobotBridges(RobotServing):
     def __init__(self, ros: RosNode, hub: Hub, names: DeviceNameRegistry, *, tf: LookupStreams,
                  parameters: ParameterWatcher,
                  package_paths: Mapping[str, Path] | None = None,
-                 topic_wait_s: float = _TOPIC_WAIT_S) -> None:
-        super().__init__(hub, names, tf=tf, package_paths=package_paths)
+                 topic_wait_s: float = _TOPIC_WAIT_S,
+                 mesh_readers: Optional[MeshReaders] = None) -> None:
+        super().__init__(hub, names, tf=tf, package_paths=package_paths,
+                         mesh_readers=mesh_readers)
         self._ros = ros
         self._parameters = parameters
         self._topic_wait_s = topic_wait_s

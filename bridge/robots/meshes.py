@@ -21,9 +21,10 @@ import os
 import tempfile
 import threading
 from collections import OrderedDict
+from concurrent.futures import Future
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Optional, Protocol, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -37,6 +38,7 @@ from bridge.robots.mesh_extras import take_back
 __all__ = [
     "MeshData",
     "MeshCache",
+    "MeshReader",
     "DEFAULT_MESH_CACHE",
     "MESH_FOLDER_ENTRIES",
     "MESH_SUFFIXES",
@@ -84,6 +86,14 @@ class MeshData:
     @property
     def triangle_count(self) -> int:
         return int(self.triangles.shape[0])
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # A mesh read in a reader process comes by pickle, its arrays writeable again:
+        # read-only as every MeshData's (one cached copy is shared by every robot).
+        for value in state.values():
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+        self.__dict__.update(state)
 
 
 def _frozen(array: np.ndarray) -> Any:
@@ -547,12 +557,22 @@ def vertex_normals(vertices: npt.ArrayLike, triangles: npt.ArrayLike
 # ---------------------------------------------------------------------------- cache
 
 
+class MeshReader(Protocol):
+    """What reads a mesh file for a `MeshCache`: `load_mesh_file`, or the daemon's reader
+    processes (`bridge.robots.mesh_readers.MeshReaders.read`)."""
+
+    def __call__(self, path: Path, scale: Sequence[float] = ..., *,
+                 max_triangles: Optional[int] = None) -> MeshData: ...
+
+
 class MeshCache:
     """Loaded meshes keyed by (resolved file, its mtime and size, scale, triangle budget).
 
     Several robots, or a robot loaded again, share the arrays instead of re-reading the
     file; an edited file (new mtime or size) is read again. Thread-safe; keeps at most
-    ``max_entries`` meshes, least recently used first out.
+    ``max_entries`` meshes, least recently used first out. A mesh being read when another
+    thread asks for it is read once: the second waits for it (a robot's loader reads
+    several files at once, and one file often serves several links).
 
     With a ``folder``, each mesh read from a file is also kept there as it was made (one
     ``.mesh`` file per key, `MESH_FOLDER_ENTRIES` at most, the oldest used out first), so a
@@ -564,6 +584,7 @@ class MeshCache:
         self.max_entries = max_entries
         self.folder = folder
         self._entries: OrderedDict[tuple[object, ...], MeshData] = OrderedDict()
+        self._reading: dict[tuple[object, ...], Future[MeshData]] = {}
         self._lock = threading.Lock()
         self.hits = 0
         self.misses = 0
@@ -578,7 +599,10 @@ class MeshCache:
         return len(self._entries)
 
     def mesh_file(self, path: Path, scale: Sequence[float] = (1.0, 1.0, 1.0), *,
-                  max_triangles: Optional[int] = None) -> MeshData:
+                  max_triangles: Optional[int] = None,
+                  reader: Optional[MeshReader] = None) -> MeshData:
+        """The mesh of a file, from memory, the folder, or read by ``reader`` (default
+        `load_mesh_file`, in this process)."""
         resolved = path.resolve()
         try:
             stat = resolved.stat()
@@ -586,12 +610,14 @@ class MeshCache:
             raise MeshError(str(path), "a readable file", str(exc)) from None
         key = ("file", str(resolved), stat.st_mtime_ns, stat.st_size,
                tuple(float(s) for s in scale), max_triangles)
-        return self._get(key, lambda: self._kept_or_read(key, resolved, scale, max_triangles))
+        read = reader or load_mesh_file
+        return self._get(key, lambda: self._kept_or_read(key, resolved, scale, max_triangles,
+                                                         read))
 
     def _kept_or_read(self, key: tuple[object, ...], path: Path, scale: Sequence[float],
-                      max_triangles: Optional[int]) -> MeshData:
+                      max_triangles: Optional[int], read: MeshReader) -> MeshData:
         if self.folder is None:
-            return load_mesh_file(path, scale, max_triangles=max_triangles)
+            return read(path, scale, max_triangles=max_triangles)
         kept = self.folder / (hashlib.sha256(repr((_FOLDER_FORMAT, key)).encode()).hexdigest()
                               + ".mesh")
         mesh = _read_kept(kept)
@@ -599,7 +625,7 @@ class MeshCache:
             with self._lock:
                 self.folder_hits += 1
             return mesh
-        mesh = load_mesh_file(path, scale, max_triangles=max_triangles)
+        mesh = read(path, scale, max_triangles=max_triangles)
         _keep(kept, mesh)
         return mesh
 
@@ -623,13 +649,29 @@ class MeshCache:
                 self._entries.move_to_end(key)
                 self.hits += 1
                 return found
-            self.misses += 1
-        mesh: MeshData = make()  # outside the lock: reading a file may take a while
+            reading = self._reading.get(key)
+            if reading is None:
+                self.misses += 1
+                mine: Future[MeshData] = Future()
+                self._reading[key] = mine
+            else:
+                self.hits += 1
+        if reading is not None:
+            return reading.result()  # read by another thread (its MeshError too)
+        try:
+            mesh: MeshData = make()  # outside the lock: reading a file may take a while
+        except BaseException as error:
+            with self._lock:
+                del self._reading[key]
+            mine.set_exception(error)
+            raise
         with self._lock:
+            del self._reading[key]
             self._entries[key] = mesh
             self._entries.move_to_end(key)
             while len(self._entries) > self.max_entries:
                 self._entries.popitem(last=False)
+        mine.set_result(mesh)
         return mesh
 
 

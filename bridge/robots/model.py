@@ -22,10 +22,11 @@ from __future__ import annotations
 
 import logging
 import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Callable, Mapping, Optional
+from typing import TYPE_CHECKING, Callable, Iterator, Mapping, Optional, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -38,6 +39,9 @@ from bridge.robots.resources import PackageResolver
 from protocol.conversions import metres_to_mm
 from protocol.messages import AttributeKind, PolyData, PolyDataAttribute, cells_from_array
 from protocol.polydata import NORMALS_ATTRIBUTE, colour_attribute, point_attribute
+
+if TYPE_CHECKING:
+    from bridge.robots.mesh_readers import MeshReaders
 
 __all__ = [
     "DEFAULT_RGBA",
@@ -159,14 +163,17 @@ class RobotModel:
 
 
 def mesh_for(spec: VisualSpec, resolver: PackageResolver, cache: MeshCache,
-             options: LoadOptions) -> tuple[MeshData, str]:
+             options: LoadOptions, readers: Optional[MeshReaders] = None
+             ) -> tuple[MeshData, str]:
     """The triangle mesh (metres, the geometry's own frame, scale applied) of one visual or
-    collision spec, and where it came from. Raises `ResourceError` / `MeshError`."""
+    collision spec, and where it came from; a file is parsed by ``readers`` (processes) if
+    given, else here. Raises `ResourceError` / `MeshError`."""
     g = spec.geometry
     if g.kind == "mesh":
         assert g.filename is not None
         path = resolver.resolve(g.filename)
-        mesh = cache.mesh_file(path, g.scale, max_triangles=options.max_triangles)
+        mesh = cache.mesh_file(path, g.scale, max_triangles=options.max_triangles,
+                               reader=None if readers is None else readers.read)
         return mesh, f"{g.filename} -> {path} ({mesh.description})"
     if g.kind == "box":
         mesh = cache.primitive("box", *g.size)
@@ -208,44 +215,76 @@ def _visual_mesh(spec: VisualSpec, mesh: MeshData, source: str,
                       vertex_rgba, source, colour_source)
 
 
+def _made(spec: VisualSpec, resolver: PackageResolver, cache: MeshCache,
+          options: LoadOptions, readers: Optional[MeshReaders]) -> tuple[VisualMesh | str, str]:
+    """One visual made, or the warning that leaves it out; and where its mesh came from."""
+    what = f"link {spec.link!r} visual {spec.index}"
+    try:
+        mesh, source = mesh_for(spec, resolver, cache, options, readers)
+    except ResourceError as exc:
+        return (f"{what}: mesh {spec.geometry.filename!r} not found: expected "
+                f"{exc.expected}, got {exc.got}; the visual is left out"), ""
+    except MeshError as exc:
+        uri = spec.geometry.filename or spec.geometry.kind
+        return (f"{what}: mesh {uri!r} ({exc.field}) cannot be used: expected "
+                f"{exc.expected}, got {exc.got}; the visual is left out"), ""
+    return _visual_mesh(spec, mesh, source, options), source
+
+
+def _as_made(specs: Sequence[VisualSpec], make: Callable[[VisualSpec], tuple[VisualMesh | str,
+                                                                             str]],
+             threads: int) -> Iterator[tuple[int, tuple[VisualMesh | str, str]]]:
+    """(index, made) for every spec, in the order they are made: by ``threads`` threads
+    (each waiting on a reader process most of the time) if more than one, else here in
+    order. An unexpected error stops the rest and is raised."""
+    if threads <= 1:
+        for index, spec in enumerate(specs):
+            yield index, make(spec)
+        return
+    pool = ThreadPoolExecutor(threads, thread_name_prefix="mesh-read")
+    try:
+        futures = {pool.submit(make, spec): index for index, spec in enumerate(specs)}
+        for future in as_completed(futures):
+            yield futures[future], future.result()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
 def _load(description: RobotDescription, resolver: PackageResolver, cache: MeshCache,
           options: LoadOptions, logger: logging.Logger,
           on_description: Optional[DescriptionListener] = None,
-          on_visual: Optional[VisualListener] = None) -> RobotModel:
+          on_visual: Optional[VisualListener] = None,
+          readers: Optional[MeshReaders] = None) -> RobotModel:
     if on_description is not None:
         on_description(description)
     warnings = list(description.warnings)
     for w in description.warnings:
         logger.warning("robot %r: %s", description.name, w)
     specs = [v for link in description.links.values() for v in link.visuals]
-    visuals: list[VisualMesh] = []
+    made: dict[int, VisualMesh] = {}
+    left_out: dict[int, str] = {}
     start = time.monotonic()
     reported = False
-    for number, spec in enumerate(specs, 1):
-        what = f"link {spec.link!r} visual {spec.index}"
-        try:
-            mesh, source = mesh_for(spec, resolver, cache, options)
-        except ResourceError as exc:
-            message = (f"{what}: mesh {spec.geometry.filename!r} not found: expected "
-                       f"{exc.expected}, got {exc.got}; the visual is left out")
-        except MeshError as exc:
-            uri = spec.geometry.filename or spec.geometry.kind
-            message = (f"{what}: mesh {uri!r} ({exc.field}) cannot be used: expected "
-                       f"{exc.expected}, got {exc.got}; the visual is left out")
-        else:
-            visuals.append(_visual_mesh(spec, mesh, source, options))
-            if on_visual is not None:
-                on_visual(visuals[-1])
-            message = ""
-        if message:
-            warnings.append(message)
-            logger.warning("robot %r: %s", description.name, message)
+    # Two files in flight per reader: each has the next while this process makes the last.
+    threads = 2 * readers.workers if readers is not None else 1
+    for number, (index, (visual, source)) in enumerate(
+            _as_made(specs, lambda spec: _made(spec, resolver, cache, options, readers),
+                     threads), 1):
+        if isinstance(visual, str):
+            left_out[index] = visual
+            logger.warning("robot %r: %s", description.name, visual)
             continue
+        made[index] = visual
+        if on_visual is not None:
+            on_visual(visual)
         elapsed = time.monotonic() - start
         if elapsed > options.progress_after_s:
             reported = True
             logger.info("robot %r: visual %d/%d loaded (%s, %.1f s)", description.name,
                         number, len(specs), source, elapsed)
+    # The model lists visuals and warnings in URDF order, whatever order they were made in.
+    visuals = [made[index] for index in sorted(made)]
+    warnings += [left_out[index] for index in sorted(left_out)]
     if reported:
         logger.info("robot %r: %d visuals of %d links loaded in %.1f s", description.name,
                     len(visuals), len(description.links), time.monotonic() - start)
@@ -259,7 +298,8 @@ def load_robot(urdf: str | bytes, *, package_paths: Optional[Mapping[str, Path]]
                logger: Optional[logging.Logger] = None,
                allowed_roots: Optional[tuple[Path, ...]] = None,
                on_description: Optional[DescriptionListener] = None,
-               on_visual: Optional[VisualListener] = None) -> RobotModel:
+               on_visual: Optional[VisualListener] = None,
+               readers: Optional[MeshReaders] = None) -> RobotModel:
     """Load a robot from URDF TEXT (for example a ``robot_description`` parameter).
 
     ``package_paths`` maps package names to folders for ``package://`` URIs (searched
@@ -268,13 +308,15 @@ def load_robot(urdf: str | bytes, *, package_paths: Optional[Mapping[str, Path]]
     ``allowed_roots``: meshes only from inside these folders (a client's robot).
     ``on_description``, ``on_visual``: told the parsed URDF, then each visual as it is made
     (on this thread), before the whole model is returned.
+    ``readers``: mesh files are parsed in these processes, several at once (the daemon's;
+    `bridge.robots.mesh_readers`); without them, here, one after the other.
     Raises `UrdfError` for a malformed URDF; mesh problems become ``warnings``.
     """
     description = parse_urdf(urdf)
     resolver = PackageResolver(dict(package_paths or {}), base_dir=base_dir,
                                allowed_roots=allowed_roots)
     return _load(description, resolver, cache if cache is not None else DEFAULT_MESH_CACHE,
-                 options, logger or _log, on_description, on_visual)
+                 options, logger or _log, on_description, on_visual, readers)
 
 
 def load_robot_file(path: str | Path, *, package_paths: Optional[Mapping[str, Path]] = None,
@@ -282,7 +324,8 @@ def load_robot_file(path: str | Path, *, package_paths: Optional[Mapping[str, Pa
                     logger: Optional[logging.Logger] = None,
                     allowed_roots: Optional[tuple[Path, ...]] = None,
                     on_description: Optional[DescriptionListener] = None,
-                    on_visual: Optional[VisualListener] = None) -> RobotModel:
+                    on_visual: Optional[VisualListener] = None,
+                    readers: Optional[MeshReaders] = None) -> RobotModel:
     """Load a robot from a URDF FILE; relative mesh paths are relative to its folder."""
     p = Path(path)
     try:
@@ -294,7 +337,7 @@ def load_robot_file(path: str | Path, *, package_paths: Optional[Mapping[str, Pa
     return load_robot(data, package_paths=package_paths, base_dir=p.resolve().parent,
                       options=options, cache=cache, logger=logger,
                       allowed_roots=allowed_roots, on_description=on_description,
-                      on_visual=on_visual)
+                      on_visual=on_visual, readers=readers)
 
 
 # ---------------------------------------------------------------------------- POLYDATA

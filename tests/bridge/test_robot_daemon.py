@@ -549,7 +549,9 @@ def test_a_robot_whose_node_answers_late_waits_and_loads_on_a_later_try(
         node.wait_for_output("NOT BUSY")
         arm = client.wait_for("slow:arm:0", is_mesh, timeout=LOAD_TIMEOUT)
         assert len(arm.body.points) == 8  # the arm's box
-        assert robot_summary(client, "slow")["state"] == "loaded"
+        # Each mesh goes out as it is made: the robot is loaded once all are.
+        wait_until(lambda: robot_summary(client, "slow")["state"] == "loaded",
+                   what="robot slow loaded")
     finally:
         client.command("remove_robot", {"name": "slow"})
 
