@@ -33,6 +33,7 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Optional, Sequence
 
+from bridge.core.threads import OnFailure, start_thread
 from bridge.robots.errors import MeshError
 
 if TYPE_CHECKING:
@@ -164,7 +165,8 @@ class MeshReaders:
             if self._starting or self._closed:
                 return
             self._starting = True
-        threading.Thread(target=self.start, name="mesh-readers-start", daemon=True).start()
+        # The helper's: a failure is logged and the start tried again (the daemon's rule).
+        start_thread("mesh-readers-start", self.start, OnFailure.RESTART)
 
     def _running(self) -> Optional[ProcessPoolExecutor]:
         with self._lock:
